@@ -1,0 +1,29 @@
+"""equilibrist: underactuated balancing systems, from derivation to firmware.
+
+The package is layered; each layer imports only from the ones before it::
+
+    mechanics -> systems -> numeric -> control -> sim -> viz / export / cli
+
+Nothing does work at import time: systems are derived (or loaded from the
+on-disk cache) when first asked for.
+"""
+
+from equilibrist.errors import EquilibristError
+
+__version__ = "0.1.0"
+
+__all__ = ["EquilibristError", "__version__", "get_system", "list_systems"]
+
+
+def get_system(name: str, **options: object):  # noqa: ANN201 - re-export
+    """Return the :class:`~equilibrist.numeric.system.System` called *name*."""
+    from equilibrist.numeric.system import get_system as _get
+
+    return _get(name, **options)
+
+
+def list_systems() -> list[str]:
+    """Names of every system in the catalogue."""
+    from equilibrist.systems.registry import family_names
+
+    return family_names()

@@ -1,0 +1,57 @@
+"""The errors equilibrist raises on purpose.
+
+Everything a user can get wrong raises a subclass of :class:`EquilibristError`
+with a message that names what was wrong and what was expected. The command
+line turns these into one line on stderr and exit status 2.
+"""
+
+from __future__ import annotations
+
+
+class EquilibristError(Exception):
+    """Base of every deliberate equilibrist error."""
+
+
+class UnknownNameError(EquilibristError, KeyError, ValueError):
+    """An unknown system, parameter, state, input or output name."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
+
+
+class ParameterError(EquilibristError, ValueError):
+    """A parameter value that is out of range, not finite or malformed."""
+
+
+class DimensionError(EquilibristError, ValueError):
+    """Arrays or lists of the wrong size."""
+
+
+class SingularConfigurationError(EquilibristError, ValueError):
+    """A configuration where the model is singular (e.g. gimbal lock)."""
+
+
+class NoEquilibriumError(EquilibristError, ValueError):
+    """f(x, u) = 0 has no solution for the components left free."""
+
+
+class DesignError(EquilibristError, ValueError):
+    """A controller or estimator that cannot be designed as asked."""
+
+
+class SimulationError(EquilibristError, ValueError):
+    """A simulation that cannot be run as asked."""
+
+
+class ExportError(EquilibristError, ValueError):
+    """An export that cannot be written as asked."""
+
+
+def nearest(name: str, choices: list[str] | tuple[str, ...]) -> str:
+    """A hint naming the closest of *choices* to *name* (or all of them)."""
+    import difflib
+
+    close = difflib.get_close_matches(name, list(choices), n=1, cutoff=0.5)
+    if close:
+        return f"did you mean {close[0]!r}?"
+    return "expected one of: " + ", ".join(choices)

@@ -1,0 +1,1 @@
+"""Symbolic layer: system specifications and derivation with sympy.physics.mechanics."""

@@ -1,0 +1,242 @@
+"""Symbolic models: from sympy.physics.mechanics to ``M(q) q_ddot = F`` and ``x_dot = f(x, u)``.
+
+Each system module writes a *derivation*: a function that receives a
+:class:`Derivation` context (its coordinates as dynamicsymbols, its inputs and
+parameters as symbols), builds frames, points, bodies and loads, and hands a
+Lagrangian or a Kane formulation back through :meth:`Derivation.lagrange` or
+:meth:`Derivation.kane`. No equation of motion is typed in.
+
+After derivation every time function is replaced by a plain symbol named as
+the state (``theta(t)`` -> ``theta``, ``theta'(t)`` -> ``theta_dot``), so the
+model is an ordinary expression in states, inputs and parameters.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import sympy as sp
+from sympy.physics import mechanics as me
+
+from equilibrist.mechanics.spec import SystemSpec
+
+
+@dataclass(frozen=True, eq=False)
+class SymbolicModel:
+    """The derived equations of one system, in plain symbols.
+
+    ``M`` and ``F`` are None for first-order models that are not mechanical
+    (the servo ball-and-beam); ``f`` is always there.
+    """
+
+    spec_key: str
+    method: str
+    states: tuple[sp.Symbol, ...]
+    inputs: tuple[sp.Symbol, ...]
+    params: tuple[sp.Symbol, ...]
+    f: sp.Matrix
+    M: sp.Matrix | None = None
+    F: sp.Matrix | None = None
+    energy: sp.Expr | None = None
+    conserved: dict[str, sp.Expr] = field(default_factory=dict)
+    extras: dict[str, sp.Expr] = field(default_factory=dict)
+
+    @property
+    def n_q(self) -> int:
+        return 0 if self.M is None else self.M.shape[0]
+
+    @cached_property
+    def A(self) -> sp.Matrix:
+        """Symbolic ``df/dx``."""
+        return self.f.jacobian(sp.Matrix(self.states))
+
+    @cached_property
+    def B(self) -> sp.Matrix:
+        """Symbolic ``df/du`` (zero columns for a system without input)."""
+        if not self.inputs:
+            return sp.zeros(len(self.states), 0)
+        return self.f.jacobian(sp.Matrix(self.inputs))
+
+    def q_ddot_symbols(self) -> sp.Matrix:
+        names = [s.name for s in self.states[: self.n_q]]
+        return sp.Matrix([sp.Symbol(f"{n}_ddot") for n in names])
+
+    def equations(self) -> sp.Matrix:
+        """``M q_ddot - F`` (zero along a motion), or ``x_dot - f``."""
+        if self.M is not None and self.F is not None:
+            return self.M * self.q_ddot_symbols() - self.F
+        xdot = sp.Matrix([sp.Symbol(f"{s.name}__rate") for s in self.states])
+        return xdot - self.f
+
+
+class Derivation:
+    """The context a system's derivation is written in.
+
+    Attributes
+    ----------
+    t:
+        Time.
+    q, qd:
+        Coordinates as dynamicsymbols and their first derivatives.
+    u:
+        Input symbols by name (plain symbols: they are specified, not solved).
+    p:
+        Parameter symbols by name.
+    N, O:
+        A Newtonian frame and its origin, for convenience.
+    """
+
+    def __init__(self, spec: SystemSpec) -> None:
+        self.spec = spec
+        self.t = me.dynamicsymbols._t
+        self.q = [me.dynamicsymbols(c) for c in spec.coordinates]
+        self.qd = [qi.diff(self.t) for qi in self.q]
+        self.u = {i.name: sp.Symbol(i.name, real=True) for i in spec.inputs}
+        self.p = {p.name: sp.Symbol(p.name, real=True) for p in spec.all_parameters}
+        self.N = me.ReferenceFrame("N")
+        self.O = me.Point("O")
+        self.O.set_vel(self.N, 0)
+
+    # -- helpers shared by the systems ------------------------------------
+    def coord(self, name: str) -> sp.Function:
+        return self.q[self.spec.coordinates.index(name)]
+
+    def rate(self, name: str) -> sp.Expr:
+        return self.qd[self.spec.coordinates.index(name)]
+
+    def _plain(self) -> dict[sp.Expr, sp.Symbol]:
+        """Substitution of time functions by plain state symbols (rates first)."""
+        subs: dict[sp.Expr, sp.Symbol] = {}
+        for c, qi, qdi in zip(self.spec.coordinates, self.q, self.qd, strict=True):
+            subs[qi.diff(self.t, 2)] = sp.Symbol(f"{c}_ddot", real=True)
+            subs[qdi] = sp.Symbol(f"{c}_dot", real=True)
+        for c, qi in zip(self.spec.coordinates, self.q, strict=True):
+            subs[qi] = sp.Symbol(c, real=True)
+        return subs
+
+    def plain(self, expr: sp.Expr | sp.Matrix) -> sp.Expr | sp.Matrix:
+        """*expr* with ``q(t)``, ``q'(t)``, ``q''(t)`` replaced by plain symbols."""
+        return me.msubs(expr, self._plain())
+
+    # -- finishing a derivation --------------------------------------------
+    def lagrange(
+        self,
+        lagrangian: sp.Expr,
+        *,
+        loads: Sequence[tuple[object, me.Vector]] = (),
+        energy: sp.Expr | None = None,
+        conserved: dict[str, sp.Expr] | None = None,
+        extras: dict[str, sp.Expr] | None = None,
+    ) -> SymbolicModel:
+        """Equations of motion by Lagrange's method.
+
+        *loads* are ``(point or frame, vector)`` pairs: forces at points and
+        torques on frames, as :class:`sympy.physics.mechanics.LagrangesMethod`
+        takes them (generalized forces come from their virtual work).
+        """
+        lm = me.LagrangesMethod(lagrangian, self.q, forcelist=list(loads), frame=self.N)
+        lm.form_lagranges_equations()
+        return self._finish("Lagrange", lm.mass_matrix, lm.forcing, energy, conserved, extras)
+
+    def kane(
+        self,
+        *,
+        bodies: Iterable[object],
+        loads: Sequence[tuple[object, me.Vector]] = (),
+        energy: sp.Expr | None = None,
+        conserved: dict[str, sp.Expr] | None = None,
+        extras: dict[str, sp.Expr] | None = None,
+    ) -> SymbolicModel:
+        """Equations of motion by Kane's method, with the speeds ``u_i = q_i'``.
+
+        Choosing the generalized speeds equal to the coordinate rates makes
+        Kane's mass matrix the one of ``M(q) q_ddot = F``, comparable term by
+        term with the Lagrange route. Velocities of points and frames must be
+        set by the caller in terms of ``q'``; they are rewritten in the speeds.
+        """
+        speeds = [me.dynamicsymbols(f"{c}_u") for c in self.spec.coordinates]
+        kd = [qd - s for qd, s in zip(self.qd, speeds, strict=True)]
+        km = me.KanesMethod(self.N, q_ind=self.q, u_ind=speeds, kd_eqs=kd)
+        fr, frstar = km.kanes_equations(list(bodies), list(loads))
+        del fr, frstar
+        back: dict[sp.Expr, sp.Expr] = {}
+        for s, qd in zip(speeds, self.qd, strict=True):
+            back[s.diff(self.t)] = qd.diff(self.t)
+            back[s] = qd
+        mass = me.msubs(km.mass_matrix, back)
+        forcing = me.msubs(km.forcing, back)
+        return self._finish("Kane", mass, forcing, energy, conserved, extras)
+
+    def first_order(
+        self,
+        f: sp.Matrix,
+        *,
+        method: str,
+        energy: sp.Expr | None = None,
+        extras: dict[str, sp.Expr] | None = None,
+    ) -> SymbolicModel:
+        """A first-order model ``x_dot = f(x, u)`` over ``spec.state_names``.
+
+        For reduced models obtained by eliminating a coordinate from a
+        derived one (the servo ball-and-beam); *f* must already be in plain
+        symbols.
+        """
+        states = tuple(sp.Symbol(n, real=True) for n in self.spec.state_names)
+        return SymbolicModel(
+            spec_key=self.spec.key,
+            method=method,
+            states=states,
+            inputs=tuple(self.u.values()),
+            params=tuple(self.p.values()),
+            f=sp.Matrix(f),
+            energy=energy,
+            extras=dict(extras or {}),
+        )
+
+    def _finish(
+        self,
+        method: str,
+        mass: sp.Matrix,
+        forcing: sp.Matrix,
+        energy: sp.Expr | None,
+        conserved: dict[str, sp.Expr] | None,
+        extras: dict[str, sp.Expr] | None,
+    ) -> SymbolicModel:
+        M = sp.Matrix(self.plain(mass)).applyfunc(sp.expand_trig).applyfunc(sp.factor_terms)
+        F = sp.Matrix(self.plain(forcing)).applyfunc(sp.expand).applyfunc(sp.collect_const)
+        qdd = _solve_linear(M, F)
+        q_rates = sp.Matrix([sp.Symbol(f"{c}_dot", real=True) for c in self.spec.coordinates])
+        f = sp.Matrix.vstack(q_rates, qdd)
+        states = tuple(sp.Symbol(n, real=True) for n in self.spec.state_names)
+        return SymbolicModel(
+            spec_key=self.spec.key,
+            method=method,
+            states=states,
+            inputs=tuple(self.u.values()),
+            params=tuple(self.p.values()),
+            f=f,
+            M=M,
+            F=F,
+            energy=None if energy is None else sp.sympify(self.plain(energy)),
+            conserved={k: sp.sympify(self.plain(v)) for k, v in (conserved or {}).items()},
+            extras={k: sp.sympify(self.plain(v)) for k, v in (extras or {}).items()},
+        )
+
+
+def _solve_linear(M: sp.Matrix, F: sp.Matrix) -> sp.Matrix:
+    """``M^-1 F`` symbolically; diagonal and small systems stay compact."""
+    n = M.shape[0]
+    if M.is_diagonal():
+        return sp.Matrix([F[i] / M[i, i] for i in range(n)])
+    if n <= 3:
+        det = sp.factor_terms(M.det(method="berkowitz"))
+        adj = M.adjugate(method="berkowitz")
+        return (adj * F) / det
+    return M.LUsolve(F)
+
+
+def kinetic_energy(frame: me.ReferenceFrame, *bodies: object) -> sp.Expr:
+    """Total kinetic energy of *bodies* in *frame*."""
+    return sum((b.kinetic_energy(frame) for b in bodies), sp.Integer(0))

@@ -1,0 +1,182 @@
+"""What a system is, as data: parameters, inputs, coordinates, operating point.
+
+A :class:`SystemSpec` is the product specification of one system of the
+catalogue (``SYSTEMS.md``) written as frozen data. The derivation of its
+equations of motion lives beside it in the system's module; the numeric layer
+combines both.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One physical parameter.
+
+    ``low``/``high`` bound the valid range; ``low_open``/``high_open`` say
+    whether the bound itself is excluded (a mass must be > 0, a friction >= 0).
+    """
+
+    name: str
+    default: float
+    unit: str
+    meaning: str
+    low: float = -math.inf
+    high: float = math.inf
+    low_open: bool = False
+    high_open: bool = False
+    note: str = ""
+
+    def check(self, value: float) -> str | None:
+        """Return a problem description, or None when *value* is valid."""
+        if not math.isfinite(value):
+            return f"parameter {self.name} = {value} is not a finite number"
+        too_low = value <= self.low if self.low_open else value < self.low
+        too_high = value >= self.high if self.high_open else value > self.high
+        if too_low or too_high:
+            return f"parameter {self.name} = {value:g} is out of range: expected {self.range_text}"
+        return None
+
+    @property
+    def range_text(self) -> str:
+        lo = "(" if self.low_open or self.low == -math.inf else "["
+        hi = ")" if self.high_open or self.high == math.inf else "]"
+        return f"{lo}{_fmt(self.low)}, {_fmt(self.high)}{hi}"
+
+
+def _fmt(v: float) -> str:
+    if v == math.inf:
+        return "inf"
+    if v == -math.inf:
+        return "-inf"
+    return f"{v:g}"
+
+
+def positive(name: str, default: float, unit: str, meaning: str, note: str = "") -> Parameter:
+    """A strictly positive parameter (masses, lengths, inertias, g)."""
+    return Parameter(name, default, unit, meaning, low=0.0, low_open=True, note=note)
+
+
+def nonnegative(name: str, default: float, unit: str, meaning: str, note: str = "") -> Parameter:
+    """A parameter that may be zero but not negative (frictions)."""
+    return Parameter(name, default, unit, meaning, low=0.0, note=note)
+
+
+@dataclass(frozen=True)
+class Input:
+    """One actuator input with its default saturation limits."""
+
+    name: str
+    unit: str
+    meaning: str
+    low: float
+    high: float
+
+    def limit_parameters(self) -> tuple[Parameter, Parameter]:
+        """The ``<input>_min`` / ``<input>_max`` parameters of this input."""
+        return (
+            Parameter(f"{self.name}_min", self.low, self.unit, f"lower limit of {self.name}"),
+            Parameter(f"{self.name}_max", self.high, self.unit, f"upper limit of {self.name}"),
+        )
+
+
+@dataclass(frozen=True)
+class OperatingPoint:
+    """The canonical operating point.
+
+    ``state`` fixes state components (missing ones are zero), ``inputs``
+    fixes inputs, and ``free`` names the components (inputs or states) that
+    are solved for so that ``f(x, u) = 0``. Values may be parameter names
+    (e.g. ``"R_d"``), resolved against the bound parameters.
+    """
+
+    state: dict[str, float | str] = field(default_factory=dict)
+    inputs: dict[str, float | str] = field(default_factory=dict)
+    free: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class SystemSpec:
+    """Everything SYSTEMS.md says about one system, except its equations.
+
+    Attributes
+    ----------
+    name:
+        Registry name (``cartpole``); with ``variant`` set, the family name.
+    variant:
+        ``(option, value)`` for families of parameterizations (the
+        gyroscope's ``("euler", "zxz")``), else None.
+    coordinates:
+        Generalized coordinates in state order; rates are ``<name>_dot``.
+    states:
+        Override of the state names for first-order models that are not
+        ``[q, q_dot]`` (the servo ball-and-beam).
+    units:
+        Unit of each coordinate (rates get ``/s``).
+    region:
+        Bounds per state outside which a balancing run counts as fallen.
+    """
+
+    name: str
+    title: str
+    description: str
+    coordinates: tuple[str, ...]
+    units: dict[str, str]
+    parameters: tuple[Parameter, ...]
+    inputs: tuple[Input, ...] = ()
+    outputs: tuple[str, ...] = ()
+    operating_point: OperatingPoint | None = None
+    source: str = ""
+    seed_slips: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+    variant: tuple[str, str] | None = None
+    states: tuple[str, ...] | None = None
+    region: dict[str, tuple[float, float]] = field(default_factory=dict)
+    symbols_latex: dict[str, str] = field(default_factory=dict)
+    singularity: str = ""
+    # Bryson's rule: the largest acceptable deviation of each state and input
+    # from the operating point on the real rig (default LQR weights).
+    design_scales: dict[str, float] = field(default_factory=dict)
+    # Standard deviation of each default output's sensor noise, in the
+    # output's unit (default measurement noise covariance), and of the
+    # process noise on each state rate (default process noise covariance).
+    sensor_noise: dict[str, float] = field(default_factory=dict)
+    process_noise: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def key(self) -> str:
+        """Unique key of this spec (family name plus variant)."""
+        if self.variant is None:
+            return self.name
+        return f"{self.name}[{self.variant[0]}={self.variant[1]}]"
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        if self.states is not None:
+            return self.states
+        return self.coordinates + tuple(f"{c}_dot" for c in self.coordinates)
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return tuple(i.name for i in self.inputs)
+
+    @property
+    def all_parameters(self) -> tuple[Parameter, ...]:
+        """Physical parameters followed by the input-limit parameters."""
+        limits = tuple(p for i in self.inputs for p in i.limit_parameters())
+        return self.parameters + limits
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.all_parameters)
+
+    def state_unit(self, name: str) -> str:
+        if name in self.units:
+            return self.units[name]
+        if name.endswith("_dot") and name[:-4] in self.units:
+            base = self.units[name[:-4]]
+            return f"{base}/s"
+        return ""

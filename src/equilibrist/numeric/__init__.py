@@ -1,0 +1,1 @@
+"""Numeric layer: symbolic model + parameter values -> fast functions, equilibria, linearization."""

@@ -1,0 +1,136 @@
+"""The on-disk cache of derived models.
+
+Deriving equations with sympy takes seconds; loading them must not. For each
+registered spec the cache holds the pickled :class:`SymbolicModel` (with its
+symbolic Jacobians) and the generated numeric module. Both are keyed by a
+hash of everything that shapes them: the system module's source, the
+mechanics and code-generation sources, and the sympy version. Changing the
+model's source changes the key, so a stale model is never loaded.
+
+The folder is ``$EQUILIBRIST_CACHE`` or ``~/.cache/equilibrist``. Writes are
+atomic (write, then rename), so parallel processes may share it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import pickle
+import sys
+import tempfile
+import types
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+import sympy as sp
+
+from equilibrist.mechanics.model import Derivation, SymbolicModel
+from equilibrist.systems.registry import Entry
+
+SCHEMA = "3"
+
+
+def cache_dir() -> Path:
+    root = os.environ.get("EQUILIBRIST_CACHE")
+    base = Path(root) if root else Path.home() / ".cache" / "equilibrist"
+    base.mkdir(parents=True, exist_ok=True)
+    return base
+
+
+def _source_of(module_name: str) -> bytes:
+    mod = sys.modules.get(module_name) or importlib.import_module(module_name)
+    return Path(mod.__file__ or "").read_bytes()
+
+
+def model_key(entry: Entry) -> str:
+    """Hash of everything the derived model depends on."""
+    h = hashlib.sha256()
+    for name in (
+        entry.module,
+        "equilibrist.mechanics.model",
+        "equilibrist.mechanics.spec",
+        "equilibrist.numeric.codegen",
+    ):
+        h.update(_source_of(name))
+    h.update(entry.spec.key.encode())
+    h.update(sp.__version__.encode())
+    h.update(SCHEMA.encode())
+    return h.hexdigest()[:16]
+
+
+def _atomic_write(path: Path, data: bytes) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _stem(entry: Entry, key: str) -> str:
+    safe = entry.spec.key.replace("[", "_").replace("]", "").replace("=", "_")
+    return f"{safe}_{key}"
+
+
+@dataclass(frozen=True, eq=False)
+class CompiledModel:
+    """A derived model: the generated numeric module, the symbolic model on demand."""
+
+    entry: Entry
+    key: str
+    module_path: Path
+    pickle_path: Path
+
+    @cached_property
+    def functions(self) -> types.ModuleType:
+        """The generated module (``f``, ``jac``, ``mass_det``, ``energy``, ``conserved``)."""
+        name = f"equilibrist_generated_{self.module_path.stem}"
+        if name in sys.modules:
+            return sys.modules[name]
+        spec = importlib.util.spec_from_file_location(name, self.module_path)
+        assert spec is not None and spec.loader is not None  # the file was just checked
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+        return module
+
+    @cached_property
+    def symbolic(self) -> SymbolicModel:
+        """The symbolic model (unpickled the first time it is asked for)."""
+        with self.pickle_path.open("rb") as fh:
+            return pickle.load(fh)  # noqa: S301 - our own cache file
+
+
+_MEMO: dict[str, CompiledModel] = {}
+
+
+def derive(entry: Entry) -> SymbolicModel:
+    """Run the derivation of *entry* (slow; bypasses the cache)."""
+    return entry.derive(Derivation(entry.spec))
+
+
+def load(entry: Entry) -> CompiledModel:
+    """The compiled model of *entry*, derived and cached on first use."""
+    key = model_key(entry)
+    memo_key = f"{entry.spec.key}:{key}"
+    if memo_key in _MEMO:
+        return _MEMO[memo_key]
+    folder = cache_dir()
+    stem = _stem(entry, key)
+    module_path = folder / f"{stem}.py"
+    pickle_path = folder / f"{stem}.pkl"
+    if not (module_path.exists() and pickle_path.exists()):
+        from equilibrist.numeric.codegen import generate_source
+
+        model = derive(entry)
+        _ = model.A, model.B  # computed once, stored with the model
+        source = generate_source(model)
+        _atomic_write(pickle_path, pickle.dumps(model, protocol=pickle.HIGHEST_PROTOCOL))
+        _atomic_write(module_path, source.encode())
+    compiled = CompiledModel(entry, key, module_path, pickle_path)
+    _MEMO[memo_key] = compiled
+    return compiled

@@ -1,0 +1,418 @@
+"""A system with its parameters bound: fast ``f``, Jacobians, equilibria, linearization.
+
+A :class:`System` is immutable: :meth:`System.with_params` returns a new one.
+Its dynamics are a pure function of ``(x, u)``; the parameters are a fixed
+vector ``p`` handed to the generated functions.
+"""
+
+from __future__ import annotations
+
+import math
+import types
+from collections.abc import Mapping
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from equilibrist.errors import (
+    DimensionError,
+    NoEquilibriumError,
+    ParameterError,
+    SingularConfigurationError,
+    UnknownNameError,
+    nearest,
+)
+from equilibrist.mechanics.model import SymbolicModel
+from equilibrist.mechanics.spec import SystemSpec
+from equilibrist.numeric import cache
+from equilibrist.numeric.linear import LinearModel
+from equilibrist.systems import registry
+
+# Condition number past which M(q) counts as singular.
+SINGULAR_CONDITION = 1e12
+
+
+@dataclass(frozen=True)
+class Equilibrium:
+    """An operating point ``(x, u)`` with its residual ``|f(x, u)|``."""
+
+    x: np.ndarray
+    u: np.ndarray
+    residual: float
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+
+    def state(self, name: str) -> float:
+        return float(self.x[self.state_names.index(name)])
+
+    def input(self, name: str) -> float:
+        return float(self.u[self.input_names.index(name)])
+
+
+def _finite_vector(values: object, n: int, what: str) -> np.ndarray:
+    try:
+        arr = np.asarray(values, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise DimensionError(f"{what} must be numbers, got {values!r}") from None
+    if arr.size != n:
+        raise DimensionError(f"{what} has {arr.size} values, expected {n}")
+    if not np.all(np.isfinite(arr)):
+        raise ParameterError(f"{what} has a value that is not a finite number: {arr.tolist()}")
+    return arr
+
+
+@dataclass(frozen=True, eq=False)
+class System:
+    """One system of the catalogue with its parameter values bound."""
+
+    spec: SystemSpec
+    compiled: cache.CompiledModel
+    params: Mapping[str, float]
+
+    # -- names ----------------------------------------------------------------
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    @property
+    def key(self) -> str:
+        return self.spec.key
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return self.spec.state_names
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return self.spec.input_names
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        """The default measured outputs (the rig's sensors)."""
+        return self.spec.outputs
+
+    @property
+    def n_states(self) -> int:
+        return len(self.state_names)
+
+    @property
+    def n_inputs(self) -> int:
+        return len(self.input_names)
+
+    @property
+    def state_units(self) -> tuple[str, ...]:
+        return tuple(self.spec.state_unit(s) for s in self.state_names)
+
+    @property
+    def input_units(self) -> tuple[str, ...]:
+        return tuple(i.unit for i in self.spec.inputs)
+
+    def state_index(self, name: str) -> int:
+        if name not in self.state_names:
+            raise UnknownNameError(
+                f"{self.key} has no state {name!r}: {nearest(name, self.state_names)}"
+            )
+        return self.state_names.index(name)
+
+    def input_index(self, name: str) -> int:
+        if name not in self.input_names:
+            if not self.input_names:
+                raise UnknownNameError(f"{self.key} has no input (got {name!r})")
+            raise UnknownNameError(
+                f"{self.key} has no input {name!r}: {nearest(name, self.input_names)}"
+            )
+        return self.input_names.index(name)
+
+    # -- parameters -------------------------------------------------------------
+    @cached_property
+    def p(self) -> np.ndarray:
+        """Parameter vector in the order of the generated functions."""
+        arr = np.array([self.params[n] for n in self.spec.parameter_names], dtype=float)
+        arr.setflags(write=False)
+        return arr
+
+    @property
+    def input_limits(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(u_min, u_max)`` from the ``<input>_min`` / ``<input>_max`` parameters."""
+        low = np.array([self.params[f"{n}_min"] for n in self.input_names], dtype=float)
+        high = np.array([self.params[f"{n}_max"] for n in self.input_names], dtype=float)
+        return low, high
+
+    def with_params(self, **values: float) -> System:
+        """A copy with some parameters changed (validated)."""
+        merged = dict(self.params)
+        merged.update(_validated(self.spec, values))
+        _check_limits_order(self.spec, merged)
+        return System(self.spec, self.compiled, types.MappingProxyType(merged))
+
+    # -- models -----------------------------------------------------------------
+    @property
+    def functions(self) -> types.ModuleType:
+        """The generated numeric module (pure Python, numba-compatible)."""
+        return self.compiled.functions
+
+    @property
+    def symbolic(self) -> SymbolicModel:
+        return self.compiled.symbolic
+
+    # -- evaluation -------------------------------------------------------------
+    def _xu(self, x: object, u: object | None) -> tuple[np.ndarray, np.ndarray]:
+        xv = _finite_vector(x, self.n_states, f"the state of {self.key} ({', '.join(self.state_names)})")
+        if u is None:
+            u = np.zeros(self.n_inputs)
+        what = (
+            f"the input of {self.key} ({', '.join(self.input_names)})"
+            if self.n_inputs
+            else f"the input of {self.key} (it has none)"
+        )
+        uv = _finite_vector(u, self.n_inputs, what)
+        self.check_regular(xv)
+        return xv, uv
+
+    def check_regular(self, x: np.ndarray) -> None:
+        """Raise :class:`SingularConfigurationError` where ``M(q)`` is singular."""
+        nq = self.functions.N_Q
+        if nq == 0:
+            return
+        mass = np.empty((nq, nq))
+        self.functions.mass_matrix(x, self.p, mass)
+        cond = np.linalg.cond(mass)
+        if not math.isfinite(cond) or cond > SINGULAR_CONDITION:
+            coords = ", ".join(
+                f"{c} = {x[i]:g}" for i, c in enumerate(self.spec.coordinates)
+            )
+            why = f": {self.spec.singularity}" if self.spec.singularity else ""
+            raise SingularConfigurationError(
+                f"{self.key} is singular at {coords} (mass matrix not invertible){why}"
+            )
+
+    def f(self, x: object, u: object | None = None) -> np.ndarray:
+        """``x_dot = f(x, u)`` (validated; the simulation core calls the raw function)."""
+        xv, uv = self._xu(x, u)
+        out = np.empty(self.n_states)
+        self.functions.f(xv, uv, self.p, out)
+        return out
+
+    def jacobians(self, x: object, u: object | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(df/dx, df/du)`` at ``(x, u)`` from the symbolic Jacobians."""
+        xv, uv = self._xu(x, u)
+        A = np.empty((self.n_states, self.n_states))
+        B = np.empty((self.n_states, self.n_inputs))
+        self.functions.jac(xv, uv, self.p, A, B)
+        return A, B
+
+    def energy(self, x: object) -> float:
+        """The model's conserved energy (total energy; the cmg robot's Jacobi integral)."""
+        xv, _ = self._xu(x, None)
+        return float(self.functions.energy(xv, self.p))
+
+    def conserved(self, x: object) -> dict[str, float]:
+        """Conserved quantities beyond the energy (momenta of cyclic coordinates)."""
+        xv, _ = self._xu(x, None)
+        names = self.functions.CONSERVED
+        out = np.empty(len(names))
+        self.functions.conserved(xv, self.p, out)
+        return dict(zip(names, out.tolist(), strict=True))
+
+    # -- operating points -------------------------------------------------------
+    def _resolve(self, value: float | str) -> float:
+        if isinstance(value, str):
+            return float(self.params[value])
+        return float(value)
+
+    def equilibrium(
+        self,
+        *,
+        state: Mapping[str, float] | None = None,
+        inputs: Mapping[str, float] | None = None,
+        free: tuple[str, ...] | None = None,
+    ) -> Equilibrium:
+        """Solve ``f(x, u) = 0`` for the components left free.
+
+        Starts from the canonical operating point; *state* and *inputs*
+        override components of it, and a component given explicitly is no
+        longer free. *free* overrides the list of unknowns.
+        """
+        op = self.spec.operating_point
+        state = dict(state or {})
+        inputs = dict(inputs or {})
+        for n in state:
+            self.state_index(n)
+        for n in inputs:
+            self.input_index(n)
+        if op is None and not state:
+            raise NoEquilibriumError(
+                f"{self.key} has no canonical operating point: give the point explicitly "
+                f"(states {', '.join(self.state_names)})"
+            )
+        x = np.zeros(self.n_states)
+        u = np.zeros(self.n_inputs)
+        if op is not None:
+            for n, v in op.state.items():
+                x[self.state_index(n)] = self._resolve(v)
+            for n, v in op.inputs.items():
+                u[self.input_index(n)] = self._resolve(v)
+        for n, v in state.items():
+            x[self.state_index(n)] = _finite_scalar(n, v)
+        for n, v in inputs.items():
+            u[self.input_index(n)] = _finite_scalar(n, v)
+        if free is None:
+            base = () if op is None else op.free
+            free = tuple(c for c in base if c not in state and c not in inputs)
+        for c in free:
+            if c not in self.state_names and c not in self.input_names:
+                raise UnknownNameError(f"{self.key} has no state or input {c!r} to solve for")
+        self.check_regular(x)
+        if free:
+            x, u = self._solve(x, u, free, fixed={**state, **inputs})
+        resid = self.f(x, u)
+        return Equilibrium(x, u, float(np.linalg.norm(resid)), self.state_names, self.input_names)
+
+    def _solve(
+        self, x: np.ndarray, u: np.ndarray, free: tuple[str, ...], fixed: Mapping[str, float]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        from scipy.optimize import least_squares
+
+        sx = [self.state_names.index(c) for c in free if c in self.state_names]
+        su = [self.input_names.index(c) for c in free if c in self.input_names]
+        fns = self.functions
+
+        def split(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            xx, uu = x.copy(), u.copy()
+            xx[sx] = z[: len(sx)]
+            uu[su] = z[len(sx) :]
+            return xx, uu
+
+        def resid(z: np.ndarray) -> np.ndarray:
+            xx, uu = split(z)
+            out = np.empty(self.n_states)
+            fns.f(xx, uu, self.p, out)
+            return out
+
+        def jac(z: np.ndarray) -> np.ndarray:
+            xx, uu = split(z)
+            A = np.empty((self.n_states, self.n_states))
+            B = np.empty((self.n_states, self.n_inputs))
+            fns.jac(xx, uu, self.p, A, B)
+            return np.hstack([A[:, sx], B[:, su]])
+
+        z0 = np.concatenate([x[sx], u[su]])
+        sol = least_squares(resid, z0, jac=jac, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        xs, us = split(sol.x)
+        res = float(np.linalg.norm(resid(sol.x)))
+        scale = 1.0 + float(np.linalg.norm(np.abs(jac(sol.x)) @ np.abs(sol.x)))
+        if not np.all(np.isfinite(sol.x)) or res > 1e-8 * scale:
+            given = ", ".join(f"{k} = {v:g}" for k, v in fixed.items()) or "the canonical point"
+            raise NoEquilibriumError(
+                f"{self.key} has no equilibrium at {given} with {', '.join(free)} free: "
+                f"the best found leaves |f| = {res:.3g}"
+            )
+        return xs, us
+
+    def operating_point(self) -> Equilibrium:
+        """The canonical operating point, with its free components solved."""
+        return self.equilibrium()
+
+    def linearize(
+        self,
+        x0: object | None = None,
+        u0: object | None = None,
+        *,
+        outputs: tuple[str, ...] | list[str] | None = None,
+    ) -> LinearModel:
+        """Numeric ``A, B, C, D`` at ``(x0, u0)`` (default: the canonical operating point).
+
+        The residual ``|f(x0, u0)|`` says whether the point is an equilibrium.
+        """
+        if x0 is None and u0 is None:
+            eq = self.operating_point()
+            xv, uv = eq.x, eq.u
+        else:
+            if x0 is None or (u0 is None and self.n_inputs):
+                raise DimensionError("linearize needs both x0 and u0, or neither")
+            xv, uv = self._xu(x0, u0)
+        A, B = self.jacobians(xv, uv)
+        names = tuple(outputs) if outputs is not None else (self.output_names or self.state_names)
+        base = LinearModel(
+            A=A,
+            B=B,
+            C=np.zeros((0, self.n_states)),
+            D=np.zeros((0, self.n_inputs)),
+            state_names=self.state_names,
+            input_names=self.input_names,
+            output_names=(),
+            x0=xv,
+            u0=uv,
+            residual=float(np.linalg.norm(self.f(xv, uv))),
+            system=self.key,
+            params=self.params,
+            state_units=self.state_units,
+            input_units=self.input_units,
+        )
+        return base.with_outputs(names)
+
+
+def _finite_scalar(name: str, value: object) -> float:
+    try:
+        v = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name} = {value!r} is not a number") from None
+    if not math.isfinite(v):
+        raise ParameterError(f"{name} = {v} is not a finite number")
+    return v
+
+
+def _validated(spec: SystemSpec, values: Mapping[str, object]) -> dict[str, float]:
+    """Check names and ranges of *values*; collect every problem, raise once."""
+    by_name = {p.name: p for p in spec.all_parameters}
+    problems: list[str] = []
+    out: dict[str, float] = {}
+    for name, raw in values.items():
+        if name not in by_name:
+            problems.append(f"unknown parameter {name!r} of {spec.key}: {nearest(name, list(by_name))}")
+            continue
+        try:
+            v = float(raw)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            problems.append(f"parameter {name} = {raw!r} is not a number")
+            continue
+        problem = by_name[name].check(v)
+        if problem:
+            problems.append(problem)
+        else:
+            out[name] = v
+    if problems:
+        unknown_only = all(p.startswith("unknown parameter") for p in problems)
+        cls = UnknownNameError if unknown_only else ParameterError
+        raise cls("; ".join(problems))
+    return out
+
+
+def _check_limits_order(spec: SystemSpec, params: Mapping[str, float]) -> None:
+    for i in spec.inputs:
+        lo, hi = params[f"{i.name}_min"], params[f"{i.name}_max"]
+        if not lo < hi:
+            raise ParameterError(
+                f"input limits of {i.name}: {i.name}_min = {lo:g} must be below {i.name}_max = {hi:g}"
+            )
+
+
+def get_system(name: str, **settings: object) -> System:
+    """The system *name* with parameters from *settings*.
+
+    *settings* holds parameter values and, for a family, its variant option
+    (``get_system("gyroscope", euler="xyz", m=2.0)``).
+    """
+    option = registry.variant_option(name)
+    registry.lookup_family(name)
+    variant = None
+    settings = dict(settings)
+    if option is not None and option in settings:
+        variant = str(settings.pop(option))
+    entry = registry.lookup(name, variant)
+    defaults = {p.name: float(p.default) for p in entry.spec.all_parameters}
+    values = _validated(entry.spec, settings)
+    defaults.update(values)
+    _check_limits_order(entry.spec, defaults)
+    return System(entry.spec, cache.load(entry), types.MappingProxyType(defaults))

@@ -1,0 +1,1 @@
+"""The catalogue: one module per system of SYSTEMS.md, registered by decorator."""

@@ -1,0 +1,134 @@
+"""The registry of systems.
+
+A system module declares its :class:`~equilibrist.mechanics.spec.SystemSpec`
+and decorates its derivation with :func:`register`; adding a system is adding
+one file to this package. Families of parameterizations (the gyroscope's
+``euler = zxz | xyz``) register one spec per variant under one name.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from equilibrist.errors import UnknownNameError
+from equilibrist.mechanics.model import Derivation, SymbolicModel
+from equilibrist.mechanics.spec import SystemSpec
+
+DeriveFunction = Callable[[Derivation], SymbolicModel]
+
+
+@dataclass(frozen=True)
+class Entry:
+    spec: SystemSpec
+    derive: DeriveFunction
+    module: str
+
+
+_FAMILIES: dict[str, dict[str | None, Entry]] = {}
+_VARIANT_OPTION: dict[str, str] = {}
+_DEFAULT_VARIANT: dict[str, str] = {}
+_LOADED = False
+
+
+def register(spec: SystemSpec, *, default: bool = False) -> Callable[[DeriveFunction], DeriveFunction]:
+    """Register *spec* with the decorated derivation function."""
+
+    def decorate(fn: DeriveFunction) -> DeriveFunction:
+        family = _FAMILIES.setdefault(spec.name, {})
+        value = None if spec.variant is None else spec.variant[1]
+        if value in family:
+            raise RuntimeError(f"system {spec.key} registered twice")
+        family[value] = Entry(spec, fn, fn.__module__)
+        if spec.variant is not None:
+            _VARIANT_OPTION[spec.name] = spec.variant[0]
+            if default or spec.name not in _DEFAULT_VARIANT:
+                _DEFAULT_VARIANT[spec.name] = spec.variant[1]
+        return fn
+
+    return decorate
+
+
+def _load_all() -> None:
+    global _LOADED
+    if _LOADED:
+        return
+    import equilibrist.systems as pkg
+
+    for info in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda m: m.name):
+        if info.name != "registry" and not info.name.startswith("_"):
+            importlib.import_module(f"{pkg.__name__}.{info.name}")
+    _LOADED = True
+
+
+_ORDER = (
+    "seesaw",
+    "cartpole",
+    "double_cartpole",
+    "wheeled_pendulum",
+    "reaction_wheel_pendulum",
+    "ball_beam",
+    "ball_beam_servo",
+    "gyroscope",
+    "cmg_robot",
+)
+
+
+def family_names() -> list[str]:
+    """Registered system names, in the catalogue's order."""
+    _load_all()
+    known = [n for n in _ORDER if n in _FAMILIES]
+    return known + sorted(n for n in _FAMILIES if n not in _ORDER)
+
+
+def variant_option(name: str) -> str | None:
+    """The option that selects a variant of *name* (``"euler"``), or None."""
+    _load_all()
+    return _VARIANT_OPTION.get(name)
+
+
+def variants(name: str) -> tuple[str, ...]:
+    _load_all()
+    return tuple(v for v in lookup_family(name) if v is not None)
+
+
+def default_variant(name: str) -> str | None:
+    _load_all()
+    return _DEFAULT_VARIANT.get(name)
+
+
+def lookup_family(name: str) -> dict[str | None, Entry]:
+    _load_all()
+    if name not in _FAMILIES:
+        from equilibrist.errors import nearest
+
+        raise UnknownNameError(
+            f"unknown system {name!r}: {nearest(name, family_names())} "
+            f"(known systems: {', '.join(family_names())})"
+        )
+    return _FAMILIES[name]
+
+
+def lookup(name: str, variant: str | None = None) -> Entry:
+    """The registry entry of *name* (and *variant* for a family)."""
+    family = lookup_family(name)
+    option = _VARIANT_OPTION.get(name)
+    if option is None:
+        if variant is not None:
+            raise UnknownNameError(f"system {name} has no variants (got {variant!r})")
+        return family[None]
+    value = variant if variant is not None else _DEFAULT_VARIANT[name]
+    if value not in family:
+        choices = ", ".join(v for v in family if v is not None)
+        raise UnknownNameError(f"{option} = {value!r} is not a variant of {name}: expected one of {choices}")
+    return family[value]
+
+
+def all_entries() -> list[Entry]:
+    """Every registered spec, variants included, in catalogue order."""
+    out: list[Entry] = []
+    for name in family_names():
+        out.extend(_FAMILIES[name].values())
+    return out
