@@ -1,0 +1,143 @@
+"""Argument helpers shared by the subcommands."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import numpy as np
+
+from equilibrist.errors import EquilibristError, ParameterError
+
+
+class UsageError(EquilibristError, ValueError):
+    """A malformed command-line value."""
+
+
+def add_system(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("system", metavar="SYSTEM", help="a system name (see 'equilibrist systems')")
+
+
+def add_set(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--set",
+        dest="settings",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="set a parameter, or a variant option such as euler=xyz (repeatable)",
+    )
+
+
+def add_json(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true", help="print JSON for scripts")
+
+
+def parse_number(text: str, what: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise UsageError(f"{what}: {text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise ParameterError(f"{what}: {text} is not a finite number")
+    return value
+
+
+def parse_assignments(items: Iterable[str], option: str) -> dict[str, str]:
+    """``["a=1", "b=2"]`` -> ``{"a": "1", "b": "2"}``; malformed items are refused."""
+    out: dict[str, str] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        name, value = name.strip(), value.strip()
+        if not sep or not name or not value:
+            raise UsageError(f"{option} {item!r}: expected NAME=VALUE")
+        if name in out:
+            raise UsageError(f"{option} gives {name} twice")
+        out[name] = value
+    return out
+
+
+def parse_vector(text: str | None, what: str, n: int | None = None) -> list[float] | None:
+    """``"1,2,3"`` -> ``[1.0, 2.0, 3.0]``, checking count and finiteness."""
+    if text is None:
+        return None
+    parts = [p for p in text.split(",")]
+    if any(not p.strip() for p in parts):
+        raise UsageError(f"{what} {text!r}: expected comma-separated numbers")
+    values = [parse_number(p.strip(), what) for p in parts]
+    if n is not None and len(values) != n:
+        raise UsageError(f"{what} has {len(values)} values, expected {n}")
+    return values
+
+
+def system_settings(name: str, items: Sequence[str]) -> dict[str, object]:
+    """The ``--set`` items as keyword settings of :func:`get_system`."""
+    from equilibrist.systems import registry
+
+    raw = parse_assignments(items, "--set")
+    option = registry.variant_option(name)
+    settings: dict[str, object] = {}
+    for key, value in raw.items():
+        settings[key] = value if key == option else parse_number(value, f"--set {key}")
+    return settings
+
+
+def load_system(args: argparse.Namespace) -> Any:
+    """The system named on the command line with its ``--set`` values."""
+    from equilibrist.numeric.system import get_system
+    from equilibrist.systems import registry
+
+    registry.lookup_family(args.system)  # unknown names fail before parsing values
+    return get_system(args.system, **system_settings(args.system, args.settings))
+
+
+def to_jsonable(obj: Any) -> Any:
+    """numpy arrays and scalars to lists and floats; NaN and infinities to None."""
+    if isinstance(obj, dict):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        if np.iscomplexobj(obj):
+            return [to_jsonable(v) for v in obj.tolist()]
+        return to_jsonable(obj.tolist())
+    if isinstance(obj, complex):
+        return {"re": to_jsonable(obj.real), "im": to_jsonable(obj.imag)}
+    if isinstance(obj, (np.floating, float)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj
+
+
+def print_json(obj: Any) -> None:
+    json.dump(to_jsonable(obj), sys.stdout, indent=2)
+    sys.stdout.write("\n")
+
+
+def format_matrix(mat: np.ndarray, rows: Sequence[str], cols: Sequence[str], *, width: int = 11) -> str:
+    """A labelled matrix as aligned text."""
+    label = max([len(r) for r in rows] + [1])
+    head = " " * (label + 2) + "".join(f"{c:>{width}}" for c in cols)
+    lines = [head]
+    for r, row in zip(rows, np.atleast_2d(mat), strict=False):
+        lines.append(f"  {r:<{label}}" + "".join(f"{v:>{width}.5g}" for v in row))
+    return "\n".join(lines)
+
+
+def format_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
+    cells = [[str(h) for h in header]] + [[str(c) for c in r] for r in rows]
+    widths = [max(len(r[i]) for r in cells) for i in range(len(header))]
+    out = []
+    for k, r in enumerate(cells):
+        out.append("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip())
+        if k == 0:
+            out.append("  ".join("-" * w for w in widths))
+    return "\n".join(out)

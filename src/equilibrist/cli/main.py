@@ -1,0 +1,79 @@
+"""Entry point of the ``equilibrist`` command.
+
+Each module of this package that defines ``add_parser(subparsers)`` adds one
+subcommand; the parser it adds sets ``func`` to a function taking the parsed
+arguments and returning the exit status. User mistakes (any
+:class:`~equilibrist.errors.EquilibristError`, and argument errors) end with
+one line on stderr and exit status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+from collections.abc import Sequence
+
+from equilibrist import __version__
+from equilibrist.errors import EquilibristError
+
+# Order of the subcommands in --help; modules not listed come after.
+_ORDER = ("systems", "show", "dynamics", "linearize", "design", "simulate", "batch",
+          "plot", "animate", "export", "demo")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (argparse prints the usage block otherwise)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise _UsageError(f"{self.prog}: {message} (see '{self.prog} --help')")
+
+
+class _UsageError(Exception):
+    pass
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="equilibrist",
+        description="Underactuated balancing systems: derive, linearize, control, simulate, "
+        "show and export.",
+    )
+    parser.add_argument("--version", action="version", version=f"equilibrist {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    import equilibrist.cli as pkg
+
+    names = [m.name for m in pkgutil.iter_modules(pkg.__path__)]
+    ordered = [n for n in _ORDER if n in names] + sorted(n for n in names if n not in _ORDER)
+    for name in ordered:
+        if name in ("main", "common"):
+            continue
+        module = importlib.import_module(f"{pkg.__name__}.{name}")
+        if hasattr(module, "add_parser"):
+            module.add_parser(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+        if not getattr(args, "func", None):
+            parser.print_help()
+            return 2
+        return int(args.func(args) or 0)
+    except (EquilibristError, _UsageError) as exc:
+        message = str(exc).replace("\n", " ")
+        prefix = "" if message.startswith("equilibrist") else "equilibrist: error: "
+        print(f"{prefix}{message}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        return 0
+    except KeyboardInterrupt:
+        print("equilibrist: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,91 @@
+"""``equilibrist systems``: the catalogue with states, inputs, outputs and parameters."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from equilibrist.cli import common
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("systems", help="list every system with its states, inputs and parameters")
+    common.add_json(p)
+    p.set_defaults(func=run)
+
+
+def describe(spec: Any) -> dict[str, Any]:
+    """One spec as plain data (the JSON of ``systems`` and of reports)."""
+    return {
+        "name": spec.name,
+        "title": spec.title,
+        "description": spec.description,
+        "variant": None if spec.variant is None else {spec.variant[0]: spec.variant[1]},
+        "states": list(spec.state_names),
+        "state_units": [spec.state_unit(s) for s in spec.state_names],
+        "inputs": list(spec.input_names),
+        "input_units": [i.unit for i in spec.inputs],
+        "outputs": list(spec.outputs),
+        "parameters": {
+            p.name: {
+                "default": p.default,
+                "unit": p.unit,
+                "meaning": p.meaning,
+                "range": [p.low, p.high],
+                "range_text": p.range_text,
+            }
+            for p in spec.all_parameters
+        },
+        "operating_point": None
+        if spec.operating_point is None
+        else {
+            "state": dict(spec.operating_point.state),
+            "inputs": dict(spec.operating_point.inputs),
+            "solved_for": list(spec.operating_point.free),
+        },
+        "source": spec.source,
+    }
+
+
+def catalogue() -> dict[str, Any]:
+    """Every system keyed by name; a family lists its variants under ``variants``."""
+    from equilibrist.systems import registry
+
+    out: dict[str, Any] = {}
+    for name in registry.family_names():
+        option = registry.variant_option(name)
+        if option is None:
+            out[name] = describe(registry.lookup(name).spec)
+            continue
+        default = registry.default_variant(name)
+        entry = describe(registry.lookup(name, default).spec)
+        entry["variant_option"] = option
+        entry["variants"] = {v: describe(registry.lookup(name, v).spec) for v in registry.variants(name)}
+        out[name] = entry
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    data = catalogue()
+    if args.json:
+        common.print_json(data)
+        return 0
+    for name, entry in data.items():
+        specs = list(entry["variants"].values()) if "variants" in entry else [entry]
+        print(f"{name}: {entry['title']}")
+        for spec in specs:
+            tag = ""
+            if spec["variant"]:
+                (k, v), = spec["variant"].items()
+                tag = f"  [{k}={v}]"
+            print(f"  states:  {', '.join(spec['states'])}{tag}")
+        print(f"  inputs:  {', '.join(entry['inputs']) or '(none)'}")
+        print(f"  outputs: {', '.join(entry['outputs']) or '(none)'}")
+        rows = [
+            [p, f"{v['default']:g}", v["unit"], v["range_text"], v["meaning"]]
+            for p, v in entry["parameters"].items()
+        ]
+        table = common.format_table(["parameter", "default", "unit", "range", "meaning"], rows)
+        print("    " + table.replace("\n", "\n    "))
+        print()
+    return 0

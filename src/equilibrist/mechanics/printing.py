@@ -1,0 +1,82 @@
+"""Readable equations of motion: pretty text and LaTeX with the seeds' symbols.
+
+State symbols are plain names (``theta_dot``) so that generated code and
+JSON stay ASCII; for printing they are swapped for display symbols that
+sympy renders with accents (``θ̇``, ``θ̈``, ``θ̇₁``).
+"""
+
+from __future__ import annotations
+
+import re
+
+import sympy as sp
+
+from equilibrist.mechanics.model import SymbolicModel
+from equilibrist.mechanics.spec import SystemSpec
+
+
+def _display(name: str, accent: str) -> sp.Symbol:
+    base, digits = re.match(r"^(.*?)(\d*)$", name).groups()  # type: ignore[union-attr]
+    return sp.Symbol(base + accent + (f"_{digits}" if digits else ""))
+
+
+def display_symbols(model: SymbolicModel, spec: SystemSpec) -> dict[sp.Symbol, sp.Symbol]:
+    """Substitution of state, rate and acceleration symbols by display symbols."""
+    subs: dict[sp.Symbol, sp.Symbol] = {}
+    coords = list(spec.coordinates) if model.M is not None else [s.name for s in model.states]
+    for c in coords:
+        subs[sp.Symbol(c, real=True)] = _display(c, "")
+        subs[sp.Symbol(f"{c}_dot", real=True)] = _display(c, "dot")
+        subs[sp.Symbol(f"{c}_ddot", real=True)] = _display(c, "ddot")
+        subs[sp.Symbol(f"{c}_ddot")] = _display(c, "ddot")
+        subs[sp.Symbol(f"{c}__rate")] = _display(c, "dot")
+    return subs
+
+
+def _latex_overrides(model: SymbolicModel, spec: SystemSpec) -> dict[sp.Symbol, str]:
+    return {s: spec.symbols_latex[s.name] for s in (*model.params, *model.inputs)
+            if s.name in spec.symbols_latex}
+
+
+def _rows(model: SymbolicModel) -> list[tuple[sp.Expr, sp.Expr]]:
+    """``(lhs, rhs)`` per equation: ``sum_j M_ij q_ddot_j = F_i`` or ``x_dot_i = f_i``."""
+    if model.M is not None and model.F is not None:
+        qdd = model.q_ddot_symbols()
+        return [
+            (sum((model.M[i, j] * qdd[j] for j in range(model.n_q)), sp.Integer(0)), model.F[i])
+            for i in range(model.n_q)
+        ]
+    return [(sp.Symbol(f"{s.name}__rate"), model.f[i]) for i, s in enumerate(model.states)]
+
+
+def equations_text(model: SymbolicModel, spec: SystemSpec) -> str:
+    """The equations of motion as pretty (unicode) text."""
+    subs = display_symbols(model, spec)
+    header = "M(q) q_ddot = F(q, q_dot, u):" if model.M is not None else "x_dot = f(x, u):"
+    lines = [header, ""]
+    for lhs, rhs in _rows(model):
+        eq = sp.Eq(lhs.xreplace(subs), rhs.xreplace(subs), evaluate=False)
+        lines.append(sp.pretty(eq, use_unicode=True, wrap_line=False))
+        lines.append("")
+    return "\n".join(lines).rstrip()
+
+
+def equations_latex(model: SymbolicModel, spec: SystemSpec) -> str:
+    """The equations of motion as a LaTeX ``aligned`` block."""
+    subs = display_symbols(model, spec)
+    names = _latex_overrides(model, spec)
+    rows = [
+        f"{sp.latex(lhs.xreplace(subs), symbol_names=names)} &= "
+        f"{sp.latex(rhs.xreplace(subs), symbol_names=names)}"
+        for lhs, rhs in _rows(model)
+    ]
+    return "\\begin{aligned}\n" + " \\\\\n".join(rows) + "\n\\end{aligned}"
+
+
+def matrix_latex(model: SymbolicModel, spec: SystemSpec, which: str) -> str:
+    """LaTeX of ``M``, ``F``, ``f``, ``A`` or ``B``."""
+    mat = {"M": model.M, "F": model.F, "f": model.f, "A": model.A, "B": model.B}[which]
+    if mat is None:
+        raise ValueError(f"model of {spec.key} has no {which}")
+    return sp.latex(mat.xreplace(display_symbols(model, spec)),
+                    symbol_names=_latex_overrides(model, spec))
