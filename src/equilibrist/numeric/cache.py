@@ -102,7 +102,7 @@ class CompiledModel:
     def symbolic(self) -> SymbolicModel:
         """The symbolic model (unpickled the first time it is asked for)."""
         with self.pickle_path.open("rb") as fh:
-            return pickle.load(fh)  # noqa: S301 - our own cache file
+            return pickle.load(fh)  # our own cache file
 
 
 _MEMO: dict[str, CompiledModel] = {}
