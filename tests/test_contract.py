@@ -74,7 +74,7 @@ def test_spec_metadata(entry: registry.Entry) -> None:
     for p in spec.all_parameters:
         assert p.check(p.default) is None, p.name
         assert p.unit is not None and p.meaning
-    assert "g" in names or spec.name == "gyroscope" and "g" in names
+    assert "g" in names
     assert set(spec.outputs) <= set(spec.state_names)
     assert set(spec.region) <= set(spec.state_names)
     for s in spec.state_names:
