@@ -15,7 +15,7 @@ __version__ = "0.1.0"
 __all__ = ["EquilibristError", "__version__", "get_system", "list_systems"]
 
 
-def get_system(name: str, **options: object):  # noqa: ANN201 - re-export
+def get_system(name: str, **options: object):  # re-exported lazily
     """Return the :class:`~equilibrist.numeric.system.System` called *name*."""
     from equilibrist.numeric.system import get_system as _get
 
