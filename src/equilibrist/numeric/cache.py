@@ -14,6 +14,7 @@ atomic (write, then rename), so parallel processes may share it.
 from __future__ import annotations
 
 import hashlib
+import importlib.metadata
 import importlib.util
 import os
 import pickle
@@ -23,11 +24,12 @@ import types
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import sympy as sp
-
-from equilibrist.mechanics.model import Derivation, SymbolicModel
 from equilibrist.systems.registry import Entry
+
+if TYPE_CHECKING:  # sympy is imported only when a model is derived or unpickled
+    from equilibrist.mechanics.model import SymbolicModel
 
 SCHEMA = "3"
 
@@ -55,7 +57,7 @@ def model_key(entry: Entry) -> str:
     ):
         h.update(_source_of(name))
     h.update(entry.spec.key.encode())
-    h.update(sp.__version__.encode())
+    h.update(importlib.metadata.version("sympy").encode())
     h.update(SCHEMA.encode())
     return h.hexdigest()[:16]
 
@@ -110,6 +112,8 @@ _MEMO: dict[str, CompiledModel] = {}
 
 def derive(entry: Entry) -> SymbolicModel:
     """Run the derivation of *entry* (slow; bypasses the cache)."""
+    from equilibrist.mechanics.model import Derivation
+
     return entry.derive(Derivation(entry.spec))
 
 

@@ -12,6 +12,7 @@ import types
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,11 +24,13 @@ from equilibrist.errors import (
     UnknownNameError,
     nearest,
 )
-from equilibrist.mechanics.model import SymbolicModel
 from equilibrist.mechanics.spec import SystemSpec
 from equilibrist.numeric import cache
 from equilibrist.numeric.linear import LinearModel
 from equilibrist.systems import registry
+
+if TYPE_CHECKING:  # sympy is imported only when the symbolic model is asked for
+    from equilibrist.mechanics.model import SymbolicModel
 
 # Condition number past which M(q) counts as singular.
 SINGULAR_CONDITION = 1e12

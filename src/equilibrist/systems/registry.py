@@ -12,12 +12,15 @@ import importlib
 import pkgutil
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from equilibrist.errors import UnknownNameError
-from equilibrist.mechanics.model import Derivation, SymbolicModel
 from equilibrist.mechanics.spec import SystemSpec
 
-DeriveFunction = Callable[[Derivation], SymbolicModel]
+if TYPE_CHECKING:  # sympy is imported only when a model is derived
+    from equilibrist.mechanics.model import Derivation, SymbolicModel
+
+DeriveFunction = Callable[["Derivation"], "SymbolicModel"]
 
 
 @dataclass(frozen=True)
