@@ -98,6 +98,12 @@ def test_seesaw_equilibrium_thrust(theta_e: float) -> None:
     assert math.cos(theta_e) == pytest.approx(-delta * force / gamma, rel=1e-10)
     # The seed's printed acos(delta F_e / gamma) has the wrong sign: F_e > 0 here.
     assert force > 0
+    # Seed 000's Jacobians at the equilibrium (x2e = 0, sech^2(0) = 1).
+    alpha, beta, _, _ = _seesaw_constants(dict(system.params))
+    lm = system.linearize(eq.x, eq.u)
+    A_seed = [[0.0, 1.0], [-gamma * math.sin(theta_e), -alpha - beta / system.params["eps"]]]
+    np.testing.assert_allclose(lm.A, A_seed, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(lm.B, [[0.0], [delta]], rtol=1e-12)
 
 
 def test_seesaw_canonical_point_is_level_with_weight_difference_thrust() -> None:

@@ -17,8 +17,8 @@ Description
     The ball's radius cancels. The exact equation has a further term
     ``5/7 (d + 2/5 r) theta_ddot``: dropping it makes the model exact only
     while ``omega`` is constant (between changes of the command); a servo
-    that changes its rate quickly adds an unmodelled push ``2/7 r
-    d(omega)/dt`` on the ball.
+    that changes its rate adds an unmodelled ball acceleration ``2/7 r
+    d(omega)/dt`` (with ``d = 0``).
 
 States
     ``theta`` beam angle from +x [rad], counter-clockwise positive; ``R``

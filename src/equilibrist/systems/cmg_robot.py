@@ -74,9 +74,12 @@ Source
 
     - it writes ``psi`` where ``psi_dot`` is meant in the linearization lines,
       and ``I_h`` for ``I_b``;
-    - it labels the derivative with respect to ``theta_dot`` as one with
-      respect to ``theta`` (twice ``d theta_ddot / d theta``), and one line
-      of ``d phi_ddot / d theta_dot`` omits the factor ``1 / (2 I_xy)``;
+    - several derivative lines of the linearization are mislabeled (``d/d
+      theta`` for ``d/d theta_dot``, ``d/d theta_dot`` and ``d/d phi_dot``
+      for ``d/d phi``), one line of ``d phi_ddot / d theta_dot`` omits the
+      factor ``1 / (2 I_xy)``, and ``d phi_ddot / d phi`` drops a
+      ``theta_dot`` from ``-2 I_z Omega theta_dot sin(phi)`` (all vanish or
+      are fixed at the upright point, so its matrix is right);
     - its ``I_b`` leaves out the body's own inertia about its centre of mass
       (kept here as ``I_body``, default 0).
 """
@@ -132,8 +135,8 @@ SPEC = SystemSpec(
     source='seeds/002 "Control moment gyroscope"',
     seed_slips=(
         "psi written for psi_dot in the linearization lines; I_h for I_b",
-        "d/d theta written for d/d theta_dot; one line of d phi_ddot / d theta_dot omits "
-        "1 / (2 I_xy)",
+        "mislabeled derivative lines in the linearization; one line of d phi_ddot / d theta_dot "
+        "omits 1 / (2 I_xy); d phi_ddot / d phi drops a theta_dot (its matrix is right)",
         "I_b leaves out the body's own inertia (I_body, default 0)",
     ),
     notes=(
