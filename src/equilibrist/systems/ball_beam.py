@@ -73,10 +73,8 @@ Source
 
 from __future__ import annotations
 
-import sympy as sp
-from sympy.physics import mechanics as me
+from typing import TYPE_CHECKING
 
-from equilibrist.mechanics.model import Derivation, SymbolicModel
 from equilibrist.mechanics.spec import (
     Input,
     OperatingPoint,
@@ -86,6 +84,9 @@ from equilibrist.mechanics.spec import (
     positive,
 )
 from equilibrist.systems.registry import register
+
+if TYPE_CHECKING:  # sympy is imported only when the model is derived
+    from equilibrist.mechanics.model import Derivation, SymbolicModel
 
 SPEC = SystemSpec(
     name="ball_beam",
@@ -139,6 +140,9 @@ SPEC = SystemSpec(
 
 @register(SPEC)
 def derive(d: Derivation) -> SymbolicModel:
+    import sympy as sp
+    from sympy.physics import mechanics as me
+
     theta, R = d.q
     thetad, Rd = d.qd
     p, tau = d.p, d.u["tau"]

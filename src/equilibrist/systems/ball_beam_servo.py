@@ -59,10 +59,8 @@ Source
 
 from __future__ import annotations
 
-import sympy as sp
-from sympy.physics import mechanics as me
+from typing import TYPE_CHECKING
 
-from equilibrist.mechanics.model import Derivation, SymbolicModel
 from equilibrist.mechanics.spec import (
     Input,
     OperatingPoint,
@@ -72,6 +70,9 @@ from equilibrist.mechanics.spec import (
     positive,
 )
 from equilibrist.systems.registry import register
+
+if TYPE_CHECKING:  # sympy is imported only when the model is derived
+    from equilibrist.mechanics.model import Derivation, SymbolicModel
 
 SPEC = SystemSpec(
     name="ball_beam_servo",
@@ -118,6 +119,9 @@ SPEC = SystemSpec(
 
 @register(SPEC)
 def derive(d: Derivation) -> SymbolicModel:
+    import sympy as sp
+    from sympy.physics import mechanics as me
+
     theta, R = d.q
     thetad, Rd = d.qd
     t = d.t

@@ -86,10 +86,8 @@ Source
 
 from __future__ import annotations
 
-import sympy as sp
-from sympy.physics import mechanics as me
+from typing import TYPE_CHECKING
 
-from equilibrist.mechanics.model import Derivation, SymbolicModel
 from equilibrist.mechanics.spec import (
     Input,
     OperatingPoint,
@@ -99,6 +97,9 @@ from equilibrist.mechanics.spec import (
     positive,
 )
 from equilibrist.systems.registry import register
+
+if TYPE_CHECKING:  # sympy is imported only when the model is derived
+    from equilibrist.mechanics.model import Derivation, SymbolicModel
 
 SPEC = SystemSpec(
     name="cmg_robot",
@@ -160,6 +161,9 @@ SPEC = SystemSpec(
 
 @register(SPEC)
 def derive(d: Derivation) -> SymbolicModel:
+    import sympy as sp
+    from sympy.physics import mechanics as me
+
     theta, phi = d.q
     thetad, phid = d.qd
     p, tau = d.p, d.u["tau"]

@@ -71,12 +71,13 @@ Source
 
 from __future__ import annotations
 
-import sympy as sp
-from sympy.physics import mechanics as me
+from typing import TYPE_CHECKING
 
-from equilibrist.mechanics.model import Derivation, SymbolicModel
 from equilibrist.mechanics.spec import Input, OperatingPoint, SystemSpec, nonnegative, positive
 from equilibrist.systems.registry import register
+
+if TYPE_CHECKING:  # sympy is imported only when the model is derived
+    from equilibrist.mechanics.model import Derivation, SymbolicModel
 
 SPEC = SystemSpec(
     name="seesaw",
@@ -135,6 +136,9 @@ SPEC = SystemSpec(
 
 @register(SPEC)
 def derive(d: Derivation) -> SymbolicModel:
+    import sympy as sp
+    from sympy.physics import mechanics as me
+
     (theta,) = d.q
     (thetad,) = d.qd
     p, F = d.p, d.u["F"]
