@@ -42,8 +42,11 @@ def cache_dir() -> Path:
 
 
 def _source_of(module_name: str) -> bytes:
-    mod = sys.modules.get(module_name) or importlib.import_module(module_name)
-    return Path(mod.__file__ or "").read_bytes()
+    # find_spec locates the file without importing (and so without sympy).
+    spec = importlib.util.find_spec(module_name)
+    if spec is None or spec.origin is None:
+        raise RuntimeError(f"cannot find the source of {module_name}")
+    return Path(spec.origin).read_bytes()
 
 
 def model_key(entry: Entry) -> str:

@@ -40,12 +40,13 @@ Source
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-from sympy.physics import mechanics as me
-
-from equilibrist.mechanics.model import Derivation, SymbolicModel
 from equilibrist.mechanics.spec import Input, OperatingPoint, SystemSpec, nonnegative, positive
 from equilibrist.systems.registry import register
+
+if TYPE_CHECKING:  # sympy is imported only when the model is derived
+    from equilibrist.mechanics.model import Derivation, SymbolicModel
 
 SPEC = SystemSpec(
     name="cartpole",
@@ -82,6 +83,7 @@ SPEC = SystemSpec(
 
 @register(SPEC)
 def derive(d: Derivation) -> SymbolicModel:
+    from sympy.physics import mechanics as me
     x, theta = d.q
     xd, thetad = d.qd
     p, F = d.p, d.u["F"]

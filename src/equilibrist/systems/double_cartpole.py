@@ -63,12 +63,13 @@ Source
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-from sympy.physics import mechanics as me
-
-from equilibrist.mechanics.model import Derivation, SymbolicModel, kinetic_energy
 from equilibrist.mechanics.spec import Input, OperatingPoint, SystemSpec, nonnegative, positive
 from equilibrist.systems.registry import register
+
+if TYPE_CHECKING:  # sympy is imported only when the model is derived
+    from equilibrist.mechanics.model import Derivation, SymbolicModel
 
 _RIG = "desktop rig: 30 cm aluminium bar"
 
@@ -138,6 +139,9 @@ SPEC = SystemSpec(
 
 @register(SPEC)
 def derive(d: Derivation) -> SymbolicModel:
+    from sympy.physics import mechanics as me
+
+    from equilibrist.mechanics.model import kinetic_energy
     x, theta1, theta2 = d.q
     xd, theta1d, theta2d = d.qd
     p, F = d.p, d.u["F"]

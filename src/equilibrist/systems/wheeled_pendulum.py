@@ -53,12 +53,13 @@ Source
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
-from sympy.physics import mechanics as me
-
-from equilibrist.mechanics.model import Derivation, SymbolicModel, kinetic_energy
 from equilibrist.mechanics.spec import Input, OperatingPoint, SystemSpec, nonnegative, positive
 from equilibrist.systems.registry import register
+
+if TYPE_CHECKING:  # sympy is imported only when the model is derived
+    from equilibrist.mechanics.model import Derivation, SymbolicModel
 
 _ROBOT = "hobby two-wheeled balancing robot"
 
@@ -119,6 +120,9 @@ SPEC = SystemSpec(
 
 @register(SPEC)
 def derive(d: Derivation) -> SymbolicModel:
+    from sympy.physics import mechanics as me
+
+    from equilibrist.mechanics.model import kinetic_energy
     phi, theta = d.q
     phid, thetad = d.qd
     p, tau = d.p, d.u["tau"]
