@@ -3,8 +3,9 @@
 Deriving equations with sympy takes seconds; loading them must not. For each
 registered spec the cache holds the pickled :class:`SymbolicModel` (with its
 symbolic Jacobians) and the generated numeric module. Both are keyed by a
-hash of everything that shapes them: the system module's source, the
-mechanics and code-generation sources, and the sympy version. Changing the
+hash of everything that shapes them: the system module's source, the whole
+mechanics layer, the systems' private helper modules (``systems/_*.py``),
+the code-generation source, and the sympy version. Changing the
 model's source changes the key, so a stale model is never loaded.
 
 The folder is ``$EQUILIBRIST_CACHE`` or ``~/.cache/equilibrist``. Writes are
@@ -52,13 +53,16 @@ def _source_of(module_name: str) -> bytes:
 def model_key(entry: Entry) -> str:
     """Hash of everything the derived model depends on."""
     h = hashlib.sha256()
-    for name in (
-        entry.module,
-        "equilibrist.mechanics.model",
-        "equilibrist.mechanics.spec",
-        "equilibrist.numeric.codegen",
-    ):
+    for name in (entry.module, "equilibrist.numeric.codegen"):
         h.update(_source_of(name))
+    # Everything a derivation may lean on: the mechanics layer and the
+    # systems' private helper modules (a leading underscore).
+    for folder in ("mechanics", "systems"):
+        base = Path(__file__).resolve().parent.parent / folder
+        for path in sorted(base.glob("*.py")):
+            if folder == "mechanics" or path.name.startswith("_"):
+                h.update(path.name.encode())
+                h.update(path.read_bytes())
     h.update(entry.spec.key.encode())
     h.update(importlib.metadata.version("sympy").encode())
     h.update(SCHEMA.encode())
