@@ -95,13 +95,7 @@ def generate_source(model: SymbolicModel) -> str:
     out += _unpack(model, with_inputs=True, used=_free(fx))
     out += _body(fx, [f"out[{i}]" for i in range(n)], subs, printer)
     out += ["", "", "def jac(x, u, p, A, B):"]
-    out += [
-        f"    for i in range({n}):",
-        f"        for j in range({n}):",
-        "            A[i, j] = 0.0",
-        f"        for j in range({m}):",
-        "            B[i, j] = 0.0",
-    ]
+    out += ["    A[:, :] = 0.0", "    B[:, :] = 0.0"]
     entries: list[sp.Expr] = []
     targets: list[str] = []
     for (i, j), val in _nonzero(model.A):
