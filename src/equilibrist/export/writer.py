@@ -1,0 +1,301 @@
+"""Write the C export of a design into a folder, all of it or nothing.
+
+Everything is checked and every file's text made in memory first; then the
+files are written into a hidden staging folder beside the target and moved
+into place, so a bad input leaves nothing half-written.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from equilibrist.errors import ExportError
+from equilibrist.export import c_code
+from equilibrist.export.data import ControllerData, check_controller, check_precision, from_design
+
+ARDUINO_FOLDER = "example_arduino"
+
+
+def generator_version() -> str:
+    """``"equilibrist <version>"``, written into every export."""
+    from equilibrist import __version__
+
+    return f"equilibrist {__version__}"
+
+
+def controller_data(design: Any, *, controller: str = "lqg") -> ControllerData:
+    """:func:`~equilibrist.export.data.from_design` for a discrete design.
+
+    Raises
+    ------
+    ExportError
+        A continuous design (no rate), or anything :func:`from_design` refuses.
+    """
+    check_controller(controller)
+    if getattr(design, "discrete", None) is None or not getattr(design, "rate", None):
+        raise ExportError(
+            f"the design of {getattr(design, 'system_key', 'the system')} is continuous: "
+            "a digital controller needs a sample rate (design it with rate=...)"
+        )
+    return from_design(design, controller=controller)
+
+
+def check_rate(rate: object) -> float:
+    """*rate* as a positive finite number of samples per second, else :class:`ExportError`."""
+    try:
+        value = float(rate)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise ExportError(f"rate must be a positive number of samples per second (Hz), got {rate!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise ExportError(f"rate must be a positive number of samples per second (Hz), got {value:g}")
+    return value
+
+
+def check_folder(out: object) -> Path:
+    """The output folder, if it can be written (existing or creatable), else :class:`ExportError`."""
+    try:
+        path = Path(os.fspath(out)).expanduser()  # type: ignore[arg-type]
+    except TypeError:
+        raise ExportError(f"output folder {out!r} is not a path") from None
+    path = path.absolute()
+    if path.exists():
+        if not path.is_dir():
+            raise ExportError(f"output folder {path} exists and is not a folder")
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise ExportError(f"output folder {path} is not writable")
+        return path
+    ancestor = path.parent
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise ExportError(f"cannot create output folder {path}: {ancestor} is not a folder")
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        raise ExportError(f"cannot create output folder {path}: {ancestor} is not writable")
+    return path
+
+
+@dataclass(frozen=True)
+class Export:
+    """What :func:`export_c` wrote.
+
+    Attributes
+    ----------
+    folder:
+        The output folder.
+    files:
+        Paths of the files written, relative to *folder*, with what each is.
+    data:
+        The controller that was exported.
+    precision:
+        ``"double"`` or ``"float"``.
+    vectors:
+        The test vectors written.
+    """
+
+    folder: Path
+    files: Mapping[str, str]
+    data: ControllerData
+    precision: str
+    vectors: c_code.Vectors
+
+    @property
+    def name(self) -> str:
+        return self.data.name
+
+    @property
+    def header(self) -> Path:
+        return self.folder / f"{self.data.name}.h"
+
+    @property
+    def source(self) -> Path:
+        return self.folder / f"{self.data.name}.c"
+
+
+def render(
+    data: ControllerData,
+    vectors: c_code.Vectors,
+    *,
+    precision: str,
+    version: str,
+    title: str = "",
+    param_table: tuple[tuple[str, float, str, str], ...] = (),
+) -> dict[str, tuple[str, str]]:
+    """Every file of the export: relative path -> (text, what it is)."""
+    name = data.name
+    head = c_code.header(data, precision=precision, version=version, title=title,
+                         param_table=param_table)
+    src = c_code.source(data, precision=precision, version=version)
+    files: dict[str, tuple[str, str]] = {
+        f"{name}.h": (head, "the library's header: constants, units, the functions"),
+        f"{name}.c": (src, "the library: init, step, estimate, version"),
+        "example_desktop.c": (c_code.desktop_example(data),
+                              "desktop example: balances the linear model, or reads stdin with '-'"),
+        f"test_{name}.c": (c_code.test_program(data), "test program: replays the test vectors"),
+        f"{name}_vectors.h": (c_code.vectors_header(data, vectors, version=version),
+                              "test vectors: a recorded noisy closed-loop run"),
+        "Makefile": (c_code.makefile(data), "make / make check / make clean"),
+        f"{ARDUINO_FOLDER}/{ARDUINO_FOLDER}.ino": (
+            c_code.arduino_sketch(data, precision=precision),
+            "Arduino sketch (with its own copy of the library)",
+        ),
+        f"{ARDUINO_FOLDER}/{name}.h": (head, "copy of the header for the sketch"),
+        f"{ARDUINO_FOLDER}/{name}.c": (src, "copy of the library for the sketch"),
+    }
+    listing = {path: what for path, (_, what) in files.items()}
+    listing["README.txt"] = "this list"
+    files["README.txt"] = (
+        c_code.readme(data, precision=precision, version=version, files=listing),
+        "this list",
+    )
+    return files
+
+
+def write_files(folder: Path, files: Mapping[str, str]) -> None:
+    """Write *files* (relative path -> text) into *folder* through a staging folder.
+
+    A new folder appears whole (one rename); into an existing folder each
+    file is moved into place, replacing an older file of the same name and
+    leaving other files alone.
+    """
+    folder = check_folder(folder)
+    existed = folder.exists()
+    if existed:
+        stage_root = folder
+    else:
+        stage_root = folder.parent
+        while not stage_root.exists():
+            stage_root = stage_root.parent
+    staging = Path(tempfile.mkdtemp(prefix=".equilibrist-export-", dir=stage_root))
+    try:
+        for rel, text in files.items():
+            path = staging / rel
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(text)
+        if not existed:
+            folder.parent.mkdir(parents=True, exist_ok=True)
+            os.chmod(staging, 0o777 & ~_umask())
+            os.rename(staging, folder)
+            return
+        for rel in files:
+            target = folder / rel
+            target.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(staging / rel, target)
+    except OSError as exc:
+        raise ExportError(f"cannot write the export into {folder}: {exc.strerror or exc}") from None
+    finally:
+        if staging.exists():
+            shutil.rmtree(staging, ignore_errors=True)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def export_c(
+    design: Any,
+    out: str | os.PathLike[str],
+    *,
+    controller: str = "lqg",
+    precision: str = "double",
+    vectors: c_code.Vectors | None = None,
+    duration: float | None = None,
+    seed: int = 0,
+    system: Any | None = None,
+) -> Export:
+    """Write the C99 library of *design*'s digital controller, with examples and tests.
+
+    The folder receives ``<name>.h`` and ``<name>.c`` (the library; ``<name>``
+    is ``<system>_<controller>``), ``example_desktop.c``, an Arduino sketch
+    in ``example_arduino/``, ``test_<name>.c`` with ``<name>_vectors.h``, a
+    ``Makefile`` (``make``, ``make check``) and ``README.txt``.
+
+    Parameters
+    ----------
+    design:
+        A discrete control-layer ``Design``.
+    out:
+        Output folder; created if missing, files of the same names replaced.
+    controller:
+        ``"lqg"`` (Kalman filter on the design's outputs) or ``"lqr"`` (full state).
+    precision:
+        ``"double"`` or ``"float"``: the library's arithmetic.
+    vectors:
+        Test vectors to ship; default a recorded noisy closed-loop run of
+        the simulation's reference controller (:func:`~equilibrist.export.vectors.record`).
+    duration, seed:
+        Length [s] and noise seed of that run.
+    system:
+        The bound system the design was made for (default: rebuilt from the
+        design's key and parameters), for its descriptions.
+
+    Returns
+    -------
+    Export
+
+    Raises
+    ------
+    ExportError
+        An unknown controller or precision, a continuous design, a system
+        without input, an output folder that cannot be written. Nothing is
+        written then.
+    """
+    check_controller(controller)
+    check_precision(precision)
+    folder = check_folder(out)
+    data = controller_data(design, controller=controller)
+    if system is None:
+        system = _system_of(design)
+    if vectors is None:
+        from equilibrist.export.vectors import record
+
+        vectors = record(design, system, controller=controller, precision=precision,
+                         duration=duration, seed=seed)
+    version = generator_version()
+    title, table = _describe(system, data)
+    files = render(data, vectors, precision=precision, version=version, title=title,
+                   param_table=table)
+    write_files(folder, {rel: text for rel, (text, _) in files.items()})
+    return Export(
+        folder=folder,
+        files={rel: what for rel, (_, what) in files.items()},
+        data=data,
+        precision=precision,
+        vectors=vectors,
+    )
+
+
+def _system_of(design: Any) -> Any:
+    from equilibrist.numeric.system import get_system
+    from equilibrist.systems import registry
+
+    key = str(design.system_key)
+    name, variant = key, None
+    if "[" in key and key.endswith("]"):
+        name, _, rest = key.partition("[")
+        variant = rest[:-1].partition("=")[2]
+    settings: dict[str, object] = dict(design.params)
+    option = registry.variant_option(name)
+    if option is not None and variant is not None:
+        settings[option] = variant
+    return get_system(name, **settings)
+
+
+def _describe(system: Any, data: ControllerData) -> tuple[str, tuple[tuple[str, float, str, str], ...]]:
+    if system is None:
+        return "", tuple((k, float(v), "", "") for k, v in data.params.items())
+    spec = system.spec
+    table = []
+    for p in spec.all_parameters:
+        if p.name in data.params:
+            table.append((p.name, float(data.params[p.name]), p.unit, p.meaning))
+    return spec.title, tuple(table)
+
