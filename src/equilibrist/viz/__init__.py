@@ -1,0 +1,28 @@
+"""Show it balance: plots, pole maps, drawings and animations of every system.
+
+Modules
+-------
+scenes
+    One drawing per system of the catalogue, built from a state vector and
+    the system's parameters only (never from its dynamics).
+frames
+    A figure that renders a scene with a time stamp and the input gauges,
+    frame by frame, to RGB arrays or a PNG.
+animation
+    Animations from arrays or from a simulation result: GIF (pure Python)
+    and MP4 where ffmpeg is installed.
+plots
+    Time responses, comparisons, Monte-Carlo fans, regions of attraction
+    and pole maps, saved as PNG or SVG.
+runs
+    The read-only view of simulation results that the plots and animations
+    share.
+report
+    The report folder of ``equilibrist demo``: plots, animations and an
+    ``index.html`` that shows them with the equations of motion.
+cli_hooks
+    ``--plot`` / ``--animate`` options for commands that produce a result.
+
+Nothing here imports matplotlib at import time; each function imports it
+when it draws.
+"""

@@ -1,0 +1,73 @@
+"""Files out of the viz layer: figures as PNG or SVG, the viz error, ffmpeg."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+from typing import Any
+
+from equilibrist.errors import EquilibristError
+
+#: Suffixes a figure can be saved as.
+FIGURE_FORMATS = (".png", ".svg")
+#: Suffixes an animation can be saved as.
+ANIMATION_FORMATS = (".gif", ".mp4")
+
+
+class VizError(EquilibristError, ValueError):
+    """A plot or animation that can not be made as asked (a format that is
+    not supported, ffmpeg missing for an MP4, nothing to show)."""
+
+
+def check_suffix(path: str | Path, allowed: tuple[str, ...], what: str) -> Path:
+    """*path* as a Path, refused unless its suffix is one of *allowed*."""
+    p = Path(path)
+    if p.suffix.lower() not in allowed:
+        raise VizError(
+            f"{what} {str(p)!r}: unsupported format {p.suffix or '(no suffix)'!r}; "
+            f"use one of {', '.join(allowed)}"
+        )
+    return p
+
+
+def save_figure(figure: Any, path: str | Path, *, dpi: float | None = None) -> Path:
+    """Save a matplotlib *figure* as PNG or SVG (by suffix), creating the folder.
+
+    Parameters
+    ----------
+    figure : matplotlib.figure.Figure
+        The figure.
+    path : str or pathlib.Path
+        Output file, ``.png`` or ``.svg``.
+    dpi : float, optional
+        Resolution of a PNG (default: the figure's).
+
+    Returns
+    -------
+    pathlib.Path
+        The file written.
+    """
+    p = check_suffix(path, FIGURE_FORMATS, "figure")
+    p.parent.mkdir(parents=True, exist_ok=True)
+    kwargs: dict[str, Any] = {"format": p.suffix.lower()[1:]}
+    if p.suffix.lower() == ".svg":
+        kwargs["metadata"] = {"Date": None}  # reproducible files
+    else:
+        kwargs["metadata"] = {"Software": None}
+    figure.savefig(p, dpi=dpi or figure.dpi, facecolor="white", **kwargs)
+    return p
+
+
+def ffmpeg_path() -> str | None:
+    """The ffmpeg executable, or None when it is not installed.
+
+    Looks at matplotlib's ``animation.ffmpeg_path`` setting when it names a
+    file, then on ``PATH``.
+    """
+    try:
+        import matplotlib
+
+        configured = str(matplotlib.rcParams.get("animation.ffmpeg_path", "ffmpeg"))
+    except ImportError:  # pragma: no cover - matplotlib is a dependency
+        configured = "ffmpeg"
+    return shutil.which(configured) or shutil.which("ffmpeg")
