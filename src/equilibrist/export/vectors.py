@@ -1,0 +1,49 @@
+"""Test vectors of an exported controller, and the compiled controller in the simulation.
+
+:func:`record` runs the simulation's own digital controller in closed loop
+on the nonlinear plant, with sensor and process noise, and keeps what the
+controller saw and did: the measurements and references in, the saturated
+commands out. Shipped with the export, they let the test program check the
+C code on the user's target.
+
+:func:`tolerance` says how close the C code must come: a fraction of the
+input's activity over the run (its largest excursion from the operating
+input), ``1e-9`` in double precision (room for another compiler's fused
+multiply-adds) and ``1e-3`` in single precision.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from equilibrist.export.c_code import Vectors
+from equilibrist.export.data import ControllerData
+
+# Fractions of the input's activity accepted by the shipped test program.
+RELATIVE_TOLERANCE = {"double": 1e-9, "float": 1e-3}
+
+
+def tolerance(data: ControllerData, u: np.ndarray, precision: str) -> np.ndarray:
+    """Per input, the largest accepted ``|u_C - u|`` for the commands *u* of a run.
+
+    The scale is the input's largest excursion from the operating input
+    over the run, at least a millionth of its range, and the tolerance
+    :data:`RELATIVE_TOLERANCE` of it.
+    """
+    u = np.atleast_2d(np.asarray(u, dtype=float))
+    activity = np.max(np.abs(u - data.u0), axis=0) if u.size else np.zeros(data.n_inputs)
+    floor = 1e-6 * (data.u_max - data.u_min)
+    scale = np.maximum(np.maximum(activity, floor), np.abs(data.u0) * 1e-6)
+    return RELATIVE_TOLERANCE[precision] * scale
+
+
+def make_vectors(data: ControllerData, y: Any, r: Any, u: Any, x_init: Any, *,
+                 precision: str) -> Vectors:
+    """:class:`Vectors` from arrays, with the tolerance of :func:`tolerance`."""
+    ys = np.asarray(y, dtype=float).reshape(-1, data.n_measured)
+    us = np.asarray(u, dtype=float).reshape(-1, data.n_inputs)
+    rs = np.asarray(r, dtype=float).reshape(len(us), data.n_references)
+    x0 = np.asarray(x_init, dtype=float).reshape(data.n_states)
+    return Vectors(y=ys, r=rs, u=us, x_init=x0, tolerance=tolerance(data, us, precision))
