@@ -126,3 +126,16 @@ def test_bad_requests_are_refused_with_a_reason(tmp_path):
         animate(system, t, np.zeros((4, 11)), tmp_path / "a.gif")
     with pytest.raises(VizError, match="inputs of cartpole"):
         animate(system, t, np.zeros((11, 4)), tmp_path / "a.gif", inputs=np.zeros((11, 2)))
+
+
+def test_slow_motion_has_more_frames_and_says_so(tmp_path):
+    system = get_system("gyroscope", euler="xyz")
+    t = np.linspace(0.0, 1.0, 101)
+    x = np.zeros((101, 6))
+    x[:, 0] = 0.3 * t
+    path = animate(system, t, x, tmp_path / "slow.gif", fps=10, speed=0.5, width=96, height=72)
+    with Image.open(path) as im:
+        assert im.n_frames == 21  # 2 s of playback at 10 frames per second
+        assert im.info["duration"] == 100
+    with pytest.raises(VizError, match="speed"):
+        animate(system, t, x, tmp_path / "bad.gif", speed=0)

@@ -72,6 +72,7 @@ def render_frames(
     width: int = 480,
     height: int = 360,
     title: str | None = None,
+    speed: float = 1.0,
     progress: bool = False,
 ) -> tuple[list[np.ndarray], np.ndarray]:
     """Render the frames of an animation.
@@ -94,6 +95,9 @@ def render_frames(
         Frame size in pixels.
     title : str, optional
         Title line of the frames.
+    speed : float
+        Playback speed relative to real time (0.25: slow motion, shown
+        beside the time stamp); *fps* is frames per second of playback.
     progress : bool
         Show a progress bar.
 
@@ -120,7 +124,9 @@ def render_frames(
                 f"{what} of {system.key} have shape {np.shape(arr)}, expected "
                 f"({len(t)}, {len(system.input_names)})"
             )
-    times = frame_times(t, fps=fps, max_frames=max_frames)
+    if not (speed > 0 and math.isfinite(speed)):
+        raise VizError(f"playback speed must be a positive number, got {speed}")
+    times = frame_times(t, fps=fps / speed, max_frames=max_frames)
     index = _sample_index(t, times)
     renderer = FrameRenderer(system, states=states[index], inputs=None if inputs is None else inputs[index],
                              width=width, height=height, title=title)
@@ -136,7 +142,8 @@ def render_frames(
             u = None if inputs is None else inputs[i]
             c = None if commands is None else commands[i]
             trail = np.vstack([states[: i + 1 : thin], states[i : i + 1]])
-            frames.append(renderer.frame(states[i], u, command=c, t=float(times[k]), trail=trail))
+            frames.append(renderer.frame(states[i], u, command=c, t=float(times[k]), trail=trail,
+                                         speed=speed))
             bar.update()
     return frames, times
 
@@ -219,6 +226,7 @@ def animate(
     width: int = 480,
     height: int = 360,
     title: str | None = None,
+    speed: float = 1.0,
     progress: bool = False,
 ) -> Path:
     """Animate a run of *system* from arrays to a GIF or MP4 (by suffix).
@@ -242,8 +250,9 @@ def animate(
         write_mp4([], p, fps=fps)  # raises the message that says what to do
     frames, times = render_frames(system, t, states, inputs=inputs, commands=commands, fps=fps,
                                   max_frames=max_frames, width=width, height=height, title=title,
-                                  progress=progress)
-    step = float(times[1] - times[0]) if len(times) > 1 else 1.0 / fps
+                                  speed=speed, progress=progress)
+    # Seconds of playback per frame.
+    step = float(times[1] - times[0]) / speed if len(times) > 1 else 1.0 / fps
     if p.suffix.lower() == ".mp4":
         return write_mp4(frames, p, fps=1.0 / step)
     return write_gif(frames, p, frame_seconds=step)
@@ -266,7 +275,7 @@ def animate_result(result: Any, path: str | Path, *, system: Any = None, estimat
         Draw the estimated states instead of the true ones.
     **options
         Passed to :func:`animate` (``fps``, ``max_frames``, ``width``,
-        ``height``, ``title``, ``progress``).
+        ``height``, ``title``, ``speed``, ``progress``).
     """
     from equilibrist.viz.runs import as_run
 

@@ -201,6 +201,7 @@ class FrameRenderer:
         command: np.ndarray | None = None,
         t: float | None = None,
         trail: np.ndarray | None = None,
+        speed: float = 1.0,
     ) -> None:
         """Update the figure to state *x*.
 
@@ -217,12 +218,17 @@ class FrameRenderer:
             Time stamp.
         trail : numpy.ndarray, optional
             The states up to *x* (for scenes that draw a trace).
+        speed : float
+            Playback speed shown beside the time stamp when it is not 1.
         """
         x = np.asarray(x, float)
         uu = None if u is None else np.atleast_1d(np.asarray(u, float))
         for shape in self.scene.shapes(x, uu, trail):
             self._apply(shape)
-        self.time_text.set_text("" if t is None else f"t = {t:6.2f} s")
+        stamp = "" if t is None else f"t = {t:6.2f} s"
+        if stamp and not math.isclose(speed, 1.0):
+            stamp = f"x{speed:g}  " + stamp
+        self.time_text.set_text(stamp)
         for i, g in enumerate(self._gauges):
             val = 0.0 if uu is None else float(uu[i])
             clipped = min(max(val, g["lo"]), g["hi"])

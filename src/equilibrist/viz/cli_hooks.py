@@ -1,0 +1,119 @@
+"""``--plot`` and ``--animate`` for commands that produce a simulation result.
+
+A command adds the options with :func:`add_output_options` and, once it has
+its result, calls :func:`handle_outputs`. The file names are checked when
+the arguments are parsed (a wrong suffix, or an MP4 without ffmpeg, fails
+before anything is simulated).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from equilibrist.viz.output import (
+    ANIMATION_FORMATS,
+    FIGURE_FORMATS,
+    VizError,
+    check_suffix,
+    ffmpeg_path,
+)
+
+
+def _figure_path(text: str) -> Path:
+    try:
+        return check_suffix(text, FIGURE_FORMATS, "--plot")
+    except VizError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _animation_path(text: str) -> Path:
+    try:
+        path = check_suffix(text, ANIMATION_FORMATS, "--animate")
+    except VizError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    if path.suffix.lower() == ".mp4" and ffmpeg_path() is None:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: MP4 needs ffmpeg, which is not installed on this machine; "
+            "use a .gif (needs nothing) or install ffmpeg"
+        )
+    return path
+
+
+def frame_size(text: str) -> tuple[int, int]:
+    """``"480x360"`` -> ``(480, 360)`` (an argparse type)."""
+    w, sep, h = text.lower().partition("x")
+    try:
+        size = (int(w), int(h))
+    except ValueError:
+        size = (0, 0)
+    if not sep or size[0] < 48 or size[1] < 36:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected WIDTHxHEIGHT in pixels, at least 48x36")
+    return size
+
+
+def add_animation_options(parser: argparse.ArgumentParser) -> None:
+    """``--fps``, ``--max-frames`` and ``--size`` of an animation."""
+    parser.add_argument("--fps", type=float, default=20.0, metavar="N",
+                        help="frames per second of simulated time (default 20)")
+    parser.add_argument("--max-frames", type=int, default=300, metavar="N",
+                        help="at most this many frames; a long run plays with fewer per second "
+                        "(default 300)")
+    parser.add_argument("--size", type=frame_size, default=(480, 360), metavar="WxH",
+                        help="frame size in pixels (default 480x360)")
+
+
+def add_output_options(parser: argparse.ArgumentParser) -> None:
+    """Add ``--plot FILE``, ``--animate FILE`` and the animation options."""
+    group = parser.add_argument_group("pictures")
+    group.add_argument("--plot", type=_figure_path, metavar="FILE",
+                       help="plot the run's time response to FILE (.png or .svg)")
+    group.add_argument("--animate", type=_animation_path, metavar="FILE",
+                       help="animate the run to FILE (.gif; .mp4 where ffmpeg is installed)")
+    add_animation_options(group)  # type: ignore[arg-type]
+
+
+def handle_outputs(args: argparse.Namespace, result: Any, *, system: Any = None) -> list[Path]:
+    """Write the pictures that *args* asks for of *result*.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed arguments of a parser given :func:`add_output_options`.
+    result : equilibrist.sim.SimResult
+        The run.
+    system : equilibrist.numeric.system.System, optional
+        The system simulated (default: rebuilt from the result).
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files written (each is also named on stderr, so that the
+        command's own output, JSON included, stays clean).
+    """
+    written: list[Path] = []
+    if getattr(args, "plot", None) is None and getattr(args, "animate", None) is None:
+        return written
+    from equilibrist.viz.runs import as_run
+
+    try:
+        run = as_run(result, system=system)
+    except VizError:
+        raise
+    if args.plot is not None:
+        from equilibrist.viz.plots import plot_response
+
+        plot_response(run, args.plot)
+        written.append(Path(args.plot))
+    if args.animate is not None:
+        from equilibrist.viz.animation import animate_result
+
+        width, height = args.size
+        animate_result(run, args.animate, fps=args.fps, max_frames=args.max_frames, width=width,
+                       height=height, progress=sys.stderr.isatty())
+        written.append(Path(args.animate))
+    for p in written:
+        print(f"wrote {p}", file=sys.stderr)
+    return written
