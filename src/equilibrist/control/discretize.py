@@ -1,0 +1,157 @@
+"""From continuous to discrete time: plant matrices and noise covariances.
+
+Two methods, named:
+
+``"zoh"`` (default)
+    Exact for an input held constant over each period:
+    ``[[Ad, Bd], [0, I]] = expm([[A, B], [0, 0]] T)``.
+``"euler"``
+    The seed's forward Euler step (seeds/002, "Discrete Kalman filter"):
+    ``Ad = I + A T``, ``Bd = B T``.
+
+Noise (SYSTEMS.md, "Control and estimation"): white process noise of
+intensity ``QN`` entering through ``G`` becomes, over one period,
+``Qd = int_0^T e^{A t} G QN G' e^{A' t} dt`` (computed by Van Loan's
+method; with ``"euler"`` its first-order term ``G QN G' T``, consistent with
+the Euler transition), and measurement noise of intensity ``RN`` averaged
+over a period becomes ``Rd = RN / T``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+from equilibrist.control import _checks
+from equilibrist.errors import DesignError
+from equilibrist.numeric.linear import LinearModel
+
+METHODS = ("zoh", "euler")
+
+
+def _method(method: str) -> str:
+    if method not in METHODS:
+        raise DesignError(
+            f"discretization method {method!r} is unknown: expected one of {', '.join(METHODS)}"
+        )
+    return method
+
+
+def discrete_matrices(
+    A: np.ndarray, B: np.ndarray, dt: float, *, method: str = "zoh"
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(Ad, Bd)`` of ``x_dot = A x + B u`` sampled every *dt* seconds."""
+    _method(method)
+    T = _checks.positive_period(dt)
+    Am = _checks.square(A, "A")
+    n = Am.shape[0]
+    Bm = _checks.with_rows(B, "B", n, "one per state")
+    m = Bm.shape[1]
+    if method == "euler":
+        return np.eye(n) + Am * T, Bm * T
+    block = np.zeros((n + m, n + m))
+    block[:n, :n] = Am * T
+    block[:n, n:] = Bm * T
+    E = scipy.linalg.expm(block)
+    return E[:n, :n], E[:n, n:]
+
+
+def discretize(model: LinearModel, dt: float, *, method: str = "zoh") -> LinearModel:
+    """The discrete-time model of a continuous :class:`LinearModel`.
+
+    Parameters
+    ----------
+    model:
+        A continuous model (``model.dt is None``).
+    dt:
+        Sample period [s], positive.
+    method:
+        ``"zoh"`` (exact for a held input) or ``"euler"`` (``I + A dt``, ``B dt``).
+
+    Returns
+    -------
+    LinearModel
+        ``Ad, Bd`` with the same ``C, D``, names and operating point, and
+        ``dt`` set.
+
+    Raises
+    ------
+    DesignError
+        A model that is already discrete, a period that is not positive, an
+        unknown method.
+    """
+    if model.dt is not None:
+        raise DesignError(f"the model is already discrete (dt = {model.dt:g} s)")
+    Ad, Bd = discrete_matrices(model.A, model.B, dt, method=method)
+    return LinearModel(
+        A=Ad,
+        B=Bd,
+        C=model.C,
+        D=model.D,
+        state_names=model.state_names,
+        input_names=model.input_names,
+        output_names=model.output_names,
+        x0=model.x0,
+        u0=model.u0,
+        residual=model.residual,
+        system=model.system,
+        params=model.params,
+        dt=float(dt),
+        state_units=model.state_units,
+        input_units=model.input_units,
+    )
+
+
+def van_loan(A: object, W: object, dt: float) -> np.ndarray:
+    """``int_0^T e^{A t} W e^{A' t} dt`` by Van Loan's method.
+
+    ``expm([[-A, W], [0, A']] T) = [[., F^-1 Qd], [0, F']]`` with
+    ``F = e^{A T}``, so ``Qd = F (F^-1 Qd)``.
+
+    Parameters
+    ----------
+    A:
+        ``n x n`` continuous state matrix.
+    W:
+        ``n x n`` noise intensity as seen by the state, ``G QN G'``.
+    dt:
+        Period ``T`` [s].
+    """
+    T = _checks.positive_period(dt)
+    Am = _checks.square(A, "A")
+    n = Am.shape[0]
+    Wm = _checks.matrix(W, "G QN G'", (n, n), "one row and column per state")
+    block = np.zeros((2 * n, 2 * n))
+    block[:n, :n] = -Am * T
+    block[:n, n:] = Wm * T
+    block[n:, n:] = Am.T * T
+    E = scipy.linalg.expm(block)
+    F = E[n:, n:].T
+    return _checks.symmetric(F @ E[:n, n:])
+
+
+def discrete_noise(
+    A: object,
+    G: object,
+    QN: object,
+    RN: object,
+    dt: float,
+    *,
+    method: str = "zoh",
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(Qd, Rd)``: per-sample covariances of continuous white noises.
+
+    ``Qd`` is Van Loan's integral for ``"zoh"`` and ``G QN G' T`` for
+    ``"euler"``; ``Rd = RN / T`` for both.
+    """
+    _method(method)
+    T = _checks.positive_period(dt)
+    Am = _checks.square(A, "A")
+    n = Am.shape[0]
+    Gm = _checks.with_rows(G, "G", n, "one per state")
+    k = Gm.shape[1]
+    QNm = _checks.matrix(QN, "QN", (k, k), f"one row and column per noise input, {k} of them")
+    RNm = _checks.square(RN, "RN")
+    W = _checks.symmetric(Gm @ QNm @ Gm.T)
+    Qd = W * T if method == "euler" else van_loan(Am, W, T)
+    return Qd, RNm / T
