@@ -99,7 +99,11 @@ def test_bryson_defaults_from_the_spec() -> None:
         np.diag(d.Q), [1 / spec.design_scales[s] ** 2 for s in d.state_names]
     )
     assert d.R[0, 0] == pytest.approx(1 / spec.design_scales["F"] ** 2)
-    np.testing.assert_allclose(np.diag(d.RN), [spec.sensor_noise[o] ** 2 for o in d.output_names])
+    # Per-sample sensor noise sigma: RN = sigma^2 T so that Rd = RN / T = sigma^2.
+    t = 1.0 / spec.control_rate
+    np.testing.assert_allclose(np.diag(d.RN), [spec.sensor_noise[o] ** 2 * t for o in d.output_names])
+    digital = design(system, rate=spec.control_rate)
+    np.testing.assert_allclose(np.diag(digital.Rd), [spec.sensor_noise[o] ** 2 for o in d.output_names])
     expected_qn = [spec.process_noise.get(s, 0.0) ** 2 for s in d.state_names]
     np.testing.assert_allclose(np.diag(d.QN), expected_qn)
     np.testing.assert_array_equal(d.G, np.eye(4))

@@ -9,7 +9,10 @@ Default weights (SYSTEMS.md, "Control and estimation"; each system's spec):
 * ``Q = diag(1 / scale_i^2)`` over the states and ``R = diag(1 / scale_j^2)``
   over the inputs from ``spec.design_scales`` (Bryson's rule: the largest
   acceptable deviation of each state and input on the real rig).
-* ``RN = diag(sensor_noise_i^2)`` over the measured outputs.
+* ``RN = diag(sensor_noise_i^2) * T`` over the measured outputs: the spec
+  gives the sensors' per-sample standard deviations, and ``Rd = RN / T``
+  then equals their variance. ``T`` is the design's sample period, or the
+  rig's ``control_rate`` for a continuous design.
 * ``QN = diag(process_noise_i^2)`` with ``G = I``: noise on the states that
   ``spec.process_noise`` names (the rates), zero on the others. When that
   leaves a mode on the stability boundary unexcited (the servo ball and
@@ -663,7 +666,11 @@ def design(
             )
             RN = np.eye(len(names))
         else:
-            RN = np.diag([float(noise[o]) ** 2 for o in names])
+            # The spec's sensor noise is a per-sample standard deviation;
+            # RN is a spectral density with Rd = RN / T, so RN = sigma^2 T
+            # makes the sampled sensor noise the stated one.
+            t_sample = 1.0 / (rate_hz if rate_hz is not None else system.spec.control_rate)
+            RN = np.diag([float(noise[o]) ** 2 * t_sample for o in names])
     else:
         RN = _weight(rn, "rn", names, definite=True, problems=problems)
     notes: tuple[str, ...] = ()

@@ -140,11 +140,16 @@ class SystemSpec:
     # Bryson's rule: the largest acceptable deviation of each state and input
     # from the operating point on the real rig (default LQR weights).
     design_scales: dict[str, float] = field(default_factory=dict)
-    # Standard deviation of each default output's sensor noise, in the
-    # output's unit (default measurement noise covariance), and of the
-    # process noise on each state rate (default process noise covariance).
+    # Standard deviation of each default output's sensor noise per sample, in
+    # the output's unit (default measurement noise covariance), and the
+    # intensity of the process noise on each state rate, in the rate's unit
+    # per sqrt(s) (default process noise covariance).
     sensor_noise: dict[str, float] = field(default_factory=dict)
     process_noise: dict[str, float] = field(default_factory=dict)
+    # The rig's digital controller rate [Hz]: the default sample rate of
+    # designs and simulations, and the rate at which ``sensor_noise`` is
+    # sampled (its standard deviations are per sample).
+    control_rate: float = 200.0
 
     @property
     def key(self) -> str:
