@@ -13,12 +13,10 @@ PRECISIONS = ("double", "float")
 # written out so that building the parser does not import scipy.
 METHODS = ("zoh", "euler")
 FORMS = ("current", "predictor")
-# Default sample rate [Hz]: 10 to 40 times the fastest unstable pole of the
-# catalogue's systems at their defaults (2.7 Hz for the wheeled pendulum),
-# and a period (10 ms) that every hobby microcontroller meets.
-DEFAULT_RATE = 100.0
+# Sample rate [Hz] for a system whose spec names no control rate of its rig.
+FALLBACK_RATE = 200.0
 
-_EPILOG = f"""\
+_EPILOG = """\
 Writes into --out (default ./<system>_<controller>): <name>.h and <name>.c
 (the library), example_desktop.c, example_arduino/ (a sketch), test vectors
 <name>_vectors.h with the test program test_<name>.c, a Makefile ('make'
@@ -28,7 +26,8 @@ check' runs the test program) and README.txt.
 The test vectors are a recorded closed-loop run of the simulation's own
 controller on the nonlinear plant, with noise (--duration seconds, --seed).
 
---rate defaults to {DEFAULT_RATE:g} Hz. Weights are diagonals, comma-separated,
+--rate defaults to the system's control rate (the rate of its rig's digital
+controller, from the system's spec). Weights are diagonals, comma-separated,
 as for 'equilibrist design'.
 """
 
@@ -47,7 +46,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="lqg: Kalman filter on the measured outputs; lqr: full state measured "
                    "(default lqg)")
     p.add_argument("--rate", metavar="HZ", default=None,
-                   help=f"sample rate [Hz] (default {DEFAULT_RATE:g})")
+                   help="sample rate [Hz] (default: the system's control rate)")
     p.add_argument("--precision", choices=PRECISIONS, default="double",
                    help="arithmetic of the C code (default double)")
     p.add_argument("--out", metavar="DIR", default=None,
@@ -87,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     from equilibrist.export.writer import check_folder, check_rate, export_c
 
     # Everything that can be checked without designing is checked first.
-    rate = check_rate(DEFAULT_RATE if args.rate is None else common.parse_number(args.rate, "--rate"))
+    rate = None if args.rate is None else check_rate(common.parse_number(args.rate, "--rate"))
     duration = None
     if args.duration is not None:
         duration = common.parse_number(args.duration, "--duration")
@@ -98,6 +97,8 @@ def run(args: argparse.Namespace) -> int:
     system = common.load_system(args)
     if system.n_inputs == 0:
         raise ExportError(f"{system.key} has no input: there is no controller to export")
+    if rate is None:
+        rate = check_rate(getattr(system.spec, "control_rate", None) or FALLBACK_RATE)
 
     from equilibrist.control.design import design
 

@@ -47,3 +47,61 @@ def make_vectors(data: ControllerData, y: Any, r: Any, u: Any, x_init: Any, *,
     rs = np.asarray(r, dtype=float).reshape(len(us), data.n_references)
     x0 = np.asarray(x_init, dtype=float).reshape(data.n_states)
     return Vectors(y=ys, r=rs, u=us, x_init=x0, tolerance=tolerance(data, us, precision))
+
+
+class CController:
+    """The compiled C controller as a controller of equilibrist's simulation.
+
+    It has the simulator's step interface for controllers written by the
+    user (``step(t, y, r) -> u``, ``reset()``, ``estimate``): each step
+    calls the C library's ``step`` with the absolute measurements and
+    references, and returns the command the C code computed (already
+    saturated, so the simulator's own saturation leaves it unchanged). The
+    C code predicts with the input it returned: run it without an input
+    delay.
+
+    Parameters
+    ----------
+    compiled:
+        A loaded :class:`~equilibrist.export.native.CompiledController`.
+    x_estimate:
+        Initial estimate (absolute state) for ``init_at``; None starts at
+        the operating point (``init``), as the simulation's LQG does.
+    """
+
+    def __init__(self, compiled: Any, x_estimate: Any | None = None) -> None:
+        self.compiled = compiled
+        self.x_estimate = None if x_estimate is None else np.asarray(x_estimate, dtype=float)
+        self.reset()
+
+    @property
+    def data(self) -> ControllerData:
+        return self.compiled.data
+
+    def reset(self) -> None:
+        """Start the C controller again (``init`` or ``init_at``)."""
+        self.compiled.reset(self.x_estimate)
+        self.estimate = self.compiled.estimate()
+
+    def step(self, t: float, y: Any, r: Any) -> np.ndarray:
+        """One sample of the C code: absolute ``y`` (and ``r``) in, saturated ``u`` out."""
+        ref = np.asarray(r, dtype=float).reshape(-1) if r is not None else np.zeros(0)
+        u = self.compiled.step(y, ref if ref.size else None)
+        self.estimate = self.compiled.estimate()
+        return u
+
+    def close(self) -> None:
+        self.compiled.close()
+
+
+def c_controller(design: Any, *, controller: str = "lqg", precision: str = "double",
+                 x_estimate: Any | None = None) -> CController:
+    """Generate, compile and load *design*'s C controller as a simulation controller.
+
+    See :func:`~equilibrist.export.native.compile_controller` for the build
+    and :class:`CController` for the interface.
+    """
+    from equilibrist.export.native import compile_controller
+
+    return CController(compile_controller(design, controller=controller, precision=precision),
+                       x_estimate)
