@@ -1,0 +1,60 @@
+"""Closed-loop simulation: digital controllers, noise, saturation, events, batches.
+
+Layer ``sim`` (it imports from ``numeric`` and ``control``). The core is
+compiled per system with numba and cached on disk
+(:mod:`equilibrist.sim.kernel`); everything here shares it:
+
+* :func:`simulate` -- one run (:class:`SimResult`);
+* :func:`simulate_batch` -- many runs at once on all cores (:class:`BatchResult`),
+  :func:`region_of_attraction`, :func:`monte_carlo`;
+* controllers :class:`OpenLoop`, :class:`StateFeedback`, :class:`LQG`, or any
+  object with ``step(t, y, r)``;
+* :class:`Noise`; events :class:`Kick`, :class:`Pulse`, :class:`Impulse`,
+  :class:`ParameterChange`; reference signals :class:`Step`, :class:`Ramp`,
+  :class:`Square`, :class:`Samples`;
+* :class:`Stepper` -- the plant alone, stepped with a held input.
+
+Importing this package does no work; numba is loaded with the first kernel.
+"""
+
+from equilibrist.sim.batch import (
+    BatchResult,
+    MonteCarloResult,
+    RegionOfAttraction,
+    monte_carlo,
+    region_of_attraction,
+    simulate_batch,
+)
+from equilibrist.sim.controllers import LQG, Controller, OpenLoop, StateFeedback
+from equilibrist.sim.events import Impulse, Kick, ParameterChange, Pulse
+from equilibrist.sim.noise import Noise
+from equilibrist.sim.result import SimResult
+from equilibrist.sim.run import simulate
+from equilibrist.sim.signals import Constant, Ramp, Samples, Square, Step
+from equilibrist.sim.stepper import Stepper
+
+__all__ = [
+    "LQG",
+    "BatchResult",
+    "Constant",
+    "Controller",
+    "Impulse",
+    "Kick",
+    "MonteCarloResult",
+    "Noise",
+    "OpenLoop",
+    "ParameterChange",
+    "Pulse",
+    "Ramp",
+    "RegionOfAttraction",
+    "Samples",
+    "SimResult",
+    "Square",
+    "StateFeedback",
+    "Step",
+    "Stepper",
+    "monte_carlo",
+    "region_of_attraction",
+    "simulate",
+    "simulate_batch",
+]

@@ -1,0 +1,627 @@
+"""Template of the compiled simulation core (numba).
+
+This file is not imported by equilibrist. :mod:`equilibrist.sim.kernel`
+copies everything below the marker line into one generated module per
+system, right after that system's generated ``f`` (the numeric layer's
+pure-Python dynamics), so numba compiles each loop with that system's
+dynamics inlined and caches the machine code on disk beside the module.
+
+Conventions of the core (all arrays float64 unless said otherwise):
+
+- ``x`` absolute state, ``u`` absolute input; the controller works in
+  deviation coordinates about ``x_op``, ``u_op``.
+- A *sample* ``k`` is a controller instant ``t_k = k T``; a *physics step*
+  ``s`` of length ``h = T / n_sub`` runs from ``s h`` to ``(s + 1) h``.
+  Events are given by physics-step index.
+- ``status`` (int64): ``[rows written, fell (0/1), fell code, fell step]``;
+  the fell code is the index of the state that left its region, ``-2`` for a
+  state that stopped being a finite number, ``-3`` for the adaptive
+  integrator giving up.
+- ``acc`` accumulators, per run: ``[0:m]`` peak ``|u_commanded|``,
+  ``[m:2m]`` sum of ``u_applied**2``, ``[2m]`` samples in saturation,
+  ``[2m+1 : 2m+1+n]`` peak ``|x - x_op|``, ``[2m+1+n : 2m+1+2n]`` sum of
+  squared estimation errors.
+- Randomness: xoshiro256** on a 4-word ``uint64`` state per run, normal
+  deviates by Box-Muller, drawn in a fixed order (the measurement noise of a
+  sample, then the process noise of each of its physics steps).
+
+Nothing allocates inside the loops over samples and physics steps; scratch
+space is allocated once per run (or per call of a Python-facing entry).
+"""
+
+# The names below the imports only stand in for the generated module's.
+import math
+
+import numpy as np
+from numba import njit, prange
+
+N_STATES = 1
+N_INPUTS = 1
+
+
+def f(x, u, p, out):
+    """Placeholder of the system's generated dynamics."""
+    raise NotImplementedError
+
+
+# ---8<--- kernel body: everything below is copied into each system's kernel
+
+# error_model="numpy": a division by zero gives inf or nan (caught as a
+# state that is no longer finite) instead of raising, and the loops run
+# without the checks. The loops themselves are compiled without numba's
+# reference counting (_nrt=False): every array they touch is allocated by
+# the entry that calls them, and helpers called per step or per sample are
+# inlined. With reference counting the same loop runs four times slower
+# (each array handed to an inlined helper costs atomic increments).
+_jit = njit(cache=True, error_model="numpy")
+_bare = njit(cache=True, error_model="numpy", _nrt=False)
+_inline = njit(cache=True, error_model="numpy", inline="always")
+_fjit = _bare(f)
+_N = N_STATES
+_M = N_INPUTS
+
+_U7 = np.uint64(7)
+_U9 = np.uint64(9)
+_U5 = np.uint64(5)
+_U11 = np.uint64(11)
+_U17 = np.uint64(17)
+_U45 = np.uint64(45)
+_U64 = np.uint64(64)
+_TWO_M53 = 1.0 / 9007199254740992.0
+_TWO_PI = 2.0 * math.pi
+
+# Dormand-Prince 5(4) tableau.
+_A21 = 1.0 / 5.0
+_A31, _A32 = 3.0 / 40.0, 9.0 / 40.0
+_A41, _A42, _A43 = 44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0
+_A51, _A52, _A53, _A54 = 19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0
+_A61, _A62, _A63 = 9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0
+_A64, _A65 = 49.0 / 176.0, -5103.0 / 18656.0
+_B1, _B3, _B4 = 35.0 / 384.0, 500.0 / 1113.0, 125.0 / 192.0
+_B5, _B6 = -2187.0 / 6784.0, 11.0 / 84.0
+_E1, _E3, _E4 = 71.0 / 57600.0, -71.0 / 16695.0, 71.0 / 1920.0
+_E5, _E6, _E7 = -17253.0 / 339200.0, 22.0 / 525.0, -1.0 / 40.0
+_DOPRI_MAX_STEPS = 100000
+
+
+@_inline
+def _rotl(v, k):
+    return (v << k) | (v >> (_U64 - k))
+
+
+@_inline
+def _next_u64(s):
+    result = _rotl(s[1] * _U5, _U7) * _U9
+    t = s[1] << _U17
+    s[2] ^= s[0]
+    s[3] ^= s[1]
+    s[1] ^= s[2]
+    s[0] ^= s[3]
+    s[2] ^= t
+    s[3] = _rotl(s[3], _U45)
+    return result
+
+
+@_inline
+def _uniform(s):
+    """A uniform deviate in (0, 1]."""
+    return (float(_next_u64(s) >> _U11) + 1.0) * _TWO_M53
+
+
+@_inline
+def _normals(s, out, count):
+    """Fill ``out[:count]`` with standard normal deviates (Box-Muller pairs)."""
+    i = 0
+    while i < count:
+        r = math.sqrt(-2.0 * math.log(_uniform(s)))
+        a = _TWO_PI * _uniform(s)
+        out[i] = r * math.cos(a)
+        if i + 1 < count:
+            out[i + 1] = r * math.sin(a)
+        i += 2
+
+
+@_inline
+def _deriv(x, u, p, w, out):
+    _fjit(x, u, p, out)
+    for i in range(_N):
+        out[i] += w[i]
+
+
+@_inline
+def _rk4(x, u, p, w, h, k1, k2, k3, k4, xt):
+    # The scratch vectors are separate arrays made once per run: a row view
+    # made here, in the innermost loop, would cost reference counting.
+    _fjit(x, u, p, k1)
+    for i in range(_N):
+        xt[i] = x[i] + 0.5 * h * (k1[i] + w[i])
+    _fjit(xt, u, p, k2)
+    for i in range(_N):
+        xt[i] = x[i] + 0.5 * h * (k2[i] + w[i])
+    _fjit(xt, u, p, k3)
+    for i in range(_N):
+        xt[i] = x[i] + h * (k3[i] + w[i])
+    _fjit(xt, u, p, k4)
+    for i in range(_N):
+        x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i] + 6.0 * w[i])
+
+
+@_bare
+def _dopri(x, u, p, w, h, rtol, atol, wk):
+    """Integrate over ``[0, h]`` with adaptive Dormand-Prince steps; False if it gives up."""
+    n = _N
+    k1 = wk[0]
+    k2 = wk[1]
+    k3 = wk[2]
+    k4 = wk[3]
+    k5 = wk[4]
+    k6 = wk[5]
+    k7 = wk[6]
+    yt = wk[7]
+    yn = wk[8]
+    hstate = wk[12]
+    t = 0.0
+    dt = min(hstate[0], h)
+    _deriv(x, u, p, w, k1)
+    steps = 0
+    while t < h:
+        steps += 1
+        if steps > _DOPRI_MAX_STEPS:
+            return False
+        last = False
+        if t + dt >= h * (1.0 - 1e-12):
+            dt = h - t
+            last = True
+        for i in range(n):
+            yt[i] = x[i] + dt * _A21 * k1[i]
+        _deriv(yt, u, p, w, k2)
+        for i in range(n):
+            yt[i] = x[i] + dt * (_A31 * k1[i] + _A32 * k2[i])
+        _deriv(yt, u, p, w, k3)
+        for i in range(n):
+            yt[i] = x[i] + dt * (_A41 * k1[i] + _A42 * k2[i] + _A43 * k3[i])
+        _deriv(yt, u, p, w, k4)
+        for i in range(n):
+            yt[i] = x[i] + dt * (_A51 * k1[i] + _A52 * k2[i] + _A53 * k3[i] + _A54 * k4[i])
+        _deriv(yt, u, p, w, k5)
+        for i in range(n):
+            yt[i] = x[i] + dt * (
+                _A61 * k1[i] + _A62 * k2[i] + _A63 * k3[i] + _A64 * k4[i] + _A65 * k5[i]
+            )
+        _deriv(yt, u, p, w, k6)
+        for i in range(n):
+            yn[i] = x[i] + dt * (
+                _B1 * k1[i] + _B3 * k3[i] + _B4 * k4[i] + _B5 * k5[i] + _B6 * k6[i]
+            )
+        _deriv(yn, u, p, w, k7)
+        err = 0.0
+        for i in range(n):
+            e = dt * (
+                _E1 * k1[i] + _E3 * k3[i] + _E4 * k4[i] + _E5 * k5[i] + _E6 * k6[i]
+                + _E7 * k7[i]
+            )
+            sc = atol + rtol * max(abs(x[i]), abs(yn[i]))
+            err += (e / sc) ** 2
+        err = math.sqrt(err / n)
+        if not math.isfinite(err):
+            dt *= 0.2
+            if dt < h * 1e-14:
+                return False
+            continue
+        if err <= 1.0:
+            t = h if last else t + dt
+            for i in range(n):
+                x[i] = yn[i]
+                k1[i] = k7[i]
+            fac = 5.0 if err == 0.0 else min(5.0, max(0.2, 0.9 * err ** -0.2))
+            if not last:
+                hstate[0] = dt * fac
+            dt = dt * fac
+        else:
+            dt *= max(0.2, 0.9 * err ** -0.2)
+            if dt < h * 1e-14:
+                return False
+    return True
+
+
+@_inline
+def _linear(x, u, op, w, lin_s, ps, dx):
+    """Exact step of the affine model ``dx' = A dx + B du + f0 + w`` (held ``u``, ``w``).
+
+    ``lin_s[ps]`` is ``[Phi | E | Gamma | f0]`` of the physics step:
+    ``Phi = e^(A h)``, ``E = int_0^h e^(A s) ds``, ``Gamma = E B``.
+    """
+    n = _N
+    m = _M
+    for i in range(n):
+        dx[i] = x[i] - op[i]
+    for i in range(n):
+        v = 0.0
+        for j in range(n):
+            v += lin_s[ps, i, j] * dx[j] + lin_s[ps, i, n + j] * (lin_s[ps, j, 2 * n + m] + w[j])
+        for j in range(m):
+            v += lin_s[ps, i, 2 * n + j] * (u[j] - op[n + j])
+        x[i] = op[i] + v
+
+
+@_inline
+def _outside(x, region):
+    """-1 inside; the index of the first state outside its region; -2 if not finite."""
+    for i in range(_N):
+        if not math.isfinite(x[i]):
+            return -2
+    for i in range(_N):
+        if x[i] <= region[0, i] or x[i] >= region[1, i]:
+            return i
+    return -1
+
+
+@_inline
+def _pset(p_switch, s):
+    """Index of the parameter set in force during physics step *s*."""
+    j = p_switch.shape[0] - 1
+    while j > 0 and p_switch[j] > s:
+        j -= 1
+    return j
+
+
+@_inline
+def _switch(p_sets, p_switch, s, pcur):
+    """Copy the parameter set that starts at physics step *s* (if one does) into *pcur*."""
+    for j in range(1, p_switch.shape[0]):
+        if p_switch[j] == s:
+            for i in range(pcur.shape[0]):
+                pcur[i] = p_sets[j, i]
+
+
+@_inline
+def _measure(x, c_idx, lv, rng, y, zbuf):
+    ny = c_idx.shape[0]
+    for j in range(ny):
+        y[j] = x[c_idx[j]]
+    if lv.shape[0] > 0:
+        _normals(rng, zbuf, ny)
+        for j in range(ny):
+            v = 0.0
+            for k in range(ny):
+                v += lv[j, k] * zbuf[k]
+            y[j] += v
+
+
+@_inline
+def _advance(
+    k, x, u_app, op, p_sets, p_switch, lin_s, region, kicks, kick_value, pulses, pulse_value,
+    lw, rng, iopts, fopts, status, pcur, k1, k2, k3, k4, xt, ubuf, wvec, zbuf, xprev, fell_x, wk,
+):
+    """The physics steps between samples *k* and *k + 1*; True when the run fell.
+
+    *pcur* holds the parameter set in force; *wk* is the adaptive
+    integrator's scratch (its row 12 carries the step size over).
+    """
+    n = _N
+    m = _M
+    nw = lw.shape[1]
+    n_sub = iopts[4]
+    integrator = iopts[5]
+    h = fopts[0]
+    ok = True
+    for j in range(n_sub):
+        s = k * n_sub + j
+        _switch(p_sets, p_switch, s, pcur)
+        for e in range(kicks.shape[0]):
+            if kicks[e, 0] == s:
+                x[kicks[e, 1]] += kick_value[e]
+        for i in range(m):
+            ubuf[i] = u_app[i]
+        for e in range(pulses.shape[0]):
+            if pulses[e, 0] <= s < pulses[e, 1]:
+                ubuf[pulses[e, 2]] += pulse_value[e]
+        if nw > 0:
+            _normals(rng, zbuf, nw)
+            for i in range(n):
+                v = 0.0
+                for c in range(nw):
+                    v += lw[i, c] * zbuf[c]
+                wvec[i] = v
+        for i in range(n):
+            xprev[i] = x[i]
+        if integrator == 0:
+            _rk4(x, ubuf, pcur, wvec, h, k1, k2, k3, k4, xt)
+        elif integrator == 1:
+            ok = _dopri(x, ubuf, pcur, wvec, h, fopts[1], fopts[2], wk)
+        else:
+            _linear(x, ubuf, op, wvec, lin_s, _pset(p_switch, s), xt)
+        code = _outside(x, region)
+        if not ok:
+            code = -3
+        if code != -1:
+            status[1] = 1
+            status[2] = code
+            status[3] = s + 1
+            finite = code >= 0
+            for i in range(n):
+                fell_x[i] = x[i] if finite else xprev[i]
+            return True
+    return False
+
+
+# Rows of the scratch array ``scr`` the entries hand to the loops.
+_SCR_ROWS = 34
+
+
+@_inline
+def _scratch(p_len, ny, nw):
+    return np.zeros((_SCR_ROWS, max(_N, _M, p_len, ny + 2, nw + 2)))
+
+
+@_bare
+def _run(
+    k_start, k_end, iopts, fopts, x, z, u_prev, rng,
+    op, c_idx, est, gains, r_op, ref, uff, lv, lw,
+    p_sets, p_switch, lin_s, region, kicks, kick_value, pulses, pulse_value,
+    rec, acc, status, scr,
+):
+    """Samples ``k_start .. k_end - 1`` of one closed-loop run (resumable).
+
+    *x*, *z* (the filter's carried state), *u_prev* (the last saturated
+    command), *rng*, *acc* and *status* carry the run from one call to the
+    next. ``iopts = [n_samples, record, est_kind, delay, n_sub, integrator]``
+    (est_kind: 0 none, 1 full state, 2 Kalman "current", 3 Kalman
+    "predictor"; integrator: 0 RK4, 1 adaptive, 2 exact linear),
+    ``fopts = [h, rtol, atol]``; ``op = [x_op, u_op]``; ``est = [Ad | Bd | Kf]``;
+    ``gains = [K | Kc]``; a row of ``rec`` is ``[x | x_hat | y | u_cmd | u_sat | u_app]``.
+    *scr* is zeroed scratch from ``_scratch``; its row 17 receives the state
+    at a fall.
+    """
+    n = _N
+    m = _M
+    n_samples = iopts[0]
+    record = iopts[1] != 0
+    est_kind = iopts[2]
+    delay = iopts[3] != 0
+    n_sub = iopts[4]
+    ny = c_idx.shape[0]
+    nr = r_op.shape[0]
+    y = scr[0]
+    xhat = scr[1]
+    innov = scr[2]
+    u_cmd = scr[3]
+    u_sat = scr[4]
+    u_app = scr[5]
+    znew = scr[6]
+    k1 = scr[7]
+    k2 = scr[8]
+    k3 = scr[9]
+    k4 = scr[10]
+    xt = scr[11]
+    xprev = scr[12]
+    ubuf = scr[13]
+    wvec = scr[14]
+    zbuf = scr[15]
+    pcur = scr[16]
+    fell_x = scr[17]
+    wk = scr[18:34]
+    wk[12, 0] = fopts[0]
+    ps0 = _pset(p_switch, k_start * n_sub)
+    for i in range(p_sets.shape[1]):
+        pcur[i] = p_sets[ps0, i]
+    base = p_sets.shape[1] - 2 * m
+    c_y = 2 * n
+    c_u = 2 * n + ny
+    for k in range(k_start, k_end):
+        _switch(p_sets, p_switch, k * n_sub, pcur)
+        if k == 0:
+            for i in range(m):
+                u_prev[i] = min(max(op[n + i], pcur[base + 2 * i]), pcur[base + 2 * i + 1])
+        _measure(x, c_idx, lv, rng, y, zbuf)
+        if est_kind == 1:
+            for i in range(n):
+                xhat[i] = y[i] - op[i]
+        elif est_kind == 2:
+            for j in range(ny):
+                innov[j] = y[j] - op[c_idx[j]] - z[c_idx[j]]
+            for i in range(n):
+                v = z[i]
+                for j in range(ny):
+                    v += est[i, n + m + j] * innov[j]
+                xhat[i] = v
+        elif est_kind == 3:
+            for i in range(n):
+                xhat[i] = z[i]
+        saturated = False
+        for i in range(m):
+            v = uff[k, i]
+            for j in range(n):
+                v -= gains[i, j] * xhat[j]
+            for j in range(nr):
+                v += gains[i, n + j] * (ref[k, j] - r_op[j])
+            u_cmd[i] = op[n + i] + v
+            u_sat[i] = min(max(u_cmd[i], pcur[base + 2 * i]), pcur[base + 2 * i + 1])
+            if u_sat[i] != u_cmd[i]:
+                saturated = True
+            u_app[i] = u_prev[i] if delay else u_sat[i]
+            u_prev[i] = u_sat[i]
+        if record:
+            for i in range(n):
+                rec[k, i] = x[i]
+                rec[k, n + i] = op[i] + xhat[i]
+            for j in range(ny):
+                rec[k, c_y + j] = y[j]
+            for i in range(m):
+                rec[k, c_u + i] = u_cmd[i]
+                rec[k, c_u + m + i] = u_sat[i]
+                rec[k, c_u + 2 * m + i] = u_app[i]
+        for i in range(m):
+            acc[i] = max(acc[i], abs(u_cmd[i]))
+            acc[m + i] += u_app[i] * u_app[i]
+        if saturated:
+            acc[2 * m] += 1.0
+        for i in range(n):
+            acc[2 * m + 1 + i] = max(acc[2 * m + 1 + i], abs(x[i] - op[i]))
+            if est_kind != 0:
+                e = op[i] + xhat[i] - x[i]
+                acc[2 * m + 1 + n + i] += e * e
+        status[0] = k + 1
+        if est_kind == 2:
+            for i in range(n):
+                v = 0.0
+                for j in range(n):
+                    v += est[i, j] * xhat[j]
+                for j in range(m):
+                    v += est[i, n + j] * (u_app[j] - op[n + j])
+                znew[i] = v
+            for i in range(n):
+                z[i] = znew[i]
+        elif est_kind == 3:
+            for j in range(ny):
+                innov[j] = y[j] - op[c_idx[j]] - z[c_idx[j]]
+            for i in range(n):
+                v = 0.0
+                for j in range(n):
+                    v += est[i, j] * z[j]
+                for j in range(m):
+                    v += est[i, n + j] * (u_app[j] - op[n + j])
+                for j in range(ny):
+                    v += est[i, n + m + j] * innov[j]
+                znew[i] = v
+            for i in range(n):
+                z[i] = znew[i]
+        if k == 0:
+            code = _outside(x, region)
+            if code != -1:
+                status[1] = 1
+                status[2] = code
+                status[3] = 0
+                for i in range(n):
+                    fell_x[i] = x[i]
+                return
+        if k >= n_samples:
+            return
+        if _advance(
+            k, x, u_app, op, p_sets, p_switch, lin_s, region, kicks, kick_value, pulses,
+            pulse_value, lw, rng, iopts, fopts, status, pcur, k1, k2, k3, k4, xt, ubuf, wvec,
+            zbuf, xprev, fell_x, wk,
+        ):
+            return
+
+
+@_jit
+def run_one(
+    k_start, k_end, iopts, fopts, x, z, u_prev, rng,
+    op, c_idx, est, gains, r_op, ref, uff, lv, lw,
+    p_sets, p_switch, lin_s, region, kicks, kick_value, pulses, pulse_value,
+    rec, acc, status, fell_x,
+):
+    """One run (or a resumable piece of one): see ``_run``; *fell_x* gets the state at a fall."""
+    scr = _scratch(p_sets.shape[1], c_idx.shape[0], lw.shape[1])
+    _run(
+        k_start, k_end, iopts, fopts, x, z, u_prev, rng,
+        op, c_idx, est, gains, r_op, ref, uff, lv, lw,
+        p_sets, p_switch, lin_s, region, kicks, kick_value, pulses, pulse_value,
+        rec, acc, status, scr,
+    )
+    for i in range(_N):
+        fell_x[i] = scr[17, i]
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def run_many(
+    iopts, fopts, x0s, z0, rngs,
+    op, c_idx, est, gains, r_op, ref, uff, lv, lw,
+    p_sets_r, p_switch, lin_r, region, kicks, kick_value, pulses, pulse_value,
+    recs, accs, statuses, fell_xs, x_ends,
+):
+    """Independent runs over the leading axis of the per-run arrays, in parallel."""
+    n_runs = x0s.shape[0]
+    n_rows = iopts[0] + 1
+    for r in prange(n_runs):
+        x = x0s[r].copy()
+        z = z0.copy()
+        u_prev = np.zeros(_M)
+        rng = rngs[r].copy()
+        scr = _scratch(p_sets_r.shape[2], c_idx.shape[0], lw.shape[1])
+        _run(
+            0, n_rows, iopts, fopts, x, z, u_prev, rng,
+            op, c_idx, est, gains, r_op, ref, uff, lv, lw,
+            p_sets_r[r], p_switch, lin_r[r], region, kicks, kick_value, pulses, pulse_value,
+            recs[r], accs[r], statuses[r], scr,
+        )
+        for i in range(_N):
+            x_ends[r, i] = x[i]
+            fell_xs[r, i] = scr[17, i]
+
+
+@_jit
+def measure_one(x, c_idx, lv, rng, y):
+    """Measured outputs of *x* with noise (the Python-controller path)."""
+    zbuf = np.empty(c_idx.shape[0] + 2)
+    _measure(x, c_idx, lv, rng, y, zbuf)
+
+
+@_bare
+def _advance_bare(
+    k, x, u_app, op, p_sets, p_switch, lin_s, region,
+    kicks, kick_value, pulses, pulse_value, lw, rng, iopts, fopts, status, scr,
+):
+    k1 = scr[7]
+    k2 = scr[8]
+    k3 = scr[9]
+    k4 = scr[10]
+    xt = scr[11]
+    xprev = scr[12]
+    ubuf = scr[13]
+    wvec = scr[14]
+    zbuf = scr[15]
+    pcur = scr[16]
+    fell_x = scr[17]
+    wk = scr[18:34]
+    ps = _pset(p_switch, k * iopts[4])
+    for i in range(p_sets.shape[1]):
+        pcur[i] = p_sets[ps, i]
+    return _advance(
+        k, x, u_app, op, p_sets, p_switch, lin_s, region, kicks, kick_value, pulses,
+        pulse_value, lw, rng, iopts, fopts, status, pcur, k1, k2, k3, k4, xt, ubuf, wvec,
+        zbuf, xprev, fell_x, wk,
+    )
+
+
+@_jit
+def scratch(p_len, ny, nw):
+    """Scratch for ``advance_one`` (keep it for the whole run: row 30 carries the adaptive step)."""
+    scr = _scratch(p_len, ny, nw)
+    return scr
+
+
+@_jit
+def advance_one(
+    k, x, u_app, op, p_sets, p_switch, lin_s, region,
+    kicks, kick_value, pulses, pulse_value, lw, rng, iopts, fopts, status, scr,
+):
+    """The physics steps after sample *k* (the Python-controller path); True if it fell.
+
+    *scr* comes from ``scratch`` and is kept for the whole run; its row 17
+    receives the state at a fall.
+    """
+    return _advance_bare(
+        k, x, u_app, op, p_sets, p_switch, lin_s, region,
+        kicks, kick_value, pulses, pulse_value, lw, rng, iopts, fopts, status, scr,
+    )
+
+
+@_jit
+def rk4_steps(x, u, p, h, n_steps):
+    """*n_steps* RK4 steps of length *h* from *x* (in place) with *u* held."""
+    w = np.zeros(_N)
+    k1 = np.empty(_N)
+    k2 = np.empty(_N)
+    k3 = np.empty(_N)
+    k4 = np.empty(_N)
+    xt = np.empty(_N)
+    for _ in range(n_steps):
+        _rk4(x, u, p, w, h, k1, k2, k3, k4, xt)
+
+
+@_jit
+def normals(rng, out):
+    """Standard normal deviates from the core's generator (for tests)."""
+    _normals(rng, out, out.shape[0])

@@ -1,0 +1,560 @@
+"""Validated run settings turned into the compiled core's packed arrays.
+
+Shared by single runs and batches, so both hand the core exactly the same
+numbers. Every problem with the settings is collected and raised once, as
+one :class:`~equilibrist.errors.SimulationError`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from equilibrist.errors import EquilibristError, NoEquilibriumError, SimulationError
+from equilibrist.numeric.system import System
+from equilibrist.sim import events as ev
+from equilibrist.sim.controllers import LQG, OpenLoop, StateFeedback, as_controller
+from equilibrist.sim.noise import Noise, square_root
+from equilibrist.sim.signals import as_signal
+
+INTEGRATORS = {"rk4": 0, "adaptive": 1}
+PLANTS = ("nonlinear", "linear")
+# The default physics step: the control period split into steps of at most this.
+DEFAULT_MAX_STEP = 1e-3
+# Fraction of the available memory a run or batch may take.
+MEMORY_FRACTION = 0.5
+
+
+def available_memory() -> int:
+    """Bytes of memory available now (``MemAvailable``; 4 GiB if unknown)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:  # pragma: no cover - not Linux
+        pass
+    try:  # pragma: no cover - not Linux
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover
+        return 4 << 30
+
+
+def _fmt_bytes(n: float) -> str:
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB"):
+        if n < 1024 or unit == "TiB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n:.1f} TiB"  # pragma: no cover
+
+
+def check_memory(n_bytes: float, what: str, limit: float | None) -> None:
+    """Refuse (before allocating) a job that needs more than *limit* bytes."""
+    cap = MEMORY_FRACTION * available_memory() if limit is None else float(limit)
+    if n_bytes > cap:
+        raise SimulationError(
+            f"{what} needs {_fmt_bytes(n_bytes)} of memory, more than the "
+            f"{_fmt_bytes(cap)} allowed (half the available memory): "
+            "shorten it, lower the rate, or run fewer at once"
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class Setup:
+    """Everything a run needs, validated, with the core's packed arrays."""
+
+    system: System
+    controller: Any
+    builtin: bool
+    est_kind: int
+    rate: float
+    h: float
+    n_sub: int
+    n_samples: int
+    integrator: str
+    rtol: float
+    atol: float
+    plant: str
+    delay: bool
+    x0: np.ndarray
+    x_op: np.ndarray
+    u_op: np.ndarray
+    outputs: tuple[str, ...]
+    c_idx: np.ndarray
+    tracked: tuple[str, ...]
+    r_op: np.ndarray
+    times: np.ndarray
+    ref: np.ndarray
+    uff: np.ndarray
+    op: np.ndarray
+    est: np.ndarray
+    gains: np.ndarray
+    lv: np.ndarray
+    lw: np.ndarray
+    noise: Noise | None
+    events: tuple[ev.Event, ...]
+    change_steps: np.ndarray
+    change_values: tuple[dict[str, float], ...]
+    kicks: np.ndarray
+    kick_value: np.ndarray
+    pulses: np.ndarray
+    pulse_value: np.ndarray
+    region: np.ndarray
+    region_spec: dict[str, tuple[float, float]]
+    duration: float
+    reference: Any
+
+    @property
+    def n_rows(self) -> int:
+        return self.n_samples + 1
+
+    @property
+    def iopts(self) -> np.ndarray:
+        return np.array(
+            [self.n_samples, 1, self.est_kind, int(self.delay), self.n_sub,
+             2 if self.plant == "linear" else INTEGRATORS[self.integrator]],
+            dtype=np.int64,
+        )
+
+    @property
+    def fopts(self) -> np.ndarray:
+        return np.array([self.h, self.rtol, self.atol])
+
+    @property
+    def record_width(self) -> int:
+        n, m = self.system.n_states, self.system.n_inputs
+        return 2 * n + len(self.outputs) + 3 * m
+
+    @property
+    def acc_len(self) -> int:
+        n, m = self.system.n_states, self.system.n_inputs
+        return 2 * m + 1 + 2 * n
+
+    def p_sets(self, base: np.ndarray) -> np.ndarray:
+        """The parameter sets of the run from parameter vector(s) *base*: ``(..., n_sets, n_p)``.
+
+        Each change sets its parameters from its time on, on top of the
+        parameters before it.
+        """
+        names = self.system.spec.parameter_names
+        base = np.asarray(base, dtype=float)
+        sets = [base]
+        for values in self.change_values:
+            nxt = sets[-1].copy()
+            for name, v in values.items():
+                nxt[..., names.index(name)] = v
+            sets.append(nxt)
+        return np.ascontiguousarray(np.stack(sets, axis=-2))
+
+    @property
+    def p_switch(self) -> np.ndarray:
+        return np.concatenate([[0], self.change_steps]).astype(np.int64)
+
+    def linear_blocks(self, p_sets: np.ndarray) -> np.ndarray:
+        """``[Phi | E | Gamma | f0]`` per parameter set (``(n_sets, n, 2n+m+1)``), or empty."""
+        n, m = self.system.n_states, self.system.n_inputs
+        if self.plant != "linear":
+            return np.zeros((p_sets.shape[0], 0, 0))
+        from scipy.linalg import expm
+
+        names = self.system.spec.parameter_names
+        out = np.zeros((p_sets.shape[0], n, 2 * n + m + 1))
+        for j, pv in enumerate(p_sets):
+            sysj = self.system.with_params(**dict(zip(names, pv.tolist(), strict=True)))
+            A, B = sysj.jacobians(self.x_op, self.u_op)
+            f0 = sysj.f(self.x_op, self.u_op)
+            aug = np.zeros((2 * n, 2 * n))
+            aug[:n, :n] = A
+            aug[:n, n:] = np.eye(n)
+            big = expm(aug * self.h)
+            phi, ex = big[:n, :n], big[:n, n:]
+            out[j, :, :n] = phi
+            out[j, :, n : 2 * n] = ex
+            out[j, :, 2 * n : 2 * n + m] = ex @ B
+            out[j, :, 2 * n + m] = f0
+        return out
+
+    def describe(self) -> dict[str, Any]:
+        """The settings as JSON-able data (recorded with every result)."""
+        ctrl = self.controller
+        return {
+            "system": self.system.key,
+            "controller": ctrl.describe() if hasattr(ctrl, "describe") else
+            {"kind": "python", "name": type(ctrl).__name__},
+            "duration": self.duration,
+            "n_samples": self.n_samples,
+            "rate": self.rate,
+            "physics_step": self.h,
+            "substeps": self.n_sub,
+            "integrator": self.integrator,
+            "rtol": self.rtol,
+            "atol": self.atol,
+            "plant": self.plant,
+            "delay": self.delay,
+            "x0": self.x0.tolist(),
+            "outputs": list(self.outputs),
+            "noise": None if self.noise is None else self.noise.describe(),
+            "reference": None if self.reference is None else self.reference.describe(),
+            "tracked": list(self.tracked),
+            "events": ev.describe(self.events),
+            "region": {k: [lo, hi] for k, (lo, hi) in self.region_spec.items()},
+        }
+
+
+def _positive(value: object, what: str, problems: list[str]) -> float | None:
+    try:
+        v = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        problems.append(f"{what} {value!r} is not a number")
+        return None
+    if not math.isfinite(v) or v <= 0:
+        problems.append(f"{what} must be a positive number, got {value!r}")
+        return None
+    return v
+
+
+def _initial_state(system: System, x0: object, x_op: np.ndarray, problems: list[str]) -> np.ndarray:
+    x = x_op.copy()
+    if x0 is None:
+        return x
+    if isinstance(x0, Mapping):
+        for name, value in x0.items():
+            if name not in system.state_names:
+                from equilibrist.errors import nearest
+
+                problems.append(f"initial state: no state {name!r} ({nearest(name, system.state_names)})")
+                continue
+            try:
+                v = float(value)
+            except (TypeError, ValueError):
+                problems.append(f"initial state {name} = {value!r} is not a number")
+                continue
+            if not math.isfinite(v):
+                problems.append(f"initial state {name} = {value} is not a finite number")
+                continue
+            x[system.state_names.index(name)] = v
+        return x
+    try:
+        arr = np.asarray(x0, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        problems.append(f"initial state {x0!r} is not a vector of numbers")
+        return x
+    if arr.size != system.n_states:
+        problems.append(
+            f"initial state has {arr.size} values, expected {system.n_states} "
+            f"({', '.join(system.state_names)})"
+        )
+        return x
+    if not np.all(np.isfinite(arr)):
+        problems.append(f"initial state {arr.tolist()} has a value that is not a finite number")
+        return x
+    return arr
+
+
+def operating_point(system: System, controller: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The controller's operating point; the system's canonical one for others.
+
+    A system without a canonical point (the zxz gyroscope) runs open loop
+    about zero input, with deviations measured from zero.
+    """
+    if isinstance(controller, StateFeedback | LQG):
+        return np.array(controller.x_op), np.array(controller.u_op)
+    try:
+        eq = system.operating_point()
+    except NoEquilibriumError:
+        return np.zeros(system.n_states), np.zeros(system.n_inputs)
+    return np.array(eq.x), np.array(eq.u)
+
+
+def build(
+    system: System,
+    controller: object,
+    *,
+    duration: float,
+    rate: float | None,
+    physics_step: float | None,
+    integrator: str,
+    rtol: float,
+    atol: float,
+    plant: str,
+    x0: object,
+    delay: bool,
+    noise: Noise | None,
+    reference: object,
+    events: Sequence[ev.Event],
+    outputs: Sequence[str] | None,
+    region: Mapping[str, tuple[float, float]] | None,
+) -> Setup:
+    """Validate the settings of a run (collecting every problem) and pack them."""
+    problems: list[str] = []
+    ctrl = as_controller(controller)
+    builtin = isinstance(ctrl, OpenLoop | StateFeedback | LQG)
+    n, m = system.n_states, system.n_inputs
+    names = system.state_names
+
+    dur = _positive(duration, "duration [s]", problems)
+    ctrl_rate = getattr(ctrl, "rate", None) if builtin else None
+    if rate is None and ctrl_rate is None:
+        problems.append("give the controller's sample rate (rate=... in Hz)")
+        run_rate = None
+    elif rate is None:
+        run_rate = float(ctrl_rate)  # type: ignore[arg-type]
+    else:
+        run_rate = _positive(rate, "rate [Hz]", problems)
+        if run_rate is not None and ctrl_rate is not None and not math.isclose(
+            run_rate, float(ctrl_rate), rel_tol=1e-12
+        ):
+            problems.append(
+                f"the controller was designed for {float(ctrl_rate):g} Hz but the run asks "
+                f"{run_rate:g} Hz: design for the run's rate"
+            )
+    if integrator not in INTEGRATORS:
+        problems.append(f"integrator {integrator!r}: expected one of {', '.join(INTEGRATORS)}")
+    if plant not in PLANTS:
+        problems.append(f"plant {plant!r}: expected one of {', '.join(PLANTS)}")
+    tol_r = _positive(rtol, "rtol", problems)
+    tol_a = _positive(atol, "atol", problems)
+
+    # Timing: the physics step must divide the control period.
+    h = n_sub = n_samples = None
+    if run_rate is not None:
+        period = 1.0 / run_rate
+        if physics_step is None:
+            n_sub = 1 if integrator == "adaptive" else max(1, math.ceil(period / DEFAULT_MAX_STEP - 1e-9))
+            h = period / n_sub
+        else:
+            step = _positive(physics_step, "physics step [s]", problems)
+            if step is not None:
+                ratio = period / step
+                k = round(ratio)
+                if k < 1 or abs(ratio - k) > 1e-9 * max(1.0, ratio):
+                    sug = period / max(1, math.ceil(ratio))
+                    problems.append(
+                        f"the physics step {step:g} s does not divide the control period "
+                        f"{period:g} s ({run_rate:g} Hz): use the period divided by a whole "
+                        f"number, e.g. {sug:.6g} s"
+                    )
+                else:
+                    n_sub = k
+                    h = period / k
+        if dur is not None:
+            exact = dur * run_rate
+            n_samples = round(exact) if abs(exact - round(exact)) < 1e-9 * max(1.0, exact) else math.ceil(exact)
+            n_samples = max(1, int(n_samples))
+
+    # Operating point, initial state, measured outputs.
+    x_op, u_op = operating_point(system, ctrl)
+    if x_op.size != n or u_op.size != m:
+        problems.append(
+            f"the controller is for {x_op.size} states and {u_op.size} inputs; "
+            f"{system.key} has {n} and {m}"
+        )
+        x_op, u_op = np.zeros(n), np.zeros(m)
+    lo, hi = system.input_limits
+    for i, name in enumerate(system.input_names):
+        if not lo[i] <= u_op[i] <= hi[i]:
+            problems.append(
+                f"the operating point needs {name} = {u_op[i]:g}, outside its limits "
+                f"[{lo[i]:g}, {hi[i]:g}] ({name}_min, {name}_max)"
+            )
+    x_init = _initial_state(system, x0, x_op, problems)
+
+    if isinstance(ctrl, LQG):
+        outs = tuple(ctrl.outputs)
+        est_kind = 2 if ctrl.form == "current" else 3
+    elif isinstance(ctrl, StateFeedback):
+        outs = tuple(names)
+        est_kind = 1
+    else:
+        outs = tuple(outputs) if outputs is not None else (tuple(system.spec.outputs) or tuple(names))
+        est_kind = 0
+    if outputs is not None and tuple(outputs) != outs:
+        problems.append(
+            f"outputs {list(outputs)} differ from the controller's measured outputs {list(outs)}"
+        )
+    bad = [o for o in outs if o not in names]
+    if bad:
+        problems.append(f"unknown outputs {bad}: the outputs are states of {system.key} ({', '.join(names)})")
+        outs = tuple(o for o in outs if o in names)
+    c_idx = np.array([names.index(o) for o in outs], dtype=np.int64)
+    ny = len(outs)
+
+    # Reference and feedforward signals.
+    tracked: tuple[str, ...] = ()
+    if isinstance(ctrl, StateFeedback | LQG):
+        tracked = tuple(ctrl.tracked)
+    elif not builtin and reference is not None:
+        tracked = tuple((system.spec.outputs or names)[:m])
+    ref_signal = None
+    if reference is not None:
+        if isinstance(ctrl, OpenLoop):
+            problems.append("a reference needs a controller that tracks it (an open loop has none)")
+        elif builtin and not tracked:
+            problems.append(
+                "a reference needs a controller with a reference gain K_c "
+                "(from_design(design, tracking=True))"
+            )
+        else:
+            ref_signal = as_signal(reference)
+    r_idx = [names.index(t) for t in tracked if t in names]
+    r_op = x_op[r_idx] if ref_signal is not None else np.zeros(0)
+    if ref_signal is None:
+        tracked = ()
+
+    # Events.
+    evs = tuple(events)
+    change_steps: list[int] = []
+    change_values: list[dict[str, float]] = []
+    kicks: list[tuple[int, int]] = []
+    kick_value: list[float] = []
+    pulses: list[tuple[int, int, int]] = []
+    pulse_value: list[float] = []
+    end_time = None if (n_samples is None or run_rate is None) else n_samples / run_rate
+    changes_sorted: list[ev.ParameterChange] = []
+    for e in evs:
+        if not isinstance(e, ev.Kick | ev.Pulse | ev.Impulse | ev.ParameterChange):
+            problems.append(f"{e!r} is not an event (Kick, Pulse, Impulse or ParameterChange)")
+            continue
+        t = e.time
+        if not isinstance(t, int | float) or not math.isfinite(t) or t < 0:
+            problems.append(f"{type(e).__name__} at time {t!r}: expected a finite time >= 0 s")
+            continue
+        if end_time is not None and t > end_time + 1e-12:
+            problems.append(f"{type(e).__name__} at {t:g} s is after the end of the run ({end_time:g} s)")
+            continue
+        if h is None:
+            continue
+        step = round(t / h)
+        if isinstance(e, ev.Kick):
+            if e.state not in names:
+                from equilibrist.errors import nearest
+
+                problems.append(f"kick of unknown state {e.state!r} ({nearest(e.state, names)})")
+            elif not math.isfinite(e.value):
+                problems.append(f"kick value {e.value!r} is not finite")
+            else:
+                kicks.append((step, names.index(e.state)))
+                kick_value.append(float(e.value))
+        elif isinstance(e, ev.Pulse | ev.Impulse):
+            if m == 0:
+                problems.append(f"{system.key} has no input to push through; use a Kick of a rate")
+                continue
+            iname = e.input if e.input is not None else system.input_names[0]
+            if iname not in system.input_names:
+                problems.append(f"push on unknown input {iname!r} (inputs: {', '.join(system.input_names)})")
+                continue
+            if not math.isfinite(e.value):
+                problems.append(f"push value {e.value!r} is not finite")
+                continue
+            if isinstance(e, ev.Pulse):
+                if not (math.isfinite(e.duration) and e.duration > 0):
+                    problems.append(f"pulse duration must be positive, got {e.duration!r}")
+                    continue
+                length = max(1, round(e.duration / h))
+                value = float(e.value)
+            else:
+                length = 1
+                value = float(e.value) / h
+            pulses.append((step, step + length, system.input_names.index(iname)))
+            pulse_value.append(value)
+        else:
+            changes_sorted.append(e)
+    for e in sorted(changes_sorted, key=lambda c: c.time):
+        try:
+            system.with_params(**e.values)
+        except EquilibristError as exc:
+            problems.append(f"parameter change at {e.time:g} s: {exc}")
+            continue
+        if h is not None:
+            change_steps.append(round(e.time / h))
+            change_values.append({k: float(v) for k, v in e.values.items()})
+
+    # Region of the balancing task.
+    region_spec = dict(system.spec.region if region is None else region)
+    reg = np.array([[-np.inf] * n, [np.inf] * n])
+    for name, bounds in region_spec.items():
+        if name not in names:
+            problems.append(f"region of unknown state {name!r}")
+            continue
+        try:
+            lo_b, hi_b = (float(b) for b in bounds)
+        except (TypeError, ValueError):
+            problems.append(f"region of {name}: expected (low, high), got {bounds!r}")
+            continue
+        if not lo_b < hi_b:
+            problems.append(f"region of {name}: low {lo_b:g} must be below high {hi_b:g}")
+            continue
+        reg[0, names.index(name)] = lo_b
+        reg[1, names.index(name)] = hi_b
+
+    # Noise.
+    lw = np.zeros((n, 0))
+    lv = np.zeros((0, 0))
+    if noise is not None:
+        if not isinstance(noise, Noise):
+            problems.append(f"noise must be a Noise or None, got {type(noise).__name__}")
+        elif noise.process_gain.shape[0] != n:
+            problems.append(
+                f"the process noise gain has {noise.process_gain.shape[0]} rows, expected {n}"
+            )
+        else:
+            try:
+                sq = square_root(noise.process_intensity, "the process noise intensity")
+                if h is not None:
+                    lw = noise.process_gain @ sq / math.sqrt(h)
+                r_full = np.zeros((ny, ny))
+                pos = {o: i for i, o in enumerate(outs)}
+                for a, oa in enumerate(noise.outputs):
+                    for b, ob in enumerate(noise.outputs):
+                        if oa in pos and ob in pos:
+                            r_full[pos[oa], pos[ob]] = noise.measurement_covariance[a, b]
+                lv = square_root(r_full, "the measurement noise covariance") if ny else lv
+            except SimulationError as exc:
+                problems.append(str(exc))
+
+    if problems or h is None or n_sub is None or n_samples is None or run_rate is None or dur is None:
+        raise SimulationError("; ".join(problems) if problems else "invalid simulation settings")
+
+    # Controller matrices.
+    est = np.zeros((n, n + m + ny))
+    gains = np.zeros((m, n + len(tracked)))
+    if isinstance(ctrl, StateFeedback | LQG):
+        gains[:, :n] = ctrl.K
+        if tracked:
+            gains[:, n:] = ctrl.Kc  # type: ignore[index]
+    if isinstance(ctrl, LQG):
+        est[:, :n] = ctrl.Ad
+        est[:, n : n + m] = ctrl.Bd
+        est[:, n + m :] = ctrl.Kf
+
+    times = np.arange(n_samples + 1) / run_rate
+    n_rows = n_samples + 1
+    check_memory(n_rows * (2 * n + ny + 4 * m + 2 * len(tracked) + 2) * 8.0,
+                 f"a run of {n_rows} samples", None)
+    ref = np.zeros((n_rows, len(tracked)))
+    if ref_signal is not None:
+        ref = np.ascontiguousarray(ref_signal.evaluate(times, x_op[r_idx]), dtype=float)
+    uff = np.zeros((n_rows, m))
+    if isinstance(ctrl, OpenLoop) and ctrl.signal is not None:
+        uff = np.ascontiguousarray(as_signal(ctrl.signal).evaluate(times, u_op) - u_op)
+
+    return Setup(
+        system=system, controller=ctrl, builtin=builtin, est_kind=est_kind, rate=run_rate,
+        h=h, n_sub=n_sub, n_samples=n_samples, integrator=integrator, rtol=float(tol_r or rtol),
+        atol=float(tol_a or atol), plant=plant, delay=bool(delay), x0=x_init, x_op=x_op,
+        u_op=u_op, outputs=outs, c_idx=c_idx, tracked=tracked, r_op=np.array(r_op, dtype=float),
+        times=times, ref=ref, uff=uff, op=np.concatenate([x_op, u_op]), est=est,
+        gains=gains, lv=np.ascontiguousarray(lv), lw=np.ascontiguousarray(lw), noise=noise,
+        events=evs, change_steps=np.array(change_steps, dtype=np.int64),
+        change_values=tuple(change_values),
+        kicks=np.array(kicks, dtype=np.int64).reshape(-1, 2),
+        kick_value=np.array(kick_value, dtype=float),
+        pulses=np.array(pulses, dtype=np.int64).reshape(-1, 3),
+        pulse_value=np.array(pulse_value, dtype=float), region=reg, region_spec=region_spec,
+        duration=float(dur), reference=ref_signal,
+    )

@@ -1,0 +1,610 @@
+"""Many runs at once: batches, regions of attraction, Monte Carlo robustness.
+
+A batch runs the same controller and settings from many initial states,
+parameter sets and noise seeds, in parallel on all cores by default (the
+compiled core's ``run_many``, a ``numba.prange`` over runs). Run ``i`` is
+exactly the run :func:`~equilibrist.sim.run.simulate` makes with the same
+initial state, parameters and ``seed=result.seed(i)``.
+
+By default a batch keeps, per run, the outcome and the metrics that can be
+accumulated while running (fell and when, final state, peak and RMS input,
+time saturated, peak deviation, estimation error RMS); ``record=True``
+keeps every trajectory too, after checking that they fit in memory.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from equilibrist.errors import SimulationError, nearest
+from equilibrist.numeric.system import System
+from equilibrist.sim import _setup
+from equilibrist.sim.events import Event
+from equilibrist.sim.kernel import load_kernel, set_workers
+from equilibrist.sim.noise import (
+    Noise,
+    SeedLike,
+    describe_seed,
+    generator_state,
+    seed_from_description,
+    seed_sequence,
+)
+from equilibrist.sim.result import SimResult
+from equilibrist.sim.run import _result, _run_python, fall_reason
+
+FORMAT = "equilibrist-batch-1"
+
+
+def child_seed(base: np.random.SeedSequence, index: int) -> np.random.SeedSequence:
+    """The *index*-th child of *base*, independent of how often *base* was spawned."""
+    return np.random.SeedSequence(base.entropy, spawn_key=(*base.spawn_key, int(index)))
+
+
+@dataclass(frozen=True, eq=False)
+class BatchResult:
+    """Outcomes of many runs (arrays with one row per run).
+
+    Attributes
+    ----------
+    x0 : ndarray, shape (runs, n_states)
+        Initial states.
+    params : ndarray, shape (runs, n_params)
+        The plant's parameters of each run (``parameter_names`` order).
+    fell, fell_at, fell_code :
+        Whether each run fell, when (NaN if it did not), and the index of the
+        state that left its region (-2 not finite, -3 integrator failed, -1 none).
+    final_state, fell_x : ndarray, shape (runs, n_states)
+    peak_input, rms_input : ndarray, shape (runs, n_inputs)
+        Largest ``|command|`` and RMS of the applied input.
+    time_saturated : ndarray, shape (runs,)
+    peak_deviation, estimation_error_rms : ndarray, shape (runs, n_states)
+    rows : ndarray, shape (runs,)
+        Samples recorded per run.
+    trajectories : ndarray or None, shape (runs, n_rows, width)
+        With ``record=True``: the packed rows (see :meth:`run`).
+    elapsed : float
+        Wall time of the compiled runs [s]; ``steps`` physics steps in all.
+    """
+
+    system: str
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    parameter_names: tuple[str, ...]
+    x0: np.ndarray
+    params: np.ndarray
+    fell: np.ndarray
+    fell_at: np.ndarray
+    fell_code: np.ndarray
+    fell_x: np.ndarray
+    final_state: np.ndarray
+    peak_input: np.ndarray
+    rms_input: np.ndarray
+    time_saturated: np.ndarray
+    peak_deviation: np.ndarray
+    estimation_error_rms: np.ndarray | None
+    rows: np.ndarray
+    seeds: tuple[dict[str, Any] | None, ...]
+    settings: Mapping[str, Any]
+    elapsed: float = 0.0
+    steps: int = 0
+    trajectories: np.ndarray | None = None
+    _setup: Any = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        for name in ("x0", "params", "fell", "fell_at", "fell_code", "fell_x", "final_state",
+                     "peak_input", "rms_input", "time_saturated", "peak_deviation",
+                     "estimation_error_rms", "rows", "trajectories"):
+            v = getattr(self, name)
+            if v is not None:
+                v = np.asarray(v)
+                v.setflags(write=False)
+                object.__setattr__(self, name, v)
+        object.__setattr__(self, "settings", MappingProxyType(dict(self.settings)))
+
+    @property
+    def runs(self) -> int:
+        return int(self.fell.shape[0])
+
+    @property
+    def stayed_up(self) -> int:
+        """How many runs stayed up."""
+        return int(self.runs - np.count_nonzero(self.fell))
+
+    @property
+    def fraction_up(self) -> float:
+        return self.stayed_up / self.runs if self.runs else math.nan
+
+    @property
+    def steps_per_second(self) -> float:
+        return self.steps / self.elapsed if self.elapsed > 0 else math.inf
+
+    def seed(self, index: int) -> np.random.SeedSequence | None:
+        """The seed that reproduces run *index* alone with :func:`simulate`."""
+        desc = self.seeds[index]
+        return None if desc is None else seed_from_description(desc)
+
+    def param(self, name: str) -> np.ndarray:
+        """The values of parameter *name* over the runs."""
+        if name not in self.parameter_names:
+            raise SimulationError(f"no parameter {name!r}: {nearest(name, self.parameter_names)}")
+        return self.params[:, self.parameter_names.index(name)]
+
+    def fell_states(self) -> list[str | None]:
+        """Per run, the state that left its region (None for runs that stayed up)."""
+        return [fall_reason(int(c), self.state_names) if f else None
+                for f, c in zip(self.fell, self.fell_code, strict=True)]
+
+    def run(self, index: int) -> SimResult:
+        """Run *index* as a :class:`SimResult` (needs ``record=True``)."""
+        if self.trajectories is None or self._setup is None:
+            raise SimulationError("the batch kept no trajectories: run it with record=True")
+        if not 0 <= index < self.runs:
+            raise SimulationError(f"run {index} out of range 0..{self.runs - 1}")
+        setup = self._setup
+        status = np.array([self.rows[index], int(self.fell[index]), self.fell_code[index],
+                           0 if not self.fell[index] else round(self.fell_at[index] / setup.h)])
+        sysm = setup.system.with_params(**dict(zip(self.parameter_names,
+                                                   self.params[index].tolist(), strict=True)))
+        s = _setup.Setup(**{**setup.__dict__, "system": sysm, "x0": self.x0[index]})
+        seq = self.seed(index)
+        return _result(s, np.asarray(self.trajectories[index]), int(self.rows[index]), status,
+                       np.asarray(self.fell_x[index]), np.asarray(self.final_state[index]), seq,
+                       estimates=setup.est_kind != 0)
+
+    def summary(self) -> dict[str, Any]:
+        """``runs``, ``stayed_up``, ``fraction_up``, ``steps_per_second`` and friends."""
+        fell_at = self.fell_at[self.fell]
+        return {
+            "system": self.system,
+            "runs": self.runs,
+            "stayed_up": self.stayed_up,
+            "fell": int(np.count_nonzero(self.fell)),
+            "fraction_up": self.fraction_up,
+            "steps": int(self.steps),
+            "elapsed": self.elapsed,
+            "steps_per_second": self.steps_per_second,
+            "fell_at_median": float(np.median(fell_at)) if fell_at.size else None,
+            "peak_input_max": dict(zip(self.input_names, self.peak_input.max(axis=0).tolist(), strict=True)) if self.runs else {},
+            "time_saturated_mean": float(self.time_saturated.mean()) if self.runs else None,
+        }
+
+    def save(self, path: str | Path) -> Path:
+        """Write the batch's per-run arrays to ``.npz`` (trajectories are not saved)."""
+        p = Path(path)
+        if p.suffix != ".npz":
+            p = p.with_name(p.name + ".npz")
+        meta = {
+            "format": FORMAT, "system": self.system, "state_names": list(self.state_names),
+            "input_names": list(self.input_names), "parameter_names": list(self.parameter_names),
+            "seeds": list(self.seeds), "settings": dict(self.settings), "elapsed": self.elapsed,
+            "steps": self.steps,
+        }
+        arrays = {k: getattr(self, k) for k in (
+            "x0", "params", "fell", "fell_at", "fell_code", "fell_x", "final_state", "peak_input",
+            "rms_input", "time_saturated", "peak_deviation", "rows")}
+        if self.estimation_error_rms is not None:
+            arrays["estimation_error_rms"] = self.estimation_error_rms
+        np.savez(p, meta=np.array(json.dumps(meta)), **arrays)
+        return p
+
+    @classmethod
+    def load(cls, path: str | Path) -> BatchResult:
+        """Read a batch written by :meth:`save`."""
+        p = Path(path)
+        try:
+            with np.load(p, allow_pickle=False) as data:
+                meta = json.loads(str(data["meta"]))
+                arrays = {k: data[k] for k in data.files if k != "meta"}
+        except (OSError, ValueError, KeyError) as exc:
+            raise SimulationError(f"{p} is not a saved batch: {exc}") from None
+        if meta.get("format") != FORMAT:
+            raise SimulationError(f"{p} is not a saved batch")
+        return cls(
+            system=meta["system"], state_names=tuple(meta["state_names"]),
+            input_names=tuple(meta["input_names"]),
+            parameter_names=tuple(meta["parameter_names"]),
+            estimation_error_rms=arrays.pop("estimation_error_rms", None),
+            seeds=tuple(meta["seeds"]), settings=meta["settings"], elapsed=meta["elapsed"],
+            steps=meta["steps"], **arrays,
+        )
+
+
+def _initial_states(system: System, x0: object, runs: int, x_op: np.ndarray) -> np.ndarray:
+    n = system.n_states
+    if x0 is None:
+        return np.tile(x_op, (runs, 1))
+    if isinstance(x0, Mapping):
+        out = np.tile(x_op, (runs, 1))
+        for name, values in x0.items():
+            if name not in system.state_names:
+                raise SimulationError(f"initial state: no state {name!r} ({nearest(name, system.state_names)})")
+            v = np.asarray(values, dtype=float)
+            if v.ndim == 0:
+                v = np.full(runs, float(v))
+            if v.shape != (runs,):
+                raise SimulationError(f"initial {name} has {v.size} values for {runs} runs")
+            out[:, system.state_names.index(name)] = v
+        arr = out
+    else:
+        arr = np.asarray(x0, dtype=float)
+        if arr.ndim == 1:
+            arr = np.tile(arr, (runs, 1))
+        if arr.shape != (runs, n):
+            raise SimulationError(f"initial states have shape {arr.shape}, expected ({runs}, {n})")
+    bad = ~np.all(np.isfinite(arr), axis=1)
+    if bad.any():
+        i = int(np.nonzero(bad)[0][0])
+        raise SimulationError(
+            f"{int(bad.sum())} initial states are not finite (first: run {i}, {arr[i].tolist()})"
+        )
+    return np.ascontiguousarray(arr)
+
+
+def _parameter_matrix(system: System, params: Mapping[str, object] | None, runs: int) -> np.ndarray:
+    names = system.spec.parameter_names
+    base = np.tile(np.array(system.p, dtype=float), (runs, 1))
+    if not params:
+        return base
+    by_name = {p.name: p for p in system.spec.all_parameters}
+    problems = []
+    for name, values in params.items():
+        if name not in by_name:
+            problems.append(f"unknown parameter {name!r} of {system.key}: {nearest(name, names)}")
+            continue
+        v = np.asarray(values, dtype=float)
+        if v.ndim == 0:
+            v = np.full(runs, float(v))
+        if v.shape != (runs,):
+            problems.append(f"parameter {name} has {v.size} values for {runs} runs")
+            continue
+        if not np.all(np.isfinite(v)):
+            problems.append(f"parameter {name} has values that are not finite")
+            continue
+        for extreme in (v.min(), v.max()):
+            problem = by_name[name].check(float(extreme))
+            if problem:
+                problems.append(problem)
+                break
+        base[:, names.index(name)] = v
+    for inp in system.input_names:
+        lo = base[:, names.index(f"{inp}_min")]
+        hi = base[:, names.index(f"{inp}_max")]
+        if np.any(lo >= hi):
+            problems.append(f"input limits of {inp}: some runs have {inp}_min >= {inp}_max")
+    if problems:
+        raise SimulationError("; ".join(problems))
+    return base
+
+
+def simulate_batch(
+    system: System,
+    controller: object = None,
+    *,
+    runs: int,
+    duration: float,
+    x0: object = None,
+    params: Mapping[str, object] | None = None,
+    seed: SeedLike = None,
+    rate: float | None = None,
+    physics_step: float | None = None,
+    integrator: str = "rk4",
+    rtol: float = 1e-8,
+    atol: float = 1e-10,
+    plant: str = "nonlinear",
+    delay: bool = False,
+    noise: Noise | None = None,
+    reference: object = None,
+    events: Sequence[Event] = (),
+    region: Mapping[str, tuple[float, float]] | None = None,
+    record: bool = False,
+    workers: int | None = None,
+    max_memory: float | None = None,
+    progress: bool = False,
+) -> BatchResult:
+    """*runs* independent runs of the same closed loop, in parallel.
+
+    Parameters
+    ----------
+    runs : int
+        Number of runs.
+    x0 : array (runs, n_states) or (n_states,), or mapping name -> values, optional
+        Initial states (absolute); a mapping overrides components of the
+        operating point per run.
+    params : mapping name -> values (runs,), optional
+        The plant's parameters per run (the controller keeps its design).
+    seed : int or SeedSequence, optional
+        Run ``i`` uses the ``i``-th child of this seed's sequence.
+    record : bool
+        Keep every trajectory (checked against *max_memory*, default half
+        the available memory, before anything is allocated).
+    workers : int, optional
+        Threads (default: all cores).
+
+    Other parameters are those of :func:`~equilibrist.sim.run.simulate`.
+    Python controllers run one by one (not in parallel).
+    """
+    if isinstance(runs, bool) or not isinstance(runs, int | np.integer) or runs < 1:
+        raise SimulationError(f"runs must be a positive whole number, got {runs!r}")
+    runs = int(runs)
+    setup = _setup.build(
+        system, controller, duration=duration, rate=rate, physics_step=physics_step,
+        integrator=integrator, rtol=rtol, atol=atol, plant=plant, x0=None, delay=delay,
+        noise=noise, reference=reference, events=events, outputs=None, region=region,
+    )
+    n, m = system.n_states, system.n_inputs
+    n_sets = len(setup.change_values) + 1
+    n_p = len(system.spec.parameter_names)
+    per_run = (3 * n + n_sets * n_p + setup.acc_len + n + 8) * 8.0
+    if plant == "linear":
+        per_run += n_sets * n * (2 * n + m + 1) * 8.0
+    if record:
+        per_run += setup.n_rows * setup.record_width * 8.0
+    what = f"a batch of {runs} runs" + (f" of {setup.n_rows} samples with trajectories" if record else "")
+    _setup.check_memory(runs * per_run, what, max_memory)
+
+    x0s = _initial_states(system, x0, runs, setup.x_op)
+    pmat = _parameter_matrix(system, params, runs)
+    base_seq = seed_sequence(seed) if (noise is not None or seed is not None) else None
+    seqs = [child_seed(base_seq, i) for i in range(runs)] if base_seq is not None else [None] * runs
+    rngs = (np.stack([generator_state(s) for s in seqs]) if base_seq is not None
+            else np.zeros((runs, 4), dtype=np.uint64))
+    p_sets_r = setup.p_sets(pmat)
+    if plant == "linear":
+        lin_r = np.stack([setup.linear_blocks(p_sets_r[i]) for i in range(runs)])
+    else:
+        lin_r = np.zeros((runs, n_sets, 0, 0))
+
+    if not setup.builtin:
+        return _python_batch(setup, x0s, pmat, seqs, record, progress)
+
+    kernel = load_kernel(system)
+    iopts = setup.iopts
+    iopts[1] = int(record)
+    recs = np.empty((runs, setup.n_rows if record else 0, setup.record_width))
+    accs = np.zeros((runs, setup.acc_len))
+    statuses = np.zeros((runs, 4), dtype=np.int64)
+    fell_xs = np.zeros((runs, n))
+    x_ends = np.zeros((runs, n))
+    z0 = np.array(setup.controller.x_hat0 if setup.est_kind >= 2 else np.zeros(n), dtype=float)
+    shared = (setup.op, setup.c_idx, setup.est, setup.gains, setup.r_op, setup.ref, setup.uff,
+              setup.lv, setup.lw)
+    threads = set_workers(workers)
+    steps_per_run = setup.n_samples * setup.n_sub
+    chunk = runs if not progress else max(4 * threads, math.ceil(2_000_000 / max(1, steps_per_run)))
+    from equilibrist.sim.run import _progress_bar
+
+    bar = _progress_bar(runs, progress and runs > chunk, "runs")
+    elapsed = 0.0
+    try:
+        for start in range(0, runs, chunk):
+            sl = slice(start, min(runs, start + chunk))
+            t0 = time.perf_counter()
+            kernel.run_many(
+                iopts, setup.fopts, x0s[sl], z0, rngs[sl], *shared,
+                p_sets_r[sl], setup.p_switch, lin_r[sl], setup.region, setup.kicks,
+                setup.kick_value, setup.pulses, setup.pulse_value,
+                recs[sl], accs[sl], statuses[sl], fell_xs[sl], x_ends[sl],
+            )
+            elapsed += time.perf_counter() - t0
+            if bar is not None:
+                bar.update(sl.stop - sl.start)
+    finally:
+        if bar is not None:
+            bar.close()
+    return _batch_result(setup, x0s, pmat, seqs, statuses, accs, fell_xs, x_ends,
+                         recs if record else None, elapsed)
+
+
+def _batch_result(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
+                  seqs: list[np.random.SeedSequence | None], statuses: np.ndarray,
+                  accs: np.ndarray, fell_xs: np.ndarray, x_ends: np.ndarray,
+                  recs: np.ndarray | None, elapsed: float) -> BatchResult:
+    sysm = setup.system
+    n, m = sysm.n_states, sysm.n_inputs
+    rows = statuses[:, 0]
+    fell = statuses[:, 1].astype(bool)
+    fell_at = np.where(fell, statuses[:, 3] * setup.h, np.nan)
+    code = np.where(fell, statuses[:, 2], -1)
+    steps_done = np.where(fell, statuses[:, 3], setup.n_samples * setup.n_sub)
+    settings = setup.describe()
+    settings["x0"] = None
+    count = np.maximum(rows, 1)[:, None]
+    return BatchResult(
+        system=sysm.key, state_names=sysm.state_names, input_names=sysm.input_names,
+        parameter_names=sysm.spec.parameter_names, x0=x0s, params=pmat, fell=fell,
+        fell_at=fell_at, fell_code=code, fell_x=fell_xs, final_state=x_ends,
+        peak_input=accs[:, :m], rms_input=np.sqrt(accs[:, m : 2 * m] / count),
+        time_saturated=accs[:, 2 * m] / setup.rate,
+        peak_deviation=accs[:, 2 * m + 1 : 2 * m + 1 + n],
+        estimation_error_rms=(np.sqrt(accs[:, 2 * m + 1 + n :] / count)
+                              if setup.est_kind != 0 else None),
+        rows=rows, seeds=tuple(None if s is None else describe_seed(s) for s in seqs),
+        settings=settings, elapsed=elapsed, steps=int(steps_done.sum()), trajectories=recs,
+        _setup=setup,
+    )
+
+
+def _python_batch(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
+                  seqs: list[np.random.SeedSequence | None], record: bool,
+                  progress: bool) -> BatchResult:
+    sysm = setup.system
+    names = sysm.spec.parameter_names
+    runs = x0s.shape[0]
+    n, m = sysm.n_states, sysm.n_inputs
+    statuses = np.zeros((runs, 4), dtype=np.int64)
+    accs = np.zeros((runs, setup.acc_len))
+    fell_xs = np.zeros((runs, n))
+    x_ends = np.zeros((runs, n))
+    recs = np.empty((runs, setup.n_rows if record else 0, setup.record_width))
+    t0 = time.perf_counter()
+    for i in range(runs):
+        sysi = sysm.with_params(**dict(zip(names, pmat[i].tolist(), strict=True)))
+        s = _setup.Setup(**{**setup.__dict__, "system": sysi, "x0": x0s[i]})
+        rng = generator_state(seqs[i]) if seqs[i] is not None else np.zeros(4, dtype=np.uint64)
+        res = _run_python(s, load_kernel(sysi), rng, seqs[i], progress=False)
+        k = res.n_rows
+        statuses[i] = (k, int(res.fell), _code(res, sysm.state_names),
+                       0 if res.fell_at is None else round(res.fell_at / setup.h))
+        accs[i, :m] = np.abs(res.commanded).max(axis=0)
+        accs[i, m : 2 * m] = (res.applied**2).sum(axis=0)
+        accs[i, 2 * m] = np.count_nonzero(np.any(res.saturated != res.commanded, axis=1))
+        accs[i, 2 * m + 1 : 2 * m + 1 + n] = np.abs(res.states - res.x_op).max(axis=0)
+        if res.fell_x is not None:
+            fell_xs[i] = res.fell_x
+        x_ends[i] = res.final_state
+        if record:
+            recs[i, :k, :n] = res.states
+    elapsed = time.perf_counter() - t0
+    setup0 = _setup.Setup(**{**setup.__dict__, "est_kind": 0})
+    return _batch_result(setup0, x0s, pmat, seqs, statuses, accs, fell_xs, x_ends,
+                         recs if record else None, elapsed)
+
+
+def _code(res: SimResult, names: Sequence[str]) -> int:
+    if not res.fell:
+        return -1
+    if res.fell_state in names:
+        return list(names).index(res.fell_state)  # type: ignore[arg-type]
+    return {"not finite": -2, "integrator failed": -3}.get(res.fell_state or "", -1)
+
+
+def sample_uniform(
+    system: System, runs: int, *, ranges: Mapping[str, tuple[float, float]] | None = None,
+    spread: Mapping[str, float] | None = None, seed: SeedLike = None,
+    x_op: np.ndarray | None = None,
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Initial states uniform in *ranges* and parameters uniform within ``(1 +- spread)``.
+
+    Returns ``(x0s, params)`` for :func:`simulate_batch`. States not in
+    *ranges* stay at *x_op* (default: the canonical operating point).
+    """
+    if x_op is None:
+        x_op, _ = _setup.operating_point(system, None)
+    gen = np.random.default_rng(seed_sequence(seed))
+    x0s = np.tile(np.asarray(x_op, dtype=float), (runs, 1))
+    problems = []
+    for name, (lo, hi) in (ranges or {}).items():
+        if name not in system.state_names:
+            problems.append(f"no state {name!r} ({nearest(name, system.state_names)})")
+            continue
+        if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
+            problems.append(f"range of {name}: {lo}:{hi} must be finite with low <= high")
+            continue
+        x0s[:, system.state_names.index(name)] = gen.uniform(lo, hi, runs)
+    params: dict[str, np.ndarray] = {}
+    for name, rel in (spread or {}).items():
+        if name not in system.params:
+            problems.append(f"unknown parameter {name!r} of {system.key}: "
+                            f"{nearest(name, list(system.params))}")
+            continue
+        if not (math.isfinite(rel) and rel >= 0):
+            problems.append(f"spread of {name} must be a number >= 0, got {rel}")
+            continue
+        nominal = system.params[name]
+        params[name] = nominal * (1.0 + gen.uniform(-rel, rel, runs))
+    if problems:
+        raise SimulationError("; ".join(problems))
+    return x0s, params
+
+
+@dataclass(frozen=True, eq=False)
+class RegionOfAttraction:
+    """Initial conditions, each marked caught (stayed up) or fallen."""
+
+    names: tuple[str, ...]
+    points: np.ndarray
+    caught: np.ndarray
+    batch: BatchResult
+
+    @property
+    def fraction_caught(self) -> float:
+        return float(np.mean(self.caught)) if self.caught.size else math.nan
+
+
+def region_of_attraction(
+    system: System,
+    controller: object,
+    *,
+    grid: Mapping[str, tuple[float, float, int]] | None = None,
+    samples: Mapping[str, tuple[float, float]] | None = None,
+    runs: int | None = None,
+    seed: SeedLike = None,
+    **options: Any,
+) -> RegionOfAttraction:
+    """Which initial conditions the controller catches.
+
+    Either a *grid* ``{state: (low, high, count)}`` (every combination) or
+    *runs* random *samples* ``{state: (low, high)}`` drawn uniformly with
+    *seed*. The other states start at the operating point. *options* go to
+    :func:`simulate_batch` (``duration`` is required).
+    """
+    if (grid is None) == (samples is None):
+        raise SimulationError("give either grid={state: (low, high, count)} or samples={state: (low, high)}")
+    ctrl_x_op, _ = _setup.operating_point(system, controller)
+    if grid is not None:
+        names = tuple(grid)
+        axes = []
+        for name, spec in grid.items():
+            lo, hi, count = spec
+            if int(count) < 1:
+                raise SimulationError(f"grid of {name}: count must be >= 1")
+            axes.append(np.linspace(float(lo), float(hi), int(count)))
+        mesh = np.meshgrid(*axes, indexing="ij")
+        points = np.column_stack([g.reshape(-1) for g in mesh])
+        x0s = np.tile(ctrl_x_op, (points.shape[0], 1))
+        for j, name in enumerate(names):
+            if name not in system.state_names:
+                raise SimulationError(f"no state {name!r} ({nearest(name, system.state_names)})")
+            x0s[:, system.state_names.index(name)] = points[:, j]
+    else:
+        if runs is None:
+            raise SimulationError("random samples need runs=...")
+        names = tuple(samples)  # type: ignore[arg-type]
+        x0s, _ = sample_uniform(system, runs, ranges=samples, seed=seed, x_op=ctrl_x_op)
+        points = x0s[:, [system.state_names.index(n) for n in names]]
+    batch = simulate_batch(system, controller, runs=points.shape[0], x0=x0s, seed=seed, **options)
+    return RegionOfAttraction(names, points, ~batch.fell, batch)
+
+
+@dataclass(frozen=True, eq=False)
+class MonteCarloResult:
+    """Robustness to parameter uncertainty: the fraction of runs that stay up."""
+
+    spread: Mapping[str, float]
+    batch: BatchResult
+
+    @property
+    def fraction_up(self) -> float:
+        return self.batch.fraction_up
+
+
+def monte_carlo(
+    system: System,
+    controller: object,
+    *,
+    spread: Mapping[str, float],
+    runs: int,
+    seed: SeedLike = None,
+    x0: object = None,
+    **options: Any,
+) -> MonteCarloResult:
+    """Runs with each parameter drawn uniformly in ``nominal * (1 +- spread)``.
+
+    The controller keeps its nominal design; *options* go to
+    :func:`simulate_batch` (``duration`` is required). The draws and the
+    noise seeds come from two children of *seed*.
+    """
+    base = seed_sequence(seed)
+    _, params = sample_uniform(system, runs, spread=spread, seed=child_seed(base, 0))
+    batch = simulate_batch(system, controller, runs=runs, x0=x0, params=params,
+                           seed=child_seed(base, 1), **options)
+    return MonteCarloResult(dict(spread), batch)

@@ -1,0 +1,314 @@
+"""One closed-loop run, as a rig runs it.
+
+The nonlinear plant (the system's own ``f``) is integrated between the
+controller's samples; the controller runs at its sample rate with
+zero-order hold. At each sample ``t_k = k T``:
+
+1. the sensors read the measured outputs, with noise;
+2. the controller estimates the state (a Kalman filter for LQG, the
+   measured state for state feedback) and computes its command;
+3. the actuator saturates the command at the input limits; with
+   ``delay=True`` the command acts one sample late (computation delay);
+4. the plant runs ``T / h`` physics steps of length ``h`` (RK4, or an
+   adaptive Dormand-Prince 5(4) over each step, or the exact solution of
+   the linearization with ``plant="linear"``) with the input held, process
+   noise held over each step, and the events (pushes, parameter changes)
+   that fall on the physics grid;
+5. after each physics step the state is checked against the system's
+   region; leaving it (or ceasing to be finite) ends the run with
+   ``fell = True`` and the time.
+
+Everything the controller does is in deviation coordinates about its
+operating point; the result is reported in absolute ones.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from equilibrist.errors import SimulationError
+from equilibrist.numeric.system import System
+from equilibrist.sim import _setup
+from equilibrist.sim.events import Event
+from equilibrist.sim.kernel import load_kernel
+from equilibrist.sim.noise import Noise, SeedLike, describe_seed, generator_state, seed_sequence
+from equilibrist.sim.result import SimResult
+
+# Physics steps per call of the core when a progress bar is shown.
+_CHUNK_STEPS = 200_000
+
+
+def fall_reason(code: int, state_names: Sequence[str]) -> str:
+    """The name of the state that left its region, or why the run stopped."""
+    if code >= 0:
+        return state_names[code]
+    return {-2: "not finite", -3: "integrator failed"}.get(code, "unknown")
+
+
+def simulate(
+    system: System,
+    controller: object = None,
+    *,
+    duration: float,
+    rate: float | None = None,
+    physics_step: float | None = None,
+    integrator: str = "rk4",
+    rtol: float = 1e-8,
+    atol: float = 1e-10,
+    plant: str = "nonlinear",
+    x0: Mapping[str, float] | Sequence[float] | np.ndarray | None = None,
+    delay: bool = False,
+    noise: Noise | None = None,
+    seed: SeedLike = None,
+    reference: object = None,
+    events: Sequence[Event] = (),
+    outputs: Sequence[str] | None = None,
+    region: Mapping[str, tuple[float, float]] | None = None,
+    progress: bool = False,
+) -> SimResult:
+    """Simulate *system* under *controller* for *duration* seconds.
+
+    Parameters
+    ----------
+    system : System
+        The plant, with its parameters (``get_system(...)``).
+    controller : OpenLoop, StateFeedback, LQG, object with ``step``, function or None
+        None runs open loop at the operating point's input. See
+        :mod:`equilibrist.sim.controllers`.
+    duration : float
+        Seconds to simulate, rounded up to a whole number of control periods.
+    rate : float, optional
+        Controller sample rate [Hz]; defaults to the controller's design rate.
+    physics_step : float, optional
+        Integration step [s]; must divide the control period. Default: the
+        period split into steps of at most 1 ms (RK4) or the period itself
+        (adaptive).
+    integrator : {"rk4", "adaptive"}
+        Fixed-step RK4, or Dormand-Prince 5(4) with *rtol*, *atol* inside
+        each physics step.
+    plant : {"nonlinear", "linear"}
+        The system's own dynamics, or its linearization at the operating
+        point (propagated exactly, by matrix exponential).
+    x0 : mapping or vector, optional
+        Initial state (absolute): a full vector, or ``{name: value}``
+        overriding components of the operating point.
+    delay : bool
+        Apply each command one sample late (one-sample computation delay).
+    noise : Noise, optional
+        Process and sensor noise (``Noise.from_design(design)``); None: none.
+    seed : int or SeedSequence, optional
+        Seed of the noise (fresh entropy when None; the result records it).
+    reference : signal, optional
+        Reference of the tracked outputs (absolute); needs a controller with
+        ``K_c`` or a Python controller.
+    events : sequence of Kick, Pulse, Impulse, ParameterChange
+        Things that happen during the run (:mod:`equilibrist.sim.events`).
+    outputs : sequence of str, optional
+        Measured states for an open loop or a Python controller (default:
+        the system's default outputs).
+    region : mapping, optional
+        ``{state: (low, high)}`` outside which the run has fallen (default:
+        the system's; ``{}`` never stops).
+    progress : bool
+        Show a progress bar on stderr for runs longer than a second.
+
+    Returns
+    -------
+    SimResult
+    """
+    setup = _setup.build(
+        system, controller, duration=duration, rate=rate, physics_step=physics_step,
+        integrator=integrator, rtol=rtol, atol=atol, plant=plant, x0=x0, delay=delay,
+        noise=noise, reference=reference, events=events, outputs=outputs, region=region,
+    )
+    seq = seed_sequence(seed) if (noise is not None or seed is not None) else None
+    rng = generator_state(seq) if seq is not None else np.zeros(4, dtype=np.uint64)
+    kernel = load_kernel(system)
+    if setup.builtin:
+        return _run_builtin(setup, kernel, rng, seq, progress)
+    return _run_python(setup, kernel, rng, seq, progress)
+
+
+def _progress_bar(total: int, enabled: bool, unit: str) -> Any:
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit=unit, file=sys.stderr, delay=1.0, leave=False,
+                dynamic_ncols=True)
+
+
+def _run_builtin(setup: _setup.Setup, kernel: Any, rng: np.ndarray,
+                 seq: np.random.SeedSequence | None, progress: bool) -> SimResult:
+    n = setup.system.n_states
+    m = setup.system.n_inputs
+    x = setup.x0.copy()
+    z = np.array(setup.controller.x_hat0 if setup.est_kind >= 2 else np.zeros(n), dtype=float)
+    u_prev = np.zeros(m)
+    p_sets = setup.p_sets(np.array(setup.system.p))
+    rec = np.empty((setup.n_rows, setup.record_width))
+    acc = np.zeros(setup.acc_len)
+    status = np.zeros(4, dtype=np.int64)
+    fell_x = np.zeros(n)
+    args = (
+        setup.op, setup.c_idx, setup.est, setup.gains, setup.r_op, setup.ref, setup.uff,
+        setup.lv, setup.lw, p_sets, setup.p_switch, setup.linear_blocks(p_sets), setup.region,
+        setup.kicks, setup.kick_value, setup.pulses, setup.pulse_value, rec, acc, status, fell_x,
+    )
+    iopts, fopts = setup.iopts, setup.fopts
+    total = setup.n_rows
+    chunk = total if not progress else max(1, _CHUNK_STEPS // setup.n_sub)
+    bar = _progress_bar(total, progress and total > chunk, "samples")
+    k = 0
+    try:
+        while k < total:
+            k_end = min(total, k + chunk)
+            kernel.run_one(k, k_end, iopts, fopts, x, z, u_prev, rng, *args)
+            if bar is not None:
+                bar.update(int(status[0]) - bar.n)
+            if status[1] or status[0] < k_end:
+                break
+            k = k_end
+    finally:
+        if bar is not None:
+            bar.close()
+    return _result(setup, rec, int(status[0]), status, fell_x, x, seq,
+                   estimates=setup.est_kind != 0)
+
+
+def _run_python(setup: _setup.Setup, kernel: Any, rng: np.ndarray,
+                seq: np.random.SeedSequence | None, progress: bool) -> SimResult:
+    ctrl = setup.controller
+    sysm = setup.system
+    n, m = sysm.n_states, sysm.n_inputs
+    ny = len(setup.outputs)
+    if hasattr(ctrl, "reset"):
+        ctrl.reset()
+    x = setup.x0.copy()
+    p_sets = setup.p_sets(np.array(sysm.p))
+    lin = setup.linear_blocks(p_sets)
+    iopts, fopts = setup.iopts, setup.fopts
+    scr = kernel.scratch(p_sets.shape[1], ny, setup.lw.shape[1])
+    scr[30, 0] = setup.h
+    status = np.zeros(4, dtype=np.int64)
+    rec = np.empty((setup.n_rows, setup.record_width))
+    names = sysm.spec.parameter_names
+    base = len(names) - 2 * m
+    y = np.empty(ny)
+    u_prev = None
+    has_estimate = False
+    c_y, c_u = 2 * n, 2 * n + ny
+    bar = _progress_bar(setup.n_rows, progress, "samples")
+    rows = 0
+    try:
+        for k in range(setup.n_rows):
+            kernel.measure_one(x, setup.c_idx, setup.lv, rng, y)
+            t = float(setup.times[k])
+            try:
+                raw = ctrl.step(t, y.copy(), setup.ref[k].copy())
+            except SimulationError:
+                raise
+            u_cmd = np.asarray(raw, dtype=float).reshape(-1)
+            if u_cmd.size != m or not np.all(np.isfinite(u_cmd)):
+                raise SimulationError(
+                    f"the controller returned {np.asarray(raw).tolist()!r} at t = {t:g} s: "
+                    f"expected {m} finite input value(s) ({', '.join(sysm.input_names)})"
+                )
+            ps = int(np.searchsorted(setup.p_switch, k * setup.n_sub, side="right") - 1)
+            lo = p_sets[ps, base::2][:m]
+            hi = p_sets[ps, base + 1 :: 2][:m]
+            u_sat = np.minimum(np.maximum(u_cmd, lo), hi)
+            if u_prev is None:
+                u_prev = np.minimum(np.maximum(setup.u_op, lo), hi)
+            u_app = u_prev if setup.delay else u_sat
+            u_prev = u_sat
+            if hasattr(ctrl, "applied"):
+                ctrl.applied(u_app)
+            est = getattr(ctrl, "estimate", None)
+            rec[k, :n] = x
+            if est is not None:
+                has_estimate = True
+                rec[k, n : 2 * n] = np.asarray(est, dtype=float).reshape(n)
+            else:
+                rec[k, n : 2 * n] = np.nan
+            rec[k, c_y : c_y + ny] = y
+            rec[k, c_u : c_u + m] = u_cmd
+            rec[k, c_u + m : c_u + 2 * m] = u_sat
+            rec[k, c_u + 2 * m : c_u + 3 * m] = u_app
+            rows = k + 1
+            if bar is not None and k % 1000 == 0:
+                bar.update(k + 1 - bar.n)
+            if k == 0:
+                outside = _outside(x, setup.region)
+                if outside != -1:
+                    status[:] = (rows, 1, outside, 0)
+                    scr[17, :n] = x
+                    break
+            if k >= setup.n_samples:
+                break
+            if kernel.advance_one(
+                k, x, np.ascontiguousarray(u_app, dtype=float), setup.op, p_sets,
+                setup.p_switch, lin, setup.region, setup.kicks, setup.kick_value,
+                setup.pulses, setup.pulse_value, setup.lw, rng, iopts, fopts, status, scr,
+            ):
+                break
+    finally:
+        if bar is not None:
+            bar.close()
+    status[0] = rows
+    return _result(setup, rec, rows, status, scr[17, :n].copy(), x, seq, estimates=has_estimate)
+
+
+def _outside(x: np.ndarray, region: np.ndarray) -> int:
+    if not np.all(np.isfinite(x)):
+        return -2
+    out = np.nonzero((x <= region[0]) | (x >= region[1]))[0]
+    return int(out[0]) if out.size else -1
+
+
+def _result(setup: _setup.Setup, rec: np.ndarray, rows: int, status: np.ndarray,
+            fell_x: np.ndarray, x_end: np.ndarray, seq: np.random.SeedSequence | None,
+            *, estimates: bool) -> SimResult:
+    sysm = setup.system
+    n, m = sysm.n_states, sysm.n_inputs
+    ny = len(setup.outputs)
+    c_y, c_u = 2 * n, 2 * n + ny
+    r = rec[:rows]
+    fell = bool(status[1])
+    settings = setup.describe()
+    settings["seed"] = None if seq is None else describe_seed(seq)
+    return SimResult(
+        system=sysm.key,
+        params=dict(sysm.params),
+        state_names=sysm.state_names,
+        state_units=sysm.state_units,
+        input_names=sysm.input_names,
+        input_units=sysm.input_units,
+        output_names=setup.outputs,
+        reference_names=setup.tracked,
+        time=setup.times[:rows],
+        states=r[:, :n],
+        estimates=r[:, n : 2 * n] if estimates else None,
+        measurements=r[:, c_y : c_y + ny],
+        commanded=r[:, c_u : c_u + m],
+        saturated=r[:, c_u + m : c_u + 2 * m],
+        applied=r[:, c_u + 2 * m : c_u + 3 * m],
+        reference=setup.ref[:rows],
+        x_op=setup.x_op,
+        u_op=setup.u_op,
+        fell=fell,
+        fell_at=float(status[3] * setup.h) if fell else None,
+        fell_state=fall_reason(int(status[2]), sysm.state_names) if fell else None,
+        fell_x=fell_x.copy() if fell else None,
+        final_state=x_end.copy(),
+        settings=settings,
+    )
+
+
+def steps_per_second(n_steps: float, seconds: float) -> float:
+    return n_steps / seconds if seconds > 0 else math.inf
