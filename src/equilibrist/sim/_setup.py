@@ -298,7 +298,8 @@ def build(
     names = system.state_names
 
     dur = _positive(duration, "duration [s]", problems)
-    ctrl_rate = getattr(ctrl, "rate", None) if builtin else None
+    # A Python controller may declare the rate it was written for.
+    ctrl_rate = getattr(ctrl, "rate", None)
     if rate is None and ctrl_rate is None:
         problems.append("give the controller's sample rate (rate=... in Hz)")
         run_rate = None
@@ -371,7 +372,13 @@ def build(
         outs = tuple(names)
         est_kind = 1
     else:
-        outs = tuple(outputs) if outputs is not None else (tuple(system.spec.outputs) or tuple(names))
+        declared = getattr(ctrl, "outputs", None) if not builtin else None
+        if outputs is not None:
+            outs = tuple(outputs)
+        elif declared is not None:
+            outs = tuple(declared)
+        else:
+            outs = tuple(system.spec.outputs) or tuple(names)
         est_kind = 0
     if outputs is not None and tuple(outputs) != outs:
         problems.append(

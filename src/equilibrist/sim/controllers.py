@@ -15,7 +15,11 @@ order of the run's ``outputs``), ``r`` the reference (absolute; empty when
 the run has none); it returns the commanded inputs, which the simulator
 then saturates (and delays, when asked). An optional ``reset()`` is called
 before the run; an optional ``estimate`` attribute (absolute state vector)
-is recorded as the run's estimate after each step.
+is recorded as the run's estimate after each step; an optional ``rate``
+attribute (Hz) is the sample rate the run then uses (and must agree with);
+an optional ``outputs`` attribute names the states it measures; an
+optional ``applied(u)`` method is told the input that actually acted
+(saturated, delayed) after each step, as a Kalman filter needs.
 """
 
 from __future__ import annotations
@@ -105,7 +109,9 @@ class StateFeedback:
 
     def runtime(self, state_names: Sequence[str]) -> _StateFeedbackRuntime:
         """A Python controller doing the same as the compiled core (for checks)."""
-        return _StateFeedbackRuntime(self, [list(state_names).index(o) for o in self.tracked])
+        return _StateFeedbackRuntime(
+            self, tuple(state_names), [list(state_names).index(o) for o in self.tracked]
+        )
 
     def describe(self) -> dict[str, object]:
         return {"kind": self.kind, "K": self.K.tolist(),
@@ -220,8 +226,10 @@ BuiltIn = OpenLoop | StateFeedback | LQG
 
 
 class _StateFeedbackRuntime:
-    def __init__(self, ctrl: StateFeedback, tracked_idx: list[int]) -> None:
+    def __init__(self, ctrl: StateFeedback, names: tuple[str, ...], tracked_idx: list[int]) -> None:
         self.c = ctrl
+        self.rate = ctrl.rate
+        self.outputs = names
         self.tracked_idx = tracked_idx
         self.estimate = ctrl.x_op.copy()
 
@@ -243,6 +251,8 @@ class _LQGRuntime:
 
     def __init__(self, ctrl: LQG, out_idx: list[int], tracked_idx: list[int]) -> None:
         self.c = ctrl
+        self.rate = ctrl.rate
+        self.outputs = ctrl.outputs
         self.idx = out_idx
         self.tracked_idx = tracked_idx
         self.reset()
