@@ -55,7 +55,7 @@ def test_kick_changes_the_state_by_its_value():
                    region={})
     k = 5
     before = res.states[k]
-    after = _rk4_reference(sysm, [*before, 0, 0, 0, 0.4], [0.0], 1e-3, 10)
+    after = _rk4_reference(sysm, before + np.array([0, 0, 0, 0.4]), [0.0], 1e-3, 10)
     np.testing.assert_allclose(res.states[k + 1], after, rtol=1e-12, atol=1e-14)
     np.testing.assert_array_equal(res.states[: k + 1], 0.0)
 
