@@ -514,6 +514,8 @@ def build(
                 sq = square_root(noise.process_intensity, "the process noise intensity")
                 if h is not None:
                     lw = noise.process_gain @ sq / math.sqrt(h)
+                    # Channels without noise (zero columns) cost deviates for nothing.
+                    lw = lw[:, np.any(lw != 0.0, axis=0)]
                 r_full = np.zeros((ny, ny))
                 pos = {o: i for i, o in enumerate(outs)}
                 for a, oa in enumerate(noise.outputs):

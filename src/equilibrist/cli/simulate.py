@@ -1,0 +1,260 @@
+"""``equilibrist simulate``: one closed-loop run as a rig runs it.
+
+The flags ``--controller --duration --rate --x0 --push --noise --seed --set
+--q --r --qn --rn --outputs --out --json`` are a contract with scripts
+outside the project; ``equilibrist batch`` takes the same ones.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from typing import Any
+
+from equilibrist.cli import common
+
+CONTROLLERS = ("none", "lqr", "lqg")
+
+_EPILOG = """\
+The run: the nonlinear plant integrated with RK4 (or --integrator adaptive)
+at --physics-step, which must divide the control period 1/--rate; the
+controller designed for that rate (LQR on the full state, or LQG: a discrete
+Kalman filter on the measured --outputs) with zero-order hold and the
+actuator's limits; noise with the design's covariances (--noise on, seeded by
+--seed). It stops with fell = true when a state leaves the system's region.
+
+--x0 NAME=VALUE: initial state components (absolute; the rest at the
+operating point). --push T:VALUE[:DURATION]: a force (torque) of VALUE in
+the first input's unit added to that input's channel from T for DURATION
+seconds (default 0.1 s), beside the actuator (not saturated).
+--kick T:STATE=VALUE: add VALUE to a state at T (e.g. theta_dot=0.5).
+--change T:NAME=VALUE: a plant parameter changes at T (the controller keeps
+its design). --reference step:V[@T] | ramp:SLOPE[@T] | square:AMP:PERIOD |
+file:PATH: track it with the reference gain K_c (lqr or lqg).
+Weights --q --r --qn --rn are comma-separated diagonals as in 'equilibrist
+design'. --json prints the summary metrics (fell, fell_at, settling_time,
+overshoot, peak_input, rms_input, time_saturated, final_error,
+estimation_error_rms, ...). --out FILE.npz saves the run (FILE.csv exports
+a table).
+"""
+
+
+def add_run_options(p: argparse.ArgumentParser) -> None:
+    """The options shared by ``simulate`` and ``batch``."""
+    common.add_system(p)
+    p.add_argument("--controller", choices=CONTROLLERS,
+                   help="none (open loop), lqr (full state) or lqg (Kalman filter + LQR); "
+                   "default lqg, none for a system without input")
+    p.add_argument("--duration", default="5", metavar="S", help="seconds to simulate (default 5)")
+    p.add_argument("--rate", metavar="HZ",
+                   help="controller sample rate [Hz] (default: the system's control rate)")
+    p.add_argument("--physics-step", metavar="S",
+                   help="integration step [s], dividing 1/rate (default: at most 1 ms)")
+    p.add_argument("--integrator", choices=("rk4", "adaptive"), default="rk4")
+    p.add_argument("--plant", choices=("nonlinear", "linear"), default="nonlinear",
+                   help="the system's own dynamics (default) or its linearization")
+    p.add_argument("--x0", action="extend", nargs="+", default=[], metavar="NAME=VALUE",
+                   help="initial state components")
+    p.add_argument("--push", action="extend", nargs="+", default=[], metavar="T:VALUE",
+                   help="a force pulse VALUE on the first input at T (T:VALUE[:DURATION])")
+    p.add_argument("--kick", action="extend", nargs="+", default=[], metavar="T:STATE=VALUE",
+                   help="add VALUE to STATE at time T")
+    p.add_argument("--change", action="extend", nargs="+", default=[], metavar="T:NAME=VALUE",
+                   help="change a plant parameter at time T")
+    p.add_argument("--delay", action="store_true", help="apply each command one sample late")
+    p.add_argument("--noise", choices=("on", "off"), default="on",
+                   help="process and sensor noise (default on)")
+    p.add_argument("--seed", default="0", metavar="N", help="noise seed (default 0)")
+    p.add_argument("--reference", metavar="SIGNAL",
+                   help="reference of the tracked output: step:V[@T], ramp:S[@T], square:A:P, file:PATH")
+    p.add_argument("--set", dest="settings", action="extend", nargs="+", default=[],
+                   metavar="NAME=VALUE", help="set a parameter (repeatable)")
+    p.add_argument("--q", metavar="Q1,...", help="LQR state weights (diagonal)")
+    p.add_argument("--r", metavar="R1,...", help="LQR input weights (diagonal)")
+    p.add_argument("--qn", metavar="QN1,...", help="process noise intensities (diagonal)")
+    p.add_argument("--rn", metavar="RN1,...", help="measurement noise intensities (diagonal)")
+    p.add_argument("--outputs", metavar="NAME,...", help="measured outputs (state names)")
+    p.add_argument("--kalman", choices=("current", "predictor"), default="current",
+                   help="discrete Kalman filter form (default current)")
+    p.add_argument("--out", metavar="FILE", help="save the result (.npz; .csv exports a table)")
+    p.add_argument("--no-progress", action="store_true", help="never show a progress bar")
+    common.add_json(p)
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "simulate",
+        help="simulate a closed loop with a digital controller, noise and saturation",
+        description="Simulate one closed-loop run of a system as a rig runs it.",
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_run_options(p)
+    p.set_defaults(func=run)
+
+
+# -- parsing ---------------------------------------------------------------------
+
+
+def _names(text: str | None, option: str) -> tuple[str, ...] | None:
+    if text is None:
+        return None
+    parts = tuple(t.strip() for t in text.split(","))
+    if not all(parts):
+        raise common.UsageError(f"{option} {text!r}: expected comma-separated names")
+    return parts
+
+
+def _positive(text: str, option: str) -> float:
+    v = common.parse_number(text, option)
+    if v <= 0:
+        raise common.UsageError(f"{option} must be positive, got {text}")
+    return v
+
+
+def _seed(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise common.UsageError(f"--seed {text!r}: expected a whole number >= 0") from None
+    if v < 0:
+        raise common.UsageError(f"--seed {text!r}: expected a whole number >= 0")
+    return v
+
+
+def _split_time(item: str, option: str) -> tuple[float, str]:
+    t, sep, rest = item.partition(":")
+    if not sep or not rest:
+        raise common.UsageError(f"{option} {item!r}: expected T:...")
+    time = common.parse_number(t, f"{option} time")
+    if time < 0:
+        raise common.UsageError(f"{option} {item!r}: the time must be >= 0")
+    return time, rest
+
+
+def parse_events(args: argparse.Namespace, system: Any) -> list[Any]:
+    """The --push, --kick and --change items as simulation events."""
+    from equilibrist.sim.events import Kick, ParameterChange, Pulse
+
+    events: list[Any] = []
+    for item in args.push:
+        t, rest = _split_time(item, "--push")
+        parts = rest.split(":")
+        if len(parts) > 2:
+            raise common.UsageError(f"--push {item!r}: expected T:VALUE[:DURATION]")
+        value = common.parse_number(parts[0], "--push value")
+        duration = 0.1 if len(parts) == 1 else _positive(parts[1], "--push duration")
+        events.append(Pulse(t, value, duration))
+    for item in args.kick:
+        t, rest = _split_time(item, "--kick")
+        (name, value), = common.parse_assignments([rest], "--kick").items()
+        events.append(Kick(t, name, common.parse_number(value, f"--kick {name}")))
+    for item in args.change:
+        t, rest = _split_time(item, "--change")
+        values = common.parse_assignments(rest.split(","), "--change")
+        events.append(ParameterChange(
+            t, {k: common.parse_number(v, f"--change {k}") for k, v in values.items()}))
+    return events
+
+
+def parse_x0(items: list[str]) -> dict[str, float]:
+    raw = common.parse_assignments(items, "--x0")
+    return {k: common.parse_number(v, f"--x0 {k}") for k, v in raw.items()}
+
+
+def show_progress(args: argparse.Namespace) -> bool:
+    """A bar on stderr, except when --json output goes to a pipe (or --no-progress)."""
+    if args.no_progress:
+        return False
+    return not (args.json and not sys.stdout.isatty())
+
+
+def build_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
+    """The system and the keyword arguments of ``simulate`` from the options."""
+    from equilibrist.sim.noise import Noise
+    from equilibrist.sim.signals import parse_signal
+
+    system = common.load_system(args)
+    duration = _positive(args.duration, "--duration")
+    rate = (_positive(args.rate, "--rate") if args.rate is not None
+            else float(system.spec.control_rate))
+    step = None if args.physics_step is None else _positive(args.physics_step, "--physics-step")
+    kind = args.controller or ("lqg" if system.n_inputs else "none")
+    reference = None if args.reference is None else parse_signal(args.reference)
+    noise_on = args.noise == "on"
+    outputs = _names(args.outputs, "--outputs")
+    controller: Any = None
+    noise = None
+    if kind == "none":
+        for flag in ("q", "r", "qn", "rn"):
+            if getattr(args, flag) is not None:
+                raise common.UsageError(f"--{flag} needs a controller (--controller lqr or lqg)")
+        if noise_on:
+            noise = Noise.from_spec(system, outputs=outputs, rate=rate)
+    else:
+        from equilibrist.control.design import design
+        from equilibrist.sim.controllers import LQG, StateFeedback
+
+        d = design(
+            system,
+            q=common.parse_vector(args.q, "--q"),
+            r=common.parse_vector(args.r, "--r"),
+            qn=common.parse_vector(args.qn, "--qn"),
+            rn=common.parse_vector(args.rn, "--rn"),
+            outputs=outputs,
+            rate=rate,
+            kalman_form=args.kalman,
+        )
+        tracking = reference is not None
+        controller = (LQG.from_design(d, tracking=tracking) if kind == "lqg"
+                      else StateFeedback.from_design(d, tracking=tracking))
+        if noise_on:
+            noise = Noise.from_design(d)
+        outputs = None
+    options: dict[str, Any] = {
+        "controller": controller,
+        "duration": duration,
+        "rate": rate,
+        "physics_step": step,
+        "integrator": args.integrator,
+        "plant": args.plant,
+        "delay": args.delay,
+        "noise": noise,
+        "seed": _seed(args.seed),
+        "reference": reference,
+        "events": parse_events(args, system),
+        "outputs": outputs,
+    }
+    return system, options
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return "-"
+    if isinstance(v, float):
+        return "inf" if math.isinf(v) else f"{v:.6g}"
+    if isinstance(v, dict):
+        return ", ".join(f"{k} {_fmt(x)}" for k, x in v.items()) or "-"
+    return str(v)
+
+
+def run(args: argparse.Namespace) -> int:
+    from equilibrist.sim.run import simulate
+
+    system, options = build_run(args)
+    result = simulate(system, x0=parse_x0(args.x0), progress=show_progress(args), **options)
+    saved = result.save(args.out) if args.out else None
+    metrics = result.metrics()
+    if args.json:
+        out = dict(metrics)
+        if saved is not None:
+            out["saved"] = str(saved)
+        common.print_json(out)
+        return 0
+    rows = [(k, _fmt(v)) for k, v in metrics.items() if k not in ("system", "seed")]
+    print(f"{system.key}: {'fell at ' + _fmt(result.fell_at) + ' s' if result.fell else 'stayed up'}")
+    print(common.format_table(("metric", "value"), rows))
+    if saved is not None:
+        print(f"saved {saved}")
+    return 0
