@@ -9,7 +9,9 @@ C code on the user's target.
 :func:`tolerance` says how close the C code must come: a fraction of the
 input's activity over the run (its largest excursion from the operating
 input), ``1e-9`` in double precision (room for another compiler's fused
-multiply-adds) and ``1e-3`` in single precision.
+multiply-adds) and ``1e-4`` in single precision (the C code in float
+differs from the simulation's double-precision controller by a few
+millionths of the activity over a noisy run).
 """
 
 from __future__ import annotations
@@ -18,11 +20,18 @@ from typing import Any
 
 import numpy as np
 
+from equilibrist.errors import ExportError
 from equilibrist.export.c_code import Vectors
-from equilibrist.export.data import ControllerData
+from equilibrist.export.data import ControllerData, check_controller, check_precision
 
 # Fractions of the input's activity accepted by the shipped test program.
-RELATIVE_TOLERANCE = {"double": 1e-9, "float": 1e-3}
+RELATIVE_TOLERANCE = {"double": 1e-9, "float": 1e-4}
+# The recorded run: its length [s] by default, the start away from the
+# operating point and the reference step, as fractions of the spec's design
+# scales (the largest deviations the rig accepts).
+DEFAULT_DURATION = 4.0
+START_FRACTION = 0.25
+STEP_FRACTION = 0.5
 
 
 def tolerance(data: ControllerData, u: np.ndarray, precision: str) -> np.ndarray:
@@ -78,6 +87,16 @@ class CController:
     def data(self) -> ControllerData:
         return self.compiled.data
 
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        """The measured states, in the order ``step`` takes them (the simulator reads this)."""
+        return self.compiled.data.measured_names
+
+    @property
+    def rate(self) -> float:
+        """The sample rate [Hz] the controller was generated for (the simulator reads this)."""
+        return self.compiled.data.rate
+
     def reset(self) -> None:
         """Start the C controller again (``init`` or ``init_at``)."""
         self.compiled.reset(self.x_estimate)
@@ -105,3 +124,72 @@ def c_controller(design: Any, *, controller: str = "lqg", precision: str = "doub
 
     return CController(compile_controller(design, controller=controller, precision=precision),
                        x_estimate)
+
+
+def scenario(design: Any, system: Any, *, duration: float | None = None) -> dict[str, Any]:
+    """The settings of the recorded run: start, reference step, noise, rate.
+
+    The run starts with each coordinate that has a design scale displaced by
+    :data:`START_FRACTION` of it, steps the reference of the tracked outputs
+    (when the design has a reference gain) by :data:`STEP_FRACTION` of their
+    scales half way, and has the sensor and process noise the design assumed.
+    """
+    from equilibrist.sim import Noise, Step
+
+    plant = design.plant
+    scales = getattr(system.spec, "design_scales", {}) or {}
+    length = DEFAULT_DURATION if duration is None else float(duration)
+    x0 = np.array(plant.x0, dtype=float)
+    coordinates = tuple(getattr(system.spec, "coordinates", ()) or plant.state_names)
+    for i, name in enumerate(plant.state_names):
+        if name in coordinates and scales.get(name):
+            x0[i] += START_FRACTION * float(scales[name])
+    reference = None
+    if design.Kc is not None:
+        r0 = np.asarray(design.r0, dtype=float)
+        step = np.array([STEP_FRACTION * float(scales.get(t, 0.0)) for t in design.tracked])
+        reference = Step(value=r0 + step, at=0.5 * length)
+    return {
+        "duration": length,
+        "rate": float(design.rate),
+        "x0": x0,
+        "noise": Noise.from_design(design),
+        "reference": reference,
+    }
+
+
+def record(design: Any, system: Any, *, controller: str = "lqg", precision: str = "double",
+           duration: float | None = None, seed: int = 0) -> Vectors:
+    """Test vectors from a noisy closed-loop run of the simulation's own controller.
+
+    The simulation's built-in digital controller (:class:`equilibrist.sim.LQG`
+    or :class:`equilibrist.sim.StateFeedback` of the design, with its
+    reference gain when it has one) balances the nonlinear plant through the
+    run of :func:`scenario`; the vectors are the measurements and references
+    it read and the saturated commands it returned.
+
+    Raises
+    ------
+    ExportError
+        When the recorded run falls (the design does not hold the plant).
+    """
+    from equilibrist.export.writer import controller_data
+    from equilibrist.sim import LQG, StateFeedback, simulate
+
+    check_controller(controller)
+    check_precision(precision)
+    data = controller_data(design, controller=controller)
+    tracking = design.Kc is not None
+    builtin = (LQG if controller == "lqg" else StateFeedback).from_design(design, tracking=tracking)
+    run = scenario(design, system, duration=duration)
+    result = simulate(system, builtin, seed=seed, **run)
+    if result.fell:
+        raise ExportError(
+            f"the recorded run of the {controller} controller of {data.system} fell at "
+            f"t = {result.fell_at:.3g} s ({result.fell_state} left its region): "
+            "the design does not hold the plant, so there are no test vectors to ship"
+        )
+    r = result.reference if tracking else np.zeros((result.n_rows, 0))
+    x_init = data.x0 + (builtin.x_hat0 if controller == "lqg" else 0.0)
+    return make_vectors(data, result.measurements, r, result.saturated, x_init,
+                        precision=precision)
