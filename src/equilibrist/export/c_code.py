@@ -196,6 +196,9 @@ def _header_comment(data: ControllerData, *, version: str, precision: str,
         ]
     if not data.n_references:
         lines.append("  (no KC, R0: the design has no reference gain)")
+    if data.controller == "lqg":
+        lines.append("The prediction assumes the returned u acts from this sample to the next: apply it")
+        lines.append("right away (a command held back one sample makes the estimate wrong).")
     lines += [
         "",
         "Settings: " + "; ".join(f"{k}={v}" for k, v in data.settings.items()),
