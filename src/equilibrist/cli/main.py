@@ -70,6 +70,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except BrokenPipeError:
         return 0
+    except OSError as exc:
+        # A file the user named that cannot be read or written.
+        where = f" {exc.filename}" if exc.filename else ""
+        print(f"equilibrist: error: cannot use{where}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("equilibrist: interrupted", file=sys.stderr)
         return 130

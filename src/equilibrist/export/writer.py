@@ -172,7 +172,10 @@ def write_files(folder: Path, files: Mapping[str, str]) -> None:
         stage_root = folder.parent
         while not stage_root.exists():
             stage_root = stage_root.parent
-    staging = Path(tempfile.mkdtemp(prefix=".equilibrist-export-", dir=stage_root))
+    try:
+        staging = Path(tempfile.mkdtemp(prefix=".equilibrist-export-", dir=stage_root))
+    except OSError as exc:
+        raise ExportError(f"cannot write the export into {folder}: {exc.strerror or exc}") from None
     try:
         for rel, text in files.items():
             path = staging / rel
