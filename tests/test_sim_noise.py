@@ -16,7 +16,7 @@ MASK = (1 << 64) - 1
 
 
 def _xoshiro_normals(state: list[int], count: int) -> list[float]:
-    """xoshiro256** and Box-Muller in plain Python integers: the reference."""
+    """xoshiro256** and the polar method in plain Python integers: the reference."""
     s = list(state)
 
     def rotl(v: int, k: int) -> int:
@@ -35,10 +35,13 @@ def _xoshiro_normals(state: list[int], count: int) -> list[float]:
 
     out: list[float] = []
     while len(out) < count:
-        u1 = ((nxt() >> 11) + 1) * 2.0**-53
-        u2 = ((nxt() >> 11) + 1) * 2.0**-53
-        r = math.sqrt(-2.0 * math.log(u1))
-        out += [r * math.cos(2 * math.pi * u2), r * math.sin(2 * math.pi * u2)]
+        v1 = 2.0 * ((nxt() >> 11) + 1) * 2.0**-53 - 1.0
+        v2 = 2.0 * ((nxt() >> 11) + 1) * 2.0**-53 - 1.0
+        r2 = v1 * v1 + v2 * v2
+        if r2 >= 1.0 or r2 == 0.0:
+            continue
+        scale = math.sqrt(-2.0 * math.log(r2) / r2)
+        out += [v1 * scale, v2 * scale]
     return out[:count]
 
 

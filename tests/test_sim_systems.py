@@ -27,6 +27,8 @@ def test_every_system_with_an_input_is_listed():
     assert "gyroscope" not in WITH_INPUT
 
 
+# Slow only the first time: each system's core is compiled (then cached on disk).
+@pytest.mark.slow
 @pytest.mark.parametrize("name", WITH_INPUT)
 def test_default_lqg_catches_the_system_with_noise(name):
     system = get_system(name)
@@ -47,6 +49,7 @@ def test_default_lqg_catches_the_system_with_noise(name):
     assert np.any(res.measurements != res.states[:, idx])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", WITH_INPUT)
 def test_default_lqr_catches_the_system_without_noise(name):
     system = get_system(name)

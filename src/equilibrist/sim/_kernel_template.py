@@ -22,7 +22,7 @@ Conventions of the core (all arrays float64 unless said otherwise):
   ``[2m+1 : 2m+1+n]`` peak ``|x - x_op|``, ``[2m+1+n : 2m+1+2n]`` sum of
   squared estimation errors.
 - Randomness: xoshiro256** on a 4-word ``uint64`` state per run, normal
-  deviates by Box-Muller, drawn in a fixed order (the measurement noise of a
+  deviates by Marsaglia's polar method, drawn in a fixed order (the measurement noise of a
   sample, then the process noise of each of its physics steps).
 
 Nothing allocates inside the loops over samples and physics steps; scratch
@@ -68,7 +68,6 @@ _U17 = np.uint64(17)
 _U45 = np.uint64(45)
 _U64 = np.uint64(64)
 _TWO_M53 = 1.0 / 9007199254740992.0
-_TWO_PI = 2.0 * math.pi
 
 # Dormand-Prince 5(4) tableau.
 _A21 = 1.0 / 5.0
@@ -110,14 +109,19 @@ def _uniform(s):
 
 @_inline
 def _normals(s, out, count):
-    """Fill ``out[:count]`` with standard normal deviates (Box-Muller pairs)."""
+    """Fill ``out[:count]`` with standard normal deviates (Marsaglia's polar method:
+    pairs from points uniform in the unit disc; no sine or cosine)."""
     i = 0
     while i < count:
-        r = math.sqrt(-2.0 * math.log(_uniform(s)))
-        a = _TWO_PI * _uniform(s)
-        out[i] = r * math.cos(a)
+        v1 = 2.0 * _uniform(s) - 1.0
+        v2 = 2.0 * _uniform(s) - 1.0
+        r2 = v1 * v1 + v2 * v2
+        if r2 >= 1.0 or r2 == 0.0:
+            continue
+        scale = math.sqrt(-2.0 * math.log(r2) / r2)
+        out[i] = v1 * scale
         if i + 1 < count:
-            out[i + 1] = r * math.sin(a)
+            out[i + 1] = v2 * scale
         i += 2
 
 

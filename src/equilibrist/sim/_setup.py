@@ -55,6 +55,8 @@ def _fmt_bytes(n: float) -> str:
 
 def check_memory(n_bytes: float, what: str, limit: float | None) -> None:
     """Refuse (before allocating) a job that needs more than *limit* bytes."""
+    if limit is None and n_bytes < 64 << 20:
+        return  # small enough anywhere; spares reading /proc on every run
     cap = MEMORY_FRACTION * available_memory() if limit is None else float(limit)
     if n_bytes > cap:
         raise SimulationError(
@@ -511,7 +513,7 @@ def build(
             )
         else:
             try:
-                sq = square_root(noise.process_intensity, "the process noise intensity")
+                sq = noise.process_root
                 if h is not None:
                     lw = noise.process_gain @ sq / math.sqrt(h)
                     # Channels without noise (zero columns) cost deviates for nothing.

@@ -44,6 +44,7 @@ _HEADER = (
     "from numba import njit, prange  # noqa: E402\n\n"
 )
 _LOADED: dict[Path, types.ModuleType] = {}
+_PATHS: dict[Path, Path] = {}
 
 
 def _template_body() -> str:
@@ -56,6 +57,9 @@ def _template_body() -> str:
 
 def kernel_path(system: System) -> Path:
     """Where the kernel module of *system* lives in the cache (written if missing)."""
+    known = _PATHS.get(system.compiled.module_path)
+    if known is not None and known.exists():
+        return known
     body = _template_body()
     digest = hashlib.sha256(body.encode()).hexdigest()[:12]
     module_path = system.compiled.module_path
@@ -75,6 +79,7 @@ def kernel_path(system: System) -> Path:
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
             raise
+    _PATHS[module_path] = path
     return path
 
 

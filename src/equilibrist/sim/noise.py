@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -43,7 +44,8 @@ def square_root(cov: np.ndarray, what: str) -> np.ndarray:
     cov = np.asarray(cov, dtype=float)
     if cov.size == 0:
         return np.zeros(cov.shape)
-    if not np.allclose(cov, cov.T, rtol=1e-9, atol=1e-12 * max(1.0, float(np.abs(cov).max()))):
+    scale = float(np.abs(cov).max())
+    if float(np.abs(cov - cov.T).max()) > 1e-9 * scale:
         raise SimulationError(f"{what} is not symmetric")
     sym = (cov + cov.T) / 2
     try:
@@ -88,6 +90,8 @@ class Noise:
             raise SimulationError("the process noise gain has a value that is not finite")
         for a in (g, q, r):
             a.setflags(write=False)
+        square_root(q, "the process noise intensity")  # refuse a bad one at once
+        square_root(r, "the measurement noise covariance")
         object.__setattr__(self, "process_gain", g)
         object.__setattr__(self, "process_intensity", q)
         object.__setattr__(self, "measurement_covariance", r)
@@ -136,6 +140,11 @@ class Noise:
             g[names.index(s), j] = 1.0
         qn = np.diag([float(spec.process_noise[s]) ** 2 / rate for s in rows])
         return cls(g, qn.reshape(len(rows), len(rows)), np.diag(sigma_y**2), outs)
+
+    @cached_property
+    def process_root(self) -> np.ndarray:
+        """``L`` with ``L L' = QN``."""
+        return square_root(self.process_intensity, "the process noise intensity")
 
     def describe(self) -> dict[str, object]:
         return {
