@@ -1,39 +1,63 @@
-"""``equilibrist demo``: the main job, a tour of the catalogue."""
+"""``equilibrist demo``: the main job, a tour of the catalogue.
+
+Designs each system's default controller, simulates a realistic run
+(digital LQG, sensor noise, saturation, a push in the middle; the gyroscope
+in a steady and a nutating precession), prints a short table and writes a
+report folder with plots, an animation per system and an ``index.html``.
+"""
 
 from __future__ import annotations
 
 import argparse
+import sys
+import time
 
-from equilibrist.errors import NoEquilibriumError
+from equilibrist.cli import common
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("demo", help="a tour of the catalogue (what 'make demo' runs)")
-    p.add_argument("system", nargs="?", metavar="SYSTEM", help="one system only")
+    p = sub.add_parser(
+        "demo",
+        help="a tour of the catalogue with a report folder (what 'make demo' runs)",
+        description="Design each system's default controller, simulate a realistic run "
+        "(digital LQG, sensor noise, saturation, a push in the middle), print a summary "
+        "and write a report folder: plots, an animation per system and index.html.",
+    )
+    p.add_argument("system", nargs="?", metavar="SYSTEM",
+                   help="one system only (default: the whole catalogue)")
+    common.add_set(p)
+    p.add_argument("--out", default="report", metavar="DIR",
+                   help="report folder (default: ./report)")
+    p.add_argument("--size", default="400x300", metavar="WxH",
+                   help="animation frame size in pixels (default 400x300)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from equilibrist.cli.linearize import render
-    from equilibrist.cli.systems import catalogue
+    from pathlib import Path
+
     from equilibrist.numeric.system import get_system
     from equilibrist.systems import registry
+    from equilibrist.viz.cli_hooks import frame_size
 
-    names = registry.family_names() if args.system is None else [args.system]
-    data = catalogue()
-    for name in names:
-        registry.lookup_family(name)
-        variants = registry.variants(name) or (None,)
-        option = registry.variant_option(name)
-        for variant in variants:
-            settings = {} if variant is None else {option: variant}
-            system = get_system(name, **settings)
-            print("=" * 72)
-            print(f"{system.key}: {data[name]['title']}")
-            print("=" * 72)
-            try:
-                print(render(system, system.linearize()))
-            except NoEquilibriumError as exc:
-                print(f"(no canonical operating point: {exc})")
-            print()
+    try:
+        size = frame_size(args.size)
+    except argparse.ArgumentTypeError as exc:
+        raise common.UsageError(f"--size {exc}") from None
+    if args.system is None:
+        if args.settings:
+            raise common.UsageError("--set needs a SYSTEM: parameters belong to one system")
+        systems = [get_system(name) for name in registry.family_names()]
+    else:
+        systems = [common.load_system(args)]
+    out = Path(args.out)
+    began = time.perf_counter()
+    progress = sys.stderr.isatty()
+    from equilibrist.viz.tour import SUMMARY_HEADER, run_tour
+
+    outcomes = run_tour(systems, out, size=size, progress=progress,
+                        log=lambda line: print(line, file=sys.stderr))
+    print(common.format_table(SUMMARY_HEADER, [o.row for o in outcomes]))
+    print()
+    print(f"report: {out / 'index.html'} ({time.perf_counter() - began:.0f} s)")
     return 0

@@ -23,6 +23,8 @@ from equilibrist.viz.output import ANIMATION_FORMATS, VizError, check_suffix, ff
 #: Default frame rate and cap on the number of frames.
 DEFAULT_FPS = 20.0
 DEFAULT_MAX_FRAMES = 200
+#: Seconds of simulated time an event's label stays on the animation.
+EVENT_HOLD = 0.5
 
 
 def frame_times(t: np.ndarray, *, fps: float = DEFAULT_FPS, max_frames: int = DEFAULT_MAX_FRAMES) -> np.ndarray:
@@ -73,6 +75,7 @@ def render_frames(
     height: int = 360,
     title: str | None = None,
     speed: float = 1.0,
+    events: Sequence[tuple[float, str]] = (),
     progress: bool = False,
 ) -> tuple[list[np.ndarray], np.ndarray]:
     """Render the frames of an animation.
@@ -98,6 +101,9 @@ def render_frames(
     speed : float
         Playback speed relative to real time (0.25: slow motion, shown
         beside the time stamp); *fps* is frames per second of playback.
+    events : sequence of (float, str)
+        Instants to announce (``(4.0, "push +120")``): each label shows in
+        red for :data:`EVENT_HOLD` seconds of simulated time from its instant.
     progress : bool
         Show a progress bar.
 
@@ -142,8 +148,10 @@ def render_frames(
             u = None if inputs is None else inputs[i]
             c = None if commands is None else commands[i]
             trail = np.vstack([states[: i + 1 : thin], states[i : i + 1]])
-            frames.append(renderer.frame(states[i], u, command=c, t=float(times[k]), trail=trail,
-                                         speed=speed))
+            now = float(times[k])
+            note = "  ".join(label for at, label in events if at <= now + 1e-9 < at + EVENT_HOLD)
+            frames.append(renderer.frame(states[i], u, command=c, t=now, trail=trail, speed=speed,
+                                         note=note))
             bar.update()
     return frames, times
 
@@ -227,6 +235,7 @@ def animate(
     height: int = 360,
     title: str | None = None,
     speed: float = 1.0,
+    events: Sequence[tuple[float, str]] = (),
     progress: bool = False,
 ) -> Path:
     """Animate a run of *system* from arrays to a GIF or MP4 (by suffix).
@@ -250,7 +259,7 @@ def animate(
         write_mp4([], p, fps=fps)  # raises the message that says what to do
     frames, times = render_frames(system, t, states, inputs=inputs, commands=commands, fps=fps,
                                   max_frames=max_frames, width=width, height=height, title=title,
-                                  speed=speed, progress=progress)
+                                  speed=speed, events=events, progress=progress)
     # Seconds of playback per frame.
     step = float(times[1] - times[0]) / speed if len(times) > 1 else 1.0 / fps
     if p.suffix.lower() == ".mp4":
@@ -283,5 +292,6 @@ def animate_result(result: Any, path: str | Path, *, system: Any = None, estimat
     states = run.estimate if estimates else run.x
     if states is None:
         raise VizError("this result holds no estimated states to animate")
+    options.setdefault("events", run.events)
     return animate(run.system, run.t, states, path, inputs=run.u, commands=run.u_command,
                    **options)

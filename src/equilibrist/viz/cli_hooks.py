@@ -98,10 +98,7 @@ def handle_outputs(args: argparse.Namespace, result: Any, *, system: Any = None)
         return written
     from equilibrist.viz.runs import as_run
 
-    try:
-        run = as_run(result, system=system)
-    except VizError:
-        raise
+    run = as_run(result, system=system)
     if args.plot is not None:
         from equilibrist.viz.plots import plot_response
 

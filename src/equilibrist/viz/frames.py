@@ -99,6 +99,11 @@ class FrameRenderer:
         self.time_text = self.figure.text(0.99, 0.995, "", ha="right", va="top",
                                           fontsize=self.font, family="monospace",
                                           color=COLORS["text"], weight="bold")
+        self.speed_text = self.figure.text(0.99, 0.995 - line, "", ha="right", va="top",
+                                           fontsize=self.font * 0.8, color="#666666")
+        # What is happening now (a push), in red under the captions.
+        self.note_text = self.figure.text(0.01, 0.995 - 2.1 * line, "", ha="left", va="top",
+                                          fontsize=self.font, color="#d1263b", weight="bold")
         self._artists: dict[str, Any] = {}
         self._background: Any = None
         self._gauges = [
@@ -202,6 +207,7 @@ class FrameRenderer:
         t: float | None = None,
         trail: np.ndarray | None = None,
         speed: float = 1.0,
+        note: str = "",
     ) -> None:
         """Update the figure to state *x*.
 
@@ -219,16 +225,18 @@ class FrameRenderer:
         trail : numpy.ndarray, optional
             The states up to *x* (for scenes that draw a trace).
         speed : float
-            Playback speed shown beside the time stamp when it is not 1.
+            Playback speed, shown under the time stamp when it is not 1.
+        note : str
+            What is happening now (``"push +120"``), shown in red.
         """
         x = np.asarray(x, float)
         uu = None if u is None else np.atleast_1d(np.asarray(u, float))
         for shape in self.scene.shapes(x, uu, trail):
             self._apply(shape)
-        stamp = "" if t is None else f"t = {t:6.2f} s"
-        if stamp and not math.isclose(speed, 1.0):
-            stamp = f"x{speed:g}  " + stamp
-        self.time_text.set_text(stamp)
+        self.time_text.set_text("" if t is None else f"t = {t:6.2f} s")
+        self.speed_text.set_text("" if math.isclose(speed, 1.0) else
+                                 ("slow motion" if speed < 1 else "fast") + f" x{speed:g}")
+        self.note_text.set_text(note)
         for i, g in enumerate(self._gauges):
             val = 0.0 if uu is None else float(uu[i])
             clipped = min(max(val, g["lo"]), g["hi"])
@@ -248,7 +256,7 @@ class FrameRenderer:
         """The artists that change from frame to frame, in drawing order."""
         scene = sorted(self._artists.values(), key=lambda a: a.get_zorder())
         gauges = [a for g in self._gauges for a in (g["bar"], g["cmd"], g["value"])]
-        return [*scene, self.time_text, *gauges]
+        return [*scene, self.time_text, self.speed_text, self.note_text, *gauges]
 
     def frame(self, x: np.ndarray, u: np.ndarray | None = None, **kwargs: Any) -> np.ndarray:
         """Draw state *x* (see :meth:`draw`) and return the picture as an

@@ -198,12 +198,12 @@ def plot_response(
         _events(ax, run)
         ax.set_ylabel(axis_label(run.input_names[j], unit))
         ax.grid(alpha=0.3)
-    bottom = [a for a in axes if a.get_subplotspec().is_last_row()]
+    # Every panel keeps its time tick labels (panels are read one at a time);
+    # the axis title goes under the bottom row only.
     for a in axes:
-        if a not in bottom:
-            a.tick_params(labelbottom=False)
-    for a in bottom:
-        a.set_xlabel("time [s]")
+        a.tick_params(labelbottom=True)
+        if a.get_subplotspec().is_last_row():
+            a.set_xlabel("time [s]")
     _legend(fig, axes)
     fig.suptitle(title if title is not None else _run_title(run), fontsize="medium")
     return _finish(fig, path)
@@ -488,12 +488,13 @@ def plot_region_of_attraction(
         grid = np.full((len(ys), len(xs)), np.nan)
         grid[np.searchsorted(ys, yv), np.searchsorted(xs, xv)] = ok
         ax.pcolormesh(_edges(xs), _edges(ys), grid, cmap=cmap, vmin=0, vmax=1, shading="flat")
+        ax.legend(handles=[Patch(color=cmap(1), label=f"recovered ({ok.sum()})"),
+                           Patch(color=cmap(0), label=f"fell ({(~ok).sum()})")],
+                  loc="upper right", fontsize="small")
     else:
-        ax.scatter(xv[ok], yv[ok], color="#2e9e4f", s=14, marker="o")
-        ax.scatter(xv[~ok], yv[~ok], color="#d1263b", s=14, marker="x")
-    ax.legend(handles=[Patch(color=cmap(1), label=f"recovered ({ok.sum()})"),
-                       Patch(color=cmap(0), label=f"fell ({(~ok).sum()})")],
-              loc="upper right", fontsize="small")
+        ax.scatter(xv[ok], yv[ok], color="#2e9e4f", s=14, marker="o", label=f"recovered ({ok.sum()})")
+        ax.scatter(xv[~ok], yv[~ok], color="#d1263b", s=14, marker="x", label=f"fell ({(~ok).sum()})")
+        ax.legend(loc="upper right", fontsize="small")
     ax.plot([0], [0], marker="+", color="#111111", ms=10, ls="none")
     ax.set_xlabel(axis_label(f"initial {x_name}", ux))
     ax.set_ylabel(axis_label(f"initial {y_name}", uy))
@@ -612,4 +613,83 @@ def plot_poles(
         ax.grid(alpha=0.3)
     _legend(fig, panels)
     fig.suptitle(title or default_title, fontsize="medium")
+    return _finish(fig, path)
+
+
+def plot_batch(batch: Any, path: str | Path | None = None, *, degrees: bool = True,
+               title: str | None = None, dpi: float = 100.0) -> Any:
+    """The picture of a batch of runs (``equilibrist.sim.BatchResult``).
+
+    With the runs' trajectories (a batch run with ``record=True``): the
+    Monte-Carlo fan (:func:`plot_fan`). Without them (a saved batch): the
+    outcome of each run over what varied between runs, initial states first,
+    then parameters; two varied quantities give a region-of-attraction map
+    (:func:`plot_region_of_attraction`), one gives the peak input against
+    it, none the peak input of each run.
+
+    Parameters
+    ----------
+    batch : equilibrist.sim.BatchResult or MonteCarloResult or RegionOfAttraction
+        The batch (a result that holds one in ``.batch`` is unwrapped).
+    path : str or pathlib.Path, optional
+        Save the figure there.
+    degrees : bool
+        Show angles in degrees.
+    title : str, optional
+        Figure title.
+    dpi : float
+        Resolution.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from equilibrist.viz._adapt import system_of
+
+    batch = getattr(batch, "batch", batch)
+    for name in ("x0", "params", "fell", "state_names", "parameter_names", "system"):
+        if not hasattr(batch, name):
+            raise VizError(f"cannot plot a {type(batch).__name__} as a batch (it has no {name})")
+    if getattr(batch, "trajectories", None) is not None:
+        return plot_fan([batch.run(i) for i in range(batch.runs)], path, degrees=degrees,
+                        title=title, dpi=dpi)
+    system = system_of(batch.system)
+    units = {p.name: p.unit for p in system.spec.all_parameters}
+    units.update(zip(system.state_names, system.state_units, strict=True))
+    varied: list[tuple[str, np.ndarray]] = []
+    for j, n in enumerate(batch.state_names):
+        if np.ptp(batch.x0[:, j]) > 0:
+            varied.append((n, batch.x0[:, j]))
+    for j, n in enumerate(batch.parameter_names):
+        if np.ptp(batch.params[:, j]) > 0:
+            varied.append((n, batch.params[:, j]))
+    ok = ~np.asarray(batch.fell, bool)
+    runs = len(ok)
+    head = title or (f"{getattr(system.spec, 'title', batch.system)}: {int(ok.sum())} of {runs} "
+                     "runs stayed up")
+    if len(varied) >= 2:
+        (xn, xv), (yn, yv) = varied[:2]
+        return plot_region_of_attraction(xv, yv, ok, path, x_name=xn, y_name=yn,
+                                         x_unit=units.get(xn, ""), y_unit=units.get(yn, ""),
+                                         degrees=degrees, title=head, dpi=dpi)
+    fig = _figure(5.5, 4.0, dpi)
+    ax = fig.add_subplot()
+    peak = np.asarray(batch.peak_input, float).reshape(runs, -1)
+    if varied:
+        xn, xv = varied[0]
+        f, unit = display_unit(units.get(xn, ""), degrees=degrees)
+        x = f * xv
+        ax.set_xlabel(axis_label(f"initial {xn}" if xn in batch.state_names else xn, unit))
+    else:
+        x = np.arange(runs, dtype=float)
+        ax.set_xlabel("run")
+    y = peak[:, 0] if peak.shape[1] else np.zeros(runs)
+    u_unit = system.input_units[0] if system.n_inputs else ""
+    ax.scatter(x[ok], y[ok], color="#2e9e4f", s=14, marker="o", label=f"stayed up ({ok.sum()})")
+    ax.scatter(x[~ok], y[~ok], color="#d1263b", s=14, marker="x", label=f"fell ({(~ok).sum()})")
+    ax.set_ylabel(axis_label(f"peak {system.input_names[0]}" if system.n_inputs else "peak input",
+                             u_unit))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize="small")
+    ax.set_title(head, fontsize="medium")
     return _finish(fig, path)

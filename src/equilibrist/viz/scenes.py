@@ -143,7 +143,7 @@ def arrow(start: np.ndarray, vector: np.ndarray, width: float) -> np.ndarray:
 def arc_arrow(center: np.ndarray, radius: float, start: float, span: float, width: float) -> np.ndarray:
     """A curved arrow around *center* from angle *start* over *span* rad
     (counter-clockwise when *span* > 0); empty when the span is tiny."""
-    if abs(span) < 0.05:
+    if abs(span) < 0.25:  # too short to read as an arrow (the gauge still shows it)
         return np.empty((0, 2))
     head = min(2.2 * width / radius, 0.5 * abs(span))
     body_end = start + span - math.copysign(head, span)

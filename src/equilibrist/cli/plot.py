@@ -1,0 +1,105 @@
+"""``equilibrist plot``: pictures of saved results.
+
+One result file (``equilibrist simulate --out run.npz``) gives its time
+response; several give a comparison; a saved batch (``equilibrist batch
+--out batch.npz``) gives the map of which runs stayed up over what varied
+between them.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from equilibrist.cli import common
+
+_EPILOG = """\
+The picture is written beside the first file with the suffix .png unless
+--out names another file (.png or .svg). Angles are shown in degrees
+(--radians keeps radians). --states picks the coordinates shown.
+"""
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "plot",
+        help="plot saved results: a time response, a comparison, a batch's outcomes",
+        description="Plot saved simulation results: one file gives its time response "
+        "(states, estimates, measurements, reference, inputs with their limits); several "
+        "files give a comparison; a saved batch gives the outcome of each run.",
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("files", nargs="+", metavar="RESULT_FILE",
+                   help="a result saved by 'equilibrist simulate --out' or 'batch --out'")
+    p.add_argument("--out", "-o", metavar="FILE", help="the picture (.png or .svg)")
+    p.add_argument("--states", metavar="NAME,...", help="coordinates to show (default: all)")
+    p.add_argument("--labels", metavar="TEXT,...", help="legend labels of a comparison")
+    p.add_argument("--radians", action="store_true", help="show angles in radians")
+    p.set_defaults(func=run)
+
+
+def load_result(path: str | Path) -> Any:
+    """A saved run (``SimResult``) or batch (``BatchResult``), whichever the file holds."""
+    import json
+
+    import numpy as np
+
+    from equilibrist.sim import BatchResult, SimResult
+    from equilibrist.viz.output import VizError
+
+    p = Path(path)
+    if not p.exists():
+        raise VizError(f"no result file {str(p)!r}")
+    try:
+        with np.load(p, allow_pickle=False) as data:
+            fmt = json.loads(str(data["meta"])).get("format", "")
+    except (OSError, ValueError, KeyError):
+        fmt = ""
+    if fmt.startswith("equilibrist-batch"):
+        return BatchResult.load(p)
+    if fmt.startswith("equilibrist-simresult"):
+        return SimResult.load(p)
+    raise VizError(
+        f"{str(p)!r} is not a saved result: expected a file written by "
+        "'equilibrist simulate --out FILE.npz' or 'equilibrist batch --out FILE.npz'"
+    )
+
+
+def _names(text: str | None, option: str) -> list[str] | None:
+    if text is None:
+        return None
+    parts = [t.strip() for t in text.split(",")]
+    if not all(parts):
+        raise common.UsageError(f"{option} {text!r}: expected comma-separated names")
+    return parts
+
+
+def run(args: argparse.Namespace) -> int:
+    from equilibrist.viz import plots
+    from equilibrist.viz.output import FIGURE_FORMATS, VizError, check_suffix
+
+    first = Path(args.files[0])
+    out = check_suffix(args.out, FIGURE_FORMATS, "--out") if args.out else first.with_suffix(".png")
+    states = _names(args.states, "--states")
+    labels = _names(args.labels, "--labels")
+    degrees = not args.radians
+    results = [load_result(f) for f in args.files]
+    batches = [r for r in results if hasattr(r, "parameter_names")]
+    if batches:
+        if len(results) > 1:
+            raise VizError("plot one batch at a time (a batch file cannot be compared with others)")
+        plots.plot_batch(results[0], out, degrees=degrees)
+    elif len(results) == 1:
+        plots.plot_response(results[0], out, states=states, degrees=degrees)
+    else:
+        names = labels or [Path(f).stem for f in args.files]
+        if len(names) != len(results):
+            raise common.UsageError(f"--labels gives {len(names)} labels for {len(results)} files")
+        if len(set(names)) != len(names):
+            raise common.UsageError("the comparison needs distinct labels: give --labels")
+        plots.plot_comparison(dict(zip(names, results, strict=True)), out, states=states,
+                              degrees=degrees)
+    print(f"wrote {out}")
+    return 0

@@ -1,0 +1,90 @@
+"""Reading the simulation layer's results into the viz layer's :class:`Run`."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from equilibrist.viz.output import VizError
+from equilibrist.viz.runs import Run
+
+# How an event of the simulation's settings is named on a plot.
+_EVENT_NAMES = {"kick": "push", "pulse": "push", "impulse": "push",
+                "parameter_change": "parameters change"}
+
+
+def system_of(key: str, params: Any = None) -> Any:
+    """The bound system of a registry *key* (``"gyroscope[euler=xyz]"``) with *params*."""
+    from equilibrist.numeric.system import get_system
+
+    name, _, rest = key.partition("[")
+    settings: dict[str, object] = {}
+    if rest:
+        option, _, value = rest.rstrip("]").partition("=")
+        settings[option] = value
+    settings.update(dict(params or {}))
+    return get_system(name, **settings)
+
+
+def _label(settings: Any) -> str:
+    ctrl = dict(settings.get("controller") or {})
+    kind = str(ctrl.get("kind", "")).replace("_", " ")
+    bits = []
+    if kind and kind != "open loop":
+        bits.append(kind if kind.isupper() else kind.replace("lqg", "LQG").replace("state feedback", "LQR"))
+    rate = settings.get("rate")
+    if rate:
+        bits.append(f"{float(rate):g} Hz")
+    if settings.get("plant") == "linear":
+        bits.append("linear plant")
+    return ", ".join(bits)
+
+
+def run_from_result(result: Any, *, system: Any = None, label: str | None = None) -> Run:
+    """The :class:`Run` of a :class:`~equilibrist.sim.SimResult`."""
+    needed = ("system", "time", "states", "commanded", "applied", "measurements")
+    missing = [n for n in needed if not hasattr(result, n)]
+    if missing:
+        raise VizError(
+            f"cannot show a {type(result).__name__}: it is not a simulation result "
+            f"(it has no {', '.join(missing)})"
+        )
+    if system is None:
+        system = system_of(result.system, getattr(result, "params", None))
+    settings = dict(getattr(result, "settings", {}) or {})
+    events = []
+    for e in settings.get("events") or ():
+        kind = str(e.get("kind", ""))
+        what = _EVENT_NAMES.get(kind, kind.replace("_", " "))
+        if kind in ("pulse", "impulse") and "value" in e and system.input_names:
+            name = e.get("input") or system.input_names[0]
+            unit = system.input_units[list(system.input_names).index(name)]
+            unit = f"{unit}*s" if kind == "impulse" else unit
+            what = f"push {float(e['value']):+g} {unit}"
+        elif kind == "kick" and "state" in e:
+            unit = system.state_units[list(system.state_names).index(e["state"])]
+            what = f"kick {e['state']} {float(e['value']):+g} {unit}"
+        events.append((float(e["time"]), what))
+    if getattr(result, "fell", False) and getattr(result, "fell_at", None) is not None:
+        events.append((float(result.fell_at), f"fell ({result.fell_state})"))
+    reference = np.asarray(result.reference) if result.reference is not None else None
+    ref_names = tuple(getattr(result, "reference_names", ()))
+    if reference is None or reference.ndim != 2 or reference.shape[1] == 0:
+        reference, ref_names = None, ()
+    n_inputs = np.asarray(result.applied).shape[1] if np.ndim(result.applied) == 2 else 0
+    return Run.from_arrays(
+        system,
+        result.time,
+        result.states,
+        u=result.applied if n_inputs else np.zeros((len(result.time), 0)),
+        u_command=result.commanded if n_inputs else None,
+        estimate=result.estimates,
+        y=result.measurements if len(result.output_names) else None,
+        output_names=tuple(result.output_names) if len(result.output_names) else (),
+        reference=reference,
+        reference_names=ref_names,
+        label=label if label is not None else _label(settings),
+        events=events,
+        fell=bool(getattr(result, "fell", False)),
+    )
