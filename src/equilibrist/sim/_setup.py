@@ -258,6 +258,14 @@ def _initial_state(system: System, x0: object, x_op: np.ndarray, problems: list[
     return arr
 
 
+def _has_operating_point(system: System) -> bool:
+    try:
+        system.operating_point()
+    except NoEquilibriumError:
+        return False
+    return True
+
+
 def operating_point(system: System, controller: Any) -> tuple[np.ndarray, np.ndarray]:
     """The controller's operating point; the system's canonical one for others.
 
@@ -365,7 +373,18 @@ def build(
                 f"the operating point needs {name} = {u_op[i]:g}, outside its limits "
                 f"[{lo[i]:g}, {hi[i]:g}] ({name}_min, {name}_max)"
             )
+    no_x0 = x0 is None or (isinstance(x0, Mapping) and not x0)
+    if no_x0 and not isinstance(ctrl, StateFeedback | LQG) and not _has_operating_point(system):
+        problems.append(
+            f"{system.key} has no canonical operating point: give the initial state "
+            f"({', '.join(names)})"
+        )
     x_init = _initial_state(system, x0, x_op, problems)
+    if not problems:
+        try:
+            system.check_regular(x_init)
+        except EquilibristError as exc:
+            problems.append(f"the initial state is not usable: {exc}")
 
     if isinstance(ctrl, LQG):
         outs = tuple(ctrl.outputs)

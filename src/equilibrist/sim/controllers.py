@@ -294,9 +294,12 @@ def as_controller(obj: object) -> BuiltIn | Controller:
         return obj  # type: ignore[return-value]
     if callable(obj):
         return _FunctionController(obj)
+    hint = ""
+    if hasattr(obj, "Kf") and hasattr(obj, "plant"):
+        hint = " (for a design: LQG.from_design(design) or StateFeedback.from_design(design))"
     raise SimulationError(
         f"{type(obj).__name__} is not a controller: expected OpenLoop, StateFeedback, LQG, "
-        "an object with step(t, y, r), or a function (t, y, r) -> u"
+        f"an object with step(t, y, r), or a function (t, y, r) -> u{hint}"
     )
 
 
