@@ -110,3 +110,20 @@ def test_lqg_needs_its_design_rate():
     sysm = cartpole()
     with pytest.raises(SimulationError, match="designed for 200 Hz"):
         simulate(sysm, lqg(sysm, rate=200.0), duration=1.0, rate=1000.0)
+
+
+@pytest.mark.parametrize("integrator", ["rk4", "adaptive"])
+def test_run_cut_into_pieces_equals_one_piece(monkeypatch, integrator):
+    from equilibrist.sim import run as run_module
+
+    sysm = cartpole()
+    ctrl = lqg(sysm, rate=100.0, qd_scale=1e-4, rd_scale=1e-5)
+    opts = dict(duration=1.0, x0={"theta": 0.1}, noise=_noise(sysm, 100.0), seed=4,
+                integrator=integrator, physics_step=2.5e-3, rtol=1e-6, atol=1e-9)
+    whole = simulate(sysm, ctrl, **opts)
+    monkeypatch.setattr(run_module, "_CHUNK_STEPS", 28)  # pieces of 7 samples
+    pieces = simulate(sysm, ctrl, progress=True, **opts)
+    np.testing.assert_array_equal(pieces.states, whole.states)
+    np.testing.assert_array_equal(pieces.estimates, whole.estimates)
+    python = simulate(sysm, ctrl.runtime(sysm.state_names), **opts)
+    np.testing.assert_allclose(python.states, whole.states, rtol=0, atol=1e-10)

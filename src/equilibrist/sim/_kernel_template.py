@@ -300,7 +300,8 @@ def _advance(
     """The physics steps between samples *k* and *k + 1*; True when the run fell.
 
     *pcur* holds the parameter set in force; *wk* is the adaptive
-    integrator's scratch (its row 12 carries the step size over).
+    integrator's scratch (its row 12 carries the step size from one physics
+    step to the next within the sample).
     """
     n = _N
     m = _M
@@ -309,6 +310,9 @@ def _advance(
     integrator = iopts[5]
     h = fopts[0]
     ok = True
+    # The adaptive step restarts at h each sample (the held input jumps there),
+    # so a run cut into pieces, or driven from Python, takes the same steps.
+    wk[12, 0] = h
     for j in range(n_sub):
         s = k * n_sub + j
         _switch(p_sets, p_switch, s, pcur)
@@ -405,7 +409,6 @@ def _run(
     pcur = scr[16]
     fell_x = scr[17]
     wk = scr[18:34]
-    wk[12, 0] = fopts[0]
     ps0 = _pset(p_switch, k_start * n_sub)
     for i in range(p_sets.shape[1]):
         pcur[i] = p_sets[ps0, i]
@@ -591,7 +594,7 @@ def _advance_bare(
 
 @_jit
 def scratch(p_len, ny, nw):
-    """Scratch for ``advance_one`` (keep it for the whole run: row 30 carries the adaptive step)."""
+    """Scratch for ``advance_one`` (its row 17 receives the state at a fall)."""
     scr = _scratch(p_len, ny, nw)
     return scr
 

@@ -194,7 +194,6 @@ def _run_python(setup: _setup.Setup, kernel: Any, rng: np.ndarray,
     lin = setup.linear_blocks(p_sets)
     iopts, fopts = setup.iopts, setup.fopts
     scr = kernel.scratch(p_sets.shape[1], ny, setup.lw.shape[1])
-    scr[30, 0] = setup.h
     status = np.zeros(4, dtype=np.int64)
     rec = np.empty((setup.n_rows, setup.record_width))
     names = sysm.spec.parameter_names
