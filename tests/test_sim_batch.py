@@ -135,3 +135,15 @@ def test_sampling_is_uniform_within_spread_and_validated():
         simulate_batch(sysm, None, runs=2, duration=0.1, rate=100.0,
                        params={"m_p": [1.0, -1.0]})
     assert child_seed(np.random.SeedSequence(1), 3).spawn_key == (3,)
+
+
+def test_batch_of_a_python_controller_equals_the_compiled_batch():
+    sysm = cartpole()
+    ctrl = state_feedback(sysm, rate=200.0)
+    x0 = {"theta": np.array([0.1, -0.2, 1.5])}
+    compiled = simulate_batch(sysm, ctrl, runs=3, duration=1.0, x0=x0, record=True)
+    python = simulate_batch(sysm, ctrl.runtime(sysm.state_names), runs=3, duration=1.0,
+                            x0=x0, record=True)
+    np.testing.assert_array_equal(python.fell, compiled.fell)
+    np.testing.assert_allclose(python.final_state, compiled.final_state, atol=1e-12)
+    np.testing.assert_allclose(python.run(1).applied, compiled.run(1).applied, atol=1e-10)

@@ -462,7 +462,14 @@ def _python_batch(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
             fell_xs[i] = res.fell_x
         x_ends[i] = res.final_state
         if record:
+            ny = len(setup.outputs)
             recs[i, :k, :n] = res.states
+            recs[i, :k, n : 2 * n] = np.nan if res.estimates is None else res.estimates
+            recs[i, :k, 2 * n : 2 * n + ny] = res.measurements
+            c = 2 * n + ny
+            recs[i, :k, c : c + m] = res.commanded
+            recs[i, :k, c + m : c + 2 * m] = res.saturated
+            recs[i, :k, c + 2 * m : c + 3 * m] = res.applied
     elapsed = time.perf_counter() - t0
     setup0 = _setup.Setup(**{**setup.__dict__, "est_kind": 0})
     return _batch_result(setup0, x0s, pmat, seqs, statuses, accs, fell_xs, x_ends,
