@@ -30,6 +30,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="report folder (default: ./report)")
     p.add_argument("--size", default="400x300", metavar="WxH",
                    help="animation frame size in pixels (default 400x300)")
+    p.add_argument("--jobs", default=None, metavar="N",
+                   help="systems toured at once, one process each (default: the cores, at most 4)")
     p.set_defaults(func=run)
 
 
@@ -50,12 +52,23 @@ def run(args: argparse.Namespace) -> int:
         systems = [get_system(name) for name in registry.family_names()]
     else:
         systems = [common.load_system(args)]
+    import os
+
+    if args.jobs is None:
+        jobs = min(4, os.cpu_count() or 1)
+    else:
+        try:
+            jobs = int(args.jobs)
+        except ValueError:
+            jobs = 0
+        if jobs < 1:
+            raise common.UsageError(f"--jobs {args.jobs!r}: expected a whole number >= 1")
     out = Path(args.out)
     began = time.perf_counter()
     progress = sys.stderr.isatty()
     from equilibrist.viz.tour import SUMMARY_HEADER, run_tour
 
-    outcomes = run_tour(systems, out, size=size, progress=progress,
+    outcomes = run_tour(systems, out, size=size, jobs=jobs, progress=progress,
                         log=lambda line: print(line, file=sys.stderr))
     print(common.format_table(SUMMARY_HEADER, [o.row for o in outcomes]))
     print()
