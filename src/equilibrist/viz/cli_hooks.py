@@ -24,14 +24,14 @@ from equilibrist.viz.output import (
 
 def _figure_path(text: str) -> Path:
     try:
-        return check_suffix(text, FIGURE_FORMATS, "--plot")
+        return check_suffix(text, FIGURE_FORMATS, "figure")
     except VizError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _animation_path(text: str) -> Path:
     try:
-        path = check_suffix(text, ANIMATION_FORMATS, "--animate")
+        path = check_suffix(text, ANIMATION_FORMATS, "animation")
     except VizError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     if path.suffix.lower() == ".mp4" and ffmpeg_path() is None:
