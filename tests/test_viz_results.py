@@ -37,6 +37,7 @@ def test_a_simulation_result_reads_as_a_run(cartpole_run):
     assert run.output_names == ("x", "theta")
     assert run.events == ((1.0, "push +50 N"),)
     assert run.fell is False and run.label == "LQG, 100 Hz"
+    assert np.array_equal(run.x_op, cartpole_run.x_op)  # the plots mark the controller's point
 
 
 def test_result_plot_and_animation(cartpole_run, tmp_path):

@@ -18,8 +18,11 @@ runs
     The read-only view of simulation results that the plots and animations
     share.
 report
-    The report folder of ``equilibrist demo``: plots, animations and an
-    ``index.html`` that shows them with the equations of motion.
+    The ``index.html`` of a report folder: one offline page with the
+    pictures, the facts of each run and the equations of motion.
+tour
+    The main job (``equilibrist demo``): design, simulate, plot and animate
+    every system of the catalogue and write the report folder.
 cli_hooks
     ``--plot`` / ``--animate`` options for commands that produce a result.
 

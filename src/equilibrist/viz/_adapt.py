@@ -87,4 +87,6 @@ def run_from_result(result: Any, *, system: Any = None, label: str | None = None
         label=label if label is not None else _label(settings),
         events=events,
         fell=bool(getattr(result, "fell", False)),
+        x_op=getattr(result, "x_op", None),
+        u_op=getattr(result, "u_op", None),
     )

@@ -115,13 +115,9 @@ class FrameRenderer:
 
     # -- layout ------------------------------------------------------------------
     def _rest_state(self) -> np.ndarray:
-        try:
-            return np.asarray(self.system.operating_point().x, float)
-        except Exception:  # no canonical point (zxz gyroscope): draw a tilted axis
-            x = np.zeros(len(self.scene.state_names))
-            if "theta" in self.scene.state_names:
-                x[self.scene.state_names.index("theta")] = 0.5
-            return x
+        # All coordinates zero: upright or level for every system (the
+        # drawing never solves the dynamics for an operating point).
+        return np.zeros(len(self.scene.state_names))
 
     def _scale_bar(self) -> None:
         x0, x1, y0, y1 = self.extent

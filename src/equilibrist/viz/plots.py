@@ -80,10 +80,15 @@ def _state_pairs(state_names: Sequence[str]) -> list[tuple[str, str | None]]:
     return pairs + [(n, None) for n in state_names if n not in used]
 
 
-def _operating_point(system: Any) -> tuple[np.ndarray | None, np.ndarray | None]:
+def _operating_point(run: Run) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The run's operating point, else the system's canonical one (None: it has none)."""
+    if run.x_op is not None:
+        return run.x_op, run.u_op
+    from equilibrist.errors import EquilibristError
+
     try:
-        eq = system.operating_point()
-    except Exception:  # no canonical point (the zxz gyroscope)
+        eq = run.system.operating_point()
+    except EquilibristError:  # no canonical point (the zxz gyroscope)
         return None, None
     return np.asarray(eq.x, float), np.asarray(eq.u, float)
 
@@ -154,7 +159,7 @@ def plot_response(
     rows = len(pairs) + n_in
     fig = _figure(width, max(2.0, row_height * rows + 0.6), dpi)
     grid = fig.add_gridspec(rows, 2 if show_rates else 1)
-    x_op, u_op = _operating_point(run.system)
+    x_op, u_op = _operating_point(run)
     measured = {n: i for i, n in enumerate(run.output_names)}
     tracked = {n: i for i, n in enumerate(run.reference_names)}
     axes = []

@@ -48,6 +48,9 @@ class Run:
         Marked instants (a push), drawn as vertical lines.
     fell : bool or None
         Whether the system left its region (None: unknown).
+    x_op, u_op : numpy.ndarray or None
+        The operating point the controller held (None: unknown; the plots
+        then ask the system for its canonical one).
     """
 
     system: Any
@@ -63,6 +66,8 @@ class Run:
     label: str = ""
     events: tuple[tuple[float, str], ...] = field(default=())
     fell: bool | None = None
+    x_op: np.ndarray | None = None
+    u_op: np.ndarray | None = None
 
     @classmethod
     def from_arrays(
@@ -81,6 +86,8 @@ class Run:
         label: str = "",
         events: Iterable[tuple[float, str]] = (),
         fell: bool | None = None,
+        x_op: object | None = None,
+        u_op: object | None = None,
     ) -> Run:
         """A run from time-major arrays, checked against the system's sizes.
 
@@ -122,12 +129,19 @@ class Run:
         for name in (*output_names, *reference_names):
             if name not in system.state_names:
                 problems.append(f"{name!r} is not a state of {system.key}")
+        xo = None if x_op is None else np.asarray(x_op, float).reshape(-1)
+        uo = None if u_op is None else np.asarray(u_op, float).reshape(-1)
+        if xo is not None and xo.size != ns:
+            problems.append(f"x_op has {xo.size} values, expected {ns}")
+        if uo is not None and uo.size != ni:
+            problems.append(f"u_op has {uo.size} values, expected {ni}")
         if problems:
             raise VizError(f"cannot show this run of {system.key}: " + "; ".join(problems))
         return cls(system=system, t=tt, x=xs, u=us, u_command=uc, estimate=est, y=ys,  # type: ignore[arg-type]
                    output_names=tuple(output_names), reference=ref,
                    reference_names=tuple(reference_names), label=label,
-                   events=tuple((float(a), str(b)) for a, b in events), fell=fell)
+                   events=tuple((float(a), str(b)) for a, b in events), fell=fell,
+                   x_op=xo, u_op=uo)
 
     # -- names ---------------------------------------------------------------------
     @property
