@@ -133,7 +133,7 @@ class FrameRenderer:
 
     def _make_gauge(self, i: int, y: float, h: float) -> dict[str, Any]:
         name = self.scene.input_names[i]
-        unit = self.system.input_units[i] if hasattr(self.system, "input_units") else ""
+        unit = self.system.input_units[i]
         lo, hi = float(self.scene.input_low[i]), float(self.scene.input_high[i])
         if not (math.isfinite(lo) and math.isfinite(hi)):
             lo, hi = -1.0, 1.0

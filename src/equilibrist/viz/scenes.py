@@ -308,7 +308,7 @@ class SeesawScene(Scene):
 class _CartMixin:
     """Cart on a track: dimensions in proportion to the pendulum's height."""
 
-    def _cart(self, x_c: float, size: float, u: np.ndarray | None, frac: float) -> tuple[list[Shape], np.ndarray]:
+    def _cart(self, x_c: float, size: float, frac: float) -> tuple[list[Shape], np.ndarray]:
         w, h, r = 0.4 * size, 0.16 * size, 0.04 * size  # cart width, body height, wheel radius
         body = rect(x_c, r, w, h)
         pivot = np.array([x_c, r + h])
@@ -356,7 +356,7 @@ class CartpoleScene(_CartMixin, Scene):
     def shapes(self, x, u, trail=None):
         l = self.params["l"]
         size = 2 * l
-        out, pivot = self._cart(self.q(x, "x"), size, u, self.input_fraction(u))
+        out, pivot = self._cart(self.q(x, "x"), size, self.input_fraction(u))
         tip = pivot + size * lean(self.q(x, "theta"))
         out.append(_fill("pole", bar(pivot, tip, 0.05 * size), COLORS["link"], z=4))
         out.append(_fill("pivot", circle(pivot, 0.03 * size, 20), COLORS["pivot"], z=6))
@@ -371,7 +371,7 @@ class DoubleCartpoleScene(_CartMixin, Scene):
     def shapes(self, x, u, trail=None):
         l1, l2 = self.params["l1"], self.params["l2"]
         size = l1 + l2
-        out, pivot = self._cart(self.q(x, "x"), size, u, self.input_fraction(u))
+        out, pivot = self._cart(self.q(x, "x"), size, self.input_fraction(u))
         elbow = pivot + l1 * lean(self.q(x, "theta1"))
         tip = elbow + l2 * lean(self.q(x, "theta2"))
         out.append(_fill("link1", bar(pivot, elbow, 0.04 * size), COLORS["link"], z=4))
