@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from equilibrist.errors import SimulationError
 from equilibrist.sim import (
@@ -147,3 +149,24 @@ def test_batch_of_a_python_controller_equals_the_compiled_batch():
     np.testing.assert_array_equal(python.fell, compiled.fell)
     np.testing.assert_allclose(python.final_state, compiled.final_state, atol=1e-12)
     np.testing.assert_allclose(python.run(1).applied, compiled.run(1).applied, atol=1e-10)
+
+
+@settings(max_examples=15, deadline=None)
+@given(
+    thetas=st.lists(st.floats(-1.6, 1.6), min_size=1, max_size=6),
+    spread=st.floats(0.0, 0.9),
+    seed=st.integers(0, 2**32),
+)
+def test_property_batch_runs_equal_single_runs(thetas, spread, seed):
+    sysm = cartpole()
+    ctrl = lqg(sysm, rate=100.0, qd_scale=1e-4, rd_scale=1e-5)
+    noise = _noise(sysm, 100.0)
+    runs = len(thetas)
+    masses = 1.0 + spread * np.linspace(-1, 1, runs)
+    batch = simulate_batch(sysm, ctrl, runs=runs, duration=0.5, x0={"theta": thetas},
+                           params={"m_p": masses}, seed=seed, noise=noise)
+    i = runs - 1
+    single = simulate(sysm.with_params(m_p=masses[i]), ctrl, duration=0.5,
+                      x0={"theta": thetas[i]}, seed=batch.seed(i), noise=noise)
+    np.testing.assert_array_equal(batch.final_state[i], single.final_state)
+    assert batch.fell[i] == single.fell
