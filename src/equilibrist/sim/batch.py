@@ -110,6 +110,10 @@ class BatchResult:
                 object.__setattr__(self, name, v)
         object.__setattr__(self, "settings", MappingProxyType(dict(self.settings)))
 
+    def __repr__(self) -> str:
+        return (f"BatchResult({self.system}, {self.runs} runs, {self.stayed_up} stayed up, "
+                f"{self.steps_per_second / 1e6:.1f} M steps/s)")
+
     @property
     def runs(self) -> int:
         return int(self.fell.shape[0])

@@ -106,6 +106,13 @@ class SimResult:
         object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
         object.__setattr__(self, "settings", MappingProxyType(dict(self.settings)))
 
+    def __repr__(self) -> str:
+        end = f"fell at {self.fell_at:g} s ({self.fell_state})" if self.fell else "stayed up"
+        ctrl = self.settings.get("controller", {})
+        kind = ctrl.get("kind", "?") if isinstance(ctrl, Mapping) else "?"
+        return (f"SimResult({self.system}, {kind}, {self.n_rows} samples at "
+                f"{self.settings.get('rate', float('nan')):g} Hz, {end})")
+
     # -- names --------------------------------------------------------------
     @property
     def n_rows(self) -> int:
