@@ -91,6 +91,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_run_options(p)
+    from equilibrist.viz.cli_hooks import add_output_options
+
+    add_output_options(p)
     p.set_defaults(func=run)
 
 
@@ -245,6 +248,9 @@ def run(args: argparse.Namespace) -> int:
     system, options = build_run(args)
     result = simulate(system, x0=parse_x0(args.x0), progress=show_progress(args), **options)
     saved = result.save(args.out) if args.out else None
+    from equilibrist.viz.cli_hooks import handle_outputs
+
+    handle_outputs(args, result, system=system)
     metrics = result.metrics()
     if args.json:
         out = dict(metrics)

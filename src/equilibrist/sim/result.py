@@ -172,8 +172,10 @@ class SimResult:
         """Summary metrics of the run.
 
         ``settling_time``: the time after which every watched output stays
-        within ``settle_fraction`` of its largest deviation from its target
-        (None if it never settles or the run fell). Watched outputs are the
+        within ``settle_fraction`` of its largest deviation from its target,
+        or within its noise floor where that is wider (the offset plus four
+        standard deviations of the output over the last fifth of the run);
+        None if it never settles or the run fell. Watched outputs are the
         tracked outputs when tracking (target: the final reference), else the
         measured outputs (target: the operating point).
         ``overshoot``: per watched output, the largest excursion past the
@@ -203,7 +205,13 @@ class SimResult:
             scale = float(np.abs(e).max())
             if scale == 0:
                 continue
-            outside = np.nonzero(np.abs(e) > settle_fraction * scale)[0]
+            # A noisy loop never enters a band thinner than its own noise: the
+            # band is also at least the steady spread of the last fifth of the
+            # run (its offset plus four standard deviations).
+            tail = e[int(0.8 * len(e)) :]
+            floor = float(abs(tail.mean()) + 4.0 * tail.std()) if tail.size > 1 else 0.0
+            band = max(settle_fraction * scale, floor)
+            outside = np.nonzero(np.abs(e) > band)[0]
             if outside.size:
                 last = int(outside[-1])
                 if last == len(e) - 1:

@@ -193,15 +193,16 @@ def write_mp4(frames: Sequence[np.ndarray], path: str | Path, *, fps: float) -> 
     Raises
     ------
     VizError
-        When ffmpeg is not installed (it is not a Python package: install
-        it from the system's package manager, or write a ``.gif``).
+        When there is no ffmpeg (install equilibrist's ``video`` extra,
+        ``pip install 'equilibrist[video]'``, or the system's ffmpeg, or
+        write a ``.gif``).
     """
     exe = ffmpeg_path()
     if exe is None:
         raise VizError(
             f"cannot write {str(path)!r}: MP4 needs ffmpeg, which is not installed on this "
-            "machine (install it with the system's package manager, or ask for a .gif, "
-            "which needs nothing)"
+            "machine (pip install 'equilibrist[video]', or the system's ffmpeg, or ask for "
+            "a .gif, which needs nothing)"
         )
     if not frames:
         raise VizError("no frames to write")

@@ -37,7 +37,7 @@ def _animation_path(text: str) -> Path:
     if path.suffix.lower() == ".mp4" and ffmpeg_path() is None:
         raise argparse.ArgumentTypeError(
             f"{text!r}: MP4 needs ffmpeg, which is not installed on this machine; "
-            "use a .gif (needs nothing) or install ffmpeg"
+            "use a .gif (needs nothing) or pip install 'equilibrist[video]'"
         )
     return path
 

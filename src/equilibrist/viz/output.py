@@ -59,10 +59,11 @@ def save_figure(figure: Any, path: str | Path, *, dpi: float | None = None) -> P
 
 
 def ffmpeg_path() -> str | None:
-    """The ffmpeg executable, or None when it is not installed.
+    """The ffmpeg executable, or None when there is none.
 
     Looks at matplotlib's ``animation.ffmpeg_path`` setting when it names a
-    file, then on ``PATH``.
+    file, then on ``PATH``, then for the ffmpeg that the ``imageio-ffmpeg``
+    package ships (installed with equilibrist's ``video`` extra).
     """
     try:
         import matplotlib
@@ -70,4 +71,16 @@ def ffmpeg_path() -> str | None:
         configured = str(matplotlib.rcParams.get("animation.ffmpeg_path", "ffmpeg"))
     except ImportError:  # pragma: no cover - matplotlib is a dependency
         configured = "ffmpeg"
-    return shutil.which(configured) or shutil.which("ffmpeg")
+    return shutil.which(configured) or shutil.which("ffmpeg") or bundled_ffmpeg()
+
+
+def bundled_ffmpeg() -> str | None:
+    """The ffmpeg binary of the ``imageio-ffmpeg`` package, if it is installed."""
+    try:
+        import imageio_ffmpeg
+    except ImportError:
+        return None
+    try:
+        return str(imageio_ffmpeg.get_ffmpeg_exe())
+    except RuntimeError:  # the package is there but its binary is not
+        return None
