@@ -69,6 +69,7 @@ def test_output_options_refuse_bad_files_before_anything_runs(monkeypatch):
     with pytest.raises(ValueError, match="WIDTHxHEIGHT"):
         p.parse_args(["--size", "big"])
     monkeypatch.setattr(output.shutil, "which", lambda name: None)
+    monkeypatch.setattr(output, "bundled_ffmpeg", lambda: None)
     with pytest.raises(ValueError, match="MP4 needs ffmpeg"):
         p.parse_args(["--animate", "a.mp4"])
 
