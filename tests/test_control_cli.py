@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from equilibrist.cli import design as design_cli
+from equilibrist.cli import common
 from equilibrist.cli.main import main
 from equilibrist.control import design
 from equilibrist.control.discretize import METHODS
@@ -116,8 +116,8 @@ def test_text_report(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_cli_choices_are_the_librarys() -> None:
-    assert design_cli.METHODS == METHODS
-    assert design_cli.FORMS == FORMS
+    assert common.DISCRETIZATIONS == METHODS
+    assert common.KALMAN_FORMS == FORMS
 
 
 BAD = {

@@ -26,10 +26,11 @@ def add_set(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--set",
         dest="settings",
-        action="append",
+        action="extend",
+        nargs="+",
         default=[],
         metavar="NAME=VALUE",
-        help="set a parameter, or a variant option such as euler=xyz (repeatable)",
+        help="set parameters, or a variant option such as euler=xyz (repeatable)",
     )
 
 
@@ -141,3 +142,46 @@ def format_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str
         if k == 0:
             out.append("  ".join("-" * w for w in widths))
     return "\n".join(out)
+
+
+def parse_names(text: str | None, option: str) -> tuple[str, ...] | None:
+    """``"x,theta"`` -> ``("x", "theta")``; empty items are refused."""
+    if text is None:
+        return None
+    parts = tuple(t.strip() for t in text.split(","))
+    if not all(parts):
+        raise UsageError(f"{option} {text!r}: expected comma-separated names")
+    return parts
+
+
+# The names of equilibrist.control.discretize.METHODS and kalman.FORMS,
+# written out so that building the parser does not import scipy.
+DISCRETIZATIONS = ("zoh", "euler")
+KALMAN_FORMS = ("current", "predictor")
+
+
+def add_design_options(parser: argparse.ArgumentParser) -> None:
+    """The weights and choices of a controller design (design, simulate, export)."""
+    parser.add_argument("--q", metavar="Q1,Q2,...", help="LQR state weights, one per state")
+    parser.add_argument("--r", metavar="R1,...", help="LQR input weights, one per input")
+    parser.add_argument("--qn", metavar="QN1,...", help="process noise intensities, one per state")
+    parser.add_argument("--rn", metavar="RN1,...", help="measurement noise intensities, one per output")
+    parser.add_argument("--outputs", metavar="NAME,...",
+                        help="measured outputs (state names); the first ones are tracked")
+    parser.add_argument("--discretization", choices=DISCRETIZATIONS, default="zoh",
+                        help="how the plant is sampled (default zoh)")
+    parser.add_argument("--kalman", choices=KALMAN_FORMS, default="current",
+                        help="discrete Kalman gain form (default current)")
+
+
+def design_options(args: argparse.Namespace) -> dict[str, Any]:
+    """Keyword arguments of :func:`equilibrist.control.design.design` from the options."""
+    return {
+        "q": parse_vector(args.q, "--q"),
+        "r": parse_vector(args.r, "--r"),
+        "qn": parse_vector(args.qn, "--qn"),
+        "rn": parse_vector(args.rn, "--rn"),
+        "outputs": parse_names(args.outputs, "--outputs"),
+        "discretization": args.discretization,
+        "kalman_form": args.kalman,
+    }

@@ -6,11 +6,6 @@ import argparse
 
 from equilibrist.cli import common
 
-# The names of equilibrist.control.discretize.METHODS and kalman.FORMS,
-# written out so that building the parser does not import scipy.
-METHODS = ("zoh", "euler")
-FORMS = ("current", "predictor")
-
 _EPILOG = """\
 Weights are diagonals, comma-separated: --q one value per state, --r one per
 input, --qn one per state (QN = diag(qn), G = I), --rn one per measured
@@ -36,40 +31,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     common.add_system(p)
-    p.add_argument("--q", metavar="Q1,Q2,...", help="LQR state weights, one per state")
-    p.add_argument("--r", metavar="R1,...", help="LQR input weights, one per input")
-    p.add_argument("--qn", metavar="QN1,...", help="process noise intensities, one per state")
-    p.add_argument("--rn", metavar="RN1,...", help="measurement noise intensities, one per output")
-    p.add_argument(
-        "--outputs",
-        metavar="NAME,...",
-        help="measured outputs (state names); the first ones are tracked",
-    )
     p.add_argument("--rate", metavar="HZ", help="sample rate of a discrete design [Hz]")
-    p.add_argument(
-        "--discretization",
-        choices=METHODS,
-        default="zoh",
-        help="how the plant is sampled (default zoh)",
-    )
-    p.add_argument(
-        "--kalman",
-        choices=FORMS,
-        default="current",
-        help="discrete Kalman gain form (default current)",
-    )
+    common.add_design_options(p)
     common.add_set(p)
     common.add_json(p)
     p.set_defaults(func=run)
-
-
-def _names(text: str | None, option: str) -> tuple[str, ...] | None:
-    if text is None:
-        return None
-    parts = [t.strip() for t in text.split(",")]
-    if not all(parts):
-        raise common.UsageError(f"{option} {text!r}: expected comma-separated names")
-    return tuple(parts)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -77,17 +43,7 @@ def run(args: argparse.Namespace) -> int:
 
     system = common.load_system(args)
     rate = None if args.rate is None else common.parse_number(args.rate, "--rate")
-    result = design(
-        system,
-        q=common.parse_vector(args.q, "--q"),
-        r=common.parse_vector(args.r, "--r"),
-        qn=common.parse_vector(args.qn, "--qn"),
-        rn=common.parse_vector(args.rn, "--rn"),
-        outputs=_names(args.outputs, "--outputs"),
-        rate=rate,
-        discretization=args.discretization,
-        kalman_form=args.kalman,
-    )
+    result = design(system, rate=rate, **common.design_options(args))
     if args.json:
         common.print_json(result.to_dict())
     else:

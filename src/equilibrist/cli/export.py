@@ -11,8 +11,6 @@ CONTROLLERS = ("lqg", "lqr")
 PRECISIONS = ("double", "float")
 # The names of equilibrist.control's discretization methods and Kalman forms,
 # written out so that building the parser does not import scipy.
-METHODS = ("zoh", "euler")
-FORMS = ("current", "predictor")
 # Sample rate [Hz] for a system whose spec names no control rate of its rig.
 FALLBACK_RATE = 200.0
 
@@ -51,31 +49,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="arithmetic of the C code (default double)")
     p.add_argument("--out", metavar="DIR", default=None,
                    help="output folder (default ./<system>_<controller>)")
-    p.add_argument("--q", metavar="Q1,Q2,...", help="LQR state weights, one per state")
-    p.add_argument("--r", metavar="R1,...", help="LQR input weights, one per input")
-    p.add_argument("--qn", metavar="QN1,...", help="process noise intensities, one per state")
-    p.add_argument("--rn", metavar="RN1,...", help="measurement noise intensities, one per output")
-    p.add_argument("--outputs", metavar="NAME,...",
-                   help="measured outputs (state names); the first ones are tracked")
-    p.add_argument("--discretization", choices=METHODS, default="zoh",
-                   help="how the plant is sampled (default zoh)")
-    p.add_argument("--kalman", choices=FORMS, default="current",
-                   help="discrete Kalman gain form (default current)")
+    common.add_design_options(p)
     p.add_argument("--duration", metavar="S", default=None,
                    help="length of the recorded test-vector run [s]")
     p.add_argument("--seed", type=int, default=0, help="noise seed of the test-vector run")
     common.add_set(p)
     common.add_json(p)
     p.set_defaults(func=run)
-
-
-def _names(text: str | None, option: str) -> tuple[str, ...] | None:
-    if text is None:
-        return None
-    parts = [t.strip() for t in text.split(",")]
-    if not all(parts):
-        raise common.UsageError(f"{option} {text!r}: expected comma-separated names")
-    return tuple(parts)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -102,17 +82,7 @@ def run(args: argparse.Namespace) -> int:
 
     from equilibrist.control.design import design
 
-    result = design(
-        system,
-        q=common.parse_vector(args.q, "--q"),
-        r=common.parse_vector(args.r, "--r"),
-        qn=common.parse_vector(args.qn, "--qn"),
-        rn=common.parse_vector(args.rn, "--rn"),
-        outputs=_names(args.outputs, "--outputs"),
-        rate=rate,
-        discretization=args.discretization,
-        kalman_form=args.kalman,
-    )
+    result = design(system, rate=rate, **common.design_options(args))
     done = export_c(result, out, controller=args.controller, precision=args.precision,
                     duration=duration, seed=args.seed, system=system)
     if args.json:

@@ -67,23 +67,14 @@ def load_result(path: str | Path) -> Any:
     )
 
 
-def _names(text: str | None, option: str) -> list[str] | None:
-    if text is None:
-        return None
-    parts = [t.strip() for t in text.split(",")]
-    if not all(parts):
-        raise common.UsageError(f"{option} {text!r}: expected comma-separated names")
-    return parts
-
-
 def run(args: argparse.Namespace) -> int:
     from equilibrist.viz import plots
     from equilibrist.viz.output import FIGURE_FORMATS, VizError, check_suffix
 
     first = Path(args.files[0])
     out = check_suffix(args.out, FIGURE_FORMATS, "--out") if args.out else first.with_suffix(".png")
-    states = _names(args.states, "--states")
-    labels = _names(args.labels, "--labels")
+    states = common.parse_names(args.states, "--states")
+    labels = common.parse_names(args.labels, "--labels")
     degrees = not args.radians
     results = [load_result(f) for f in args.files]
     batches = [r for r in results if hasattr(r, "parameter_names")]

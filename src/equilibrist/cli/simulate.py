@@ -68,15 +68,8 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", default="0", metavar="N", help="noise seed (default 0)")
     p.add_argument("--reference", metavar="SIGNAL",
                    help="reference of the tracked output: step:V[@T], ramp:S[@T], square:A:P, file:PATH")
-    p.add_argument("--set", dest="settings", action="extend", nargs="+", default=[],
-                   metavar="NAME=VALUE", help="set a parameter (repeatable)")
-    p.add_argument("--q", metavar="Q1,...", help="LQR state weights (diagonal)")
-    p.add_argument("--r", metavar="R1,...", help="LQR input weights (diagonal)")
-    p.add_argument("--qn", metavar="QN1,...", help="process noise intensities (diagonal)")
-    p.add_argument("--rn", metavar="RN1,...", help="measurement noise intensities (diagonal)")
-    p.add_argument("--outputs", metavar="NAME,...", help="measured outputs (state names)")
-    p.add_argument("--kalman", choices=("current", "predictor"), default="current",
-                   help="discrete Kalman filter form (default current)")
+    common.add_set(p)
+    common.add_design_options(p)
     p.add_argument("--out", metavar="FILE", help="save the result (.npz; .csv exports a table)")
     p.add_argument("--no-progress", action="store_true", help="never show a progress bar")
     common.add_json(p)
@@ -98,15 +91,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 # -- parsing ---------------------------------------------------------------------
-
-
-def _names(text: str | None, option: str) -> tuple[str, ...] | None:
-    if text is None:
-        return None
-    parts = tuple(t.strip() for t in text.split(","))
-    if not all(parts):
-        raise common.UsageError(f"{option} {text!r}: expected comma-separated names")
-    return parts
 
 
 def _positive(text: str, option: str) -> float:
@@ -186,7 +170,8 @@ def build_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     kind = args.controller or ("lqg" if system.n_inputs else "none")
     reference = None if args.reference is None else parse_signal(args.reference)
     noise_on = args.noise == "on"
-    outputs = _names(args.outputs, "--outputs")
+    options = common.design_options(args)
+    outputs = options.pop("outputs")
     controller: Any = None
     noise = None
     if kind == "none":
@@ -199,16 +184,7 @@ def build_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
         from equilibrist.control.design import design
         from equilibrist.sim.controllers import LQG, StateFeedback
 
-        d = design(
-            system,
-            q=common.parse_vector(args.q, "--q"),
-            r=common.parse_vector(args.r, "--r"),
-            qn=common.parse_vector(args.qn, "--qn"),
-            rn=common.parse_vector(args.rn, "--rn"),
-            outputs=outputs,
-            rate=rate,
-            kalman_form=args.kalman,
-        )
+        d = design(system, outputs=outputs, rate=rate, **options)
         tracking = reference is not None
         controller = (LQG.from_design(d, tracking=tracking) if kind == "lqg"
                       else StateFeedback.from_design(d, tracking=tracking))
