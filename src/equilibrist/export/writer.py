@@ -277,19 +277,9 @@ def export_c(
 
 
 def _system_of(design: Any) -> Any:
-    from equilibrist.numeric.system import get_system
-    from equilibrist.systems import registry
+    from equilibrist.numeric.system import system_from_key
 
-    key = str(design.system_key)
-    name, variant = key, None
-    if "[" in key and key.endswith("]"):
-        name, _, rest = key.partition("[")
-        variant = rest[:-1].partition("=")[2]
-    settings: dict[str, object] = dict(design.params)
-    option = registry.variant_option(name)
-    if option is not None and variant is not None:
-        settings[option] = variant
-    return get_system(name, **settings)
+    return system_from_key(str(design.system_key), design.params)
 
 
 def _describe(system: Any, data: ControllerData) -> tuple[str, tuple[tuple[str, float, str, str], ...]]:

@@ -419,3 +419,20 @@ def get_system(name: str, **settings: object) -> System:
     defaults.update(values)
     _check_limits_order(entry.spec, defaults)
     return System(entry.spec, cache.load(entry), types.MappingProxyType(defaults))
+
+
+def system_from_key(key: str, params: Mapping[str, float] | None = None) -> System:
+    """The system of a spec key (``"gyroscope[euler=xyz]"``) with *params* bound.
+
+    The inverse of :attr:`System.key` plus :attr:`System.params`: what a saved
+    result or a design records is enough to rebuild its system.
+    """
+    name, variant = key, None
+    if "[" in key and key.endswith("]"):
+        name, _, rest = key.partition("[")
+        variant = rest[:-1].partition("=")[2]
+    settings: dict[str, object] = dict(params or {})
+    option = registry.variant_option(name)
+    if option is not None and variant is not None:
+        settings[option] = variant
+    return get_system(name, **settings)

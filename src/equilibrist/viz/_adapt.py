@@ -16,15 +16,9 @@ _EVENT_NAMES = {"kick": "push", "pulse": "push", "impulse": "push",
 
 def system_of(key: str, params: Any = None) -> Any:
     """The bound system of a registry *key* (``"gyroscope[euler=xyz]"``) with *params*."""
-    from equilibrist.numeric.system import get_system
+    from equilibrist.numeric.system import system_from_key
 
-    name, _, rest = key.partition("[")
-    settings: dict[str, object] = {}
-    if rest:
-        option, _, value = rest.rstrip("]").partition("=")
-        settings[option] = value
-    settings.update(dict(params or {}))
-    return get_system(name, **settings)
+    return system_from_key(key, params)
 
 
 def _label(settings: Any) -> str:
