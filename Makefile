@@ -27,7 +27,8 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests bench examples
 
 bench: $(STAMP)
-	$(PY) bench/run.py
+	$(PY) bench/bench_load.py
+	$(PY) bench/bench_sim.py
 
 clean:
 	rm -rf $(VENV) report build
