@@ -6,7 +6,7 @@ discrete design's LQG or LQR controller, with a desktop example, an
 Arduino sketch, test vectors from a recorded closed-loop run, a test
 program and a Makefile. :func:`compile_controller` builds the same code
 into a shared library and loads it, and
-:func:`~equilibrist.export.vectors.c_controller` wraps it as a controller of
+:func:`c_controller` wraps it as a controller of
 equilibrist's simulation, so the exported code closes the loop on the
 nonlinear plant.
 
@@ -26,13 +26,17 @@ _LAZY = {
     "compile_controller": "equilibrist.export.native",
     "CompiledController": "equilibrist.export.native",
     "Vectors": "equilibrist.export.c_code",
+    "c_controller": "equilibrist.export.vectors",
+    "CController": "equilibrist.export.vectors",
 }
 
 __all__ = [
+    "CController",
     "CompiledController",
     "ControllerData",
     "Export",
     "Vectors",
+    "c_controller",
     "compile_controller",
     "controller_data",
     "export_c",
