@@ -55,3 +55,16 @@ def nearest(name: str, choices: list[str] | tuple[str, ...]) -> str:
     if close:
         return f"did you mean {close[0]!r}?"
     return "expected one of: " + ", ".join(choices)
+
+
+def finite_number(name: str, value: object) -> float:
+    """*value* as a float, or a :class:`ParameterError` naming *name*."""
+    import math
+
+    try:
+        v = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name} = {value!r} is not a number") from None
+    if not math.isfinite(v):
+        raise ParameterError(f"{name} = {v} is not a finite number")
+    return v

@@ -22,6 +22,7 @@ from equilibrist.errors import (
     ParameterError,
     SingularConfigurationError,
     UnknownNameError,
+    finite_number,
     nearest,
 )
 from equilibrist.mechanics.spec import SystemSpec
@@ -257,9 +258,9 @@ class System:
             for n, v in op.inputs.items():
                 u[self.input_index(n)] = self._resolve(v)
         for n, v in state.items():
-            x[self.state_index(n)] = _finite_scalar(n, v)
+            x[self.state_index(n)] = finite_number(n, v)
         for n, v in inputs.items():
-            u[self.input_index(n)] = _finite_scalar(n, v)
+            u[self.input_index(n)] = finite_number(n, v)
         if free is None:
             base = () if op is None else op.free
             free = tuple(c for c in base if c not in state and c not in inputs)
@@ -356,14 +357,6 @@ class System:
         return base.with_outputs(names)
 
 
-def _finite_scalar(name: str, value: object) -> float:
-    try:
-        v = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise ParameterError(f"{name} = {value!r} is not a number") from None
-    if not math.isfinite(v):
-        raise ParameterError(f"{name} = {v} is not a finite number")
-    return v
 
 
 def _validated(spec: SystemSpec, values: Mapping[str, object]) -> dict[str, float]:

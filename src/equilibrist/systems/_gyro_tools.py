@@ -40,6 +40,7 @@ from equilibrist.errors import (
     ParameterError,
     SingularConfigurationError,
     UnknownNameError,
+    finite_number,
 )
 
 if TYPE_CHECKING:  # sympy is imported only by the functions that need it
@@ -64,14 +65,6 @@ def _check_gyroscope(system: System) -> None:
         )
 
 
-def _finite(name: str, value: object) -> float:
-    try:
-        v = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise ParameterError(f"{name} = {value!r} is not a number") from None
-    if not math.isfinite(v):
-        raise ParameterError(f"{name} = {v} is not a finite number")
-    return v
 
 
 def steady_precession_relation(model: SymbolicModel) -> sp.Expr:
@@ -149,8 +142,8 @@ def steady_precession_rates(system: System, theta: float, psi_dot: float) -> tup
         escapes to infinity).
     """
     _check_gyroscope(system)
-    theta = _finite("theta", theta)
-    psi_dot = _finite("psi_dot", psi_dot)
+    theta = finite_number("theta", theta)
+    psi_dot = finite_number("psi_dot", psi_dot)
     if abs(math.sin(theta)) < _SINGULAR:
         raise SingularConfigurationError(
             f"steady precession at theta = {theta:g}: the axis is vertical (sin(theta) = 0), "
