@@ -19,7 +19,7 @@ from equilibrist import __version__
 from equilibrist.errors import EquilibristError
 
 # Order of the subcommands in --help; modules not listed come after.
-_ORDER = ("systems", "show", "dynamics", "linearize", "design", "simulate", "batch",
+_ORDER = ("systems", "show", "dynamics", "linearize", "linkage", "design", "simulate", "batch",
           "plot", "animate", "export", "demo")
 
 
