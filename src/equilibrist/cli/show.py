@@ -24,7 +24,7 @@ def run(args: argparse.Namespace) -> int:
     spec, model = system.spec, system.symbolic
     print(f"{spec.key}: {spec.title}")
     print(f"  {spec.description}")
-    print(f"  derived by {model.method}'s method; source: {spec.source}")
+    print(f"  derived by: {model.method}; source: {spec.source}")
     print(f"  states: {', '.join(f'{s} [{u}]' for s, u in zip(system.state_names, system.state_units, strict=True))}")
     inputs = ", ".join(f"{i.name} [{i.unit}]" for i in spec.inputs) or "(none)"
     print(f"  inputs: {inputs}")

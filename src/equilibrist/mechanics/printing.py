@@ -23,13 +23,18 @@ def _display(name: str, accent: str) -> sp.Symbol:
 def display_symbols(model: SymbolicModel, spec: SystemSpec) -> dict[sp.Symbol, sp.Symbol]:
     """Substitution of state, rate and acceleration symbols by display symbols."""
     subs: dict[sp.Symbol, sp.Symbol] = {}
-    coords = list(spec.coordinates) if model.M is not None else [s.name for s in model.states]
-    for c in coords:
+    for c in spec.coordinates:
         subs[sp.Symbol(c, real=True)] = _display(c, "")
         subs[sp.Symbol(f"{c}_dot", real=True)] = _display(c, "dot")
         subs[sp.Symbol(f"{c}_ddot", real=True)] = _display(c, "ddot")
         subs[sp.Symbol(f"{c}_ddot")] = _display(c, "ddot")
+        # Left-hand sides of a first-order model: the rate of each state.
         subs[sp.Symbol(f"{c}__rate")] = _display(c, "dot")
+        subs[sp.Symbol(f"{c}_dot__rate")] = _display(c, "ddot")
+    for state in model.states:  # states that are not coordinates or their rates
+        if state not in subs:
+            subs[state] = _display(state.name, "")
+            subs[sp.Symbol(f"{state.name}__rate")] = _display(state.name, "dot")
     return subs
 
 
