@@ -116,3 +116,11 @@ def test_show_prints_equations_and_linearization(capsys) -> None:
     assert main(["show", "cartpole", "--latex"]) == 0
     out = capsys.readouterr().out
     assert r"\ddot{\theta}" in out and r"\begin{aligned}" in out
+
+
+def test_first_order_model_prints_rates_with_accents(capsys) -> None:
+    assert main(["show", "ball_beam_servo"]) == 0
+    out = capsys.readouterr().out
+    assert "x_dot = f(x, u)" in out
+    assert "R̈ =" in out and "θ̇ = ω" in out
+    assert "R_dot" not in out.split("x_dot = f(x, u):")[1].split("linearization")[0]
