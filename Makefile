@@ -21,10 +21,12 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(VENV)/bin/ruff check src tests bench examples
+	$(VENV)/bin/mypy src/equilibrist
 	$(PY) -m pytest -n $(JOBS) -q
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests bench examples
+	$(VENV)/bin/mypy src/equilibrist
 
 bench: $(STAMP)
 	$(PY) bench/bench_load.py

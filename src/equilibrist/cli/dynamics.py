@@ -20,6 +20,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     system = common.load_system(args)
     x = common.parse_vector(args.state, f"--state ({', '.join(system.state_names)})", system.n_states)
+    if x is None:
+        raise common.UsageError("--state is required")
     if system.n_inputs and args.input is None:
         raise common.UsageError(
             f"{system.key} needs --input with {system.n_inputs} value(s) ({', '.join(system.input_names)})"

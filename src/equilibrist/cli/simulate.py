@@ -135,8 +135,8 @@ def parse_events(args: argparse.Namespace, system: Any) -> list[Any]:
         events.append(Pulse(t, value, duration))
     for item in args.kick:
         t, rest = _split_time(item, "--kick")
-        (name, value), = common.parse_assignments([rest], "--kick").items()
-        events.append(Kick(t, name, common.parse_number(value, f"--kick {name}")))
+        (name, text), = common.parse_assignments([rest], "--kick").items()
+        events.append(Kick(t, name, common.parse_number(text, f"--kick {name}")))
     for item in args.change:
         t, rest = _split_time(item, "--change")
         values = common.parse_assignments(rest.split(","), "--change")
@@ -170,8 +170,8 @@ def build_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     kind = args.controller or ("lqg" if system.n_inputs else "none")
     reference = None if args.reference is None else parse_signal(args.reference)
     noise_on = args.noise == "on"
-    options = common.design_options(args)
-    outputs = options.pop("outputs")
+    design_kwargs = common.design_options(args)
+    outputs = design_kwargs.pop("outputs")
     controller: Any = None
     noise = None
     if kind == "none":
@@ -184,7 +184,7 @@ def build_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
         from equilibrist.control.design import design
         from equilibrist.sim.controllers import LQG, StateFeedback
 
-        d = design(system, outputs=outputs, rate=rate, **options)
+        d = design(system, outputs=outputs, rate=rate, **design_kwargs)
         tracking = reference is not None
         controller = (LQG.from_design(d, tracking=tracking) if kind == "lqg"
                       else StateFeedback.from_design(d, tracking=tracking))

@@ -178,8 +178,8 @@ class DiscreteKalmanFilter:
             B=model.B,
             H=model.C,
             D=model.D,
-            Qd=Qd,
-            Rd=Rd,
+            Qd=Qd,  # type: ignore[arg-type]  # checked and converted in __post_init__
+            Rd=Rd,  # type: ignore[arg-type]  # checked and converted in __post_init__
             dt=model.dt,
             state_names=model.state_names,
             input_names=model.input_names,
@@ -325,7 +325,7 @@ class DiscreteKalmanFilter:
         if us.shape != (ys.shape[0], m):
             raise DimensionError(f"u has shape {us.shape}, expected ({ys.shape[0]}, {m})")
         prior = Estimate(
-            np.zeros(n) if x0 is None else _checks.matrix(np.reshape(x0, (1, -1)), "x0", (1, n))[0],
+            np.zeros(n) if x0 is None else _checks.matrix(np.reshape(np.asarray(x0), (1, -1)), "x0", (1, n))[0],
             self.steady_state.P_prior if P0 is None else _checks.matrix(P0, "P0", (n, n)),
         )
         steps = ys.shape[0]

@@ -171,8 +171,8 @@ def _header_comment(data: ControllerData, *, version: str, precision: str,
         "RN": "measurement noise intensity RN",
         "G": "process noise input matrix G",
     }
-    for key, value in data.weights.items():
-        text = _fmt_matrix_text(value)
+    for key, weight in data.weights.items():
+        text = _fmt_matrix_text(weight)
         lines.append(f"  {labels.get(key, key)} = {text[0]}")
         lines.extend(f"      {t}" for t in text[1:])
     lines.append("")

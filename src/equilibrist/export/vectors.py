@@ -190,6 +190,7 @@ def record(design: Any, system: Any, *, controller: str = "lqg", precision: str 
             "the design does not hold the plant, so there are no test vectors to ship"
         )
     r = result.reference if tracking else np.zeros((result.n_rows, 0))
-    x_init = data.x0 + (builtin.x_hat0 if controller == "lqg" else 0.0)
+    estimate0 = builtin.x_hat0 if isinstance(builtin, LQG) else None
+    x_init = data.x0 + (0.0 if estimate0 is None else estimate0)
     return make_vectors(data, result.measurements, r, result.saturated, x_init,
                         precision=precision)

@@ -61,7 +61,7 @@ def check_rate(rate: object) -> float:
 def check_folder(out: object) -> Path:
     """The output folder, if it can be written (existing or creatable), else :class:`ExportError`."""
     try:
-        path = Path(os.fspath(out)).expanduser()  # type: ignore[arg-type]
+        path = Path(os.fspath(out)).expanduser()  # type: ignore[call-overload]  # TypeError caught below
     except TypeError:
         raise ExportError(f"output folder {out!r} is not a path") from None
     path = path.absolute()

@@ -237,6 +237,6 @@ def _solve_linear(M: sp.Matrix, F: sp.Matrix) -> sp.Matrix:
     return M.LUsolve(F)
 
 
-def kinetic_energy(frame: me.ReferenceFrame, *bodies: object) -> sp.Expr:
+def kinetic_energy(frame: me.ReferenceFrame, *bodies: me.RigidBody | me.Particle) -> sp.Expr:
     """Total kinetic energy of *bodies* in *frame*."""
     return sum((b.kinetic_energy(frame) for b in bodies), sp.Integer(0))

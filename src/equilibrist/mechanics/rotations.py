@@ -83,7 +83,7 @@ def angle_names(sequence: str) -> tuple[str, str, str]:
     tuple of str
         ``("theta", "phi", "psi")`` for xyz, ``("phi", "theta", "psi")`` for zxz.
     """
-    return _ANGLE_NAMES[_check_sequence(sequence)]  # type: ignore[return-value]
+    return _ANGLE_NAMES[_check_sequence(sequence)]
 
 
 def angle_symbols(sequence: str) -> tuple[tuple[sp.Symbol, ...], tuple[sp.Symbol, ...]]:

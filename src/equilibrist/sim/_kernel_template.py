@@ -54,7 +54,7 @@ def f(x, u, p, out):
 # inlined. With reference counting the same loop runs four times slower
 # (each array handed to an inlined helper costs atomic increments).
 _jit = njit(cache=True, error_model="numpy")
-_bare = njit(cache=True, error_model="numpy", _nrt=False)
+_bare = njit(cache=True, error_model="numpy", _nrt=False)  # type: ignore[call-overload]  # private numba option
 _inline = njit(cache=True, error_model="numpy", inline="always")
 _fjit = _bare(f)
 _N = N_STATES

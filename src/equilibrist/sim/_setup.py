@@ -556,7 +556,7 @@ def build(
     if isinstance(ctrl, StateFeedback | LQG):
         gains[:, :n] = ctrl.K
         if tracked:
-            gains[:, n:] = ctrl.Kc  # type: ignore[index]
+            gains[:, n:] = ctrl.Kc
     if isinstance(ctrl, LQG):
         est[:, :n] = ctrl.Ad
         est[:, n : n + m] = ctrl.Bd

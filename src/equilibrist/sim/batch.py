@@ -358,9 +358,14 @@ def simulate_batch(
     x0s = _initial_states(system, x0, runs, setup.x_op)
     pmat = _parameter_matrix(system, params, runs)
     base_seq = seed_sequence(seed) if (noise is not None or seed is not None) else None
-    seqs = [child_seed(base_seq, i) for i in range(runs)] if base_seq is not None else [None] * runs
-    rngs = (np.stack([generator_state(s) for s in seqs]) if base_seq is not None
-            else np.zeros((runs, 4), dtype=np.uint64))
+    seqs: list[np.random.SeedSequence | None]
+    if base_seq is not None:
+        children = [child_seed(base_seq, i) for i in range(runs)]
+        seqs = list(children)
+        rngs = np.stack([generator_state(s) for s in children])
+    else:
+        seqs = [None] * runs
+        rngs = np.zeros((runs, 4), dtype=np.uint64)
     p_sets_r = setup.p_sets(pmat)
     if plant == "linear":
         lin_r = np.stack([setup.linear_blocks(p_sets_r[i]) for i in range(runs)])
@@ -462,8 +467,9 @@ def _python_batch(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
     for i in range(runs):
         sysi = sysm.with_params(**dict(zip(names, pmat[i].tolist(), strict=True)))
         s = _setup.Setup(**{**setup.__dict__, "system": sysi, "x0": x0s[i]})
-        rng = generator_state(seqs[i]) if seqs[i] is not None else np.zeros(4, dtype=np.uint64)
-        res = _run_python(s, load_kernel(sysi), rng, seqs[i], progress=False)
+        seq = seqs[i]
+        rng = generator_state(seq) if seq is not None else np.zeros(4, dtype=np.uint64)
+        res = _run_python(s, load_kernel(sysi), rng, seq, progress=False)
         k = res.n_rows
         statuses[i] = (k, int(res.fell), _code(res, sysm.state_names),
                        0 if res.fell_at is None else round(res.fell_at / setup.h))

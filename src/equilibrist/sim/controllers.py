@@ -258,7 +258,7 @@ class _LQGRuntime:
         self.reset()
 
     def reset(self) -> None:
-        self.z = self.c.x_hat0.copy()
+        self.z = _initial_estimate(self.c).copy()
         self.estimate = self.c.x_op + self.z
         self._y = np.zeros(len(self.idx))
         self._xhat = self.z.copy()
@@ -284,14 +284,21 @@ class _LQGRuntime:
             self.z = c.Ad @ self.z + c.Bd @ du + c.Kf @ (self._y - self.z[self.idx])
 
 
+def _initial_estimate(ctrl: LQG) -> np.ndarray:
+    """``ctrl.x_hat0``, which ``LQG.__post_init__`` always fills in."""
+    if ctrl.x_hat0 is None:
+        raise SimulationError("the LQG controller has no initial estimate x_hat0")
+    return ctrl.x_hat0
+
+
 def as_controller(obj: object) -> BuiltIn | Controller:
     """A controller from a built-in, an object with ``step``, or a function ``(t, y, r)``."""
     if obj is None:
         return OpenLoop()
     if isinstance(obj, OpenLoop | StateFeedback | LQG):
         return obj
-    if hasattr(obj, "step") and callable(obj.step):  # type: ignore[attr-defined]
-        return obj  # type: ignore[return-value]
+    if hasattr(obj, "step") and callable(obj.step):
+        return obj
     if callable(obj):
         return _FunctionController(obj)
     hint = ""

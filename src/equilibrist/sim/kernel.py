@@ -109,7 +109,7 @@ def set_workers(workers: int | None) -> int:
     """Set numba's thread count for parallel entries; returns the count in force."""
     import numba
 
-    available = numba.config.NUMBA_NUM_THREADS
+    available = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]  # set at import by numba.config
     count = available if workers is None else max(1, min(int(workers), available))
     numba.set_num_threads(count)
     return count

@@ -22,6 +22,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
@@ -98,13 +99,13 @@ class Noise:
         object.__setattr__(self, "outputs", tuple(self.outputs))
 
     @classmethod
-    def from_design(cls, design: object, *, rate: float | None = None) -> Noise:
+    def from_design(cls, design: Any, *, rate: float | None = None) -> Noise:
         """The covariances a design assumed: ``G``, ``QN`` and ``R_d``.
 
         A continuous design has no ``R_d``: then ``R = RN / T`` with ``T = 1 /
         rate`` the simulation's control period (*rate* is required then).
         """
-        plant = design.plant  # type: ignore[attr-defined]
+        plant = design.plant
         rd = getattr(design, "Rd", None)
         if rd is None:
             if rate is None:
@@ -112,10 +113,10 @@ class Noise:
                     "a continuous design has no per-sample measurement noise covariance: "
                     "give the simulation's rate (Noise.from_design(design, rate=...))"
                 )
-            rd = np.asarray(design.RN, dtype=float) * float(rate)  # type: ignore[attr-defined]
+            rd = np.asarray(design.RN, dtype=float) * float(rate)
         return cls(
-            process_gain=np.asarray(design.G, dtype=float),  # type: ignore[attr-defined]
-            process_intensity=np.asarray(design.QN, dtype=float),  # type: ignore[attr-defined]
+            process_gain=np.asarray(design.G, dtype=float),
+            process_intensity=np.asarray(design.QN, dtype=float),
             measurement_covariance=np.asarray(rd, dtype=float),
             outputs=tuple(plant.output_names),
         )

@@ -31,7 +31,7 @@ class Stepper:
     system: System
     physics_step: float = 1e-3
     _kernel: Any = field(default=None, init=False, repr=False)
-    _p: np.ndarray = field(default=None, init=False, repr=False)  # type: ignore[assignment]
+    _p: np.ndarray = field(init=False, repr=False)  # set in __post_init__
 
     def __post_init__(self) -> None:
         h = float(self.physics_step)

@@ -160,6 +160,7 @@ class FrameRenderer:
     def _apply(self, shape: Shape) -> None:
         from matplotlib.lines import Line2D
         from matplotlib.patches import Polygon
+        from matplotlib.text import Text
 
         art = self._artists.get(shape.key)
         pts = shape.points
@@ -182,15 +183,20 @@ class FrameRenderer:
                 raise ValueError(f"unknown shape kind {shape.kind!r}")
             self._artists[shape.key] = art
             self._background = None  # a new moving part: take the background again
+        # A key keeps its kind from frame to frame, so its artist is of that kind.
         if shape.kind == "fill":
+            assert isinstance(art, Polygon)
             if len(pts):
                 art.set_xy(pts)
             art.set_visible(bool(len(pts)))
         elif shape.kind == "line":
+            assert isinstance(art, Line2D)
             art.set_data(pts[:, 0], pts[:, 1]) if len(pts) else art.set_data([], [])
         elif shape.kind == "hline":
+            assert isinstance(art, Line2D)
             art.set_ydata([pts[0, 1], pts[0, 1]])
         elif shape.kind == "text":
+            assert isinstance(art, Text)
             art.set_position((float(pts[0, 0]), float(pts[0, 1])))
             art.set_text(shape.text)
 

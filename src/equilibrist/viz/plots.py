@@ -14,12 +14,15 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from equilibrist.viz.output import VizError, save_figure
 from equilibrist.viz.runs import Run, as_run
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 # Line styles shared by the plots.
 TRUE = {"color": "#1f5fa8", "lw": 1.5}
@@ -162,7 +165,7 @@ def plot_response(
     x_op, u_op = _operating_point(run)
     measured = {n: i for i, n in enumerate(run.output_names)}
     tracked = {n: i for i, n in enumerate(run.reference_names)}
-    axes = []
+    axes: list[Axes] = []
     for row, (coord, rate) in enumerate(pairs):
         for col, name in enumerate((coord, rate) if show_rates else (coord,)):
             if name is None:
@@ -207,7 +210,8 @@ def plot_response(
     # the axis title goes under the bottom row only.
     for a in axes:
         a.tick_params(labelbottom=True)
-        if a.get_subplotspec().is_last_row():
+        spec = a.get_subplotspec()
+        if spec is not None and spec.is_last_row():
             a.set_xlabel("time [s]")
     _legend(fig, axes)
     fig.suptitle(title if title is not None else _run_title(run), fontsize="medium")
@@ -428,9 +432,9 @@ def plot_fan(
 
 
 def plot_region_of_attraction(
-    x_values: Sequence[float],
-    y_values: Sequence[float],
-    stayed_up: Sequence[bool],
+    x_values: Sequence[float] | np.ndarray,
+    y_values: Sequence[float] | np.ndarray,
+    stayed_up: Sequence[bool] | np.ndarray,
     path: str | Path | None = None,
     *,
     x_name: str,

@@ -103,7 +103,7 @@ def bar(p0: np.ndarray, p1: np.ndarray, width: float) -> np.ndarray:
     return np.array([p0 + perp, p1 + perp, p1 - perp, p0 - perp])
 
 
-def circle(center: np.ndarray, radius: float, n: int = 48) -> np.ndarray:
+def circle(center: np.ndarray | Sequence[float], radius: float, n: int = 48) -> np.ndarray:
     s = np.linspace(0.0, 2 * math.pi, n, endpoint=False)
     return np.column_stack([center[0] + radius * np.cos(s), center[1] + radius * np.sin(s)])
 
@@ -122,7 +122,8 @@ def rotate(points: np.ndarray, angle: float, about: Sequence[float] = (0.0, 0.0)
     return np.column_stack([c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1]]) + o
 
 
-def arrow(start: np.ndarray, vector: np.ndarray, width: float) -> np.ndarray:
+def arrow(start: np.ndarray | Sequence[float], vector: np.ndarray | Sequence[float],
+          width: float) -> np.ndarray:
     """A filled arrow polygon from *start* along *vector* (empty when tiny)."""
     start, vector = np.asarray(start, float), np.asarray(vector, float)
     length = float(np.hypot(*vector))
@@ -464,7 +465,7 @@ class BallBeamScene(Scene):
         p = self.params
         r = p.get("r", self.nominal_radius)
         d = p.get("d", 0.0)
-        region = self.system.spec.region.get("R", (-0.25, 0.25))  # type: ignore[attr-defined]
+        region = self.system.spec.region.get("R", (-0.25, 0.25))
         half = max(abs(region[0]), abs(region[1]))
         th, R = self.q(x, "theta"), self.q(x, "R")
         e = np.array([math.cos(th), math.sin(th)])

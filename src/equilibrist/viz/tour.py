@@ -214,7 +214,8 @@ def tour_controlled(
         reference = Step(value=r1, at=sc.step_at, initial=r0)
     push_at = sc.duration / 2
     events = [Pulse(time=push_at, value=sc.push, duration=sc.push_duration)] if sc.push else []
-    common = {"duration": sc.duration, "x0": x0, "reference": reference, "events": events}
+    common: dict[str, Any] = {"duration": sc.duration, "x0": x0, "reference": reference,
+                              "events": events}
     lqg = LQG.from_design(d, tracking=tracking)
     main = simulate(system, lqg, noise=Noise.from_design(d), seed=SEED, progress=progress, **common)
     ideal = simulate(system, StateFeedback.from_design(d, tracking=tracking), **common)
@@ -588,7 +589,8 @@ def run_tour(
     folder.mkdir(parents=True, exist_ok=True)
     from tqdm.auto import tqdm
 
-    options = {"size": size, "fps": fps, "max_frames": max_frames, "extras": tuple(extras)}
+    options: dict[str, Any] = {"size": size, "fps": fps, "max_frames": max_frames,
+                               "extras": tuple(extras)}
     bar = tqdm(total=len(systems), desc="demo", unit="system", disable=not progress, leave=False)
     done: dict[int, Outcome] = {}
 
