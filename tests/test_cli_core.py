@@ -69,7 +69,7 @@ def test_linearize_away_from_equilibrium_reports_the_residual(capsys) -> None:
     ("argv", "needle"),
     [
         (["linearize", "cartpol"], "did you mean 'cartpole'"),
-        (["linearize", "nonsense"], "known systems"),
+        (["linearize", "nonsense"], "expected one of: seesaw, cartpole"),
         (["linearize", "cartpole", "--set", "m_cc=1"], "did you mean 'm_c'"),
         (["linearize", "cartpole", "--set", "m_c=-1"], "out of range"),
         (["linearize", "cartpole", "--set", "m_c=inf"], "not a finite number"),

@@ -80,10 +80,12 @@ def system_settings(name: str, items: Sequence[str]) -> dict[str, object]:
     from equilibrist.systems import registry
 
     raw = parse_assignments(items, "--set")
-    option = registry.variant_option(name)
     settings: dict[str, object] = {}
+    known = {p for entry in registry.lookup_family(name).values() for p in entry.spec.parameter_names}
     for key, value in raw.items():
-        settings[key] = value if key == option else parse_number(value, f"--set {key}")
+        # Unknown names go through as they are: the system's validation
+        # names them and suggests the nearest parameter.
+        settings[key] = parse_number(value, f"--set {key}") if key in known else value
     return settings
 
 

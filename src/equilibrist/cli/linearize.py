@@ -62,7 +62,8 @@ def run(args: argparse.Namespace) -> int:
             "C": lm.C,
             "D": lm.D,
             "residual": lm.residual,
-            "poles": lm.poles,
+            # Always {"re", "im"}, as in 'design --json', whether or not any is complex.
+            "poles": [{"re": float(p.real), "im": float(p.imag)} for p in lm.poles],
         })
         return 0
     print(render(system, lm))

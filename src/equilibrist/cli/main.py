@@ -12,8 +12,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import pkgutil
+import re
 import sys
+import warnings
 from collections.abc import Sequence
+from typing import Any
 
 from equilibrist import __version__
 from equilibrist.errors import EquilibristError
@@ -24,7 +27,16 @@ _ORDER = ("systems", "show", "dynamics", "linearize", "linkage", "design", "simu
 
 
 class _Parser(argparse.ArgumentParser):
-    """argparse with one-line errors (argparse prints the usage block otherwise)."""
+    """argparse with one-line errors (argparse prints the usage block otherwise).
+
+    A value that starts with a minus sign and a digit is a value, not an
+    option: argparse's own rule accepts ``-1`` but not the list
+    ``-0.1,0,0,0`` that ``--state`` or ``--q`` take.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r"^-\.?\d")
 
     def error(self, message: str) -> None:  # type: ignore[override]
         raise _UsageError(f"{self.prog}: {message} (see '{self.prog} --help')")
@@ -62,7 +74,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not getattr(args, "func", None):
             parser.print_help()
             return 2
-        return int(args.func(args) or 0)
+        # Numerical warnings of numpy and scipy are not messages for a user of
+        # the command line: what goes wrong is reported as an error.
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return int(args.func(args) or 0)
     except (EquilibristError, _UsageError) as exc:
         message = str(exc).replace("\n", " ")
         prefix = "" if message.startswith("equilibrist") else "equilibrist: error: "

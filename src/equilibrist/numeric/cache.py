@@ -100,18 +100,43 @@ class CompiledModel:
         name = f"equilibrist_generated_{self.module_path.stem}"
         if name in sys.modules:
             return sys.modules[name]
-        spec = importlib.util.spec_from_file_location(name, self.module_path)
-        assert spec is not None and spec.loader is not None  # the file was just checked
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-        return module
+        try:
+            return _import(name, self.module_path)
+        except (SyntaxError, ImportError, NameError, OSError):
+            # A damaged cache file (a disk filled up, an edit by hand): build it again.
+            _build(self.entry, self.module_path, self.pickle_path)
+            return _import(name, self.module_path)
 
     @cached_property
     def symbolic(self) -> SymbolicModel:
         """The symbolic model (unpickled the first time it is asked for)."""
-        with self.pickle_path.open("rb") as fh:
-            return pickle.load(fh)  # our own cache file
+        try:
+            with self.pickle_path.open("rb") as fh:
+                return pickle.load(fh)  # our own cache file
+        except (pickle.UnpicklingError, EOFError, AttributeError, ImportError, OSError, ValueError):
+            return _build(self.entry, self.module_path, self.pickle_path)
+
+
+def _import(name: str, path: Path) -> types.ModuleType:
+    spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:
+        raise ImportError(f"cannot load {path}")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    sys.modules[name] = module
+    return module
+
+
+def _build(entry: Entry, module_path: Path, pickle_path: Path) -> SymbolicModel:
+    """Derive *entry* and write its cache files; returns the symbolic model."""
+    from equilibrist.numeric.codegen import generate_source
+
+    model = derive(entry)
+    _ = model.A, model.B  # computed once, stored with the model
+    source = generate_source(model)
+    _atomic_write(pickle_path, pickle.dumps(model, protocol=pickle.HIGHEST_PROTOCOL))
+    _atomic_write(module_path, source.encode())
+    return model
 
 
 _MEMO: dict[str, CompiledModel] = {}
@@ -135,13 +160,7 @@ def load(entry: Entry) -> CompiledModel:
     module_path = folder / f"{stem}.py"
     pickle_path = folder / f"{stem}.pkl"
     if not (module_path.exists() and pickle_path.exists()):
-        from equilibrist.numeric.codegen import generate_source
-
-        model = derive(entry)
-        _ = model.A, model.B  # computed once, stored with the model
-        source = generate_source(model)
-        _atomic_write(pickle_path, pickle.dumps(model, protocol=pickle.HIGHEST_PROTOCOL))
-        _atomic_write(module_path, source.encode())
+        _build(entry, module_path, pickle_path)
     compiled = CompiledModel(entry, key, module_path, pickle_path)
     _MEMO[memo_key] = compiled
     return compiled

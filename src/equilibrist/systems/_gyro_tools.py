@@ -165,7 +165,9 @@ def steady_precession_rates(system: System, theta: float, psi_dot: float) -> tup
             f"{psi_dot:g} rad/s: I_c cos(theta) phi_dot^2 + I_z psi_dot phi_dot = p has no real "
             f"root (it needs |psi_dot| >= {slowest:.6g} rad/s at this tilt)"
         )
-    if a == 0.0:
+    # cos(pi/2) is 6e-17 in floating point: a horizontal axis counts as
+    # cos(theta) = 0 (the fast root runs off to 1e17 rad/s otherwise).
+    if abs(math.cos(theta)) < 1e-9 or a == 0.0:
         raise NoSteadyPrecessionError(
             f"I_c cos(theta) = 0 at theta = {theta:g} rad: the relation is linear, its only root "
             f"is the slow precession phi_dot = p / (I_z psi_dot) = {p / b:.6g} rad/s"

@@ -107,10 +107,9 @@ def lookup_family(name: str) -> dict[str | None, Entry]:
     if name not in _FAMILIES:
         from equilibrist.errors import nearest
 
-        raise UnknownNameError(
-            f"unknown system {name!r}: {nearest(name, family_names())} "
-            f"(known systems: {', '.join(family_names())})"
-        )
+        hint = nearest(name, family_names())
+        known = "" if hint.startswith("expected") else f" (known systems: {', '.join(family_names())})"
+        raise UnknownNameError(f"unknown system {name!r}: {hint}{known}")
     return _FAMILIES[name]
 
 
