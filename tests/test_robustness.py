@@ -100,3 +100,63 @@ def test_damaged_cache_files_are_rebuilt(tmp_path, monkeypatch) -> None:
     again.functions.f(np.array([0, 0.1, 0, 0.0]), np.zeros(1), get_system("cartpole").p, out)
     assert np.allclose(out, get_system("cartpole").f([0, 0.1, 0, 0], [0]))
     assert again.symbolic.M.shape == (2, 2)
+
+
+@pytest.mark.parametrize(
+    ("argv", "needle"),
+    [
+        (["simulate", "cartpole", "--duration", "1e9", "--json"], "TiB of memory"),
+        (["batch", "cartpole", "--runs", "4", "--duration", "1e9", "--json"], "TiB of memory"),
+        (["batch", "cartpole", "--runs", "100000000000", "--duration", "1", "--json"], "TiB of memory"),
+        (["simulate", "cartpole", "--rate", "0.01", "--json"], "too slow for cartpole"),
+        (["export", "cartpole", "--rate", "1e-6", "--out", "unused"], "too slow for cartpole"),
+        (["simulate", "cartpole", "--reference", "file:/nonexistent.csv"], "does not exist"),
+    ],
+)
+def test_refused_before_anything_is_allocated(capsys, argv, needle) -> None:
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0]
+
+
+def test_results_that_are_not_results(tmp_path, capsys) -> None:
+    empty = tmp_path / "empty"
+    empty.touch()
+    junk = tmp_path / "junk.npz"
+    junk.write_bytes(b"not a zip file")
+    for command in ("plot", "animate"):
+        for path in (empty, junk):
+            assert main([command, str(path)]) == 2
+            err = capsys.readouterr().err.strip().splitlines()
+            assert len(err) == 1 and "is not a saved result" in err[0]
+
+
+def test_reference_file_with_spaces_and_its_errors(tmp_path, capsys) -> None:
+    spaced = tmp_path / "ref.txt"
+    spaced.write_text("# t r\n0 0\n1 0.1\n2 0.2\n")
+    assert main(["simulate", "cartpole", "--reference", f"file:{spaced}", "--duration", "0.5",
+                 "--noise", "off", "--json"]) == 0
+    capsys.readouterr()
+    unsorted = tmp_path / "bad.csv"
+    unsorted.write_text("0,0\n2,0.1\n1,0.2\n")
+    assert main(["simulate", "cartpole", "--reference", f"file:{unsorted}"]) == 2
+    assert "times that do not increase" in capsys.readouterr().err
+
+
+def test_batch_of_a_system_without_operating_point(capsys) -> None:
+    argv = ["batch", "gyroscope", "--runs", "3", "--x0", "phi=0", "theta=0.4:0.6", "psi=0",
+            "phi_dot=0", "theta_dot=0", "psi_dot=300", "--duration", "0.5", "--json"]
+    assert main(argv) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["runs"] == 3 and data["stayed_up"] == 3 and data["fallen"] == 0
+
+
+def test_fallen_run_metrics_fit_inside_the_run(capsys) -> None:
+    argv = ["simulate", "cartpole", "--x0", "theta=1.2", "--controller", "lqr", "--duration", "3", "--json"]
+    assert main(argv) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["fell"] is True
+    # Samples clipped times the period: at most one period past the last row's time.
+    assert data["time_saturated"] <= data["duration"] + 0.005 + 1e-12
+    assert data["fell_at"] == round(data["fell_at"], 12)

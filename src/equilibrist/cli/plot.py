@@ -9,6 +9,7 @@ between them.
 from __future__ import annotations
 
 import argparse
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -55,7 +56,7 @@ def load_result(path: str | Path) -> Any:
     try:
         with np.load(p, allow_pickle=False) as data:
             fmt = json.loads(str(data["meta"])).get("format", "")
-    except (OSError, ValueError, KeyError):
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
         fmt = ""
     if fmt.startswith("equilibrist-batch"):
         return BatchResult.load(p)

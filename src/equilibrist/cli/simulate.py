@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+import stat
 import sys
 from typing import Any
 
@@ -154,7 +156,14 @@ def show_progress(args: argparse.Namespace) -> bool:
     """A bar on stderr, except when --json output goes to a pipe (or --no-progress)."""
     if args.no_progress:
         return False
-    return not (args.json and not sys.stdout.isatty())
+    return not (args.json and _stdout_is_pipe())
+
+
+def _stdout_is_pipe() -> bool:
+    try:
+        return stat.S_ISFIFO(os.fstat(sys.stdout.fileno()).st_mode)
+    except (OSError, ValueError, AttributeError):  # no real file behind stdout (a test's capture)
+        return True
 
 
 def build_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:

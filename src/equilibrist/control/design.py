@@ -630,6 +630,16 @@ def design(
     plant = system.linearize(outputs=names)
     states, inputs = plant.state_names, plant.input_names
     n, m = plant.n_states, plant.n_inputs
+    if rate_hz is not None:
+        # A mode that grows by e^10 within one sample cannot be held by a
+        # sampled controller (and e^400 overflows the discretization).
+        fastest = float(np.max(np.abs(np.linalg.eigvals(plant.A)))) if n else 0.0
+        if fastest / rate_hz > 10.0:
+            raise DesignError(
+                f"a rate of {rate_hz:g} Hz is too slow for {system.key}: its fastest mode, "
+                f"{fastest:.4g} rad/s, changes by e^{fastest / rate_hz:.3g} within one sample; "
+                f"sample at {10 * fastest / (2 * math.pi):.3g} Hz or more"
+            )
 
     # Weights: defaults from the spec, or the user's; every problem at once.
     missing: list[str] = []

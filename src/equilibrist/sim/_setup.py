@@ -562,10 +562,10 @@ def build(
         est[:, n : n + m] = ctrl.Bd
         est[:, n + m :] = ctrl.Kf
 
-    times = np.arange(n_samples + 1) / run_rate
     n_rows = n_samples + 1
     check_memory(n_rows * (2 * n + ny + 4 * m + 2 * len(tracked) + 2) * 8.0,
                  f"a run of {n_rows} samples", None)
+    times = np.arange(n_samples + 1) / run_rate
     ref = np.zeros((n_rows, len(tracked)))
     if ref_signal is not None:
         ref = np.ascontiguousarray(ref_signal.evaluate(times, x_op[r_idx]), dtype=float)

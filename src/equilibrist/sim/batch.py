@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import math
 import time
+import zipfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -171,7 +172,8 @@ class BatchResult:
             "system": self.system,
             "runs": self.runs,
             "stayed_up": self.stayed_up,
-            "fell": int(np.count_nonzero(self.fell)),
+            # A count (a single run's "fell" is a flag: another name, another type).
+            "fallen": int(np.count_nonzero(self.fell)),
             "fraction_up": self.fraction_up,
             "steps": int(self.steps),
             "elapsed": self.elapsed,
@@ -208,7 +210,7 @@ class BatchResult:
             with np.load(p, allow_pickle=False) as data:
                 meta = json.loads(str(data["meta"]))
                 arrays = {k: data[k] for k in data.files if k != "meta"}
-        except (OSError, ValueError, KeyError) as exc:
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
             raise SimulationError(f"{p} is not a saved batch: {exc}") from None
         if meta.get("format") != FORMAT:
             raise SimulationError(f"{p} is not a saved batch")
@@ -339,9 +341,15 @@ def simulate_batch(
     if isinstance(runs, bool) or not isinstance(runs, int | np.integer) or runs < 1:
         raise SimulationError(f"runs must be a positive whole number, got {runs!r}")
     runs = int(runs)
+    # A system without a canonical point (the zxz gyroscope) has no default
+    # initial state: the settings are checked on the first run's.
+    template_x0 = None
+    if x0 is not None and not _setup._has_operating_point(system):
+        given = np.asarray(x0, dtype=float)
+        template_x0 = given[0] if given.ndim == 2 else given
     setup = _setup.build(
         system, controller, duration=duration, rate=rate, physics_step=physics_step,
-        integrator=integrator, rtol=rtol, atol=atol, plant=plant, x0=None, delay=delay,
+        integrator=integrator, rtol=rtol, atol=atol, plant=plant, x0=template_x0, delay=delay,
         noise=noise, reference=reference, events=events, outputs=None, region=region,
     )
     n, m = system.n_states, system.n_inputs
@@ -515,6 +523,8 @@ def sample_uniform(
     """
     if x_op is None:
         x_op, _ = _setup.operating_point(system, None)
+    _setup.check_memory(runs * (system.n_states + len(spread or {})) * 8.0,
+                        f"a batch of {runs} runs", None)
     gen = np.random.default_rng(seed_sequence(seed))
     x0s = np.tile(np.asarray(x_op, dtype=float), (runs, 1))
     problems = []

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import math
+import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -226,7 +227,7 @@ class SimResult:
         return {
             "system": self.system,
             "fell": bool(self.fell),
-            "fell_at": self.fell_at,
+            "fell_at": None if self.fell_at is None else round(float(self.fell_at), 12),
             "fell_state": self.fell_state,
             "stayed_up": not self.fell,
             "duration": float(self.time[-1]) if self.n_rows else 0.0,
@@ -234,6 +235,8 @@ class SimResult:
             "overshoot": overshoot,
             "peak_input": dict(zip(self.input_names, np.abs(self.commanded).max(axis=0).tolist(), strict=True)),
             "rms_input": dict(zip(self.input_names, np.sqrt(np.mean(self.applied**2, axis=0)).tolist(), strict=True)),
+            # Samples whose command was clipped, times the sample period (the
+            # compiled batch counts the same way, the last sample included).
             "time_saturated": float(np.count_nonzero(sat_rows) * dt),
             "final_error": dict(zip(watched, errors[-1].tolist(), strict=True)),
             "estimation_error_rms": est_rms,
@@ -269,7 +272,7 @@ class SimResult:
             "output_names": list(self.output_names),
             "reference_names": list(self.reference_names),
             "fell": self.fell,
-            "fell_at": self.fell_at,
+            "fell_at": None if self.fell_at is None else round(float(self.fell_at), 12),
             "fell_state": self.fell_state,
             "settings": dict(self.settings),
         }
@@ -290,7 +293,7 @@ class SimResult:
             with np.load(p, allow_pickle=False) as data:
                 meta = json.loads(str(data["meta"]))
                 arrays = {k: data[k] for k in data.files if k != "meta"}
-        except (OSError, ValueError, KeyError) as exc:
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
             raise SimulationError(f"{p} is not a saved simulation result: {exc}") from None
         if meta.get("format") != FORMAT:
             raise SimulationError(f"{p} is not a saved simulation result (format {meta.get('format')!r})")

@@ -15,6 +15,7 @@ set-point would.
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -170,15 +171,22 @@ class Samples:
                 if "times" not in data or "values" not in data:
                     raise SimulationError(f"{p} needs arrays 'times' and 'values'")
                 return cls(data["times"], data["values"], source=str(p))
+        text = p.read_text(errors="replace")
+        # Commas, or else white space, separate the columns.
+        delimiter = "," if "," in text else None
         try:
-            rows = np.genfromtxt(p, delimiter=",", comments="#", dtype=float)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # genfromtxt warns about an empty file
+                rows = np.genfromtxt(p, delimiter=delimiter, comments="#", dtype=float)
         except ValueError as exc:
             raise SimulationError(f"cannot read reference samples from {p}: {exc}") from None
         rows = np.atleast_2d(rows)
         if rows.size and np.all(np.isnan(rows[0])):
             rows = rows[1:]  # a header line
-        if rows.ndim != 2 or rows.shape[1] < 2:
-            raise SimulationError(f"{p}: expected rows of 'time, value' separated by commas")
+        if rows.ndim != 2 or rows.shape[0] == 0 or rows.shape[1] < 2:
+            raise SimulationError(
+                f"{p}: expected rows of 'time, value' (separated by commas or spaces)"
+            )
         return cls(rows[:, 0], rows[:, 1:], source=str(p))
 
     def evaluate(self, times: np.ndarray, base: np.ndarray) -> np.ndarray:
@@ -244,6 +252,8 @@ def parse_signal(text: str) -> Signal:
             return Square(float(amp), float(period))
         if kind == "file":
             return Samples.from_file(rest)
+    except SimulationError:
+        raise  # the file's own problem, said precisely
     except ValueError:
         pass
     raise SimulationError(

@@ -94,8 +94,8 @@ class FrameRenderer:
         room = 0.72 * self.width / (0.62 * dpi / 72.0 * max(len(title), 1))
         self.figure.text(0.01, 0.995, title, ha="left", va="top", fontsize=min(self.font, room),
                          color=COLORS["text"], weight="bold")
-        self.figure.text(0.01, 0.995 - line, self.scene.caption, ha="left", va="top",
-                         fontsize=self.font * 0.8, color="#666666")
+        self.caption_text = self.figure.text(0.01, 0.995 - line, self.scene.caption, ha="left",
+                                             va="top", fontsize=self.font * 0.8, color="#666666")
         self.time_text = self.figure.text(0.99, 0.995, "", ha="right", va="top",
                                           fontsize=self.font, family="monospace",
                                           color=COLORS["text"], weight="bold")
@@ -106,6 +106,7 @@ class FrameRenderer:
                                           fontsize=self.font, color="#d1263b", weight="bold")
         self._artists: dict[str, Any] = {}
         self._background: Any = None
+        self._fitted_speed: str | None = None
         self._gauges = [
             self._make_gauge(i, 0.01 + 1.2 * line + gauge_step * (n_in - 1 - i), gauge_h)
             for i in range(n_in)
@@ -130,6 +131,25 @@ class FrameRenderer:
                      solid_capstyle="butt", zorder=7)
         self.ax.text(xe - length / 2, ys + 0.015 * (y1 - y0), label, ha="center", va="bottom",
                      fontsize=self.font * 0.85, color=COLORS["text"], zorder=7)
+
+    def _fit_caption(self) -> None:
+        """Shrink the caption line so that it ends a gap before the speed
+        note beside it (or the frame's right edge): the two never run into
+        each other."""
+        renderer = self.canvas.get_renderer()
+        gap = 0.6 * self.font * self.figure.dpi / 72.0  # pixels
+        right = self.width * 0.99
+        if self.speed_text.get_text():
+            right = self.speed_text.get_window_extent(renderer).x0 - gap
+        left = self.caption_text.get_window_extent(renderer).x0
+        size = self.font * 0.8
+        self.caption_text.set_fontsize(size)
+        for _ in range(4):  # text width is nearly proportional to the font size
+            needed = self.caption_text.get_window_extent(renderer).x1 - left
+            if needed <= right - left or size <= 3.0:
+                break
+            size = max(3.0, size * (right - left) / needed * 0.98)
+            self.caption_text.set_fontsize(size)
 
     def _make_gauge(self, i: int, y: float, h: float) -> dict[str, Any]:
         name = self.scene.input_names[i]
@@ -238,6 +258,12 @@ class FrameRenderer:
         self.time_text.set_text("" if t is None else f"t = {t:6.2f} s")
         self.speed_text.set_text("" if math.isclose(speed, 1.0) else
                                  ("slow motion" if speed < 1 else "fast") + f" x{speed:g}")
+        if self.speed_text.get_text() != self._fitted_speed:
+            # The caption is static (drawn with the background): fit it
+            # beside the new speed note and take the background again.
+            self._fitted_speed = self.speed_text.get_text()
+            self._fit_caption()
+            self._background = None
         self.note_text.set_text(note)
         for i, g in enumerate(self._gauges):
             val = 0.0 if uu is None else float(uu[i])

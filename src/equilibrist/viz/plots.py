@@ -12,6 +12,7 @@ degrees (``degrees=False`` keeps radians). Runs are read through
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -58,6 +59,17 @@ def _figure(width: float, height: float, dpi: float = 100.0) -> Any:
     fig = Figure(figsize=(width, height), dpi=dpi, layout="constrained")
     FigureCanvasAgg(fig)
     return fig
+
+
+def _wrap(fig: Any, text: str, points: float = 10.0) -> str:
+    """*text* broken into lines that fit the figure's width (a long title
+    would otherwise run off both sides of a centred suptitle)."""
+    chars = max(20, int(fig.get_figwidth() * 72.0 / (0.6 * points)))
+    return "\n".join(textwrap.fill(line, chars) for line in text.splitlines() or [""])
+
+
+def _title(fig: Any, text: str) -> None:
+    fig.suptitle(_wrap(fig, text), fontsize="medium")
 
 
 def _finish(fig: Any, path: str | Path | None) -> Any:
@@ -214,7 +226,7 @@ def plot_response(
         if spec is not None and spec.is_last_row():
             a.set_xlabel("time [s]")
     _legend(fig, axes)
-    fig.suptitle(title if title is not None else _run_title(run), fontsize="medium")
+    _title(fig, title if title is not None else _run_title(run))
     return _finish(fig, path)
 
 
@@ -317,8 +329,7 @@ def plot_comparison(
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time [s]")
     _legend(fig, list(axes))
-    fig.suptitle(title or f"{getattr(first.system.spec, 'title', first.key)}: comparison",
-                 fontsize="medium")
+    _title(fig, title or f"{getattr(first.system.spec, 'title', first.key)}: comparison")
     return _finish(fig, path)
 
 
@@ -426,8 +437,8 @@ def plot_fan(
     axes[-1].set_xlabel("time [s]")
     _legend(fig, list(axes))
     n_fell = sum(fell)
-    fig.suptitle(title or f"{getattr(first.system.spec, 'title', first.key)}: {len(runs)} runs, "
-                 f"{n_fell} fell", fontsize="medium")
+    _title(fig, title or f"{getattr(first.system.spec, 'title', first.key)}: {len(runs)} runs, "
+                f"{n_fell} fell")
     return _finish(fig, path)
 
 
@@ -507,7 +518,7 @@ def plot_region_of_attraction(
     ax.plot([0], [0], marker="+", color="#111111", ms=10, ls="none")
     ax.set_xlabel(axis_label(f"initial {x_name}", ux))
     ax.set_ylabel(axis_label(f"initial {y_name}", uy))
-    ax.set_title(title or "region of attraction", fontsize="medium")
+    ax.set_title(_wrap(fig, title or "region of attraction"), fontsize="medium")
     return _finish(fig, path)
 
 
@@ -621,7 +632,7 @@ def plot_poles(
                     mew=1.5, label=label)
         ax.grid(alpha=0.3)
     _legend(fig, panels)
-    fig.suptitle(title or default_title, fontsize="medium")
+    _title(fig, title or default_title)
     return _finish(fig, path)
 
 
@@ -700,5 +711,5 @@ def plot_batch(batch: Any, path: str | Path | None = None, *, degrees: bool = Tr
                              u_unit))
     ax.grid(alpha=0.3)
     ax.legend(fontsize="small")
-    ax.set_title(head, fontsize="medium")
+    ax.set_title(_wrap(fig, head), fontsize="medium")
     return _finish(fig, path)

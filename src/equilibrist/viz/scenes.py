@@ -255,6 +255,9 @@ class Scene:
         n = len(states)
         pick = np.unique(np.linspace(0, n - 1, min(n, 80)).round().astype(int))
         pts = []
+        reach = self.reach(states)
+        if reach is not None:
+            pts.append(np.array([[reach[0], reach[2]], [reach[1], reach[3]]]))
         for k in pick:
             u = None if inputs is None or not len(inputs) else np.asarray(inputs)[k]
             for s in self.shapes(states[k], u, states[: k + 1]):
@@ -265,6 +268,18 @@ class Scene:
         span = max(float((hi - lo).max()), 1e-6)
         pad = 0.06 * span
         return (float(lo[0] - pad), float(hi[0] + pad), float(lo[1] - pad), float(hi[1] + pad))
+
+    def reach(self, states: np.ndarray) -> tuple[float, float, float, float] | None:
+        """``(xmin, xmax, ymin, ymax)`` that the view contains whatever the
+        swinging parts do between the states sampled by :meth:`extent`
+        (None: the sampled states alone size the view).
+
+        A pendulum's view holds the whole upper half of the circle its links
+        sweep about their pivot (their full length, upright or leaning to
+        horizontal on either side), so a link never leaves the top of the
+        frame as it swings.
+        """
+        return None
 
 
 class SeesawScene(Scene):
@@ -327,6 +342,14 @@ class _CartMixin:
                             COLORS["input"], z=5))
         return shapes, pivot
 
+    def _swing(self, states: np.ndarray, size: float, links: float) -> tuple[float, float, float, float]:
+        """The cart's travel, widened by *links* (the full length of the
+        links on the cart's pivot) to each side and above the pivot."""
+        xs = states[:, self._index["x"]]  # type: ignore[attr-defined]
+        w, h, r = 0.4 * size, 0.16 * size, 0.04 * size
+        side = max(links + 0.05 * size, w / 2 + w)  # the force arrow: a cart's width beside it
+        return (float(xs.min()) - side, float(xs.max()) + side, 0.0, r + h + links + 0.03 * size)
+
 
 def _ticks(size: float) -> np.ndarray:
     """Marks along the track every 10 % of *size* (so that motion shows)."""
@@ -363,6 +386,9 @@ class CartpoleScene(_CartMixin, Scene):
         out.append(_fill("pivot", circle(pivot, 0.03 * size, 20), COLORS["pivot"], z=6))
         return out
 
+    def reach(self, states):
+        return self._swing(states, 2 * self.params["l"], 2 * self.params["l"])
+
 
 class DoubleCartpoleScene(_CartMixin, Scene):
     """Cart with two links of full lengths l1, l2 at absolute angles."""
@@ -380,6 +406,10 @@ class DoubleCartpoleScene(_CartMixin, Scene):
         out.append(_fill("pivot", circle(pivot, 0.025 * size, 20), COLORS["pivot"], z=6))
         out.append(_fill("elbow", circle(elbow, 0.022 * size, 20), COLORS["pivot"], z=6))
         return out
+
+    def reach(self, states):
+        size = self.params["l1"] + self.params["l2"]
+        return self._swing(states, size, size)  # both links stretched out: l1 + l2
 
 
 def _spokes(key: str, center: np.ndarray, radius: float, angle: float) -> list[Shape]:
@@ -423,6 +453,14 @@ class WheeledPendulumScene(Scene):
         ]
         return out
 
+    def reach(self, states):
+        p = self.params
+        R, L = p["R"], p["L"]
+        xs = R * states[:, self._index["phi"]]
+        arm = 2 * L + 0.5 * max(0.9 * R, 0.3 * L)  # the body's length and half its width
+        side = max(arm, 1.35 * R + 0.18 * R)  # or the torque arrow around the wheel
+        return (float(xs.min()) - side, float(xs.max()) + side, 0.0, R + arm)
+
 
 class ReactionWheelScene(Scene):
     """Pendulum on a base pivot with its flywheel at the tip."""
@@ -448,6 +486,11 @@ class ReactionWheelScene(Scene):
             _fill("axle", circle(c, 0.1 * rw, 16), COLORS["pivot"], z=6),
         ]
         return out
+
+    def reach(self, states):
+        p = self.params
+        arm = p["L_w"] + 1.4 * disc_radius(p["I_w"], p["m_w"])  # the wheel and its torque arrow
+        return (-arm, arm, -0.15 * p["L_w"], arm)
 
 
 class BallBeamScene(Scene):

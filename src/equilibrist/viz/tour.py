@@ -419,8 +419,8 @@ def _extras(system: Any, d: Any, sub: Path, slug: str, sc: Scenario, *, progress
     runs = [mc.batch.run(i) for i in range(mc.batch.runs)]
     spread_text = ", ".join(f"{k} ±{100 * v:.0f} %" for k, v in spread.items())
     plot_fan(runs, sub / "monte_carlo.png",
-             title=f"{system.spec.title}: 40 runs with {spread_text} (the controller keeps its "
-                   f"nominal design); {mc.batch.stayed_up} stayed up")
+             title=f"{system.spec.title}: 40 runs with {spread_text}, nominal controller; "
+                   f"{mc.batch.stayed_up} stayed up")
     return [
         Image(f"{slug}/region_of_attraction.png", f"Region of attraction: each cell is a run started "
               f"at that {angle} and {rate_name} (other states at rest); green ones were caught."),
