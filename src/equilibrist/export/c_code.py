@@ -53,6 +53,10 @@ class Vectors:
     def n_steps(self) -> int:
         return int(self.u.shape[0])
 
+    def __repr__(self) -> str:  # the arrays are long: say what they are
+        return (f"Vectors(n_steps={self.n_steps}, measurements={self.y.shape[1]}, "
+                f"references={self.r.shape[1]}, inputs={self.u.shape[1]})")
+
 
 # -- numbers ------------------------------------------------------------------------------
 def literal(value: float, precision: str) -> str:
