@@ -99,7 +99,8 @@ class FrameRenderer:
         self.time_text = self.figure.text(0.99, 0.995, "", ha="right", va="top",
                                           fontsize=self.font, family="monospace",
                                           color=COLORS["text"], weight="bold")
-        self.speed_text = self.figure.text(0.99, 0.995 - line, "", ha="right", va="top",
+        self._line, self._speed_y = line, 0.995 - line
+        self.speed_text = self.figure.text(0.99, self._speed_y, "", ha="right", va="top",
                                            fontsize=self.font * 0.8, color="#666666")
         # What is happening now (a push), in red under the captions.
         self.note_text = self.figure.text(0.01, 0.995 - 2.1 * line, "", ha="left", va="top",
@@ -133,23 +134,23 @@ class FrameRenderer:
                      fontsize=self.font * 0.85, color=COLORS["text"], zorder=7)
 
     def _fit_caption(self) -> None:
-        """Shrink the caption line so that it ends a gap before the speed
-        note beside it (or the frame's right edge): the two never run into
-        each other."""
+        """Keep the caption line and the speed note beside it apart: when
+        the caption leaves no room for the note, the note moves down a line
+        (right-aligned, opposite the event note); a caption wider than the
+        frame is shrunk to fit it."""
         renderer = self.canvas.get_renderer()
-        gap = 0.6 * self.font * self.figure.dpi / 72.0  # pixels
-        right = self.width * 0.99
+        gap = 0.8 * self.font * self.figure.dpi / 72.0  # pixels
+        self.caption_text.set_fontsize(self.font * 0.8)
+        self.speed_text.set_y(self._speed_y)
+        caption = self.caption_text.get_window_extent(renderer)
+        room = self.width * 0.99 - caption.x0
+        if caption.width > room:
+            self.caption_text.set_fontsize(max(3.0, self.font * 0.8 * room / caption.width * 0.98))
+            caption = self.caption_text.get_window_extent(renderer)
         if self.speed_text.get_text():
-            right = self.speed_text.get_window_extent(renderer).x0 - gap
-        left = self.caption_text.get_window_extent(renderer).x0
-        size = self.font * 0.8
-        self.caption_text.set_fontsize(size)
-        for _ in range(4):  # text width is nearly proportional to the font size
-            needed = self.caption_text.get_window_extent(renderer).x1 - left
-            if needed <= right - left or size <= 3.0:
-                break
-            size = max(3.0, size * (right - left) / needed * 0.98)
-            self.caption_text.set_fontsize(size)
+            speed = self.speed_text.get_window_extent(renderer)
+            if caption.x1 + gap > speed.x0:
+                self.speed_text.set_y(self._speed_y - self._line)
 
     def _make_gauge(self, i: int, y: float, h: float) -> dict[str, Any]:
         name = self.scene.input_names[i]

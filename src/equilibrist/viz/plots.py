@@ -64,7 +64,7 @@ def _figure(width: float, height: float, dpi: float = 100.0) -> Any:
 def _wrap(fig: Any, text: str, points: float = 10.0) -> str:
     """*text* broken into lines that fit the figure's width (a long title
     would otherwise run off both sides of a centred suptitle)."""
-    chars = max(20, int(fig.get_figwidth() * 72.0 / (0.6 * points)))
+    chars = max(20, int(fig.get_figwidth() * 72.0 / (0.55 * points)))
     return "\n".join(textwrap.fill(line, chars) for line in text.splitlines() or [""])
 
 

@@ -345,7 +345,8 @@ class _CartMixin:
     def _swing(self, states: np.ndarray, size: float, links: float) -> tuple[float, float, float, float]:
         """The cart's travel, widened by *links* (the full length of the
         links on the cart's pivot) to each side and above the pivot."""
-        xs = states[:, self._index["x"]]  # type: ignore[attr-defined]
+        column: int = self._index["x"]  # type: ignore[attr-defined]
+        xs = states[:, column]
         w, h, r = 0.4 * size, 0.16 * size, 0.04 * size
         side = max(links + 0.05 * size, w / 2 + w)  # the force arrow: a cart's width beside it
         return (float(xs.min()) - side, float(xs.max()) + side, 0.0, r + h + links + 0.03 * size)

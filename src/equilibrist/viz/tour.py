@@ -418,8 +418,12 @@ def _extras(system: Any, d: Any, sub: Path, slug: str, sc: Scenario, *, progress
                      noise=Noise.from_design(d), record=True, progress=progress)
     runs = [mc.batch.run(i) for i in range(mc.batch.runs)]
     spread_text = ", ".join(f"{k} ±{100 * v:.0f} %" for k, v in spread.items())
+    if len(set(spread.values())) == 1:  # one spread for all: "m_p, l, m_c ±30 %"
+        short = f"{', '.join(spread)} ±{100 * next(iter(spread.values())):.0f} %"
+    else:
+        short = spread_text
     plot_fan(runs, sub / "monte_carlo.png",
-             title=f"{system.spec.title}: 40 runs with {spread_text}, nominal controller; "
+             title=f"{system.spec.title}: 40 runs with {short} (nominal controller), "
                    f"{mc.batch.stayed_up} stayed up")
     return [
         Image(f"{slug}/region_of_attraction.png", f"Region of attraction: each cell is a run started "
