@@ -70,7 +70,15 @@ def run(args: argparse.Namespace) -> int:
 
     outcomes = run_tour(systems, out, size=size, jobs=jobs, progress=progress,
                         log=lambda line: print(line, file=sys.stderr))
+    print("Each system balanced by its default digital LQG controller (a Kalman filter on its")
+    print("sensors, LQR feedback at the rig's sample rate) on the nonlinear model, with sensor")
+    print("and process noise, actuator limits and a push halfway through the run:")
+    print()
     print(common.format_table(SUMMARY_HEADER, [o.row for o in outcomes]))
     print()
-    print(f"report: {out / 'index.html'} ({time.perf_counter() - began:.0f} s)")
+    print("settling after push: time until the states that decide a fall are back near the")
+    print("operating point; peak input: largest force or torque applied (share of its limit);")
+    print("final error: the measured outputs at the end of the run, from their targets.")
+    print(f"report with plots, animations and equations: {out / 'index.html'} "
+          f"({time.perf_counter() - began:.0f} s)")
     return 0
