@@ -143,40 +143,17 @@ def derive(d: Derivation) -> SymbolicModel:
     import sympy as sp
     from sympy.physics import mechanics as me
 
+    from equilibrist.systems._ball import rolling_ball
+
     theta, R = d.q
     thetad, Rd = d.qd
     p, tau = d.p, d.u["tau"]
     m, r, g = p["m"], p["r"], p["g"]
     N, O = d.N, d.O
-    B = N.orientnew("B", "Axis", (theta, N.z))
-    B.set_ang_vel(N, thetad * N.z)
-
-    centre = O.locatenew("C", R * B.x + p["d"] * B.y)
-    centre.set_vel(N, centre.pos_from(O).dt(N))
-    # The beam's material point under the ball's centre: the reaction of the
-    # rolling friction acts there, so only the relative motion R_dot dissipates.
-    beam_point = O.locatenew("Cb", R * B.x + p["d"] * B.y)
-    beam_point.v2pt_theory(O, N, B)
-
-    # Spin from the rolling condition: the ball's and the beam's material
-    # points at the contact move together.
-    spin = sp.Symbol("spin")
-    S = N.orientnew("S", "Axis", (sp.Symbol("ball_angle"), N.z))
-    S.set_ang_vel(N, spin * N.z)
-    contact_ball = centre.locatenew("K", -r * B.y)
-    contact_ball.v2pt_theory(centre, N, S)
-    contact_beam = O.locatenew("Kb", R * B.x + (p["d"] - r) * B.y)
-    contact_beam.v2pt_theory(O, N, B)
-    slip = (contact_ball.vel(N) - contact_beam.vel(N)).express(B)
-    (spin_rate,) = sp.solve(slip.dot(B.x), spin)
-    if slip.dot(B.y).subs(spin, spin_rate) != 0:
-        raise RuntimeError("ball_beam: the rolling condition has a normal component")
-    S.set_ang_vel(N, spin_rate * N.z)
+    rolling = rolling_ball(N, O, theta, thetad, R, m=m, r=r, offset=p["d"], name="ball_beam")
+    B, ball, centre, beam_point = rolling.beam_frame, rolling.ball, rolling.centre, rolling.beam_point
 
     beam = me.RigidBody("beam", O, B, sp.Integer(0), (me.inertia(B, 0, 0, p["I"]), O))
-    ball = me.RigidBody(
-        "ball", centre, S, m, (me.inertia(S, 0, 0, sp.Rational(2, 5) * m * r**2), centre)
-    )
     potential = m * g * centre.pos_from(O).dot(N.y)
     kinetic = beam.kinetic_energy(N) + ball.kinetic_energy(N)
     friction = -p["b"] * Rd * B.x

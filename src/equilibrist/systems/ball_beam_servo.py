@@ -122,6 +122,8 @@ def derive(d: Derivation) -> SymbolicModel:
     import sympy as sp
     from sympy.physics import mechanics as me
 
+    from equilibrist.systems._ball import rolling_ball
+
     theta, R = d.q
     thetad, Rd = d.qd
     t = d.t
@@ -131,27 +133,8 @@ def derive(d: Derivation) -> SymbolicModel:
     # cancel below; they are not parameters of the reduced model.
     r, offset = sp.symbols("r d_offset", positive=True)
     N, O = d.N, d.O
-    # Same geometry as ball_beam, repeated here so this module's cache key
-    # covers all of its derivation.
-    B = N.orientnew("B", "Axis", (theta, N.z))
-    B.set_ang_vel(N, thetad * N.z)
-    centre = O.locatenew("C", R * B.x + offset * B.y)
-    centre.set_vel(N, centre.pos_from(O).dt(N))
-    beam_point = O.locatenew("Cb", R * B.x + offset * B.y)
-    beam_point.v2pt_theory(O, N, B)
-    spin = sp.Symbol("spin")
-    S = N.orientnew("S", "Axis", (sp.Symbol("ball_angle"), N.z))
-    S.set_ang_vel(N, spin * N.z)
-    contact_ball = centre.locatenew("K", -r * B.y)
-    contact_ball.v2pt_theory(centre, N, S)
-    contact_beam = O.locatenew("Kb", R * B.x + (offset - r) * B.y)
-    contact_beam.v2pt_theory(O, N, B)
-    slip = (contact_ball.vel(N) - contact_beam.vel(N)).express(B)
-    (spin_rate,) = sp.solve(slip.dot(B.x), spin)
-    S.set_ang_vel(N, spin_rate * N.z)
-    ball = me.RigidBody(
-        "ball", centre, S, m, (me.inertia(S, 0, 0, sp.Rational(2, 5) * m * r**2), centre)
-    )
+    rolling = rolling_ball(N, O, theta, thetad, R, m=m, r=r, offset=offset, name="ball_beam_servo")
+    B, ball, centre, beam_point = rolling.beam_frame, rolling.ball, rolling.centre, rolling.beam_point
     lagrangian = ball.kinetic_energy(N) - m * g * centre.pos_from(O).dot(N.y)
     friction = -p["b"] * Rd * B.x
     # theta is not a coordinate here: it is prescribed, so only R has an equation.
