@@ -19,6 +19,10 @@ class UnknownNameError(EquilibristError, KeyError, ValueError):
         return str(self.args[0]) if self.args else ""
 
 
+class DefinitionError(EquilibristError, ValueError):
+    """A system definition (a user's file, a model file, a spec) that cannot be used."""
+
+
 class ParameterError(EquilibristError, ValueError):
     """A parameter value that is out of range, not finite or malformed."""
 

@@ -19,7 +19,20 @@ class UsageError(EquilibristError, ValueError):
 
 
 def add_system(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("system", metavar="SYSTEM", help="a system name (see 'equilibrist systems')")
+    parser.add_argument(
+        "system", metavar="SYSTEM",
+        help="a system name (see 'equilibrist systems'), or the path of your own system: "
+             "a .py file, an MJCF model (.xml) or a URDF (.urdf)",
+    )
+
+
+def parameter_names(name: str) -> set[str]:
+    """Every parameter name of the system (or family, or system file) *name*."""
+    from equilibrist.systems import files, registry
+
+    if files.looks_like_path(name):
+        return set(files.from_file(name).spec.parameter_names)
+    return {p for entry in registry.lookup_family(name).values() for p in entry.spec.parameter_names}
 
 
 def add_set(parser: argparse.ArgumentParser) -> None:
@@ -77,11 +90,9 @@ def parse_vector(text: str | None, what: str, n: int | None = None) -> list[floa
 
 def system_settings(name: str, items: Sequence[str]) -> dict[str, object]:
     """The ``--set`` items as keyword settings of :func:`get_system`."""
-    from equilibrist.systems import registry
-
     raw = parse_assignments(items, "--set")
     settings: dict[str, object] = {}
-    known = {p for entry in registry.lookup_family(name).values() for p in entry.spec.parameter_names}
+    known = parameter_names(name)
     for key, value in raw.items():
         # Unknown names go through as they are: the system's validation
         # names them and suggests the nearest parameter.
@@ -92,9 +103,8 @@ def system_settings(name: str, items: Sequence[str]) -> dict[str, object]:
 def load_system(args: argparse.Namespace) -> Any:
     """The system named on the command line with its ``--set`` values."""
     from equilibrist.numeric.system import get_system
-    from equilibrist.systems import registry
 
-    registry.lookup_family(args.system)  # unknown names fail before parsing values
+    parameter_names(args.system)  # unknown names and bad files fail before parsing values
     return get_system(args.system, **system_settings(args.system, args.settings))
 
 

@@ -1,9 +1,10 @@
 """The on-disk cache of derived models.
 
 Deriving equations with sympy takes seconds; loading them must not. For each
-registered spec the cache holds the pickled :class:`SymbolicModel` (with its
+definition the cache holds the pickled :class:`SymbolicModel` (with its
 symbolic Jacobians) and the generated numeric module. Both are keyed by a
-hash of everything that shapes them: the system module's source, the whole
+hash of everything that shapes them: the definition's content (a catalogue
+module's source, a user's file, a script's function), the whole
 mechanics layer, the systems' private helper modules (``systems/_*.py``),
 the code-generation source, and the sympy version. Changing the
 model's source changes the key, so a stale model is never loaded.
@@ -19,6 +20,7 @@ import importlib.metadata
 import importlib.util
 import os
 import pickle
+import re
 import sys
 import tempfile
 import types
@@ -53,8 +55,10 @@ def _source_of(module_name: str) -> bytes:
 def model_key(entry: Entry) -> str:
     """Hash of everything the derived model depends on."""
     h = hashlib.sha256()
-    for name in (entry.module, "equilibrist.numeric.codegen"):
-        h.update(_source_of(name))
+    # The definition's own content: a user's file or function as handed
+    # over, a catalogue module's source.
+    h.update(entry.content if entry.content is not None else _source_of(entry.module))
+    h.update(_source_of("equilibrist.numeric.codegen"))
     # Everything a derivation may lean on: the mechanics layer and the
     # systems' private helper modules (a leading underscore).
     for folder in ("mechanics", "systems"):
@@ -81,7 +85,7 @@ def _atomic_write(path: Path, data: bytes) -> None:
 
 
 def _stem(entry: Entry, key: str) -> str:
-    safe = entry.spec.key.replace("[", "_").replace("]", "").replace("=", "_")
+    safe = re.sub(r"[^A-Za-z0-9_]+", "_", entry.spec.key).strip("_")[:40] or "system"
     return f"{safe}_{key}"
 
 
@@ -152,7 +156,7 @@ def derive(entry: Entry) -> SymbolicModel:
 def load(entry: Entry) -> CompiledModel:
     """The compiled model of *entry*, derived and cached on first use."""
     key = model_key(entry)
-    memo_key = f"{entry.spec.key}:{key}"
+    memo_key = f"{entry.key}:{key}"
     if memo_key in _MEMO:
         return _MEMO[memo_key]
     folder = cache_dir()

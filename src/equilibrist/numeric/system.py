@@ -8,6 +8,7 @@ vector ``p`` handed to the generated functions.
 from __future__ import annotations
 
 import math
+import os
 import types
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -81,7 +82,20 @@ class System:
 
     @property
     def key(self) -> str:
-        return self.spec.key
+        """What names the system in results and designs (a model file's path for imports)."""
+        return self.compiled.entry.key
+
+    @classmethod
+    def from_definition(cls, spec: SystemSpec, derive: registry.DeriveFunction, **params: object) -> System:
+        """A system built from a spec and its derivation, with no registration.
+
+        The derived model is cached by the content of the definition (the
+        function's source and the spec), so a system defined in a script or
+        a notebook loads as fast as a catalogue one the second time.
+        """
+        from equilibrist.systems import files
+
+        return _bind(files.from_definition(spec, derive), params)
 
     @property
     def state_names(self) -> tuple[str, ...]:
@@ -412,6 +426,9 @@ def _validated(spec: SystemSpec, values: Mapping[str, object]) -> dict[str, floa
             continue
         try:
             v = float(raw)  # type: ignore[arg-type]
+        except OverflowError:
+            problems.append(f"parameter {name} = {raw!r} is too large for double precision")
+            continue
         except (TypeError, ValueError):
             problems.append(f"parameter {name} = {raw!r} is not a number")
             continue
@@ -439,16 +456,31 @@ def _check_limits_order(spec: SystemSpec, params: Mapping[str, float]) -> None:
 def get_system(name: str, **settings: object) -> System:
     """The system *name* with parameters from *settings*.
 
-    *settings* holds parameter values and, for a family, its variant option
+    *name* is a catalogue name or the path of a system file: a Python file
+    that declares a system as a catalogue module does, an MJCF model
+    (``.xml``) or a URDF (``.urdf``). *settings* holds parameter values and,
+    for a family, its variant option
     (``get_system("gyroscope", euler="xyz", m=2.0)``).
     """
+    from equilibrist.systems import files
+
+    if not isinstance(name, (str, os.PathLike)):
+        raise UnknownNameError(
+            f"system: expected a system name or the path of a system file, got {type(name).__name__}"
+        )
+    name = os.fspath(name)
+    if files.looks_like_path(name):
+        return _bind(files.from_file(name), settings)
     option = registry.variant_option(name)
     registry.lookup_family(name)
     variant = None
     settings = dict(settings)
     if option is not None and option in settings:
         variant = str(settings.pop(option))
-    entry = registry.lookup(name, variant)
+    return _bind(registry.lookup(name, variant), settings)
+
+
+def _bind(entry: registry.Entry, settings: Mapping[str, object]) -> System:
     defaults = {p.name: float(p.default) for p in entry.spec.all_parameters}
     values = _validated(entry.spec, settings)
     defaults.update(values)
@@ -457,11 +489,18 @@ def get_system(name: str, **settings: object) -> System:
 
 
 def system_from_key(key: str, params: Mapping[str, float] | None = None) -> System:
-    """The system of a spec key (``"gyroscope[euler=xyz]"``) with *params* bound.
+    """The system of a key (``"gyroscope[euler=xyz]"``, a model file) with *params* bound.
 
     The inverse of :attr:`System.key` plus :attr:`System.params`: what a saved
     result or a design records is enough to rebuild its system.
     """
+    from equilibrist.systems import files
+
+    entry = files.defined(key)
+    if entry is not None:
+        return _bind(entry, dict(params or {}))
+    if files.looks_like_path(key):
+        return get_system(key, **dict(params or {}))
     name, variant = key, None
     if "[" in key and key.endswith("]"):
         name, _, rest = key.partition("[")

@@ -25,21 +25,52 @@ DeriveFunction = Callable[["Derivation"], "SymbolicModel"]
 
 @dataclass(frozen=True)
 class Entry:
+    """A system's definition: its spec and its derivation, as a value.
+
+    ``content`` is everything that shapes the derived model beyond the shared
+    mechanics layer (a user's file, a script's function); ``None`` for a
+    catalogue module, whose source is read from ``module``. ``origin`` is the
+    path of a user's file (the system's key, so that a saved result can
+    rebuild it), ``None`` otherwise.
+    """
+
     spec: SystemSpec
     derive: DeriveFunction
     module: str
+    content: bytes | None = None
+    origin: str | None = None
+
+    @property
+    def key(self) -> str:
+        """What names this system in results and designs: the file, or the spec key."""
+        return self.origin if self.origin is not None else self.spec.key
 
 
 _FAMILIES: dict[str, dict[str | None, Entry]] = {}
 _VARIANT_OPTION: dict[str, str] = {}
 _DEFAULT_VARIANT: dict[str, str] = {}
 _LOADED = False
+# Modules of this package that are machinery, not systems.
+_NOT_SYSTEMS = frozenset({"registry", "files"})
+
+
+# The attribute by which a decorated derivation carries its spec, so that a
+# user's file outside this package declares a system the same way.
+SPEC_ATTRIBUTE = "__equilibrist_spec__"
 
 
 def register(spec: SystemSpec, *, default: bool = False) -> Callable[[DeriveFunction], DeriveFunction]:
-    """Register *spec* with the decorated derivation function."""
+    """Declare the decorated function as the derivation of *spec*.
+
+    In a module of this package the pair joins the catalogue; anywhere else
+    (a user's file, a script) the function only carries its spec, and
+    :func:`equilibrist.get_system` builds the system from the file.
+    """
 
     def decorate(fn: DeriveFunction) -> DeriveFunction:
+        setattr(fn, SPEC_ATTRIBUTE, spec)
+        if not fn.__module__.startswith("equilibrist.systems."):
+            return fn
         family = _FAMILIES.setdefault(spec.name, {})
         value = None if spec.variant is None else spec.variant[1]
         if value in family:
@@ -61,7 +92,7 @@ def _load_all() -> None:
     import equilibrist.systems as pkg
 
     for info in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda m: m.name):
-        if info.name != "registry" and not info.name.startswith("_"):
+        if info.name not in _NOT_SYSTEMS and not info.name.startswith("_"):
             importlib.import_module(f"{pkg.__name__}.{info.name}")
     _LOADED = True
 

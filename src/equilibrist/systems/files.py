@@ -1,0 +1,155 @@
+"""Systems from values: a user's Python file, an MJCF or URDF model, a script's function.
+
+A system is a value built from a definition (a spec and a derivation), not an
+entry in a process-wide list. The catalogue's modules are definitions that
+ship with the package; this module builds the same kind of value from
+
+* a Python file that declares a system exactly as a catalogue module does
+  (a :class:`~equilibrist.mechanics.spec.SystemSpec` and a derivation
+  decorated with :func:`~equilibrist.systems.registry.register`);
+* a model file, MJCF (``.xml``) or URDF (``.urdf``), read through MuJoCo's own
+  compiler (:mod:`equilibrist.importers`, the ``models`` extra);
+* a spec and a derivation function handed over in a script or a notebook
+  (:func:`from_definition`).
+
+The derived-model cache is keyed by the definition's content (the file's
+bytes, the function's source), never by where a module lives. A system read
+from a file is named by the file's absolute path (:attr:`Entry.key`), so a
+saved result or design rebuilds it; a system defined in a script is known by
+its spec's name within the process that defined it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import inspect
+import marshal
+import os
+import sys
+from pathlib import Path
+
+from equilibrist.errors import DefinitionError, UnknownNameError
+from equilibrist.mechanics.spec import SystemSpec
+from equilibrist.systems.registry import SPEC_ATTRIBUTE, DeriveFunction, Entry, family_names
+
+PYTHON_SUFFIX = ".py"
+MODEL_SUFFIXES = (".xml", ".urdf")
+
+# Definitions handed over in this process (by spec key), and files read (by
+# content hash): building the same definition twice gives the same entry.
+_DEFINED: dict[str, Entry] = {}
+_FROM_FILES: dict[tuple[str, str], Entry] = {}
+
+
+def looks_like_path(name: str) -> bool:
+    """Whether a command line's SYSTEM names a file rather than a catalogue entry."""
+    return name.lower().endswith((PYTHON_SUFFIX, *MODEL_SUFFIXES)) or "/" in name or os.sep in name
+
+
+def from_file(path: str | os.PathLike[str]) -> Entry:
+    """The definition in the file *path* (``.py``, MJCF ``.xml`` or ``.urdf``)."""
+    given = os.fspath(path)
+    file = Path(given).expanduser()
+    suffix = file.suffix.lower()
+    if suffix not in (PYTHON_SUFFIX, *MODEL_SUFFIXES):
+        raise UnknownNameError(
+            f"system file {given!r}: expected a .py file, an MJCF model (.xml) or a URDF (.urdf)"
+        )
+    try:
+        data = file.read_bytes()
+    except FileNotFoundError:
+        raise UnknownNameError(f"system file {given!r} does not exist") from None
+    except IsADirectoryError:
+        raise UnknownNameError(f"system file {given!r} is a folder, expected a file") from None
+    except OSError as exc:
+        raise UnknownNameError(f"system file {given!r} cannot be read: {exc.strerror}") from None
+    resolved = str(file.resolve())
+    digest = hashlib.sha256(data).hexdigest()
+    memo = (resolved, digest)
+    if memo in _FROM_FILES:
+        return _FROM_FILES[memo]
+    if suffix == PYTHON_SUFFIX:
+        entry = _from_python(data, resolved, digest)
+    else:
+        from equilibrist.importers import load_model_file
+
+        entry = load_model_file(file, origin=resolved, content=data)
+    _FROM_FILES[memo] = entry
+    return entry
+
+
+def _from_python(data: bytes, origin: str, digest: str) -> Entry:
+    """Run a user's system file and take the one system it declares."""
+    module_name = f"equilibrist_user_{digest[:16]}"
+    module = sys.modules.get(module_name)
+    if module is None:
+        loader_spec = importlib.util.spec_from_file_location(module_name, origin)
+        if loader_spec is None or loader_spec.loader is None:
+            raise DefinitionError(f"{origin}: cannot be loaded as a Python module")
+        module = importlib.util.module_from_spec(loader_spec)
+        sys.modules[module_name] = module
+        try:
+            loader_spec.loader.exec_module(module)
+        except Exception as exc:  # the user's own code: one line that says where
+            del sys.modules[module_name]
+            raise DefinitionError(f"{origin}: {_where(exc, origin)}{type(exc).__name__}: {exc}") from None
+    found = [
+        obj for obj in vars(module).values()
+        if callable(obj) and isinstance(getattr(obj, SPEC_ATTRIBUTE, None), SystemSpec)
+        and getattr(obj, "__module__", None) == module_name
+    ]
+    if len(found) != 1:
+        what = "no derivation decorated with @register(SPEC)" if not found else (
+            f"{len(found)} systems ({', '.join(getattr(f, SPEC_ATTRIBUTE).name for f in found)})"
+        )
+        raise DefinitionError(f"{origin}: expected one system, found {what}")
+    derive = found[0]
+    spec: SystemSpec = getattr(derive, SPEC_ATTRIBUTE)
+    return Entry(spec, derive, module_name, content=data, origin=origin)
+
+
+def _where(exc: BaseException, origin: str) -> str:
+    tb = exc.__traceback__
+    line = None
+    while tb is not None:
+        if tb.tb_frame.f_code.co_filename == origin:
+            line = tb.tb_lineno
+        tb = tb.tb_next
+    return f"line {line}: " if line is not None else ""
+
+
+def _function_content(derive: DeriveFunction) -> bytes:
+    try:
+        return inspect.getsource(derive).encode()
+    except (OSError, TypeError):  # defined where no source is kept (an exec'd string)
+        code = getattr(derive, "__code__", None)
+        if code is None:
+            raise DefinitionError(
+                f"the derivation {derive!r} must be a Python function (got {type(derive).__name__})"
+            ) from None
+        return marshal.dumps(code)
+
+
+def from_definition(spec: SystemSpec, derive: DeriveFunction) -> Entry:
+    """The definition of a system handed over as values (a script, a notebook)."""
+    if not isinstance(spec, SystemSpec):
+        raise DefinitionError(f"spec must be a SystemSpec, got {type(spec).__name__}")
+    if not callable(derive):
+        raise DefinitionError(f"derive must be a function of the Derivation, got {type(derive).__name__}")
+    if spec.name in family_names():
+        raise DefinitionError(
+            f"the name {spec.name!r} belongs to the catalogue: give your system another name"
+        )
+    content = _function_content(derive) + repr(spec).encode()
+    previous = _DEFINED.get(spec.key)
+    if previous is not None and previous.content == content:
+        return previous
+    entry = Entry(spec, derive, getattr(derive, "__module__", "__main__") or "__main__", content=content)
+    _DEFINED[spec.key] = entry
+    return entry
+
+
+def defined(key: str) -> Entry | None:
+    """The definition handed over in this process under *key*, if any."""
+    return _DEFINED.get(key)
