@@ -150,6 +150,11 @@ class SystemSpec:
     # designs and simulations, and the rate at which ``sensor_noise`` is
     # sampled (its standard deviations are per sample).
     control_rate: float = 200.0
+    # The stable rest configuration a swing-up starts from (coordinates not
+    # named are zero, rates zero); None when the rig has no swing-up task.
+    # What a controller is asked to do lives in :mod:`equilibrist.tasks`;
+    # the rig only states where it hangs.
+    hanging: dict[str, float] | None = None
 
     @property
     def key(self) -> str:

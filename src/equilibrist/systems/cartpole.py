@@ -24,6 +24,7 @@ Parameters
     b_c     0         N s/m     cart viscous friction (force -b_c x_dot)
     b_p     0         N m s     pivot viscous friction (torque -b_p theta_dot)
     g       9.8       m/s^2     gravity
+    x_max   1         m         half length of the track (swing-up task)
     ======  ========  ========  ==========================================
 
 Operating point
@@ -62,6 +63,8 @@ SPEC = SystemSpec(
         nonnegative("b_c", 0.0, "N*s/m", "cart viscous friction"),
         nonnegative("b_p", 0.0, "N*m*s/rad", "pivot viscous friction"),
         positive("g", 9.8, "m/s^2", "gravitational acceleration", note="seed 001 table"),
+        positive("x_max", 1.0, "m", "half length of the track (the swing-up task's bound on x)",
+                 note="SYSTEMS.md, Tasks"),
     ),
     inputs=(Input("F", "N", "horizontal force on the cart, +x", -200.0, 200.0),),
     outputs=("x", "theta"),
@@ -78,6 +81,7 @@ SPEC = SystemSpec(
     # 4096-count encoders: quantization of 1.5 mm and 1.5 mrad.
     sensor_noise={"x": 1.5e-3, "theta": 1.5e-3},
     process_noise={"x_dot": 0.05, "theta_dot": 0.05},
+    hanging={"theta": math.pi},
 )
 
 

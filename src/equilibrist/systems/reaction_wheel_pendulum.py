@@ -112,6 +112,7 @@ SPEC = SystemSpec(
     # quadrature encoder on the pivot (0.77 mrad steps).
     sensor_noise={"phi": 1.5e-3, "theta": 7.7e-4},
     process_noise={"phi_dot": 0.5, "theta_dot": 0.1},
+    hanging={"theta": math.pi},
 )
 
 

@@ -1,0 +1,219 @@
+"""Tasks: what a controller is asked to do with a system.
+
+A system is the physics (parameters, inputs, sensors); a task says where a
+run starts, what counts as a fall, what it costs, at what rate the
+controller runs and for how long (dm_control's domain/task split). The
+environments, the demo, batches and studies read tasks; systems do not know
+about them.
+
+Two tasks exist:
+
+``balance``
+    Every system with an input and an operating point. A run starts at the
+    operating point, each coordinate that decides a fall (``spec.region``)
+    drawn uniformly within a quarter of its Bryson scale
+    (``spec.design_scales``; the others and the rates start there); it falls
+    when a state leaves the system's region (``spec.region``).
+``swingup``
+    Rigs that state where they hang (``spec.hanging``: the cart-pole, the
+    reaction-wheel pendulum, the rotary pendulum, the acrobot). A run starts
+    hanging at rest with each hanging coordinate offset uniformly by up to
+    0.05 rad, and ends balanced at the operating point. Only the track
+    bounds a swing-up: the cart-pole leaves its track at ``|x| > x_max``.
+
+The cost is the quadratic one of the default design: ``Q`` and ``R`` from
+Bryson's rule, ``1 / scale^2`` on the diagonal.
+
+Examples
+--------
+>>> from equilibrist import get_system
+>>> task = get_task(get_system("cartpole"), "swingup")      # doctest: +SKIP
+>>> x0 = task.draw_initial(np.random.default_rng(1))         # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from equilibrist.errors import DesignError, UnknownNameError, nearest
+from equilibrist.numeric.system import System
+
+TASK_NAMES = ("balance", "swingup")
+
+# Seconds a run of each task lasts (an environment's truncation, the demo's run).
+DURATION = {"balance": 10.0, "swingup": 15.0}
+# The balance start: each coordinate within this share of its Bryson scale.
+BALANCE_SPREAD = 0.25
+# The swing-up start: hanging, each hanging coordinate offset by up to this [rad].
+SWINGUP_OFFSET = 0.05
+# A track parameter bounds the cart's coordinate during a swing-up.
+TRACK_PARAMETER, TRACK_STATE = "x_max", "x"
+
+
+@dataclass(frozen=True, eq=False)
+class Task:
+    """One task on one bound system.
+
+    Attributes
+    ----------
+    name:
+        ``"balance"`` or ``"swingup"``.
+    system:
+        The bound system the task is posed on.
+    rate:
+        The controller's sample rate [Hz] (the rig's ``control_rate``).
+    duration:
+        Length of a run [s].
+    start:
+        The nominal initial state (absolute).
+    spread:
+        Half-width of the uniform draw around ``start``, per state.
+    region:
+        ``{state: (low, high)}`` (absolute) outside which the run has fallen.
+    x_op, u_op:
+        The operating point the task ends at.
+    state_scales, input_scales:
+        Bryson scales of the cost (largest acceptable deviations).
+    """
+
+    name: str
+    system: System
+    rate: float
+    duration: float
+    start: np.ndarray
+    spread: np.ndarray
+    region: Mapping[str, tuple[float, float]]
+    x_op: np.ndarray
+    u_op: np.ndarray
+    state_scales: np.ndarray
+    input_scales: np.ndarray
+
+    @property
+    def id(self) -> str:
+        """``<system>-<task>`` (the environment id's middle part)."""
+        return f"{self.system.name}-{self.name}"
+
+    @property
+    def Q(self) -> np.ndarray:
+        """State weight of the quadratic cost (Bryson's rule)."""
+        return np.diag(1.0 / self.state_scales**2)
+
+    @property
+    def R(self) -> np.ndarray:
+        """Input weight of the quadratic cost (Bryson's rule)."""
+        return np.diag(1.0 / self.input_scales**2)
+
+    @property
+    def period(self) -> float:
+        return 1.0 / self.rate
+
+    @property
+    def n_samples(self) -> int:
+        """Controller samples in a run."""
+        return math.ceil(self.duration * self.rate - 1e-9)
+
+    def draw_initial(self, rng: np.random.Generator) -> np.ndarray:
+        """An initial state drawn from the task's distribution with *rng*."""
+        return self.start + rng.uniform(-1.0, 1.0, self.start.size) * self.spread
+
+    def draw_initials(self, rng: np.random.Generator, runs: int) -> np.ndarray:
+        """``runs`` initial states (rows) drawn with *rng*."""
+        return self.start + rng.uniform(-1.0, 1.0, (int(runs), self.start.size)) * self.spread
+
+    def cost(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Quadratic stage cost ``dx' Q dx + du' R du`` (rows of *x*, *u*; or one pair)."""
+        dx = (np.asarray(x, dtype=float) - self.x_op) / self.state_scales
+        du = (np.asarray(u, dtype=float) - self.u_op) / self.input_scales
+        return np.sum(dx * dx, axis=-1) + np.sum(du * du, axis=-1)
+
+    def fallen(self, x: np.ndarray) -> bool:
+        """Whether the state *x* is outside the task's region."""
+        for name, (lo, hi) in self.region.items():
+            v = float(x[self.system.state_index(name)])
+            if not lo <= v <= hi:
+                return True
+        return False
+
+    def describe(self) -> dict[str, object]:
+        names = self.system.state_names
+        return {
+            "task": self.name,
+            "system": self.system.key,
+            "rate": self.rate,
+            "duration": self.duration,
+            "start": dict(zip(names, self.start.tolist(), strict=True)),
+            "spread": dict(zip(names, self.spread.tolist(), strict=True)),
+            "region": {k: [lo, hi] for k, (lo, hi) in self.region.items()},
+        }
+
+
+def task_names(system: System) -> tuple[str, ...]:
+    """The tasks *system* offers."""
+    if not system.n_inputs or system.spec.operating_point is None:
+        return ()
+    names = ["balance"]
+    if system.spec.hanging is not None:
+        names.append("swingup")
+    return tuple(names)
+
+
+def _scales(system: System, names: tuple[str, ...]) -> np.ndarray:
+    scales = system.spec.design_scales
+    missing = [n for n in names if not scales.get(n, 0.0) > 0]
+    if missing:
+        raise DesignError(
+            f"{system.key} has no design scale for {', '.join(missing)}: a task's cost needs "
+            "the largest acceptable deviation of every state and input"
+        )
+    return np.array([float(scales[n]) for n in names])
+
+
+def get_task(system: System, name: str) -> Task:
+    """The task *name* (``"balance"``, ``"swingup"``) posed on *system*."""
+    if not isinstance(name, str):
+        raise UnknownNameError(f"task: expected a task name, got {type(name).__name__}")
+    offered = task_names(system)
+    if name not in offered:
+        if name in TASK_NAMES:
+            why = "it has no input" if not system.n_inputs else f"it offers {', '.join(offered) or 'none'}"
+            raise UnknownNameError(f"{system.key} has no task {name!r}: {why}")
+        raise UnknownNameError(f"unknown task {name!r}: {nearest(name, TASK_NAMES)}")
+    eq = system.operating_point()
+    names = system.state_names
+    state_scales = _scales(system, names)
+    input_scales = _scales(system, system.input_names)
+    nq = len(system.spec.coordinates)
+    spread = np.zeros(system.n_states)
+    if name == "balance":
+        start = eq.x.copy()
+        for k in range(nq):
+            if names[k] in system.spec.region:
+                spread[k] = BALANCE_SPREAD * state_scales[k]
+        region = dict(system.spec.region)
+    else:
+        hanging = system.spec.hanging or {}
+        start = np.zeros(system.n_states)
+        for coord, value in hanging.items():
+            k = system.state_index(coord)
+            start[k] = float(value)
+            spread[k] = SWINGUP_OFFSET
+        region = {}
+        if TRACK_PARAMETER in system.params and TRACK_STATE in names:
+            bound = float(system.params[TRACK_PARAMETER])
+            region[TRACK_STATE] = (-bound, bound)
+    for arr in (start, spread):
+        arr.setflags(write=False)
+    return Task(
+        name=name, system=system, rate=float(system.spec.control_rate), duration=DURATION[name],
+        start=start, spread=spread, region=region, x_op=eq.x, u_op=eq.u,
+        state_scales=state_scales, input_scales=input_scales,
+    )
+
+
+def all_tasks(system: System) -> tuple[Task, ...]:
+    """Every task *system* offers."""
+    return tuple(get_task(system, n) for n in task_names(system))
