@@ -69,7 +69,7 @@ def register(spec: SystemSpec, *, default: bool = False) -> Callable[[DeriveFunc
 
     def decorate(fn: DeriveFunction) -> DeriveFunction:
         setattr(fn, SPEC_ATTRIBUTE, spec)
-        if not fn.__module__.startswith("equilibrist.systems."):
+        if not (getattr(fn, "__module__", None) or "").startswith("equilibrist.systems."):
             return fn
         family = _FAMILIES.setdefault(spec.name, {})
         value = None if spec.variant is None else spec.variant[1]
@@ -103,10 +103,13 @@ _ORDER = (
     "double_cartpole",
     "wheeled_pendulum",
     "reaction_wheel_pendulum",
+    "furuta",
     "ball_beam",
     "ball_beam_servo",
     "gyroscope",
     "cmg_robot",
+    "acrobot",
+    "pendubot",
 )
 
 
