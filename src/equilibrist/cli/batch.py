@@ -33,7 +33,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     add_run_options(p)
     p.add_argument("--runs", required=True, metavar="N", help="number of runs")
-    p.add_argument("--spread", action="extend", nargs="+", default=[], metavar="PARAM=REL",
+    common.add_items(p, "--spread", marker="=", metavar="PARAM=REL",
                    help="relative spread of a parameter (uniform)")
     p.add_argument("--workers", metavar="N", help="threads (default: all cores)")
     p.add_argument("--trajectories", action="store_true",

@@ -18,9 +18,63 @@ class UsageError(EquilibristError, ValueError):
     """A malformed command-line value."""
 
 
+STRAYS = "_stray_words"
+
+
+class ItemsAction(argparse.Action):
+    """A repeatable option taking several items (``--set m_p=2 l=0.4``).
+
+    argparse hands such an option every word up to the next option, so a
+    SYSTEM written after it (``linearize --set m_p=2 cartpole``) would be
+    swallowed. Items contain ``marker`` (``=`` or ``:``); a word that does
+    not is kept aside, and the command line takes it as the SYSTEM (or
+    names it as out of place).
+    """
+
+    def __init__(self, option_strings: Sequence[str], dest: str, *, marker: str, **kwargs: Any) -> None:
+        kwargs.setdefault("nargs", "+")
+        kwargs.setdefault("default", [])
+        super().__init__(option_strings, dest, **kwargs)
+        self.marker = marker
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: Any, option_string: str | None = None) -> None:
+        items = list(getattr(namespace, self.dest, None) or [])
+        strays = list(getattr(namespace, STRAYS, None) or [])
+        for k, value in enumerate(values):
+            # The first word is the option's own, right or wrong: its parser
+            # says what is wrong with it.
+            if k == 0 or self.marker in value:
+                items.append(value)
+            else:
+                strays.append((option_string, value))
+        setattr(namespace, self.dest, items)
+        setattr(namespace, STRAYS, strays)
+
+
+def add_items(parser: argparse.ArgumentParser, option: str, *, marker: str, metavar: str,
+              help: str, dest: str | None = None) -> None:
+    """A repeatable option of several ``marker``-separated items (see :class:`ItemsAction`)."""
+    kwargs: dict[str, Any] = {"dest": dest} if dest else {}
+    parser.add_argument(option, action=ItemsAction, marker=marker, metavar=metavar, help=help, **kwargs)
+
+
+def take_strays(args: argparse.Namespace) -> None:
+    """Give a word that followed a list option to SYSTEM, or refuse it in one line."""
+    strays = list(getattr(args, STRAYS, None) or [])
+    if strays and hasattr(args, "system") and args.system is None:
+        args.system = strays.pop(0)[1]
+    if strays:
+        option, word = strays[0]
+        raise UsageError(f"{word!r} after {option} is not one of its items; SYSTEM goes before the options")
+    if getattr(args, "needs_system", False) and args.system is None:
+        raise UsageError("the following arguments are required: SYSTEM")
+
+
 def add_system(parser: argparse.ArgumentParser) -> None:
+    parser.set_defaults(needs_system=True)
     parser.add_argument(
-        "system", metavar="SYSTEM",
+        "system", metavar="SYSTEM", nargs="?", default=None,
         help="a system name (see 'equilibrist systems'), or the path of your own system: "
              "a .py file, an MJCF model (.xml) or a URDF (.urdf)",
     )
@@ -36,15 +90,8 @@ def parameter_names(name: str) -> set[str]:
 
 
 def add_set(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--set",
-        dest="settings",
-        action="extend",
-        nargs="+",
-        default=[],
-        metavar="NAME=VALUE",
-        help="set parameters, or a variant option such as euler=xyz (repeatable)",
-    )
+    add_items(parser, "--set", dest="settings", marker="=", metavar="NAME=VALUE",
+              help="set parameters, or a variant option such as euler=xyz (repeatable)")
 
 
 def add_json(parser: argparse.ArgumentParser) -> None:

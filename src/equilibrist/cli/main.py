@@ -22,7 +22,7 @@ from equilibrist import __version__
 from equilibrist.errors import EquilibristError
 
 # Order of the subcommands in --help; modules not listed come after.
-_ORDER = ("systems", "show", "dynamics", "linearize", "linkage", "design", "simulate", "batch",
+_ORDER = ("systems", "show", "dynamics", "linearize", "linkage", "design", "simulate", "batch", "sweep",
           "plot", "animate", "export", "demo")
 
 
@@ -74,6 +74,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not getattr(args, "func", None):
             parser.print_help()
             return 2
+        from equilibrist.cli.common import take_strays
+
+        take_strays(args)
         # Numerical warnings of numpy and scipy are not messages for a user of
         # the command line: what goes wrong is reported as an error.
         with warnings.catch_warnings():

@@ -56,13 +56,13 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--integrator", choices=("rk4", "adaptive"), default="rk4")
     p.add_argument("--plant", choices=("nonlinear", "linear"), default="nonlinear",
                    help="the system's own dynamics (default) or its linearization")
-    p.add_argument("--x0", action="extend", nargs="+", default=[], metavar="NAME=VALUE",
+    common.add_items(p, "--x0", marker="=", metavar="NAME=VALUE",
                    help="initial state components")
-    p.add_argument("--push", action="extend", nargs="+", default=[], metavar="T:VALUE",
+    common.add_items(p, "--push", marker=":", metavar="T:VALUE",
                    help="a force pulse VALUE on the first input at T (T:VALUE[:DURATION])")
-    p.add_argument("--kick", action="extend", nargs="+", default=[], metavar="T:STATE=VALUE",
+    common.add_items(p, "--kick", marker="=", metavar="T:STATE=VALUE",
                    help="add VALUE to STATE at time T")
-    p.add_argument("--change", action="extend", nargs="+", default=[], metavar="T:NAME=VALUE",
+    common.add_items(p, "--change", marker="=", metavar="T:NAME=VALUE",
                    help="change a plant parameter at time T")
     p.add_argument("--delay", action="store_true", help="apply each command one sample late")
     p.add_argument("--noise", choices=("on", "off"), default="on",
