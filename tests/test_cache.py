@@ -68,3 +68,50 @@ def test_cached_symbolic_model_equals_a_fresh_derivation(fresh_cache) -> None:
     diff = (cached.f - fresh.f).applyfunc(sp.simplify)
     assert diff == sp.zeros(*diff.shape)
     assert (cached.A - fresh.A).applyfunc(sp.simplify) == sp.zeros(*cached.A.shape)
+
+
+@pytest.mark.parametrize(
+    "damage",
+    [b"", b"N_STATES = 4\n", b"def f(:\n", b"raise RuntimeError('planted')\n",
+     b"N_STATES = 7\nN_INPUTS = 1\nN_Q = 2\nCONSERVED = ()\n"
+     b"f = jac = mass_matrix = energy = conserved = None\n"],
+    ids=["empty", "truncated", "syntax", "raises", "wrong-size"],
+)
+def test_damaged_generated_model_is_rebuilt(fresh_cache, damage) -> None:
+    entry = registry.lookup("cartpole")
+    compiled = cache.load(entry)
+    compiled.module_path.write_bytes(damage)
+    cache._MEMO.clear()
+    again = cache.load(entry)
+    out = np.empty(4)
+    p = np.array([10, 1, 0.5, 0.08333, 0.0, 0.0, 9.8, 1.0, -200, 200.0])
+    again.functions.f(np.array([0.0, 0.1, 0.0, 0.0]), np.array([0.0]), p, out)
+    # The pole falls away from upright: the independent textbook value of theta_ddot.
+    m_c, m_p, l, I_p, g = 10, 1, 0.5, 0.08333, 9.8
+    d = I_p * (m_c + m_p) + m_c * m_p * l**2
+    expected = m_p * g * l * (m_c + m_p) * np.sin(0.1) / (d + m_p**2 * l**2 * np.sin(0.1) ** 2)
+    assert out[3] == pytest.approx(expected, rel=1e-12)
+
+
+@pytest.mark.parametrize("damage", [b"", b"garbage", b"\x80\x05K\x03."], ids=["empty", "garbage", "an-int"])
+def test_damaged_symbolic_model_is_rebuilt(fresh_cache, damage) -> None:
+    entry = registry.lookup("cartpole")
+    compiled = cache.load(entry)
+    compiled.pickle_path.write_bytes(damage)
+    cache._MEMO.clear()
+    model = cache.load(entry).symbolic
+    assert model.spec_key == "cartpole" and model.M.shape == (2, 2)
+
+
+def test_cache_folder_problems_name_the_variable(tmp_path, monkeypatch) -> None:
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    shared.chmod(0o777)
+    for where, expected in ((a_file, "is not a folder"), (a_file / "below", "cannot be created"),
+                            (shared, "can be written by other users")):
+        monkeypatch.setenv("EQUILIBRIST_CACHE", str(where))
+        with pytest.raises(cache.CacheError, match="EQUILIBRIST_CACHE") as info:
+            cache.cache_dir()
+        assert expected in str(info.value)

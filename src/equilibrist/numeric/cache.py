@@ -21,6 +21,7 @@ import importlib.util
 import os
 import pickle
 import re
+import stat
 import sys
 import tempfile
 import types
@@ -29,6 +30,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from equilibrist.errors import EquilibristError
 from equilibrist.systems.registry import Entry
 
 if TYPE_CHECKING:  # sympy is imported only when a model is derived or unpickled
@@ -37,10 +39,39 @@ if TYPE_CHECKING:  # sympy is imported only when a model is derived or unpickled
 SCHEMA = "3"
 
 
+class CacheError(EquilibristError, OSError):
+    """The cache folder cannot be used (it names the setting that chose it)."""
+
+
 def cache_dir() -> Path:
+    """The cache folder, created if missing; refused if it is unusable or not private.
+
+    The folder holds code that is imported and models that are unpickled, so
+    a folder that other users can write to is refused: one of them could
+    plant a file that runs as you.
+    """
     root = os.environ.get("EQUILIBRIST_CACHE")
     base = Path(root) if root else Path.home() / ".cache" / "equilibrist"
-    base.mkdir(parents=True, exist_ok=True)
+    where = f"the cache folder EQUILIBRIST_CACHE={root}" if root else f"the cache folder {base}"
+    hint = "set EQUILIBRIST_CACHE to a folder of your own" if not root else "point it at a folder of your own"
+    try:
+        base.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise CacheError(f"{where} is not a folder: {hint}") from None
+    except OSError as exc:
+        raise CacheError(f"{where} cannot be created ({exc.strerror}): {hint}") from None
+    if not base.is_dir():
+        raise CacheError(f"{where} is not a folder: {hint}")
+    info = base.stat()
+    if info.st_mode & 0o022:
+        raise CacheError(
+            f"{where} can be written by other users (mode {stat.S_IMODE(info.st_mode):o}): its files "
+            f"are imported and unpickled, so it must be yours alone (chmod go-w), or {hint}"
+        )
+    if info.st_uid != os.getuid():
+        raise CacheError(f"{where} belongs to another user: {hint}")
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise CacheError(f"{where} is not writable: {hint}")
     return base
 
 
@@ -105,20 +136,43 @@ class CompiledModel:
         if name in sys.modules:
             return sys.modules[name]
         try:
-            return _import(name, self.module_path)
-        except (SyntaxError, ImportError, NameError, OSError):
-            # A damaged cache file (a disk filled up, an edit by hand): build it again.
+            module = _import(name, self.module_path)
+            _check_module(module, self.entry)
+            return module
+        except Exception:  # any damage (truncated, emptied, edited) is rebuilt
+            sys.modules.pop(name, None)
             _build(self.entry, self.module_path, self.pickle_path)
-            return _import(name, self.module_path)
+            module = _import(name, self.module_path)
+            _check_module(module, self.entry)
+            return module
 
     @cached_property
     def symbolic(self) -> SymbolicModel:
         """The symbolic model (unpickled the first time it is asked for)."""
+        from equilibrist.mechanics.model import SymbolicModel
+
         try:
             with self.pickle_path.open("rb") as fh:
-                return pickle.load(fh)  # our own cache file
-        except (pickle.UnpicklingError, EOFError, AttributeError, ImportError, OSError, ValueError):
-            return _build(self.entry, self.module_path, self.pickle_path)
+                model = pickle.load(fh)  # our own cache file, in a folder only we can write
+        except Exception:  # any damage is rebuilt
+            model = None
+        if not isinstance(model, SymbolicModel) or model.spec_key != self.entry.spec.key:
+            model = _build(self.entry, self.module_path, self.pickle_path)
+        return model
+
+
+# What every generated module defines (see numeric/codegen.py).
+_GENERATED = ("N_STATES", "N_INPUTS", "N_Q", "CONSERVED", "f", "jac", "mass_matrix", "energy",
+              "conserved")
+
+
+def _check_module(module: types.ModuleType, entry: Entry) -> None:
+    """Raise if *module* is not a complete generated model of *entry*."""
+    missing = [n for n in _GENERATED if not hasattr(module, n)]
+    if missing:
+        raise ImportError(f"generated model lacks {', '.join(missing)}")
+    if (len(entry.spec.state_names), len(entry.spec.inputs)) != (module.N_STATES, module.N_INPUTS):
+        raise ImportError("generated model has the wrong size")
 
 
 def _import(name: str, path: Path) -> types.ModuleType:
