@@ -38,7 +38,40 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--states", metavar="NAME,...", help="coordinates to show (default: all)")
     p.add_argument("--labels", metavar="TEXT,...", help="legend labels of a comparison")
     p.add_argument("--radians", action="store_true", help="show angles in radians")
+    add_study_options(p)
     p.set_defaults(func=run)
+
+
+def add_study_options(p: argparse.ArgumentParser) -> None:
+    """Options of a study table's picture (``equilibrist sweep --out study.parquet``)."""
+    g = p.add_argument_group("study tables (.parquet)")
+    g.add_argument("--metric", default="fraction_up", metavar="NAME",
+                   help="the metric shown (default fraction_up; settling_p90, cost_mean, ...)")
+    g.add_argument("--x", metavar="NAME", help="varied quantity along x (default: the first)")
+    g.add_argument("--y", metavar="NAME",
+                   help="varied quantity along y: a heat map (default: the second, if any)")
+    g.add_argument("--agg", default="mean", choices=("mean", "median", "min", "max"),
+                   help="how the other varied quantities are combined (default mean)")
+    g.add_argument("--where", action="extend", nargs="+", default=[], metavar="NAME=VALUE",
+                   help="fix another varied quantity at one of its values")
+
+
+def plot_study_file(args: argparse.Namespace) -> int:
+    """The picture of a study table (one file, ``.parquet``)."""
+    from equilibrist.study.plot import plot_study
+    from equilibrist.study.store import read_study
+    from equilibrist.viz.output import FIGURE_FORMATS, VizError, check_suffix
+
+    if len(args.files) > 1:
+        raise VizError("plot one study table at a time")
+    first = Path(args.files[0])
+    out = check_suffix(args.out, FIGURE_FORMATS, "--out") if args.out else first.with_suffix(".png")
+    table, study = read_study(first)
+    # --x alone draws a line over x; neither draws the first two quantities' heat map.
+    written = plot_study(table, study, out, metric=args.metric, x=args.x, y=args.y, agg=args.agg,
+                         where=common.parse_assignments(args.where, "--where"))
+    print(f"wrote {written}")
+    return 0
 
 
 def load_result(path: str | Path) -> Any:
@@ -72,6 +105,8 @@ def run(args: argparse.Namespace) -> int:
     from equilibrist.viz import plots
     from equilibrist.viz.output import FIGURE_FORMATS, VizError, check_suffix
 
+    if any(Path(f).suffix == ".parquet" for f in args.files):
+        return plot_study_file(args)
     first = Path(args.files[0])
     out = check_suffix(args.out, FIGURE_FORMATS, "--out") if args.out else first.with_suffix(".png")
     states = common.parse_names(args.states, "--states")

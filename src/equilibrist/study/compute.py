@@ -1,0 +1,245 @@
+"""One point of a study: its design, its batch of runs, its metrics (one table row).
+
+Metrics of a point (columns of the table; NaN where a metric does not apply):
+
+``runs``, ``stayed_up``, ``fraction_up``
+    Runs made and how many never left the system's region.
+``fell_at_median``
+    Median time of a fall among the runs that fell [s].
+``settled_fraction``, ``settling_p50``, ``settling_p90``, ``settling_max``
+    Settling time of each run as :meth:`SimResult.metrics` defines it (the
+    measured outputs back within 2 % of their largest deviation, or their
+    noise floor); a run that fell or never settles counts as ``inf``, so a
+    percentile is ``inf`` when more than that share did not settle. The
+    percentiles are sample values (``inverted_cdf``), never interpolated.
+``peak_input_p50.<input>``, ``peak_input_max.<input>``
+    The median and the largest over runs of each run's peak ``|command|``.
+``time_saturated_mean``, ``time_saturated_max``
+    Time with a command outside the actuator's limits [s].
+``cost_mean``, ``cost_p90``
+    Quadratic cost ``T * sum_k (dx' Q dx + du' R du)`` over each run that
+    stayed up, with the *spec's* Bryson weights (the same for every point,
+    whatever weights the point's design used, so costs compare across
+    points); ``dx``, ``du`` are the state and applied input from the
+    operating point, ``T`` the sample period.
+``roa_fraction``
+    Share of the region-of-attraction grid caught (with ``roa``).
+``steps``
+    Physics steps integrated for the point.
+``status``, ``error``
+    ``ok``; ``design failed`` or ``invalid point`` or ``simulation failed``
+    with the reason in ``error`` (null when ok): a failing point is recorded,
+    never fatal.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from equilibrist.errors import EquilibristError
+from equilibrist.study.spec import Study
+
+SETTLE_FRACTION = 0.02
+
+
+def metric_names(input_names: Sequence[str]) -> list[str]:
+    """The metric columns (floats) of a system with *input_names*."""
+    return [
+        "fraction_up", "fell_at_median", "settled_fraction", "settling_p50", "settling_p90",
+        "settling_max",
+        *(f"peak_input_p50.{u}" for u in input_names),
+        *(f"peak_input_max.{u}" for u in input_names),
+        "time_saturated_mean", "time_saturated_max", "cost_mean", "cost_p90", "roa_fraction",
+    ]
+
+
+def _quantile(values: np.ndarray, q: float) -> float:
+    if values.size == 0:
+        return math.nan
+    return float(np.quantile(values, q, method="inverted_cdf"))
+
+
+def settling_times(states: np.ndarray, times: np.ndarray, watched: Sequence[int],
+                   x_op: np.ndarray) -> np.ndarray:
+    """Settling time of each run of ``states`` (runs, rows, n): ``inf`` if never settled.
+
+    The rule of :meth:`~equilibrist.sim.result.SimResult.metrics`, vectorized
+    over runs that ran to the end (all rows present).
+    """
+    runs, rows = states.shape[0], states.shape[1]
+    settle_idx = np.zeros(runs, dtype=np.int64)
+    settled = np.ones(runs, dtype=bool)
+    for j in watched:
+        e = states[:, :, j] - x_op[j]
+        scale = np.abs(e).max(axis=1)
+        tail = e[:, int(0.8 * rows):]
+        if tail.shape[1] > 1:
+            floor = np.abs(tail.mean(axis=1)) + 4.0 * tail.std(axis=1)
+        else:
+            floor = np.zeros(runs)
+        band = np.maximum(SETTLE_FRACTION * scale, floor)
+        outside = np.abs(e) > band[:, None]
+        anywhere = outside.any(axis=1) & (scale != 0)
+        last = rows - 1 - np.argmax(outside[:, ::-1], axis=1)
+        settled &= ~(anywhere & (last == rows - 1))
+        settle_idx = np.where(anywhere, np.maximum(settle_idx, last + 1), settle_idx)
+    t = times[np.minimum(settle_idx, rows - 1)]
+    return np.where(settled, t, np.inf)
+
+
+def _bryson_weights(system: Any, names: Sequence[str]) -> np.ndarray | None:
+    scales = system.spec.design_scales
+    if not all(scales.get(n, 0) > 0 for n in names):
+        return None
+    return np.array([1.0 / float(scales[n]) ** 2 for n in names])
+
+
+def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> dict[str, Any]:
+    """The table row of point *index* (a mapping column -> value)."""
+    from equilibrist.control.design import design
+    from equilibrist.numeric.system import get_system
+    from equilibrist.sim._setup import operating_point
+    from equilibrist.sim.batch import region_of_attraction, sample_uniform, simulate_batch
+    from equilibrist.sim.controllers import LQG, StateFeedback
+    from equilibrist.sim.noise import Noise
+
+    values = study.point(index)
+    nominal = get_system(study.system, **study.settings)
+    inputs = nominal.input_names
+    row: dict[str, Any] = {"point": index, **values}
+    row.update(dict.fromkeys(metric_names(inputs), math.nan))
+    row.update({"runs": 0, "stayed_up": 0, "steps": 0, "status": "ok", "error": None})
+    kinds = {a.name: a for a in study.axes}
+
+    def failed(status: str, exc: Exception) -> dict[str, Any]:
+        row["status"] = status
+        row["error"] = str(exc).replace("\n", " ")
+        return row
+
+    physical = {k: float(v) for k, v in values.items() if kinds[k].kind == "parameter"}
+    try:
+        plant = nominal.with_params(**physical) if physical else nominal
+    except EquilibristError as exc:
+        return failed("invalid point", exc)
+    rate = float(values.get("rate", study.rate))
+    kind = str(values.get("controller", study.controller))
+    noise_scale = float(values.get("noise", study.noise))
+    delay = bool(values.get("delay", study.delay))
+    q = r = None
+    q_scales = {kinds[k].target: float(v) for k, v in values.items() if kinds[k].kind == "q"}
+    r_scales = {kinds[k].target: float(v) for k, v in values.items() if kinds[k].kind == "r"}
+    base = plant if study.design_for == "point" else nominal
+    scales = base.spec.design_scales
+    if q_scales:
+        q = [1.0 / (q_scales.get(s) or float(scales.get(s, math.nan))) ** 2 for s in base.state_names]
+    if r_scales:
+        r = [1.0 / (r_scales.get(u) or float(scales.get(u, math.nan))) ** 2 for u in base.input_names]
+    try:
+        d = design(base, q=q, r=r, rate=rate)
+    except EquilibristError as exc:
+        return failed("design failed", exc)
+    controller = LQG.from_design(d) if kind == "lqg" else StateFeedback.from_design(d)
+    noise = None
+    if noise_scale > 0:
+        nd = Noise.from_design(d)
+        s2 = noise_scale**2
+        noise = Noise(nd.process_gain, nd.process_intensity * s2,
+                      nd.measurement_covariance * s2, nd.outputs)
+    full = study.metrics == "full"
+    runs = study.runs
+    try:
+        x_op, u_op = operating_point(plant, controller)
+        x0s, spread = sample_uniform(plant, runs, ranges=dict(study.x0), spread=dict(study.spread),
+                                     seed=study.point_seed(index, 1), x_op=x_op)
+        fell = np.zeros(runs, dtype=bool)
+        fell_at = np.full(runs, np.nan)
+        settle = np.full(runs, np.inf)
+        peak = np.zeros((runs, len(inputs)))
+        saturated = np.zeros(runs)
+        cost = np.full(runs, np.nan)
+        steps = 0
+        qw = _bryson_weights(nominal, nominal.state_names)
+        rw = _bryson_weights(nominal, inputs)
+        options: dict[str, Any] = {"duration": study.duration, "rate": rate, "delay": delay,
+                                   "noise": noise}
+        for b, start in enumerate(range(0, runs, study.batch_size)):
+            sl = slice(start, min(runs, start + study.batch_size))
+            batch = simulate_batch(
+                plant, controller, runs=sl.stop - sl.start, x0=x0s[sl],
+                params={k: v[sl] for k, v in spread.items()}, seed=study.point_seed(index, 2, b),
+                record=full, workers=threads, **options)
+            steps += batch.steps
+            fell[sl] = batch.fell
+            fell_at[sl] = batch.fell_at
+            peak[sl] = batch.peak_input
+            saturated[sl] = batch.time_saturated
+            if full and batch.trajectories is not None:
+                setup = batch._setup
+                n, m = plant.n_states, plant.n_inputs
+                up = ~batch.fell
+                traj = batch.trajectories[up]
+                states = traj[:, :, :n]
+                names = setup.outputs or plant.state_names
+                watched = [plant.state_names.index(o) for o in names]
+                idx = np.nonzero(up)[0] + start
+                settle[idx] = settling_times(states, setup.times, watched, setup.x_op)
+                if qw is not None and rw is not None:
+                    c_u = 2 * n + len(setup.outputs)
+                    dx = states - setup.x_op
+                    du = traj[:, :, c_u + 2 * m : c_u + 3 * m] - setup.u_op
+                    cost[idx] = ((dx**2 * qw).sum(axis=(1, 2)) + (du**2 * rw).sum(axis=(1, 2))) / rate
+        roa_fraction = math.nan
+        if study.roa:
+            roa = region_of_attraction(
+                plant, controller, grid={k: (lo, hi, n) for k, (lo, hi, n) in study.roa.items()},
+                seed=study.point_seed(index, 3), workers=threads, **options)
+            roa_fraction = roa.fraction_caught
+            steps += roa.batch.steps
+    except EquilibristError as exc:
+        return failed("simulation failed", exc)
+    del u_op
+    up = ~fell
+    row.update({
+        "runs": runs,
+        "stayed_up": int(up.sum()),
+        "fraction_up": float(up.mean()),
+        "fell_at_median": float(np.median(fell_at[fell])) if fell.any() else math.nan,
+        "time_saturated_mean": float(saturated.mean()),
+        "time_saturated_max": float(saturated.max()),
+        "roa_fraction": roa_fraction,
+        "steps": int(steps),
+    })
+    for j, u in enumerate(inputs):
+        row[f"peak_input_p50.{u}"] = _quantile(peak[:, j], 0.5)
+        row[f"peak_input_max.{u}"] = float(peak[:, j].max())
+    if full:
+        row["settled_fraction"] = float(np.isfinite(settle).mean())
+        row["settling_p50"] = _quantile(settle, 0.5)
+        row["settling_p90"] = _quantile(settle, 0.9)
+        row["settling_max"] = float(settle.max())
+        kept = cost[up & np.isfinite(cost)]
+        row["cost_mean"] = float(kept.mean()) if kept.size else math.nan
+        row["cost_p90"] = _quantile(kept, 0.9)
+    return row
+
+
+def evaluate_chunk(study: Study, chunk: int, chunk_size: int, *,
+                   threads: int | None = None) -> list[dict[str, Any]]:
+    """The rows of points ``chunk * chunk_size`` up to the next chunk."""
+    start = chunk * chunk_size
+    stop = min(study.n_points, start + chunk_size)
+    return [evaluate_point(study, i, threads=threads) for i in range(start, stop)]
+
+
+def chunk_task(study_json: str, chunk: int, chunk_size: int, threads: int) -> list[dict[str, Any]]:
+    """A chunk as a cluster task: plain arguments in, plain rows out.
+
+    The worker rebuilds the study from its description, loads the compiled
+    core from the on-disk cache on its first chunk and keeps it for the next.
+    """
+    study = Study.from_json(study_json)
+    return evaluate_chunk(study, chunk, chunk_size, threads=threads)

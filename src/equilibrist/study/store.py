@@ -1,0 +1,202 @@
+"""The study's table on disk: Parquet parts written atomically, then one file.
+
+While a study runs, each finished chunk of points is written to
+``<out>.parts/chunk-NNNNNN.parquet`` through a temporary file and a rename,
+so a part is either complete or absent; ``<out>.parts/study.json`` holds
+the study's description and the chunk size. When every chunk is there, the
+parts are concatenated in point order into ``<out>`` (again a temporary
+file and a rename) and the parts folder is removed. ``--resume`` reads the
+parts folder, checks that it belongs to the same study, and computes only
+the chunks that are missing.
+
+The table: one row per point, columns ``point``, the varied quantities,
+``status``, ``error``, the metrics of :mod:`equilibrist.study.compute`.
+The file's key-value metadata holds ``equilibrist.format``,
+``equilibrist.study`` (the description, canonical JSON) and
+``equilibrist.versions``. Nothing that depends on the run (times, hosts,
+workers) is written, so the file is the same bytes however it was made.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import shutil
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from equilibrist.study.compute import metric_names
+from equilibrist.study.spec import FORMAT, Study, StudyError
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+_MANIFEST = "study.json"
+
+
+def require_pyarrow() -> Any:
+    try:
+        import pyarrow
+        import pyarrow.parquet
+    except ImportError:
+        raise StudyError("study tables need pyarrow: pip install 'equilibrist[cluster]'") from None
+    return pyarrow
+
+
+def versions() -> dict[str, str]:
+    """The versions that shape the numbers (recorded in the file)."""
+    import numba
+    import numpy
+    import scipy
+
+    from equilibrist import __version__
+
+    pa = require_pyarrow()
+    return {"equilibrist": __version__, "python": platform.python_version(),
+            "numpy": numpy.__version__, "scipy": scipy.__version__, "numba": numba.__version__,
+            "pyarrow": pa.__version__}
+
+
+def schema(study: Study) -> pa.Schema:
+    """The table's columns and types (the same for every chunk)."""
+    pa = require_pyarrow()
+    from equilibrist.numeric.system import get_system
+
+    inputs = get_system(study.system, **study.settings).input_names
+    fields = [pa.field("point", pa.int64(), nullable=False)]
+    for a in study.axes:
+        typ = pa.string() if a.kind == "controller" else pa.bool_() if a.kind == "delay" else pa.float64()
+        fields.append(pa.field(a.name, typ, nullable=False))
+    fields += [pa.field("status", pa.string(), nullable=False), pa.field("error", pa.string()),
+               pa.field("runs", pa.int64(), nullable=False),
+               pa.field("stayed_up", pa.int64(), nullable=False)]
+    fields += [pa.field(name, pa.float64(), nullable=False) for name in metric_names(inputs)]
+    fields.append(pa.field("steps", pa.int64(), nullable=False))
+    meta = {"equilibrist.format": FORMAT, "equilibrist.study": study.to_json(),
+            "equilibrist.versions": json.dumps(versions(), sort_keys=True)}
+    return pa.schema(fields, metadata=meta)
+
+
+def rows_to_table(rows: list[dict[str, Any]], sch: pa.Schema) -> pa.Table:
+    pa = require_pyarrow()
+    columns = {f.name: [r[f.name] for r in rows] for f in sch}
+    return pa.Table.from_pydict(columns, schema=sch)
+
+
+def _atomic_parquet(table: pa.Table, path: Path) -> None:
+    import pyarrow.parquet as pq
+
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(fd)
+    try:
+        os.chmod(tmp, 0o666 & ~_umask())
+        pq.write_table(table, tmp, compression="zstd")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def parts_dir(out: Path) -> Path:
+    return out.with_name(out.name + ".parts")
+
+
+class Store:
+    """The parts folder of one study being written to *out*."""
+
+    def __init__(self, study: Study, out: Path, chunk_size: int) -> None:
+        self.study = study
+        self.out = out
+        self.chunk_size = chunk_size
+        self.dir = parts_dir(out)
+        self.schema = schema(study)
+
+    @property
+    def n_chunks(self) -> int:
+        return -(-self.study.n_points // self.chunk_size)
+
+    def part(self, chunk: int) -> Path:
+        return self.dir / f"chunk-{chunk:06d}.parquet"
+
+    def open(self, *, resume: bool) -> list[int]:
+        """Create (or, resuming, check) the parts folder; the chunks still to compute."""
+        manifest = {"study": self.study.to_dict(), "chunk_size": self.chunk_size}
+        if self.dir.exists():
+            if not resume:
+                raise StudyError(f"{self.dir} holds an unfinished study: add --resume to "
+                                 "continue it, or remove that folder to start again")
+            try:
+                found = json.loads((self.dir / _MANIFEST).read_text())
+            except (OSError, ValueError):
+                raise StudyError(f"{self.dir} is not the parts folder of a study: remove it") from None
+            if found.get("study") != manifest["study"]:
+                raise StudyError(f"{self.dir} belongs to another study: --resume continues "
+                                 "the same study only (remove the folder to start this one)")
+            if found.get("chunk_size") != self.chunk_size:
+                raise StudyError(f"{self.dir} was written with --chunk-size "
+                                 f"{found.get('chunk_size')}: resume with the same chunk size")
+            return [c for c in range(self.n_chunks) if not self._complete(c)]
+        self.dir.mkdir(parents=True)
+        text = json.dumps(manifest, sort_keys=True, indent=1)
+        fd, tmp = tempfile.mkstemp(dir=self.dir, prefix=".study.", suffix=".tmp")
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+        os.replace(tmp, self.dir / _MANIFEST)
+        return list(range(self.n_chunks))
+
+    def _complete(self, chunk: int) -> bool:
+        import pyarrow.parquet as pq
+
+        path = self.part(chunk)
+        if not path.exists():
+            return False
+        try:
+            meta = pq.read_metadata(path)
+        except Exception:  # a damaged part is computed again
+            path.unlink(missing_ok=True)
+            return False
+        expected = min(self.chunk_size, self.study.n_points - chunk * self.chunk_size)
+        return bool(meta.num_rows == expected)
+
+    def write(self, chunk: int, rows: list[dict[str, Any]]) -> None:
+        _atomic_parquet(rows_to_table(rows, self.schema), self.part(chunk))
+
+    def assemble(self) -> Path:
+        """Concatenate the parts into the final file and remove the parts folder."""
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        tables = [pq.read_table(self.part(c), schema=self.schema) for c in range(self.n_chunks)]
+        table = pa.concat_tables(tables) if tables else self.schema.empty_table()
+        points = table.column("point").to_pylist()
+        if points != list(range(self.study.n_points)):
+            raise StudyError(f"{self.dir}: the parts do not cover the study's points: remove it")
+        _atomic_parquet(table.replace_schema_metadata(self.schema.metadata), self.out)
+        shutil.rmtree(self.dir)
+        return self.out
+
+
+def read_study(path: str | Path) -> tuple[pa.Table, Study]:
+    """A study file's table and its study description."""
+    pa = require_pyarrow()
+    import pyarrow.parquet as pq
+
+    p = Path(path)
+    if not p.exists():
+        raise StudyError(f"no study file {str(p)!r}")
+    try:
+        table = pq.read_table(p)
+    except (OSError, pa.ArrowException) as exc:
+        raise StudyError(f"{p} is not a study table: {exc}") from None
+    meta = table.schema.metadata or {}
+    if meta.get(b"equilibrist.format", b"").decode() != FORMAT:
+        raise StudyError(f"{p} is not a study table written by 'equilibrist sweep'")
+    return table, Study.from_json(meta[b"equilibrist.study"].decode())
