@@ -1,0 +1,132 @@
+"""``equilibrist play``: the live playground in the browser.
+
+Serves the page of :mod:`equilibrist.web` on a local port, prints its
+address, opens it in the default browser where one exists, and runs until
+Ctrl-C (the sessions' sockets are closed and the port freed). It binds the
+loopback interface by default: the playground has no login, so binding
+another address (``--host 0.0.0.0``) lets anyone on that network drive it,
+and the command says so.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import ipaddress
+import socket
+import sys
+import threading
+
+from equilibrist.cli import common
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "play",
+        help="a live web page to watch a system balance, push it and tune it",
+        description="Start the playground: a local web page where a system balances in real "
+        "time under its digital controller; push it, tune the weights, the rate, the noise "
+        "and the parameters, watch the poles, download the controller as C code. Runs "
+        "until Ctrl-C.",
+    )
+    p.add_argument("system", nargs="?", metavar="SYSTEM",
+                   help="the system the page starts with (default: cartpole); a catalogue "
+                        "name or the path of your own model file")
+    p.add_argument("--port", default="8050", metavar="PORT",
+                   help="TCP port (default 8050; 0 picks a free one)")
+    p.add_argument("--host", default="127.0.0.1", metavar="ADDRESS",
+                   help="address to bind (default 127.0.0.1: this machine only)")
+    p.add_argument("--no-browser", action="store_true", help="do not open a browser")
+    p.set_defaults(func=run)
+
+
+def _port(text: str) -> int:
+    try:
+        port = int(text)
+    except ValueError:
+        raise common.UsageError(f"--port {text!r} is not a port number: expected 0 to 65535") from None
+    if not 0 <= port <= 65535:
+        raise common.UsageError(f"--port {port} is out of range: expected 0 to 65535")
+    return port
+
+
+def is_loopback(host: str) -> bool:
+    """Whether *host* names only this machine."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def bind(host: str, port: int) -> socket.socket:
+    """A listening socket on *host*:*port* (one clear error when it cannot be had)."""
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except socket.gaierror as exc:
+        raise common.UsageError(f"--host {host!r} is not an address of this machine: {exc.strerror}") from None
+    family, _, _, _, address = infos[0]
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind(address)
+    except OSError as exc:
+        sock.close()
+        why = "is in use (another playground?): pick another with --port" if exc.errno in (98, 48) \
+            else f"cannot be bound: {exc.strerror}"
+        raise common.UsageError(f"port {port} on {host} {why}") from None
+    sock.listen(128)
+    sock.set_inheritable(True)
+    return sock
+
+
+def run(args: argparse.Namespace) -> int:
+    from equilibrist.web import require
+
+    require()
+    import uvicorn
+
+    from equilibrist.web.app import create_app
+    from equilibrist.web.session import Catalogue
+
+    port = _port(args.port)
+    extra = () if args.system is None else (args.system,)
+    catalogue = Catalogue.default(extra)
+    first = args.system
+    if first is not None:
+        catalogue.check(first)  # a system that cannot be played is one line, before the port
+    app = create_app(catalogue, system=first)
+    sock = bind(args.host, port)
+    bound_port = sock.getsockname()[1]
+    shown = f"[{args.host}]" if ":" in args.host else args.host
+    url = f"http://{shown}:{bound_port}/"
+    if not is_loopback(args.host):
+        print(f"equilibrist: warning: the playground is bound to {args.host}: anyone who can "
+              "reach this machine can use it (it has no login)", file=sys.stderr)
+    print(f"equilibrist playground at {url}  (Ctrl-C to stop)", flush=True)
+    config = uvicorn.Config(app, log_level="warning", ws_max_size=4 * 1024 * 1024,
+                            lifespan="off", timeout_graceful_shutdown=2)
+    server = uvicorn.Server(config)
+    if not args.no_browser:
+        threading.Thread(target=_open_browser, args=(url, server), daemon=True).start()
+    try:
+        server.run(sockets=[sock])
+    finally:
+        sock.close()
+    print("equilibrist: playground stopped", file=sys.stderr)
+    return 0
+
+
+def _open_browser(url: str, server: object) -> None:
+    """Open *url* once the server listens, where a browser exists (never fails the command)."""
+    import time
+    import webbrowser
+
+    for _ in range(100):
+        if getattr(server, "started", False):
+            break
+        time.sleep(0.05)
+    # No browser on this machine: the printed address is enough.
+    with contextlib.suppress(webbrowser.Error):
+        webbrowser.get().open(url)

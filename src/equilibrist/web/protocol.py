@@ -1,0 +1,244 @@
+"""The playground's message protocol: what a client may send, checked field by field.
+
+Every message from the browser is one JSON object in one text frame of at
+most :data:`MAX_MESSAGE_BYTES` bytes. :func:`parse` turns the frame into a
+:class:`Message` or raises :class:`ProtocolError` with one line saying what
+was wrong and what was expected; the server answers such a message with an
+``error`` frame and goes on. Nothing here touches a file or evaluates text:
+names are looked up in the :class:`Limits` the session offers, numbers must
+be finite and within the stated ranges, unknown fields are refused.
+
+The protocol is documented for people in ``docs/playground.md``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from equilibrist.errors import EquilibristError
+
+#: Largest text frame accepted from a client, in bytes.
+MAX_MESSAGE_BYTES = 16 * 1024
+
+#: Controllers a client may pick (the registered ones, in picker order).
+CONTROLLERS = ("lqg", "lqr", "off")
+
+# Ranges of the session-independent settings.
+RATE_RANGE = (5.0, 2000.0)  # control rate [Hz]
+NOISE_RANGE = (0.0, 20.0)  # sensor noise, in multiples of the rig's
+LIMIT_RANGE = (0.05, 4.0)  # actuator limits, in multiples of the rig's
+PUSH_RANGE = (-3.0, 3.0)  # push, in multiples of the input's full scale
+PUSH_DURATION_RANGE = (0.005, 1.0)  # [s]
+KICK_RANGE = (-1.0, 1.0)  # [rad] (or the main state's unit)
+SEQ_RANGE = (0, 2**53)
+
+# The fields each message type takes (besides "type" and "seq"), and which are required.
+FIELDS: dict[str, tuple[frozenset[str], frozenset[str]]] = {
+    "select": (frozenset({"system"}), frozenset({"system"})),
+    "tune": (frozenset({"controller", "rate", "noise", "limit", "scales", "params"}), frozenset()),
+    "push": (frozenset({"size", "duration"}), frozenset({"size"})),
+    "kick": (frozenset({"angle"}), frozenset({"angle"})),
+    "reset": (frozenset({"kick"}), frozenset()),
+    "pause": (frozenset({"paused"}), frozenset({"paused"})),
+    "full": (frozenset(), frozenset()),
+}
+
+
+class ProtocolError(EquilibristError, ValueError):
+    """A client message that does not follow the protocol."""
+
+
+@dataclass(frozen=True)
+class Limits:
+    """What the session in its current state accepts.
+
+    Attributes
+    ----------
+    systems:
+        Names the system picker offers.
+    scales:
+        ``{state or input name: (low, high)}`` of the Bryson scales.
+    params:
+        ``{parameter name: (low, high)}`` of the tunable physical parameters.
+    """
+
+    systems: tuple[str, ...]
+    scales: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    params: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Message:
+    """A checked client message: its ``type``, its fields, its sequence number."""
+
+    type: str
+    fields: Mapping[str, Any]
+    seq: int | None = None
+
+
+def _reject_constant(name: str) -> float:
+    raise ProtocolError(f"{name} is not a number of JSON: numbers must be finite")
+
+
+def _number(value: object, what: str, low: float, high: float) -> float:
+    # bool is an int in Python, but true is not a number in the protocol.
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ProtocolError(f"{what} must be a number, got {_short(value)}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise ProtocolError(f"{what} must be a finite number, got {_short(value)}")
+    if not low <= v <= high:
+        raise ProtocolError(f"{what} = {v:g} is out of range: expected {low:g} to {high:g}")
+    return v
+
+
+def _short(value: object) -> str:
+    text = json.dumps(value) if isinstance(value, str | int | float | bool | None) else type(value).__name__
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _named_numbers(
+    value: object, what: str, ranges: Mapping[str, tuple[float, float]]
+) -> dict[str, float]:
+    if not isinstance(value, dict):
+        raise ProtocolError(f"{what} must be an object of name: number, got {_short(value)}")
+    if not value:
+        raise ProtocolError(f"{what} is empty: expected at least one of {', '.join(ranges)}")
+    out: dict[str, float] = {}
+    for name, raw in value.items():
+        if name not in ranges:
+            known = ", ".join(ranges) or "none"
+            raise ProtocolError(f"{what} has no entry {_short(name)}: expected one of {known}")
+        low, high = ranges[name]
+        out[name] = _number(raw, f"{what}.{name}", low, high)
+    return out
+
+
+def parse(text: str | bytes, limits: Limits) -> Message:
+    """The :class:`Message` in the text frame *text*, checked against *limits*.
+
+    Raises
+    ------
+    ProtocolError
+        A frame that is too long, not JSON, not an object; an unknown type
+        or field; a missing field; a value of the wrong type, not finite or
+        out of its range; a name the session does not offer.
+    """
+    if isinstance(text, bytes):
+        raise ProtocolError("binary frames are not part of the protocol: send JSON text")
+    if len(text) > MAX_MESSAGE_BYTES or len(text.encode("utf-8", "replace")) > MAX_MESSAGE_BYTES:
+        raise ProtocolError(
+            f"message of {len(text.encode('utf-8', 'replace'))} bytes is too long: "
+            f"the limit is {MAX_MESSAGE_BYTES} bytes"
+        )
+    try:
+        data = json.loads(text, parse_constant=_reject_constant)
+    except ProtocolError:
+        raise
+    except (ValueError, RecursionError) as exc:
+        raise ProtocolError(f"message is not valid JSON: {str(exc)[:80]}") from None
+    if not isinstance(data, dict):
+        raise ProtocolError(f"message must be a JSON object, got {type(data).__name__}")
+    kind = data.get("type")
+    if not isinstance(kind, str) or kind not in FIELDS:
+        raise ProtocolError(
+            f"message type {_short(kind)} is unknown: expected one of {', '.join(FIELDS)}"
+        )
+    allowed, required = FIELDS[kind]
+    unknown = sorted(k for k in data if k not in allowed and k not in ("type", "seq"))
+    if unknown:
+        raise ProtocolError(
+            f"{kind} message has unknown field(s) {', '.join(_short(k) for k in unknown)}: "
+            f"expected {', '.join(sorted(allowed)) or 'none'} (and seq)"
+        )
+    missing = sorted(required - set(data))
+    if missing:
+        raise ProtocolError(f"{kind} message lacks {', '.join(missing)}")
+    seq: int | None = None
+    if "seq" in data:
+        raw = data["seq"]
+        if isinstance(raw, bool) or not isinstance(raw, int) or not SEQ_RANGE[0] <= raw <= SEQ_RANGE[1]:
+            raise ProtocolError(f"seq must be an integer from 0 to 2^53, got {_short(raw)}")
+        seq = raw
+    fields = _FIELD_CHECKS[kind](data, limits)
+    return Message(kind, fields, seq)
+
+
+def _select(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+    name = data["system"]
+    if not isinstance(name, str) or name not in limits.systems:
+        raise ProtocolError(
+            f"system {_short(name)} is not offered: expected one of {', '.join(limits.systems)}"
+        )
+    return {"system": name}
+
+
+def _tune(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    if len(data) - ("seq" in data) <= 1:
+        raise ProtocolError(
+            "tune message changes nothing: give controller, rate, noise, limit, scales or params"
+        )
+    if "controller" in data:
+        c = data["controller"]
+        if not isinstance(c, str) or c not in CONTROLLERS:
+            raise ProtocolError(
+                f"controller {_short(c)} is unknown: expected one of {', '.join(CONTROLLERS)}"
+            )
+        out["controller"] = c
+    if "rate" in data:
+        out["rate"] = _number(data["rate"], "rate", *RATE_RANGE)
+    if "noise" in data:
+        out["noise"] = _number(data["noise"], "noise", *NOISE_RANGE)
+    if "limit" in data:
+        out["limit"] = _number(data["limit"], "limit", *LIMIT_RANGE)
+    if "scales" in data:
+        out["scales"] = _named_numbers(data["scales"], "scales", limits.scales)
+    if "params" in data:
+        out["params"] = _named_numbers(data["params"], "params", limits.params)
+    return out
+
+
+def _push(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+    out = {"size": _number(data["size"], "size", *PUSH_RANGE)}
+    if "duration" in data:
+        out["duration"] = _number(data["duration"], "duration", *PUSH_DURATION_RANGE)
+    return out
+
+
+def _kick(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+    return {"angle": _number(data["angle"], "angle", *KICK_RANGE)}
+
+
+def _reset(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+    if "kick" in data:
+        return {"kick": _number(data["kick"], "kick", *KICK_RANGE)}
+    return {}
+
+
+def _pause(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+    value = data["paused"]
+    if not isinstance(value, bool):
+        raise ProtocolError(f"paused must be true or false, got {_short(value)}")
+    return {"paused": value}
+
+
+def _full(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+    return {}
+
+
+_FIELD_CHECKS = {
+    "select": _select,
+    "tune": _tune,
+    "push": _push,
+    "kick": _kick,
+    "reset": _reset,
+    "pause": _pause,
+    "full": _full,
+}
+
+__all__ = ["CONTROLLERS", "FIELDS", "MAX_MESSAGE_BYTES", "Limits", "Message", "ProtocolError", "parse"]

@@ -1,0 +1,509 @@
+// equilibrist playground: the page. Plain JavaScript, no build step.
+// The server simulates and computes the drawing; this file draws what it is
+// sent and sends what the user does (protocol: docs/playground.md).
+"use strict";
+
+(function () {
+  const $ = (id) => document.getElementById(id);
+  const WINDOW = 10; // seconds shown by the strip charts
+  const state = {
+    ws: null, sys: null, design: null, token: null, seq: 0,
+    shapes: new Map(), view: null, frame: null, fell: null,
+    charts: [], data: null, tuneInFlight: null, tunePending: null,
+    drag: null, paused: false, lastFrameAt: 0, frames: 0,
+  };
+  window.playground = state; // for the page's tests and the curious
+
+  // ---- socket ------------------------------------------------------------------------
+  function connect() {
+    const proto = location.protocol === "https:" ? "wss" : "ws";
+    const ws = new WebSocket(`${proto}://${location.host}/ws`);
+    state.ws = ws;
+    ws.onopen = () => setConnection("connected");
+    ws.onclose = () => setConnection("disconnected: reload the page to start again");
+    ws.onerror = () => setConnection("connection error");
+    ws.onmessage = (ev) => {
+      let msg;
+      try { msg = JSON.parse(ev.data); } catch (e) { return; }
+      const handler = HANDLERS[msg.type];
+      if (handler) handler(msg);
+    };
+  }
+
+  function send(obj) {
+    if (!state.ws || state.ws.readyState !== WebSocket.OPEN) return null;
+    state.seq += 1;
+    obj.seq = state.seq;
+    state.ws.send(JSON.stringify(obj));
+    return state.seq;
+  }
+
+  function setConnection(text) { $("connection").textContent = text; }
+
+  let messageTimer = null;
+  function showMessage(text, sticky) {
+    const el = $("message");
+    el.textContent = text;
+    clearTimeout(messageTimer);
+    if (!sticky) messageTimer = setTimeout(() => { el.textContent = ""; }, 6000);
+  }
+
+  // ---- handlers of server frames ---------------------------------------------------------
+  const HANDLERS = {
+    hello(msg) { state.token = msg.token; },
+    system(msg) { setupSystem(msg); },
+    design(msg) { showDesign(msg); tuneDone(); },
+    design_error(msg) {
+      showMessage(`Design failed, the previous controller keeps running: ${msg.message}`, true);
+      $("controller").value = msg.controller;
+      tuneDone();
+    },
+    error(msg) {
+      showMessage(msg.message);
+      if (state.tuneInFlight !== null && msg.seq === state.tuneInFlight) tuneDone();
+    },
+    ack() {},
+    frame(msg) { onFrame(msg); },
+  };
+
+  // ---- system setup ---------------------------------------------------------------------
+  function setupSystem(sys) {
+    state.sys = sys;
+    state.token = sys.token;
+    state.shapes = new Map();
+    state.view = sys.view.slice();
+    state.fell = null;
+    const picker = $("system");
+    picker.innerHTML = "";
+    for (const name of sys.systems) {
+      const opt = document.createElement("option");
+      opt.value = name; opt.textContent = name;
+      picker.appendChild(opt);
+    }
+    picker.value = sys.name;
+    $("controller").value = sys.settings.controller;
+    $("title").textContent = `${sys.title} (${sys.key})`;
+    $("caption").textContent = sys.caption;
+    buildSliders(sys);
+    buildCharts(sys);
+    buildReadout(sys);
+    $("message").textContent = "";
+  }
+
+  function logSlider(parent, { id, label, unit, low, high, value, onChange, fmt, title }) {
+    const row = document.createElement("div");
+    row.className = "slider";
+    if (title) row.title = title;
+    const lab = document.createElement("label");
+    lab.htmlFor = id; lab.textContent = label;
+    const input = document.createElement("input");
+    input.type = "range"; input.id = id; input.min = "0"; input.max = "1000"; input.step = "1";
+    input.setAttribute("aria-label", label);
+    const out = document.createElement("output");
+    out.className = "value"; out.htmlFor = id;
+    const toValue = (pos) => low * Math.pow(high / low, pos / 1000);
+    const toPos = (v) => Math.round(1000 * Math.log(v / low) / Math.log(high / low));
+    const show = (v) => { out.textContent = `${(fmt || fmtNum)(v)} ${unit || ""}`.trim(); };
+    input.value = String(toPos(value));
+    show(value);
+    input.addEventListener("input", () => { const v = toValue(+input.value); show(v); onChange(v); });
+    row.append(lab, input, out);
+    parent.appendChild(row);
+    return input;
+  }
+
+  function linSlider(parent, { id, label, unit, low, high, step, value, onChange }) {
+    const row = document.createElement("div");
+    row.className = "slider";
+    const lab = document.createElement("label");
+    lab.htmlFor = id; lab.textContent = label;
+    const input = document.createElement("input");
+    input.type = "range"; input.id = id; input.min = String(low); input.max = String(high);
+    input.step = String(step); input.value = String(value);
+    input.setAttribute("aria-label", label);
+    const out = document.createElement("output");
+    out.className = "value"; out.htmlFor = id;
+    const show = (v) => { out.textContent = `${fmtNum(v)} ${unit || ""}`.trim(); };
+    show(value);
+    input.addEventListener("input", () => { show(+input.value); onChange(+input.value); });
+    row.append(lab, input, out);
+    parent.appendChild(row);
+    return input;
+  }
+
+  function buildSliders(sys) {
+    const loop = $("loop-sliders"), scales = $("scale-sliders"), params = $("param-sliders");
+    loop.innerHTML = ""; scales.innerHTML = ""; params.innerHTML = "";
+    const s = sys.settings;
+    logSlider(loop, { id: "rate", label: "Control rate", unit: "Hz", low: 5, high: 2000,
+      value: s.rate, fmt: (v) => v.toFixed(v < 20 ? 1 : 0), onChange: (v) => tune({ rate: round3(v) }) });
+    linSlider(loop, { id: "noise", label: "Sensor noise (× rig)", low: 0, high: 10, step: 0.1,
+      value: s.noise, onChange: (v) => tune({ noise: v }) });
+    logSlider(loop, { id: "limit", label: "Actuator limit (× rig)", low: 0.05, high: 4,
+      value: s.limit, onChange: (v) => tune({ limit: round3(v) }) });
+    for (const sc of sys.scales) {
+      logSlider(scales, { id: `scale-${sc.name}`, label: `${sc.kind === "input" ? "input" : "state"} ${sc.name}`,
+        unit: sc.unit, low: sc.low, high: sc.high, value: s.scales[sc.name],
+        onChange: (v) => tune({ scales: { [sc.name]: clamp(v, sc.low, sc.high) } }) });
+    }
+    for (const p of sys.params) {
+      const meaning = p.meaning.length > 22 ? `${p.meaning.slice(0, 21)}…` : p.meaning;
+      logSlider(params, { id: `param-${p.name}`, label: `${p.name} (${meaning})`, title: p.meaning,
+        unit: p.unit, low: p.low, high: p.high, value: s.params[p.name],
+        onChange: (v) => tune({ params: { [p.name]: clamp(v, p.low, p.high) } }) });
+    }
+  }
+
+  // Tuning: one design in flight; changes made meanwhile are merged and sent when it returns.
+  function tune(fields) {
+    const pending = state.tunePending || {};
+    for (const [k, v] of Object.entries(fields)) {
+      if (k === "scales" || k === "params") pending[k] = Object.assign(pending[k] || {}, v);
+      else pending[k] = v;
+    }
+    state.tunePending = pending;
+    if (state.tuneInFlight === null) flushTune();
+  }
+  function flushTune() {
+    if (!state.tunePending) return;
+    const msg = Object.assign({ type: "tune" }, state.tunePending);
+    state.tunePending = null;
+    state.tuneInFlight = send(msg);
+  }
+  function tuneDone() { state.tuneInFlight = null; flushTune(); }
+
+  // ---- design display ---------------------------------------------------------------------
+  function showDesign(d) {
+    state.design = d;
+    const gains = $("gains");
+    let html = "<thead><tr><th></th>" + d.states.map((s) => `<th>${esc(s)}</th>`).join("") + "</tr></thead><tbody>";
+    d.K.forEach((row, i) => {
+      html += `<tr><th>${esc(d.inputs[i])}</th>` + row.map((v) => `<td>${fmtNum(v)}</td>`).join("") + "</tr>";
+    });
+    gains.innerHTML = html + "</tbody>";
+    const info = `${d.controller.toUpperCase()} design at ${fmtNum(d.rate)} Hz, redesigned in ${d.milliseconds.toFixed(1)} ms` +
+      (d.notes.length ? ` — ${d.notes.join("; ")}` : "");
+    $("design-info").textContent = info;
+    const m = d.margins;
+    $("loop-margins").innerHTML = m ? (
+      `<tr><th>gain margin</th><td>×${fmtNum(m.gain_lower)} to ×${fmtNum(m.gain_upper)}</td></tr>` +
+      `<tr><th>phase margin</th><td>${fmtNum(m.phase_margin_deg)}°</td></tr>` +
+      `<tr><th>min |1 + L|</th><td>${fmtNum(m.return_difference)}</td></tr>`) : "<tr><td>(several inputs)</td></tr>";
+    drawPoles();
+  }
+
+  function sPlane(p, rate) {
+    const r = Math.hypot(p.re, p.im);
+    if (r === 0) return null;
+    return { re: Math.log(r) * rate, im: Math.atan2(p.im, p.re) * rate };
+  }
+
+  function drawPoles() {
+    const d = state.design;
+    if (!d) return;
+    const cv = $("poles"), ctx = cv.getContext("2d");
+    const W = cv.width, H = cv.height;
+    ctx.clearRect(0, 0, W, H);
+    const sets = [
+      { poles: d.open_loop_poles, color: "#999", mark: "+" },
+      { poles: d.estimator_poles, color: "#e8871e", mark: "o" },
+      { poles: d.poles, color: "#3b6fb6", mark: "x" },
+    ].map((s) => ({ ...s, pts: s.poles.map((p) => sPlane(p, d.rate)).filter((p) => p) }));
+    let reach = 1;
+    for (const s of sets) for (const p of s.pts) reach = Math.max(reach, Math.abs(p.re), Math.abs(p.im));
+    reach *= 1.15;
+    const sx = (re) => W * 0.75 + (re / reach) * W * 0.7;  // room to the left (stable half)
+    const sy = (im) => H / 2 - (im / reach) * H * 0.45;
+    ctx.strokeStyle = "#ccc"; ctx.lineWidth = 1;
+    ctx.beginPath(); ctx.moveTo(0, H / 2); ctx.lineTo(W, H / 2); ctx.moveTo(sx(0), 0); ctx.lineTo(sx(0), H); ctx.stroke();
+    ctx.fillStyle = "#666"; ctx.font = "11px sans-serif";
+    ctx.fillText(`Re s (1/s), ±${fmtNum(reach)}`, 4, H - 4);
+    ctx.fillText("Im s", sx(0) + 3, 11);
+    for (const s of sets) {
+      ctx.strokeStyle = s.color; ctx.lineWidth = 1.8;
+      for (const p of s.pts) {
+        const x = sx(p.re), y = sy(p.im), r = 5;
+        ctx.beginPath();
+        if (s.mark === "x") { ctx.moveTo(x - r, y - r); ctx.lineTo(x + r, y + r); ctx.moveTo(x + r, y - r); ctx.lineTo(x - r, y + r); }
+        else if (s.mark === "+") { ctx.moveTo(x - r, y); ctx.lineTo(x + r, y); ctx.moveTo(x, y - r); ctx.lineTo(x, y + r); }
+        else { ctx.arc(x, y, r, 0, 2 * Math.PI); }
+        ctx.stroke();
+      }
+    }
+    const list = $("pole-list");
+    list.innerHTML = sets[2].pts.map((p) => `<li>${fmtNum(p.re)} ${p.im >= 0 ? "+" : "−"} ${fmtNum(Math.abs(p.im))}j</li>`).join("");
+    cv.dataset.poles = JSON.stringify(d.poles);
+  }
+
+  // ---- charts -----------------------------------------------------------------------------
+  function buildCharts(sys) {
+    const area = $("chart-area");
+    for (const c of state.charts) c.plot.destroy();
+    area.innerHTML = "";
+    state.charts = [];
+    const n = sys.states.length, m = sys.inputs.length;
+    state.data = { t: [], x: Array.from({ length: n }, () => []), xhat: Array.from({ length: n }, () => []),
+      u: Array.from({ length: m }, () => []) };
+    const width = Math.max(260, Math.min(380, Math.floor((area.clientWidth || 1200) / 3) - 12));
+    const make = (title, series, dataFn) => {
+      const box = document.createElement("div");
+      box.className = "chart";
+      box.setAttribute("role", "img");
+      box.setAttribute("aria-label", `Strip chart: ${title}`);
+      const h = document.createElement("h4"); h.textContent = title;
+      box.appendChild(h);
+      area.appendChild(box);
+      const plot = new uPlot({ width, height: 150, legend: { show: true }, cursor: { show: false },
+        scales: { x: { time: false } }, series: [{ label: "t [s]" }, ...series] }, [[]], box);
+      state.charts.push({ plot, dataFn });
+    };
+    sys.states.forEach((name, i) => {
+      const unit = sys.state_units[i];
+      make(`${name}${unit ? ` [${unit}]` : ""}`, [
+        { label: "true", stroke: "#3b6fb6", width: 1.5 },
+        { label: "estimate", stroke: "#e8871e", width: 1.2, dash: [5, 3] },
+      ], (d) => [d.t, d.x[i], d.xhat[i]]);
+    });
+    sys.inputs.forEach((name, j) => {
+      const unit = sys.input_units[j];
+      make(`${name}${unit ? ` [${unit}]` : ""} (applied, with limits)`, [
+        { label: name, stroke: "#9b30c8", width: 1.5 },
+        { label: "min", stroke: "#d1263b", width: 1, dash: [3, 3] },
+        { label: "max", stroke: "#d1263b", width: 1, dash: [3, 3] },
+      ], (d) => {
+        const f = state.frame;
+        const lo = f ? f.u_limits[0][j] : sys.input_limits[j][0];
+        const hi = f ? f.u_limits[1][j] : sys.input_limits[j][1];
+        return [d.t, d.u[j], d.t.map(() => lo), d.t.map(() => hi)];
+      });
+    });
+  }
+
+  function appendSamples(s) {
+    const d = state.data;
+    if (!d || !s.t.length) return;
+    if (d.t.length && s.t[0] < d.t[d.t.length - 1]) { // a reset: time starts again
+      d.t.length = 0; d.x.forEach((a) => (a.length = 0)); d.xhat.forEach((a) => (a.length = 0)); d.u.forEach((a) => (a.length = 0));
+    }
+    for (let k = 0; k < s.t.length; k++) {
+      d.t.push(s.t[k]);
+      s.x[k].forEach((v, i) => d.x[i].push(v));
+      s.xhat[k].forEach((v, i) => d.xhat[i].push(v));
+      s.u[k].forEach((v, j) => d.u[j].push(v));
+    }
+    const tmin = d.t[d.t.length - 1] - WINDOW;
+    let cut = 0;
+    while (cut < d.t.length && d.t[cut] < tmin) cut++;
+    if (cut) {
+      d.t.splice(0, cut); d.x.forEach((a) => a.splice(0, cut)); d.xhat.forEach((a) => a.splice(0, cut)); d.u.forEach((a) => a.splice(0, cut));
+    }
+  }
+
+  function buildReadout(sys) {
+    const body = $("readout").querySelector("tbody");
+    body.innerHTML = sys.states.map((s, i) =>
+      `<tr><th>${esc(s)}</th><td id="x-${i}"></td><td id="xhat-${i}"></td><td>${esc(sys.state_units[i])}</td></tr>`).join("") +
+      sys.inputs.map((u, j) => `<tr><th>${esc(u)} (applied)</th><td id="u-${j}"></td><td></td><td>${esc(sys.input_units[j])}</td></tr>`).join("");
+  }
+
+  // ---- frames --------------------------------------------------------------------------------
+  function onFrame(f) {
+    state.frame = f;
+    state.frames += 1;
+    for (const s of f.shapes) state.shapes.set(s.key, s);
+    appendSamples(f.samples);
+    state.fell = f.fell;
+    drawScene();
+    const sys = state.sys;
+    if (sys) {
+      f.x.forEach((v, i) => { const el = $(`x-${i}`); if (el) el.textContent = fmtNum(v); });
+      f.xhat.forEach((v, i) => { const el = $(`xhat-${i}`); if (el) el.textContent = fmtNum(v); });
+      f.u.forEach((v, j) => { const el = $(`u-${j}`); if (el) el.textContent = fmtNum(v); });
+    }
+    const st = $("status");
+    if (f.fell) {
+      st.textContent = `Fell at t = ${f.fell.at.toFixed(2)} s: ${f.fell.state} left its region. Press Reset.`;
+      st.className = "fell";
+    } else {
+      st.textContent = `${f.paused ? "Paused" : "Running"} (${f.controller === "off" ? "controller off" : f.controller.toUpperCase()}), t = ${f.t.toFixed(2)} s`;
+      st.className = "";
+    }
+    if (f.margin) {
+      $("margin").value = f.margin.fraction;
+      $("margin-text").textContent = `${Math.round(100 * f.margin.fraction)} % (${f.margin.state})`;
+    }
+    const now = performance.now();
+    if (now - state.lastFrameAt > 60 || f.samples.t.length) {
+      for (const c of state.charts) c.plot.setData(c.dataFn(state.data));
+    }
+    state.lastFrameAt = now;
+  }
+
+  // ---- the drawing ---------------------------------------------------------------------------
+  function transform() {
+    const cv = $("scene");
+    const W = cv.width, H = cv.height;
+    let [x0, x1, y0, y1] = state.view;
+    const sx = W / (x1 - x0), sy = H / (y1 - y0);
+    const s = Math.min(sx, sy);
+    const cx = (x0 + x1) / 2, cy = (y0 + y1) / 2;
+    return { W, H, s, toPx: (x, y) => [W / 2 + (x - cx) * s, H / 2 - (y - cy) * s],
+      toWorld: (px, py) => [cx + (px - W / 2) / s, cy - (py - H / 2) / s] };
+  }
+
+  function follow() {
+    // Keep the drawing in view: pan when the bounded parts leave the middle of the picture.
+    let lo = Infinity, hi = -Infinity;
+    for (const s of state.shapes.values()) {
+      if (!s.bounds || s.kind !== "fill") continue;
+      for (let i = 0; i < s.points.length; i += 2) {
+        const v = s.points[i];
+        if (v === null) continue;
+        if (v < lo) lo = v; if (v > hi) hi = v;
+      }
+    }
+    if (!isFinite(lo)) return;
+    const [x0, x1] = state.view, w = x1 - x0, margin = 0.1 * w;
+    let shift = 0;
+    if (hi > x1 - margin) shift = hi - (x1 - margin);
+    else if (lo < x0 + margin) shift = lo - (x0 + margin);
+    if (shift) { state.view[0] += shift; state.view[1] += shift; }
+  }
+
+  function drawScene() {
+    if (!state.view) return;
+    follow();
+    const cv = $("scene"), ctx = cv.getContext("2d");
+    const T = transform();
+    ctx.clearRect(0, 0, T.W, T.H);
+    const shapes = [...state.shapes.values()].sort((a, b) => a.z - b.z);
+    const pt = 1.3;  // pixels per point of line width
+    for (const s of shapes) {
+      const p = s.points;
+      if (!p.length) continue;
+      if (s.kind === "hline") {
+        const y = T.toPx(0, p[1])[1];
+        ctx.strokeStyle = s.color; ctx.lineWidth = s.width * pt;
+        ctx.beginPath(); ctx.moveTo(0, y); ctx.lineTo(T.W, y); ctx.stroke();
+      } else if (s.kind === "text") {
+        const [x, y] = T.toPx(p[0], p[1]);
+        ctx.fillStyle = s.color; ctx.font = "12px sans-serif"; ctx.fillText(s.text, x, y);
+      } else {
+        ctx.beginPath();
+        let pen = false;
+        for (let i = 0; i < p.length; i += 2) {
+          if (p[i] === null || p[i + 1] === null) { pen = false; continue; }
+          const [x, y] = T.toPx(p[i], p[i + 1]);
+          if (pen) ctx.lineTo(x, y); else { ctx.moveTo(x, y); pen = true; }
+        }
+        if (s.kind === "fill") {
+          ctx.closePath(); ctx.fillStyle = s.color; ctx.fill();
+          if (s.edge) { ctx.strokeStyle = s.edge; ctx.lineWidth = s.width * pt; ctx.stroke(); }
+        } else {
+          ctx.strokeStyle = s.color; ctx.lineWidth = s.width * pt; ctx.stroke();
+        }
+      }
+    }
+    const f = state.frame;
+    ctx.fillStyle = "#333"; ctx.font = "bold 13px sans-serif"; ctx.textAlign = "right";
+    if (f) ctx.fillText(`t = ${f.t.toFixed(2)} s`, T.W - 8, 18);
+    if (f && f.push) { ctx.fillStyle = "#9b30c8"; ctx.fillText(`push ${fmtNum(f.push)}`, T.W - 8, 36); }
+    ctx.textAlign = "left";
+    if (state.drag && state.drag.now) {
+      const [ax, ay] = state.drag.startPx, [bx, by] = state.drag.now;
+      ctx.strokeStyle = "#9b30c8"; ctx.lineWidth = 3; ctx.setLineDash([6, 4]);
+      ctx.beginPath(); ctx.moveTo(ax, ay); ctx.lineTo(bx, ay); ctx.stroke(); ctx.setLineDash([]);
+    }
+  }
+
+  // ---- controls ------------------------------------------------------------------------------
+  function canvasPoint(ev) {
+    const cv = $("scene"), r = cv.getBoundingClientRect();
+    return [(ev.clientX - r.left) * cv.width / r.width, (ev.clientY - r.top) * cv.height / r.height];
+  }
+  function bodyCentre() {
+    let lo = Infinity, hi = -Infinity;
+    for (const s of state.shapes.values()) {
+      if (!s.bounds || s.kind !== "fill") continue;
+      for (let i = 0; i < s.points.length; i += 2) if (s.points[i] !== null) { lo = Math.min(lo, s.points[i]); hi = Math.max(hi, s.points[i]); }
+    }
+    return isFinite(lo) ? (lo + hi) / 2 : 0;
+  }
+
+  function wire() {
+    const push = (size) => send({ type: "push", size });
+    $("push-left").onclick = () => push(-(state.sys ? state.sys.push.size : 0.5));
+    $("push-right").onclick = () => push(state.sys ? state.sys.push.size : 0.5);
+    $("reset").onclick = () => send({ type: "reset", kick: +$("kick").value });
+    $("kick-now").onclick = () => send({ type: "kick", angle: +$("kick").value });
+    const showKick = () => { $("kick-value").textContent = `${(+$("kick").value).toFixed(2)} ${state.sys ? state.sys.state_units[state.sys.states.indexOf(state.sys.main_state)] || "" : ""}`; };
+    $("kick").addEventListener("input", showKick); showKick();
+    $("pause").onclick = () => {
+      state.paused = !state.paused;
+      $("pause").setAttribute("aria-pressed", String(state.paused));
+      $("pause").textContent = state.paused ? "Resume" : "Pause";
+      send({ type: "pause", paused: state.paused });
+    };
+    $("system").onchange = () => send({ type: "select", system: $("system").value });
+    $("controller").onchange = () => tune({ controller: $("controller").value });
+    $("dl-zip").onclick = () => download("controller.zip");
+    $("dl-csv").onclick = () => download("run.csv");
+    $("dl-npz").onclick = () => download("run.npz");
+    const cv = $("scene");
+    cv.addEventListener("pointerdown", (ev) => {
+      state.drag = { startPx: canvasPoint(ev), now: null };
+      cv.setPointerCapture(ev.pointerId);
+    });
+    cv.addEventListener("pointermove", (ev) => { if (state.drag) state.drag.now = canvasPoint(ev); });
+    cv.addEventListener("pointerup", (ev) => {
+      if (!state.drag) return;
+      const [ax] = state.drag.startPx, [bx] = canvasPoint(ev);
+      state.drag = null;
+      const full = state.sys ? state.sys.push.size : 0.5;
+      const dx = bx - ax;
+      if (Math.abs(dx) < 6) {  // a click: a push away from the side clicked
+        const [wx] = transform().toWorld(ax, 0);
+        push(wx < bodyCentre() ? full : -full);
+      } else {  // a drag: its length across the picture sets the size (whole width: 3 x full scale)
+        push(clamp(3 * dx / cv.width, -3, 3));
+      }
+    });
+  }
+
+  async function download(kind) {
+    if (!state.token) return;
+    showMessage(`Preparing ${kind}…`);
+    try {
+      const res = await fetch(`/download/${encodeURIComponent(state.token)}/${kind}`);
+      if (!res.ok) {
+        const body = await res.json().catch(() => ({ error: res.statusText }));
+        showMessage(`Download failed: ${body.error}`);
+        return;
+      }
+      const blob = await res.blob();
+      const name = (res.headers.get("Content-Disposition") || "").match(/filename="([^"]+)"/);
+      const a = document.createElement("a");
+      a.href = URL.createObjectURL(blob);
+      a.download = name ? name[1] : kind;
+      document.body.appendChild(a); a.click(); a.remove();
+      setTimeout(() => URL.revokeObjectURL(a.href), 10000);
+      showMessage(`Downloaded ${a.download}`);
+    } catch (e) {
+      showMessage(`Download failed: ${e}`);
+    }
+  }
+
+  // ---- helpers ------------------------------------------------------------------------------
+  function fmtNum(v) {
+    if (v === null || v === undefined || !isFinite(v)) return "–";
+    const a = Math.abs(v);
+    if (a !== 0 && (a >= 1e5 || a < 1e-3)) return v.toExponential(2);
+    return (+v.toPrecision(4)).toString();
+  }
+  function round3(v) { return +v.toPrecision(4); }
+  function clamp(v, lo, hi) { return Math.min(hi, Math.max(lo, v)); }
+  function esc(s) { return String(s).replace(/[&<>"']/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;" }[c])); }
+
+  wire();
+  connect();
+})();
