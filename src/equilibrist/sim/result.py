@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from equilibrist.atomic import atomic_path, write_text
 from equilibrist.errors import SimulationError, UnknownNameError, nearest
 
 FORMAT = "equilibrist-simresult-1"
@@ -257,10 +258,9 @@ class SimResult:
     def save(self, path: str | Path) -> Path:
         """Write the run to an ``.npz`` file (lossless); returns the path written."""
         p = Path(path)
-        if p.suffix == ".csv":
+        if p.suffix.lower() == ".csv":
             return self.to_csv(p)
-        if p.suffix != ".npz":
-            p = p.with_name(p.name + ".npz")
+        check_result_path(p, "a run")
         meta = {
             "format": FORMAT,
             "system": self.system,
@@ -280,7 +280,8 @@ class SimResult:
         arrays.update(x_op=self.x_op, u_op=self.u_op, final_state=self.final_state)
         if self.fell_x is not None:
             arrays["fell_x"] = self.fell_x
-        np.savez(p, meta=np.array(json.dumps(meta)), **arrays)
+        with atomic_path(p) as tmp:
+            np.savez(tmp, meta=np.array(json.dumps(meta)), **arrays)
         return p
 
     @classmethod
@@ -290,39 +291,10 @@ class SimResult:
         if not p.exists():
             raise SimulationError(f"no result file {p}")
         try:
-            with np.load(p, allow_pickle=False) as data:
-                meta = json.loads(str(data["meta"]))
-                arrays = {k: data[k] for k in data.files if k != "meta"}
+            meta, arrays = read_npz(p)
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
             raise SimulationError(f"{p} is not a saved simulation result: {exc}") from None
-        if meta.get("format") != FORMAT:
-            raise SimulationError(f"{p} is not a saved simulation result (format {meta.get('format')!r})")
-        return cls(
-            system=meta["system"],
-            params=meta["params"],
-            state_names=tuple(meta["state_names"]),
-            state_units=tuple(meta["state_units"]),
-            input_names=tuple(meta["input_names"]),
-            input_units=tuple(meta["input_units"]),
-            output_names=tuple(meta["output_names"]),
-            reference_names=tuple(meta["reference_names"]),
-            time=arrays["time"],
-            states=arrays["states"],
-            estimates=arrays.get("estimates"),
-            measurements=arrays["measurements"],
-            commanded=arrays["commanded"],
-            saturated=arrays["saturated"],
-            applied=arrays["applied"],
-            reference=arrays["reference"],
-            x_op=arrays["x_op"],
-            u_op=arrays["u_op"],
-            fell=bool(meta["fell"]),
-            fell_at=meta["fell_at"],
-            fell_state=meta["fell_state"],
-            fell_x=arrays.get("fell_x"),
-            final_state=arrays["final_state"],
-            settings=meta["settings"],
-        )
+        return _checked(cls, meta, arrays, p)
 
     def columns(self) -> list[tuple[str, str, np.ndarray]]:
         """``(column name, unit, values)`` of every recorded quantity, in CSV order."""
@@ -350,7 +322,7 @@ class SimResult:
         data = np.column_stack([c[2] for c in cols]) if cols else np.zeros((0, 0))
         lines = [f"# {self.system}; fell: {self.fell}; fell_at: {self.fell_at}", header]
         lines += [",".join(_repr(v) for v in row) for row in data]
-        p.write_text("\n".join(lines) + "\n")
+        write_text(p, "\n".join(lines) + "\n")
         return p
 
     @staticmethod
@@ -367,3 +339,119 @@ def _repr(v: float) -> str:
     if math.isnan(v):
         return "nan"
     return repr(float(v))
+
+
+def read_npz(path: Path) -> tuple[object, dict[str, np.ndarray]]:
+    """``(meta, arrays)`` of a result file; never unpickles, never leaks the file handle.
+
+    Raises what numpy, zipfile and json raise on a file that is not one.
+    """
+    with path.open("rb") as fh, np.load(fh, allow_pickle=False) as data:
+        meta = json.loads(str(data["meta"]))
+        arrays = {k: data[k] for k in data.files if k != "meta"}
+    return meta, arrays
+
+
+def check_result_path(path: Path, what: str, suffixes: tuple[str, ...] = (".npz", ".csv")) -> None:
+    """Refuse a result file name that is empty or has a suffix no writer knows."""
+    if not str(path) or not path.name or path.name in (".", ".."):
+        raise SimulationError(f"the file to save {what} in has no name: expected NAME{suffixes[0]}")
+    if path.suffix.lower() not in suffixes:
+        raise SimulationError(
+            f"{path}: unknown result format {path.suffix or '(no suffix)'!r}: expected "
+            + " or ".join(suffixes)
+        )
+
+
+def _checked(cls: type[SimResult], meta: object, arrays: dict[str, np.ndarray], p: Path) -> SimResult:
+    """A :class:`SimResult` from a file's contents, every field checked once, here."""
+    bad = f"{p} is not a valid saved simulation result"
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        found = meta.get("format") if isinstance(meta, dict) else type(meta).__name__
+        raise SimulationError(f"{p} is not a saved simulation result (format {found!r})")
+
+    def text(key: str, *, optional: bool = False) -> str | None:
+        v = meta.get(key)
+        if v is None and optional:
+            return None
+        if not isinstance(v, str):
+            raise SimulationError(f"{bad}: {key} should be text, found {v!r}")
+        return v
+
+    def names(key: str) -> tuple[str, ...]:
+        v = meta.get(key)
+        if not isinstance(v, list) or not all(isinstance(n, str) for n in v):
+            raise SimulationError(f"{bad}: {key} should be a list of names, found {v!r}")
+        return tuple(v)
+
+    def maybe(key: str, shape: tuple[int | None, ...], *, finite: bool = True) -> np.ndarray | None:
+        return array(key, shape, finite=finite) if key in arrays else None
+
+    def array(key: str, shape: tuple[int | None, ...], *, finite: bool = True) -> np.ndarray:
+        if key not in arrays:
+            raise SimulationError(f"{bad}: the array {key!r} is missing")
+        a = arrays[key]
+        if a.dtype.kind not in "fiub":
+            raise SimulationError(f"{bad}: {key} holds {a.dtype} values, expected numbers")
+        a = a.astype(float)
+        if a.ndim != len(shape) or any(w is not None and w != n for w, n in zip(shape, a.shape, strict=True)):
+            want = "x".join("n" if w is None else str(w) for w in shape)
+            raise SimulationError(f"{bad}: {key} has shape {a.shape}, expected {want}")
+        if finite and not np.all(np.isfinite(a)):
+            raise SimulationError(f"{bad}: {key} holds values that are not finite numbers")
+        return a
+
+    system = text("system")
+    params = meta.get("params")
+    if not isinstance(params, dict) or not all(
+        isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool) for k, v in params.items()
+    ):
+        raise SimulationError(f"{bad}: params should map names to numbers")
+    states_n = names("state_names")
+    inputs_n = names("input_names")
+    outputs_n = names("output_names")
+    refs_n = names("reference_names")
+    state_units = names("state_units")
+    input_units = names("input_units")
+    if len(state_units) != len(states_n) or len(input_units) != len(inputs_n):
+        raise SimulationError(f"{bad}: units do not match the names")
+    time = array("time", (None,))
+    rows = time.shape[0]
+    if rows == 0 or np.any(np.diff(time) <= 0):
+        raise SimulationError(f"{bad}: time must be a non-empty increasing sequence")
+    n, m = len(states_n), len(inputs_n)
+    fell = meta.get("fell")
+    fell_at = meta.get("fell_at")
+    if not isinstance(fell, bool):
+        raise SimulationError(f"{bad}: fell should be true or false, found {fell!r}")
+    if fell_at is not None and (not isinstance(fell_at, (int, float)) or not math.isfinite(fell_at)):
+        raise SimulationError(f"{bad}: fell_at should be a time in seconds, found {fell_at!r}")
+    settings = meta.get("settings")
+    if not isinstance(settings, dict):
+        raise SimulationError(f"{bad}: settings should be a mapping, found {settings!r}")
+    return cls(
+        system=str(system),
+        params={k: float(v) for k, v in params.items()},
+        state_names=states_n,
+        state_units=state_units,
+        input_names=inputs_n,
+        input_units=input_units,
+        output_names=outputs_n,
+        reference_names=refs_n,
+        time=time,
+        states=array("states", (rows, n)),
+        estimates=maybe("estimates", (rows, n)),
+        measurements=array("measurements", (rows, len(outputs_n))),
+        commanded=array("commanded", (rows, m)),
+        saturated=array("saturated", (rows, m)),
+        applied=array("applied", (rows, m)),
+        reference=array("reference", (rows, len(refs_n))),
+        x_op=array("x_op", (n,)),
+        u_op=array("u_op", (m,)),
+        fell=fell,
+        fell_at=None if fell_at is None else float(fell_at),
+        fell_state=text("fell_state", optional=True),
+        fell_x=maybe("fell_x", (n,), finite=False),
+        final_state=array("final_state", (n,), finite=False),
+        settings=settings,
+    )
