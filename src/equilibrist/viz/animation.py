@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from equilibrist.atomic import atomic_path
 from equilibrist.viz.output import ANIMATION_FORMATS, VizError, check_suffix, ffmpeg_path
 
 #: Default frame rate and cap on the number of frames.
@@ -182,8 +183,9 @@ def write_gif(frames: Sequence[np.ndarray], path: str | Path, *, frame_seconds: 
         colors=255, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
     images = [Image.fromarray(f).quantize(palette=palette, dither=Image.Dither.NONE) for f in frames]
     ms = max(20, round(frame_seconds * 1000 / 10) * 10)  # GIF delays are in 10 ms steps
-    images[0].save(p, save_all=True, append_images=images[1:], duration=ms, loop=0,
-                   optimize=False, disposal=1)
+    with atomic_path(p) as tmp:
+        images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=ms,
+                       loop=0, optimize=False, disposal=1)
     return p
 
 
@@ -213,12 +215,13 @@ def write_mp4(frames: Sequence[np.ndarray], path: str | Path, *, fps: float) -> 
         exe, "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgb24",
         "-s", f"{w}x{h}", "-r", f"{fps:.6g}", "-i", "-",
         # yuv420p (what players expect) needs even sizes: pad by one pixel if odd.
-        "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-pix_fmt", "yuv420p", "-vcodec", "libx264", str(p),
+        "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-pix_fmt", "yuv420p", "-vcodec", "libx264",
     ]
     data = b"".join(np.ascontiguousarray(f, dtype=np.uint8).tobytes() for f in frames)
-    done = subprocess.run(cmd, input=data, capture_output=True, check=False)
-    if done.returncode != 0:
-        raise VizError(f"ffmpeg failed writing {str(p)!r}: {done.stderr.decode(errors='replace').strip()}")
+    with atomic_path(p) as tmp:
+        done = subprocess.run([*cmd, "-f", "mp4", str(tmp)], input=data, capture_output=True, check=False)
+        if done.returncode != 0:
+            raise VizError(f"ffmpeg failed writing {str(p)!r}: {done.stderr.decode(errors='replace').strip()}")
     return p
 
 

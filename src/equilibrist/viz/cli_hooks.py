@@ -9,6 +9,7 @@ before anything is simulated).
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -49,16 +50,47 @@ def frame_size(text: str) -> tuple[int, int]:
         size = (int(w), int(h))
     except ValueError:
         size = (0, 0)
-    if not sep or size[0] < 48 or size[1] < 36:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected WIDTHxHEIGHT in pixels, at least 48x36")
+    if not sep or size[0] < 48 or size[1] < 36 or size[0] > MAX_SIDE or size[1] > MAX_SIDE:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected WIDTHxHEIGHT in pixels, from 48x36 to {MAX_SIDE}x{MAX_SIDE}"
+        )
     return size
+
+
+# Bounds of an animation: a frame no larger than a 4K screen's long side,
+# a frame rate a player shows, a frame count that fits in memory.
+MAX_SIDE = 4096
+MAX_FPS = 240.0
+MAX_FRAMES = 20_000
+
+
+def frame_rate(text: str) -> float:
+    """Frames per second of simulated time (an argparse type)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 < value <= MAX_FPS:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected frames per second in (0, {MAX_FPS:g}]")
+    return value
+
+
+def frame_count(text: str) -> int:
+    """A number of frames (an argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= MAX_FRAMES:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number of frames from 1 to {MAX_FRAMES}")
+    return value
 
 
 def add_animation_options(parser: argparse.ArgumentParser) -> None:
     """``--fps``, ``--max-frames`` and ``--size`` of an animation."""
-    parser.add_argument("--fps", type=float, default=20.0, metavar="N",
+    parser.add_argument("--fps", type=frame_rate, default=20.0, metavar="N",
                         help="frames per second of simulated time (default 20)")
-    parser.add_argument("--max-frames", type=int, default=300, metavar="N",
+    parser.add_argument("--max-frames", type=frame_count, default=300, metavar="N",
                         help="at most this many frames; a long run plays with fewer per second "
                         "(default 300)")
     parser.add_argument("--size", type=frame_size, default=(480, 360), metavar="WxH",

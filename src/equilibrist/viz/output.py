@@ -6,6 +6,7 @@ import shutil
 from pathlib import Path
 from typing import Any
 
+from equilibrist.atomic import atomic_path
 from equilibrist.errors import EquilibristError
 
 #: Suffixes a figure can be saved as.
@@ -48,13 +49,13 @@ def save_figure(figure: Any, path: str | Path, *, dpi: float | None = None) -> P
         The file written.
     """
     p = check_suffix(path, FIGURE_FORMATS, "figure")
-    p.parent.mkdir(parents=True, exist_ok=True)
     kwargs: dict[str, Any] = {"format": p.suffix.lower()[1:]}
     if p.suffix.lower() == ".svg":
         kwargs["metadata"] = {"Date": None}  # reproducible files
     else:
         kwargs["metadata"] = {"Software": None}
-    figure.savefig(p, dpi=dpi or figure.dpi, facecolor="white", **kwargs)
+    with atomic_path(p) as tmp:
+        figure.savefig(tmp, dpi=dpi or figure.dpi, facecolor="white", **kwargs)
     return p
 
 

@@ -14,6 +14,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from equilibrist.atomic import write_text
+
 
 @dataclass(frozen=True)
 class Image:
@@ -208,5 +210,5 @@ def write_index(
         parts.append(f'<hr><p class="sub">{_e(footer)}</p>')
     parts.append("</body></html>")
     path = folder / "index.html"
-    path.write_text("\n".join(parts) + "\n", encoding="utf-8")
+    write_text(path, "\n".join(parts) + "\n")
     return path
