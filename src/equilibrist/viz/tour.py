@@ -19,6 +19,9 @@ inputs; a system not listed gets :func:`default_scenario`.
 from __future__ import annotations
 
 import math
+import os
+import shutil
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -27,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from equilibrist.viz.output import VizError
 from equilibrist.viz.report import Image, Section, write_index
 
 #: Seed of the noise of every demo run (the report is reproducible).
@@ -589,8 +593,76 @@ def run_tour(
     list of Outcome
         In the order of *systems*.
     """
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    target = Path(folder)
+    check_report_folder(target)
+    # The report is built in a staging folder beside the target and moved
+    # into place whole: a failure or Ctrl-C part-way leaves nothing behind.
+    target.parent.mkdir(parents=True, exist_ok=True)
+    folder = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.partial-"))
+    try:
+        outcomes = _tour_into(systems, folder, size=size, fps=fps, max_frames=max_frames,
+                              extras=extras, jobs=jobs, progress=progress, log=log)
+        (folder / REPORT_MARKER).write_text("written by equilibrist demo\n")
+        _put_in_place(folder, target)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    return outcomes
+
+
+# A report folder holds this file: a folder without it is the user's, never replaced.
+REPORT_MARKER = ".equilibrist-report"
+
+
+def check_report_folder(target: Path) -> None:
+    """Refuse a report folder that would replace something equilibrist did not write."""
+    if target.exists() and not target.is_dir():
+        raise VizError(f"the report folder {str(target)!r} is a file: name a folder")
+    if target.is_dir() and any(target.iterdir()) and not _is_report(target):
+        raise VizError(
+            f"the report folder {str(target)!r} holds files that equilibrist did not write: "
+            "name a new or empty folder"
+        )
+
+
+def _is_report(folder: Path) -> bool:
+    if (folder / REPORT_MARKER).exists():
+        return True
+    # Reports of earlier versions have no marker; their index says who made them.
+    index = folder / "index.html"
+    try:
+        return index.is_file() and "Made by 'equilibrist demo'" in index.read_text(errors="replace")
+    except OSError:
+        return False
+
+
+def _put_in_place(staged: Path, target: Path) -> None:
+    """Replace *target* (an earlier report, or nothing) by *staged*."""
+    old = None
+    if target.exists():
+        old = target.with_name(f".{target.name}.old-{os.getpid()}")
+        target.rename(old)
+    try:
+        staged.rename(target)
+    except BaseException:
+        if old is not None:
+            old.rename(target)
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _tour_into(
+    systems: Sequence[Any],
+    folder: Path,
+    *,
+    size: tuple[int, int],
+    fps: float,
+    max_frames: int,
+    extras: Sequence[str],
+    jobs: int,
+    progress: bool,
+    log: Callable[[str], None] | None,
+) -> list[Outcome]:
     from tqdm.auto import tqdm
 
     options: dict[str, Any] = {"size": size, "fps": fps, "max_frames": max_frames,
