@@ -199,3 +199,31 @@ def test_result_file_names_that_say_nothing_are_refused(tmp_path, name) -> None:
     with pytest.raises(EquilibristError, match="expected"):
         result.save(tmp_path / name if name else Path(""))
     assert sorted(p.name for p in tmp_path.iterdir()) == ["src.npz"]
+
+
+def test_linkage_answers_the_exact_question_where_the_approximation_has_no_pose(capsys) -> None:
+    from equilibrist.mechanics.linkage import FourBar, UnreachablePoseError
+
+    bar = FourBar(a=0.05, b=0.03, c=0.06, d=0.04, e=0.08)
+    with pytest.raises(UnreachablePoseError):
+        bar.approximate_platform_angle(0.25, branch="plus")
+    assert main(["linkage", "--geometry", "a=0.05,b=0.03,c=0.06,d=0.04,e=0.08",
+                 "--motor-angle", "0.25", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["approximate"]["phi"] is None
+    # The exact pose closes the loop: the independent check of the answer.
+    assert abs(out["residual"]) < 1e-12
+    assert bar.closure_residual(0.25, out["phi"]) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_a_rate_too_fast_is_named_as_the_reason(capsys) -> None:
+    assert main(["design", "cartpole", "--rate", "1e9"]) == 2
+    line = capsys.readouterr().err.strip()
+    assert "too fast" in line and "1e+09 Hz" in line and "stabilizable" not in line
+
+
+@pytest.mark.parametrize("value", ["-inf,0,0,0", "-nan,0,0,0", "-Infinity,0,0,0"])
+def test_negative_non_finite_values_are_values(capsys, value) -> None:
+    assert main(["dynamics", "cartpole", "--state", value]) == 2
+    line = capsys.readouterr().err.strip()
+    assert "expected one argument" not in line and "finite" in line

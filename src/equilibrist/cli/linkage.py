@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from collections.abc import Callable
 
 from equilibrist.cli import common
 
@@ -50,13 +51,13 @@ def run(args: argparse.Namespace) -> int:
         theta = common.parse_number(args.motor_angle, "--motor-angle")
         branch = args.branch or "plus"
         phi = float(bar.platform_angle(theta, branch=branch))
-        approx = float(bar.approximate_platform_angle(theta, branch=branch))
+        approx = _approximate(lambda: bar.approximate_platform_angle(theta, branch=branch))
         solved, exact, label = "phi", phi, "platform angle"
     else:
         phi = common.parse_number(args.platform_angle, "--platform-angle")
         branch = args.branch or "minus"
         theta = float(bar.motor_angle(phi, branch=branch))
-        approx = float(bar.approximate_motor_angle(phi, branch=branch))
+        approx = _approximate(lambda: bar.approximate_motor_angle(phi, branch=branch))
         solved, exact, label = "theta", theta, "motor angle"
     ratio = float(bar.rate_ratio(theta, phi))
     out = {
@@ -65,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
         "theta": theta,
         "phi": phi,
         "rate_ratio": ratio,
-        "approximate": {solved: approx, "error": approx - exact},
+        "approximate": {solved: approx, "error": None if approx is None else approx - exact},
         "residual": float(bar.closure_residual(theta, phi)),
     }
     if args.json:
@@ -74,6 +75,20 @@ def run(args: argparse.Namespace) -> int:
     print(f"{label} ({branch} branch): {solved} = {exact:.6g} rad ({math.degrees(exact):.4g} deg)")
     print(f"pose: theta = {theta:.6g} rad, phi = {phi:.6g} rad; loop closure residual {out['residual']:.2g}")
     print(f"rate ratio d theta / d phi = {ratio:.6g}")
-    print(f"seed's near-parallelogram approximation: {solved} = {approx:.6g} rad "
-          f"(error {approx - exact:+.3g} rad)")
+    if approx is None:
+        print("seed's near-parallelogram approximation: no pose (its closed form has no "
+              "solution here, although the exact linkage reaches it)")
+    else:
+        print(f"seed's near-parallelogram approximation: {solved} = {approx:.6g} rad "
+              f"(error {approx - exact:+.3g} rad)")
     return 0
+
+
+def _approximate(solve: Callable[[], object]) -> float | None:
+    """The seed's approximate answer, or None where its closed form has none."""
+    from equilibrist.mechanics.linkage import UnreachablePoseError
+
+    try:
+        return float(solve())  # type: ignore[arg-type]
+    except UnreachablePoseError:
+        return None

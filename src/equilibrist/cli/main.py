@@ -22,7 +22,7 @@ from equilibrist import __version__
 from equilibrist.errors import EquilibristError
 
 # Order of the subcommands in --help; modules not listed come after.
-_ORDER = ("systems", "show", "dynamics", "linearize", "linkage", "design", "simulate", "batch", "sweep",
+_ORDER = ("systems", "show", "dynamics", "linearize", "linkage", "design", "simulate", "batch", "sweep", "identify",
           "plot", "animate", "export", "demo")
 
 
@@ -31,12 +31,13 @@ class _Parser(argparse.ArgumentParser):
 
     A value that starts with a minus sign and a digit is a value, not an
     option: argparse's own rule accepts ``-1`` but not the list
-    ``-0.1,0,0,0`` that ``--state`` or ``--q`` take.
+    ``-0.1,0,0,0`` that ``--state`` or ``--q`` take. So are ``-inf`` and
+    ``-nan``, so that their message says what is wrong with them.
     """
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        self._negative_number_matcher = re.compile(r"^-\.?\d")
+        self._negative_number_matcher = re.compile(r"^-(\.?\d|inf|nan)", re.IGNORECASE)
 
     def error(self, message: str) -> None:  # type: ignore[override]
         raise _UsageError(f"{self.prog}: {message} (see '{self.prog} --help')")

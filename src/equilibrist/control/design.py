@@ -539,6 +539,10 @@ def _default_process_noise(
     return QN, (note,)
 
 
+# The fastest sample rate a design accepts [Hz].
+MAX_RATE = 1e6
+
+
 def design(
     system: System,
     *,
@@ -630,6 +634,15 @@ def design(
     plant = system.linearize(outputs=names)
     states, inputs = plant.state_names, plant.input_names
     n, m = plant.n_states, plant.n_inputs
+    if rate_hz is not None and rate_hz > MAX_RATE:
+        # Past this the sampled plant is the identity to double precision (an
+        # input moves the state by ~dt^2 per sample) and every mode looks
+        # uncontrollable: the rate is the problem, not the plant.
+        raise DesignError(
+            f"a rate of {rate_hz:g} Hz is too fast to design for: at dt = {1 / rate_hz:.3g} s the "
+            f"sampled plant is the identity to within double precision; design at "
+            f"{MAX_RATE:g} Hz or less (real rigs sample at 10 Hz to 100 kHz)"
+        )
     if rate_hz is not None:
         # A mode that grows by e^10 within one sample cannot be held by a
         # sampled controller (and e^400 overflows the discretization).
