@@ -227,3 +227,40 @@ def test_negative_non_finite_values_are_values(capsys, value) -> None:
     assert main(["dynamics", "cartpole", "--state", value]) == 2
     line = capsys.readouterr().err.strip()
     assert "expected one argument" not in line and "finite" in line
+
+
+def test_export_never_overwrites_the_users_files(tmp_path, capsys) -> None:
+    folder = tmp_path / "robot"
+    folder.mkdir()
+    (folder / "Makefile").write_text("the user's own Makefile")
+    assert main(["export", "cartpole", "--out", str(folder)]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert (folder / "Makefile").read_text() == "the user's own Makefile"
+    assert sorted(p.name for p in folder.iterdir()) == ["Makefile"]
+    # An earlier export is equilibrist's own: writing again replaces it.
+    again = tmp_path / "export"
+    assert main(["export", "cartpole", "--out", str(again)]) == 0
+    assert main(["export", "cartpole", "--out", str(again)]) == 0
+    assert main(["export", "cartpole", "--out", str(folder), "--force"]) == 0
+    assert "the user's own" not in (folder / "Makefile").read_text()
+
+
+def test_a_terminated_demo_leaves_nothing(tmp_path) -> None:
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    report = tmp_path / "report"
+    proc = subprocess.Popen([sys.executable, "-m", "equilibrist.cli.main", "demo", "cartpole",
+                             "--out", str(report), "--jobs", "1"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not any(tmp_path.glob(".report.partial-*/*")):
+        time.sleep(0.05)
+    assert any(tmp_path.glob(".report.partial-*")), "the demo never started its report"
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode != 0
+    assert b"Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

@@ -58,8 +58,17 @@ def check_rate(rate: object) -> float:
     return value
 
 
-def check_folder(out: object) -> Path:
-    """The output folder, if it can be written (existing or creatable), else :class:`ExportError`."""
+# Every export folder holds this file: a folder without it is the user's.
+EXPORT_MARKER = ".equilibrist-export"
+
+
+def check_folder(out: object, *, force: bool = False) -> Path:
+    """The output folder, if it can be written (existing or creatable), else :class:`ExportError`.
+
+    An existing folder that holds files and is not an earlier export is the
+    user's: it is refused unless *force* (its files of the export's names
+    are then replaced, the others left alone).
+    """
     try:
         path = Path(os.fspath(out)).expanduser()  # type: ignore[call-overload]  # TypeError caught below
     except TypeError:
@@ -70,6 +79,11 @@ def check_folder(out: object) -> Path:
             raise ExportError(f"output folder {path} exists and is not a folder")
         if not os.access(path, os.W_OK | os.X_OK):
             raise ExportError(f"output folder {path} is not writable")
+        if not force and not (path / EXPORT_MARKER).exists() and any(path.iterdir()):
+            raise ExportError(
+                f"output folder {path} holds files that equilibrist did not write: name a new or "
+                "empty folder, or add --force to replace the files of the export's names"
+            )
         return path
     ancestor = path.parent
     while not ancestor.exists():
@@ -164,7 +178,7 @@ def write_files(folder: Path, files: Mapping[str, str]) -> None:
     file is moved into place, replacing an older file of the same name and
     leaving other files alone.
     """
-    folder = check_folder(folder)
+    folder = check_folder(folder, force=True)
     existed = folder.exists()
     if existed:
         stage_root = folder
@@ -213,6 +227,7 @@ def export_c(
     duration: float | None = None,
     seed: int = 0,
     system: Any | None = None,
+    force: bool = False,
 ) -> Export:
     """Write the C99 library of *design*'s digital controller, with examples and tests.
 
@@ -239,6 +254,9 @@ def export_c(
     system:
         The bound system the design was made for (default: rebuilt from the
         design's key and parameters), for its descriptions.
+    force:
+        Write into an existing folder that holds files equilibrist did not
+        write (replacing those of the export's names).
 
     Returns
     -------
@@ -253,7 +271,7 @@ def export_c(
     """
     check_controller(controller)
     check_precision(precision)
-    folder = check_folder(out)
+    folder = check_folder(out, force=force)
     data = controller_data(design, controller=controller)
     if system is None:
         system = _system_of(design)
@@ -266,7 +284,9 @@ def export_c(
     title, table = _describe(system, data)
     files = render(data, vectors, precision=precision, version=version, title=title,
                    param_table=table)
-    write_files(folder, {rel: text for rel, (text, _) in files.items()})
+    texts = {rel: text for rel, (text, _) in files.items()}
+    texts[EXPORT_MARKER] = f"written by equilibrist {version}\n"
+    write_files(folder, texts)
     return Export(
         folder=folder,
         files={rel: what for rel, (_, what) in files.items()},
