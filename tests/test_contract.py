@@ -34,6 +34,9 @@ FRICTIONS = {
     "ball_beam_servo": ("b",),
     "gyroscope": (),
     "cmg_robot": ("B_w",),
+    "furuta": ("b_a", "b_p"),
+    "acrobot": ("b1", "b2"),
+    "pendubot": ("b1", "b2"),
 }
 # Reduced first-order models have no energy to conserve (SYSTEMS.md: the
 # servo model drops the beam's dynamics); listed here, not skipped silently.

@@ -697,6 +697,102 @@ class CmgRobotScene(Scene):
         return out
 
 
+class FurutaScene(Scene):
+    """The rotary pendulum in a 3D projection (z up): the motor on its
+    stand, the arm turning about the vertical, the pendulum swinging in the
+    plane across the arm's tip. The pendulum is drawn as the uniform rod of
+    length ``2 l_p`` that the default inertia describes; the motor's body
+    (not a parameter) is a cylinder of a third of the arm's length."""
+
+    caption = "3D view: arm angle φ counter-clockwise from above; pendulum θ from up; arrow: torque τ"
+    projected = True
+
+    def shapes(self, x, u, trail=None):
+        p = self.params
+        La, lp = p["L_a"], p["l_p"]
+        phi, th = self.q(x, "phi"), self.q(x, "theta")
+        proj = _Projection()
+        arm = np.array([math.cos(phi), math.sin(phi), 0.0])
+        across = np.array([-math.sin(phi), math.cos(phi), 0.0])  # where the tip goes as phi grows
+        up = np.array([0.0, 0.0, 1.0])
+        joint = La * arm
+        tip = joint + 2 * lp * (math.cos(th) * up + math.sin(th) * across)
+        r_motor = La / 3
+        h_motor = 0.9 * La
+        ring = _disc3d(np.array([0.0, 0.0, -h_motor]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]),
+                       r_motor, 36)
+        lid = _disc3d(np.zeros(3), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), r_motor, 36)
+        # The motor's outline: its bottom and top circles joined at the sides of the view.
+        base, top = proj(ring), proj(lid)
+        left, right = int(np.argmin(base[:, 0])), int(np.argmax(base[:, 0]))
+        body = np.vstack([base[left], base[right], top[right], top[left]])
+        frac = self.input_fraction(u)
+        # The torque: an arc above the motor, counter-clockwise seen from above
+        # when positive, three quarters of a turn at full scale.
+        arc = arc_arrow(np.zeros(2), 0.55 * La, phi + math.pi, 1.5 * math.pi * frac, 0.06 * La)
+        arc3 = np.column_stack([arc, np.full(len(arc), 0.12 * La)]) if len(arc) else np.empty((0, 3))
+        out = [
+            _fill("motor", body, COLORS["wheel"], z=1),
+            _fill("motor_base", base, COLORS["wheel"], z=0.9),
+            _fill("motor_top", top, COLORS["ground"], z=1.1, edge=COLORS["wheel"]),
+            _fill("arm", bar(proj(np.zeros(3))[0], proj(joint)[0], 0.09 * La), COLORS["body"], z=2),
+            _fill("pendulum", bar(proj(joint)[0], proj(tip)[0], 0.07 * La), COLORS["link"], z=3),
+            _fill("torque", proj(arc3) if len(arc3) else np.empty((0, 2)), COLORS["input"], z=5),
+            _fill("hub", circle(proj(np.zeros(3))[0], 0.08 * La, 16), COLORS["pivot"], z=6),
+            _fill("joint", circle(proj(joint)[0], 0.06 * La, 16), COLORS["pivot"], z=6),
+        ]
+        return out
+
+    def extent(self, states, inputs=None):
+        p = self.params
+        reach = p["L_a"] + 2 * p["l_p"]
+        return (-1.15 * reach, 1.15 * reach, -1.15 * reach, 1.15 * reach)
+
+
+class TwoLinkScene(Scene):
+    """Two links hanging from a fixed shoulder (the acrobot and the
+    pendubot): angles from hanging down, counter-clockwise, ``theta2``
+    relative to link 1; the motor's torque is a curved arrow at the joint
+    it drives (counter-clockwise when positive)."""
+
+    caption = "θ1 from hanging down, counter-clockwise; θ2 relative to link 1; arrow: torque τ"
+    #: The joint the motor drives.
+    motor_at = "shoulder"
+
+    def shapes(self, x, u, trail=None):
+        p = self.params
+        l1, l2 = p["l1"], p["l2"]
+        size = l1 + l2
+        a1 = self.q(x, "theta1")
+        a2 = a1 + self.q(x, "theta2")
+        shoulder = np.zeros(2)
+        elbow = l1 * np.array([math.sin(a1), -math.cos(a1)])
+        tip = elbow + l2 * np.array([math.sin(a2), -math.cos(a2)])
+        at = elbow if self.motor_at == "elbow" else shoulder
+        frac = self.input_fraction(u)
+        out = [
+            _fill("mount", _pts((-0.06 * size, 0.05 * size), (0.06 * size, 0.05 * size), (0.0, 0.0)),
+                  COLORS["ground"], z=1),
+            _fill("link1", bar(shoulder, elbow, 0.05 * size), COLORS["link"], z=3),
+            _fill("link2", bar(elbow, tip, 0.045 * size), COLORS["link2"], z=3.5),
+            _fill("torque", arc_arrow(at, 0.1 * size, a1 + math.pi / 2, 1.5 * math.pi * frac,
+                                      0.02 * size), COLORS["input"], z=5),
+            _fill("shoulder", circle(shoulder, 0.025 * size, 20), COLORS["pivot"], z=6),
+            _fill("elbow", circle(elbow, 0.022 * size, 20), COLORS["pivot"], z=6),
+        ]
+        return out
+
+    def reach(self, states):
+        r = self.params["l1"] + self.params["l2"]
+        return (-r, r, -r, r)  # the whole circle the links sweep
+
+
+class AcrobotScene(TwoLinkScene):
+    """The acrobot: the motor at the elbow."""
+
+    motor_at = "elbow"
+
+
 SCENES: dict[str, Callable[[object], Scene]] = {
     "seesaw": SeesawScene,
     "cartpole": CartpoleScene,
@@ -707,6 +803,9 @@ SCENES: dict[str, Callable[[object], Scene]] = {
     "ball_beam_servo": BallBeamScene,
     "gyroscope": GyroscopeScene,
     "cmg_robot": CmgRobotScene,
+    "furuta": FurutaScene,
+    "acrobot": AcrobotScene,
+    "pendubot": TwoLinkScene,
 }
 
 
