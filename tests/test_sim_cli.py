@@ -55,7 +55,7 @@ def test_simulate_saves_and_pushes(tmp_path, capsys):
     assert np.all(res.states[res.time < 0.5] == 0.0)
     csv = tmp_path / "run.csv"
     assert main(["simulate", "cartpole", "--duration", "0.5", "--out", str(csv)]) == 0
-    assert csv.read_text().splitlines()[1].startswith("time [s],x [m]")
+    assert csv.read_text().splitlines()[2].startswith("t [s],F [N],x [m],theta [rad]")
 
 
 def test_simulate_tracks_a_reference(capsys):

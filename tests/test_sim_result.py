@@ -58,13 +58,19 @@ def test_npz_round_trip_is_lossless(noisy_run, tmp_path):
 def test_csv_round_trip_is_lossless(noisy_run, tmp_path):
     r = noisy_run
     cols = SimResult.read_csv(r.to_csv(tmp_path / "run.csv"))
-    header = (tmp_path / "run.csv").read_text().splitlines()[1]
-    assert header.startswith("time [s],x [m],theta [rad]")
-    np.testing.assert_array_equal(cols["theta"], r.state("theta"))
+    header = (tmp_path / "run.csv").read_text().splitlines()[2]
+    # The log of the run first (t, inputs, measured outputs), as identify reads it.
+    assert header.startswith("t [s],F [N],x [m],theta [rad],x_true [m]")
+    np.testing.assert_array_equal(cols["theta_true"], r.state("theta"))
     np.testing.assert_array_equal(cols["theta_hat"], r.estimate("theta"))
     np.testing.assert_array_equal(cols["F_commanded"], r.command("F"))
     np.testing.assert_array_equal(cols["F"], r.input("F"))
-    np.testing.assert_array_equal(cols["x_measured"], r.measurement("x"))
+    np.testing.assert_array_equal(cols["x"], r.measurement("x"))
+    back = SimResult.load(tmp_path / "run.csv")
+    for name in ("time", "states", "estimates", "measurements", "commanded", "saturated",
+                 "applied", "reference", "x_op", "u_op", "final_state"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(r, name))
+    assert back.metrics() == r.metrics()
 
 
 def test_loading_something_else_is_a_clear_error(tmp_path):

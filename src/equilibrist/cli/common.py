@@ -147,12 +147,25 @@ def system_settings(name: str, items: Sequence[str]) -> dict[str, object]:
     return settings
 
 
+def add_params(parser: argparse.ArgumentParser) -> None:
+    """``--params FILE.json``: parameter values from a file (``identify --out``)."""
+    parser.add_argument("--params", metavar="FILE.json",
+                        help="parameter values from a JSON file (as 'equilibrist identify --out' "
+                        "writes); --set values override them")
+
+
 def load_system(args: argparse.Namespace) -> Any:
-    """The system named on the command line with its ``--set`` values."""
+    """The system named on the command line with its ``--params`` and ``--set`` values."""
     from equilibrist.numeric.system import get_system
 
     parameter_names(args.system)  # unknown names and bad files fail before parsing values
-    return get_system(args.system, **system_settings(args.system, args.settings))
+    settings: dict[str, object] = {}
+    if getattr(args, "params", None) is not None:  # only commands given add_params have it
+        from equilibrist.ident.params import read_params
+
+        settings.update(read_params(args.params, system=args.system))
+    settings.update(system_settings(args.system, args.settings))
+    return get_system(args.system, **settings)
 
 
 def to_jsonable(obj: Any) -> Any:

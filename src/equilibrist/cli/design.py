@@ -34,6 +34,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rate", metavar="HZ", help="sample rate of a discrete design [Hz]")
     common.add_design_options(p)
     common.add_set(p)
+    common.add_params(p)
     common.add_json(p)
     p.set_defaults(func=run)
 

@@ -38,7 +38,15 @@ Weights --q --r --qn --rn are comma-separated diagonals as in 'equilibrist
 design'. --json prints the summary metrics (fell, fell_at, settling_time,
 overshoot, peak_input, rms_input, time_saturated, final_error,
 estimation_error_rms, ...). --out FILE.npz saves the run (FILE.csv exports
-a table).
+a table that starts with the log 'equilibrist identify' reads: t, the inputs,
+the measured outputs; then the true states and the rest).
+
+--excite SIGNAL (an identification experiment) adds a signal to the
+controller's command, before the actuator's limits, on every input:
+chirp:AMP:F0:F1[:SWEEP], a sine of amplitude AMP (the input's unit) whose
+frequency rises linearly from F0 to F1 Hz over SWEEP seconds (default the
+whole run); prbs:AMP:PERIOD, +-AMP switching at multiples of PERIOD seconds
+by an 11-bit maximal-length shift register whose bits are fixed by --seed.
 """
 
 
@@ -71,6 +79,7 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reference", metavar="SIGNAL",
                    help="reference of the tracked output: step:V[@T], ramp:S[@T], square:A:P, file:PATH")
     common.add_set(p)
+    common.add_params(p)
     common.add_design_options(p)
     p.add_argument("--out", metavar="FILE", help="save the result (.npz; .csv exports a table)")
     p.add_argument("--no-progress", action="store_true", help="never show a progress bar")
@@ -86,6 +95,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_run_options(p)
+    p.add_argument("--excite", metavar="SIGNAL", help="add an excitation to the command: "
+                   "chirp:AMP:F0:F1[:SWEEP] or prbs:AMP:PERIOD (see below)")
     from equilibrist.viz.cli_hooks import add_output_options
 
     add_output_options(p)
@@ -145,6 +156,15 @@ def parse_events(args: argparse.Namespace, system: Any) -> list[Any]:
         events.append(ParameterChange(
             t, {k: common.parse_number(v, f"--change {k}") for k, v in values.items()}))
     return events
+
+
+def parse_excitation(args: argparse.Namespace) -> Any:
+    """The --excite signal (None without one)."""
+    if args.excite is None:
+        return None
+    from equilibrist.sim.signals import parse_excitation as parse
+
+    return parse(args.excite, seed=_seed(args.seed))
 
 
 def parse_x0(items: list[str]) -> dict[str, float]:
@@ -231,7 +251,8 @@ def run(args: argparse.Namespace) -> int:
     from equilibrist.sim.run import simulate
 
     system, options = build_run(args)
-    result = simulate(system, x0=parse_x0(args.x0), progress=show_progress(args), **options)
+    result = simulate(system, x0=parse_x0(args.x0), progress=show_progress(args),
+                      excitation=parse_excitation(args), **options)
     saved = result.save(args.out) if args.out else None
     from equilibrist.viz.cli_hooks import handle_outputs
 

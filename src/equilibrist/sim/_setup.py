@@ -110,6 +110,7 @@ class Setup:
     region_spec: dict[str, tuple[float, float]]
     duration: float
     reference: Any
+    excitation: Any = None
 
     @property
     def n_rows(self) -> int:
@@ -205,6 +206,7 @@ class Setup:
             "tracked": list(self.tracked),
             "events": ev.describe(self.events),
             "region": {k: [lo, hi] for k, (lo, hi) in self.region_spec.items()},
+            "excitation": None if self.excitation is None else self.excitation.describe(),
         }
 
 
@@ -299,6 +301,7 @@ def build(
     events: Sequence[ev.Event],
     outputs: Sequence[str] | None,
     region: Mapping[str, tuple[float, float]] | None,
+    excitation: object = None,
 ) -> Setup:
     """Validate the settings of a run (collecting every problem) and pack them."""
     problems: list[str] = []
@@ -572,6 +575,13 @@ def build(
     uff = np.zeros((n_rows, m))
     if isinstance(ctrl, OpenLoop) and ctrl.signal is not None:
         uff = np.ascontiguousarray(as_signal(ctrl.signal).evaluate(times, u_op) - u_op)
+    excite = None
+    if excitation is not None:  # on top of the command, before the actuator's limits
+        if not builtin:
+            raise SimulationError("an excitation is added to the command of a built-in controller "
+                                  "(open loop, state feedback or LQG), not of a Python one")
+        excite = as_signal(excitation)
+        uff = np.ascontiguousarray(uff + excite.evaluate(times, np.zeros(m)))
 
     return Setup(
         system=system, controller=ctrl, builtin=builtin, est_kind=est_kind, rate=run_rate,
@@ -586,5 +596,5 @@ def build(
         kick_value=np.array(kick_value, dtype=float),
         pulses=np.array(pulses, dtype=np.int64).reshape(-1, 3),
         pulse_value=np.array(pulse_value, dtype=float), region=reg, region_spec=region_spec,
-        duration=float(dur), reference=ref_signal,
+        duration=float(dur), reference=ref_signal, excitation=excite,
     )

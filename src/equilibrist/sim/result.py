@@ -8,7 +8,13 @@ physics grid) at which a state left the system's region.
 
 A result saves to ``.npz`` (lossless: the arrays bit for bit, the settings as
 JSON) and exports to CSV (one column per named quantity, unit in the header,
-17 significant digits, so the CSV is lossless too).
+17 significant digits, the settings as JSON in a comment line, so the CSV is
+lossless too and loads back). The CSV starts with the columns of a rig's
+log, as ``equilibrist identify`` reads it: ``t``, the inputs that acted (named
+as the system names them) and the measured outputs (named after the states
+they measure); the true states follow as ``<state>_true``, then the
+estimates (``_hat``), the commands (``_commanded``, ``_saturated``) and the
+references (``_reference``).
 """
 
 from __future__ import annotations
@@ -261,7 +267,17 @@ class SimResult:
         if p.suffix.lower() == ".csv":
             return self.to_csv(p)
         check_result_path(p, "a run")
-        meta = {
+        meta = self._meta()
+        arrays = {name: getattr(self, name) for name in _ARRAYS if getattr(self, name) is not None}
+        arrays.update(x_op=self.x_op, u_op=self.u_op, final_state=self.final_state)
+        if self.fell_x is not None:
+            arrays["fell_x"] = self.fell_x
+        with atomic_path(p) as tmp:
+            np.savez(tmp, meta=np.array(json.dumps(meta)), **arrays)
+        return p
+
+    def _meta(self) -> dict[str, Any]:
+        return {
             "format": FORMAT,
             "system": self.system,
             "params": dict(self.params),
@@ -276,69 +292,122 @@ class SimResult:
             "fell_state": self.fell_state,
             "settings": dict(self.settings),
         }
-        arrays = {name: getattr(self, name) for name in _ARRAYS if getattr(self, name) is not None}
-        arrays.update(x_op=self.x_op, u_op=self.u_op, final_state=self.final_state)
-        if self.fell_x is not None:
-            arrays["fell_x"] = self.fell_x
-        with atomic_path(p) as tmp:
-            np.savez(tmp, meta=np.array(json.dumps(meta)), **arrays)
-        return p
 
     @classmethod
     def load(cls, path: str | Path) -> SimResult:
-        """Read a run written by :meth:`save`."""
+        """Read a run written by :meth:`save` (``.npz``, or ``.csv`` by :meth:`to_csv`)."""
         p = Path(path)
         if not p.exists():
             raise SimulationError(f"no result file {p}")
         try:
-            meta, arrays = read_npz(p)
+            meta, arrays = read_csv_result(p) if p.suffix.lower() == ".csv" else read_npz(p)
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
             raise SimulationError(f"{p} is not a saved simulation result: {exc}") from None
         return _checked(cls, meta, arrays, p)
 
     def columns(self) -> list[tuple[str, str, np.ndarray]]:
-        """``(column name, unit, values)`` of every recorded quantity, in CSV order."""
-        cols: list[tuple[str, str, np.ndarray]] = [("time", "s", self.time)]
+        """``(column name, unit, values)`` of every recorded quantity, in CSV order.
+
+        First the run's log as a rig records it (``t``, the inputs that acted,
+        the measured outputs), then the true states and the rest.
+        """
+        cols: list[tuple[str, str, np.ndarray]] = [("t", "s", self.time)]
+        for i, (n, u) in enumerate(zip(self.input_names, self.input_units, strict=True)):
+            cols.append((n, u, self.applied[:, i]))
+        for i, n in enumerate(self.output_names):
+            cols.append((n, self.unit(n), self.measurements[:, i]))
         for i, (n, u) in enumerate(zip(self.state_names, self.state_units, strict=True)):
-            cols.append((n, u, self.states[:, i]))
+            cols.append((f"{n}_true", u, self.states[:, i]))
         if self.estimates is not None:
             for i, (n, u) in enumerate(zip(self.state_names, self.state_units, strict=True)):
                 cols.append((f"{n}_hat", u, self.estimates[:, i]))
-        for i, n in enumerate(self.output_names):
-            cols.append((f"{n}_measured", self.unit(n), self.measurements[:, i]))
         for i, (n, u) in enumerate(zip(self.input_names, self.input_units, strict=True)):
             cols.append((f"{n}_commanded", u, self.commanded[:, i]))
             cols.append((f"{n}_saturated", u, self.saturated[:, i]))
-            cols.append((f"{n}", u, self.applied[:, i]))
         for i, n in enumerate(self.reference_names):
             cols.append((f"{n}_reference", self.unit(n), self.reference[:, i]))
         return cols
 
     def to_csv(self, path: str | Path) -> Path:
-        """Write one column per quantity (header ``name [unit]``) with 17 significant digits."""
+        """Write one column per quantity (header ``name [unit]``) with 17 significant digits.
+
+        A comment line holds the rest of the result as JSON, so that
+        :meth:`load` reads the file back.
+        """
         p = Path(path)
         cols = self.columns()
         header = ",".join(f"{n} [{u}]" if u else n for n, u, _ in cols)
         data = np.column_stack([c[2] for c in cols]) if cols else np.zeros((0, 0))
-        lines = [f"# {self.system}; fell: {self.fell}; fell_at: {self.fell_at}", header]
+        meta = self._meta()
+        meta["csv"] = {"x_op": self.x_op.tolist(), "u_op": self.u_op.tolist(),
+                       "final_state": self.final_state.tolist(),
+                       "fell_x": None if self.fell_x is None else self.fell_x.tolist(),
+                       "estimates": self.estimates is not None}
+        lines = [f"# {self.system}; fell: {self.fell}; fell_at: {self.fell_at}",
+                 f"# {json.dumps(meta)}", header]
         lines += [",".join(_repr(v) for v in row) for row in data]
         write_text(p, "\n".join(lines) + "\n")
         return p
 
     @staticmethod
     def read_csv(path: str | Path) -> dict[str, np.ndarray]:
-        """The columns of a CSV written by :meth:`to_csv`, by name (units dropped)."""
+        """The columns of a CSV written by :meth:`to_csv`, by name (units dropped).
+
+        The time is also given as ``"time"``, its column's name in earlier files.
+        """
         text = Path(path).read_text().splitlines()
         rows = [ln for ln in text if not ln.startswith("#")]
         names = [h.split(" [")[0] for h in rows[0].split(",")]
         data = np.array([[float(v) for v in ln.split(",")] for ln in rows[1:]]).reshape(-1, len(names))
-        return {n: data[:, i] for i, n in enumerate(names)}
+        cols = {n: data[:, i] for i, n in enumerate(names)}
+        if "t" in cols and "time" not in cols:
+            cols["time"] = cols["t"]
+        return cols
 
 
 def _repr(v: float) -> str:
     if math.isnan(v):
         return "nan"
     return repr(float(v))
+
+
+def read_csv_result(path: Path) -> tuple[object, dict[str, np.ndarray]]:
+    """``(meta, arrays)`` of a CSV written by :meth:`SimResult.to_csv`.
+
+    Raises ValueError or KeyError on a CSV that is not one.
+    """
+    with path.open(errors="replace") as fh:
+        head = [fh.readline() for _ in range(2)]
+    line = next((h for h in head if h.startswith("# {")), None)
+    if line is None:
+        raise ValueError("no result line at its top (a CSV written by equilibrist has one)")
+    meta = json.loads(line[2:])
+    extra = meta.pop("csv")
+    cols = SimResult.read_csv(path)
+    n_rows = cols["t"].shape[0]
+
+    def block(names: list[str], suffix: str) -> np.ndarray:
+        if not names:
+            return np.zeros((n_rows, 0))
+        return np.column_stack([cols[f"{n}{suffix}"] for n in names])
+
+    arrays = {
+        "time": cols["t"],
+        "states": block(meta["state_names"], "_true"),
+        "measurements": block(meta["output_names"], ""),
+        "commanded": block(meta["input_names"], "_commanded"),
+        "saturated": block(meta["input_names"], "_saturated"),
+        "applied": block(meta["input_names"], ""),
+        "reference": block(meta["reference_names"], "_reference"),
+        "x_op": np.array(extra["x_op"], dtype=float),
+        "u_op": np.array(extra["u_op"], dtype=float),
+        "final_state": np.array(extra["final_state"], dtype=float),
+    }
+    if extra["estimates"]:
+        arrays["estimates"] = block(meta["state_names"], "_hat")
+    if extra["fell_x"] is not None:
+        arrays["fell_x"] = np.array(extra["fell_x"], dtype=float)
+    return meta, arrays
 
 
 def read_npz(path: Path) -> tuple[object, dict[str, np.ndarray]]:

@@ -70,6 +70,7 @@ def simulate(
     outputs: Sequence[str] | None = None,
     region: Mapping[str, tuple[float, float]] | None = None,
     progress: bool = False,
+    excitation: object = None,
 ) -> SimResult:
     """Simulate *system* under *controller* for *duration* seconds.
 
@@ -116,6 +117,10 @@ def simulate(
         the system's; ``{}`` never stops).
     progress : bool
         Show a progress bar on stderr for runs longer than a second.
+    excitation : signal, optional
+        Added to the controller's command before the actuator's limits
+        (:class:`~equilibrist.sim.signals.Chirp`, :class:`~equilibrist.sim.signals.PRBS`):
+        an identification experiment. The logged input is what acted.
 
     Returns
     -------
@@ -125,6 +130,7 @@ def simulate(
         system, controller, duration=duration, rate=rate, physics_step=physics_step,
         integrator=integrator, rtol=rtol, atol=atol, plant=plant, x0=x0, delay=delay,
         noise=noise, reference=reference, events=events, outputs=outputs, region=region,
+        excitation=excitation,
     )
     seq = seed_sequence(seed) if (noise is not None or seed is not None) else None
     rng = generator_state(seq) if seq is not None else np.zeros(4, dtype=np.uint64)

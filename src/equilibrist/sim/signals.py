@@ -1,4 +1,4 @@
-"""Signals of time: references for tracking and inputs for open-loop runs.
+"""Signals of time: references for tracking, inputs for open-loop runs, excitations.
 
 A signal is a frozen description; :meth:`evaluate` turns it into values at
 given times, time-major ``(n_times, width)``. Values are absolute (in the
@@ -219,12 +219,147 @@ class Function:
         return {"kind": "function", "name": getattr(self.fn, "__name__", repr(self.fn))}
 
 
-Signal = Constant | Step | Ramp | Square | Samples | Function
+def _amplitude(value: Value, width: int, what: str) -> np.ndarray:
+    """An amplitude for every channel: one value for all, or one per channel."""
+    arr = np.atleast_1d(np.asarray(value, dtype=float)).reshape(-1)
+    if arr.size == 1:
+        arr = np.full(width, float(arr[0]))
+    if arr.size != width:
+        raise DimensionError(f"{what} has {arr.size} values, expected 1 or {width}")
+    if not np.all(np.isfinite(arr)):
+        raise SimulationError(f"{what} is not finite: {arr.tolist()}")
+    return arr
+
+
+@dataclass(frozen=True)
+class Chirp:
+    """A linear frequency sweep: ``centre + amplitude sin(2 pi (f0 t + (f1 - f0) t^2 / (2 T)))``.
+
+    The frequency rises linearly from ``f0`` to ``f1`` [Hz] over ``sweep``
+    seconds from ``start`` (default: up to the last time asked for), and
+    stays at ``f1`` after. The signal starts at zero phase, so it starts
+    at ``centre`` without a jump. As an excitation (``centre`` None is
+    zero there) it is added to the controller's command.
+    """
+
+    amplitude: Value
+    f0: float
+    f1: float
+    sweep: float | None = None
+    start: float = 0.0
+    centre: Value | None = None
+
+    def evaluate(self, times: np.ndarray, base: np.ndarray) -> np.ndarray:
+        f0 = _finite(self.f0, "the chirp's start frequency")
+        f1 = _finite(self.f1, "the chirp's end frequency")
+        if f0 < 0 or f1 < 0:
+            raise SimulationError(f"the chirp's frequencies must be >= 0 Hz, got {f0:g} and {f1:g}")
+        start = _finite(self.start, "the chirp's start")
+        centre = _vector(self.centre, base, "the chirp's centre")
+        amp = _amplitude(self.amplitude, base.size, "the chirp's amplitude")
+        t = np.asarray(times, dtype=float) - start
+        span = float(t[-1]) if self.sweep is None and t.size else _finite(self.sweep or 0.0, "the sweep")
+        if span <= 0:
+            span = 1.0
+        tc = np.clip(t, 0.0, span)
+        phase = f0 * tc + (f1 - f0) * tc**2 / (2.0 * span) + f1 * np.maximum(t - span, 0.0)
+        value = np.where(t < 0, 0.0, np.sin(2.0 * np.pi * phase))
+        return centre + value[:, None] * amp
+
+    def describe(self) -> dict[str, object]:
+        return {"kind": "chirp", "amplitude": _plain(self.amplitude), "f0": self.f0, "f1": self.f1,
+                "sweep": self.sweep, "start": self.start, "centre": _plain(self.centre)}
+
+
+# Feedback taps of the maximal-length shift register x^11 + x^9 + 1 (period 2047).
+PRBS_ORDER = 11
+PRBS_TAPS = (11, 9)
+
+
+@dataclass(frozen=True)
+class PRBS:
+    """A pseudo-random binary sequence: ``centre +- amplitude``, held for ``period`` seconds.
+
+    The bits come from an 11-bit maximal-length shift register
+    (``x^11 + x^9 + 1``, period 2047 bits) started from a state given by
+    ``seed``, so a seed fixes the sequence. Its spectrum is flat up to
+    about ``0.44 / period`` Hz. Before ``start`` the signal is ``centre``.
+    """
+
+    amplitude: Value
+    period: float
+    seed: int = 0
+    start: float = 0.0
+    centre: Value | None = None
+
+    def bits(self, count: int) -> np.ndarray:
+        """The first *count* bits (0 or 1) of the sequence."""
+        state = (int(self.seed) * 2654435761 + 1) % (2**PRBS_ORDER - 1) + 1  # never all zero
+        out = np.empty(count, dtype=np.int8)
+        a, b = PRBS_TAPS
+        for i in range(count):
+            out[i] = state & 1
+            fb = ((state >> (PRBS_ORDER - a)) ^ (state >> (PRBS_ORDER - b))) & 1
+            state = (state >> 1) | (fb << (PRBS_ORDER - 1))
+        return out
+
+    def evaluate(self, times: np.ndarray, base: np.ndarray) -> np.ndarray:
+        period = _finite(self.period, "the PRBS period")
+        if period <= 0:
+            raise SimulationError(f"the PRBS period must be positive, got {period:g} s")
+        start = _finite(self.start, "the PRBS start")
+        centre = _vector(self.centre, base, "the PRBS centre")
+        amp = _amplitude(self.amplitude, base.size, "the PRBS amplitude")
+        t = np.asarray(times, dtype=float) - start
+        index = np.floor(np.maximum(t, 0.0) / period + 1e-9).astype(np.int64)
+        bits = self.bits(int(index.max()) + 1 if index.size else 0)
+        sign = np.where(t < 0, 0.0, 2.0 * bits[index] - 1.0) if index.size else np.zeros(0)
+        return centre + sign[:, None] * amp
+
+    def describe(self) -> dict[str, object]:
+        return {"kind": "prbs", "amplitude": _plain(self.amplitude), "period": self.period,
+                "seed": self.seed, "start": self.start, "centre": _plain(self.centre)}
+
+
+def parse_excitation(text: str, *, seed: int = 0) -> Chirp | PRBS:
+    """Parse the command line's excitation syntax.
+
+    ``chirp:AMPLITUDE:F0:F1[:SWEEP]`` (a sweep from F0 to F1 Hz over SWEEP
+    seconds, default the whole run) or ``prbs:AMPLITUDE:PERIOD`` (a
+    pseudo-random binary sequence switching at most every PERIOD seconds,
+    its bits fixed by *seed*). AMPLITUDE is in the input's unit.
+    """
+    kind, _, rest = text.partition(":")
+    parts = rest.split(":") if rest else []
+    try:
+        values = [float(v) for v in parts]
+        sig: Chirp | PRBS
+        if kind == "chirp" and len(parts) in (3, 4):
+            sweep = values[3] if len(parts) == 4 else None
+            sig = Chirp(values[0], values[1], values[2], sweep=sweep)
+        elif kind == "prbs" and len(parts) == 2:
+            sig = PRBS(values[0], values[1], seed=seed)
+        else:
+            raise ValueError
+    except ValueError:
+        raise SimulationError(
+            f"excitation {text!r}: expected chirp:AMPLITUDE:F0:F1[:SWEEP] or prbs:AMPLITUDE:PERIOD"
+        ) from None
+    if not all(math.isfinite(v) for v in values):
+        raise SimulationError(f"excitation {text!r}: the values must be finite numbers")
+    if isinstance(sig, Chirp) and (sig.f0 < 0 or sig.f1 < 0 or (sig.sweep is not None and sig.sweep <= 0)):
+        raise SimulationError(f"excitation {text!r}: frequencies must be >= 0 Hz and the sweep > 0 s")
+    if isinstance(sig, PRBS) and sig.period <= 0:
+        raise SimulationError(f"excitation {text!r}: the period must be positive")
+    return sig
+
+
+Signal = Constant | Step | Ramp | Square | Samples | Function | Chirp | PRBS
 
 
 def as_signal(value: object) -> Signal:
     """A signal from a signal, a Python function of time, or a constant."""
-    if isinstance(value, Constant | Step | Ramp | Square | Samples | Function):
+    if isinstance(value, Constant | Step | Ramp | Square | Samples | Function | Chirp | PRBS):
         return value
     if callable(value):
         return Function(value)

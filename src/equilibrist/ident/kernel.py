@@ -1,0 +1,89 @@
+"""The compiled multiple-shooting integrator: one numba module per system, cached on disk.
+
+The integrator's source is written once, in ``_shoot_template.py``. For each
+system it is appended to a copy of the system's generated dynamics (the
+numeric layer's ``f``, which compiles unchanged with numba) and written to
+the numeric cache folder as ``<system>_<hash>_shoot_<hash>.py``; its
+functions are ``njit(cache=True)``, so a process compiles a system's
+integrator once and later processes load the machine code.
+
+Importing this module does no work; numba is imported when an integrator is
+first loaded.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import sys
+import tempfile
+import types
+from pathlib import Path
+
+from equilibrist.numeric.system import System
+
+_MARKER = "# ---8<--- shooting body"
+_HEADER = (
+    "\n\n# --- multiple-shooting integrator (equilibrist.ident._shoot_template) ---\n"
+    "import numpy as np  # noqa: E402\n"
+    "from numba import njit  # noqa: E402\n\n"
+)
+_LOADED: dict[Path, types.ModuleType] = {}
+
+
+def _body() -> str:
+    text = (Path(__file__).parent / "_shoot_template.py").read_text()
+    _head, sep, body = text.partition(_MARKER)
+    if not sep:  # pragma: no cover - a broken install
+        raise RuntimeError("the shooting template has lost its marker line")
+    return body.split("\n", 1)[1]
+
+
+def shooting_path(system: System) -> Path:
+    """Where the integrator module of *system* lives in the cache (written if missing)."""
+    body = _body()
+    digest = hashlib.sha256(body.encode()).hexdigest()[:12]
+    module_path = system.compiled.module_path
+    path = module_path.with_name(f"{module_path.stem}_shoot_{digest}.py")
+    if not path.exists():
+        source = module_path.read_text() + _HEADER + body
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".")
+        try:
+            with os.fdopen(fd, "w") as fh:
+                fh.write(source)
+            # Never replace a module another process wrote: numba's on-disk
+            # cache is keyed on the source file's time stamp.
+            if path.exists():
+                Path(tmp).unlink()
+            else:
+                os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+    return path
+
+
+def load_shooting(system: System) -> types.ModuleType:
+    """The compiled integrator of *system* (its entry compiles on first call)."""
+    path = shooting_path(system)
+    if path in _LOADED:
+        return _LOADED[path]
+    name = f"equilibrist_shoot_{path.stem}"
+    module = sys.modules.get(name)
+    if module is None:
+        spec = importlib.util.spec_from_file_location(name, path)
+        if spec is None or spec.loader is None:  # pragma: no cover
+            raise RuntimeError(f"cannot load the shooting integrator {path}")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        try:
+            spec.loader.exec_module(module)
+        except BaseException:
+            del sys.modules[name]
+            raise
+    _LOADED[path] = module
+    return module
+
+
+__all__ = ["load_shooting", "shooting_path"]

@@ -1,0 +1,76 @@
+"""Parameter files: what ``identify --out params.json`` writes and ``--params`` reads.
+
+The file is JSON: ``{"format": "equilibrist-params-1", "system": KEY,
+"params": {NAME: VALUE, ...}, ...}`` (``identified`` holds the fitted values
+with their standard errors, for people). A plain object of parameter values
+``{NAME: VALUE, ...}`` is accepted too.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from equilibrist.ident.log import IdentificationError
+
+FORMAT = "equilibrist-params-1"
+
+
+def _family(key: str) -> str:
+    return key.partition("[")[0]
+
+
+def read_params(path: str | Path, system: str | None = None) -> dict[str, float]:
+    """The parameter values in *path*; with *system*, checked to be that system's.
+
+    Returns a plain ``{name: value}`` (names are checked by the system when
+    the values are bound).
+    """
+    p = Path(path)
+    if not p.exists():
+        raise IdentificationError(f"no parameter file {p}")
+    try:
+        doc = json.loads(p.read_text())
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise IdentificationError(f"{p} is not a JSON parameter file: {exc}") from None
+    if not isinstance(doc, dict):
+        raise IdentificationError(f"{p}: expected a JSON object of parameter values")
+    if "params" in doc and isinstance(doc.get("params"), dict):
+        key = doc.get("system")
+        if system is not None and isinstance(key, str) and _family(key) != _family(system) \
+                and key != system:
+            raise IdentificationError(f"{p} holds parameters of {key}, not of {system}")
+        values = doc["params"]
+    else:
+        values = doc
+    out: dict[str, float] = {}
+    for name, v in values.items():
+        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(float(v)):
+            raise IdentificationError(f"{p}: parameter {name} = {v!r} is not a finite number")
+        out[str(name)] = float(v)
+    return out
+
+
+def write_params(document: Mapping[str, Any], path: str | Path) -> Path:
+    """Write *document* (``Identification.params_document()``) atomically."""
+    p = Path(path)
+    if p.suffix != ".json":
+        raise IdentificationError(f"--out {p}: a parameter file is written as .json")
+    text = json.dumps(document, indent=2) + "\n"
+    fd, tmp = tempfile.mkstemp(dir=p.parent if str(p.parent) else ".", prefix=p.name + ".")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(text)
+        os.replace(tmp, p)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return p
+
+
+__all__ = ["FORMAT", "read_params", "write_params"]
