@@ -110,10 +110,12 @@ def run(args: argparse.Namespace) -> int:
     server = uvicorn.Server(config)
     if not args.no_browser:
         threading.Thread(target=_open_browser, args=(url, server), daemon=True).start()
-    try:
-        server.run(sockets=[sock])
-    finally:
-        sock.close()
+    # uvicorn shuts down on Ctrl-C (closing every socket), then raises the signal again.
+    with contextlib.suppress(KeyboardInterrupt):
+        try:
+            server.run(sockets=[sock])
+        finally:
+            sock.close()
     print("equilibrist: playground stopped", file=sys.stderr)
     return 0
 

@@ -131,12 +131,15 @@ class Catalogue:
         return self._systems[name]
 
     def check(self, name: str) -> System:
-        """The system *name*, refused when it cannot be played (no input, no operating point)."""
+        """The system *name*, refused when it cannot be played (no input, operating point or drawing)."""
         system = self.system(name)
         if not system.n_inputs:
             raise SessionError(f"{system.key} has no input: there is nothing to control in the playground")
         if system.spec.operating_point is None:
             raise SessionError(f"{system.key} has no operating point to balance at")
+        from equilibrist.viz.scenes import scene_for
+
+        scene_for(system)  # one clear line when the system has no drawing
         return system
 
 

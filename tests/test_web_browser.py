@@ -1,0 +1,161 @@
+"""The playground in a real headless Chromium (selenium): the page draws, pushes, tunes and falls.
+
+The browser is Debian's ``chromium`` with ``chromedriver`` (``.ci/run`` installs
+them). A machine without them fails these tests: they are never skipped.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.slow
+
+CHROMIUM = os.environ.get("EQUILIBRIST_CHROMIUM", shutil.which("chromium") or "/usr/bin/chromium")
+CHROMEDRIVER = os.environ.get("EQUILIBRIST_CHROMEDRIVER",
+                              shutil.which("chromedriver") or "/usr/bin/chromedriver")
+
+
+@pytest.fixture(scope="module")
+def server():
+    """``equilibrist play`` on a free loopback port, as a user starts it."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "equilibrist.cli.main", "play", "--no-browser", "--port", "0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    line = proc.stdout.readline()
+    assert line.startswith("equilibrist playground at "), line + proc.stderr.read()
+    yield line.split()[3]
+    proc.send_signal(signal.SIGINT)
+    proc.communicate(timeout=20)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    for path, what in ((CHROMIUM, "chromium"), (CHROMEDRIVER, "chromedriver")):
+        if not os.path.exists(path):
+            pytest.fail(f"{what} is missing ({path}): install Debian's chromium and "
+                        "chromium-driver (.ci/run does)")
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = CHROMIUM
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                "--window-size=1400,1400"):
+        opts.add_argument(arg)
+    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
+    yield driver
+    driver.quit()
+
+
+def wait_for(predicate, timeout=15.0, what="the condition"):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def frame(driver):
+    return driver.execute_script("return window.playground.frame")
+
+
+def button(driver, text):
+    from selenium.webdriver.common.by import By
+
+    return driver.find_element(By.XPATH, f"//button[normalize-space()='{text}']")
+
+
+def canvas_pixels(driver):
+    from PIL import Image
+    from selenium.webdriver.common.by import By
+
+    png = driver.find_element(By.ID, "scene").screenshot_as_png
+    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB"), dtype=int)
+    return img[50:]  # below the time stamp and the push note drawn at the top right
+
+
+@pytest.fixture(scope="module")
+def page(server, browser):
+    browser.get(server)
+    wait_for(lambda: browser.execute_script(
+        "return window.playground.frames > 10 && window.playground.design !== null"),
+        30, "the first frames")
+    return browser
+
+
+def test_page_draws_and_moves(page):
+    from selenium.webdriver.common.by import By
+
+    first = canvas_pixels(page)
+    assert (first != 255).any(axis=2).mean() > 0.02  # something is drawn
+    time.sleep(0.4)
+    second = canvas_pixels(page)
+    assert (first != second).any(axis=2).sum() > 20  # and it moved (the time stamp excluded)
+    frames0 = page.execute_script("return window.playground.frames")
+    time.sleep(1.0)
+    assert page.execute_script("return window.playground.frames") - frames0 >= 25
+    # Every control has a visible label or an accessible name.
+    unnamed = page.execute_script("""
+        const bad = [];
+        for (const el of document.querySelectorAll('button, input, select')) {
+          const named = (el.textContent || '').trim() || el.getAttribute('aria-label') ||
+            (el.id && document.querySelector(`label[for="${el.id}"]`)) || el.closest('label');
+          if (!named) bad.push(el.outerHTML.slice(0, 80));
+        }
+        return bad;""")
+    assert unnamed == []
+    assert page.find_element(By.ID, "chart-area").find_elements(By.CSS_SELECTOR, ".uplot")
+
+
+def test_push_right_moves_the_cart_right(page):
+    states = page.execute_script("return window.playground.sys.states")
+    i = states.index("x_dot")
+    pushes = frame(page)["pushes"]
+    before = frame(page)["x"][i]
+    button(page, "Push right").click()
+    after = wait_for(lambda: (f := frame(page))["pushes"] > pushes and f["push"] == 0 and f,
+                     5, "the push to act")
+    assert after["x"][i] - before > 0.3  # 100 N for 0.1 s on 11 kg: about 0.9 m/s
+
+
+def test_weight_slider_changes_gains_and_poles(page):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+
+    gains0 = page.find_element(By.ID, "gains").text
+    poles0 = page.find_element(By.ID, "poles").get_attribute("data-poles")
+    slider = page.find_element(By.ID, "scale-theta")
+    slider.send_keys(*([Keys.ARROW_LEFT] * 60))
+    wait_for(lambda: page.find_element(By.ID, "gains").text != gains0, 10, "new gains")
+    wait_for(lambda: page.find_element(By.ID, "poles").get_attribute("data-poles") != poles0,
+             10, "new poles")
+    poles = json.loads(page.find_element(By.ID, "poles").get_attribute("data-poles"))
+    assert all(abs(complex(p["re"], p["im"])) < 1 for p in poles)
+    assert frame(page)["fell"] is None
+
+
+def test_controller_off_falls(page):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    Select(page.find_element(By.ID, "controller")).select_by_visible_text("Off")
+    button(page, "Kick").click()
+    wait_for(lambda: "Fell" in page.find_element(By.ID, "status").text, 15, "the fall")
+    assert frame(page)["fell"]["state"] == "theta"
+    Select(page.find_element(By.ID, "controller")).select_by_value("lqg")
+    time.sleep(0.3)
+    button(page, "Reset").click()
+    wait_for(lambda: "Running" in page.find_element(By.ID, "status").text, 10, "the restart")
