@@ -555,8 +555,13 @@ def design(
     discretization: str = "zoh",
     kalman_form: str = "current",
     G: object | None = None,
+    at: Mapping[str, float] | None = None,
 ) -> Design:
     """Design LQR, Kalman filter and reference gain for *system* at its canonical point.
+
+    With *at*, the design is made at another operating point: the
+    equilibrium with the given states (``{"theta": math.pi}``), its other
+    components solved as for the canonical one.
 
     Parameters
     ----------
@@ -583,6 +588,9 @@ def design(
         ``"current"`` or ``"predictor"`` (which discrete gain is ``Kf``).
     G:
         Noise input matrix (``n x k``); default the identity (``k = n``).
+    at:
+        States of the operating point to design at (the others solved);
+        None: the canonical operating point.
 
     Returns
     -------
@@ -631,7 +639,17 @@ def design(
     repeated = sorted({n for n in names if names.count(n) > 1})
     if repeated:
         raise DesignError(f"outputs lists {', '.join(repeated)} more than once")
-    plant = system.linearize(outputs=names)
+    if at:
+        eq = system.equilibrium(state={k: float(v) for k, v in at.items()})
+        if eq.residual > 1e-6 * (1.0 + float(np.max(np.abs(eq.x)))):
+            raise DesignError(
+                f"{system.key} has no equilibrium with "
+                + ", ".join(f"{k} = {v:g}" for k, v in at.items())
+                + f" (the closest point leaves |f| = {eq.residual:.3g})"
+            )
+        plant = system.linearize(eq.x, eq.u, outputs=names)
+    else:
+        plant = system.linearize(outputs=names)
     states, inputs = plant.state_names, plant.input_names
     n, m = plant.n_states, plant.n_inputs
     if rate_hz is not None and rate_hz > MAX_RATE:
