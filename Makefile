@@ -31,6 +31,7 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(PY) bench/bench_load.py
 	$(PY) bench/bench_sim.py
+	$(PY) bench/bench_playground.py
 
 clean:
 	rm -rf $(VENV) report build

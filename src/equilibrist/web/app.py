@@ -197,7 +197,11 @@ def create_app(
 
 
 async def _send(ws: Any, message: dict[str, Any]) -> None:
-    await ws.send_text(json.dumps(message, separators=(",", ":"), allow_nan=False, default=_plain))
+    try:
+        text = json.dumps(message, separators=(",", ":"), allow_nan=False, default=_plain)
+    except ValueError:  # a number that is not finite (a state that diverged): null in JSON
+        text = json.dumps(_clean(message), separators=(",", ":"), allow_nan=False, default=_plain)
+    await ws.send_text(text)
 
 
 def _plain(obj: Any) -> Any:
@@ -232,8 +236,8 @@ async def _stream(ws: Any, session: Session) -> None:
             continue
         session.advance_to(loop.time())
         for message in session.take_messages():
-            await _send(ws, _clean(message))
-        await _send(ws, _clean(session.frame()))
+            await _send(ws, message)
+        await _send(ws, session.frame())
         deadline += period
         now = loop.time()
         if deadline < now - period:  # fell behind: do not burst to catch up

@@ -618,11 +618,12 @@ class Session:
         """The ``frame`` message for the page (and clears the chart samples sent)."""
         shapes = []
         for s in self.scene.shapes(self.x, self.u_app):
-            pts = np.round(np.asarray(s.points, float), DIGITS)
-            sig = (s.kind, s.color, s.z, s.text, s.edge, s.width, pts.tobytes())
+            raw = np.asarray(s.points, float)
+            sig = (s.kind, s.color, s.z, s.text, s.edge, s.width, raw.tobytes())
             if self.sent_shapes.get(s.key) == sig:
-                continue
+                continue  # unchanged since the last frame: the page keeps it
             self.sent_shapes[s.key] = sig
+            pts = np.round(raw, DIGITS)
             # NaN (a break in a polyline) goes out as null.
             flat = [None if math.isnan(v) else v for v in pts.reshape(-1).tolist()]
             shapes.append({"key": s.key, "kind": s.kind, "points": flat, "color": s.color,

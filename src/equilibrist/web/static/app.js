@@ -10,7 +10,7 @@
     ws: null, sys: null, design: null, token: null, seq: 0,
     shapes: new Map(), view: null, frame: null, fell: null,
     charts: [], data: null, tuneInFlight: null, tunePending: null,
-    drag: null, paused: false, lastFrameAt: 0, frames: 0,
+    drag: null, paused: false, lastFrameAt: 0, frames: 0, retries: 0,
   };
   window.playground = state; // for the page's tests and the curious
 
@@ -19,9 +19,17 @@
     const proto = location.protocol === "https:" ? "wss" : "ws";
     const ws = new WebSocket(`${proto}://${location.host}/ws`);
     state.ws = ws;
-    ws.onopen = () => setConnection("connected");
-    ws.onclose = () => setConnection("disconnected: reload the page to start again");
-    ws.onerror = () => setConnection("connection error");
+    ws.onopen = () => { setConnection("connected"); state.retries = 0; };
+    ws.onclose = () => {
+      // A new session after a lost connection (a server restart), a few times.
+      if (state.retries < 5) {
+        state.retries += 1;
+        setConnection(`disconnected: reconnecting (${state.retries})…`);
+        setTimeout(connect, 1000 * state.retries);
+      } else {
+        setConnection("disconnected: reload the page to start again");
+      }
+    };
     ws.onmessage = (ev) => {
       let msg;
       try { msg = JSON.parse(ev.data); } catch (e) { return; }
@@ -244,7 +252,7 @@
     const n = sys.states.length, m = sys.inputs.length;
     state.data = { t: [], x: Array.from({ length: n }, () => []), xhat: Array.from({ length: n }, () => []),
       u: Array.from({ length: m }, () => []) };
-    const width = Math.max(260, Math.min(380, Math.floor((area.clientWidth || 1200) / 3) - 12));
+    const width = Math.max(260, Math.floor((area.clientWidth || 600) / 2) - 8);
     const make = (title, series, dataFn) => {
       const box = document.createElement("div");
       box.className = "chart";
