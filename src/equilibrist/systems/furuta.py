@@ -50,7 +50,8 @@ Sensors and rate
 
 Operating point
     Pendulum upright, arm at 0, at rest, ``tau = 0``. Default outputs
-    ``[phi, theta]`` (the two encoders).
+    ``[phi, theta]`` (the two encoders). A swing-up starts hanging,
+    ``theta = pi``.
 
 Source
     Not in the seeds. The equations agree with the published Furuta-pendulum
@@ -127,8 +128,9 @@ SPEC = SystemSpec(
         "phi": 0.5, "theta": 0.1, "phi_dot": 5.0, "theta_dot": 2.0, "tau": 0.05,
     },
     sensor_noise={"phi": _ENCODER, "theta": _ENCODER},
-    # Torque ripple and cogging of the small DC motor (some 1e-3 N m over
-    # the arm's inertia) and air and cable drag on the pendulum.
+    # Random torques of some 2e-4 N m sqrt(s) on the arm (the small DC
+    # motor's ripple and cogging, over the arm's 4e-4 kg m^2 with the
+    # pendulum) and 3e-5 N m sqrt(s) on the pendulum (air, the encoder's cable).
     process_noise={"phi_dot": 0.5, "theta_dot": 0.2},
     # The rig's control software samples its encoders and drive at 500 Hz.
     control_rate=500.0,
