@@ -70,6 +70,10 @@ def run(args: argparse.Namespace) -> int:
 
     outcomes = run_tour(systems, out, size=size, jobs=jobs, progress=progress,
                         log=lambda line: print(line, file=sys.stderr))
+    if any(s.key == "cartpole" for s in systems):
+        from equilibrist.study.demo import add_study_to_report
+
+        add_study_to_report(out, log=lambda line: print(line, file=sys.stderr))
     print("Each system balanced by its default digital LQG controller (a Kalman filter on its")
     print("sensors, LQR feedback at the rig's sample rate) on the nonlinear model, with sensor")
     print("and process noise, actuator limits and a push halfway through the run:")
