@@ -1,0 +1,469 @@
+"""Constrained linear model predictive control (MPC), solved by OSQP.
+
+At every sample the controller solves, for the deviation ``dx_0`` of the
+(estimated) state from the operating point, the quadratic program
+
+.. math::
+
+    \\min \\sum_{k=0}^{N-1} (dx_k' Q dx_k + du_k' R du_k) + dx_N' P dx_N
+          + \\sum_{k=1}^{N} (\\rho_1 1's_k + \\rho_2 s_k's_k)
+
+    dx_{k+1} = A_d dx_k + B_d du_k,\\quad
+    u_{min} - u_{op} \\le du_k \\le u_{max} - u_{op}\\ \\text{(hard)},\\quad
+    lo - s_k \\le C_s dx_k \\le hi + s_k,\\ s_k \\ge 0\\ \\text{(soft)}
+
+and applies ``u = u_op + du_0`` (receding horizon). ``A_d, B_d`` are the
+design's zero-order-hold sampled linearization, ``Q`` and ``R`` its weights
+(``--q``, ``--r``; Bryson's rule by default), ``P`` the discrete Riccati
+solution ``S`` of the same weights: with no constraint active the
+minimizer is the discrete LQR's ``du_0 = -K dx_0`` whatever the horizon.
+
+*Soft state constraints* (the cart's track ``|x| <= x_max``, the system's
+region of each angle) carry a slack ``s_k`` per constrained state and step,
+penalized by ``rho_1 s + rho_2 s^2``. The L1 weight ``rho_1`` makes the
+penalty exact: as long as a trajectory that meets the constraints exists,
+the slack stays zero; the L2 weight keeps the problem strictly convex.
+Defaults: ``rho_1 = 1e3`` and ``rho_2 = 1e4`` times the largest diagonal
+entry of ``Q`` (per unit of the constrained state, squared for ``rho_2``).
+The input limits are hard: the command never leaves them.
+
+*Solver.* First the unconstrained case is solved exactly: the LQR's own
+trajectory from ``dx_0`` (``du_k = -K dx_k``) minimizes the quadratic part
+of the cost, so when it meets every constraint over the horizon (slack
+zero) it is the QP's minimizer, and the controller applies ``-K dx_0``
+to round-off without calling the solver. Otherwise OSQP (sparse
+formulation, variables ``[dx_0..dx_N, du_0..du_{N-1}, s_1..s_N]``),
+warm-started from the previous solution shifted by one sample, with
+``eps_abs = eps_rel = 1e-6`` and solution polishing (the polished solution
+solves the KKT system of the active set exactly). ``exact_unconstrained=False``
+on the runtime sends every sample to OSQP.
+
+*Estimator.* With ``estimator="kalman"`` (the default when the measured
+outputs are not the full state) the design's discrete Kalman filter (its
+``current`` or ``predictor`` form) runs in front and the QP starts at its
+estimate; with ``"state"`` the measured full state is used.
+
+The controller is a :class:`~equilibrist.control.controller.PythonController`:
+the solver is C code called from Python at every sample, so batches of it
+run in worker processes.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from equilibrist.control.controller import ControllerError, ControllerRequest, register_controller
+
+if TYPE_CHECKING:
+    from equilibrist.control.design import Design
+    from equilibrist.numeric.system import System
+
+#: Tolerances of the QP (absolute and relative); polishing then solves the
+#: active set's KKT system exactly. The unconstrained case is not left to them.
+EPS = 1e-6
+#: Default horizon [samples].
+HORIZON = 30
+#: Default soft-constraint weights, relative to the largest diagonal entry of Q.
+RHO_L1, RHO_L2 = 1e3, 1e4
+#: Track parameter bounding the cart's coordinate.
+TRACK = ("x_max", "x")
+
+
+def _osqp() -> Any:
+    try:
+        import osqp
+    except ModuleNotFoundError as exc:  # pragma: no cover - the extra is missing
+        raise ControllerError(
+            "the MPC controller needs OSQP: pip install 'equilibrist[mpc]'"
+        ) from exc
+    return osqp
+
+
+@dataclass(frozen=True, eq=False)
+class MPCProblem:
+    """The QP of one MPC controller (everything but the current state).
+
+    Attributes
+    ----------
+    A, B:
+        Sampled model (deviation coordinates).
+    Q, R, P:
+        Stage and terminal weights.
+    horizon:
+        ``N`` samples.
+    u_lo, u_hi:
+        Hard bounds of ``du`` (``u_min - u_op``, ``u_max - u_op``).
+    soft_index, soft_lo, soft_hi:
+        Constrained states and their bounds (deviation).
+    rho_l1, rho_l2:
+        Penalties of the slacks.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    Q: np.ndarray
+    R: np.ndarray
+    P: np.ndarray
+    horizon: int
+    u_lo: np.ndarray
+    u_hi: np.ndarray
+    soft_index: tuple[int, ...]
+    soft_lo: np.ndarray
+    soft_hi: np.ndarray
+    rho_l1: float
+    rho_l2: float
+
+    @property
+    def n(self) -> int:
+        return int(self.A.shape[0])
+
+    @property
+    def m(self) -> int:
+        return int(self.B.shape[1])
+
+    @property
+    def n_soft(self) -> int:
+        return len(self.soft_index)
+
+    K: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+
+    @property
+    def n_variables(self) -> int:
+        return self.horizon * (self.m + self.n_soft)
+
+    def predictions(self) -> tuple[np.ndarray, np.ndarray]:
+        """``Fx, Gx`` with the stacked states ``[dx_0..dx_N] = Fx dx_0 + Gx v``.
+
+        The moves are ``du_k = -K dx_k + v_k`` (the LQR plus a correction).
+        """
+        n, m, N = self.n, self.m, self.horizon
+        Acl = self.A - self.B @ self.K
+        Fx = np.zeros(((N + 1) * n, n))
+        Gx = np.zeros(((N + 1) * n, N * m))
+        Fx[:n] = np.eye(n)
+        for k in range(N):
+            rows = slice((k + 1) * n, (k + 2) * n)
+            prev = slice(k * n, (k + 1) * n)
+            Fx[rows] = Acl @ Fx[prev]
+            Gx[rows] = Acl @ Gx[prev]
+            Gx[rows, k * m:(k + 1) * m] += self.B
+        return Fx, Gx
+
+    def matrices(self) -> tuple[Any, np.ndarray, Any, np.ndarray, np.ndarray, np.ndarray]:
+        """``P, q, A, l, u`` of OSQP's form at ``dx_0 = 0``, and ``E``: the bounds
+        at ``dx_0`` are ``l - E dx_0`` and ``u - E dx_0``."""
+        from scipy import sparse
+
+        n, m, N, ns = self.n, self.m, self.horizon, self.n_soft
+        Fx, Gx = self.predictions()
+        # u_k = -K x_k + v_k for k < N.
+        Kb = np.kron(np.eye(N), self.K)
+        Fu = -Kb @ Fx[: N * n]
+        Gu = -Kb @ Gx[: N * n] + np.eye(N * m)
+        W = self.R + self.B.T @ self.P @ self.B
+        H = sparse.block_diag(
+            [np.kron(np.eye(N), 2.0 * W)] + ([2.0 * self.rho_l2 * np.eye(N * ns)] if ns else []),
+            format="csc",
+        )
+        q = np.concatenate([np.zeros(N * m), np.full(N * ns, self.rho_l1)])
+        rows = [np.hstack([Gu, np.zeros((N * m, N * ns))])]
+        lows = [np.tile(self.u_lo, N)]
+        highs = [np.tile(self.u_hi, N)]
+        Es = [Fu]
+        if ns:
+            Cs = np.zeros((ns, n))
+            for row, i in enumerate(self.soft_index):
+                Cs[row, i] = 1.0
+            Cb = np.kron(np.eye(N), Cs)
+            Fs = Cb @ Fx[n:]
+            Gs = Cb @ Gx[n:]
+            eye = np.eye(N * ns)
+            zero = np.zeros((N * ns, N * m))
+            # lo <= C x_k + s_k; C x_k - s_k <= hi (k = 1..N); s >= 0.
+            rows += [np.hstack([Gs, eye]), np.hstack([Gs, -eye]), np.hstack([zero, eye])]
+            lows += [np.tile(self.soft_lo, N), np.full(N * ns, -np.inf), np.zeros(N * ns)]
+            highs += [np.full(N * ns, np.inf), np.tile(self.soft_hi, N), np.full(N * ns, np.inf)]
+            Es += [Fs, Fs, np.zeros((N * ns, n))]
+        return (H, q, sparse.csc_matrix(np.vstack(rows)), np.concatenate(lows),
+                np.concatenate(highs), np.vstack(Es))
+
+
+@dataclass(frozen=True, eq=False)
+class MPC:
+    """A constrained MPC controller (a value; :meth:`runtime` makes the running one).
+
+    Attributes
+    ----------
+    problem:
+        The QP.
+    x_op, u_op:
+        Operating point.
+    rate:
+        Sample rate [Hz].
+    state_names, input_names, output_names:
+        The plant's states and inputs, and the measured outputs.
+    estimator:
+        ``"kalman"`` or ``"state"``.
+    Ad, Bd, Kf, form:
+        The Kalman filter (``estimator="kalman"``).
+    K:
+        The discrete LQR gain (what the unconstrained MPC equals).
+    design:
+        The design it was made from.
+    """
+
+    problem: MPCProblem
+    x_op: np.ndarray
+    u_op: np.ndarray
+    rate: float
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    output_names: tuple[str, ...]
+    estimator: str
+    Kf: np.ndarray | None
+    form: str
+    K: np.ndarray
+    design: Any = field(default=None, repr=False)
+
+    kind = "mpc"
+
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        return self.output_names
+
+    def runtime(self) -> MPCRuntime:
+        """A new running controller (its own OSQP workspace)."""
+        return MPCRuntime(self)
+
+    def describe(self) -> dict[str, object]:
+        p = self.problem
+        return {"kind": self.kind, "rate": self.rate, "horizon": p.horizon,
+                "estimator": self.estimator, "outputs": list(self.output_names),
+                "soft": [self.state_names[i] for i in p.soft_index],
+                "soft_lo": p.soft_lo.tolist(), "soft_hi": p.soft_hi.tolist(),
+                "rho_l1": p.rho_l1, "rho_l2": p.rho_l2, "eps": EPS}
+
+
+class MPCRuntime:
+    """The MPC running: ``reset``, ``output``, ``update`` (a PythonController).
+
+    Also records ``solve_times`` (seconds per QP) and ``last_status``.
+    """
+
+    def __init__(self, ctrl: MPC, *, exact_unconstrained: bool = True) -> None:
+        self.ctrl = ctrl
+        self.exact_unconstrained = exact_unconstrained
+        self.rate: float | None = ctrl.rate
+        self.outputs: tuple[str, ...] | None = ctrl.output_names
+        self.estimate: np.ndarray | None = None
+        prob = ctrl.problem
+        H, q, A, lo, hi, E = prob.matrices()
+        self._lo, self._hi, self._E = lo, hi, E
+        self._solver = _osqp().OSQP()
+        self._solver.setup(H, q, A, lo, hi, eps_abs=EPS, eps_rel=EPS, polishing=True,
+                           polish_refine_iter=10, max_iter=4000, verbose=False,
+                           warm_starting=True)
+        self._idx = [ctrl.state_names.index(o) for o in ctrl.output_names]
+        self.solve_times: list[float] = []
+        self.reset()
+
+    def reset(self) -> None:
+        n = self.ctrl.problem.n
+        self.z = np.zeros(n)  # the filter's predicted deviation
+        self._xhat = np.zeros(n)
+        self._warm: np.ndarray | None = None
+        self.estimate = None
+        self.last_status = ""
+
+    def _state(self, y: np.ndarray) -> np.ndarray:
+        c = self.ctrl
+        dy = np.asarray(y, dtype=float) - c.x_op[self._idx]
+        if c.estimator == "state":
+            return dy.copy()
+        assert c.Kf is not None
+        if c.form == "current":
+            return self.z + c.Kf @ (dy - self.z[self._idx])
+        return self.z.copy()
+
+    def lqr_feasible(self, dx0: np.ndarray) -> bool:
+        """Whether the LQR's own trajectory from *dx0* meets every constraint over the horizon.
+
+        Then it is the QP's minimizer (the unconstrained minimizer of the
+        quadratic part, with zero slack), and the controller applies it
+        exactly instead of solving.
+        """
+        prob = self.ctrl.problem
+        K = self.ctrl.K
+        x = np.array(dx0, dtype=float)
+        idx = list(prob.soft_index)
+        for _ in range(prob.horizon):
+            u = -K @ x
+            if np.any(u < prob.u_lo) or np.any(u > prob.u_hi):
+                return False
+            x = prob.A @ x + prob.B @ u
+            if idx and (np.any(x[idx] < prob.soft_lo) or np.any(x[idx] > prob.soft_hi)):
+                return False
+        return True
+
+    def solve(self, dx0: np.ndarray) -> np.ndarray:
+        """The first move ``du_0`` of the QP from the deviation *dx0*."""
+        prob = self.ctrl.problem
+        m = prob.m
+        if self.exact_unconstrained:
+            t0 = time.perf_counter()
+            if self.lqr_feasible(dx0):
+                self.solve_times.append(time.perf_counter() - t0)
+                self.last_status = "unconstrained"
+                self._warm = None
+                return -self.ctrl.K @ np.asarray(dx0, dtype=float)
+        shift = self._E @ dx0
+        self._solver.update(l=self._lo - shift, u=self._hi - shift)
+        if self._warm is not None:
+            self._solver.warm_start(x=self._warm)
+        t0 = time.perf_counter()
+        res = self._solver.solve()
+        self.solve_times.append(time.perf_counter() - t0)
+        self.last_status = str(res.info.status)
+        sol = np.asarray(res.x, dtype=float)
+        du_lqr = -self.ctrl.K @ np.asarray(dx0, dtype=float)
+        if not np.all(np.isfinite(sol)):
+            # No usable solution: the LQR, inside the hard limits.
+            self._warm = None
+            return np.clip(du_lqr, prob.u_lo, prob.u_hi)
+        N, ns = prob.horizon, prob.n_soft
+        warm = np.zeros_like(sol)
+        # Shift the corrections and slacks by one sample for the next warm start.
+        warm[: (N - 1) * m] = sol[m : N * m]
+        warm[N * m : N * m + (N - 1) * ns] = sol[N * m + ns :]
+        self._warm = warm
+        return np.clip(du_lqr + sol[:m], prob.u_lo, prob.u_hi)
+
+    def output(self, t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray:
+        dx = self._state(y)
+        self._xhat = dx
+        self.estimate = self.ctrl.x_op + dx
+        return self.ctrl.u_op + self.solve(dx)
+
+    def update(self, t: float, y: np.ndarray, r: np.ndarray, u_applied: np.ndarray) -> None:
+        c = self.ctrl
+        if c.estimator == "state" or c.Kf is None or c.design is None:
+            return
+        Ad = np.asarray(c.design.discrete.A)
+        Bd = np.asarray(c.design.discrete.B)
+        du = np.asarray(u_applied, dtype=float) - c.u_op
+        if c.form == "current":
+            self.z = Ad @ self._xhat + Bd @ du
+        else:
+            dy = np.asarray(y, dtype=float) - c.x_op[self._idx]
+            self.z = Ad @ self.z + Bd @ du + c.Kf @ (dy - self.z[self._idx])
+
+
+def soft_bounds(system: System, x_op: np.ndarray) -> dict[str, tuple[float, float]]:
+    """The soft state constraints (absolute): the system's region and the cart's track."""
+    out = {k: (float(lo), float(hi)) for k, (lo, hi) in system.spec.region.items()}
+    param, state = TRACK
+    if param in system.params and state in system.state_names:
+        bound = float(system.params[param])
+        out[state] = (-bound, bound)
+    return out
+
+
+def mpc(
+    system: System,
+    *,
+    design: Design | None = None,
+    horizon: int = HORIZON,
+    estimator: str | None = None,
+    constraints: Mapping[str, tuple[float, float]] | None = None,
+    rho: tuple[float, float] | None = None,
+    rate: float | None = None,
+) -> MPC:
+    """The constrained MPC of *system* (see the module docstring).
+
+    Parameters
+    ----------
+    design:
+        A discrete design (weights, model, Riccati solution, Kalman filter);
+        default ``design(system, rate=rate)``.
+    horizon:
+        Prediction horizon ``N`` in samples (at least 1).
+    estimator:
+        ``"kalman"`` or ``"state"``; default ``"state"`` when the design's
+        outputs are the full state, else ``"kalman"``.
+    constraints:
+        Soft state constraints ``{state: (low, high)}`` (absolute); default
+        :func:`soft_bounds`. ``{}`` for none.
+    rho:
+        ``(rho_1, rho_2)`` of the slack penalty; default :data:`RHO_L1`,
+        :data:`RHO_L2` times the largest diagonal entry of ``Q``.
+    rate:
+        Sample rate [Hz]; default the design's, else the rig's.
+    """
+    from equilibrist.control.design import design as make_design
+
+    problems: list[str] = []
+    if isinstance(horizon, bool) or not isinstance(horizon, int | np.integer) or horizon < 1:
+        problems.append(f"horizon must be a whole number of samples >= 1, got {horizon!r}")
+    if estimator not in (None, "kalman", "state"):
+        problems.append(f"estimator {estimator!r}: expected 'kalman' or 'state'")
+    if problems:
+        raise ControllerError("; ".join(problems))
+    hz = float(rate if rate is not None else (design.rate if design is not None and design.rate
+                                               else system.spec.control_rate))
+    if design is None:
+        design = make_design(system, rate=hz)
+    if design.discrete is None or design.rate is None:
+        raise ControllerError("the MPC needs a discrete design: design(system, rate=...)")
+    plant = design.plant
+    names = plant.state_names
+    n, m = plant.n_states, plant.n_inputs
+    x_op, u_op = np.asarray(plant.x0, dtype=float), np.asarray(plant.u0, dtype=float)
+    lo, hi = system.input_limits
+    bounds = soft_bounds(system, x_op) if constraints is None else dict(constraints)
+    unknown = [k for k in bounds if k not in names]
+    if unknown:
+        raise ControllerError(
+            f"constraint on {', '.join(unknown)}: not a state of {system.key} ({', '.join(names)})"
+        )
+    idx = tuple(names.index(k) for k in bounds)
+    s_lo = np.array([bounds[names[i]][0] - x_op[i] for i in idx])
+    s_hi = np.array([bounds[names[i]][1] - x_op[i] for i in idx])
+    Q = np.asarray(design.Q, dtype=float)
+    qmax = float(np.max(np.diag(Q)))
+    r1, r2 = rho if rho is not None else (RHO_L1 * qmax, RHO_L2 * qmax)
+    prob = MPCProblem(
+        A=np.asarray(design.discrete.A, dtype=float), B=np.asarray(design.discrete.B, dtype=float),
+        Q=Q, R=np.asarray(design.R, dtype=float), P=np.asarray(design.S, dtype=float),
+        horizon=int(horizon), u_lo=lo - u_op, u_hi=hi - u_op, soft_index=idx,
+        soft_lo=s_lo, soft_hi=s_hi, rho_l1=float(r1), rho_l2=float(r2),
+        K=np.asarray(design.K, dtype=float).reshape(m, n),
+    )
+    outs = tuple(plant.output_names)
+    est = estimator or ("state" if outs == tuple(names) else "kalman")
+    if est == "state" and outs != tuple(names):
+        outs = tuple(names)
+    return MPC(
+        problem=prob, x_op=x_op, u_op=u_op, rate=float(design.rate), state_names=tuple(names),
+        input_names=tuple(plant.input_names), output_names=outs, estimator=est,
+        Kf=None if est == "state" else np.asarray(design.Kf, dtype=float),
+        form=design.kalman_form, K=np.asarray(design.K, dtype=float).reshape(m, n),
+        design=design,
+    )
+
+
+@register_controller("mpc")
+def _build(request: ControllerRequest) -> MPCRuntime:
+    opts = dict(request.options)
+    horizon = opts.get("horizon")
+    ctrl = mpc(request.system, design=request.design(),
+               horizon=HORIZON if horizon is None else int(horizon),
+               estimator=opts.get("estimator"))
+    return ctrl.runtime()
+
+
+__all__ = ["EPS", "HORIZON", "MPC", "MPCProblem", "MPCRuntime", "mpc", "soft_bounds"]
