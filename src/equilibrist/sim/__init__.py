@@ -7,8 +7,11 @@ compiled per system with numba and cached on disk
 * :func:`simulate` -- one run (:class:`SimResult`);
 * :func:`simulate_batch` -- many runs at once on all cores (:class:`BatchResult`),
   :func:`region_of_attraction`, :func:`monte_carlo`;
-* controllers :class:`OpenLoop`, :class:`StateFeedback`, :class:`LQG`, or any
-  object with ``step(t, y, r)``;
+* controllers of the one contract (:mod:`equilibrist.control.controller`):
+  :class:`LinearController` and :class:`NonlinearController` run compiled,
+  a :class:`PythonController` is called from Python; :class:`OpenLoop`,
+  :class:`StateFeedback` and :class:`LQG` describe linear ones; an object
+  with the older ``step(t, y, r)`` or a function still runs;
 * :class:`Noise`; events :class:`Kick`, :class:`Pulse`, :class:`Impulse`,
   :class:`ParameterChange`; reference signals :class:`Step`, :class:`Ramp`,
   :class:`Square`, :class:`Samples`;
@@ -17,6 +20,12 @@ compiled per system with numba and cached on disk
 Importing this package does no work; numba is loaded with the first kernel.
 """
 
+from equilibrist.control.controller import (
+    LinearController,
+    NonlinearController,
+    PythonController,
+    PythonControllerBase,
+)
 from equilibrist.sim.batch import (
     BatchResult,
     MonteCarloResult,
@@ -40,11 +49,15 @@ __all__ = [
     "Controller",
     "Impulse",
     "Kick",
+    "LinearController",
     "MonteCarloResult",
     "Noise",
+    "NonlinearController",
     "OpenLoop",
     "ParameterChange",
     "Pulse",
+    "PythonController",
+    "PythonControllerBase",
     "Ramp",
     "RegionOfAttraction",
     "Samples",

@@ -13,14 +13,19 @@ Conventions of the core (all arrays float64 unless said otherwise):
 - A *sample* ``k`` is a controller instant ``t_k = k T``; a *physics step*
   ``s`` of length ``h = T / n_sub`` runs from ``s h`` to ``(s + 1) h``.
   Events are given by physics-step index.
-- ``status`` (int64): ``[rows written, fell (0/1), fell code, fell step]``;
-  the fell code is the index of the state that left its region, ``-2`` for a
-  state that stopped being a finite number, ``-3`` for the adaptive
-  integrator giving up.
-- ``acc`` accumulators, per run: ``[0:m]`` peak ``|u_commanded|``,
-  ``[m:2m]`` sum of ``u_applied**2``, ``[2m]`` samples in saturation,
-  ``[2m+1 : 2m+1+n]`` peak ``|x - x_op|``, ``[2m+1+n : 2m+1+2n]`` sum of
-  squared estimation errors.
+- The option slots (``iopts``, ``fopts``), the ``status`` slots, the
+  columns of a recorded row and of the accumulators, and the rows of the
+  scratch array are named in :mod:`equilibrist.sim.layout`; the generator
+  writes them into the kernel as constants (``_IO_DELAY``, ``_REC_U_APP``,
+  ...). Column blocks whose width depends on the run start at
+  ``rec_cols[_REC_<NAME>]`` / ``acc_cols[_ACC_<NAME>]``. The fell code is the
+  index of the state that left its region, ``-2`` for a state that stopped
+  being a finite number, ``-3`` for the adaptive integrator giving up.
+- The controller is the generated module's ``controller_output``,
+  ``controller_update`` and ``controller_estimate`` with its parameter
+  vector ``cp`` and state ``z``: the linear controller of
+  :mod:`equilibrist.control.controller` unless the kernel was generated for
+  a nonlinear one. One loop runs them all.
 - Randomness: xoshiro256** on a 4-word ``uint64`` state per run, normal
   deviates by Marsaglia's polar method, drawn in a fixed order (the measurement noise of a
   sample, then the process noise of each of its physics steps).
@@ -29,11 +34,17 @@ Nothing allocates inside the loops over samples and physics steps; scratch
 space is allocated once per run (or per call of a Python-facing entry).
 """
 
-# The names below the imports only stand in for the generated module's.
+# The names below the imports only stand in for the generated module's: the
+# system's dynamics, the layout's constants (equilibrist.sim.layout) and the
+# controller's compiled functions (equilibrist.control.controller).
+# mypy: ignore-errors
+# ruff: noqa: F405
 import math
 
 import numpy as np
 from numba import njit, prange
+
+from equilibrist.sim.layout import *  # noqa: F403
 
 N_STATES = 1
 N_INPUTS = 1
@@ -41,6 +52,21 @@ N_INPUTS = 1
 
 def f(x, u, p, out):
     """Placeholder of the system's generated dynamics."""
+    raise NotImplementedError
+
+
+def controller_output(t, z, y, r, params, u_out):
+    """Placeholder of the controller's compiled ``output``."""
+    raise NotImplementedError
+
+
+def controller_update(t, z, y, r, u_applied, params, z_out):
+    """Placeholder of the controller's compiled ``update``."""
+    raise NotImplementedError
+
+
+def controller_estimate(t, z, y, r, params, x_out):
+    """Placeholder of the controller's compiled ``estimate``."""
     raise NotImplementedError
 
 
@@ -306,9 +332,9 @@ def _advance(
     n = _N
     m = _M
     nw = lw.shape[1]
-    n_sub = iopts[4]
-    integrator = iopts[5]
-    h = fopts[0]
+    n_sub = iopts[_IO_N_SUB]
+    integrator = iopts[_IO_INTEGRATOR]
+    h = fopts[_FO_H]
     ok = True
     # The adaptive step restarts at h each sample (the held input jumps there),
     # so a run cut into pieces, or driven from Python, takes the same steps.
@@ -333,19 +359,19 @@ def _advance(
                 wvec[i] = v
         for i in range(n):
             xprev[i] = x[i]
-        if integrator == 0:
+        if integrator == _INT_RK4:
             _rk4(x, ubuf, pcur, wvec, h, k1, k2, k3, k4, xt)
-        elif integrator == 1:
-            ok = _dopri(x, ubuf, pcur, wvec, h, fopts[1], fopts[2], wk)
+        elif integrator == _INT_ADAPTIVE:
+            ok = _dopri(x, ubuf, pcur, wvec, h, fopts[_FO_RTOL], fopts[_FO_ATOL], wk)
         else:
             _linear(x, ubuf, op, wvec, lin_s, _pset(p_switch, s), xt)
         code = _outside(x, region)
         if not ok:
             code = -3
         if code != -1:
-            status[1] = 1
-            status[2] = code
-            status[3] = s + 1
+            status[_ST_FELL] = 1
+            status[_ST_FELL_CODE] = code
+            status[_ST_FELL_STEP] = s + 1
             finite = code >= 0
             for i in range(n):
                 fell_x[i] = x[i] if finite else xprev[i]
@@ -353,96 +379,88 @@ def _advance(
     return False
 
 
-# Rows of the scratch array ``scr`` the entries hand to the loops.
-_SCR_ROWS = 34
-
-
 @_inline
-def _scratch(p_len, ny, nw):
-    return np.zeros((_SCR_ROWS, max(_N, _M, p_len, ny + 2, nw + 2)))
+def _scratch(p_len, ny, nw, nz):
+    return np.zeros((_SCR_ROWS, max(_N, _M, p_len, ny + 2, nw + 2, nz, 1)))
 
 
 @_bare
 def _run(
     k_start, k_end, iopts, fopts, x, z, u_prev, rng,
-    op, c_idx, est, gains, r_op, ref, uff, lv, lw,
+    op, c_idx, cp, ref, uff, lv, lw,
     p_sets, p_switch, lin_s, region, kicks, kick_value, pulses, pulse_value,
-    rec, acc, status, scr,
+    rec_cols, acc_cols, rec, acc, status, scr,
 ):
     """Samples ``k_start .. k_end - 1`` of one closed-loop run (resumable).
 
-    *x*, *z* (the filter's carried state), *u_prev* (the last saturated
+    *x*, *z* (the controller's state), *u_prev* (the last saturated
     command), *rng*, *acc* and *status* carry the run from one call to the
-    next. ``iopts = [n_samples, record, est_kind, delay, n_sub, integrator]``
-    (est_kind: 0 none, 1 full state, 2 Kalman "current", 3 Kalman
-    "predictor"; integrator: 0 RK4, 1 adaptive, 2 exact linear),
-    ``fopts = [h, rtol, atol]``; ``op = [x_op, u_op]``; ``est = [Ad | Bd | Kf]``;
-    ``gains = [K | Kc]``; a row of ``rec`` is ``[x | x_hat | y | u_cmd | u_sat | u_app]``.
-    *scr* is zeroed scratch from ``_scratch``; its row 17 receives the state
-    at a fall.
+    next. ``op = [x_op, u_op]``; *cp* the controller's parameters; *ref* and
+    *uff* the references and the open-loop input added to the command, one
+    row per sample. *scr* is zeroed scratch from ``_scratch``; its row
+    ``_S_FELL_X`` receives the state at a fall.
+
+    At each sample: measure, ``controller_output`` (plus *uff*), saturate
+    with the limits of the parameter set in force (and delay), record and
+    accumulate, then ``controller_update`` with the input that acts.
     """
     n = _N
     m = _M
-    n_samples = iopts[0]
-    record = iopts[1] != 0
-    est_kind = iopts[2]
-    delay = iopts[3] != 0
-    n_sub = iopts[4]
+    n_samples = iopts[_IO_N_SAMPLES]
+    record = iopts[_IO_RECORD] != 0
+    delay = iopts[_IO_DELAY] != 0
+    n_sub = iopts[_IO_N_SUB]
+    estimates = iopts[_IO_ESTIMATES] != 0
+    rate = fopts[_FO_RATE]
     ny = c_idx.shape[0]
-    nr = r_op.shape[0]
-    y = scr[0]
-    xhat = scr[1]
-    innov = scr[2]
-    u_cmd = scr[3]
-    u_sat = scr[4]
-    u_app = scr[5]
-    znew = scr[6]
-    k1 = scr[7]
-    k2 = scr[8]
-    k3 = scr[9]
-    k4 = scr[10]
-    xt = scr[11]
-    xprev = scr[12]
-    ubuf = scr[13]
-    wvec = scr[14]
-    zbuf = scr[15]
-    pcur = scr[16]
-    fell_x = scr[17]
-    wk = scr[18:34]
+    nz = z.shape[0]
+    y = scr[_S_Y, :ny]
+    xhat = scr[_S_X_HAT, :n]
+    u_cmd = scr[_S_U_CMD, :m]
+    u_sat = scr[_S_U_SAT, :m]
+    u_app = scr[_S_U_APP, :m]
+    znew = scr[_S_Z_NEW, :nz]
+    k1 = scr[_S_K1]
+    k2 = scr[_S_K2]
+    k3 = scr[_S_K3]
+    k4 = scr[_S_K4]
+    xt = scr[_S_XT]
+    xprev = scr[_S_XPREV]
+    ubuf = scr[_S_UBUF]
+    wvec = scr[_S_WVEC]
+    zbuf = scr[_S_ZBUF]
+    pcur = scr[_S_PCUR]
+    fell_x = scr[_S_FELL_X]
+    wk = scr[_S_WK:_SCR_ROWS]
     ps0 = _pset(p_switch, k_start * n_sub)
     for i in range(p_sets.shape[1]):
         pcur[i] = p_sets[ps0, i]
     base = p_sets.shape[1] - 2 * m
-    c_y = 2 * n
-    c_u = 2 * n + ny
+    c_x = rec_cols[_REC_X]
+    c_xhat = rec_cols[_REC_X_HAT]
+    c_y = rec_cols[_REC_Y]
+    c_cmd = rec_cols[_REC_U_CMD]
+    c_sat = rec_cols[_REC_U_SAT]
+    c_app = rec_cols[_REC_U_APP]
+    a_peak = acc_cols[_ACC_PEAK_U]
+    a_u2 = acc_cols[_ACC_SUM_U2]
+    a_sat = acc_cols[_ACC_N_SAT]
+    a_dx = acc_cols[_ACC_PEAK_DX]
+    a_est = acc_cols[_ACC_SUM_EST2]
     for k in range(k_start, k_end):
         _switch(p_sets, p_switch, k * n_sub, pcur)
         if k == 0:
             for i in range(m):
                 u_prev[i] = min(max(op[n + i], pcur[base + 2 * i]), pcur[base + 2 * i + 1])
         _measure(x, c_idx, lv, rng, y, zbuf)
-        if est_kind == 1:
-            for i in range(n):
-                xhat[i] = y[i] - op[i]
-        elif est_kind == 2:
-            for j in range(ny):
-                innov[j] = y[j] - op[c_idx[j]] - z[c_idx[j]]
-            for i in range(n):
-                v = z[i]
-                for j in range(ny):
-                    v += est[i, n + m + j] * innov[j]
-                xhat[i] = v
-        elif est_kind == 3:
-            for i in range(n):
-                xhat[i] = z[i]
+        t = k / rate
+        r = ref[k]
+        controller_output(t, z, y, r, cp, u_cmd)
+        if estimates:
+            controller_estimate(t, z, y, r, cp, xhat)
         saturated = False
         for i in range(m):
-            v = uff[k, i]
-            for j in range(n):
-                v -= gains[i, j] * xhat[j]
-            for j in range(nr):
-                v += gains[i, n + j] * (ref[k, j] - r_op[j])
-            u_cmd[i] = op[n + i] + v
+            u_cmd[i] = u_cmd[i] + uff[k, i]
             u_sat[i] = min(max(u_cmd[i], pcur[base + 2 * i]), pcur[base + 2 * i + 1])
             if u_sat[i] != u_cmd[i]:
                 saturated = True
@@ -450,55 +468,35 @@ def _run(
             u_prev[i] = u_sat[i]
         if record:
             for i in range(n):
-                rec[k, i] = x[i]
-                rec[k, n + i] = op[i] + xhat[i]
+                rec[k, c_x + i] = x[i]
+                rec[k, c_xhat + i] = xhat[i] if estimates else np.nan
             for j in range(ny):
                 rec[k, c_y + j] = y[j]
             for i in range(m):
-                rec[k, c_u + i] = u_cmd[i]
-                rec[k, c_u + m + i] = u_sat[i]
-                rec[k, c_u + 2 * m + i] = u_app[i]
+                rec[k, c_cmd + i] = u_cmd[i]
+                rec[k, c_sat + i] = u_sat[i]
+                rec[k, c_app + i] = u_app[i]
         for i in range(m):
-            acc[i] = max(acc[i], abs(u_cmd[i]))
-            acc[m + i] += u_app[i] * u_app[i]
+            acc[a_peak + i] = max(acc[a_peak + i], abs(u_cmd[i]))
+            acc[a_u2 + i] += u_app[i] * u_app[i]
         if saturated:
-            acc[2 * m] += 1.0
+            acc[a_sat] += 1.0
         for i in range(n):
-            acc[2 * m + 1 + i] = max(acc[2 * m + 1 + i], abs(x[i] - op[i]))
-            if est_kind != 0:
-                e = op[i] + xhat[i] - x[i]
-                acc[2 * m + 1 + n + i] += e * e
-        status[0] = k + 1
-        if est_kind == 2:
-            for i in range(n):
-                v = 0.0
-                for j in range(n):
-                    v += est[i, j] * xhat[j]
-                for j in range(m):
-                    v += est[i, n + j] * (u_app[j] - op[n + j])
-                znew[i] = v
-            for i in range(n):
-                z[i] = znew[i]
-        elif est_kind == 3:
-            for j in range(ny):
-                innov[j] = y[j] - op[c_idx[j]] - z[c_idx[j]]
-            for i in range(n):
-                v = 0.0
-                for j in range(n):
-                    v += est[i, j] * z[j]
-                for j in range(m):
-                    v += est[i, n + j] * (u_app[j] - op[n + j])
-                for j in range(ny):
-                    v += est[i, n + m + j] * innov[j]
-                znew[i] = v
-            for i in range(n):
+            acc[a_dx + i] = max(acc[a_dx + i], abs(x[i] - op[i]))
+            if estimates:
+                e = xhat[i] - x[i]
+                acc[a_est + i] += e * e
+        status[_ST_ROWS] = k + 1
+        if nz > 0:
+            controller_update(t, z, y, r, u_app, cp, znew)
+            for i in range(nz):
                 z[i] = znew[i]
         if k == 0:
             code = _outside(x, region)
             if code != -1:
-                status[1] = 1
-                status[2] = code
-                status[3] = 0
+                status[_ST_FELL] = 1
+                status[_ST_FELL_CODE] = code
+                status[_ST_FELL_STEP] = 0
                 for i in range(n):
                     fell_x[i] = x[i]
                 return
@@ -515,47 +513,47 @@ def _run(
 @_jit
 def run_one(
     k_start, k_end, iopts, fopts, x, z, u_prev, rng,
-    op, c_idx, est, gains, r_op, ref, uff, lv, lw,
+    op, c_idx, cp, ref, uff, lv, lw,
     p_sets, p_switch, lin_s, region, kicks, kick_value, pulses, pulse_value,
-    rec, acc, status, fell_x,
+    rec_cols, acc_cols, rec, acc, status, fell_x,
 ):
     """One run (or a resumable piece of one): see ``_run``; *fell_x* gets the state at a fall."""
-    scr = _scratch(p_sets.shape[1], c_idx.shape[0], lw.shape[1])
+    scr = _scratch(p_sets.shape[1], c_idx.shape[0], lw.shape[1], z.shape[0])
     _run(
         k_start, k_end, iopts, fopts, x, z, u_prev, rng,
-        op, c_idx, est, gains, r_op, ref, uff, lv, lw,
+        op, c_idx, cp, ref, uff, lv, lw,
         p_sets, p_switch, lin_s, region, kicks, kick_value, pulses, pulse_value,
-        rec, acc, status, scr,
+        rec_cols, acc_cols, rec, acc, status, scr,
     )
     for i in range(_N):
-        fell_x[i] = scr[17, i]
+        fell_x[i] = scr[_S_FELL_X, i]
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
 def run_many(
     iopts, fopts, x0s, z0, rngs,
-    op, c_idx, est, gains, r_op, ref, uff, lv, lw,
+    op, c_idx, cp, ref, uff, lv, lw,
     p_sets_r, p_switch, lin_r, region, kicks, kick_value, pulses, pulse_value,
-    recs, accs, statuses, fell_xs, x_ends,
+    rec_cols, acc_cols, recs, accs, statuses, fell_xs, x_ends,
 ):
     """Independent runs over the leading axis of the per-run arrays, in parallel."""
     n_runs = x0s.shape[0]
-    n_rows = iopts[0] + 1
+    n_rows = iopts[_IO_N_SAMPLES] + 1
     for r in prange(n_runs):
         x = x0s[r].copy()
         z = z0.copy()
         u_prev = np.zeros(_M)
         rng = rngs[r].copy()
-        scr = _scratch(p_sets_r.shape[2], c_idx.shape[0], lw.shape[1])
+        scr = _scratch(p_sets_r.shape[2], c_idx.shape[0], lw.shape[1], z0.shape[0])
         _run(
             0, n_rows, iopts, fopts, x, z, u_prev, rng,
-            op, c_idx, est, gains, r_op, ref, uff, lv, lw,
+            op, c_idx, cp, ref, uff, lv, lw,
             p_sets_r[r], p_switch, lin_r[r], region, kicks, kick_value, pulses, pulse_value,
-            recs[r], accs[r], statuses[r], scr,
+            rec_cols, acc_cols, recs[r], accs[r], statuses[r], scr,
         )
         for i in range(_N):
             x_ends[r, i] = x[i]
-            fell_xs[r, i] = scr[17, i]
+            fell_xs[r, i] = scr[_S_FELL_X, i]
 
 
 @_jit
@@ -570,19 +568,19 @@ def _advance_bare(
     k, x, u_app, op, p_sets, p_switch, lin_s, region,
     kicks, kick_value, pulses, pulse_value, lw, rng, iopts, fopts, status, scr,
 ):
-    k1 = scr[7]
-    k2 = scr[8]
-    k3 = scr[9]
-    k4 = scr[10]
-    xt = scr[11]
-    xprev = scr[12]
-    ubuf = scr[13]
-    wvec = scr[14]
-    zbuf = scr[15]
-    pcur = scr[16]
-    fell_x = scr[17]
-    wk = scr[18:34]
-    ps = _pset(p_switch, k * iopts[4])
+    k1 = scr[_S_K1]
+    k2 = scr[_S_K2]
+    k3 = scr[_S_K3]
+    k4 = scr[_S_K4]
+    xt = scr[_S_XT]
+    xprev = scr[_S_XPREV]
+    ubuf = scr[_S_UBUF]
+    wvec = scr[_S_WVEC]
+    zbuf = scr[_S_ZBUF]
+    pcur = scr[_S_PCUR]
+    fell_x = scr[_S_FELL_X]
+    wk = scr[_S_WK:_SCR_ROWS]
+    ps = _pset(p_switch, k * iopts[_IO_N_SUB])
     for i in range(p_sets.shape[1]):
         pcur[i] = p_sets[ps, i]
     return _advance(
@@ -594,8 +592,8 @@ def _advance_bare(
 
 @_jit
 def scratch(p_len, ny, nw):
-    """Scratch for ``advance_one`` (its row 17 receives the state at a fall)."""
-    scr = _scratch(p_len, ny, nw)
+    """Scratch for ``advance_one`` (its row ``_S_FELL_X`` receives the state at a fall)."""
+    scr = _scratch(p_len, ny, nw, 0)
     return scr
 
 
@@ -606,8 +604,7 @@ def advance_one(
 ):
     """The physics steps after sample *k* (the Python-controller path); True if it fell.
 
-    *scr* comes from ``scratch`` and is kept for the whole run; its row 17
-    receives the state at a fall.
+    *scr* comes from ``scratch`` and is kept for the whole run.
     """
     return _advance_bare(
         k, x, u_app, op, p_sets, p_switch, lin_s, region,
@@ -632,3 +629,317 @@ def rk4_steps(x, u, p, h, n_steps):
 def normals(rng, out):
     """Standard normal deviates from the core's generator (for tests)."""
     _normals(rng, out, out.shape[0])
+
+
+# --- environments ---
+# The compiled steps of the Gymnasium environments (equilibrist.envs). This
+# section uses the core's RK4 step and generator, so that a control period
+# of an environment is, number for number, a sample of ``simulate`` with a
+# Python controller: zero-order hold of the saturated input, RK4 physics
+# steps with process noise held over each, the region checked after each
+# physics step, the sensors read with noise at the next sample.
+#
+# Settings (written by ``equilibrist.envs._core.Layout``, the only Python
+# code that knows these slots):
+#   ei = [n_sub, n_samples, observe_state, reward_kind, action_physical, n_chunks]
+#   ef = [h, dt, alive_bonus]
+#   op = [x_op | u_op]; sc = [state scales | input scales] (the task's cost)
+#   hang: indices of the coordinates a swing-up raises
+#   rnd_idx, rnd_spread: randomized parameters and their relative spreads
+# Per copy: x (state), p (parameters), k (periods taken), rng (xoshiro256**
+# words), eref = [energy upright, energy hanging] (swing-up shaping).
+# ``status`` of a step: 0 running, 1 fell (terminated), 2 out of time
+# (truncated), 3 the action was not a finite number (nothing was done).
+
+_ENV_SCR = 12
+_env_energy = _bare(energy)
+
+
+@_inline
+def _env_region(x, region):
+    """-1 inside; the first state outside its region; -2 if not finite (as ``simulate``)."""
+    for i in range(_N):
+        if not math.isfinite(x[i]):
+            return -2
+    for i in range(_N):
+        if x[i] <= region[0, i] or x[i] >= region[1, i]:
+            return i
+    return -1
+
+
+@_inline
+def _env_observe(x, c_idx, lv, rng, observe_state, obs, r, zbuf):
+    """Row *r* of *obs*: the state, or the measured outputs with sensor noise.
+
+    The sensor noise is drawn either way, so that an environment observing
+    the state follows the same run as one observing the outputs.
+    """
+    ny = c_idx.shape[0]
+    if lv.shape[0] > 0:
+        _normals(rng, zbuf, ny)
+    if observe_state != 0:
+        for i in range(_N):
+            obs[r, i] = x[i]
+        return
+    for j in range(ny):
+        v = 0.0
+        if lv.shape[0] > 0:
+            for c in range(ny):
+                v += lv[j, c] * zbuf[c]
+        obs[r, j] = x[c_idx[j]] + v
+
+
+@_inline
+def _env_input(a, p, physical, u):
+    """The saturated input of action *a*; False if *a* is not finite."""
+    base = p.shape[0] - 2 * _M
+    for i in range(_M):
+        if not math.isfinite(a[i]):
+            return False
+        lo = p[base + 2 * i]
+        hi = p[base + 2 * i + 1]
+        v = a[i] if physical != 0 else lo + 0.5 * (a[i] + 1.0) * (hi - lo)
+        u[i] = min(max(v, lo), hi)
+    return True
+
+
+@_inline
+def _env_physics(x, u, p, lw, rng, n_sub, h, region, w, zbuf, k1, k2, k3, k4, xt, xprev):
+    """One control period; the region code at a fall (the last finite state kept), else -1."""
+    nw = lw.shape[1]
+    for i in range(_N):
+        w[i] = 0.0
+    for _s in range(n_sub):
+        if nw > 0:
+            _normals(rng, zbuf, nw)
+            for i in range(_N):
+                v = 0.0
+                for c in range(nw):
+                    v += lw[i, c] * zbuf[c]
+                w[i] = v
+        for i in range(_N):
+            xprev[i] = x[i]
+        _rk4(x, u, p, w, h, k1, k2, k3, k4, xt)
+        code = _env_region(x, region)
+        if code != -1:
+            if code == -2:
+                for i in range(_N):
+                    x[i] = xprev[i]
+            return code
+    return -1
+
+
+@_inline
+def _env_reward(x, u, p, kind, ef, op, sc, hang, eref0, eref1):
+    """Reward of a period ending in *x* with *u* applied (see ``equilibrist.envs``)."""
+    dt = ef[1]
+    if kind == 0:
+        c = 0.0
+        for i in range(_N):
+            d = (x[i] - op[i]) / sc[i]
+            c += d * d
+        for i in range(_M):
+            d = (u[i] - op[_N + i]) / sc[_N + i]
+            c += d * d
+        return dt * (ef[2] - c)
+    up = 0.0
+    for j in range(hang.shape[0]):
+        up += 0.5 * (1.0 + math.cos(x[hang[j]] - op[hang[j]]))
+    if hang.shape[0] > 0:
+        up /= hang.shape[0]
+    gap = eref0 - eref1
+    if gap == 0.0:
+        gap = 1.0
+    e = (_env_energy(x, p) - eref0) / gap
+    return dt * 0.5 * (up + max(0.0, 1.0 - e * e))
+
+
+@_inline
+def _env_draw(x, p, rng, start, spread, p_nom, rnd_idx, rnd_spread):
+    """A start drawn from the task's distribution and randomized parameters."""
+    for i in range(_N):
+        x[i] = start[i] + (2.0 * _uniform(rng) - 1.0) * spread[i]
+    for i in range(p.shape[0]):
+        p[i] = p_nom[i]
+    for j in range(rnd_idx.shape[0]):
+        p[rnd_idx[j]] = p_nom[rnd_idx[j]] * (1.0 + (2.0 * _uniform(rng) - 1.0) * rnd_spread[j])
+
+
+@_jit
+def env_energy(x, p):
+    """The model's energy (the swing-up's shaping reads it)."""
+    return _env_energy(x, p)
+
+
+@_jit
+def env_observe(x, c_idx, lv, rng, observe_state, obs):
+    """The observation of *x* into ``obs[0]`` (draws the sensor noise)."""
+    zbuf = np.zeros(max(c_idx.shape[0], 1) + 2)
+    _env_observe(x, c_idx, lv, rng, observe_state, obs, 0, zbuf)
+
+
+@_jit
+def env_step_one(a, x, p, rng, k, eref, obs, ei, ef, c_idx, lv, lw, region, op, sc, hang):
+    """One control period of one environment: ``(reward, status)`` (see the section's notes).
+
+    *x*, *rng* and ``k[0]`` carry the episode; ``obs[0]`` receives the observation.
+    """
+    scr = np.zeros((_ENV_SCR, max(_N, _M, lw.shape[1], c_idx.shape[0]) + 2))
+    u = scr[0]
+    if not _env_input(a, p, ei[4], u):
+        return 0.0, 3
+    code = _env_physics(x, u, p, lw, rng, ei[0], ef[0], region, scr[1], scr[2], scr[3],
+                        scr[4], scr[5], scr[6], scr[7], scr[8])
+    k[0] += 1
+    _env_observe(x, c_idx, lv, rng, ei[2], obs, 0, scr[2])
+    reward = _env_reward(x, u, p, ei[3], ef, op, sc, hang, eref[0], eref[1])
+    if code != -1:
+        return reward, 1
+    if k[0] >= ei[1]:
+        return reward, 2
+    return reward, 0
+
+
+@_inline
+def _env_reset_copy(r, xs, ps, rng, ks, erefs, obs, x, p, ei, c_idx, lv, start, spread,
+                    p_nom, rnd_idx, rnd_spread, op, zbuf):
+    _env_draw(x, p, rng, start, spread, p_nom, rnd_idx, rnd_spread)
+    for i in range(_N):
+        xs[r, i] = x[i]
+    for i in range(p.shape[0]):
+        ps[r, i] = p[i]
+    ks[r] = 0
+    if ei[3] == 1:
+        erefs[r, 0] = _env_energy(op, p)
+        erefs[r, 1] = _env_energy(start, p)
+    _env_observe(x, c_idx, lv, rng, ei[2], obs, r, zbuf)
+
+
+@_inline
+def _env_width(ps, lw, c_idx):
+    return max(_N, _M, lw.shape[1], c_idx.shape[0], ps.shape[1]) + 2
+
+
+@_bare
+def _env_reset_range(lo, hi, mask, xs, ps, rngs, ks, erefs, obs, ei, c_idx, lv, start, spread,
+                     p_nom, rnd_idx, rnd_spread, op, scr, rng):
+    # Compiled without reference counting, like the core's loops: *scr*
+    # (rows x, p, zbuf) and *rng* are made by the entry that calls it.
+    x = scr[0]
+    p = scr[1, : ps.shape[1]]
+    zbuf = scr[2]
+    for r in range(lo, hi):
+        if mask[r]:
+            for i in range(4):
+                rng[i] = rngs[r, i]
+            _env_reset_copy(r, xs, ps, rng, ks, erefs, obs, x, p, ei, c_idx, lv, start,
+                            spread, p_nom, rnd_idx, rnd_spread, op, zbuf)
+            for i in range(4):
+                rngs[r, i] = rng[i]
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def env_reset_many(mask, xs, ps, rngs, ks, erefs, obs, ei, c_idx, lv, start, spread,
+                   p_nom, rnd_idx, rnd_spread, op):
+    """Reset the copies where *mask* is set: draw each one's start and parameters
+    from its own generator and observe it into its row of *obs*."""
+    n_copies = xs.shape[0]
+    chunks = max(1, min(ei[5], n_copies))
+    scrs = np.zeros((chunks, 3, _env_width(ps, lv, c_idx)))
+    rbuf = np.zeros((chunks, 4), dtype=np.uint64)
+    for c in prange(chunks):
+        _env_reset_range(c * n_copies // chunks, (c + 1) * n_copies // chunks, mask, xs, ps,
+                         rngs, ks, erefs, obs, ei, c_idx, lv, start, spread, p_nom, rnd_idx,
+                         rnd_spread, op, scrs[c], rbuf[c])
+
+
+@_bare
+def _env_step_range(lo, hi, actions, xs, ps, rngs, ks, erefs, auto, obs, rewards, terminated,
+                    truncated, ei, ef, c_idx, lv, lw, region, op, sc, hang, start, spread,
+                    p_nom, rnd_idx, rnd_spread, scr, rng):
+    """Copies ``lo .. hi - 1`` of a vector step; the number of non-finite actions.
+
+    Compiled without reference counting (a reference-counted loop handing
+    arrays to the dynamics runs several times slower): *scr* (``_ENV_SCR``
+    rows of ``_env_width``) and *rng* (4 words) come from the entry.
+    """
+    # Rows of the copies' arrays are used in place (views cost nothing here).
+    u = scr[1]
+    w = scr[2]
+    zbuf = scr[3]
+    k1 = scr[4]
+    k2 = scr[5]
+    k3 = scr[6]
+    k4 = scr[7]
+    xt = scr[8]
+    xprev = scr[9]
+    bad = 0
+    for r in range(lo, hi):
+        terminated[r] = False
+        truncated[r] = False
+        x = xs[r]
+        p = ps[r]
+        rng_r = rngs[r]
+        if auto[r]:
+            _env_reset_copy(r, xs, ps, rng_r, ks, erefs, obs, x, p, ei, c_idx, lv,
+                            start, spread, p_nom, rnd_idx, rnd_spread, op, zbuf)
+            rewards[r] = 0.0
+            auto[r] = False
+            continue
+        if not _env_input(actions[r], p, ei[4], u):
+            bad += 1
+            continue
+        code = _env_physics(x, u, p, lw, rng_r, ei[0], ef[0], region, w, zbuf,
+                            k1, k2, k3, k4, xt, xprev)
+        ks[r] += 1
+        _env_observe(x, c_idx, lv, rng_r, ei[2], obs, r, zbuf)
+        rewards[r] = _env_reward(x, u, p, ei[3], ef, op, sc, hang, erefs[r, 0], erefs[r, 1])
+        if code != -1:
+            terminated[r] = True
+            auto[r] = True
+        elif ks[r] >= ei[1]:
+            truncated[r] = True
+            auto[r] = True
+    return bad
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def env_step_many(actions, xs, ps, rngs, ks, erefs, auto, obs, rewards, terminated,
+                  truncated, ei, ef, c_idx, lv, lw, region, op, sc, hang, start, spread,
+                  p_nom, rnd_idx, rnd_spread):
+    """One control period of every copy, in parallel; Gymnasium's next-step autoreset.
+
+    A copy whose previous step ended (``auto``) is reset instead of stepped
+    (its action ignored, reward 0); a copy that ends now is flagged in
+    ``auto`` for the next call. Returns the number of copies whose action
+    was not a finite number (they are left as they were).
+    """
+    n_copies = xs.shape[0]
+    chunks = max(1, min(ei[5], n_copies))
+    bad = np.zeros(chunks, dtype=np.int64)
+    scrs = np.zeros((chunks, _ENV_SCR, _env_width(ps, lw, c_idx)))
+    rbuf = np.zeros((chunks, 4), dtype=np.uint64)
+    for c in prange(chunks):
+        bad[c] = _env_step_range(
+            c * n_copies // chunks, (c + 1) * n_copies // chunks, actions, xs, ps, rngs, ks,
+            erefs, auto, obs, rewards, terminated, truncated, ei, ef, c_idx, lv, lw, region, op,
+            sc, hang, start, spread, p_nom, rnd_idx, rnd_spread, scrs[c], rbuf[c],
+        )
+    total = 0
+    for c in range(chunks):
+        total += bad[c]
+    return total
+
+
+@_jit
+def env_step_serial(actions, xs, ps, rngs, ks, erefs, auto, obs, rewards, terminated,
+                    truncated, ei, ef, c_idx, lv, lw, region, op, sc, hang, start, spread,
+                    p_nom, rnd_idx, rnd_spread):
+    """``env_step_many`` on one thread (few copies: a parallel region costs more than it saves)."""
+    scr = np.zeros((_ENV_SCR, _env_width(ps, lw, c_idx)))
+    rng = np.zeros(4, dtype=np.uint64)
+    return _env_step_range(
+        0, xs.shape[0], actions, xs, ps, rngs, ks, erefs, auto, obs, rewards, terminated,
+        truncated, ei, ef, c_idx, lv, lw, region, op, sc, hang, start, spread, p_nom, rnd_idx,
+        rnd_spread, scr, rng,
+    )

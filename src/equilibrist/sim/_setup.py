@@ -15,10 +15,12 @@ from typing import Any
 
 import numpy as np
 
+from equilibrist.control.controller import LinearController, NonlinearController
 from equilibrist.errors import EquilibristError, NoEquilibriumError, SimulationError
 from equilibrist.numeric.system import System
 from equilibrist.sim import events as ev
-from equilibrist.sim.controllers import LQG, OpenLoop, StateFeedback, as_controller
+from equilibrist.sim import layout
+from equilibrist.sim.controllers import LQG, StateFeedback, as_controller
 from equilibrist.sim.noise import Noise, square_root
 from equilibrist.sim.signals import as_signal
 
@@ -72,8 +74,11 @@ class Setup:
 
     system: System
     controller: Any
-    builtin: bool
-    est_kind: int
+    compiled: bool
+    estimates: bool
+    description: dict[str, Any]
+    cp: np.ndarray
+    z0: np.ndarray
     rate: float
     h: float
     n_sub: int
@@ -94,8 +99,6 @@ class Setup:
     ref: np.ndarray
     uff: np.ndarray
     op: np.ndarray
-    est: np.ndarray
-    gains: np.ndarray
     lv: np.ndarray
     lw: np.ndarray
     noise: Noise | None
@@ -117,26 +120,40 @@ class Setup:
         return self.n_samples + 1
 
     @property
-    def iopts(self) -> np.ndarray:
-        return np.array(
-            [self.n_samples, 1, self.est_kind, int(self.delay), self.n_sub,
-             2 if self.plant == "linear" else INTEGRATORS[self.integrator]],
-            dtype=np.int64,
+    def nonlinear(self) -> NonlinearController | None:
+        """The nonlinear controller whose kernel runs this setup, if any."""
+        return self.controller if isinstance(self.controller, NonlinearController) else None
+
+    def iopts(self, *, record: bool = True) -> np.ndarray:
+        return layout.IOPTS.pack(
+            np.int64, n_samples=self.n_samples, record=int(record), delay=int(self.delay),
+            n_sub=self.n_sub, estimates=int(self.estimates),
+            integrator=layout.INTEGRATORS["linear" if self.plant == "linear" else self.integrator],
         )
 
     @property
     def fopts(self) -> np.ndarray:
-        return np.array([self.h, self.rtol, self.atol])
+        return layout.FOPTS.pack(h=self.h, rtol=self.rtol, atol=self.atol, rate=self.rate)
+
+    @property
+    def sizes(self) -> dict[str, int]:
+        return {"n": self.system.n_states, "m": self.system.n_inputs, "ny": len(self.outputs)}
+
+    @property
+    def rec_cols(self) -> np.ndarray:
+        return layout.RECORD.offsets(**self.sizes)
+
+    @property
+    def acc_cols(self) -> np.ndarray:
+        return layout.ACC.offsets(**self.sizes)
 
     @property
     def record_width(self) -> int:
-        n, m = self.system.n_states, self.system.n_inputs
-        return 2 * n + len(self.outputs) + 3 * m
+        return layout.RECORD.width(**self.sizes)
 
     @property
     def acc_len(self) -> int:
-        n, m = self.system.n_states, self.system.n_inputs
-        return 2 * m + 1 + 2 * n
+        return layout.ACC.width(**self.sizes)
 
     def p_sets(self, base: np.ndarray) -> np.ndarray:
         """The parameter sets of the run from parameter vector(s) *base*: ``(..., n_sets, n_p)``.
@@ -184,11 +201,9 @@ class Setup:
 
     def describe(self) -> dict[str, Any]:
         """The settings as JSON-able data (recorded with every result)."""
-        ctrl = self.controller
         return {
             "system": self.system.key,
-            "controller": ctrl.describe() if hasattr(ctrl, "describe") else
-            {"kind": "python", "name": type(ctrl).__name__},
+            "controller": self.description,
             "duration": self.duration,
             "n_samples": self.n_samples,
             "rate": self.rate,
@@ -274,7 +289,9 @@ def operating_point(system: System, controller: Any) -> tuple[np.ndarray, np.nda
     A system without a canonical point (the zxz gyroscope) runs open loop
     about zero input, with deviations measured from zero.
     """
-    if isinstance(controller, StateFeedback | LQG):
+    if isinstance(controller, StateFeedback | LQG | LinearController | NonlinearController) and (
+        getattr(controller, "kind", "") != "none"
+    ):
         return np.array(controller.x_op), np.array(controller.u_op)
     try:
         eq = system.operating_point()
@@ -305,14 +322,25 @@ def build(
 ) -> Setup:
     """Validate the settings of a run (collecting every problem) and pack them."""
     problems: list[str] = []
-    ctrl = as_controller(controller)
-    builtin = isinstance(ctrl, OpenLoop | StateFeedback | LQG)
     n, m = system.n_states, system.n_inputs
     names = system.state_names
+    # Operating point: the controller's, else the system's canonical one.
+    x_op, u_op = operating_point(system, controller)
+    if x_op.size != n or u_op.size != m:
+        problems.append(
+            f"the controller is for {x_op.size} states and {u_op.size} inputs; "
+            f"{system.key} has {n} and {m}"
+        )
+        x_op, u_op = np.zeros(n), np.zeros(m)
+    resolved = as_controller(controller, system, x_op, u_op)
+    ctrl = resolved.controller
+    compiled = resolved.compiled
+    open_loop = isinstance(ctrl, LinearController) and ctrl.kind == "none"
+    designed = compiled and not open_loop
 
     dur = _positive(duration, "duration [s]", problems)
-    # A Python controller may declare the rate it was written for.
-    ctrl_rate = getattr(ctrl, "rate", None)
+    # A controller may declare the rate it was written for.
+    ctrl_rate = ctrl.rate
     if rate is None and ctrl_rate is None:
         problems.append("give the controller's sample rate (rate=... in Hz)")
         run_rate = None
@@ -361,14 +389,7 @@ def build(
             n_samples = round(exact) if abs(exact - round(exact)) < 1e-9 * max(1.0, exact) else math.ceil(exact)
             n_samples = max(1, int(n_samples))
 
-    # Operating point, initial state, measured outputs.
-    x_op, u_op = operating_point(system, ctrl)
-    if x_op.size != n or u_op.size != m:
-        problems.append(
-            f"the controller is for {x_op.size} states and {u_op.size} inputs; "
-            f"{system.key} has {n} and {m}"
-        )
-        x_op, u_op = np.zeros(n), np.zeros(m)
+    # Initial state, measured outputs.
     lo, hi = system.input_limits
     for i, name in enumerate(system.input_names):
         if not lo[i] <= u_op[i] <= hi[i]:
@@ -377,7 +398,7 @@ def build(
                 f"[{lo[i]:g}, {hi[i]:g}] ({name}_min, {name}_max)"
             )
     no_x0 = x0 is None or (isinstance(x0, Mapping) and not x0)
-    if no_x0 and not isinstance(ctrl, StateFeedback | LQG) and not _has_operating_point(system):
+    if no_x0 and not designed and not _has_operating_point(system):
         problems.append(
             f"{system.key} has no canonical operating point: give the initial state "
             f"({', '.join(names)})"
@@ -389,21 +410,16 @@ def build(
         except EquilibristError as exc:
             problems.append(f"the initial state is not usable: {exc}")
 
-    if isinstance(ctrl, LQG):
-        outs = tuple(ctrl.outputs)
-        est_kind = 2 if ctrl.form == "current" else 3
-    elif isinstance(ctrl, StateFeedback):
-        outs = tuple(names)
-        est_kind = 1
+    if designed:
+        outs = tuple(ctrl.outputs or ())
     else:
-        declared = getattr(ctrl, "outputs", None) if not builtin else None
+        declared = None if compiled else ctrl.outputs
         if outputs is not None:
             outs = tuple(outputs)
         elif declared is not None:
             outs = tuple(declared)
         else:
             outs = tuple(system.spec.outputs) or tuple(names)
-        est_kind = 0
     if outputs is not None and tuple(outputs) != outs:
         problems.append(
             f"outputs {list(outputs)} differ from the controller's measured outputs {list(outs)}"
@@ -417,15 +433,16 @@ def build(
 
     # Reference and feedforward signals.
     tracked: tuple[str, ...] = ()
-    if isinstance(ctrl, StateFeedback | LQG):
+    if designed and isinstance(ctrl, LinearController | NonlinearController):
         tracked = tuple(ctrl.tracked)
-    elif not builtin and reference is not None:
+    elif not compiled and reference is not None:
         tracked = tuple((system.spec.outputs or names)[:m])
+    ctrl_tracked = tracked if compiled else ()
     ref_signal = None
     if reference is not None:
-        if isinstance(ctrl, OpenLoop):
+        if open_loop:
             problems.append("a reference needs a controller that tracks it (an open loop has none)")
-        elif builtin and not tracked:
+        elif compiled and not tracked:
             problems.append(
                 "a reference needs a controller with a reference gain K_c "
                 "(from_design(design, tracking=True))"
@@ -436,6 +453,9 @@ def build(
     r_op = x_op[r_idx] if ref_signal is not None else np.zeros(0)
     if ref_signal is None:
         tracked = ()
+    # A compiled controller with tracked outputs reads a reference at every
+    # sample: without one given, it is held at the operating point.
+    ctrl_r_idx = [names.index(t) for t in ctrl_tracked if t in names]
 
     # Events.
     evs = tuple(events)
@@ -553,43 +573,41 @@ def build(
     if problems or h is None or n_sub is None or n_samples is None or run_rate is None or dur is None:
         raise SimulationError("; ".join(problems) if problems else "invalid simulation settings")
 
-    # Controller matrices.
-    est = np.zeros((n, n + m + ny))
-    gains = np.zeros((m, n + len(tracked)))
-    if isinstance(ctrl, StateFeedback | LQG):
-        gains[:, :n] = ctrl.K
-        if tracked:
-            gains[:, n:] = ctrl.Kc
-    if isinstance(ctrl, LQG):
-        est[:, :n] = ctrl.Ad
-        est[:, n : n + m] = ctrl.Bd
-        est[:, n + m :] = ctrl.Kf
+    # The controller's numbers.
+    if isinstance(ctrl, LinearController):
+        cp, z0, estimates = ctrl.packed(), np.array(ctrl.z0, dtype=float), ctrl.has_estimate
+    elif isinstance(ctrl, NonlinearController):
+        cp, z0, estimates = np.array(ctrl.params), np.array(ctrl.z0, dtype=float), ctrl.has_estimate
+    else:
+        cp, z0, estimates = np.zeros(0), np.zeros(0), False
 
     n_rows = n_samples + 1
-    check_memory(n_rows * (2 * n + ny + 4 * m + 2 * len(tracked) + 2) * 8.0,
+    check_memory(n_rows * (2 * n + ny + 4 * m + 2 * max(len(tracked), len(ctrl_tracked)) + 2) * 8.0,
                  f"a run of {n_rows} samples", None)
     times = np.arange(n_samples + 1) / run_rate
     ref = np.zeros((n_rows, len(tracked)))
     if ref_signal is not None:
         ref = np.ascontiguousarray(ref_signal.evaluate(times, x_op[r_idx]), dtype=float)
+    elif ctrl_tracked:
+        ref = np.ascontiguousarray(np.tile(x_op[ctrl_r_idx], (n_rows, 1)), dtype=float)
     uff = np.zeros((n_rows, m))
-    if isinstance(ctrl, OpenLoop) and ctrl.signal is not None:
-        uff = np.ascontiguousarray(as_signal(ctrl.signal).evaluate(times, u_op) - u_op)
+    if resolved.signal is not None:
+        uff = np.ascontiguousarray(as_signal(resolved.signal).evaluate(times, u_op) - u_op)
     excite = None
     if excitation is not None:  # on top of the command, before the actuator's limits
-        if not builtin:
-            raise SimulationError("an excitation is added to the command of a built-in controller "
-                                  "(open loop, state feedback or LQG), not of a Python one")
+        if not compiled:
+            raise SimulationError("an excitation is added to the command of a compiled controller "
+                                  "(open loop, linear or nonlinear), not of a Python one")
         excite = as_signal(excitation)
         uff = np.ascontiguousarray(uff + excite.evaluate(times, np.zeros(m)))
 
     return Setup(
-        system=system, controller=ctrl, builtin=builtin, est_kind=est_kind, rate=run_rate,
+        system=system, controller=ctrl, compiled=compiled, estimates=estimates,
+        description=resolved.description, cp=cp, z0=z0, rate=run_rate,
         h=h, n_sub=n_sub, n_samples=n_samples, integrator=integrator, rtol=float(tol_r or rtol),
         atol=float(tol_a or atol), plant=plant, delay=bool(delay), x0=x_init, x_op=x_op,
         u_op=u_op, outputs=outs, c_idx=c_idx, tracked=tracked, r_op=np.array(r_op, dtype=float),
-        times=times, ref=ref, uff=uff, op=np.concatenate([x_op, u_op]), est=est,
-        gains=gains, lv=np.ascontiguousarray(lv), lw=np.ascontiguousarray(lw), noise=noise,
+        times=times, ref=ref, uff=uff, op=np.concatenate([x_op, u_op]), lv=np.ascontiguousarray(lv), lw=np.ascontiguousarray(lw), noise=noise,
         events=evs, change_steps=np.array(change_steps, dtype=np.int64),
         change_values=tuple(change_values),
         kicks=np.array(kicks, dtype=np.int64).reshape(-1, 2),

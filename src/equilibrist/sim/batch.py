@@ -16,9 +16,13 @@ from __future__ import annotations
 
 import json
 import math
+import multiprocessing
+import os
+import pickle
 import time
 import zipfile
 from collections.abc import Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -26,11 +30,12 @@ from typing import Any
 
 import numpy as np
 
+from equilibrist.atomic import atomic_path, write_text
 from equilibrist.errors import SimulationError, nearest
 from equilibrist.numeric.system import System
-from equilibrist.sim import _setup
+from equilibrist.sim import _setup, layout
 from equilibrist.sim.events import Event
-from equilibrist.sim.kernel import load_kernel, set_workers
+from equilibrist.sim.kernel import Kernel, set_workers
 from equilibrist.sim.noise import (
     Noise,
     SeedLike,
@@ -39,7 +44,7 @@ from equilibrist.sim.noise import (
     seed_from_description,
     seed_sequence,
 )
-from equilibrist.sim.result import SimResult
+from equilibrist.sim.result import SimResult, check_result_path, read_npz
 from equilibrist.sim.run import _result, _run_python, fall_reason
 
 FORMAT = "equilibrist-batch-1"
@@ -155,15 +160,17 @@ class BatchResult:
         if not 0 <= index < self.runs:
             raise SimulationError(f"run {index} out of range 0..{self.runs - 1}")
         setup = self._setup
-        status = np.array([self.rows[index], int(self.fell[index]), self.fell_code[index],
-                           0 if not self.fell[index] else round(self.fell_at[index] / setup.h)])
+        status = layout.STATUS.pack(
+            np.int64, rows=self.rows[index], fell=int(self.fell[index]),
+            fell_code=self.fell_code[index],
+            fell_step=0 if not self.fell[index] else round(self.fell_at[index] / setup.h))
         sysm = setup.system.with_params(**dict(zip(self.parameter_names,
                                                    self.params[index].tolist(), strict=True)))
         s = _setup.Setup(**{**setup.__dict__, "system": sysm, "x0": self.x0[index]})
         seq = self.seed(index)
         return _result(s, np.asarray(self.trajectories[index]), int(self.rows[index]), status,
                        np.asarray(self.fell_x[index]), np.asarray(self.final_state[index]), seq,
-                       estimates=setup.est_kind != 0)
+                       estimates=setup.estimates)
 
     def summary(self) -> dict[str, Any]:
         """``runs``, ``stayed_up``, ``fraction_up``, ``steps_per_second`` and friends."""
@@ -186,8 +193,9 @@ class BatchResult:
     def save(self, path: str | Path) -> Path:
         """Write the batch's per-run arrays to ``.npz`` (trajectories are not saved)."""
         p = Path(path)
-        if p.suffix != ".npz":
-            p = p.with_name(p.name + ".npz")
+        if p.suffix.lower() == ".csv":
+            return self.to_csv(p)
+        check_result_path(p, "a batch")
         meta = {
             "format": FORMAT, "system": self.system, "state_names": list(self.state_names),
             "input_names": list(self.input_names), "parameter_names": list(self.parameter_names),
@@ -199,7 +207,26 @@ class BatchResult:
             "rms_input", "time_saturated", "peak_deviation", "rows")}
         if self.estimation_error_rms is not None:
             arrays["estimation_error_rms"] = self.estimation_error_rms
-        np.savez(p, meta=np.array(json.dumps(meta)), **arrays)
+        with atomic_path(p) as tmp:
+            np.savez(tmp, meta=np.array(json.dumps(meta)), **arrays)
+        return p
+
+    def to_csv(self, path: str | Path) -> Path:
+        """A table, one row per run: its initial state, parameters, outcome and metrics."""
+        p = Path(path)
+        cols: list[tuple[str, np.ndarray]] = [("run", np.arange(self.runs, dtype=float))]
+        cols += [(f"{n}_0", self.x0[:, i]) for i, n in enumerate(self.state_names)]
+        cols += [(n, self.params[:, i]) for i, n in enumerate(self.parameter_names)]
+        cols += [("fell", self.fell.astype(float)), ("fell_at", self.fell_at)]
+        cols += [(f"peak_{n}", self.peak_input[:, i]) for i, n in enumerate(self.input_names)]
+        cols += [(f"rms_{n}", self.rms_input[:, i]) for i, n in enumerate(self.input_names)]
+        cols += [("time_saturated", self.time_saturated)]
+        cols += [(f"peak_dev_{n}", self.peak_deviation[:, i]) for i, n in enumerate(self.state_names)]
+        lines = [f"# {self.system}: {self.runs} runs; fell_at is nan for a run that stayed up",
+                 ",".join(n for n, _ in cols)]
+        table = np.column_stack([np.asarray(v, dtype=float).reshape(self.runs) for _, v in cols])
+        lines += [",".join("nan" if math.isnan(v) else repr(float(v)) for v in row) for row in table]
+        write_text(p, "\n".join(lines) + "\n")
         return p
 
     @classmethod
@@ -207,13 +234,12 @@ class BatchResult:
         """Read a batch written by :meth:`save`."""
         p = Path(path)
         try:
-            with np.load(p, allow_pickle=False) as data:
-                meta = json.loads(str(data["meta"]))
-                arrays = {k: data[k] for k in data.files if k != "meta"}
+            meta, arrays = read_npz(p)
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
             raise SimulationError(f"{p} is not a saved batch: {exc}") from None
-        if meta.get("format") != FORMAT:
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT:
             raise SimulationError(f"{p} is not a saved batch")
+        _check_batch_file(p, meta, arrays)
         return cls(
             system=meta["system"], state_names=tuple(meta["state_names"]),
             input_names=tuple(meta["input_names"]),
@@ -222,6 +248,33 @@ class BatchResult:
             seeds=tuple(meta["seeds"]), settings=meta["settings"], elapsed=meta["elapsed"],
             steps=meta["steps"], **arrays,
         )
+
+
+_BATCH_ARRAYS = ("x0", "params", "fell", "fell_at", "fell_code", "fell_x", "final_state",
+                 "peak_input", "rms_input", "time_saturated", "peak_deviation", "rows")
+
+
+def _check_batch_file(p: Path, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+    """Refuse a batch file whose contents are not what :meth:`BatchResult.save` writes."""
+    bad = f"{p} is not a valid saved batch"
+    for key in ("state_names", "input_names", "parameter_names"):
+        v = meta.get(key)
+        if not isinstance(v, list) or not all(isinstance(n, str) for n in v):
+            raise SimulationError(f"{bad}: {key} should be a list of names")
+    if not isinstance(meta.get("system"), str) or not isinstance(meta.get("settings"), dict):
+        raise SimulationError(f"{bad}: system and settings are missing or of the wrong type")
+    if not isinstance(meta.get("seeds"), list):
+        raise SimulationError(f"{bad}: seeds should be a list")
+    for key in ("elapsed", "steps"):
+        if not isinstance(meta.get(key), (int, float)) or isinstance(meta.get(key), bool):
+            raise SimulationError(f"{bad}: {key} should be a number")
+    missing = [k for k in _BATCH_ARRAYS if k not in arrays]
+    if missing:
+        raise SimulationError(f"{bad}: the arrays {', '.join(missing)} are missing")
+    runs = arrays["x0"].shape[0] if arrays["x0"].ndim == 2 else -1
+    for key, a in arrays.items():
+        if a.dtype.kind not in "fiub" or a.ndim == 0 or a.shape[0] != runs:
+            raise SimulationError(f"{bad}: {key} is not one row of numbers per run")
 
 
 def _initial_states(system: System, x0: object, runs: int, x_op: np.ndarray) -> np.ndarray:
@@ -336,7 +389,10 @@ def simulate_batch(
         Threads (default: all cores).
 
     Other parameters are those of :func:`~equilibrist.sim.run.simulate`.
-    Python controllers run one by one (not in parallel).
+    Linear and nonlinear controllers run compiled, in threads; Python
+    controllers in worker processes (*workers* of them; the controller is
+    pickled to them, so it must be defined at module level), or one by
+    one in this process with ``workers=1``.
     """
     if isinstance(runs, bool) or not isinstance(runs, int | np.integer) or runs < 1:
         raise SimulationError(f"runs must be a positive whole number, got {runs!r}")
@@ -380,46 +436,42 @@ def simulate_batch(
     else:
         lin_r = np.zeros((runs, n_sets, 0, 0))
 
-    if not setup.builtin:
-        return _python_batch(setup, x0s, pmat, seqs, record, progress)
+    if not setup.compiled:
+        return _python_batch(setup, x0s, pmat, seqs, record, progress, workers)
 
-    kernel = load_kernel(system)
-    iopts = setup.iopts
-    iopts[1] = int(record)
+    kernel = Kernel(system, setup.nonlinear)
     recs = np.empty((runs, setup.n_rows if record else 0, setup.record_width))
     accs = np.zeros((runs, setup.acc_len))
-    statuses = np.zeros((runs, 4), dtype=np.int64)
+    statuses = np.zeros((runs, len(layout.STATUS)), dtype=np.int64)
     fell_xs = np.zeros((runs, n))
     x_ends = np.zeros((runs, n))
-    z0 = np.array(setup.controller.x_hat0 if setup.est_kind >= 2 else np.zeros(n), dtype=float)
-    shared = (setup.op, setup.c_idx, setup.est, setup.gains, setup.r_op, setup.ref, setup.uff,
-              setup.lv, setup.lw)
+    shared = dict(
+        iopts=setup.iopts(record=record), fopts=setup.fopts, z0=setup.z0, op=setup.op,
+        c_idx=setup.c_idx, cp=setup.cp, ref=setup.ref, uff=setup.uff, lv=setup.lv, lw=setup.lw,
+        p_switch=setup.p_switch, region=setup.region, kicks=setup.kicks,
+        kick_value=setup.kick_value, pulses=setup.pulses, pulse_value=setup.pulse_value,
+        rec_cols=setup.rec_cols, acc_cols=setup.acc_cols,
+    )
     threads = set_workers(workers)
     steps_per_run = setup.n_samples * setup.n_sub
     chunk = runs if not progress else max(4 * threads, math.ceil(2_000_000 / max(1, steps_per_run)))
     from equilibrist.sim.run import _progress_bar
 
-    if not kernel.run_many.overloads:
+    def run_arrays(sl: slice) -> dict[str, np.ndarray]:
+        return dict(x0s=x0s[sl], rngs=rngs[sl], p_sets_r=p_sets_r[sl], lin_r=lin_r[sl],
+                    recs=recs[sl], accs=accs[sl], statuses=statuses[sl], fell_xs=fell_xs[sl],
+                    x_ends=x_ends[sl])
+
+    if not kernel.compiled:
         # Load (or compile) the core outside the timing: steps_per_second is the runs' speed.
-        empty = slice(0, 0)
-        kernel.run_many(
-            iopts, setup.fopts, x0s[empty], z0, rngs[empty], *shared, p_sets_r[empty],
-            setup.p_switch, lin_r[empty], setup.region, setup.kicks, setup.kick_value,
-            setup.pulses, setup.pulse_value, recs[empty], accs[empty], statuses[empty],
-            fell_xs[empty], x_ends[empty],
-        )
+        kernel.run_many(**shared, **run_arrays(slice(0, 0)))
     bar = _progress_bar(runs, progress and runs > chunk, "runs")
     elapsed = 0.0
     try:
         for start in range(0, runs, chunk):
             sl = slice(start, min(runs, start + chunk))
             t0 = time.perf_counter()
-            kernel.run_many(
-                iopts, setup.fopts, x0s[sl], z0, rngs[sl], *shared,
-                p_sets_r[sl], setup.p_switch, lin_r[sl], setup.region, setup.kicks,
-                setup.kick_value, setup.pulses, setup.pulse_value,
-                recs[sl], accs[sl], statuses[sl], fell_xs[sl], x_ends[sl],
-            )
+            kernel.run_many(**shared, **run_arrays(sl))
             elapsed += time.perf_counter() - t0
             if bar is not None:
                 bar.update(sl.stop - sl.start)
@@ -435,12 +487,13 @@ def _batch_result(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
                   accs: np.ndarray, fell_xs: np.ndarray, x_ends: np.ndarray,
                   recs: np.ndarray | None, elapsed: float) -> BatchResult:
     sysm = setup.system
-    n, m = sysm.n_states, sysm.n_inputs
-    rows = statuses[:, 0]
-    fell = statuses[:, 1].astype(bool)
-    fell_at = np.where(fell, statuses[:, 3] * setup.h, np.nan)
-    code = np.where(fell, statuses[:, 2], -1)
-    steps_done = np.where(fell, statuses[:, 3], setup.n_samples * setup.n_sub)
+    st = layout.STATUS
+    acc = layout.ACC.slices(**setup.sizes)
+    rows = statuses[:, st["rows"]]
+    fell = statuses[:, st["fell"]].astype(bool)
+    fell_at = np.where(fell, statuses[:, st["fell_step"]] * setup.h, np.nan)
+    code = np.where(fell, statuses[:, st["fell_code"]], -1)
+    steps_done = np.where(fell, statuses[:, st["fell_step"]], setup.n_samples * setup.n_sub)
     settings = setup.describe()
     settings["x0"] = None
     count = np.maximum(rows, 1)[:, None]
@@ -448,11 +501,11 @@ def _batch_result(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
         system=sysm.key, state_names=sysm.state_names, input_names=sysm.input_names,
         parameter_names=sysm.spec.parameter_names, x0=x0s, params=pmat, fell=fell,
         fell_at=fell_at, fell_code=code, fell_x=fell_xs, final_state=x_ends,
-        peak_input=accs[:, :m], rms_input=np.sqrt(accs[:, m : 2 * m] / count),
-        time_saturated=accs[:, 2 * m] / setup.rate,
-        peak_deviation=accs[:, 2 * m + 1 : 2 * m + 1 + n],
-        estimation_error_rms=(np.sqrt(accs[:, 2 * m + 1 + n :] / count)
-                              if setup.est_kind != 0 else None),
+        peak_input=accs[:, acc["peak_u"]], rms_input=np.sqrt(accs[:, acc["sum_u2"]] / count),
+        time_saturated=accs[:, acc["n_sat"].start] / setup.rate,
+        peak_deviation=accs[:, acc["peak_dx"]],
+        estimation_error_rms=(np.sqrt(accs[:, acc["sum_est2"]] / count)
+                              if setup.estimates else None),
         rows=rows, seeds=tuple(None if s is None else describe_seed(s) for s in seqs),
         settings=settings, elapsed=elapsed, steps=int(steps_done.sum()), trajectories=recs,
         _setup=setup,
@@ -461,46 +514,94 @@ def _batch_result(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
 
 def _python_batch(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
                   seqs: list[np.random.SeedSequence | None], record: bool,
-                  progress: bool) -> BatchResult:
+                  progress: bool, workers: int | None) -> BatchResult:
+    """Runs of a Python controller: in worker processes, or here with ``workers=1``."""
+    runs = x0s.shape[0]
+    count = (os.cpu_count() or 1) if workers is None else max(1, int(workers))
+    count = min(count, runs)
+    t0 = time.perf_counter()
+    if count <= 1:
+        parts = [_python_runs(setup, x0s, pmat, seqs, record)]
+    else:
+        payload = _portable(setup)
+        chunks = np.array_split(np.arange(runs), count)
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=count, mp_context=ctx) as pool:
+            futures = [pool.submit(_python_worker, payload, x0s[c], pmat[c],
+                                   [seqs[i] for i in c], record) for c in chunks]
+            parts = [f.result() for f in futures]
+    elapsed = time.perf_counter() - t0
+    statuses, accs, fell_xs, x_ends, recs = (np.concatenate(a) for a in zip(*parts, strict=True))
+    setup0 = _setup.Setup(**{**setup.__dict__, "estimates": False})
+    return _batch_result(setup0, x0s, pmat, seqs, statuses, accs, fell_xs, x_ends,
+                         recs if record else None, elapsed)
+
+
+def _portable(setup: _setup.Setup) -> bytes:
+    """*setup* pickled for a worker process (the system as its key and parameters)."""
+    fields = {k: v for k, v in setup.__dict__.items() if k != "system"}
+    try:
+        return pickle.dumps((setup.system.key, dict(setup.system.params), fields))
+    except (pickle.PicklingError, TypeError, AttributeError) as exc:
+        name = type(getattr(setup.controller, "target", setup.controller)).__name__
+        raise SimulationError(
+            f"the Python controller {name} cannot be sent to worker processes ({exc}): define "
+            "it at module level (not in a function, not a lambda), or run the batch in this "
+            "process with workers=1"
+        ) from exc
+
+
+def _python_worker(payload: bytes, x0s: np.ndarray, pmat: np.ndarray,
+                   seqs: list[np.random.SeedSequence | None], record: bool
+                   ) -> tuple[np.ndarray, ...]:
+    from equilibrist.numeric.system import system_from_key
+
+    key, params, fields = pickle.loads(payload)
+    setup = _setup.Setup(system=system_from_key(key, params), **fields)
+    return _python_runs(setup, x0s, pmat, seqs, record)
+
+
+def _python_runs(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
+                 seqs: list[np.random.SeedSequence | None], record: bool
+                 ) -> tuple[np.ndarray, ...]:
+    """Runs of a Python controller one after the other: the batch's per-run arrays."""
     sysm = setup.system
     names = sysm.spec.parameter_names
     runs = x0s.shape[0]
-    n, m = sysm.n_states, sysm.n_inputs
-    statuses = np.zeros((runs, 4), dtype=np.int64)
+    n = sysm.n_states
+    st = layout.STATUS
+    statuses = np.zeros((runs, len(st)), dtype=np.int64)
     accs = np.zeros((runs, setup.acc_len))
+    acc = layout.ACC.slices(**setup.sizes)
+    cols = layout.RECORD.slices(**setup.sizes)
     fell_xs = np.zeros((runs, n))
     x_ends = np.zeros((runs, n))
     recs = np.empty((runs, setup.n_rows if record else 0, setup.record_width))
-    t0 = time.perf_counter()
     for i in range(runs):
         sysi = sysm.with_params(**dict(zip(names, pmat[i].tolist(), strict=True)))
         s = _setup.Setup(**{**setup.__dict__, "system": sysi, "x0": x0s[i]})
         seq = seqs[i]
         rng = generator_state(seq) if seq is not None else np.zeros(4, dtype=np.uint64)
-        res = _run_python(s, load_kernel(sysi), rng, seq, progress=False)
+        res = _run_python(s, Kernel(sysi), rng, seq, progress=False)
         k = res.n_rows
-        statuses[i] = (k, int(res.fell), _code(res, sysm.state_names),
-                       0 if res.fell_at is None else round(res.fell_at / setup.h))
-        accs[i, :m] = np.abs(res.commanded).max(axis=0)
-        accs[i, m : 2 * m] = (res.applied**2).sum(axis=0)
-        accs[i, 2 * m] = np.count_nonzero(np.any(res.saturated != res.commanded, axis=1))
-        accs[i, 2 * m + 1 : 2 * m + 1 + n] = np.abs(res.states - res.x_op).max(axis=0)
+        statuses[i] = st.pack(np.int64, rows=k, fell=int(res.fell),
+                              fell_code=_code(res, sysm.state_names),
+                              fell_step=0 if res.fell_at is None else round(res.fell_at / setup.h))
+        accs[i, acc["peak_u"]] = np.abs(res.commanded).max(axis=0)
+        accs[i, acc["sum_u2"]] = (res.applied**2).sum(axis=0)
+        accs[i, acc["n_sat"]] = np.count_nonzero(np.any(res.saturated != res.commanded, axis=1))
+        accs[i, acc["peak_dx"]] = np.abs(res.states - res.x_op).max(axis=0)
         if res.fell_x is not None:
             fell_xs[i] = res.fell_x
         x_ends[i] = res.final_state
         if record:
-            ny = len(setup.outputs)
-            recs[i, :k, :n] = res.states
-            recs[i, :k, n : 2 * n] = np.nan if res.estimates is None else res.estimates
-            recs[i, :k, 2 * n : 2 * n + ny] = res.measurements
-            c = 2 * n + ny
-            recs[i, :k, c : c + m] = res.commanded
-            recs[i, :k, c + m : c + 2 * m] = res.saturated
-            recs[i, :k, c + 2 * m : c + 3 * m] = res.applied
-    elapsed = time.perf_counter() - t0
-    setup0 = _setup.Setup(**{**setup.__dict__, "est_kind": 0})
-    return _batch_result(setup0, x0s, pmat, seqs, statuses, accs, fell_xs, x_ends,
-                         recs if record else None, elapsed)
+            recs[i, :k, cols["x"]] = res.states
+            recs[i, :k, cols["x_hat"]] = np.nan if res.estimates is None else res.estimates
+            recs[i, :k, cols["y"]] = res.measurements
+            recs[i, :k, cols["u_cmd"]] = res.commanded
+            recs[i, :k, cols["u_sat"]] = res.saturated
+            recs[i, :k, cols["u_app"]] = res.applied
+    return statuses, accs, fell_xs, x_ends, recs
 
 
 def _code(res: SimResult, names: Sequence[str]) -> int:

@@ -1,25 +1,25 @@
-"""Controllers the simulator runs: open loop, state feedback, LQG, and yours.
+"""Controllers the simulator runs: descriptions that become the one controller contract.
 
-The built-in controllers are frozen descriptions (gains, filter matrices,
-operating point); the compiled core runs them. Each also has a plain-Python
-:meth:`runtime` with the same step interface as a user-written controller,
-which is what the core's results are checked against.
+The simulator runs three kinds of controller (:mod:`equilibrist.control.controller`):
+a :class:`~equilibrist.control.controller.LinearController` and a
+:class:`~equilibrist.control.controller.NonlinearController` run compiled
+(single runs and batches on all cores); a
+:class:`~equilibrist.control.controller.PythonController` is called from
+Python once per sample (batches in worker processes).
 
-All work in deviation coordinates about the operating point ``(x_op, u_op)``
-(``dx = x - x_op``), take absolute measurements and return absolute inputs.
+The descriptions here are the convenient ways to say which linear
+controller: :class:`StateFeedback` (LQR), :class:`LQG` and
+:class:`OpenLoop`. Each becomes a ``LinearController`` for the system it
+runs on (:func:`as_controller`); nothing else in the simulator knows them.
 
-A user-written controller is any object with a method
-``step(t, y, r) -> u`` (or a plain function ``(t, y, r) -> u``): ``t`` the
-sample time in seconds, ``y`` the measured outputs (absolute, noisy, in the
-order of the run's ``outputs``), ``r`` the reference (absolute; empty when
-the run has none); it returns the commanded inputs, which the simulator
-then saturates (and delays, when asked). An optional ``reset()`` is called
-before the run; an optional ``estimate`` attribute (absolute state vector)
-is recorded as the run's estimate after each step; an optional ``rate``
-attribute (Hz) is the sample rate the run then uses (and must agree with);
-an optional ``outputs`` attribute names the states it measures; an
-optional ``applied(u)`` method is told the input that actually acted
-(saturated, delayed) after each step, as a Kalman filter needs.
+All work in deviation coordinates about the operating point ``(x_op, u_op)``,
+take absolute measurements and return absolute inputs. A user-written
+controller follows the ``PythonController`` protocol (``reset``,
+``output(t, y, r)``, ``update(t, y, r, u_applied)``, ``rate``, ``outputs``,
+``estimate``); an object with the older ``step(t, y, r)`` (and optional
+``reset``, ``applied``, ``estimate``, ``rate``, ``outputs``) or a plain
+function ``(t, y, r) -> u`` still runs, through
+:class:`~equilibrist.control.controller.StepAdapter`.
 """
 
 from __future__ import annotations
@@ -30,13 +30,22 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from equilibrist.errors import DimensionError, SimulationError
+from equilibrist.control.controller import (
+    ControllerError,
+    LinearController,
+    LinearRuntime,
+    NonlinearController,
+    PythonController,
+    as_python_controller,
+)
+from equilibrist.errors import DimensionError, EquilibristError, SimulationError
+from equilibrist.numeric.system import System
 from equilibrist.sim.signals import Signal, as_signal
 
 
 @runtime_checkable
 class Controller(Protocol):
-    """The step interface of a controller written in Python."""
+    """The older step interface of a controller written in Python (see :class:`StepAdapter`)."""
 
     def step(self, t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray: ...
 
@@ -107,11 +116,18 @@ class StateFeedback:
             rate=getattr(design, "rate", None), design=design,
         )
 
-    def runtime(self, state_names: Sequence[str]) -> _StateFeedbackRuntime:
-        """A Python controller doing the same as the compiled core (for checks)."""
-        return _StateFeedbackRuntime(
-            self, tuple(state_names), [list(state_names).index(o) for o in self.tracked]
+    def linear(self, state_names: Sequence[str], input_names: Sequence[str] | None = None
+               ) -> LinearController:
+        """This controller in the one linear form, for a plant with these states and inputs."""
+        return LinearController.state_feedback(
+            self.K, x_op=self.x_op, u_op=self.u_op, state_names=state_names,
+            input_names=input_names, Kc=self.Kc, tracked=self.tracked, rate=self.rate,
+            design=self.design,
         )
+
+    def runtime(self, state_names: Sequence[str]) -> LinearRuntime:
+        """A Python controller doing the same as the compiled core (for checks)."""
+        return self.linear(state_names).runtime()
 
     def describe(self) -> dict[str, object]:
         return {"kind": self.kind, "K": self.K.tolist(),
@@ -187,12 +203,22 @@ class LQG:
             tracked=tuple(design.tracked) if tracking else (), design=design,
         )
 
-    def runtime(self, state_names: Sequence[str]) -> _LQGRuntime:
+    def linear(self, state_names: Sequence[str], input_names: Sequence[str] | None = None
+               ) -> LinearController:
+        """This controller in the one linear form, for a plant with these states and inputs."""
+        try:
+            return LinearController.lqg(
+                self.K, Ad=self.Ad, Bd=self.Bd, Kf=self.Kf, outputs=self.outputs,
+                x_op=self.x_op, u_op=self.u_op, rate=self.rate, form=self.form,
+                state_names=state_names, input_names=input_names, Kc=self.Kc,
+                tracked=self.tracked, x_hat0=self.x_hat0, design=self.design,
+            )
+        except EquilibristError as exc:
+            raise SimulationError(str(exc)) from exc
+
+    def runtime(self, state_names: Sequence[str]) -> LinearRuntime:
         """A Python controller doing the same as the compiled core (for checks)."""
-        names = list(state_names)
-        return _LQGRuntime(
-            self, [names.index(o) for o in self.outputs], [names.index(o) for o in self.tracked]
-        )
+        return self.linear(state_names).runtime()
 
     def describe(self) -> dict[str, object]:
         return {"kind": self.kind, "form": self.form, "outputs": list(self.outputs),
@@ -225,94 +251,59 @@ def _check_tracking(ctrl: Any, m: int) -> None:
 BuiltIn = OpenLoop | StateFeedback | LQG
 
 
-class _StateFeedbackRuntime:
-    def __init__(self, ctrl: StateFeedback, names: tuple[str, ...], tracked_idx: list[int]) -> None:
-        self.c = ctrl
-        self.rate = ctrl.rate
-        self.outputs = names
-        self.tracked_idx = tracked_idx
-        self.estimate = ctrl.x_op.copy()
+@dataclass(frozen=True, eq=False)
+class Resolved:
+    """A controller as the simulator runs it.
 
-    def reset(self) -> None:
-        self.estimate = self.c.x_op.copy()
+    ``controller`` is the contract's value; ``signal`` the open-loop input
+    (None: none); ``description`` what the result records.
+    """
 
-    def step(self, t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray:
-        dx = np.asarray(y, dtype=float) - self.c.x_op
-        self.estimate = self.c.x_op + dx
-        du = -self.c.K @ dx
-        if self.c.Kc is not None:
-            du = du + self.c.Kc @ (np.asarray(r) - self.c.x_op[self.tracked_idx])
-        return self.c.u_op + du
+    controller: LinearController | NonlinearController | PythonController
+    signal: Any
+    description: dict[str, object]
+
+    @property
+    def compiled(self) -> bool:
+        return isinstance(self.controller, LinearController | NonlinearController)
 
 
-class _LQGRuntime:
-    """The LQG controller in plain Python. It needs the input actually applied:
-    the simulator calls :meth:`applied` after saturating (and delaying)."""
+def as_controller(obj: object, system: System | None = None,
+                  x_op: np.ndarray | None = None, u_op: np.ndarray | None = None) -> Resolved:
+    """What the simulator runs for *obj* on *system* (with its operating point *x_op*, *u_op*).
 
-    def __init__(self, ctrl: LQG, out_idx: list[int], tracked_idx: list[int]) -> None:
-        self.c = ctrl
-        self.rate = ctrl.rate
-        self.outputs = ctrl.outputs
-        self.idx = out_idx
-        self.tracked_idx = tracked_idx
-        self.reset()
-
-    def reset(self) -> None:
-        self.z = _initial_estimate(self.c).copy()
-        self.estimate = self.c.x_op + self.z
-        self._y = np.zeros(len(self.idx))
-        self._xhat = self.z.copy()
-
-    def step(self, t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray:
-        c = self.c
-        dy = np.asarray(y, dtype=float) - c.x_op[self.idx]
-        self._y = dy
-        xhat = self.z + c.Kf @ (dy - self.z[self.idx]) if c.form == "current" else self.z.copy()
-        self._xhat = xhat
-        self.estimate = c.x_op + xhat
-        du = -c.K @ xhat
-        if c.Kc is not None:
-            du = du + c.Kc @ (np.asarray(r) - c.x_op[self.tracked_idx])
-        return c.u_op + du
-
-    def applied(self, u: np.ndarray) -> None:
-        c = self.c
-        du = np.asarray(u, dtype=float) - c.u_op
-        if c.form == "current":
-            self.z = c.Ad @ self._xhat + c.Bd @ du
-        else:
-            self.z = c.Ad @ self.z + c.Bd @ du + c.Kf @ (self._y - self.z[self.idx])
-
-
-def _initial_estimate(ctrl: LQG) -> np.ndarray:
-    """``ctrl.x_hat0``, which ``LQG.__post_init__`` always fills in."""
-    if ctrl.x_hat0 is None:
-        raise SimulationError("the LQG controller has no initial estimate x_hat0")
-    return ctrl.x_hat0
-
-
-def as_controller(obj: object) -> BuiltIn | Controller:
-    """A controller from a built-in, an object with ``step``, or a function ``(t, y, r)``."""
+    None and :class:`OpenLoop` become the open loop at the operating
+    point, :class:`StateFeedback` and :class:`LQG` their
+    ``LinearController``, a contract value itself, and anything else a
+    ``PythonController`` (directly, or through the step adapter).
+    """
     if obj is None:
-        return OpenLoop()
-    if isinstance(obj, OpenLoop | StateFeedback | LQG):
-        return obj
-    if hasattr(obj, "step") and callable(obj.step):
-        return obj
-    if callable(obj):
-        return _FunctionController(obj)
-    hint = ""
-    if hasattr(obj, "Kf") and hasattr(obj, "plant"):
-        hint = " (for a design: LQG.from_design(design) or StateFeedback.from_design(design))"
-    raise SimulationError(
-        f"{type(obj).__name__} is not a controller: expected OpenLoop, StateFeedback, LQG, "
-        f"an object with step(t, y, r), or a function (t, y, r) -> u{hint}"
-    )
-
-
-class _FunctionController:
-    def __init__(self, fn: Callable[..., Any]) -> None:
-        self.fn = fn
-
-    def step(self, t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray:
-        return np.asarray(self.fn(t, y, r), dtype=float)
+        obj = OpenLoop()
+    if isinstance(obj, OpenLoop):
+        if system is None or x_op is None or u_op is None:
+            raise SimulationError("an open loop needs the system and its operating point")
+        lin = LinearController.open_loop(x_op=x_op, u_op=u_op, state_names=system.state_names,
+                                         input_names=system.input_names)
+        return Resolved(lin, obj.signal, obj.describe())
+    if isinstance(obj, StateFeedback | LQG):
+        names = system.state_names if system is not None else tuple(f"x{i}" for i in range(obj.x_op.size))
+        inputs = system.input_names if system is not None else None
+        if len(names) != obj.x_op.size or (inputs is not None and len(inputs) != obj.u_op.size):
+            raise SimulationError(
+                f"the controller is for {obj.x_op.size} states and {obj.u_op.size} inputs; "
+                f"{system.key if system is not None else 'the system'} has {len(names)} and "
+                f"{len(inputs or ())}"
+            )
+        return Resolved(obj.linear(names, inputs), None, obj.describe())
+    if isinstance(obj, LinearController | NonlinearController):
+        return Resolved(obj, None, obj.describe())
+    try:
+        py = as_python_controller(obj)
+    except ControllerError as exc:
+        hint = ""
+        if hasattr(obj, "Kf") and hasattr(obj, "plant"):
+            hint = (" (for a design: LinearController.from_design(design), LQG.from_design(design) "
+                    "or StateFeedback.from_design(design))")
+        raise SimulationError(f"{exc}{hint}") from exc
+    target = getattr(py, "target", py)
+    return Resolved(py, None, {"kind": "python", "name": type(target).__name__})

@@ -2,16 +2,25 @@
 
 The core's source is written once, in ``_kernel_template.py``. For each
 system it is appended to a copy of the system's generated dynamics (the
-numeric layer's ``f``) and written to the numeric cache folder, keyed by the
-generated module's hash and the template's hash, as
-``<system>_<hash>_sim_<hash>.py``. Its functions are ``njit(cache=True)``,
-so numba keeps their machine code in that folder's ``__pycache__``: a
-process compiles a system's core once, later processes load it.
+numeric layer's ``f``), after the calling convention's constants
+(:mod:`equilibrist.sim.layout`) and the controller's source: the linear
+controller's (:data:`equilibrist.control.controller.LINEAR_SOURCE`) for
+every built-in linear controller, or a
+:class:`~equilibrist.control.controller.NonlinearController`'s own source
+(with the linear library beside it). The result is written to the numeric
+cache folder, keyed by the generated module's hash and the hash of
+everything appended, as ``<system>_<hash>_sim_<hash>.py``. Its functions
+are ``njit(cache=True)``, so numba keeps their machine code in that
+folder's ``__pycache__``: a process compiles a system's core once (per
+nonlinear controller source), later processes load it.
+
+:class:`Kernel` wraps a loaded module: its methods take keyword arguments
+and are the only code that knows the entries' argument order.
 
 The entries (see the template's docstring for the array conventions):
 
 ``run_one``
-    One closed-loop run with a built-in controller (resumable by sample range).
+    One closed-loop run with a compiled controller (resumable by sample range).
 ``run_many``
     Many independent runs in parallel (``numba.prange`` over runs).
 ``measure_one``, ``advance_one``
@@ -27,6 +36,7 @@ first loaded.
 
 from __future__ import annotations
 
+import ast
 import hashlib
 import importlib.util
 import os
@@ -34,17 +44,29 @@ import sys
 import tempfile
 import types
 from pathlib import Path
+from typing import Any
 
+from equilibrist.control.controller import (
+    LINEAR_FUNCTIONS,
+    LINEAR_SOURCE,
+    NonlinearController,
+    check_source,
+)
 from equilibrist.numeric.system import System
+from equilibrist.sim import layout
 
 _MARKER = "# ---8<--- kernel body"
 _HEADER = (
     "\n\n# --- simulation core (equilibrist.sim._kernel_template) ---\n"
+    "import math  # noqa: E402\n"
     "import numpy as np  # noqa: E402\n"
     "from numba import njit, prange  # noqa: E402\n\n"
 )
+_CONTROLLER_JIT = (
+    "_ctrl_jit = njit(cache=True, error_model=\"numpy\", _nrt=False)  # noqa: E402\n"
+)
 _LOADED: dict[Path, types.ModuleType] = {}
-_PATHS: dict[Path, Path] = {}
+_PATHS: dict[tuple[Path, str], Path] = {}
 
 
 def _template_body() -> str:
@@ -55,17 +77,49 @@ def _template_body() -> str:
     return body.split("\n", 1)[1]
 
 
-def kernel_path(system: System) -> Path:
-    """Where the kernel module of *system* lives in the cache (written if missing)."""
-    known = _PATHS.get(system.compiled.module_path)
+def controller_section(controller: NonlinearController | None = None) -> str:
+    """The generated source between the system's ``f`` and the core's body.
+
+    The layout's constants, the linear library, and the functions the core
+    calls (``controller_output``, ``controller_update``,
+    ``controller_estimate``): the linear library's own, or *controller*'s.
+    Every function of the section is compiled like the core's helpers
+    (no reference counting), so a controller may slice its arrays freely.
+    """
+    parts = ["# --- calling convention (equilibrist.sim.layout) ---\n",
+             layout.constants_source(), "\n", _CONTROLLER_JIT, LINEAR_SOURCE, "\n"]
+    names = list(LINEAR_FUNCTIONS)
+    if controller is None:
+        binding = ("controller_output = linear_output\n"
+                   "controller_update = linear_update\n"
+                   "controller_estimate = linear_estimate\n")
+    else:
+        own = check_source(controller.source, has_estimate=controller.has_estimate)
+        parts += [f"\n# --- controller {controller.name} ---\n", controller.source, "\n"]
+        names += list(own)
+        estimate = "estimate" if controller.has_estimate else "linear_estimate"
+        binding = ("controller_output = output\n"
+                   "controller_update = update\n"
+                   f"controller_estimate = {estimate}\n")
+    parts += [f"{name} = _ctrl_jit({name})\n" for name in names]
+    parts.append(binding)
+    return "".join(parts)
+
+
+def kernel_path(system: System, controller: NonlinearController | None = None) -> Path:
+    """Where the kernel module of *system* (and *controller*) lives in the cache (written if missing)."""
+    module_path = system.compiled.module_path
+    section = controller_section(controller)
+    key = (module_path, hashlib.sha256(section.encode()).hexdigest())
+    known = _PATHS.get(key)
     if known is not None and known.exists():
         return known
     body = _template_body()
-    digest = hashlib.sha256(body.encode()).hexdigest()[:12]
-    module_path = system.compiled.module_path
+    digest = hashlib.sha256((section + body).encode()).hexdigest()[:12]
     path = module_path.with_name(f"{module_path.stem}_sim_{digest}.py")
     if not path.exists():
-        source = module_path.read_text() + _HEADER + body
+        source = module_path.read_text() + _HEADER + section + "\n" + body
+        ast.parse(source)  # a broken controller source fails here, not inside numba
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".")
         try:
             with os.fdopen(fd, "w") as fh:
@@ -79,13 +133,16 @@ def kernel_path(system: System) -> Path:
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
             raise
-    _PATHS[module_path] = path
+    _PATHS[key] = path
     return path
 
 
-def load_kernel(system: System) -> types.ModuleType:
-    """The compiled core of *system* (a module whose entries compile on first call)."""
-    path = kernel_path(system)
+def load_kernel(system: System, controller: NonlinearController | None = None) -> types.ModuleType:
+    """The compiled core of *system* (a module whose entries compile on first call).
+
+    With a nonlinear *controller*, the core that runs it (one per source).
+    """
+    path = kernel_path(system, controller)
     if path in _LOADED:
         return _LOADED[path]
     name = f"equilibrist_simkernel_{path.stem}"
@@ -105,6 +162,63 @@ def load_kernel(system: System) -> types.ModuleType:
     return module
 
 
+class Kernel:
+    """A loaded core, called with keyword arguments only.
+
+    The array arguments are those of the template's entries (see its
+    docstring and :mod:`equilibrist.sim.layout`); this class is the one
+    place that passes them in order.
+    """
+
+    def __init__(self, system: System, controller: NonlinearController | None = None) -> None:
+        self.module = load_kernel(system, controller)
+
+    @property
+    def compiled(self) -> bool:
+        """Whether ``run_many`` is compiled (or loaded) in this process already."""
+        return bool(self.module.run_many.overloads)
+
+    def run_one(self, *, k_start: int, k_end: int, iopts: Any, fopts: Any, x: Any, z: Any,
+                u_prev: Any, rng: Any, op: Any, c_idx: Any, cp: Any, ref: Any, uff: Any,
+                lv: Any, lw: Any, p_sets: Any, p_switch: Any, lin_s: Any, region: Any,
+                kicks: Any, kick_value: Any, pulses: Any, pulse_value: Any, rec_cols: Any,
+                acc_cols: Any, rec: Any, acc: Any, status: Any, fell_x: Any) -> None:
+        self.module.run_one(
+            k_start, k_end, iopts, fopts, x, z, u_prev, rng, op, c_idx, cp, ref, uff, lv, lw,
+            p_sets, p_switch, lin_s, region, kicks, kick_value, pulses, pulse_value,
+            rec_cols, acc_cols, rec, acc, status, fell_x,
+        )
+
+    def run_many(self, *, iopts: Any, fopts: Any, x0s: Any, z0: Any, rngs: Any, op: Any,
+                 c_idx: Any, cp: Any, ref: Any, uff: Any, lv: Any, lw: Any, p_sets_r: Any,
+                 p_switch: Any, lin_r: Any, region: Any, kicks: Any, kick_value: Any,
+                 pulses: Any, pulse_value: Any, rec_cols: Any, acc_cols: Any, recs: Any,
+                 accs: Any, statuses: Any, fell_xs: Any, x_ends: Any) -> None:
+        self.module.run_many(
+            iopts, fopts, x0s, z0, rngs, op, c_idx, cp, ref, uff, lv, lw, p_sets_r, p_switch,
+            lin_r, region, kicks, kick_value, pulses, pulse_value, rec_cols, acc_cols, recs,
+            accs, statuses, fell_xs, x_ends,
+        )
+
+    def measure_one(self, *, x: Any, c_idx: Any, lv: Any, rng: Any, y: Any) -> None:
+        self.module.measure_one(x, c_idx, lv, rng, y)
+
+    def scratch(self, *, p_len: int, ny: int, nw: int) -> Any:
+        return self.module.scratch(p_len, ny, nw)
+
+    def advance_one(self, *, k: int, x: Any, u_app: Any, op: Any, p_sets: Any, p_switch: Any,
+                    lin_s: Any, region: Any, kicks: Any, kick_value: Any, pulses: Any,
+                    pulse_value: Any, lw: Any, rng: Any, iopts: Any, fopts: Any, status: Any,
+                    scr: Any) -> bool:
+        return bool(self.module.advance_one(
+            k, x, u_app, op, p_sets, p_switch, lin_s, region, kicks, kick_value, pulses,
+            pulse_value, lw, rng, iopts, fopts, status, scr,
+        ))
+
+    def rk4_steps(self, *, x: Any, u: Any, p: Any, h: float, n_steps: int) -> None:
+        self.module.rk4_steps(x, u, p, h, n_steps)
+
+
 def set_workers(workers: int | None) -> int:
     """Set numba's thread count for parallel entries; returns the count in force."""
     import numba
@@ -115,4 +229,4 @@ def set_workers(workers: int | None) -> int:
     return count
 
 
-__all__ = ["kernel_path", "load_kernel", "set_workers"]
+__all__ = ["Kernel", "controller_section", "kernel_path", "load_kernel", "set_workers"]

@@ -33,9 +33,9 @@ import numpy as np
 
 from equilibrist.errors import SimulationError
 from equilibrist.numeric.system import System
-from equilibrist.sim import _setup
+from equilibrist.sim import _setup, layout
 from equilibrist.sim.events import Event
-from equilibrist.sim.kernel import load_kernel
+from equilibrist.sim.kernel import Kernel
 from equilibrist.sim.noise import Noise, SeedLike, describe_seed, generator_state, seed_sequence
 from equilibrist.sim.result import SimResult
 
@@ -78,8 +78,11 @@ def simulate(
     ----------
     system : System
         The plant, with its parameters (``get_system(...)``).
-    controller : OpenLoop, StateFeedback, LQG, object with ``step``, function or None
-        None runs open loop at the operating point's input. See
+    controller : LinearController, NonlinearController, PythonController, OpenLoop, StateFeedback, LQG, or None
+        The first two run compiled; a PythonController (or an object with
+        the older ``step``, or a function ``(t, y, r)``) is called once
+        per sample. None runs open loop at the operating point's input.
+        See :mod:`equilibrist.control.controller` and
         :mod:`equilibrist.sim.controllers`.
     duration : float
         Seconds to simulate, rounded up to a whole number of control periods.
@@ -134,9 +137,9 @@ def simulate(
     )
     seq = seed_sequence(seed) if (noise is not None or seed is not None) else None
     rng = generator_state(seq) if seq is not None else np.zeros(4, dtype=np.uint64)
-    kernel = load_kernel(system)
-    if setup.builtin:
-        return _run_builtin(setup, kernel, rng, seq, progress)
+    kernel = Kernel(system, setup.nonlinear)
+    if setup.compiled:
+        return _run_compiled(setup, kernel, rng, seq, progress)
     return _run_python(setup, kernel, rng, seq, progress)
 
 
@@ -149,75 +152,78 @@ def _progress_bar(total: int, enabled: bool, unit: str) -> Any:
                 dynamic_ncols=True)
 
 
-def _run_builtin(setup: _setup.Setup, kernel: Any, rng: np.ndarray,
-                 seq: np.random.SeedSequence | None, progress: bool) -> SimResult:
+def _run_compiled(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
+                  seq: np.random.SeedSequence | None, progress: bool) -> SimResult:
     n = setup.system.n_states
     m = setup.system.n_inputs
     x = setup.x0.copy()
-    z = np.array(setup.controller.x_hat0 if setup.est_kind >= 2 else np.zeros(n), dtype=float)
+    z = setup.z0.copy()
     u_prev = np.zeros(m)
     p_sets = setup.p_sets(np.array(setup.system.p))
     rec = np.empty((setup.n_rows, setup.record_width))
     acc = np.zeros(setup.acc_len)
-    status = np.zeros(4, dtype=np.int64)
+    status = np.zeros(len(layout.STATUS), dtype=np.int64)
     fell_x = np.zeros(n)
-    args = (
-        setup.op, setup.c_idx, setup.est, setup.gains, setup.r_op, setup.ref, setup.uff,
-        setup.lv, setup.lw, p_sets, setup.p_switch, setup.linear_blocks(p_sets), setup.region,
-        setup.kicks, setup.kick_value, setup.pulses, setup.pulse_value, rec, acc, status, fell_x,
+    arrays = dict(
+        iopts=setup.iopts(), fopts=setup.fopts, x=x, z=z, u_prev=u_prev, rng=rng, op=setup.op,
+        c_idx=setup.c_idx, cp=setup.cp, ref=setup.ref, uff=setup.uff, lv=setup.lv, lw=setup.lw,
+        p_sets=p_sets, p_switch=setup.p_switch, lin_s=setup.linear_blocks(p_sets),
+        region=setup.region, kicks=setup.kicks, kick_value=setup.kick_value,
+        pulses=setup.pulses, pulse_value=setup.pulse_value, rec_cols=setup.rec_cols,
+        acc_cols=setup.acc_cols, rec=rec, acc=acc, status=status, fell_x=fell_x,
     )
-    iopts, fopts = setup.iopts, setup.fopts
     total = setup.n_rows
     chunk = total if not progress else max(1, _CHUNK_STEPS // setup.n_sub)
     bar = _progress_bar(total, progress and total > chunk, "samples")
     k = 0
+    rows, fell = layout.STATUS["rows"], layout.STATUS["fell"]
     try:
         while k < total:
             k_end = min(total, k + chunk)
-            kernel.run_one(k, k_end, iopts, fopts, x, z, u_prev, rng, *args)
+            kernel.run_one(k_start=k, k_end=k_end, **arrays)
             if bar is not None:
-                bar.update(int(status[0]) - bar.n)
-            if status[1] or status[0] < k_end:
+                bar.update(int(status[rows]) - bar.n)
+            if status[fell] or status[rows] < k_end:
                 break
             k = k_end
     finally:
         if bar is not None:
             bar.close()
-    return _result(setup, rec, int(status[0]), status, fell_x, x, seq,
-                   estimates=setup.est_kind != 0)
+    return _result(setup, rec, int(status[rows]), status, fell_x, x, seq,
+                   estimates=setup.estimates)
 
 
-def _run_python(setup: _setup.Setup, kernel: Any, rng: np.ndarray,
+def _run_python(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
                 seq: np.random.SeedSequence | None, progress: bool) -> SimResult:
+    """A run of a :class:`~equilibrist.control.controller.PythonController`: the core
+    measures and advances the plant, the controller is called in between."""
     ctrl = setup.controller
     sysm = setup.system
     n, m = sysm.n_states, sysm.n_inputs
     ny = len(setup.outputs)
-    if hasattr(ctrl, "reset"):
-        ctrl.reset()
+    ctrl.reset()
     x = setup.x0.copy()
     p_sets = setup.p_sets(np.array(sysm.p))
     lin = setup.linear_blocks(p_sets)
-    iopts, fopts = setup.iopts, setup.fopts
-    scr = kernel.scratch(p_sets.shape[1], ny, setup.lw.shape[1])
-    status = np.zeros(4, dtype=np.int64)
+    iopts, fopts = setup.iopts(), setup.fopts
+    scr = kernel.scratch(p_len=p_sets.shape[1], ny=ny, nw=setup.lw.shape[1])
+    fell_row = layout.SCRATCH["fell_x"]
+    status = np.zeros(len(layout.STATUS), dtype=np.int64)
     rec = np.empty((setup.n_rows, setup.record_width))
+    cols = layout.RECORD.slices(**setup.sizes)
     names = sysm.spec.parameter_names
     base = len(names) - 2 * m
     y = np.empty(ny)
     u_prev = None
     has_estimate = False
-    c_y, c_u = 2 * n, 2 * n + ny
     bar = _progress_bar(setup.n_rows, progress, "samples")
     rows = 0
     try:
         for k in range(setup.n_rows):
-            kernel.measure_one(x, setup.c_idx, setup.lv, rng, y)
+            kernel.measure_one(x=x, c_idx=setup.c_idx, lv=setup.lv, rng=rng, y=y)
             t = float(setup.times[k])
-            try:
-                raw = ctrl.step(t, y.copy(), setup.ref[k].copy())
-            except SimulationError:
-                raise
+            r = setup.ref[k].copy()
+            raw = ctrl.output(t, y.copy(), r)
             u_cmd = np.asarray(raw, dtype=float).reshape(-1)
             if u_cmd.size != m or not np.all(np.isfinite(u_cmd)):
                 raise SimulationError(
@@ -232,41 +238,44 @@ def _run_python(setup: _setup.Setup, kernel: Any, rng: np.ndarray,
                 u_prev = np.minimum(np.maximum(setup.u_op, lo), hi)
             u_app = u_prev if setup.delay else u_sat
             u_prev = u_sat
-            if hasattr(ctrl, "applied"):
-                ctrl.applied(u_app)
-            est = getattr(ctrl, "estimate", None)
-            rec[k, :n] = x
+            ctrl.update(t, y.copy(), r, u_app.copy())
+            est = ctrl.estimate
+            rec[k, cols["x"]] = x
             if est is not None:
                 has_estimate = True
-                rec[k, n : 2 * n] = np.asarray(est, dtype=float).reshape(n)
+                rec[k, cols["x_hat"]] = np.asarray(est, dtype=float).reshape(n)
             else:
-                rec[k, n : 2 * n] = np.nan
-            rec[k, c_y : c_y + ny] = y
-            rec[k, c_u : c_u + m] = u_cmd
-            rec[k, c_u + m : c_u + 2 * m] = u_sat
-            rec[k, c_u + 2 * m : c_u + 3 * m] = u_app
+                rec[k, cols["x_hat"]] = np.nan
+            rec[k, cols["y"]] = y
+            rec[k, cols["u_cmd"]] = u_cmd
+            rec[k, cols["u_sat"]] = u_sat
+            rec[k, cols["u_app"]] = u_app
             rows = k + 1
             if bar is not None and k % 1000 == 0:
                 bar.update(k + 1 - bar.n)
             if k == 0:
                 outside = _outside(x, setup.region)
                 if outside != -1:
-                    status[:] = (rows, 1, outside, 0)
-                    scr[17, :n] = x
+                    status[:] = layout.STATUS.pack(np.int64, rows=rows, fell=1,
+                                                   fell_code=outside, fell_step=0)
+                    scr[fell_row, :n] = x
                     break
             if k >= setup.n_samples:
                 break
             if kernel.advance_one(
-                k, x, np.ascontiguousarray(u_app, dtype=float), setup.op, p_sets,
-                setup.p_switch, lin, setup.region, setup.kicks, setup.kick_value,
-                setup.pulses, setup.pulse_value, setup.lw, rng, iopts, fopts, status, scr,
+                k=k, x=x, u_app=np.ascontiguousarray(u_app, dtype=float), op=setup.op,
+                p_sets=p_sets, p_switch=setup.p_switch, lin_s=lin, region=setup.region,
+                kicks=setup.kicks, kick_value=setup.kick_value, pulses=setup.pulses,
+                pulse_value=setup.pulse_value, lw=setup.lw, rng=rng, iopts=iopts, fopts=fopts,
+                status=status, scr=scr,
             ):
                 break
     finally:
         if bar is not None:
             bar.close()
-    status[0] = rows
-    return _result(setup, rec, rows, status, scr[17, :n].copy(), x, seq, estimates=has_estimate)
+    status[layout.STATUS["rows"]] = rows
+    return _result(setup, rec, rows, status, scr[fell_row, :n].copy(), x, seq,
+                   estimates=has_estimate)
 
 
 def _outside(x: np.ndarray, region: np.ndarray) -> int:
@@ -280,11 +289,10 @@ def _result(setup: _setup.Setup, rec: np.ndarray, rows: int, status: np.ndarray,
             fell_x: np.ndarray, x_end: np.ndarray, seq: np.random.SeedSequence | None,
             *, estimates: bool) -> SimResult:
     sysm = setup.system
-    n, m = sysm.n_states, sysm.n_inputs
-    ny = len(setup.outputs)
-    c_y, c_u = 2 * n, 2 * n + ny
+    cols = layout.RECORD.slices(**setup.sizes)
+    st = layout.STATUS
     r = rec[:rows]
-    fell = bool(status[1])
+    fell = bool(status[st["fell"]])
     settings = setup.describe()
     settings["seed"] = None if seq is None else describe_seed(seq)
     return SimResult(
@@ -297,18 +305,18 @@ def _result(setup: _setup.Setup, rec: np.ndarray, rows: int, status: np.ndarray,
         output_names=setup.outputs,
         reference_names=setup.tracked,
         time=setup.times[:rows],
-        states=r[:, :n],
-        estimates=r[:, n : 2 * n] if estimates else None,
-        measurements=r[:, c_y : c_y + ny],
-        commanded=r[:, c_u : c_u + m],
-        saturated=r[:, c_u + m : c_u + 2 * m],
-        applied=r[:, c_u + 2 * m : c_u + 3 * m],
-        reference=setup.ref[:rows],
+        states=r[:, cols["x"]],
+        estimates=r[:, cols["x_hat"]] if estimates else None,
+        measurements=r[:, cols["y"]],
+        commanded=r[:, cols["u_cmd"]],
+        saturated=r[:, cols["u_sat"]],
+        applied=r[:, cols["u_app"]],
+        reference=setup.ref[:rows, : len(setup.tracked)],
         x_op=setup.x_op,
         u_op=setup.u_op,
         fell=fell,
-        fell_at=float(status[3] * setup.h) if fell else None,
-        fell_state=fall_reason(int(status[2]), sysm.state_names) if fell else None,
+        fell_at=float(status[st["fell_step"]] * setup.h) if fell else None,
+        fell_state=fall_reason(int(status[st["fell_code"]]), sysm.state_names) if fell else None,
         fell_x=fell_x.copy() if fell else None,
         final_state=x_end.copy(),
         settings=settings,

@@ -1,0 +1,118 @@
+"""The compiled core's calling convention, defined once.
+
+Every array the core shares with Python has its slots, columns or rows
+named here. :func:`constants` turns them into the ``_NAME = index`` lines
+that :mod:`equilibrist.sim.kernel` writes into each generated kernel
+source, and the Python side (:mod:`equilibrist.sim._setup`,
+:mod:`equilibrist.sim.run`, :mod:`equilibrist.sim.batch`) packs and reads
+the same arrays through :class:`Slots` and :class:`Blocks`. The entries'
+argument order is known only to :class:`equilibrist.sim.kernel.Kernel`,
+whose methods take keyword arguments.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from equilibrist.control.controller import linear_constants
+
+
+@dataclass(frozen=True)
+class Slots:
+    """Named scalar slots of a 1-D array (``iopts``, ``fopts``, ``status``)."""
+
+    prefix: str
+    names: tuple[str, ...]
+
+    def __getitem__(self, name: str) -> int:
+        return self.names.index(name)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def pack(self, dtype: type = float, **values: float) -> np.ndarray:
+        """The array with every slot given by keyword (each exactly once)."""
+        missing = [n for n in self.names if n not in values]
+        extra = [n for n in values if n not in self.names]
+        if missing or extra:
+            raise TypeError(f"{self.prefix}: missing {missing}, unknown {extra}")
+        return np.array([values[n] for n in self.names], dtype=dtype)
+
+    def constants(self) -> dict[str, int]:
+        return {f"_{self.prefix}_{n.upper()}": i for i, n in enumerate(self.names)}
+
+
+@dataclass(frozen=True)
+class Blocks:
+    """Consecutive blocks of columns whose widths depend on the run's sizes.
+
+    The core reads the start of each block from a small ``int64`` array
+    (``offsets(...)``), indexed by the generated ``_<PREFIX>_<NAME>`` constants.
+    """
+
+    prefix: str
+    blocks: tuple[tuple[str, str], ...]  # (name, size symbol: "n", "m", "ny", "1")
+
+    def sizes(self, sizes: Mapping[str, int]) -> dict[str, int]:
+        return {name: (1 if sym == "1" else int(sizes[sym])) for name, sym in self.blocks}
+
+    def offsets(self, **sizes: int) -> np.ndarray:
+        """Start column of each block, then the total width (``int64``)."""
+        widths = self.sizes(sizes)
+        out = np.zeros(len(self.blocks) + 1, dtype=np.int64)
+        for i, (name, _sym) in enumerate(self.blocks):
+            out[i + 1] = out[i] + widths[name]
+        return out
+
+    def slices(self, **sizes: int) -> dict[str, slice]:
+        off = self.offsets(**sizes)
+        return {name: slice(int(off[i]), int(off[i + 1])) for i, (name, _s) in enumerate(self.blocks)}
+
+    def width(self, **sizes: int) -> int:
+        return int(self.offsets(**sizes)[-1])
+
+    def constants(self) -> dict[str, int]:
+        out = {f"_{self.prefix}_{n.upper()}": i for i, (n, _s) in enumerate(self.blocks)}
+        out[f"_{self.prefix}_END"] = len(self.blocks)
+        return out
+
+
+#: Integer options of a run.
+IOPTS = Slots("IO", ("n_samples", "record", "delay", "n_sub", "integrator", "estimates"))
+#: Float options of a run (``rate`` gives the sample times ``t_k = k / rate``).
+FOPTS = Slots("FO", ("h", "rtol", "atol", "rate"))
+#: A run's status (``int64``): rows written, fell (0/1), the fell code, the physics step it fell.
+STATUS = Slots("ST", ("rows", "fell", "fell_code", "fell_step"))
+#: Integrators by number.
+INTEGRATORS = {"rk4": 0, "adaptive": 1, "linear": 2}
+#: A row of a recorded trajectory.
+RECORD = Blocks("REC", (("x", "n"), ("x_hat", "n"), ("y", "ny"), ("u_cmd", "m"),
+                        ("u_sat", "m"), ("u_app", "m")))
+#: A run's accumulators: peak |u_cmd|, sum u_app^2, samples saturated, peak |x - x_op|,
+#: sum of squared estimation errors.
+ACC = Blocks("ACC", (("peak_u", "m"), ("sum_u2", "m"), ("n_sat", "1"), ("peak_dx", "n"),
+                     ("sum_est2", "n")))
+#: Rows of the per-run scratch array (``fell_x`` receives the state at a fall).
+SCRATCH = Slots("S", ("y", "x_hat", "u_cmd", "u_sat", "u_app", "z_new", "k1", "k2", "k3", "k4",
+                      "xt", "xprev", "ubuf", "wvec", "zbuf", "pcur", "fell_x", "wk"))
+#: Rows of the adaptive integrator's work space at the end of the scratch array.
+SCRATCH_WORK_ROWS = 16
+
+
+def constants() -> dict[str, int]:
+    """Every slot, column block and scratch row as a source constant (``_IO_DELAY = 2``...)."""
+    out: dict[str, int] = {}
+    for part in (IOPTS, FOPTS, STATUS, RECORD, ACC, SCRATCH):
+        out.update(part.constants())
+    out["_SCR_ROWS"] = len(SCRATCH) - 1 + SCRATCH_WORK_ROWS
+    out.update({f"_INT_{k.upper()}": v for k, v in INTEGRATORS.items()})
+    out.update(linear_constants())
+    return out
+
+
+def constants_source() -> str:
+    """:func:`constants` as Python source lines."""
+    return "\n".join(f"{name} = {value}" for name, value in constants().items()) + "\n"
