@@ -37,8 +37,10 @@ Parameters
     The defaults are Gymnasium ``Acrobot-v1``'s (``LINK_MOI`` for both
     inertias, which Gymnasium's "book" dynamics takes about each link's
     centre of mass). ``tau`` is limited to +-20 N m: Gymnasium's +-1 N m
-    leaves the upright acrobot a region of attraction under 0.01 rad, too
-    small to balance with any sensor noise; it stays available through
+    leaves the upright acrobot a region of attraction of about 0.01 rad
+    (the default design's ideal loop, started off upright on ``theta1``
+    alone, recovers from 0.005 rad and falls from 0.01 rad), too small to
+    balance with any sensor noise; it stays available through
     ``--set tau_min=-1 --set tau_max=1``.
 
 Sensors and rate
@@ -86,7 +88,7 @@ SPEC = SystemSpec(
     source="not in the seeds; Gymnasium Acrobot-v1 (its book dynamics)",
     notes=(
         "Gymnasium Acrobot-v1's coordinates: theta1 from hanging down, theta2 relative to link 1",
-        "tau limited to +-20 N m; Gymnasium's +-1 N m leaves a region of attraction under 0.01 rad",
+        "tau limited to +-20 N m; Gymnasium's +-1 N m leaves a region of attraction of about 0.01 rad",
     ),
     region=dict(_two_link.REGION),
     # Bryson: each angle may stray 0.1 rad and turn at 1 rad/s. The torque
