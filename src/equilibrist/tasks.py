@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from equilibrist.errors import DesignError, UnknownNameError, nearest
+from equilibrist.mechanics.spec import SystemSpec
 from equilibrist.numeric.system import System
 
 TASK_NAMES = ("balance", "swingup")
@@ -153,10 +154,15 @@ class Task:
 
 def task_names(system: System) -> tuple[str, ...]:
     """The tasks *system* offers."""
-    if not system.n_inputs or system.spec.operating_point is None:
+    return spec_task_names(system.spec)
+
+
+def spec_task_names(spec: SystemSpec) -> tuple[str, ...]:
+    """The tasks a system of *spec* offers (read from the spec alone, without deriving it)."""
+    if not spec.inputs or spec.operating_point is None:
         return ()
     names = ["balance"]
-    if system.spec.hanging is not None:
+    if spec.hanging is not None:
         names.append("swingup")
     return tuple(names)
 

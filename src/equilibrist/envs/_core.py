@@ -1,0 +1,292 @@
+"""The settings an environment hands the compiled core, validated once.
+
+:class:`Core` is built from a system, a task and the environment's options;
+the single environment and the vector environment read the same one, so
+both step exactly the same numbers. It is the only Python code that knows
+the slots of the core's settings arrays (``ei``, ``ef``; see the
+environments section of ``equilibrist/sim/_kernel_template.py``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from equilibrist.errors import EquilibristError, UnknownNameError, nearest
+from equilibrist.numeric.system import System, get_system
+from equilibrist.sim.kernel import load_kernel
+from equilibrist.sim.noise import Noise, square_root
+from equilibrist.tasks import Task, get_task
+
+OBSERVE = ("outputs", "state")
+ACTION_UNITS = ("normalized", "physical")
+# Reward per second for staying inside the region (balance).
+ALIVE_BONUS = 1.0
+# The largest finite double: the observation space's bound ("any finite value").
+FINITE = float(np.finfo(np.float64).max)
+REWARD_KINDS = {"balance": 0, "swingup": 1}
+
+
+class EnvError(EquilibristError, ValueError):
+    """An environment was asked for something it can not be or do."""
+
+
+def _positive(value: object, what: str, problems: list[str]) -> float | None:
+    try:
+        v = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        problems.append(f"{what} {value!r} is not a number")
+        return None
+    if not math.isfinite(v) or v <= 0:
+        problems.append(f"{what} must be a positive number, got {value!r}")
+        return None
+    return v
+
+
+def bind_system(system: object, params: Mapping[str, object] | None) -> System:
+    """*system* (a catalogue name, a file's path or a :class:`System`) with *params* bound."""
+    if system is None:
+        raise EnvError(
+            "give the system: a catalogue name (system='cartpole') or a model file "
+            "(system='robot.xml')"
+        )
+    if params is not None and not isinstance(params, Mapping):
+        raise EnvError(f"params: expected a mapping of parameter values, got {type(params).__name__}")
+    values = dict(params or {})
+    if isinstance(system, System):
+        return system.with_params(**values) if values else system  # type: ignore[arg-type]
+    if not isinstance(system, str):
+        raise EnvError(
+            f"system: expected a system name or the path of a model file, got {type(system).__name__}"
+        )
+    return get_system(system, **values)
+
+
+@dataclass(frozen=True, eq=False)
+class Core:
+    """One environment's validated settings and the core's arrays.
+
+    Attributes
+    ----------
+    system, task:
+        The bound system and the task posed on it.
+    rate, physics_step, n_sub, n_samples:
+        Control rate [Hz], RK4 step [s], steps per period, periods per episode.
+    observe:
+        ``"outputs"`` (the rig's sensors, with their noise) or ``"state"``.
+    observation_names:
+        What each observation component is.
+    action_units:
+        ``"normalized"`` (``[-1, 1]`` onto each input's limits) or ``"physical"``.
+    noise:
+        The rig's process and sensor noise, or None.
+    randomize:
+        ``{parameter: relative spread}`` drawn per reset.
+    """
+
+    system: System
+    task: Task
+    rate: float
+    physics_step: float
+    n_sub: int
+    n_samples: int
+    observe: str
+    observation_names: tuple[str, ...]
+    action_units: str
+    noise: Noise | None
+    randomize: Mapping[str, float]
+    alive_bonus: float
+    kernel: Any
+    c_idx: np.ndarray
+    lv: np.ndarray
+    lw: np.ndarray
+    region: np.ndarray
+    op: np.ndarray
+    sc: np.ndarray
+    hang: np.ndarray
+    p_nom: np.ndarray
+    rnd_idx: np.ndarray
+    rnd_spread: np.ndarray
+    ei: np.ndarray
+    ef: np.ndarray
+
+    @property
+    def period(self) -> float:
+        return 1.0 / self.rate
+
+    @property
+    def n_obs(self) -> int:
+        return len(self.observation_names)
+
+    @property
+    def limits(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.system.input_limits
+
+    def physical_input(self, action: np.ndarray) -> np.ndarray:
+        """The saturated input an action applies (as the core computes it)."""
+        lo, hi = self.limits
+        a = np.asarray(action, dtype=float)
+        u = a if self.action_units == "physical" else lo + 0.5 * (a + 1.0) * (hi - lo)
+        return np.minimum(np.maximum(u, lo), hi)
+
+    def with_chunks(self, chunks: int) -> np.ndarray:
+        ei = self.ei.copy()
+        ei[5] = max(1, int(chunks))
+        return ei
+
+    def describe(self) -> dict[str, object]:
+        return {
+            "system": self.system.key,
+            "task": self.task.name,
+            "rate": self.rate,
+            "physics_step": self.physics_step,
+            "n_samples": self.n_samples,
+            "observe": self.observe,
+            "observation": list(self.observation_names),
+            "action_units": self.action_units,
+            "noise": self.noise is not None,
+            "randomize": dict(self.randomize),
+            "alive_bonus": self.alive_bonus,
+        }
+
+
+def build_core(
+    system: object,
+    task: str,
+    *,
+    params: Mapping[str, object] | None = None,
+    rate: float | None = None,
+    physics_step: float | None = None,
+    observe: str = "outputs",
+    noise: bool = True,
+    randomize: Mapping[str, object] | None = None,
+    action_units: str = "normalized",
+    alive_bonus: float = ALIVE_BONUS,
+) -> Core:
+    """Validate an environment's options (every problem at once) and pack them."""
+    sysm = bind_system(system, params)
+    if not sysm.n_inputs:
+        raise EnvError(f"{sysm.key} has no input: there is nothing for an agent to do")
+    tsk = get_task(sysm, task)
+    problems: list[str] = []
+    names = sysm.state_names
+    n = sysm.n_states
+
+    run_rate = tsk.rate if rate is None else _positive(rate, "rate [Hz]", problems)
+    h = n_sub = None
+    if run_rate is not None:
+        period = 1.0 / run_rate
+        if physics_step is None:
+            n_sub = max(1, math.ceil(period / 1e-3 - 1e-9))
+            h = period / n_sub
+        else:
+            step = _positive(physics_step, "physics_step [s]", problems)
+            if step is not None:
+                ratio = period / step
+                k = round(ratio)
+                if k < 1 or abs(ratio - k) > 1e-9 * max(1.0, ratio):
+                    sug = period / max(1, math.ceil(ratio))
+                    problems.append(
+                        f"physics_step {step:g} s does not divide the control period {period:g} s "
+                        f"({run_rate:g} Hz): use the period divided by a whole number, e.g. {sug:.6g} s"
+                    )
+                else:
+                    n_sub, h = k, period / k
+    if observe not in OBSERVE:
+        problems.append(f"observe={observe!r}: expected one of {', '.join(map(repr, OBSERVE))}")
+    if action_units not in ACTION_UNITS:
+        problems.append(
+            f"action_units={action_units!r}: expected one of {', '.join(map(repr, ACTION_UNITS))}"
+        )
+    if not isinstance(noise, bool):
+        problems.append(f"noise={noise!r}: expected True or False")
+    bonus = None
+    try:
+        bonus = float(alive_bonus)
+        if not math.isfinite(bonus):
+            raise ValueError
+    except (TypeError, ValueError):
+        problems.append(f"alive_bonus={alive_bonus!r}: expected a finite number (reward per second)")
+
+    # Domain randomization: relative spreads of physical parameters.
+    pnames = sysm.spec.parameter_names
+    limit_names = {f"{i}_{s}" for i in sysm.input_names for s in ("min", "max")}
+    rnd: dict[str, float] = {}
+    if randomize is not None and not isinstance(randomize, Mapping):
+        problems.append(f"randomize: expected {{parameter: relative spread}}, got {type(randomize).__name__}")
+        randomize = None
+    for name, spread in (randomize or {}).items():
+        if name not in pnames:
+            problems.append(f"randomize: {sysm.key} has no parameter {name!r} ({nearest(name, pnames)})")
+            continue
+        if name in limit_names:
+            problems.append(
+                f"randomize: {name} is an input limit (the action's scale), not a physical parameter"
+            )
+            continue
+        try:
+            s = float(spread)  # type: ignore[arg-type]
+        except (TypeError, ValueError):
+            s = math.nan
+        if not (math.isfinite(s) and 0.0 <= s < 1.0):
+            problems.append(
+                f"randomize: the spread of {name} is {spread!r}; expected a relative spread "
+                "in [0, 1) (0.2 draws it within +-20 % of its value)"
+            )
+            continue
+        if sysm.params[name] == 0.0 and s > 0:
+            problems.append(f"randomize: {name} is 0, so a relative spread can not change it")
+            continue
+        rnd[name] = s
+
+    if problems or run_rate is None or h is None or n_sub is None or bonus is None:
+        raise EnvError("; ".join(problems) if problems else "invalid environment settings")
+
+    outputs = tuple(sysm.spec.outputs) or tuple(names)
+    c_idx = np.array([names.index(o) for o in outputs], dtype=np.int64)
+    lw = np.zeros((n, 0))
+    lv = np.zeros((0, 0))
+    spec_noise = None
+    if noise:
+        # The rig's own noise, as simulate draws it: process noise held over
+        # each physics step with covariance QN / h, sensor noise per sample.
+        spec_noise = Noise.from_spec(sysm, outputs=outputs, rate=run_rate)
+        lw = spec_noise.process_gain @ spec_noise.process_root / math.sqrt(h)
+        lw = lw[:, np.any(lw != 0.0, axis=0)]
+        lv = square_root(spec_noise.measurement_covariance, "the measurement noise covariance")
+    region = np.array([[-np.inf] * n, [np.inf] * n])
+    for name, (lo, hi) in tsk.region.items():
+        region[0, names.index(name)] = lo
+        region[1, names.index(name)] = hi
+    hang = np.array(
+        [sysm.state_index(c) for c in (sysm.spec.hanging or {})] if tsk.name == "swingup" else [],
+        dtype=np.int64,
+    )
+    n_samples = max(1, math.ceil(tsk.duration * run_rate - 1e-9))
+    ei = np.array(
+        [n_sub, n_samples, int(observe == "state"), REWARD_KINDS[tsk.name],
+         int(action_units == "physical"), 1],
+        dtype=np.int64,
+    )
+    ef = np.array([h, 1.0 / run_rate, bonus])
+    rnd_idx = np.array([pnames.index(k) for k in rnd], dtype=np.int64)
+    return Core(
+        system=sysm, task=tsk, rate=float(run_rate), physics_step=float(h), n_sub=int(n_sub),
+        n_samples=int(n_samples), observe=observe,
+        observation_names=tuple(names) if observe == "state" else outputs,
+        action_units=action_units, noise=spec_noise, randomize=dict(rnd), alive_bonus=bonus,
+        kernel=load_kernel(sysm), c_idx=c_idx, lv=np.ascontiguousarray(lv),
+        lw=np.ascontiguousarray(lw), region=region,
+        op=np.concatenate([tsk.x_op, tsk.u_op]).astype(float),
+        sc=np.concatenate([tsk.state_scales, tsk.input_scales]).astype(float),
+        hang=hang, p_nom=np.array(sysm.p, dtype=float), rnd_idx=rnd_idx,
+        rnd_spread=np.array(list(rnd.values()), dtype=float), ei=ei, ef=ef,
+    )
+
+
+def unknown_task(task: object) -> UnknownNameError:
+    return UnknownNameError(f"task: expected 'balance' or 'swingup', got {task!r}")

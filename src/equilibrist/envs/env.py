@@ -1,0 +1,303 @@
+"""One Gymnasium environment of one system and task.
+
+See :mod:`equilibrist.envs` for the contract (spaces, step, reward,
+seeding); this module is its single-copy implementation.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from equilibrist.envs._core import FINITE, Core, EnvError, build_core
+from equilibrist.errors import DimensionError
+from equilibrist.sim.noise import generator_state
+
+# Backends of matplotlib that draw to files only.
+_FILE_BACKENDS = frozenset({"agg", "pdf", "ps", "svg", "pgf", "cairo", "template"})
+
+
+def display_problem() -> str | None:
+    """Why no window can be opened here, or None when one can."""
+    if sys.platform.startswith("linux") and not (
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    ):
+        return "this machine has no display (DISPLAY and WAYLAND_DISPLAY are not set)"
+    backend = os.environ.get("MPLBACKEND", "").lower()
+    if backend in _FILE_BACKENDS:
+        return f"matplotlib's backend is {backend!r} (MPLBACKEND), which draws to files only"
+    return None
+
+
+def drawing_problem(core: Core) -> str | None:
+    """Why *core*'s system can not be drawn, or None when it can."""
+    from equilibrist.errors import UnknownNameError
+    from equilibrist.viz.scenes import scene_for
+
+    try:
+        scene_for(core.system)
+    except UnknownNameError as exc:
+        return str(exc)
+    return None
+
+
+def _spaces(core: Core) -> tuple[spaces.Box, spaces.Box]:
+    m = core.system.n_inputs
+    if core.action_units == "physical":
+        lo, hi = core.limits
+        action = spaces.Box(lo.astype(np.float64), hi.astype(np.float64), (m,), np.float64)
+    else:
+        action = spaces.Box(-1.0, 1.0, (m,), np.float64)
+    observation = spaces.Box(-FINITE, FINITE, (core.n_obs,), np.float64)
+    return action, observation
+
+
+class Renderer:
+    """Frames of an environment: the animations' drawing of the state and input."""
+
+    def __init__(self, core: Core, mode: str) -> None:
+        self.core = core
+        self.mode = mode
+        self._frames: Any = None
+        self._window: Any = None
+
+    def _extent_states(self) -> np.ndarray:
+        core = self.core
+        rows = [core.task.start, core.task.x_op]
+        for i in range(core.system.n_states):
+            for bound in core.region[:, i]:
+                if np.isfinite(bound):
+                    row = np.array(core.task.x_op, dtype=float)
+                    row[i] = bound
+                    rows.append(row)
+        return np.array(rows, dtype=float)
+
+    def frame(self, x: np.ndarray, u: np.ndarray | None, t: float) -> np.ndarray:
+        if self._frames is None:
+            from equilibrist.viz.frames import FrameRenderer
+
+            self._frames = FrameRenderer(self.core.system, states=self._extent_states())
+        return self._frames.frame(x, u, t=t)
+
+    def show(self, x: np.ndarray, u: np.ndarray | None, t: float) -> None:
+        import matplotlib.pyplot as plt
+
+        image = self.frame(x, u, t)
+        if self._window is None or not plt.fignum_exists(self._window[0].number):
+            fig, ax = plt.subplots()
+            ax.set_axis_off()
+            fig.subplots_adjust(0, 0, 1, 1)
+            self._window = (fig, ax.imshow(image))
+            plt.show(block=False)
+        else:
+            self._window[1].set_data(image)
+        plt.pause(self.core.period)
+
+    def close(self) -> None:
+        if self._window is not None:
+            import matplotlib.pyplot as plt
+
+            plt.close(self._window[0])
+            self._window = None
+        self._frames = None
+
+
+class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
+    """A system and a task as a Gymnasium environment (see :mod:`equilibrist.envs`).
+
+    Parameters
+    ----------
+    system : str or System
+        A catalogue name, the path of a model file (``"robot.xml"``) or a
+        bound :class:`~equilibrist.numeric.system.System`.
+    task : {"balance", "swingup"}
+    params : mapping, optional
+        Parameter values (``{"m_p": 2.0}``).
+    rate : float, optional
+        Control rate [Hz]: one step is one period (default: the task's).
+    physics_step : float, optional
+        RK4 step [s]; must divide the period (default: at most 1 ms).
+    observe : {"outputs", "state"}
+        The rig's measured outputs with their sensor noise, or the state.
+    noise : bool
+        The rig's process and sensor noise (off: a deterministic plant).
+    randomize : mapping, optional
+        ``{parameter: relative spread}``: each reset draws the parameter
+        uniformly within ``value * (1 +- spread)``.
+    action_units : {"normalized", "physical"}
+        Actions in ``[-1, 1]`` mapped onto the input limits, or the input
+        itself bounded by its limits.
+    alive_bonus : float
+        Balance reward per second inside the region.
+    render_mode : {"rgb_array", "human"}, optional
+    """
+
+    metadata: dict[str, Any] = {"render_modes": ["rgb_array", "human"], "render_fps": 50}  # noqa: RUF012
+
+    def __init__(
+        self,
+        system: object = None,
+        task: str = "balance",
+        *,
+        params: Mapping[str, object] | None = None,
+        rate: float | None = None,
+        physics_step: float | None = None,
+        observe: str = "outputs",
+        noise: bool = True,
+        randomize: Mapping[str, object] | None = None,
+        action_units: str = "normalized",
+        alive_bonus: float = 1.0,
+        render_mode: str | None = None,
+    ) -> None:
+        if render_mode is not None and render_mode not in type(self).metadata["render_modes"]:
+            raise EnvError(f"render_mode={render_mode!r}: expected 'rgb_array' or 'human'")
+        core = build_core(
+            system, task, params=params, rate=rate, physics_step=physics_step, observe=observe,
+            noise=noise, randomize=randomize, action_units=action_units, alive_bonus=alive_bonus,
+        )
+        # Rendering is offered where the system has a drawing, a window where one can open.
+        no_drawing = drawing_problem(core)
+        problem = display_problem()
+        modes = [] if no_drawing else ["rgb_array"] if problem else ["rgb_array", "human"]
+        if render_mode is not None and no_drawing is not None:
+            raise EnvError(f"render_mode={render_mode!r}: {no_drawing}")
+        if render_mode == "human" and problem is not None:
+            raise EnvError(
+                f"render_mode='human' opens a window, but {problem}: use render_mode='rgb_array'"
+            )
+        self.core = core
+        self.render_mode = render_mode
+        self.metadata = {"render_modes": modes, "render_fps": core.rate}
+        self.action_space, self.observation_space = _spaces(core)
+        n, m = core.system.n_states, core.system.n_inputs
+        self._x = np.array(core.task.start, dtype=float)
+        self._p = core.p_nom.copy()
+        self._rng = np.zeros(4, dtype=np.uint64)
+        self._k = np.zeros(1, dtype=np.int64)
+        self._eref = np.zeros(2)
+        self._u = np.zeros(m)
+        self._ready = False
+        self._step_fn = core.kernel.env_step_one
+        self._consts = (core.ei, core.ef, core.c_idx, core.lv, core.lw, core.region, core.op,
+                        core.sc, core.hang)
+        self._ashape = (m,)
+        self._n = n
+        self._renderer = Renderer(core, render_mode) if render_mode is not None else None
+
+    # -- the episode --------------------------------------------------------------
+    @property
+    def state(self) -> np.ndarray:
+        """The plant's true state now (a copy)."""
+        return self._x.copy()
+
+    @property
+    def params(self) -> dict[str, float]:
+        """The parameters of this episode (randomized ones drawn at reset)."""
+        names = self.core.system.spec.parameter_names
+        return dict(zip(names, self._p.tolist(), strict=True))
+
+    @property
+    def time(self) -> float:
+        """Seconds since the episode began."""
+        return float(self._k[0]) / self.core.rate
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start an episode.
+
+        The env's generator (``np_random``, seeded by *seed*) draws, in this
+        order: the initial state from the task's distribution, the
+        randomized parameters, and the episode's noise seed (an integer,
+        returned as ``info["noise_seed"]``: ``simulate(..., seed=...)`` of
+        it draws the same noise). ``options={"state": x0}`` starts at *x0*
+        instead of a drawn state (the draws are made all the same).
+        """
+        super().reset(seed=seed)
+        core = self.core
+        x0 = core.task.draw_initial(self.np_random)
+        p = core.p_nom.copy()
+        if core.rnd_idx.size:
+            p[core.rnd_idx] *= 1.0 + core.rnd_spread * self.np_random.uniform(
+                -1.0, 1.0, core.rnd_idx.size
+            )
+        noise_seed = int(self.np_random.integers(0, 2**63 - 1))
+        for key in options or {}:
+            if key != "state":
+                raise EnvError(f"reset options: unknown option {key!r} (expected 'state')")
+        if options and "state" in options:
+            given = np.asarray(options["state"], dtype=float).reshape(-1)
+            if given.size != self._n or not np.all(np.isfinite(given)):
+                raise DimensionError(
+                    f"reset options: state must be {self._n} finite numbers "
+                    f"({', '.join(core.system.state_names)}), got {options['state']!r}"
+                )
+            x0 = given
+        self._x[:] = x0
+        self._p[:] = p
+        self._rng[:] = generator_state(np.random.SeedSequence(noise_seed))
+        self._k[0] = 0
+        self._u[:] = core.task.u_op
+        if core.ei[3] == 1:
+            self._eref[0] = core.kernel.env_energy(core.op, self._p)
+            self._eref[1] = core.kernel.env_energy(np.array(core.task.start, dtype=float), self._p)
+        obs = np.empty((1, core.n_obs))
+        core.kernel.env_observe(self._x, core.c_idx, core.lv, self._rng, core.ei[2], obs)
+        self._ready = True
+        info: dict[str, Any] = {"state": self._x.copy(), "noise_seed": noise_seed}
+        if core.randomize:
+            names = core.system.spec.parameter_names
+            info["params"] = {names[i]: float(self._p[i]) for i in core.rnd_idx}
+        if self.render_mode == "human":
+            self.render()
+        return obs[0], info
+
+    def step(self, action: object) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """One control period with *action* held; see :mod:`equilibrist.envs`."""
+        if not self._ready:
+            raise EnvError("call reset() before step()")
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != self._ashape:
+            if a.size != self._ashape[0]:
+                raise DimensionError(
+                    f"action has {a.size} values, expected {self._ashape[0]} "
+                    f"({', '.join(self.core.system.input_names)})"
+                )
+            a = a.reshape(self._ashape)
+        obs = np.empty((1, self.core.n_obs))
+        reward, status = self._step_fn(a, self._x, self._p, self._rng, self._k, self._eref, obs,
+                                       *self._consts)
+        if status == 3:
+            raise EnvError(f"action {a.tolist()} is not a finite number")
+        if self._renderer is not None:
+            self._u = self.core.physical_input(a)
+            if self.render_mode == "human":
+                self.render()
+        return obs[0], reward, status == 1, status == 2, {}
+
+    # -- pictures -------------------------------------------------------------------
+    def render(self) -> np.ndarray | None:
+        """The current state drawn as the animations draw it (``rgb_array``), or shown."""
+        if self._renderer is None:
+            raise EnvError(
+                "render() needs a render_mode: make the environment with render_mode='rgb_array' "
+                "or 'human'"
+            )
+        if self.render_mode == "rgb_array":
+            return self._renderer.frame(self._x, self._u, self.time)
+        self._renderer.show(self._x, self._u, self.time)
+        return None
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+        super().close()
+
+
+__all__ = ["EquilibristEnv", "display_problem"]
