@@ -32,6 +32,7 @@ bench: $(STAMP)
 	$(PY) bench/bench_load.py
 	$(PY) bench/bench_sim.py
 	$(PY) bench/bench_playground.py
+	$(PY) bench/bench_identify.py
 
 clean:
 	rm -rf $(VENV) report build

@@ -33,6 +33,13 @@ loop with :func:`scipy.integrate.solve_ivp` (for comparison). The Jacobian of
 the residuals is by central differences, all segments at once (segments are
 independent given their initial states), assembled sparse.
 
+Whiteness: a Ljung-Box test of the one-step prediction errors of a Kalman
+filter of the fitted model (the nonlinear model predicts; the steady-state
+gain of its linearization, with the fitted noise levels, corrects). The
+multiple-shooting residuals themselves are not white even for a perfect
+model (the process noise inside a segment is correlated along it); the
+filter's errors are, when model and noise levels are right.
+
 Uncertainty: the covariance of the decision variables is ``s^2 (J' J)^-1``
 at the solution (``J`` the whitened Jacobian, ``s^2`` the residual variance);
 the segment states are eliminated (Schur complement) to give the parameters'
