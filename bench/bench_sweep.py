@@ -35,7 +35,7 @@ def _cluster(workers: int):  # type: ignore[no-untyped-def]
     from distributed import Client, LocalCluster
 
     lc = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                      dashboard_address=None, silence_logs=logging.ERROR)
+                      dashboard_address=":0", silence_logs=logging.ERROR)
     return lc, Client(lc)
 
 

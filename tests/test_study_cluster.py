@@ -41,7 +41,7 @@ def cluster():
     from distributed import Client, LocalCluster
 
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                      dashboard_address=None, silence_logs=logging.ERROR) as lc, Client(lc) as client:
+                      dashboard_address=":0", silence_logs=logging.ERROR) as lc, Client(lc) as client:
         yield client
 
 

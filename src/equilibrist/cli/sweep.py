@@ -165,8 +165,13 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         from pathlib import Path
 
-        print(f"equilibrist: interrupted; the finished chunks are in {parts_dir(Path(args.out))}: "
-              "run the same command with --resume to continue", file=sys.stderr)
+        parts = parts_dir(Path(args.out))
+        if parts.exists():
+            print(f"equilibrist: interrupted; the finished chunks are in {parts}: run the same "
+                  "command with --resume to continue", file=sys.stderr)
+        else:
+            print("equilibrist: interrupted before any chunk was finished; nothing was written",
+                  file=sys.stderr)
         return 130
     summary = done.to_dict()
     summary["study"] = study.to_dict()

@@ -235,16 +235,18 @@ class _local_cluster:
         distributed = _distributed()
         self.cluster = distributed.LocalCluster(
             n_workers=self.workers, threads_per_worker=1, processes=True,
-            dashboard_address=None, silence_logs=logging.ERROR,
+            # ":0": its HTTP endpoint on a free port, never clashing with another cluster.
+            dashboard_address=":0", silence_logs=logging.ERROR,
         )
         self.client = distributed.Client(self.cluster)
         return self.client
 
     def __exit__(self, *exc: object) -> None:
+        # Short timeouts: after Ctrl-C the workers are stopped, not waited for.
         try:
-            self.client.close()
+            self.client.close(timeout=5)
         finally:
-            self.cluster.close()
+            self.cluster.close(timeout=10)
 
 
 class _connect:
