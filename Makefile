@@ -33,6 +33,7 @@ bench: $(STAMP)
 	$(PY) bench/bench_sim.py
 	$(PY) bench/bench_playground.py
 	$(PY) bench/bench_identify.py
+	$(PY) bench/bench_sweep.py
 
 clean:
 	rm -rf $(VENV) report build
