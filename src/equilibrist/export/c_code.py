@@ -4,10 +4,11 @@ Every function here is pure: it takes a :class:`~equilibrist.export.data.Control
 (and, for the test vectors, a recorded run) and returns the text of one
 file. Writing them is :mod:`equilibrist.export.writer`'s job.
 
-The step function repeats the simulation core's built-in controller
-operation for operation (``equilibrist/sim/_kernel_template.py``, ``_run``):
-the same sums in the same order, so that in double precision the C
-controller and the simulated one agree to rounding.
+The step function is the fixed C code of the linear controller form
+(:data:`equilibrist.export.linear_c.LINEAR_C`), the transcription of the
+simulation core's compiled controller operation for operation, plus the
+generated constants of the design's form: in double precision the C
+controller and the simulated one agree to the last bit.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 
 from equilibrist.errors import ExportError
 from equilibrist.export.data import ControllerData
+from equilibrist.export.linear_c import FORM_BLOCKS, LINEAR_C
 
 _INDENT = "    "
 _FLOAT_MAX = float(np.finfo(np.float32).max)
@@ -253,6 +255,8 @@ def header(data: ControllerData, *, precision: str, version: str, title: str = "
         f"#define {nm.macro('N_INPUTS')} {data.n_inputs}",
         f"#define {nm.macro('N_MEASUREMENTS')} {data.n_measured}",
         f"#define {nm.macro('N_REFERENCES')} {data.n_references}",
+        "/* States of the controller's linear form (the Kalman prediction; 0 without). */",
+        f"#define {nm.macro('N_Z')} {data.n_z}",
         "",
         "/* Sample period [s] and rate [Hz]; the period in microseconds for timer loops. */",
         f"#define {nm.macro('SAMPLE_PERIOD')} {literal(data.dt, 'double')}",
@@ -276,9 +280,9 @@ def header(data: ControllerData, *, precision: str, version: str, title: str = "
         "/* The controller's memory: one per controller, no dynamic allocation. */",
         "typedef struct {",
     ]
-    if data.controller == "lqg":
-        lines.append(f"{_INDENT}{real} z[{nm.macro('N_STATES')}];     "
-                     "/* prediction of the state deviation for the next sample */")
+    if data.n_z:
+        lines.append(f"{_INDENT}{real} z[{nm.macro('N_Z')}];     "
+                     "/* the controller's state: the prediction of the state deviation */")
     lines += [
         f"{_INDENT}{real} xhat[{nm.macro('N_STATES')}];  /* state deviation used at the last step */",
         f"{_INDENT}{real} u[{nm.macro('N_INPUTS')}];     /* last saturated command, absolute */",
@@ -312,6 +316,17 @@ def header(data: ControllerData, *, precision: str, version: str, title: str = "
         lines.append(
             f"extern const {real} {nm('KC')}[{nm.macro('N_INPUTS')}][{nm.macro('N_REFERENCES')}];"
         )
+    lines += [
+        "",
+        "/* The controller as one linear form (what step runs), matrices row-major:",
+        " *   u  = U0 + CC z + DY (y - Y0) + DR (r - R0), then saturated",
+        " *   z+ = AC z + BY (y - Y0) + BR (r - R0) + BU (u - U0)",
+        " *   estimate = X0 + EZ z + EY (y - Y0)",
+        " * (a matrix without elements is not defined). */",
+    ]
+    for label, rows, cols in _form_shapes(data):
+        if rows * cols:
+            lines.append(f"extern const {real} {nm(label.upper())}[{rows * cols}];")
     lines += [
         "",
         "/* Start at the operating point (estimate zero deviation). */",
@@ -378,10 +393,33 @@ def source(data: ControllerData, *, precision: str, version: str) -> str:
         lines.append(f"const {real} {nm('KF')}[{N}][{P}] = {_matrix(data.Kf, precision)};")
     if data.n_references:
         lines.append(f"const {real} {nm('KC')}[{M}][{NR}] = {_matrix(data.Kc, precision)};")
+    for label, rows, cols in _form_shapes(data):
+        if rows * cols:
+            block = np.asarray(getattr(data.form_controller, label), dtype=float).reshape(-1)
+            lines.append(f"const {real} {nm(label.upper())}[{rows * cols}] = "
+                         f"{_vector(block, precision)};")
     version_line = (
         f"{nm.lower} ({version}, design {data.fingerprint}): {_settings_string(data, precision)}"
     )
+    form_fields = []
+    for label in FORM_BLOCKS:
+        if label in ("u_op", "y_op", "r_op"):
+            size = {"u_op": data.n_inputs, "y_op": data.n_measured, "r_op": data.n_references}[label]
+            const = {"u_op": "U0", "y_op": "Y0", "r_op": "R0"}[label]
+            form_fields.append(nm(const) if size else "NULL")
+        else:
+            rows, cols = next((r, c) for lb, r, c in _form_shapes(data) if lb == label)
+            form_fields.append(nm(label.upper()) if rows * cols else "NULL")
+    sizes = f"{data.n_z}, {data.n_measured}, {data.n_references}, {data.n_inputs}, {data.n_states}"
+    zvar = "s->z" if data.n_z else "NULL"
     lines += [
+        "",
+        f"#define EQ_REAL {real}",
+        LINEAR_C,
+        f"static const eq_linear_form {nm('form')} = {{",
+        f"    {sizes},",
+        "    " + ", ".join(form_fields),
+        "};",
         "",
         f"static const char {nm('version_text')}[] = {_c_string(version_line)};",
         "",
@@ -393,11 +431,18 @@ def source(data: ControllerData, *, precision: str, version: str) -> str:
         f"void {nm('init')}({nm('state')} *s)",
         "{",
         "    int i;",
-        f"    for (i = 0; i < {N}; ++i) {{",
     ]
-    if data.controller == "lqg":
-        lines.append(f"        s->z[i] = {zero};")
+    if data.n_z:
+        z0 = np.asarray(data.form_controller.z0)
+        if np.any(z0 != 0):
+            lines.append(f"    static const {real} z0[{nm.macro('N_Z')}] = {_vector(z0, precision)};")
+        lines += [
+            f"    for (i = 0; i < {nm.macro('N_Z')}; ++i) {{",
+            f"        s->z[i] = {'z0[i]' if np.any(z0 != 0) else zero};",
+            "    }",
+        ]
     lines += [
+        f"    for (i = 0; i < {N}; ++i) {{",
         f"        s->xhat[i] = {zero};",
         "    }",
         f"    for (i = 0; i < {M}; ++i) {{",
@@ -413,11 +458,21 @@ def source(data: ControllerData, *, precision: str, version: str) -> str:
         "    int i;",
         f"    {nm('init')}(s);",
         f"    for (i = 0; i < {N}; ++i) {{",
-    ]
-    target = "s->z[i]" if data.controller == "lqg" else "s->xhat[i]"
-    lines += [
-        f"        {target} = x_estimate[i] - {nm('X0')}[i];",
+        f"        s->xhat[i] = x_estimate[i] - {nm('X0')}[i];",
         "    }",
+    ]
+    if data.n_z:
+        # z = state_map (x - x0): the state map of an LQG form is the identity.
+        smap = np.asarray(data.form_controller.state_map)
+        if smap.shape == (data.n_states, data.n_states) and np.array_equal(smap, np.eye(data.n_states)):
+            lines += [
+                f"    for (i = 0; i < {N}; ++i) {{",
+                "        s->z[i] = s->xhat[i];",
+                "    }",
+            ]
+        else:
+            raise ExportError("the controller's state is not the state estimate: no init_at")
+    lines += [
         "}",
         "",
         f"void {nm('estimate')}(const {nm('state')} *s, {real} x[{N}])",
@@ -430,61 +485,20 @@ def source(data: ControllerData, *, precision: str, version: str) -> str:
         "",
         f"int {nm('step')}({nm('state')} *s, const {real} y[{P}], const {real} *r, {real} u[{M}])",
         "{",
-        "    int i, j;",
+        "    int i;",
         "    int saturated = 0;",
     ]
-    if data.controller == "lqg":
-        lines.append(f"    {real} innovation[{P}];")
-        if data.form == "predictor":
-            lines.append(f"    {real} z_next[{N}];")
+    if data.n_z:
+        lines.append(f"    {real} z_next[{nm.macro('N_Z')}];")
     if not data.n_references:
-        lines.append("    (void)r;")
-    # 1. the estimate used for the feedback
-    if data.controller == "lqr":
-        lines += [
-            "    /* The measured state, as a deviation from the operating point. */",
-            f"    for (i = 0; i < {N}; ++i) {{",
-            f"        s->xhat[i] = y[i] - {nm('X0')}[i];",
-            "    }",
-        ]
-    elif data.form == "current":
-        lines += [
-            "    /* Correct the prediction with the measurements. */",
-            _innovation_loop(nm, P),
-            f"    for (i = 0; i < {N}; ++i) {{",
-            f"        {real} v = s->z[i];",
-            f"        for (j = 0; j < {P}; ++j) {{",
-            f"            v += {nm('KF')}[i][j] * innovation[j];",
-            "        }",
-            "        s->xhat[i] = v;",
-            "    }",
-        ]
-    else:
-        lines += [
-            "    /* The estimate is the prediction made at the last sample. */",
-            f"    for (i = 0; i < {N}; ++i) {{",
-            "        s->xhat[i] = s->z[i];",
-            "    }",
-        ]
-    # 2. feedback and saturation
+        lines.append("    r = NULL;  /* no references: nothing to read */")
     lines += [
-        "    /* State feedback (and reference), saturated to the input limits. */",
+        "    /* The estimate behind the command, and the command. */",
+        f"    eq_linear_estimate(&{nm('form')}, {zvar}, y, s->xhat);",
+        f"    eq_linear_output(&{nm('form')}, {zvar}, y, r, u);",
+        "    /* Saturated to the input limits. */",
         f"    for (i = 0; i < {M}; ++i) {{",
-        f"        {real} v = {zero};",
-        f"        for (j = 0; j < {N}; ++j) {{",
-        f"            v -= {nm('K')}[i][j] * s->xhat[j];",
-        "        }",
-    ]
-    if data.n_references:
-        lines += [
-            "        if (r != NULL) {",
-            f"            for (j = 0; j < {NR}; ++j) {{",
-            f"                v += {nm('KC')}[i][j] * (r[j] - {nm('R0')}[j]);",
-            "            }",
-            "        }",
-        ]
-    lines += [
-        f"        v = {nm('U0')}[i] + v;",
+        f"        {real} v = u[i];",
         f"        if (v < {nm('U_MIN')}[i]) {{",
         f"            v = {nm('U_MIN')}[i];",
         "            ++saturated;",
@@ -496,39 +510,13 @@ def source(data: ControllerData, *, precision: str, version: str) -> str:
         "        u[i] = v;",
         "    }",
     ]
-    # 3. prediction for the next sample
-    if data.controller == "lqg" and data.form == "current":
+    lines += [
+        "    /* The next controller state, with the input actually applied. */",
+        f"    eq_linear_update(&{nm('form')}, {zvar}, y, r, s->u, {'z_next' if data.n_z else 'NULL'});",
+    ]
+    if data.n_z:
         lines += [
-            "    /* Predict the next sample with the input actually applied. */",
-            f"    for (i = 0; i < {N}; ++i) {{",
-            f"        {real} v = {zero};",
-            f"        for (j = 0; j < {N}; ++j) {{",
-            f"            v += {nm('AD')}[i][j] * s->xhat[j];",
-            "        }",
-            f"        for (j = 0; j < {M}; ++j) {{",
-            f"            v += {nm('BD')}[i][j] * (s->u[j] - {nm('U0')}[j]);",
-            "        }",
-            "        s->z[i] = v;",
-            "    }",
-        ]
-    elif data.controller == "lqg":
-        lines += [
-            "    /* Predict the next sample with the applied input and the measurements. */",
-            _innovation_loop(nm, P),
-            f"    for (i = 0; i < {N}; ++i) {{",
-            f"        {real} v = {zero};",
-            f"        for (j = 0; j < {N}; ++j) {{",
-            f"            v += {nm('AD')}[i][j] * s->z[j];",
-            "        }",
-            f"        for (j = 0; j < {M}; ++j) {{",
-            f"            v += {nm('BD')}[i][j] * (s->u[j] - {nm('U0')}[j]);",
-            "        }",
-            f"        for (j = 0; j < {P}; ++j) {{",
-            f"            v += {nm('KF')}[i][j] * innovation[j];",
-            "        }",
-            "        z_next[i] = v;",
-            "    }",
-            f"    for (i = 0; i < {N}; ++i) {{",
+            f"    for (i = 0; i < {nm.macro('N_Z')}; ++i) {{",
             "        s->z[i] = z_next[i];",
             "    }",
         ]
@@ -541,12 +529,11 @@ def source(data: ControllerData, *, precision: str, version: str) -> str:
     return "\n".join(lines)
 
 
-def _innovation_loop(nm: _Names, P: str) -> str:
-    return "\n".join([
-        f"    for (i = 0; i < {P}; ++i) {{",
-        f"        innovation[i] = y[i] - {nm('Y0')}[i] - s->z[{nm('MEASURED_STATE')}[i]];",
-        "    }",
-    ])
+def _form_shapes(data: ControllerData) -> list[tuple[str, int, int]]:
+    """``(name, rows, columns)`` of each matrix of the linear form."""
+    lin = data.form_controller
+    return [(label, int(np.shape(getattr(lin, label))[0]), int(np.shape(getattr(lin, label))[1]))
+            for label in ("Ac", "By", "Br", "Bu", "Cc", "Dy", "Dr", "Ez", "Ey")]
 
 
 # -- test vectors and the test program ----------------------------------------------------

@@ -7,10 +7,12 @@ Everything downstream (the C text, the test vectors, the ctypes wrapper)
 reads this one object, so the numbers that ship are the numbers that were
 simulated.
 
-The controller is the one the simulation core runs for its built-in
-digital controllers (``equilibrist.sim``), in deviation coordinates about
-the operating point ``(x0, u0)``, with ``z`` the carried prediction
-``xhat_{k|k-1}``:
+The controller is the one the simulation core runs: the design's
+:class:`~equilibrist.control.controller.LinearController` (``linear``), one
+state-space form that the C code runs with one fixed step function
+(:mod:`equilibrist.export.linear_c`). In deviation coordinates about the
+operating point ``(x0, u0)``, with ``z`` the carried prediction
+``xhat_{k|k-1}``, it is:
 
 ``lqg``, ``current`` Kalman form::
 
@@ -40,7 +42,8 @@ from typing import Any
 
 import numpy as np
 
-from equilibrist.errors import ExportError
+from equilibrist.control.controller import LinearController
+from equilibrist.errors import EquilibristError, ExportError
 
 CONTROLLERS = ("lqg", "lqr")
 PRECISIONS = ("double", "float")
@@ -113,6 +116,8 @@ class ControllerData:
         The design weights (``Q``, ``R``, ``QN``, ``RN``, ``G``) for the record.
     settings:
         The generating settings (rate, discretization, Kalman form, ...).
+    linear:
+        The controller as the one linear form (what the C step runs).
     """
 
     system: str
@@ -141,6 +146,19 @@ class ControllerData:
     params: Mapping[str, float] = field(default_factory=dict)
     weights: Mapping[str, np.ndarray] = field(default_factory=dict)
     settings: Mapping[str, str] = field(default_factory=dict)
+    linear: LinearController | None = field(default=None, repr=False)
+
+    @property
+    def form_controller(self) -> LinearController:
+        """:attr:`linear`, which :func:`from_design` always fills in."""
+        if self.linear is None:
+            raise ExportError("the controller data has no linear form")
+        return self.linear
+
+    @property
+    def n_z(self) -> int:
+        """States of the controller (the Kalman prediction; 0 for LQR)."""
+        return self.form_controller.n_z
 
     @property
     def n_states(self) -> int:
@@ -336,6 +354,11 @@ def from_design(design: Any, *, controller: str = "lqg") -> ControllerData:
     settings["reference"] = ", ".join(tracked) if tracked else "none"
     for arr in (y0, r0, u_min, u_max):
         arr.setflags(write=False)
+    try:
+        linear = LinearController.from_design(design, kind=controller, tracking=bool(tracked),
+                                              u_min=u_min, u_max=u_max)
+    except EquilibristError as exc:
+        raise ExportError(f"cannot export the {controller} controller of {system}: {exc}") from exc
     return ControllerData(
         system=system,
         controller=controller,
@@ -363,4 +386,5 @@ def from_design(design: Any, *, controller: str = "lqg") -> ControllerData:
         params=params,
         weights=weights,
         settings=settings,
+        linear=linear,
     )

@@ -162,11 +162,11 @@ def record(design: Any, system: Any, *, controller: str = "lqg", precision: str 
            duration: float | None = None, seed: int = 0) -> Vectors:
     """Test vectors from a noisy closed-loop run of the simulation's own controller.
 
-    The simulation's built-in digital controller (:class:`equilibrist.sim.LQG`
-    or :class:`equilibrist.sim.StateFeedback` of the design, with its
-    reference gain when it has one) balances the nonlinear plant through the
-    run of :func:`scenario`; the vectors are the measurements and references
-    it read and the saturated commands it returned.
+    The simulation runs the export's own controller (:attr:`ControllerData.linear`,
+    the design's linear form, with its reference gain when it has one) on
+    the nonlinear plant through the run of :func:`scenario`; the vectors
+    are the measurements and references it read and the saturated commands
+    it returned.
 
     Raises
     ------
@@ -174,15 +174,15 @@ def record(design: Any, system: Any, *, controller: str = "lqg", precision: str 
         When the recorded run falls (the design does not hold the plant).
     """
     from equilibrist.export.writer import controller_data
-    from equilibrist.sim import LQG, StateFeedback, simulate
+    from equilibrist.sim import simulate
 
     check_controller(controller)
     check_precision(precision)
     data = controller_data(design, controller=controller)
     tracking = design.Kc is not None
-    builtin = (LQG if controller == "lqg" else StateFeedback).from_design(design, tracking=tracking)
+    linear = data.form_controller
     run = scenario(design, system, duration=duration)
-    result = simulate(system, builtin, seed=seed, **run)
+    result = simulate(system, linear, seed=seed, **run)
     if result.fell:
         raise ExportError(
             f"the recorded run of the {controller} controller of {data.system} fell at "
@@ -190,7 +190,7 @@ def record(design: Any, system: Any, *, controller: str = "lqg", precision: str 
             "the design does not hold the plant, so there are no test vectors to ship"
         )
     r = result.reference if tracking else np.zeros((result.n_rows, 0))
-    estimate0 = builtin.x_hat0 if isinstance(builtin, LQG) else None
+    estimate0 = linear.z0 if linear.n_z else None
     x_init = data.x0 + (0.0 if estimate0 is None else estimate0)
     return make_vectors(data, result.measurements, r, result.saturated, x_init,
                         precision=precision)

@@ -11,7 +11,7 @@ import math
 import os
 import shutil
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -215,6 +215,22 @@ def _umask() -> int:
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+#: Exporters of the controllers the registry builds beyond LQR and LQG (``--controller
+#: swingup``...): name -> ``exporter(controller, out, *, system, precision, duration, seed,
+#: force) -> Export``. A module adds one with :func:`register_exporter`.
+EXPORTERS: dict[str, Callable[..., Any]] = {}
+
+
+def register_exporter(name: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """Decorator: *exporter* writes the C code of the registry's controller *name*."""
+
+    def add(exporter: Callable[..., Any]) -> Callable[..., Any]:
+        EXPORTERS[name] = exporter
+        return exporter
+
+    return add
 
 
 def export_c(
