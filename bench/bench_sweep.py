@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import tempfile
 import time
 from pathlib import Path
@@ -46,14 +47,29 @@ def _warm_worker() -> None:
                    threads=1)
 
 
-def _timed_study(study, client, folder: Path, name: str, chunk: int, threads: int | None) -> float:  # type: ignore[no-untyped-def]
+def _cpu(client) -> float:  # type: ignore[no-untyped-def]
+    """CPU seconds of this process, the workers and the scheduler so far."""
+    workers = sum(client.run(time.process_time).values())
+    pid, sched = client.run_on_scheduler(_pid_and_cpu)
+    # A LocalCluster's scheduler runs in this process: counted once.
+    return time.process_time() + workers + (0.0 if pid == os.getpid() else sched)
+
+
+def _pid_and_cpu() -> tuple[int, float]:
+    return os.getpid(), time.process_time()
+
+
+def _timed_study(study, client, folder: Path, name: str, chunk: int, threads: int | None  # type: ignore[no-untyped-def]
+                 ) -> tuple[float, float]:
     from equilibrist.study import run_study
 
     out = folder / f"{name}.parquet"
     out.unlink(missing_ok=True)
+    c0 = _cpu(client)
     t0 = time.perf_counter()
     run_study(study, out, client=client, chunk_size=chunk, threads=threads)
-    return time.perf_counter() - t0
+    wall = time.perf_counter() - t0
+    return wall, _cpu(client) - c0
 
 
 def main() -> None:
@@ -90,22 +106,23 @@ def main() -> None:
         for i, m in enumerate(masses)])
     m_p = np.repeat(masses, 10_000)
 
-    def plain() -> float:
-        t0 = time.perf_counter()
+    def plain() -> tuple[float, float]:
+        c0, t0 = time.process_time(), time.perf_counter()
         simulate_batch(plant, ctrl, runs=100_000, duration=1.0, rate=200.0, x0=x0s,
                        params={"m_p": m_p}, noise=noise, seed=2, workers=2)
-        return time.perf_counter() - t0
+        return time.perf_counter() - t0, time.process_time() - c0
 
-    def local_study() -> float:
+    def local_study() -> tuple[float, float]:
         out = folder / "local.parquet"
         out.unlink(missing_ok=True)
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         run_study(overhead, out, chunk_size=1, threads=2)
-        return time.perf_counter() - t0
+        return time.perf_counter() - t0, time.process_time() - c0
 
     plain()
-    results: dict[str, list[float]] = {"plain": [], "local": [], "dask2": [], "scale1": [],
-                                       "scale2": []}
+    results: dict[str, list[tuple[float, float]]] = {
+        "plain": [], "local": [], "dask2": [], "scale1": [], "scale2": []}
+    load_before = os.getloadavg()[0]
     lc1, c1 = _cluster(1)
     lc2, c2 = _cluster(2)
     try:
@@ -122,7 +139,9 @@ def main() -> None:
             c.close()
             lc.close()
     same = (folder / "s1.parquet").read_bytes() == (folder / "s2.parquet").read_bytes()
-    best = {k: min(v) for k, v in results.items()}
+    load_after = os.getloadavg()[0]
+    best = {k: min(w for w, _ in v) for k, v in results.items()}
+    cpu = {k: min(c for _, c in v) for k, v in results.items()}
     runs_scaling = scaling.total_runs
     steps_per_run = 1.0 * 1000  # 1 s at the 1 ms physics step
     out = {
@@ -138,21 +157,33 @@ def main() -> None:
         "dask_2_workers_s": best["dask2"],
         "dask_overhead": best["dask2"] / best["plain"] - 1.0,
         "local_overhead": best["local"] / best["plain"] - 1.0,
+        "cpu_s": cpu,
+        "dask_overhead_cpu": cpu["dask2"] / cpu["plain"] - 1.0,
+        "local_overhead_cpu": cpu["local"] / cpu["plain"] - 1.0,
+        "scaling_cpu_ratio": cpu["scale2"] / cpu["scale1"],
+        "load_average": [load_before, load_after],
         "runs": results,
     }
     if args.json:
         print(json.dumps(out, indent=2))
         return
+    print(f"load average of the machine: {load_before:.1f} before, {load_after:.1f} after "
+          f"(2 cores)")
     print(f"scaling: {out['scaling_study']}")
     print(f"  1 worker   {best['scale1']:8.2f} s   {1e3 * best['scale1'] / runs_scaling:.3f} ms/run")
     print(f"  2 workers  {best['scale2']:8.2f} s   efficiency {out['scaling_efficiency']:.2f} "
           f"(goal >= 0.8); tables identical: {same}")
+    print(f"  CPU time: {cpu['scale1']:.2f} s on 1 worker, {cpu['scale2']:.2f} s on 2 "
+          f"(ratio {out['scaling_cpu_ratio']:.3f})")
     print(f"overhead at 10^5 runs: {out['overhead_study']}")
     print(f"  plain simulate_batch, 2 threads   {best['plain']:8.2f} s")
     print(f"  study, local (no Dask), 2 threads {best['local']:8.2f} s   "
           f"{100 * out['local_overhead']:+.1f} %")
     print(f"  study, Dask, 2 workers x 1 thread {best['dask2']:8.2f} s   "
           f"{100 * out['dask_overhead']:+.1f} % (goal <= 10 %)")
+    print(f"  CPU time (all processes): plain {cpu['plain']:.2f} s, local study {cpu['local']:.2f} s "
+          f"({100 * out['local_overhead_cpu']:+.1f} %), Dask {cpu['dask2']:.2f} s "
+          f"({100 * out['dask_overhead_cpu']:+.1f} %)")
 
 
 if __name__ == "__main__":
