@@ -244,6 +244,9 @@ def add_design_options(parser: argparse.ArgumentParser) -> None:
                         help="how the plant is sampled (default zoh)")
     parser.add_argument("--kalman", choices=KALMAN_FORMS, default="current",
                         help="discrete Kalman gain form (default current)")
+    add_items(parser, "--at", marker="=", metavar="STATE=VALUE",
+              help="design at the equilibrium with these states (the others solved); "
+              "default the canonical operating point")
 
 
 def design_options(args: argparse.Namespace) -> dict[str, Any]:
@@ -256,4 +259,13 @@ def design_options(args: argparse.Namespace) -> dict[str, Any]:
         "outputs": parse_names(args.outputs, "--outputs"),
         "discretization": args.discretization,
         "kalman_form": args.kalman,
+        "at": operating_point_option(getattr(args, "at", None)),
     }
+
+
+def operating_point_option(items: Sequence[str] | None) -> dict[str, float] | None:
+    """``--at STATE=VALUE ...`` as ``{state: value}`` (None when not given)."""
+    if not items:
+        return None
+    raw = parse_assignments(items, "--at")
+    return {k: parse_number(v, f"--at {k}") for k, v in raw.items()}

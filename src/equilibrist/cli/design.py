@@ -1,4 +1,4 @@
-"""``equilibrist design``: LQR, Kalman filter and reference gain at the canonical point."""
+"""``equilibrist design``: LQR, Kalman filter and reference gain, at the canonical point or --at another."""
 
 from __future__ import annotations
 
@@ -17,14 +17,25 @@ sensor and process noise.
 {"re": ..., "im": ...} (also when real); numbers that are not finite (an
 infinite time constant) are null. Keys include K, S, poles, Kf, P, Kc
 (null when the tracked output has zero DC gain; kc_note says why),
-estimator_poles, Q, R, QN, RN, G, Qd, Rd, plant, discrete, margins.
+estimator_poles, Q, R, QN, RN, G, Qd, Rd, plant, discrete, margins, and
+(with --rate) "controller": the chosen controller as the one linear form
+the simulator runs and the C export writes (kind, form, Ac, By, Br, Bu, Cc,
+Dy, Dr).
+
+--at STATE=VALUE designs at the equilibrium with those states (the others
+solved), e.g. --at theta=3.14159 for a pendulum hanging down.
+--controller lqr|lqg (default lqg) names the controller whose form --json
+shows; swingup and mpc are designed by their own modules when installed; a
+controller that does not apply to the system is refused in one line.
 """
+
+CONTROLLERS = ("lqr", "lqg", "swingup", "mpc", "none")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "design",
-        help="design LQR + Kalman (LQG) controllers at the canonical operating point",
+        help="design LQR + Kalman (LQG) controllers at an operating point",
         description="Design an LQR state feedback, a Kalman estimator and a reference gain "
         "for a system at its canonical operating point, continuous or sampled at --rate.",
         epilog=_EPILOG,
@@ -32,6 +43,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     common.add_system(p)
     p.add_argument("--rate", metavar="HZ", help="sample rate of a discrete design [Hz]")
+    p.add_argument("--controller", choices=CONTROLLERS, default="lqg",
+                   help="the controller to design (default lqg: the LQR and the Kalman filter)")
     common.add_design_options(p)
     common.add_set(p)
     common.add_params(p)
@@ -44,9 +57,32 @@ def run(args: argparse.Namespace) -> int:
 
     system = common.load_system(args)
     rate = None if args.rate is None else common.parse_number(args.rate, "--rate")
+    kind = args.controller
+    if kind == "none":
+        raise common.UsageError("--controller none is the open loop: there is nothing to design")
+    if kind not in ("lqr", "lqg"):
+        from equilibrist.control.controller import ControllerRequest, build_controller
+
+        request = ControllerRequest(system=system, rate=rate,
+                                    design_options=common.design_options(args))
+        built = build_controller(kind, request)
+        describe = getattr(built, "describe", None)
+        info = describe() if callable(describe) else {"kind": kind}
+        if args.json:
+            common.print_json(info)
+        else:
+            print(f"{system.key}: {kind} controller")
+            for key, value in info.items():
+                print(f"  {key}: {value}")
+        return 0
     result = design(system, rate=rate, **common.design_options(args))
     if args.json:
-        common.print_json(result.to_dict())
+        out = result.to_dict()
+        if result.rate is not None:
+            from equilibrist.control.controller import LinearController
+
+            out["controller"] = LinearController.from_design(result, kind=kind).describe()
+        common.print_json(out)
     else:
         print(result.summary())
     return 0

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import math
+from typing import Any
 
 from equilibrist.cli import common
 
-CONTROLLERS = ("lqg", "lqr")
+# The registry's names (equilibrist.control.controller.CONTROLLER_KINDS).
+CONTROLLERS = ("lqg", "lqr", "swingup", "mpc", "none")
 PRECISIONS = ("double", "float")
 # The names of equilibrist.control's discretization methods and Kalman forms,
 # written out so that building the parser does not import scipy.
@@ -23,6 +25,10 @@ check' runs the test program) and README.txt.
 
 The test vectors are a recorded closed-loop run of the simulation's own
 controller on the nonlinear plant, with noise (--duration seconds, --seed).
+
+--controller swingup or mpc: written by their own exporters when installed;
+a controller that does not apply to the system, or that has no C exporter,
+is refused in one line. --at STATE=VALUE designs at another equilibrium.
 
 --rate defaults to the system's control rate (the rate of its rig's digital
 controller, from the system's spec). Weights are diagonals, comma-separated,
@@ -47,6 +53,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="sample rate [Hz] (default: the system's control rate)")
     p.add_argument("--precision", choices=PRECISIONS, default="double",
                    help="arithmetic of the C code (default double)")
+    p.add_argument("--force", action="store_true",
+                   help="write into a folder that holds files equilibrist did not write, "
+                        "replacing those of the export's names")
     p.add_argument("--out", metavar="DIR", default=None,
                    help="output folder (default ./<system>_<controller>)")
     common.add_design_options(p)
@@ -54,7 +63,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="length of the recorded test-vector run [s]")
     p.add_argument("--seed", type=int, default=0, help="noise seed of the test-vector run")
     common.add_set(p)
-    common.add_params(p)
     common.add_params(p)
     common.add_json(p)
     p.set_defaults(func=run)
@@ -74,19 +82,40 @@ def run(args: argparse.Namespace) -> int:
         duration = common.parse_number(args.duration, "--duration")
         if not (math.isfinite(duration) and duration > 0):
             raise ExportError(f"--duration must be a positive number of seconds, got {duration:g}")
+    if args.controller == "none":
+        raise ExportError("--controller none is the open loop: there is no controller to export")
     out = Path(args.out) if args.out else Path(f"{c_identifier(args.system)}_{args.controller}")
-    check_folder(out)
+    check_folder(out, force=args.force)
     system = common.load_system(args)
     if system.n_inputs == 0:
         raise ExportError(f"{system.key} has no input: there is no controller to export")
     if rate is None:
         rate = check_rate(getattr(system.spec, "control_rate", None) or FALLBACK_RATE)
 
+    if args.controller not in ("lqg", "lqr"):
+        from equilibrist.control.controller import ControllerRequest, build_controller
+        from equilibrist.export.writer import EXPORTERS
+
+        request = ControllerRequest(system=system, rate=rate,
+                                    design_options=common.design_options(args))
+        built = build_controller(args.controller, request)
+        exporter = EXPORTERS.get(args.controller)
+        if exporter is None:
+            raise ExportError(f"the {args.controller} controller of {system.key} has no C "
+                              "exporter in this installation")
+        done = exporter(built, out, system=system, precision=args.precision,
+                        duration=duration, seed=args.seed, force=args.force)
+        return _report(args, done, system)
+
     from equilibrist.control.design import design
 
     result = design(system, rate=rate, **common.design_options(args))
     done = export_c(result, out, controller=args.controller, precision=args.precision,
-                    duration=duration, seed=args.seed, system=system)
+                    duration=duration, seed=args.seed, system=system, force=args.force)
+    return _report(args, done, system)
+
+
+def _report(args: argparse.Namespace, done: Any, system: Any) -> int:
     if args.json:
         common.print_json({
             "folder": str(done.folder),

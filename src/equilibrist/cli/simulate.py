@@ -16,7 +16,8 @@ from typing import Any
 
 from equilibrist.cli import common
 
-CONTROLLERS = ("none", "lqr", "lqg")
+# The registry's names (equilibrist.control.controller.CONTROLLER_KINDS).
+CONTROLLERS = ("lqr", "lqg", "swingup", "mpc", "none")
 
 _EPILOG = """\
 The run: the nonlinear plant integrated with RK4 (or --integrator adaptive)
@@ -54,8 +55,9 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     """The options shared by ``simulate`` and ``batch``."""
     common.add_system(p)
     p.add_argument("--controller", choices=CONTROLLERS,
-                   help="none (open loop), lqr (full state) or lqg (Kalman filter + LQR); "
-                   "default lqg, none for a system without input")
+                   help="lqr (full state), lqg (Kalman filter + LQR), swingup, mpc, or none "
+                   "(open loop); default lqg, none for a system without input; one that does "
+                   "not apply to the system is refused")
     p.add_argument("--duration", default="5", metavar="S", help="seconds to simulate (default 5)")
     p.add_argument("--rate", metavar="HZ",
                    help="controller sample rate [Hz] (default: the system's control rate)")
@@ -209,16 +211,26 @@ def build_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
                 raise common.UsageError(f"--{flag} needs a controller (--controller lqr or lqg)")
         if noise_on:
             noise = Noise.from_spec(system, outputs=outputs, rate=rate)
-    else:
+    elif kind in ("lqr", "lqg"):
+        from equilibrist.control.controller import LinearController
         from equilibrist.control.design import design
-        from equilibrist.sim.controllers import LQG, StateFeedback
 
         d = design(system, outputs=outputs, rate=rate, **design_kwargs)
-        tracking = reference is not None
-        controller = (LQG.from_design(d, tracking=tracking) if kind == "lqg"
-                      else StateFeedback.from_design(d, tracking=tracking))
+        controller = LinearController.from_design(d, kind=kind, tracking=reference is not None)
         if noise_on:
             noise = Noise.from_design(d)
+        outputs = None
+    else:
+        from equilibrist.control.controller import ControllerRequest, build_controller
+
+        request = ControllerRequest(
+            system=system, rate=rate, design_options={"outputs": outputs, **design_kwargs},
+            tracking=reference is not None,
+        )
+        controller = build_controller(kind, request)
+        measured = getattr(controller, "outputs", None) or outputs
+        if noise_on:
+            noise = Noise.from_spec(system, outputs=measured, rate=rate)
         outputs = None
     options: dict[str, Any] = {
         "controller": controller,
