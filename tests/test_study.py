@@ -242,3 +242,21 @@ def test_plot_draws_heat_maps_and_lines_of_a_study(tmp_path, capsys):
     assert main(["plot", str(out), "--metric", "nonsense", "--out", str(heat)]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "--metric 'nonsense'" in err
+
+
+def test_a_random_sample_from_the_command_line_is_drawn_and_plotted(tmp_path, capsys):
+    out = tmp_path / "r.parquet"
+    assert main(["sweep", "cartpole", "--vary", "m_p=0.1:0.4", "--vary", "rate=50:400:log",
+                 "--sample", "random:5", "--runs", "2", "--duration", "0.5", "--metrics",
+                 "basic", "--noise", "off", "--out", str(out), "--no-progress", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["points"] == 5 and summary["study"]["sample"] == 5
+    table, study = read_study(out)
+    m_p = table.column("m_p").to_pylist()
+    assert all(0.1 <= m <= 0.4 for m in m_p) and len(set(m_p)) == 5
+    assert m_p == [study.point(i)["m_p"] for i in range(5)]
+    # basic metrics leave the trajectory metrics out (NaN), never guessed
+    assert all(math.isnan(v) for v in table.column("settling_p90").to_pylist())
+    png = tmp_path / "r.png"
+    assert main(["plot", str(out), "--out", str(png)]) == 0
+    assert png.stat().st_size > 0

@@ -200,7 +200,7 @@ class Study:
 
     @classmethod
     def from_json(cls, text: str) -> Study:
-        """The study of :meth:`to_json` (checked again)."""
+        """The study of :meth:`to_json` (as recorded in a table's metadata)."""
         d = json.loads(text)
         if d.get("format") != FORMAT:
             raise StudyError(f"not a study description of format {FORMAT}")
