@@ -35,11 +35,14 @@ Step
     sensor noise. With ``observe="state"`` the sensor noise is still drawn
     (and not added), so the run is the same as with the outputs observed.
 Reward
-    Balance: ``dt * (alive_bonus - c(x, u))`` with ``c`` the task's
+    Balance: ``dt * max(0, alive_bonus - c(x, u))`` with ``c`` the task's
     quadratic cost (Bryson's weights of the default design,
     :meth:`equilibrist.tasks.Task.cost`) at the state reached and the input
-    applied, ``alive_bonus`` 1 per second: an episode's return is the time
-    balanced minus the integrated cost. Swing-up: ``dt * (U + S) / 2`` with
+    applied, ``alive_bonus`` 1 per second: near upright an episode's return
+    is the time balanced minus the integrated cost. The floor at zero keeps
+    a fall from ever paying: without it a policy that struggles far from
+    upright (where the cost is large) would earn less than one that falls
+    at once, and a search would learn to fall. Swing-up: ``dt * (U + S) / 2`` with
     ``U`` the mean of ``(1 + cos(q - q_up)) / 2`` over the coordinates
     that hang, and ``S = max(0, 1 - ((E - E_up) / (E_up - E_hang))**2)``
     the energy shaping (``E`` the model's energy, ``E_up`` at the

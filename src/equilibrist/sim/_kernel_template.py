@@ -741,7 +741,8 @@ def _env_reward(x, u, p, kind, ef, op, sc, hang, eref0, eref1):
         for i in range(_M):
             d = (u[i] - op[_N + i]) / sc[_N + i]
             c += d * d
-        return dt * (ef[2] - c)
+        # Never below zero: struggling must not earn less than falling at once.
+        return dt * max(0.0, ef[2] - c)
     up = 0.0
     for j in range(hang.shape[0]):
         up += 0.5 * (1.0 + math.cos(x[hang[j]] - op[hang[j]]))
