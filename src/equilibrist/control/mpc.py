@@ -134,7 +134,7 @@ class MPCProblem:
 
     @property
     def n_variables(self) -> int:
-        return self.horizon * (self.m + self.n_soft)
+        return (self.horizon + 1) * self.n + self.horizon * (self.m + self.n_soft)
 
     def predictions(self) -> tuple[np.ndarray, np.ndarray]:
         """``Fx, Gx`` with the stacked states ``[dx_0..dx_N] = Fx dx_0 + Gx v``.
@@ -156,40 +156,54 @@ class MPCProblem:
 
     def matrices(self) -> tuple[Any, np.ndarray, Any, np.ndarray, np.ndarray, np.ndarray]:
         """``P, q, A, l, u`` of OSQP's form at ``dx_0 = 0``, and ``E``: the bounds
-        at ``dx_0`` are ``l - E dx_0`` and ``u - E dx_0``."""
+        at ``dx_0`` are ``l - E dx_0`` and ``u - E dx_0``.
+
+        Variables ``[dx_0..dx_N, v_0..v_{N-1}, s_1..s_N]`` (sparse form) with
+        the moves ``du_k = -K dx_k + v_k``: the cost is
+        ``dx_0' P dx_0 + sum v_k' (R + B'PB) v_k`` plus the slacks' penalty.
+        """
         from scipy import sparse
 
         n, m, N, ns = self.n, self.m, self.horizon, self.n_soft
-        Fx, Gx = self.predictions()
-        # u_k = -K x_k + v_k for k < N.
-        Kb = np.kron(np.eye(N), self.K)
-        Fu = -Kb @ Fx[: N * n]
-        Gu = -Kb @ Gx[: N * n] + np.eye(N * m)
+        nx, nv, nsl = (N + 1) * n, N * m, N * ns
         W = self.R + self.B.T @ self.P @ self.B
         H = sparse.block_diag(
-            [np.kron(np.eye(N), 2.0 * W)] + ([2.0 * self.rho_l2 * np.eye(N * ns)] if ns else []),
+            [sparse.csc_matrix((nx, nx)), sparse.kron(sparse.eye(N), 2.0 * W)]
+            + ([2.0 * self.rho_l2 * sparse.eye(nsl)] if ns else []),
             format="csc",
         )
-        q = np.concatenate([np.zeros(N * m), np.full(N * ns, self.rho_l1)])
-        rows = [np.hstack([Gu, np.zeros((N * m, N * ns))])]
-        lows = [np.tile(self.u_lo, N)]
-        highs = [np.tile(self.u_hi, N)]
-        Es = [Fu]
+        q = np.concatenate([np.zeros(nx + nv), np.full(nsl, self.rho_l1)])
+        Acl = self.A - self.B @ self.K
+        # dx_0 = x0; -dx_{k+1} + Acl dx_k + B v_k = 0.
+        Ax = sparse.kron(sparse.eye(N + 1), -sparse.eye(n)) + sparse.kron(
+            sparse.eye(N + 1, k=-1), Acl)
+        Bv = sparse.kron(sparse.vstack([sparse.csc_matrix((1, N)), sparse.eye(N)]), self.B)
+        Aeq = sparse.hstack([Ax, Bv, sparse.csc_matrix((nx, nsl))])
+        E_eq = np.zeros((nx, n))
+        E_eq[:n] = np.eye(n)
+        # Hard input bounds on du_k = -K dx_k + v_k.
+        Ku = sparse.hstack([sparse.kron(sparse.eye(N), -self.K), sparse.csc_matrix((nv, n))])
+        Ain = sparse.hstack([Ku, sparse.eye(nv), sparse.csc_matrix((nv, nsl))])
+        rows = [Aeq, Ain]
+        # Equality rows: l = u = -x0 on the first block (so E = E_eq with l - E x0).
+        lows = [np.zeros(nx), np.tile(self.u_lo, N)]
+        highs = [np.zeros(nx), np.tile(self.u_hi, N)]
+        Es = [E_eq, np.zeros((nv, n))]
         if ns:
             Cs = np.zeros((ns, n))
             for row, i in enumerate(self.soft_index):
                 Cs[row, i] = 1.0
-            Cb = np.kron(np.eye(N), Cs)
-            Fs = Cb @ Fx[n:]
-            Gs = Cb @ Gx[n:]
-            eye = np.eye(N * ns)
-            zero = np.zeros((N * ns, N * m))
-            # lo <= C x_k + s_k; C x_k - s_k <= hi (k = 1..N); s >= 0.
-            rows += [np.hstack([Gs, eye]), np.hstack([Gs, -eye]), np.hstack([zero, eye])]
-            lows += [np.tile(self.soft_lo, N), np.full(N * ns, -np.inf), np.zeros(N * ns)]
-            highs += [np.full(N * ns, np.inf), np.tile(self.soft_hi, N), np.full(N * ns, np.inf)]
-            Es += [Fs, Fs, np.zeros((N * ns, n))]
-        return (H, q, sparse.csc_matrix(np.vstack(rows)), np.concatenate(lows),
+            sel = sparse.hstack([sparse.csc_matrix((N, 1)), sparse.eye(N)])
+            Cx = sparse.kron(sel, Cs)
+            eye = sparse.eye(nsl)
+            zero_v = sparse.csc_matrix((nsl, nv))
+            # lo <= C dx_k + s_k; C dx_k - s_k <= hi (k = 1..N); s >= 0.
+            rows += [sparse.hstack([Cx, zero_v, eye]), sparse.hstack([Cx, zero_v, -eye]),
+                     sparse.hstack([sparse.csc_matrix((nsl, nx + nv)), eye])]
+            lows += [np.tile(self.soft_lo, N), np.full(nsl, -np.inf), np.zeros(nsl)]
+            highs += [np.full(nsl, np.inf), np.tile(self.soft_hi, N), np.full(nsl, np.inf)]
+            Es += [np.zeros((nsl, n))] * 3
+        return (H, q, sparse.vstack(rows, format="csc"), np.concatenate(lows),
                 np.concatenate(highs), np.vstack(Es))
 
 
@@ -335,13 +349,15 @@ class MPCRuntime:
             # No usable solution: the LQR, inside the hard limits.
             self._warm = None
             return np.clip(du_lqr, prob.u_lo, prob.u_hi)
-        N, ns = prob.horizon, prob.n_soft
+        N, n, ns = prob.horizon, prob.n, prob.n_soft
+        nx = (N + 1) * n
         warm = np.zeros_like(sol)
-        # Shift the corrections and slacks by one sample for the next warm start.
-        warm[: (N - 1) * m] = sol[m : N * m]
-        warm[N * m : N * m + (N - 1) * ns] = sol[N * m + ns :]
+        # Shift states, corrections and slacks by one sample for the next warm start.
+        warm[: N * n] = sol[n:nx]
+        warm[nx : nx + (N - 1) * m] = sol[nx + m : nx + N * m]
+        warm[nx + N * m : nx + N * m + (N - 1) * ns] = sol[nx + N * m + ns :]
         self._warm = warm
-        return np.clip(du_lqr + sol[:m], prob.u_lo, prob.u_hi)
+        return np.clip(du_lqr + sol[nx : nx + m], prob.u_lo, prob.u_hi)
 
     def output(self, t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray:
         dx = self._state(y)

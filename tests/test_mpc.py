@@ -1,0 +1,121 @@
+"""Constrained MPC: the unconstrained case is the LQR, the hard limits hold, the track is kept."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from equilibrist import get_system
+from equilibrist.control.controller import ControllerError, ControllerRequest, build_controller
+from equilibrist.control.design import design
+from equilibrist.control.mpc import MPCRuntime, mpc
+from equilibrist.control.riccati import dlqr
+from equilibrist.sim.run import simulate
+
+
+@pytest.fixture(scope="module")
+def cart() -> tuple[object, object]:
+    system = get_system("cartpole")
+    return system, design(system, rate=200.0)
+
+
+def _small_states(n: int, seed: int) -> np.ndarray:
+    scale = np.array([0.05, 0.02, 0.05, 0.05])
+    return np.random.default_rng(seed).normal(size=(n, 4)) * scale
+
+
+@pytest.mark.parametrize("exact", [True, False])
+def test_unconstrained_command_is_the_discrete_lqr(cart: tuple[object, object], exact: bool) -> None:
+    """Away from every limit the first move is -K dx, K from an independent dlqr call."""
+    system, d = cart
+    ctrl = mpc(system, design=d, horizon=30, estimator="state")  # type: ignore[arg-type]
+    K = dlqr(d.discrete.A, d.discrete.B, d.Q, d.R).K  # type: ignore[attr-defined]
+    rt = MPCRuntime(ctrl, exact_unconstrained=exact)
+    for dx in _small_states(25, 1):
+        assert rt.lqr_feasible(dx)
+        du = rt.solve(dx)
+        np.testing.assert_allclose(du, -K @ dx, rtol=0, atol=1e-8)
+    assert rt.last_status == ("unconstrained" if exact else "solved")
+
+
+def test_terminal_cost_makes_any_horizon_the_lqr(cart: tuple[object, object]) -> None:
+    system, d = cart
+    dx = _small_states(1, 2)[0]
+    moves = [MPCRuntime(mpc(system, design=d, horizon=h, estimator="state"), exact_unconstrained=False).solve(dx)  # type: ignore[arg-type]
+             for h in (1, 5, 40)]
+    for du in moves[1:]:
+        np.testing.assert_allclose(du, moves[0], rtol=0, atol=1e-8)
+
+
+def test_closed_loop_equals_lqr_closed_loop(cart: tuple[object, object]) -> None:
+    """Same run, MPC (through OSQP) and LQR: states agree to 1e-6 of each state's range."""
+    from equilibrist.control.controller import LinearController
+
+    system, d = cart
+    lqr = LinearController.from_design(d, kind="lqr")  # type: ignore[arg-type]
+    ctrl = MPCRuntime(mpc(system, design=d, horizon=20, estimator="state"), exact_unconstrained=False)  # type: ignore[arg-type]
+    x0 = {"x": 0.05, "theta": 0.03}
+    a = simulate(system, lqr, duration=2.0, x0=x0)
+    b = simulate(system, ctrl, duration=2.0, x0=x0)
+    span = np.ptp(a.states, axis=0)
+    assert np.all(np.abs(a.states - b.states) <= 1e-6 * span)
+
+
+def test_commands_stay_inside_the_hard_limits(cart: tuple[object, object]) -> None:
+    system, d = cart
+    ctrl = mpc(system, design=d, horizon=30, estimator="state")  # type: ignore[arg-type]
+    res = simulate(system, ctrl.runtime(), duration=2.0,
+                   x0={"x": 0.3, "theta": 0.5, "theta_dot": 1.0}, region={})
+    lo, hi = system.input_limits
+    assert np.all(res.commanded >= lo - 1e-12) and np.all(res.commanded <= hi + 1e-12)
+    assert np.any(np.isclose(np.abs(res.commanded), hi[0])), "the case must reach a limit"
+
+
+def test_keeps_the_track_where_the_clipped_lqr_leaves_it() -> None:
+    """The cart at the centre moving at 2 m/s: the clipped LQR runs off the 1 m track, the MPC
+    (50 Hz, 40 samples = 0.8 s ahead, track constrained to 0.95 m) stops in time and balances."""
+    from equilibrist.control.controller import LinearController
+
+    system = get_system("cartpole")
+    d = design(system, rate=50.0)
+    x0 = {"x": 0.0, "x_dot": 2.0, "theta": 0.0}
+    region = {"x": (-1.0, 1.0), "theta": (-1.2, 1.2)}
+    lqr = simulate(system, LinearController.from_design(d, kind="lqr"), duration=4.0, x0=x0,
+                   region=region)
+    assert lqr.fell and lqr.fell_state == "x"
+    ctrl = mpc(system, design=d, horizon=40, estimator="state",
+               constraints={"x": (-0.95, 0.95), "theta": (-1.2, 1.2)})
+    res = simulate(system, ctrl.runtime(), duration=4.0, x0=x0, region=region)
+    assert not res.fell
+    assert np.max(np.abs(res.states[:, 0])) <= 0.96
+    assert abs(res.final_state[1]) < 0.05
+
+
+def test_with_the_kalman_filter_in_front() -> None:
+    system = get_system("cartpole")
+    d = design(system, rate=200.0)
+    ctrl = mpc(system, design=d, horizon=10, estimator="kalman")
+    assert ctrl.estimator == "kalman" and ctrl.outputs == ("x", "theta")
+    from equilibrist.control.controller import LinearController
+
+    lqg = LinearController.from_design(d, kind="lqg")
+    x0 = {"x": 0.05, "theta": 0.02}
+    a = simulate(system, lqg, duration=1.0, x0=x0)
+    b = simulate(system, MPCRuntime(ctrl, exact_unconstrained=False), duration=1.0, x0=x0)
+    span = np.ptp(a.states, axis=0)
+    assert np.all(np.abs(a.states - b.states) <= 1e-6 * span)
+
+
+def test_bad_options_are_one_line() -> None:
+    system = get_system("cartpole")
+    for kwargs, word in (({"horizon": 0}, "horizon"), ({"estimator": "magic"}, "estimator"),
+                         ({"constraints": {"nope": (0, 1)}}, "nope")):
+        with pytest.raises(ControllerError, match=word) as info:
+            mpc(system, **kwargs)  # type: ignore[arg-type]
+        assert "\n" not in str(info.value)
+
+
+def test_registered() -> None:
+    rt = build_controller("mpc", ControllerRequest(system=get_system("cartpole"), rate=None,
+                                                   options={"horizon": 12}))
+    assert isinstance(rt, MPCRuntime) and rt.ctrl.problem.horizon == 12

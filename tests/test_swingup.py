@@ -1,0 +1,183 @@
+"""Swing-up: the pumped energy against the derived model, its monotone rise, the catch."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from equilibrist import get_system
+from equilibrist.control.controller import (
+    ControllerError,
+    ControllerRequest,
+    NonlinearController,
+    build_controller,
+)
+from equilibrist.control.swingup import (
+    CP,
+    LAWS,
+    MODE_BALANCE,
+    SwingUpRuntime,
+    SwingUpTuning,
+    Z,
+    catch_level,
+    energy,
+    swingup,
+    tracking_gains,
+)
+from equilibrist.sim.run import simulate
+from equilibrist.tasks import get_task
+
+PENDULUMS = ("cartpole", "reaction_wheel_pendulum", "furuta")
+
+
+def _pendulum_part(name: str, x: np.ndarray) -> np.ndarray:
+    """The state with the drive at rest, so the derived total energy is the pendulum's."""
+    x = np.array(x, dtype=float)
+    if name != "acrobot":
+        x[2] = 0.0
+    return x
+
+
+@pytest.mark.parametrize("name", [*PENDULUMS, "acrobot"])
+def test_energy_is_the_derived_models(name: str) -> None:
+    """The law's energy equals the derived model's (sympy) energy, measured from upright."""
+    system = get_system(name)
+    ctrl = swingup(system)
+    up = system.operating_point().x
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        x = up + rng.uniform(-3.0, 3.0, 4)
+        xp = _pendulum_part(name, x)
+        truth = system.energy(xp) - system.energy(_pendulum_part(name, up))
+        assert energy(xp, ctrl.params) == pytest.approx(truth, rel=1e-10, abs=1e-12)
+    hanging = get_task(system, "swingup").start
+    # Hanging at rest is the lowest energy: minus the lift from hanging to upright.
+    assert energy(hanging, ctrl.params) < 0
+
+
+def test_alpha_beta_gains_are_kalatas() -> None:
+    """Kalata's steady-state gains satisfy the alpha-beta filter's Riccati relation."""
+    for lam in (0.01, 0.3, 5.0):
+        a, b = tracking_gains(1.0, lam, 1.0)
+        # beta^2 / (1 - alpha) = lambda^2 (Kalata 1984, eq. 18).
+        assert b * b / (1.0 - a) == pytest.approx(lam * lam, rel=1e-9)
+
+
+def test_catch_level_is_where_the_lqr_saturates() -> None:
+    """On the ellipse dx' S dx = c_sat the largest LQR command is exactly the room to the limit."""
+    rng = np.random.default_rng(0)
+    K = rng.normal(size=(1, 4))
+    L = rng.normal(size=(4, 4))
+    S = L @ L.T + 4 * np.eye(4)
+    c = catch_level(K, S, np.array([2.0]))
+    # The maximizer of K dx on the ellipse: dx = sqrt(c) S^-1 K' / sqrt(K S^-1 K').
+    g = np.linalg.solve(S, K[0])
+    dx = math.sqrt(c) * g / math.sqrt(K[0] @ g)
+    assert dx @ S @ dx == pytest.approx(c)
+    assert float(K[0] @ dx) == pytest.approx(2.0)
+
+
+@pytest.mark.parametrize("name", PENDULUMS)
+def test_pumping_energy_rises_monotonically(name: str) -> None:
+    """Pure pumping (no centering, no catch, no noise): E never falls until it reaches E0.
+
+    In continuous time ``dE/dt = -c k_E (E - E0) |theta_dot cos theta| >= 0``
+    (minus the pendulum joint's small friction); a sample-and-hold command
+    can lose at most what one sample of a sign change costs, far below
+    1e-3 of the lift ``-E(hanging)``.
+    """
+    system = get_system(name)
+    base = swingup(system).settings["tuning"]
+    tune = SwingUpTuning(k_energy=base["k_energy"], a_max=base["a_max"], catch_fraction=0.0,
+                         accel=base["accel"])
+    ctrl = swingup(system, tuning=tune)
+    task = get_task(system, "swingup")
+    res = simulate(system, ctrl, duration=6.0, x0=task.draw_initial(np.random.default_rng(1)),
+                   region={})
+    E = np.array([energy(x, ctrl.params) for x in res.states])
+    lift = -E[0]
+    reached = int(np.argmax(-1e-3 * lift <= E)) if np.any(-1e-3 * lift <= E) else len(E)
+    assert reached > 10, "the pendulum must take some swings"
+    assert reached < len(E), f"{name}: the energy never reached the upright's"
+    steps = np.diff(E[: reached + 1])
+    assert steps.min() >= -1e-3 * lift, f"{name}: energy fell by {-steps.min():.3g} J in a sample"
+    # And it does rise: from hanging to within 0.1 % of the top.
+    assert E[reached] - E[0] > 0.99 * lift
+
+
+@pytest.mark.parametrize("name", ["cartpole", "reaction_wheel_pendulum"])
+def test_swings_up_and_stays_with_noise(name: str) -> None:
+    """From seeded hanging starts, with sensor noise, it is caught and balanced, on the track."""
+    from equilibrist.sim.noise import Noise
+
+    system = get_system(name)
+    ctrl = swingup(system)
+    task = get_task(system, "swingup")
+    noise = Noise.from_design(_design(system))
+    rng = np.random.default_rng(11)
+    for seed in range(3):
+        res = simulate(system, ctrl, duration=8.0, x0=task.draw_initial(rng), region=task.region,
+                       noise=noise, seed=seed)
+        assert not res.fell, f"{name} seed {seed}: left its track ({res.fell_state})"
+        end = res.final_state - system.operating_point().x
+        theta = system.state_index("theta")
+        assert abs(math.remainder(end[theta], 2 * math.pi)) < 0.05
+        assert abs(end[theta + 2]) < 0.5
+
+
+def _design(system: object) -> object:
+    from equilibrist.control.design import design
+
+    return design(system, rate=system.spec.control_rate)  # type: ignore[attr-defined]
+
+
+def test_compiled_and_python_agree() -> None:
+    """The source compiled into the core and run as plain Python give the same run."""
+    system = get_system("cartpole")
+    ctrl = swingup(system)
+    x0 = get_task(system, "swingup").draw_initial(np.random.default_rng(4))
+    a = simulate(system, ctrl, duration=3.0, x0=x0, region={})
+    b = simulate(system, SwingUpRuntime(ctrl, compiled=False), duration=3.0, x0=x0, region={})
+    np.testing.assert_allclose(a.states, b.states, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(a.commanded, b.commanded, rtol=0, atol=1e-9)
+
+
+def test_supervisor_hysteresis() -> None:
+    """Catch below c_in, stay up to c_out, hand back above it."""
+    system = get_system("cartpole")
+    ctrl = swingup(system)
+    fns = ctrl.python_functions()
+    p = ctrl.params
+    S = p[CP["S"]:CP["S"] + 16].reshape(4, 4)
+    v = np.array([0.0, 1.0, 0.0, 0.0])
+    unit = float(v @ S @ v)
+
+    def mode_after(z: np.ndarray, level: float) -> float:
+        y = np.array([0.0, math.sqrt(level / unit)])
+        zn = np.zeros_like(z)
+        fns["update"](0.0, z, y, np.zeros(0), np.zeros(1), p, zn)
+        return float(zn[Z["mode"]])
+
+    z = np.zeros(Z["end"])
+    c_in, c_out = ctrl.settings["c_in"], ctrl.settings["c_out"]
+    assert mode_after(z, 0.5 * c_in) == MODE_BALANCE
+    assert mode_after(z, 1.5 * c_in) != MODE_BALANCE
+    z[Z["init"]] = 1.0
+    z[Z["mode"]] = MODE_BALANCE
+    for level, expected in ((0.9 * c_out, True), (1.1 * c_out, False)):
+        # A held estimate at the level (rates zero): the predicted state is the measurement.
+        z[Z["xhat"] + 1] = math.sqrt(level / unit)
+        z[Z["xhat"] + 3] = 0.0
+        z[Z["ref"]:Z["ref"] + 4] = system.operating_point().x
+        assert (mode_after(z, level) == MODE_BALANCE) is expected
+
+
+def test_registered_and_refused_where_it_does_not_apply() -> None:
+    ctrl = build_controller("swingup", ControllerRequest(system=get_system("cartpole"), rate=None))
+    assert isinstance(ctrl, NonlinearController)
+    with pytest.raises(ControllerError, match="ball_beam has no swing-up") as info:
+        build_controller("swingup", ControllerRequest(system=get_system("ball_beam"), rate=None))
+    assert "\n" not in str(info.value)
+    assert set(LAWS) == {"cartpole", "reaction_wheel_pendulum", "furuta", "acrobot"}
