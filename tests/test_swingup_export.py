@@ -73,3 +73,19 @@ def test_exported_code_closes_the_loop() -> None:
         c.close()
     assert not res.fell
     assert abs(math.remainder(res.final_state[1], 2 * math.pi)) < 0.02
+
+
+def test_command_line_export_and_refusal(tmp_path: Path) -> None:
+    exe = Path(__file__).resolve().parents[1] / ".venv" / "bin" / "equilibrist"
+    cmd = [str(exe)] if exe.exists() else ["equilibrist"]
+    out = tmp_path / "cart"
+    proc = subprocess.run([*cmd, "export", "cartpole", "--controller", "swingup", "--out", str(out)],
+                          capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, proc.stderr
+    check = subprocess.run(["make", "check"], cwd=out, capture_output=True, text=True, check=False)
+    assert check.returncode == 0 and "0 mismatches" in check.stdout
+    bad = subprocess.run([*cmd, "export", "ball_beam", "--controller", "swingup", "--out",
+                          str(tmp_path / "bb")], capture_output=True, text=True, check=False)
+    assert bad.returncode == 2
+    assert bad.stderr.strip().count("\n") == 0 and "no swing-up" in bad.stderr
+    assert not (tmp_path / "bb").exists()

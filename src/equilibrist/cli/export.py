@@ -94,12 +94,12 @@ def run(args: argparse.Namespace) -> int:
 
     if args.controller not in ("lqg", "lqr"):
         from equilibrist.control.controller import ControllerRequest, build_controller
-        from equilibrist.export.writer import EXPORTERS
+        from equilibrist.export.writer import EXPORTERS, load_exporter
 
         request = ControllerRequest(system=system, rate=rate,
                                     design_options=common.design_options(args))
         built = build_controller(args.controller, request)
-        exporter = EXPORTERS.get(args.controller)
+        exporter = EXPORTERS.get(args.controller) or load_exporter(args.controller)
         if exporter is None:
             raise ExportError(f"the {args.controller} controller of {system.key} has no C "
                               "exporter in this installation")

@@ -28,7 +28,10 @@ limits), ``u_applied`` the input that acted.
 from __future__ import annotations
 
 import ctypes
+import hashlib
 import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -36,6 +39,7 @@ import numpy as np
 
 from equilibrist.control.swingup import N_STATES, Z, layout_constants
 from equilibrist.errors import ExportError
+from equilibrist.export.writer import register_exporter
 
 if TYPE_CHECKING:
     from equilibrist.control.controller import NonlinearController
@@ -368,6 +372,59 @@ def export_swingup(ctrl: NonlinearController, system: Any, folder: str | Path, *
     return out
 
 
+@dataclass(frozen=True)
+class _Described:
+    """What the command line's report reads of an export (name, id, rate, kind)."""
+
+    fingerprint: str
+    controller: str
+    rate: float
+
+
+@dataclass(frozen=True)
+class _Steps:
+    n_steps: int
+
+
+@dataclass(frozen=True)
+class SwingUpExport:
+    """What :func:`export_files` wrote (the fields the command line reports)."""
+
+    folder: Path
+    name: str
+    files: Mapping[str, str]
+    precision: str
+    data: _Described
+    vectors: _Steps
+
+
+@register_exporter("swingup")
+def export_files(ctrl: NonlinearController, out: str | Path, *, system: Any,
+                 precision: str = "double", duration: float | None = None, seed: int = 0,
+                 force: bool = False) -> SwingUpExport:
+    """``equilibrist export SYSTEM --controller swingup``: the library, vectors, ``make check``."""
+    from equilibrist.export.writer import check_folder, write_files
+
+    if precision != "double":
+        raise ExportError(
+            f"the swing-up is exported in double precision only (its test is bit for bit "
+            f"against the Python controller), not {precision!r}"
+        )
+    folder = check_folder(out, force=force)
+    name = "swingup"
+    vec = recorded_vectors(ctrl, system, duration=duration or 4.0, seed=seed)
+    files = {**swingup_files(ctrl, name=name), **check_files(name, vec)}
+    write_files(folder, files)
+    what = {
+        f"{name}.h": "the library's interface", f"{name}.c": "the swing-up and its supervisor",
+        f"{name}_vectors.h": "recorded test vectors", f"test_{name}.c": "test program",
+        "Makefile": "make check",
+    }
+    digest = hashlib.sha256(ctrl.params.tobytes() + ctrl.source.encode()).hexdigest()[:12]
+    return SwingUpExport(folder=folder, name=name, files=what, precision="double",
+                         data=_Described(digest, "swingup", ctrl.rate), vectors=_Steps(len(vec["y"])))
+
+
 class CompiledSwingUp:
     """The exported C swing-up compiled into a shared library and called through ctypes.
 
@@ -391,12 +448,16 @@ class CompiledSwingUp:
                                    include=folder, extra_flags=("-lm",))
         self._lib: Any = ctypes.CDLL(str(lib))
         dp = ctypes.POINTER(ctypes.c_double)
-        for fn, args in (("init", [dp]), ("output", [dp, dp, dp]), ("update", [dp, dp, dp]),
-                         ("estimate", [dp, dp, dp])):
+        def function(fn: str, count: int) -> Any:
             f = getattr(self._lib, f"{name}_{fn}")
-            f.argtypes = args
+            f.argtypes = [dp] * count
             f.restype = None
-            setattr(self, f"_{fn}", f)
+            return f
+
+        self._init = function("init", 1)
+        self._output = function("output", 3)
+        self._update = function("update", 3)
+        self._estimate = function("estimate", 3)
         self._z = np.zeros(Z["end"])
         self.reset()
 
@@ -426,4 +487,4 @@ class CompiledSwingUp:
         self._dir.cleanup()
 
 
-__all__ = ["MATH_FUNCTIONS", "CompiledSwingUp", "check_files", "export_swingup", "recorded_vectors", "swingup_files"]
+__all__ = ["MATH_FUNCTIONS", "CompiledSwingUp", "SwingUpExport", "check_files", "export_files", "export_swingup", "recorded_vectors", "swingup_files"]

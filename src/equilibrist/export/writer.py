@@ -223,6 +223,19 @@ def _umask() -> int:
 EXPORTERS: dict[str, Callable[..., Any]] = {}
 
 
+#: Modules that register an exporter when first asked (name -> module).
+EXPORTER_MODULES = {"swingup": "equilibrist.export.swingup_c"}
+
+
+def load_exporter(name: str) -> Callable[..., Any] | None:
+    """The exporter of controller *name*, importing its module when needed (None: none)."""
+    if name not in EXPORTERS and name in EXPORTER_MODULES:
+        import importlib
+
+        importlib.import_module(EXPORTER_MODULES[name])
+    return EXPORTERS.get(name)
+
+
 def register_exporter(name: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     """Decorator: *exporter* writes the C code of the registry's controller *name*."""
 
