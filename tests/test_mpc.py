@@ -119,3 +119,20 @@ def test_registered() -> None:
     rt = build_controller("mpc", ControllerRequest(system=get_system("cartpole"), rate=None,
                                                    options={"horizon": 12}))
     assert isinstance(rt, MPCRuntime) and rt.ctrl.problem.horizon == 12
+
+
+def test_command_line_horizon() -> None:
+    import subprocess
+    from pathlib import Path
+
+    exe = Path(__file__).resolve().parents[1] / ".venv" / "bin" / "equilibrist"
+    cmd = [str(exe)] if exe.exists() else ["equilibrist"]
+    bad = subprocess.run([*cmd, "simulate", "cartpole", "--controller", "mpc", "--horizon", "0"],
+                         capture_output=True, text=True, check=False)
+    assert bad.returncode == 2 and "--horizon" in bad.stderr
+    assert bad.stderr.strip().count("\n") == 0
+    ok = subprocess.run([*cmd, "simulate", "cartpole", "--controller", "mpc", "--horizon", "12",
+                         "--duration", "0.5", "--x0", "theta=0.05", "--json"],
+                        capture_output=True, text=True, check=False)
+    assert ok.returncode == 0, ok.stderr
+    assert '"stayed_up": true' in ok.stdout

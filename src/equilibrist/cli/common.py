@@ -247,6 +247,22 @@ def add_design_options(parser: argparse.ArgumentParser) -> None:
     add_items(parser, "--at", marker="=", metavar="STATE=VALUE",
               help="design at the equilibrium with these states (the others solved); "
               "default the canonical operating point")
+    parser.add_argument("--horizon", metavar="N", default=None,
+                        help="prediction horizon of --controller mpc [samples] (default 30)")
+
+
+def controller_options(args: argparse.Namespace) -> dict[str, Any]:
+    """Options of the registry's controller builders (``--horizon`` for MPC)."""
+    value = getattr(args, "horizon", None)
+    if value is None:
+        return {}
+    try:
+        horizon = int(value)
+    except ValueError:
+        horizon = 0
+    if horizon < 1 or str(horizon) != str(value).strip():
+        raise UsageError(f"--horizon must be a whole number of samples >= 1, got {value!r}")
+    return {"horizon": horizon}
 
 
 def design_options(args: argparse.Namespace) -> dict[str, Any]:

@@ -64,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
         from equilibrist.control.controller import ControllerRequest, build_controller
 
         request = ControllerRequest(system=system, rate=rate,
-                                    design_options=common.design_options(args))
+                                    design_options=common.design_options(args),
+                                    options=common.controller_options(args))
         built = build_controller(kind, request)
         describe = getattr(built, "describe", None)
         info = describe() if callable(describe) else {"kind": kind}

@@ -97,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
         from equilibrist.export.writer import EXPORTERS, load_exporter
 
         request = ControllerRequest(system=system, rate=rate,
-                                    design_options=common.design_options(args))
+                                    design_options=common.design_options(args),
+                                    options=common.controller_options(args))
         built = build_controller(args.controller, request)
         exporter = EXPORTERS.get(args.controller) or load_exporter(args.controller)
         if exporter is None:

@@ -225,7 +225,7 @@ def build_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
 
         request = ControllerRequest(
             system=system, rate=rate, design_options={"outputs": outputs, **design_kwargs},
-            tracking=reference is not None,
+            tracking=reference is not None, options=common.controller_options(args),
         )
         controller = build_controller(kind, request)
         measured = getattr(controller, "outputs", None) or outputs
