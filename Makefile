@@ -34,6 +34,7 @@ bench: $(STAMP)
 	$(PY) bench/bench_playground.py
 	$(PY) bench/bench_identify.py
 	$(PY) bench/bench_sweep.py
+	$(PY) bench/bench_envs.py
 
 clean:
 	rm -rf $(VENV) report build
