@@ -246,6 +246,11 @@ def build_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
         "events": parse_events(args, system),
         "outputs": outputs,
     }
+    if kind == "swingup":
+        # A swing-up starts hanging: only the task's region (the cart's track) ends it.
+        from equilibrist.tasks import get_task
+
+        options["region"] = dict(get_task(system, "swingup").region)
     return system, options
 
 
