@@ -35,6 +35,8 @@ bench: $(STAMP)
 	$(PY) bench/bench_identify.py
 	$(PY) bench/bench_sweep.py
 	$(PY) bench/bench_envs.py
+	$(PY) bench/bench_swingup.py
+	$(PY) bench/bench_mpc.py
 
 clean:
 	rm -rf $(VENV) report build

@@ -181,3 +181,17 @@ def test_registered_and_refused_where_it_does_not_apply() -> None:
         build_controller("swingup", ControllerRequest(system=get_system("ball_beam"), rate=None))
     assert "\n" not in str(info.value)
     assert set(LAWS) == {"cartpole", "reaction_wheel_pendulum", "furuta", "acrobot"}
+
+
+def test_demo_animates_a_swing_up(tmp_path: object) -> None:
+    from pathlib import Path
+
+    from PIL import Image
+
+    from equilibrist.viz.swingup_demo import swingup_animation
+
+    path, caption = swingup_animation(get_system("cartpole"), Path(str(tmp_path)), width=160,
+                                      height=120, fps=5, max_frames=6, duration=4.0)
+    with Image.open(path) as gif:
+        assert gif.size == (160, 120) and gif.n_frames >= 2
+    assert "Swing-up from hanging" in caption

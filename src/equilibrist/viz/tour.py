@@ -249,6 +249,12 @@ def tour_controlled(
               "state without noise.", wide=True),
     ]
     notes: list[str] = [*([sc.note] if sc.note else []), *getattr(d, "notes", ())]
+    if system.name in ("cartpole", "reaction_wheel_pendulum", "furuta", "acrobot"):
+        from equilibrist.viz.swingup_demo import swingup_animation
+
+        _gif, caption = swingup_animation(system, sub, width=size[0], height=size[1], fps=fps,
+                                          max_frames=max_frames, progress=progress)
+        images.insert(1, Image(f"{slug}/swingup.gif", caption))
     if extras:
         images += _extras(system, d, sub, slug, sc, progress=progress)
 
