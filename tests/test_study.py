@@ -85,6 +85,7 @@ def test_random_points_depend_on_the_seed_and_index_only():
 
 # -- the metrics of one point against single runs -----------------------------------------
 
+@pytest.mark.slow
 def test_a_point_summarizes_the_same_runs_simulate_makes():
     """Rows from the compiled batch equal the metrics of each run simulated alone."""
     study = make_study("cartpole", vary={"m_p": [0.2], "q.theta": [0.1]}, runs=5,
