@@ -42,6 +42,11 @@ class SymbolicModel:
     energy: sp.Expr | None = None
     conserved: dict[str, sp.Expr] = field(default_factory=dict)
     extras: dict[str, sp.Expr] = field(default_factory=dict)
+    # Named points of the mechanism (joint anchors, centres of mass) as
+    # ``(x, y, z)`` column vectors in the Newtonian frame, and the pairs of
+    # them joined by a link: what a generic drawing of the system shows.
+    points: dict[str, sp.Matrix] = field(default_factory=dict)
+    links: tuple[tuple[str, str], ...] = ()
 
     @property
     def n_q(self) -> int:
@@ -148,6 +153,9 @@ class Derivation:
         energy: sp.Expr | None = None,
         conserved: dict[str, sp.Expr] | None = None,
         extras: dict[str, sp.Expr] | None = None,
+        armature: dict[str, sp.Expr] | None = None,
+        points: dict[str, me.Point] | None = None,
+        links: Sequence[tuple[str, str]] = (),
     ) -> SymbolicModel:
         """Equations of motion by Kane's method, with the speeds ``u_i = q_i'``.
 
@@ -155,6 +163,11 @@ class Derivation:
         Kane's mass matrix the one of ``M(q) q_ddot = F``, comparable term by
         term with the Lagrange route. Velocities of points and frames must be
         set by the caller in terms of ``q'``; they are rewritten in the speeds.
+
+        *armature* adds an inertia to the diagonal of ``M`` for the named
+        coordinates (a rotor's reflected inertia, as MuJoCo's ``armature``).
+        *points* (positions relative to ``O``) and *links* (pairs of point
+        names) describe the mechanism for a generic drawing.
         """
         speeds = [me.dynamicsymbols(f"{c}_u") for c in self.spec.coordinates]
         kd = [qd - s for qd, s in zip(self.qd, speeds, strict=True)]
@@ -167,7 +180,30 @@ class Derivation:
             back[s] = qd
         mass = me.msubs(km.mass_matrix, back)
         forcing = me.msubs(km.forcing, back)
-        return self._finish("Kane", mass, forcing, energy, conserved, extras)
+        if armature:
+            mass = sp.Matrix(mass)
+            for name, value in armature.items():
+                k = self.spec.coordinates.index(name)
+                mass[k, k] += value
+        model = self._finish("Kane", mass, forcing, energy, conserved, extras)
+        if points:
+            model = self.with_points(model, points, links)
+        return model
+
+    def with_points(
+        self, model: SymbolicModel, points: dict[str, me.Point], links: Sequence[tuple[str, str]] = ()
+    ) -> SymbolicModel:
+        """*model* with named *points* (positions from ``O`` in ``N``) and *links* recorded."""
+        from dataclasses import replace
+
+        recorded: dict[str, sp.Matrix] = {}
+        for name, point in points.items():
+            r = point.pos_from(self.O)
+            recorded[name] = sp.Matrix(self.plain(sp.Matrix([r.dot(self.N.x), r.dot(self.N.y), r.dot(self.N.z)])))
+        for a, b in links:
+            if a not in recorded or b not in recorded:
+                raise ValueError(f"link ({a}, {b}) joins a point that is not recorded")
+        return replace(model, points=recorded, links=tuple((a, b) for a, b in links))
 
     def first_order(
         self,

@@ -18,6 +18,11 @@ in the order of the spec's states, inputs and parameters):
     The conserved energy (NaN when the model states none).
 ``conserved(x, p, out)``
     The other conserved quantities, in the order of ``CONSERVED``.
+``points(x, p, out)``
+    ``out[k, :]`` = position ``(x, y, z)`` of the named point ``POINTS[k]``
+    (joint anchors, centres of mass) for a generic drawing; ``LINKS`` holds
+    the index pairs joined by a link. Both are empty when the derivation
+    records no points.
 """
 
 from __future__ import annotations
@@ -87,6 +92,8 @@ def generate_source(model: SymbolicModel) -> str:
         f"N_INPUTS = {m}",
         f"N_Q = {model.n_q}",
         f"CONSERVED = {tuple(model.conserved)!r}",
+        f"POINTS = {tuple(model.points)!r}",
+        f"LINKS = {_link_indices(model)!r}",
         "",
         "",
         "def f(x, u, p, out):",
@@ -123,8 +130,18 @@ def generate_source(model: SymbolicModel) -> str:
     cons = list(model.conserved.values())
     out += _unpack(model, with_inputs=False, used=_free(cons))
     out += _body(cons, [f"out[{i}]" for i in range(len(cons))], subs, printer)
+    out += ["    return None", "", "", "def points(x, p, out):"]
+    coords = [v for m in model.points.values() for v in m]
+    out += _unpack(model, with_inputs=False, used=_free(coords))
+    targets = [f"out[{k}, {j}]" for k in range(len(model.points)) for j in range(3)]
+    out += _body(coords, targets, subs, printer)
     out += ["    return None", ""]
     return "\n".join(out)
+
+
+def _link_indices(model: SymbolicModel) -> tuple[tuple[int, int], ...]:
+    names = list(model.points)
+    return tuple((names.index(a), names.index(b)) for a, b in model.links)
 
 
 def _nonzero(mat: sp.Matrix) -> list[tuple[tuple[int, int], sp.Expr]]:

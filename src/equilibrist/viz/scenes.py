@@ -812,6 +812,10 @@ SCENES: dict[str, Callable[[object], Scene]] = {
 def scene_for(system: object) -> Scene:
     """The scene that draws *system* (a bound ``System``).
 
+    A catalogue system has its hand-drawn scene; any other system whose
+    derivation records its points (every MJCF or URDF model) is drawn from
+    its kinematic tree (:class:`~equilibrist.viz.generic.GenericScene`).
+
     Raises
     ------
     UnknownNameError
@@ -819,8 +823,13 @@ def scene_for(system: object) -> Scene:
         catalogue without one).
     """
     name = system.name  # type: ignore[attr-defined]
-    if name not in SCENES:
-        raise UnknownNameError(
-            f"no drawing for system {name!r} (drawings exist for {', '.join(SCENES)})"
-        )
-    return SCENES[name](system)
+    if name in SCENES:
+        return SCENES[name](system)
+    from equilibrist.viz.generic import GenericScene, can_draw
+
+    if can_draw(system):
+        return GenericScene(system)
+    raise UnknownNameError(
+        f"no drawing for system {name!r}: drawings exist for {', '.join(SCENES)} and for "
+        "systems whose derivation records its points (model files do)"
+    )

@@ -1,0 +1,233 @@
+"""Systems from model files: MJCF (``.xml``) and URDF (``.urdf``).
+
+The model file is the only input. MuJoCo's own compiler reads it (MJCF and
+URDF alike, with defaults classes, the angle unit, euler sequences,
+``fullinertia`` and inertia inferred from geoms, fixed joints merged);
+equilibrist takes the compiled kinematic tree (:mod:`.tree`) and derives the
+symbolic equations of motion from it with sympy.physics.mechanics by Kane's
+method (:mod:`.derive`). A URDF's ``<transmission>`` elements, which MuJoCo
+ignores, are read with :mod:`xml.etree` (:mod:`.urdf`).
+
+The system that results is an ordinary :class:`~equilibrist.numeric.system.System`:
+
+* states: the joints (hinge or slide) in document order, named by joint
+  name, then their rates ``<joint>_dot``;
+* inputs: MJCF ``<motor>`` actuators in document order (generalized force
+  ``gear * u``, limits from ``ctrlrange``), or URDF transmissions (force
+  ``mechanicalReduction * u``, limits the joint's effort over the reduction);
+* parameters: ``g``, ``<body>_mass`` of every moving body (its inertia scales
+  with it), ``<joint>_damping`` of every joint, and the input limits;
+* operating point: the keyframe named ``balance``, else the first keyframe,
+  else the zero configuration;
+* outputs: the joints of MJCF ``jointpos`` sensors (their ``noise`` the
+  sensor's standard deviation), else every joint;
+* defaults for design and simulation: see ``docs/models.md``.
+
+What the file has and equilibrist does not model (ball and free joints,
+tendons, equality constraints, dry friction, actuators other than motors,
+fluid forces) is refused with one line naming the element. Contacts and
+joint limits are not modelled; ``equilibrist show`` says so.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from equilibrist.errors import DefinitionError
+from equilibrist.importers.tree import ActuatorData, Tree, read_tree
+from equilibrist.mechanics.spec import (
+    Input,
+    OperatingPoint,
+    Parameter,
+    SystemSpec,
+    nonnegative,
+    positive,
+)
+from equilibrist.systems.registry import Entry
+
+if TYPE_CHECKING:
+    from equilibrist.mechanics.model import Derivation, SymbolicModel
+
+# Defaults that make design and simulation work with nothing but the file
+# (docs/models.md): Bryson scales of the states, noise and the control rate.
+HINGE_SCALE = 0.2  # rad
+SLIDE_SCALE = 0.5  # m
+RATE_SCALE = 1.0  # rad/s or m/s
+ENCODER_NOISE = 1e-3  # rad or m, per sample: an encoder's quantization
+PROCESS_NOISE = 0.05  # on each rate, per sqrt(s)
+CONTROL_RATE = 200.0  # Hz
+# A hinge may turn this far from the operating point before a balancing run
+# counts as fallen (hinges about the vertical can not fall).
+FALL_ANGLE = math.pi / 2
+
+_SOURCES = ("__init__.py", "tree.py", "derive.py", "urdf.py")
+
+
+def _importer_source() -> bytes:
+    here = Path(__file__).resolve().parent
+    return b"".join(name.encode() + (here / name).read_bytes() for name in _SOURCES)
+
+
+def load_model_file(file: Path, *, origin: str, content: bytes) -> Entry:
+    """The definition of the system in the MJCF or URDF *file*.
+
+    Parameters
+    ----------
+    file : pathlib.Path
+        The model file (``.xml`` MJCF or ``.urdf``).
+    origin : str
+        Its absolute path: the system's key in results and designs.
+    content : bytes
+        The file's bytes, as read.
+
+    Raises
+    ------
+    DefinitionError
+        A file that can not be read, compiled, or that holds something
+        equilibrist does not model; the message is one line naming it.
+    """
+    suffix = file.suffix.lower()
+    if suffix == ".urdf":
+        from equilibrist.importers.urdf import read_urdf
+
+        facts = read_urdf(file, content)
+        tree0 = read_tree(file, joint_order=facts.joint_order, actuators=())
+        position = {j.name: k for k, j in enumerate(tree0.joints)}
+        actuators = []
+        for t in facts.transmissions:
+            if t.joint not in position:
+                raise DefinitionError(
+                    f"{file.name}: transmission of {t.actuator!r} drives joint {t.joint!r}, "
+                    "which the compiled model does not have"
+                )
+            actuators.append(ActuatorData(t.actuator, position[t.joint], t.reduction, t.low, t.high))
+        tree = read_tree(file, joint_order=facts.joint_order, actuators=tuple(actuators))
+        kind = "URDF"
+    else:
+        _check_xml(file, content)
+        tree = read_tree(file)
+        kind = "MJCF"
+    spec = build_spec(tree, name=file.name, kind=kind, origin=origin)
+
+    def derive(d: Derivation) -> SymbolicModel:
+        from equilibrist.importers.derive import derive_tree
+
+        return derive_tree(tree, d)
+
+    return Entry(
+        spec,
+        derive,
+        "equilibrist.importers",
+        content=content + repr(tree).encode() + _importer_source(),
+        origin=origin,
+    )
+
+
+def _check_xml(file: Path, content: bytes) -> None:
+    """An MJCF file must have a ``<mujoco>`` root (MuJoCo reads a ``<robot>`` as URDF).
+
+    XML that this parser refuses but MuJoCo's more lenient one reads (a
+    ``--`` in a comment) is left to MuJoCo.
+    """
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.fromstring(content)
+    except ET.ParseError:
+        return
+    if root.tag != "mujoco":
+        raise DefinitionError(
+            f"{file.name}: expected an MJCF model (a <mujoco> root element), found <{root.tag}>"
+            + (": name a URDF with the .urdf suffix" if root.tag == "robot" else "")
+        )
+
+
+def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
+    """The spec of the system of *tree* (a file called *name*)."""
+    joints = tree.joints
+    if not joints:
+        raise DefinitionError(f"{name}: the model has no hinge or slide joint: nothing moves")
+    coords = tuple(j.name for j in joints)
+    units = {j.name: "rad" if j.kind == "hinge" else "m" for j in joints}
+    g_norm = math.sqrt(sum(v * v for v in tree.gravity))
+    parameters: list[Parameter] = [
+        nonnegative("g", g_norm, "m/s^2", "gravitational acceleration",
+                    note=f"the model's gravity, along ({', '.join(f'{v:g}' for v in tree.gravity)})"),
+    ]
+    for b in tree.bodies:
+        parameters.append(positive(
+            f"{b.name}_mass", b.mass, "kg", f"mass of body {b.label} (its inertia scales with it)",
+            note=f"{b.mass:g} kg in the file",
+        ))
+    for j in joints:
+        unit = "N*m*s/rad" if j.kind == "hinge" else "N*s/m"
+        parameters.append(nonnegative(f"{j.name}_damping", j.damping, unit, f"viscous damping of joint {j.name}"))
+    inputs = []
+    for a in tree.actuators:
+        joint = joints[a.joint]
+        unit = "N*m" if joint.kind == "hinge" else "N"
+        what = "torque" if joint.kind == "hinge" else "force"
+        inputs.append(Input(a.name, unit, f"motor on joint {joint.name}: {what} {a.gain:g} * {a.name}",
+                            a.low, a.high))
+    names = [*coords, *(f"{c}_dot" for c in coords), *(i.name for i in inputs)]
+    names += [p.name for p in parameters] + [p.name for i in inputs for p in i.limit_parameters()]
+    seen: set[str] = set()
+    for n in names:
+        if n in seen:
+            raise DefinitionError(
+                f"{name}: the name {n!r} is used twice among states, inputs and parameters: "
+                "rename a joint, body or actuator"
+            )
+        seen.add(n)
+    sensors = tree.sensors or tuple((c, None) for c in coords)
+    outputs = tuple(s for s, _ in sensors)
+    sensor_noise = {s: noise if noise is not None else ENCODER_NOISE for s, noise in sensors}
+    state = {c: v for c, v in zip(coords, tree.key_qpos, strict=True) if v != 0}
+    state.update({f"{c}_dot": v for c, v in zip(coords, tree.key_qvel, strict=True) if v != 0})
+    free = () if tree.key_is_equilibrium else tuple(i.name for i in inputs)
+    operating_point = OperatingPoint(
+        state=dict(state),
+        inputs={i.name: v for i, v in zip(inputs, tree.key_ctrl, strict=True)},
+        free=free,
+    )
+    region = {
+        j.name: (tree.key_qpos[k] - FALL_ANGLE, tree.key_qpos[k] + FALL_ANGLE)
+        for k, j in enumerate(joints)
+        if j.kind == "hinge" and j.name not in tree.vertical_hinges
+    }
+    design_scales = {j.name: HINGE_SCALE if j.kind == "hinge" else SLIDE_SCALE for j in joints}
+    design_scales.update({f"{c}_dot": RATE_SCALE for c in coords})
+    design_scales.update({i.name: (i.high - i.low) / 2 for i in inputs})
+    where = f"the keyframe {tree.key_name!r}" if tree.key_name else "the zero configuration"
+    notes = [
+        f"imported from the {kind} file {origin} through MuJoCo's compiler; derived by Kane's method",
+        *tree.notes,
+        f"operating point: {where}"
+        + ("" if tree.key_is_equilibrium or not inputs else " (its inputs solved so that it holds)"),
+        "defaults of the import (docs/models.md): design scales 0.2 rad, 0.5 m, 1 /s and half of "
+        "each input's range; sensor noise 1e-3 where the file gives none; 200 Hz",
+    ]
+    return SystemSpec(
+        name=name,
+        title=f"{tree.model_name} ({kind} model)",
+        description=(
+            f"{kind} model {tree.model_name!r}: {len(joints)} joint{'s' * (len(joints) != 1)}, "
+            f"{len(inputs)} motor{'s' * (len(inputs) != 1)}, {len(tree.bodies)} moving "
+            f"bod{'ies' if len(tree.bodies) != 1 else 'y'}."
+        ),
+        coordinates=coords,
+        units=units,
+        parameters=tuple(parameters),
+        inputs=tuple(inputs),
+        outputs=outputs,
+        operating_point=operating_point,
+        source=origin,
+        notes=tuple(notes),
+        region=region,
+        design_scales=design_scales,
+        sensor_noise=sensor_noise,
+        process_noise={f"{c}_dot": PROCESS_NOISE for c in coords},
+        control_rate=CONTROL_RATE,
+    )

@@ -1,0 +1,160 @@
+"""What a URDF says that MuJoCo's URDF reader does not keep.
+
+MuJoCo compiles a URDF's links and joints into the kinematic tree, but it
+ignores ``<transmission>`` elements (the actuators) and orders the joints
+by the tree rather than by the file. This module reads those few things
+with :mod:`xml.etree`: the document order of the moving joints, the
+transmissions (one joint, one actuator, a mechanical reduction), each
+joint's effort limit, and the checks that MuJoCo's reader does not make
+(a link without ``<inertial>``, a link that is the child of two joints).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+from equilibrist.errors import DefinitionError
+
+# Transmission types that pass the actuator's effort straight to one joint.
+_SIMPLE = ("SimpleTransmission",)
+# Hardware interfaces that command an effort (a force or torque).
+_EFFORT = ("EffortJointInterface",)
+_MOVING = ("revolute", "continuous", "prismatic")
+
+
+@dataclass(frozen=True)
+class Transmission:
+    """One actuator driving one joint: force ``reduction * u``, ``|u| <= limit``."""
+
+    actuator: str
+    joint: str
+    reduction: float
+    low: float
+    high: float
+
+
+@dataclass(frozen=True)
+class UrdfFacts:
+    joint_order: tuple[str, ...]  # moving joints in document order
+    transmissions: tuple[Transmission, ...]
+
+
+def _text(element: ET.Element | None) -> str:
+    return "" if element is None or element.text is None else element.text.strip()
+
+
+def _tail(kind: str) -> str:
+    return re.split(r"[/:]", kind.strip())[-1]
+
+
+def read_urdf(file: Path, data: bytes) -> UrdfFacts:
+    """The facts of the URDF *data* (the content of *file*)."""
+    where = file.name
+    try:
+        # Comments carry nothing; MuJoCo's lenient parser takes a "--" in one.
+        root = ET.fromstring(re.sub(rb"<!--.*?-->", b"", data, flags=re.S))
+    except ET.ParseError as exc:
+        raise DefinitionError(f"{where}: malformed XML: {exc}") from None
+    if root.tag != "robot":
+        raise DefinitionError(f"{where}: expected a <robot> root element (URDF), found <{root.tag}>")
+    links = {link.get("name", ""): link for link in root.findall("link")}
+    joints = {j.get("name", ""): j for j in root.findall("joint")}
+    # Links, children and loops.
+    parent_of: dict[str, str] = {}
+    for j in root.findall("joint"):
+        name = j.get("name", "")
+        child = j.find("child")
+        parent = j.find("parent")
+        if child is None or parent is None:
+            raise DefinitionError(f"{where}: joint {name!r} needs a <parent> and a <child> link")
+        c, p = child.get("link", ""), parent.get("link", "")
+        for link in (c, p):
+            if link not in links:
+                raise DefinitionError(f"{where}: joint {name!r} names an unknown link {link!r}")
+        if c in parent_of:
+            raise DefinitionError(
+                f"{where}: link {c!r} is the child of two joints ({parent_of[c]!r} and {name!r}): "
+                "a joint loop, which a kinematic tree can not hold"
+            )
+        parent_of[c] = name
+    for link in links:
+        seen = {link}
+        at = link
+        while at in parent_of:
+            parent_link = joints[parent_of[at]].find("parent")
+            assert parent_link is not None
+            at = parent_link.get("link", "")
+            if at in seen:
+                raise DefinitionError(f"{where}: the joints form a loop through link {link!r}")
+            seen.add(at)
+    for link_name, element in links.items():
+        if (link_name in parent_of and joints[parent_of[link_name]].get("type") in _MOVING
+                and element.find("inertial") is None):
+            raise DefinitionError(
+                f"{where}: link {link_name!r} has no <inertial>: a moving link needs its mass and inertia"
+            )
+    order = tuple(j.get("name", "") for j in root.findall("joint") if j.get("type") in _MOVING)
+    transmissions = []
+    driven: dict[str, str] = {}
+    for t in root.findall("transmission"):
+        tname = t.get("name", "")
+        kind = _text(t.find("type")) or t.get("type", "")
+        if _tail(kind) not in _SIMPLE:
+            raise DefinitionError(
+                f"{where}: transmission {tname!r} of type {kind!r} is not modelled "
+                "(expected transmission_interface/SimpleTransmission)"
+            )
+        tj = t.findall("joint")
+        ta = t.findall("actuator")
+        if len(tj) != 1 or len(ta) != 1:
+            raise DefinitionError(f"{where}: transmission {tname!r} must have one <joint> and one <actuator>")
+        jname = tj[0].get("name", "")
+        if jname not in joints:
+            raise DefinitionError(f"{where}: transmission {tname!r} drives an unknown joint {jname!r}")
+        if joints[jname].get("type") not in _MOVING:
+            raise DefinitionError(
+                f"{where}: transmission {tname!r} drives joint {jname!r} of type "
+                f"{joints[jname].get('type')!r}, expected revolute, continuous or prismatic"
+            )
+        if jname in driven:
+            raise DefinitionError(
+                f"{where}: joint {jname!r} is driven by two transmissions ({driven[jname]!r} and {tname!r})"
+            )
+        driven[jname] = tname
+        interfaces = [_text(h) for h in tj[0].findall("hardwareInterface")]
+        interfaces += [_text(h) for h in ta[0].findall("hardwareInterface")]
+        if interfaces and not all(_tail(h) in _EFFORT for h in interfaces):
+            raise DefinitionError(
+                f"{where}: transmission {tname!r} uses {', '.join(interfaces)}: only effort "
+                "(EffortJointInterface) actuators are modelled"
+            )
+        aname = ta[0].get("name", "")
+        reduction_text = _text(ta[0].find("mechanicalReduction")) or _text(t.find("mechanicalReduction")) or "1"
+        try:
+            reduction = float(reduction_text)
+        except ValueError:
+            raise DefinitionError(
+                f"{where}: transmission {tname!r}: mechanicalReduction {reduction_text!r} is not a number"
+            ) from None
+        if not math.isfinite(reduction) or reduction == 0:
+            raise DefinitionError(f"{where}: transmission {tname!r}: mechanicalReduction must be a nonzero number")
+        limit = joints[jname].find("limit")
+        effort_text = None if limit is None else limit.get("effort")
+        if effort_text is None:
+            raise DefinitionError(
+                f"{where}: joint {jname!r} has no effort limit (<limit effort=...>): the limits of "
+                f"actuator {aname!r} come from it"
+            )
+        try:
+            effort = float(effort_text)
+        except ValueError:
+            raise DefinitionError(f"{where}: joint {jname!r}: effort {effort_text!r} is not a number") from None
+        if not (math.isfinite(effort) and effort > 0):
+            raise DefinitionError(f"{where}: joint {jname!r}: effort limit {effort_text} must be > 0")
+        bound = effort / abs(reduction)
+        transmissions.append(Transmission(aname, jname, reduction, -bound, bound))
+    return UrdfFacts(joint_order=order, transmissions=tuple(transmissions))
