@@ -261,3 +261,20 @@ def test_a_random_sample_from_the_command_line_is_drawn_and_plotted(tmp_path, ca
     png = tmp_path / "r.png"
     assert main(["plot", str(out), "--out", str(png)]) == 0
     assert png.stat().st_size > 0
+
+
+@pytest.mark.parametrize(("text", "extra", "expected"), [
+    ('system = "cartpole"\nruns = 2\n[vary]\nm_p = "0.1:0.3:2"\nbogus = 1\n', [],
+     "unknown quantity 'bogus'"),
+    ('system = "cartpole"\nrunz = 2\n', [], "unknown key(s) runz"),
+    ('system = "cartpole"\n[vary\n', [], "not valid TOML"),
+    ('system = "cartpole"\n[vary]\nm_p = "0.1:0.3:2"\n', ["--runs", "3"], "drop --runs"),
+])
+def test_a_bad_study_file_is_one_line_exit_2(tmp_path, capsys, text, extra, expected):
+    toml = tmp_path / "study.toml"
+    toml.write_text(text)
+    out = tmp_path / "s.parquet"
+    assert main(["sweep", "--study", str(toml), *extra, "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and expected in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["study.toml"]
