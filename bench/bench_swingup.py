@@ -29,7 +29,7 @@ import numpy as np
 from equilibrist import get_system
 from equilibrist.control.controller import LinearController
 from equilibrist.control.design import design
-from equilibrist.control.swingup import LAWS, SwingUpRuntime, swingup
+from equilibrist.control.swingup import LAWS, python_namespace, swingup
 from equilibrist.sim.batch import simulate_batch
 from equilibrist.sim.noise import Noise
 from equilibrist.tasks import get_task
@@ -37,28 +37,49 @@ from equilibrist.tasks import get_task
 CHUNK = 200  # runs per recorded batch (memory)
 
 
+_REPLAY = """
+def replay(ys, uas, rows, p, z0, out_last_pump, out_mode):
+    for i in range(ys.shape[0]):
+        z = z0.copy()
+        zn = z0.copy()
+        u = np.zeros(1)
+        r = np.zeros(0)
+        last = -1
+        for k in range(rows[i]):
+            output(0.0, z, ys[i, k], r, p, u)
+            update(0.0, z, ys[i, k], r, uas[i, k], p, zn)
+            z[:] = zn
+            if z[SU_Z_MODE] != 1.0:
+                last = k
+        out_last_pump[i] = last
+        out_mode[i] = z[SU_Z_MODE]
+"""
+
+
 def swing_times(ctrl: object, batch: object, n_out: int, m: int) -> np.ndarray:
-    """Time of the last hand-over to the balance per run (NaN when it ends pumping)."""
-    rt = SwingUpRuntime(ctrl)  # type: ignore[arg-type]
-    out = np.full(batch.runs, np.nan)  # type: ignore[attr-defined]
+    """Time of the last hand-over to the balance per run (NaN when it ends pumping).
+
+    The controller's own compiled functions replay each run's recorded
+    measurements and applied inputs, so the mode is the one the batch had.
+    """
+    from numba import njit
+
+    ns = dict(python_namespace(compiled=True))
+    ns["np"] = np
+    exec(_REPLAY, ns)
+    replay = njit(ns["replay"])
     traj = batch.trajectories  # type: ignore[attr-defined]
     n = len(batch.state_names)  # type: ignore[attr-defined]
     c_y = 2 * n
     c_app = c_y + n_out + 2 * m
-    r = np.zeros(0)
-    for i in range(batch.runs):  # type: ignore[attr-defined]
-        rt.reset()
-        last_pump = -1
-        rows = int(batch.rows[i])  # type: ignore[attr-defined]
-        for k in range(rows):
-            y = traj[i, k, c_y:c_y + n_out]
-            rt.output(0.0, y, r)
-            rt.update(0.0, y, r, traj[i, k, c_app:c_app + m])
-            if rt.mode != "balance":
-                last_pump = k
-        if rt.mode == "balance":
-            out[i] = (last_pump + 1) / ctrl.rate  # type: ignore[attr-defined]
-    return out
+    ys = np.ascontiguousarray(traj[:, :, c_y:c_y + n_out])
+    uas = np.ascontiguousarray(traj[:, :, c_app:c_app + m])
+    runs = ys.shape[0]
+    last = np.zeros(runs, dtype=np.int64)
+    mode = np.zeros(runs)
+    replay(ys, uas, np.asarray(batch.rows, dtype=np.int64), np.array(ctrl.params),  # type: ignore[attr-defined]
+           np.array(ctrl.z0), last, mode)  # type: ignore[attr-defined]
+    return np.where(mode == 1.0, (last + 1) / ctrl.rate, np.nan)  # type: ignore[attr-defined]
 
 
 def bench_system(name: str, runs: int, seed: int) -> dict[str, object]:
