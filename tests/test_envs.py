@@ -371,6 +371,17 @@ def test_vector_sensor_noise_has_the_rigs_spread() -> None:
         assert err[:, j].std() == pytest.approx(sigma, rel=0.05)
 
 
+def test_vector_render_draws_every_copy() -> None:
+    vec = _vec(2, render_mode="rgb_array")
+    vec.reset(seed=0)
+    vec.step(np.array([[0.5], [-0.5]]))
+    frames = vec.render()
+    assert frames is not None and len(frames) == 2
+    assert frames[0].dtype == np.uint8 and frames[0].shape == frames[1].shape
+    assert not np.array_equal(frames[0], frames[1])
+    vec.close()
+
+
 def test_vector_rejects_bad_input() -> None:
     vec = _vec(2)
     with pytest.raises(EnvError, match="reset"):
