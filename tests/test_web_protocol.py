@@ -98,6 +98,7 @@ def opening(ws):
         ('{"type": "reset", "kick": 7}', "out of range"),
         ('{"type": "push", "size": 1, "seq": -1}', "seq"),
         ('{"type": "push", "size": 1, "seq": 1.5}', "seq"),
+        ('{"type": "seen", "frame": -3}', "frame must be an integer"),
         ("[" * 8000 + "]" * 8000, "not valid JSON"),
     ],
 )
@@ -123,6 +124,7 @@ def test_parse_accepts_the_documented_messages():
     assert parse('{"type": "push", "size": -1, "duration": 0.2}', LIMITS).fields == {
         "size": -1.0, "duration": 0.2}
     assert parse('{"type": "select", "system": "seesaw"}', LIMITS).fields == {"system": "seesaw"}
+    assert parse('{"type": "seen", "frame": 12}', LIMITS).fields == {"frame": 12}
 
 
 # -- the server --------------------------------------------------------------------------------
@@ -381,3 +383,63 @@ def test_play_command_warns_off_loopback_and_refuses_bad_input():
                           "--no-browser"], check=False, capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "no input" in bad.stderr and "Traceback" not in bad.stderr
     assert Path(__file__).exists()
+
+
+def test_session_runs_the_controller_contract_as_its_reference_does():
+    """The session's numpy loop against the contract's own (numba-source) output and update."""
+    from equilibrist.control.controller import LinearController
+    from equilibrist.web.session import Session, _Linear
+
+    session = Session(Catalogue.default(), "cartpole", seed=3)
+    design = session.loop.design
+    ctrl = LinearController.from_design(design, kind="lqg")
+    fast = _Linear(ctrl, session.system)
+    rng = np.random.default_rng(0)
+    z = np.array(ctrl.z0)
+    for _ in range(50):
+        y = ctrl.y_op + rng.normal(scale=0.05, size=len(ctrl.output_names))
+        u = fast.output(y)
+        np.testing.assert_allclose(u, ctrl.output(z, y), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(fast.estimate(), ctrl.estimate(z, y), rtol=1e-12, atol=1e-12)
+        u_applied = np.clip(u, -50, 50)
+        fast.update(u_applied)
+        z = ctrl.update(z, y, (), u_applied)
+        np.testing.assert_allclose(fast.z, z, rtol=1e-12, atol=1e-12)
+
+
+def test_a_page_that_lags_is_not_flooded():
+    """A page that reports the frames it drew gets no more than a dozen ahead of it
+    (over a real socket: the test client hands frames over one at a time)."""
+    import asyncio
+
+    import websockets
+
+    async def check(url: str) -> None:
+        async with websockets.connect(url) as ws:
+            while (msg := json.loads(await ws.recv()))["type"] != "frame":
+                pass
+            n0 = msg["n"]
+            await ws.send(json.dumps({"type": "seen", "frame": n0}))
+            await asyncio.sleep(1.5)  # the page draws nothing for 60 frames' time
+            numbers = []
+            try:
+                while True:
+                    msg = json.loads(await asyncio.wait_for(ws.recv(), 0.5))
+                    if msg["type"] == "frame":
+                        numbers.append(msg["n"])
+            except TimeoutError:
+                pass
+            assert numbers and max(numbers) <= n0 + 13 and len(numbers) < 30
+            # Once it catches up, frames flow again, with the samples it missed.
+            await ws.send(json.dumps({"type": "seen", "frame": max(numbers)}))
+            while (msg := json.loads(await ws.recv()))["type"] != "frame":
+                pass
+            assert msg["n"] == max(numbers) + 1
+            assert len(msg["samples"]["t"]) > 100  # 2 s of samples at 100 a second
+
+    proc, line = _start()
+    try:
+        asyncio.run(check(line.split()[3].replace("http://", "ws://") + "ws"))
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=20)

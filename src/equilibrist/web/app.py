@@ -237,7 +237,8 @@ async def _stream(ws: Any, session: Session) -> None:
         session.advance_to(loop.time())
         for message in session.take_messages():
             await _send(ws, message)
-        await _send(ws, session.frame())
+        if not session.behind():
+            await _send(ws, session.frame())
         deadline += period
         now = loop.time()
         if deadline < now - period:  # fell behind: do not burst to catch up

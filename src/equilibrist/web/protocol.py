@@ -45,6 +45,7 @@ FIELDS: dict[str, tuple[frozenset[str], frozenset[str]]] = {
     "reset": (frozenset({"kick"}), frozenset()),
     "pause": (frozenset({"paused"}), frozenset({"paused"})),
     "full": (frozenset(), frozenset()),
+    "seen": (frozenset({"frame"}), frozenset({"frame"})),
 }
 
 
@@ -231,6 +232,13 @@ def _full(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
     return {}
 
 
+def _seen(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+    raw = data["frame"]
+    if isinstance(raw, bool) or not isinstance(raw, int) or not SEQ_RANGE[0] <= raw <= SEQ_RANGE[1]:
+        raise ProtocolError(f"frame must be an integer from 0 to 2^53, got {_short(raw)}")
+    return {"frame": raw}
+
+
 _FIELD_CHECKS = {
     "select": _select,
     "tune": _tune,
@@ -239,6 +247,7 @@ _FIELD_CHECKS = {
     "reset": _reset,
     "pause": _pause,
     "full": _full,
+    "seen": _seen,
 }
 
 __all__ = ["CONTROLLERS", "FIELDS", "MAX_MESSAGE_BYTES", "Limits", "Message", "ProtocolError", "parse"]

@@ -14,9 +14,9 @@ How a sample runs (the rig as the simulator runs it, :mod:`equilibrist.sim.run`)
 1. the sensors read the design's outputs with the rig's sensor noise times
    the ``noise`` setting;
 2. the controller: ``"lqg"`` the design's discrete Kalman filter and LQR
-   gain (the simulation's reference runtime of
-   :class:`~equilibrist.sim.controllers.LQG`); ``"lqr"`` the gain on the
-   true state; ``"off"`` holds the operating point's input;
+   gain, ``"lqr"`` the gain on the true state (both as the one controller
+   contract, :class:`~equilibrist.control.controller.LinearController`,
+   run in numpy); ``"off"`` holds the operating point's input;
 3. the actuator saturates the command at the input limits (the ``limit``
    setting scales the rig's limits);
 4. a push adds to the first input for its duration, beyond the limits (as
@@ -59,6 +59,7 @@ from equilibrist.errors import DesignError, EquilibristError
 from equilibrist.web.protocol import CONTROLLERS, Limits, Message
 
 if TYPE_CHECKING:
+    from equilibrist.control.controller import LinearController
     from equilibrist.control.design import Design
     from equilibrist.numeric.system import System
     from equilibrist.sim.result import SimResult
@@ -83,6 +84,10 @@ SCALE_FACTOR = 100.0
 NOISE_FLOOR = 0.05
 #: Digits of the drawing's coordinates sent to the page.
 DIGITS = 5
+#: Frames a page that reports what it has drawn may be behind before frames are held back.
+MAX_UNSEEN = 12
+#: Chart samples kept for a page that is behind (the oldest are dropped).
+MAX_CHART_SAMPLES = 2000
 
 
 class SessionError(EquilibristError, ValueError):
@@ -230,28 +235,62 @@ def describe_design(d: Design, controller: str, seconds: float) -> dict[str, Any
 # -- the running loop ----------------------------------------------------------------
 
 
-class _Loop:
-    """The controller in force: the design's runtime, and what it was made for."""
+class _Linear:
+    """One :class:`~equilibrist.control.controller.LinearController` run sample by sample.
 
-    def __init__(self, d: Design, controller: str, system: System,
-                 previous: _Loop | None = None) -> None:
-        from equilibrist.sim.controllers import LQG, StateFeedback
+    The contract's form in deviation coordinates (``dy = y - y_op``, no
+    reference: ``dr = 0``)::
+
+        u = u_op + Cc z + Dy dy,   x_hat = x_op + Ez z + Ey dy,
+        z+ = Ac z + By dy + Bu (u_applied - u_op)
+
+    in plain numpy: a few small products per sample.
+    """
+
+    def __init__(self, ctrl: LinearController, system: System) -> None:
+        self.ctrl = ctrl
+        self.idx = np.array([system.state_index(o) for o in ctrl.output_names], dtype=np.int64)
+        self.z = np.array(ctrl.z0, dtype=float)
+        self._dy = np.zeros(len(ctrl.output_names))
+
+    def start_at(self, x_estimate: np.ndarray) -> None:
+        self.z = self.ctrl.state_map @ (np.asarray(x_estimate, dtype=float) - self.ctrl.x_op)
+
+    def output(self, y: np.ndarray) -> np.ndarray:
+        c = self.ctrl
+        self._dy = y - c.y_op
+        return c.u_op + c.Cc @ self.z + c.Dy @ self._dy
+
+    def estimate(self) -> np.ndarray:
+        c = self.ctrl
+        return c.x_op + c.Ez @ self.z + c.Ey @ self._dy
+
+    def update(self, u_applied: np.ndarray) -> None:
+        c = self.ctrl
+        self.z = c.Ac @ self.z + c.By @ self._dy + c.Bu @ (u_applied - c.u_op)
+
+
+class _Loop:
+    """The controllers of one design: LQG (in charge, or its filter running alongside for
+    the estimate and a bumpless switch) and LQR on the true state."""
+
+    def __init__(self, d: Design, system: System, previous: _Loop | None = None) -> None:
+        from equilibrist.control.controller import LinearController
 
         self.design = d
-        self.kind = controller
         self.x_op = np.array(d.plant.x0, dtype=float)
         self.u_op = np.array(d.plant.u0, dtype=float)
         self.outputs = tuple(d.plant.output_names)
         self.out_idx = np.array([system.state_index(o) for o in self.outputs], dtype=np.int64)
-        self.lqg = LQG.from_design(d).runtime(system.state_names)
-        self.lqr = StateFeedback.from_design(d).runtime(system.state_names)
+        self.lqg = _Linear(LinearController.from_design(d, kind="lqg"), system)
+        self.lqr = _Linear(LinearController.from_design(d, kind="lqr"), system)
         if previous is not None:
-            # The filter goes on from where the previous one was.
-            self.lqg.z = previous.lqg.z + previous.x_op - self.x_op
+            # The new filter goes on from the previous one's estimate.
+            self.lqg.start_at(previous.lqg.estimate())
 
     def reset(self) -> None:
-        self.lqg.reset()
-        self.lqr.reset()
+        self.lqg.z = np.array(self.lqg.ctrl.z0, dtype=float)
+        self.lqr.z = np.array(self.lqr.ctrl.z0, dtype=float)
 
 
 @dataclass
@@ -313,6 +352,8 @@ class Session:
         self.rng = np.random.default_rng(seed)
         self.paused = False
         self.busy = False  # True while another thread rebuilds the session
+        self.frame_no = 0  # frames made
+        self.seen: int | None = None  # the last frame the page said it drew
         self.pending_design = 0  # id of the latest design asked for
         self.messages: list[dict[str, Any]] = []  # frames to send besides the next frame
         self.load(system)
@@ -339,7 +380,7 @@ class Session:
         self.settings = settings
         self.kernel = load_kernel(system)
         self.scene: Scene = scene_for(system)
-        self.loop = _Loop(d, settings.controller, system)
+        self.loop = _Loop(d, system)
         self.limits = self._limits()
         self.state_names = system.state_names
         coords = [s for s in system.state_names if not s.endswith("_dot")] or list(system.state_names)
@@ -358,6 +399,10 @@ class Session:
         self.messages.append(self.describe())
         self.messages.append(self.design_message)
         self.reset(kick=0.5 * float(spec.design_scales.get(system.state_names[self.angle_index], 0.1)))
+        # Compile (or load) the core's entry now, in the thread that builds the session,
+        # not at the first sample on the server's event loop.
+        self.kernel.rk4_steps(self.x.copy(), np.ascontiguousarray(self.u_app, dtype=float),
+                              self.p, self.h, 0)
 
     @staticmethod
     def _param_specs(base: System) -> list[Any]:
@@ -495,6 +540,8 @@ class Session:
         elif message.type == "pause":
             self.paused = f["paused"]
             self._anchor(None)
+        elif message.type == "seen":
+            self.seen = min(int(f["frame"]), self.frame_no)
         elif message.type == "full":
             self.sent_shapes = {}
             self.messages.append(self.describe())
@@ -523,7 +570,7 @@ class Session:
         low, high = system.input_limits
         self.u_low, self.u_high = np.asarray(low, float), np.asarray(high, float)
         if d is not None:
-            self.loop = _Loop(d, settings.controller, system, previous=self.loop)
+            self.loop = _Loop(d, system, previous=self.loop)
             self.design_message = describe_design(d, settings.controller, seconds)
             self.messages.append(self.design_message)
         if rate_changed:
@@ -561,18 +608,17 @@ class Session:
         if self.settings.noise > 0 and self.sigma_y.size:
             y = y + self.settings.noise * self.sigma_y * self.rng.standard_normal(self.sigma_y.size)
         kind = self.settings.controller
-        r = np.zeros(0)
         # The filter runs whichever controller is in charge, so that switching is bumpless.
-        u_lqg = loop.lqg.step(self.t, y, r)
+        u_lqg = loop.lqg.output(y)
         if kind == "lqg":
             u_cmd = u_lqg
         elif kind == "lqr":
-            u_cmd = loop.lqr.step(self.t, x, r)
+            u_cmd = loop.lqr.output(x[loop.lqr.idx])
         else:
             u_cmd = loop.u_op
         u_sat = np.minimum(np.maximum(u_cmd, self.u_low), self.u_high)
-        loop.lqg.applied(u_sat)
-        xhat = x.copy() if kind == "lqr" else np.asarray(loop.lqg.estimate, dtype=float)
+        xhat = x.copy() if kind == "lqr" else loop.lqg.estimate()
+        loop.lqg.update(u_sat)
         u_app = u_sat.copy()
         if self.push_left > 0:
             u_app[0] += self.push_value
@@ -614,6 +660,20 @@ class Session:
         return {"fraction": float(np.clip(frac[i], 0.0, 1.0)) if np.isfinite(frac[i]) else 0.0,
                 "state": self.state_names[int(self.region_idx[i])]}
 
+    def behind(self) -> bool:
+        """Whether the page is too far behind to be sent another frame now.
+
+        A page that reports the frames it drew (``seen``) gets frames no
+        faster than it draws them; the chart samples wait for the next frame
+        it gets. A client that never reports gets every frame.
+        """
+        if self.seen is None or self.frame_no - self.seen <= MAX_UNSEEN:
+            return False
+        if len(self.chart_t) > MAX_CHART_SAMPLES:
+            cut = len(self.chart_t) - MAX_CHART_SAMPLES
+            del self.chart_t[:cut], self.chart_x[:cut], self.chart_xhat[:cut], self.chart_u[:cut]
+        return True
+
     def frame(self) -> dict[str, Any]:
         """The ``frame`` message for the page (and clears the chart samples sent)."""
         shapes = []
@@ -629,8 +689,10 @@ class Session:
             shapes.append({"key": s.key, "kind": s.kind, "points": flat, "color": s.color,
                            "width": s.width, "z": s.z, "text": s.text, "edge": s.edge,
                            "bounds": s.bounds})
+        self.frame_no += 1
         out = {
             "type": "frame",
+            "n": self.frame_no,
             "t": round(self.t, 6),
             "x": self.x.tolist(),
             "xhat": self.xhat.tolist(),

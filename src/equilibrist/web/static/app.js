@@ -10,7 +10,7 @@
     ws: null, sys: null, design: null, token: null, seq: 0,
     shapes: new Map(), view: null, frame: null, fell: null,
     charts: [], data: null, tuneInFlight: null, tunePending: null,
-    drag: null, paused: false, lastFrameAt: 0, frames: 0, retries: 0,
+    drag: null, paused: false, lastFrameAt: 0, frames: 0, retries: 0, history: [],
   };
   window.playground = state; // for the page's tests and the curious
 
@@ -38,12 +38,11 @@
     };
   }
 
-  function send(obj) {
+  function send(obj, numbered = true) {
     if (!state.ws || state.ws.readyState !== WebSocket.OPEN) return null;
-    state.seq += 1;
-    obj.seq = state.seq;
+    if (numbered) { state.seq += 1; obj.seq = state.seq; }
     state.ws.send(JSON.stringify(obj));
-    return state.seq;
+    return numbered ? state.seq : null;
   }
 
   function setConnection(text) { $("connection").textContent = text; }
@@ -318,6 +317,11 @@
   function onFrame(f) {
     state.frame = f;
     state.frames += 1;
+    // Say what has been drawn, so that the server never runs ahead of a slow page.
+    if (f.n % 4 === 0) send({ type: "seen", frame: f.n }, false);
+    // The last frames' states, for the page's tests.
+    state.history.push({ t: f.t, x: f.x, push: f.push, pushes: f.pushes });
+    if (state.history.length > 240) state.history.shift();
     for (const s of f.shapes) state.shapes.set(s.key, s);
     appendSamples(f.samples);
     state.fell = f.fell;
@@ -340,11 +344,12 @@
       $("margin").value = f.margin.fraction;
       $("margin-text").textContent = `${Math.round(100 * f.margin.fraction)} % (${f.margin.state})`;
     }
+    // The strip charts redraw 15 times a second (the drawing at every frame).
     const now = performance.now();
-    if (now - state.lastFrameAt > 60 || f.samples.t.length) {
+    if (now - state.lastFrameAt > 66) {
       for (const c of state.charts) c.plot.setData(c.dataFn(state.data));
+      state.lastFrameAt = now;
     }
-    state.lastFrameAt = now;
   }
 
   // ---- the drawing ---------------------------------------------------------------------------
