@@ -280,16 +280,19 @@ def test_human_rendering_without_a_display_says_so(monkeypatch: pytest.MonkeyPat
 # -- the vector environment ------------------------------------------------------------------------
 
 
-def _vec(n: int, **kwargs: object) -> EquilibristVectorEnv:
-    env = gym.make_vec("equilibrist/cartpole-balance-v0", num_envs=n,
-                       vectorization_mode="vector_entry_point", **kwargs)
+def _vec(n: int, env_id: str = "equilibrist/cartpole-balance-v0", **kwargs: object
+         ) -> EquilibristVectorEnv:
+    env = gym.make_vec(env_id, num_envs=n, vectorization_mode="vector_entry_point", **kwargs)
     assert isinstance(env, EquilibristVectorEnv)
     return env
 
 
-def test_vector_copy_is_the_single_env() -> None:
-    vec = _vec(5, noise=False, randomize={"m_p": 0.2})
-    single = _make("equilibrist/cartpole-balance-v0", noise=False)
+@pytest.mark.parametrize("env_id", ["equilibrist/cartpole-balance-v0",
+                                    "equilibrist/cartpole-swingup-v0"])
+def test_vector_copy_is_the_single_env(env_id: str) -> None:
+    """Observations and rewards, copy by copy, with randomized parameters."""
+    vec = _vec(5, env_id, noise=False, randomize={"m_p": 0.2})
+    single = _make(env_id, noise=False)
     obs, info = vec.reset(seed=9)
     x0 = info["state"]
     params = vec.parameters
@@ -297,16 +300,16 @@ def test_vector_copy_is_the_single_env() -> None:
     actions = rng.uniform(-0.2, 0.2, (30, 5, 1))
     out = []
     for a in actions:
-        out.append(vec.step(a)[0])
+        out.append(vec.step(a)[:2])
     for i in range(5):
         names = single.core.system.spec.parameter_names
-        env = _make("equilibrist/cartpole-balance-v0", noise=False,
-                    params={"m_p": params[i, names.index("m_p")]})
+        env = _make(env_id, noise=False, params={"m_p": params[i, names.index("m_p")]})
         o, _ = env.reset(options={"state": x0[i]})
         np.testing.assert_array_equal(o, obs[i])
         for k in range(30):
-            o, *_ = env.step(actions[k, i])
-            np.testing.assert_allclose(o, out[k][i], rtol=0, atol=1e-13)
+            o, reward, *_ = env.step(actions[k, i])
+            np.testing.assert_allclose(o, out[k][0][i], rtol=0, atol=1e-13)
+            assert reward == pytest.approx(out[k][1][i], rel=1e-12, abs=1e-15)
     assert not np.allclose(params[0], params[1])
 
 
