@@ -131,6 +131,7 @@ def one_line(message: str) -> str:
     if not lines:
         return "MuJoCo could not read the model"
     what = re.sub(r"^(Error|XML Error|Parse error)\s*:\s*", "", lines[0]).rstrip(".")
+    what = what.replace("mjMINVAL", "1e-15 (mjMINVAL)")
     where = ""
     for ln in lines[1:]:
         found = re.search(r"line (\d+)", ln)
@@ -352,7 +353,7 @@ def read_tree(
         data.ctrl[:] = ctrl
     model.opt.disableflags |= int(D.mjDSBL_CONSTRAINT)
     mujoco.mj_forward(model, data)
-    key_is_equilibrium = bool(np.all(np.abs(data.qacc) < 1e-9 * (1.0 + np.abs(data.qfrc_bias).max())))
+    key_is_equilibrium = bool(np.all(np.abs(data.qacc) < 1e-9 * (1.0 + np.abs(data.qfrc_bias).max(initial=0.0))))
     gravity = np.asarray(model.opt.gravity, float)
     vertical: list[str] = []
     g_norm = float(np.linalg.norm(gravity))
