@@ -21,10 +21,11 @@ With the noise levels right this is the maximum a-posteriori estimate of the
 parameters and of the segment states together (the process noise acting
 inside a segment is lumped at its end, which is why segments are kept short:
 by default as long as the process noise moves the outputs by at most half a
-sensor standard deviation over one segment). The noise levels start from the
-system's spec (sensor and process noise) and are re-estimated from the
-residuals of a first fit (one scale per sensor, one for the process noise),
-then the fit is repeated.
+sensor standard deviation over one segment, at least 5 samples). The noise
+levels start from the system's spec (sensor and process noise) and are re-estimated after a first
+fit: each sensor's variance from its residuals over their redundancy (rows
+minus leverage), the process noise's scale as the one that makes the fitted
+model's Kalman filter most likely; then the fit is repeated.
 
 Integration: RK4 with the input held, at most ``max_step`` per step (1 ms by
 default, as the simulator), compiled with numba over the system's generated
@@ -59,7 +60,7 @@ from typing import Any
 
 import numpy as np
 
-from equilibrist.errors import nearest
+from equilibrist.errors import EquilibristError, nearest
 from equilibrist.ident.log import IdentificationError, Log
 from equilibrist.numeric.system import System
 
@@ -69,6 +70,10 @@ DEFAULT_MAX_STEP = 1e-3
 # Segment length rule: process noise may move an output by this fraction of
 # the sensor variance over one segment.
 SEGMENT_NOISE_RATIO = 0.25
+# The shortest default segment, in samples: shorter ones multiply the
+# decision variables for little gain where the sensors are far finer than
+# the process noise.
+MIN_SEGMENT_SAMPLES = 5
 MAX_SEGMENT_SECONDS = 1.0
 # A log-parameter direction whose information is below this fraction of the
 # largest is not determined at all; one whose standard deviation exceeds
@@ -240,9 +245,11 @@ class Identification:
             lines += ["", "correlation:"]
             names = [e.name for e in self.estimates]
             width = max(len(n) for n in names)
-            lines.append(" " * (width + 2) + "".join(f"{n:>10}" for n in names))
+            col = max(10, width + 2)
+            lines.append(" " * (width + 2) + "".join(f"{n:>{col}}" for n in names))
             for n, row in zip(names, self.correlation, strict=True):
-                lines.append(f"  {n:<{width}}" + "".join(f"{v:>10.3f}" for v in row))
+                lines.append(f"  {n:<{width}}" + "".join(
+                    f"{v:>{col}.3f}" if math.isfinite(v) else f"{'-':>{col}}" for v in row))
         lines += ["", "fit per output (replayed segment by segment):"]
         rows = [(o.name, f"{o.nrmse:.4f}", f"{o.fit_percent:.1f} %", f"{o.rms_residual:.3g} {o.unit}",
                  f"{o.sensor_std:.3g} {o.unit}",
@@ -324,9 +331,7 @@ def _guess_states(system: System, log: Log) -> np.ndarray:
     n_rows = log.n_rows
     try:
         base = np.array(system.operating_point().x)
-    except IdentificationError:  # pragma: no cover
-        base = np.zeros(system.n_states)
-    except Exception:
+    except EquilibristError:  # a system without an operating point starts at zero
         base = np.zeros(system.n_states)
     x = np.tile(base, (n_rows, 1))
     dt = float(np.median(np.diff(log.time)))
@@ -573,7 +578,7 @@ def _linearization(system: System, xs: np.ndarray, u_mean: np.ndarray) -> np.nda
     x_mid = np.median(xs, axis=0)
     try:
         A, _B = system.jacobians(x_mid, u_mean)
-    except Exception:
+    except EquilibristError:  # a singular point: the segments' covariance without drift
         A = np.zeros((system.n_states, system.n_states))
     return A
 
@@ -581,12 +586,13 @@ def _linearization(system: System, xs: np.ndarray, u_mean: np.ndarray) -> np.nda
 def _segment_samples(A: np.ndarray, q: np.ndarray, c_idx: np.ndarray, sigma_y: np.ndarray,
                      dt: float, n_rows: int) -> int:
     """Samples per segment: the longest over which process noise moves each output
-    by at most SEGMENT_NOISE_RATIO of its sensor variance."""
-    cap = max(2, min(n_rows - 1, int(MAX_SEGMENT_SECONDS / dt)))
+    by at most SEGMENT_NOISE_RATIO of its sensor variance (at least
+    MIN_SEGMENT_SAMPLES)."""
+    cap = max(MIN_SEGMENT_SAMPLES, min(n_rows - 1, int(MAX_SEGMENT_SECONDS / dt)))
     if not np.any(q > 0):
         return cap
-    best = 2
-    for L in range(2, cap + 1):
+    best = MIN_SEGMENT_SAMPLES
+    for L in range(MIN_SEGMENT_SAMPLES, cap + 1):
         Q = _van_loan(A, np.diag(q), L * dt)
         ratio = np.diag(Q)[c_idx] / sigma_y**2
         if np.max(ratio) > SEGMENT_NOISE_RATIO:
@@ -645,7 +651,7 @@ def identify(
     segment : float, optional
         Length of the shooting segments [s]; by default the longest over
         which process noise moves the outputs by at most half a sensor
-        standard deviation.
+        standard deviation (at least 5 samples).
     max_step : float
         Longest RK4 step [s].
     sensor_noise, process_noise : mapping, optional
@@ -735,22 +741,24 @@ def identify(
         # Variance components (Helmert): each group's sum of squares over its
         # redundancy (its rows minus their leverage), so that the states
         # fitted to the residuals do not make the noise look smaller.
-        _theta, _off, xs = prob.split(sol.x)
+        theta, off, xs = prob.split(sol.x)
         r = prob.residuals(sol.x)
         n_out = n_rows * ny
-        groups = [np.arange(j, n_out, ny) for j in range(ny)] + [np.arange(n_out, r.size)]
+        groups = [np.arange(j, n_out, ny) for j in range(ny)]
         lev = _leverage(prob.jacobian(sol.x), groups)
         ry = r[:n_out].reshape(n_rows, ny)
         ratio_y = np.sum(ry**2, axis=0) / np.maximum(n_rows - lev[:ny], 1.0)
         sigma_y = sigma_y * np.sqrt(ratio_y)
-        ratio_q = 1.0
-        if n_seg > 1 and np.any(q > 0):
-            rd = r[n_out:]
-            ratio_q = float(rd @ rd) / max(rd.size - float(lev[ny]), 1.0)
-            q = q * ratio_q
-            q_scale *= ratio_q
         A = _linearization(system, xs, u_mean)
         prob.sigma_y = sigma_y
+        # The process noise: the scale that makes the fitted model's Kalman
+        # filter most likely (the segment defects alone understate it: the
+        # segment states absorb part of the noise acting inside a segment).
+        ratio_q = 1.0
+        if np.any(q > 0):
+            ratio_q = _process_scale(system, log, prob, theta, off, xs[0], A, q, floor, dt)
+            q = q * ratio_q
+            q_scale *= ratio_q
         prob.W = _whitening(A, q, floor, durations)
         sol = fit(sol.x)
         if max(abs(ratio_q - 1.0), float(np.max(np.abs(ratio_y - 1.0)))) < 0.05:
@@ -826,14 +834,27 @@ def _answer(system: System, log: Log, prob: _Problem, sol: Any, theta0: np.ndarr
     lam_max = float(max(lam.max(), 1e-300))
     undetermined = np.zeros(nh, dtype=bool)
     directions: list[str] = []
+    weak = np.zeros(nh, dtype=bool)
+    weakest = 0.0
     for k in range(nh):
         structural = lam[k] <= STRUCTURAL_RATIO * lam_max
         std_log = math.sqrt(s2 / lam[k]) if lam[k] > 0 else math.inf
-        if structural or std_log > WEAK_LOG_STD:
-            v = V[:, k]
-            directions.append(_name_direction(names, v, prob.n_theta, structural, std_log))
-            if structural:
-                undetermined |= np.abs(v) >= 0.2 * np.abs(v).max()
+        v = V[:, k]
+        involved = np.abs(v) >= 0.2 * np.abs(v).max()
+        if structural:
+            directions.append(_name_direction(names, v, prob.n_theta))
+            undetermined |= involved
+        elif std_log > WEAK_LOG_STD:
+            weak |= involved
+            weakest = max(weakest, std_log)
+    weak &= ~undetermined
+    if weak.any():
+        who = [n for n, w in zip(names, weak, strict=True) if w]
+        directions.append(
+            f"{_and(who)} {'is' if len(who) == 1 else 'are'} not determined by this log: "
+            f"relative changes of up to +-{100 * min(weakest, 99.99):.0f} % "
+            f"{'of it' if len(who) == 1 else 'along a combination of them'} fit as well "
+            "(excite the rig more, or fix what you know with --set)")
     # Covariance: the pseudo-inverse on the determined directions.
     keep = lam > STRUCTURAL_RATIO * lam_max
     cov_l = (V[:, keep] / lam[keep]) @ V[:, keep].T * s2
@@ -844,6 +865,8 @@ def _answer(system: System, log: Log, prob: _Problem, sol: Any, theta0: np.ndarr
         d = np.sqrt(np.diag(cov))
         corr = cov / np.outer(d, d)
     corr = np.where(np.isfinite(corr), corr, 0.0)
+    corr[undetermined, :] = np.nan  # no correlation of what is not determined
+    corr[:, undetermined] = np.nan
     np.fill_diagonal(corr, 1.0)
     units = {p.name: p.unit for p in system.spec.parameters}
     estimates = []
@@ -856,7 +879,7 @@ def _answer(system: System, log: Log, prob: _Problem, sol: Any, theta0: np.ndarr
     warnings = []
     for i in range(nh):
         for j in range(i):
-            if abs(corr[i, j]) > 0.99 and not (undetermined[i] or undetermined[j]):
+            if math.isfinite(corr[i, j]) and abs(corr[i, j]) > 0.99 and not (undetermined[i] or undetermined[j]):
                 warnings.append(f"{names[i]} and {names[j]} are correlated {corr[i, j]:+.3f}: "
                                 "the log barely tells them apart")
     at_bound = {name for a, name in enumerate(prob.free) if sol.active_mask[a] != 0}
@@ -942,15 +965,31 @@ def _answer(system: System, log: Log, prob: _Problem, sol: Any, theta0: np.ndarr
     )
 
 
-def _innovations(system: System, log: Log, prob: _Problem, theta: np.ndarray, off: np.ndarray,
-                 x0: np.ndarray, A: np.ndarray, q: np.ndarray, floor: np.ndarray,
-                 dt: float) -> np.ndarray:
-    """Normalised one-step prediction errors of a Kalman filter of the fitted model.
+def _process_scale(system: System, log: Log, prob: _Problem, theta: np.ndarray, off: np.ndarray,
+                   x0: np.ndarray, A: np.ndarray, q: np.ndarray, floor: np.ndarray,
+                   dt: float) -> float:
+    """The factor on the process noise *q* that maximizes the likelihood of the
+    fitted model's Kalman filter prediction errors."""
+    from scipy.optimize import minimize_scalar
 
-    The filter predicts with the nonlinear model and corrects with the
-    steady-state gain of its linearization (the fitted noise levels): if
-    model and noise levels are right, these errors are white.
-    """
+    n_rows = log.n_rows
+
+    def nll(log_scale: float) -> float:
+        e, S = _kalman(system, log, prob, theta, off, x0, A, q * math.exp(log_scale), floor, dt)
+        if not np.all(np.isfinite(e)):
+            return math.inf
+        _sign, logdet = np.linalg.slogdet(S)
+        return float(n_rows * logdet + np.einsum("ki,ij,kj->", e, np.linalg.inv(S), e))
+
+    res = minimize_scalar(nll, bounds=(math.log(1e-3), math.log(1e3)), method="bounded",
+                          options={"xatol": 0.02})
+    return float(math.exp(res.x))
+
+
+def _kalman(system: System, log: Log, prob: _Problem, theta: np.ndarray, off: np.ndarray,
+            x0: np.ndarray, A: np.ndarray, q: np.ndarray, floor: np.ndarray,
+            dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Prediction errors of a Kalman filter of the model, and their covariance."""
     from scipy.linalg import expm, solve_discrete_are
 
     from equilibrist.ident.kernel import load_shooting
@@ -961,10 +1000,12 @@ def _innovations(system: System, log: Log, prob: _Problem, theta: np.ndarray, of
     Ad = expm(A * dt)
     Qd = _van_loan(A, np.diag(q), dt) + np.diag(floor)
     R = np.diag(prob.sigma_y**2)
-    try:
-        P = solve_discrete_are(Ad.T, C.T, Qd, R)
-    except (ValueError, np.linalg.LinAlgError):
-        P = Qd.copy()
+    P = _filter_riccati(Ad, C, Qd, R)
+    if P is None:
+        try:
+            P = solve_discrete_are(Ad.T, C.T, Qd, R)
+        except (ValueError, np.linalg.LinAlgError):
+            P = Qd.copy()
     Sinn = C @ P @ C.T + R
     gain = P @ C.T @ np.linalg.inv(Sinn)
     e = np.empty((log.n_rows, ny))
@@ -972,6 +1013,45 @@ def _innovations(system: System, log: Log, prob: _Problem, theta: np.ndarray, of
         prob.p_of(theta), np.ascontiguousarray(x0, dtype=float), log.time, log.inputs,
         prob.n_sub, prob.c_idx, np.ascontiguousarray(gain), log.outputs,
         np.ascontiguousarray(off, dtype=float), e)
+    return e, Sinn
+
+
+def _filter_riccati(Ad: np.ndarray, C: np.ndarray, Qd: np.ndarray, R: np.ndarray) -> np.ndarray | None:
+    """The Kalman predictor's steady covariance ``P = Ad P (I + C'R^-1 C P)^-1 Ad' + Qd`` by
+    the structure-preserving doubling algorithm (quadratic convergence; None if it does not)."""
+    n = Ad.shape[0]
+    A = Ad.T.copy()
+    G = C.T @ np.linalg.solve(R, C)
+    H = Qd.copy()
+    eye = np.eye(n)
+    for _ in range(60):
+        W = eye + G @ H
+        try:
+            WA = np.linalg.solve(W, A)
+            WG = np.linalg.solve(W, G)
+        except np.linalg.LinAlgError:
+            return None
+        H_next = H + A.T @ H @ WA
+        G = G + A @ WG @ A.T
+        A = A @ WA
+        if not np.all(np.isfinite(H_next)):
+            return None
+        if np.max(np.abs(H_next - H)) <= 1e-13 * max(1.0, float(np.max(np.abs(H_next)))):
+            return (H_next + H_next.T) / 2
+        H = H_next
+    return None
+
+
+def _innovations(system: System, log: Log, prob: _Problem, theta: np.ndarray, off: np.ndarray,
+                 x0: np.ndarray, A: np.ndarray, q: np.ndarray, floor: np.ndarray,
+                 dt: float) -> np.ndarray:
+    """Normalised one-step prediction errors of a Kalman filter of the fitted model.
+
+    The filter predicts with the nonlinear model and corrects with the
+    steady-state gain of its linearization (the fitted noise levels): if
+    model and noise levels are right, these errors are white.
+    """
+    e, Sinn = _kalman(system, log, prob, theta, off, x0, A, q, floor, dt)
     return e / np.sqrt(np.diag(Sinn))
 
 
@@ -987,43 +1067,31 @@ def _ljung_box(e: np.ndarray, chi2: Any) -> tuple[float, float, int]:
     return qv, float(chi2.sf(qv, h)), h
 
 
-def _name_direction(names: list[str], v: np.ndarray, n_theta: int, structural: bool,
-                    std_log: float) -> str:
-    """A direction of (log-)parameters the data cannot tell apart, in words."""
+def _and(names: Sequence[str]) -> str:
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+
+
+def _name_direction(names: list[str], v: np.ndarray, n_theta: int) -> str:
+    """A direction of (log-)parameters that changes nothing, in words."""
     mags = np.abs(v)
     idx = [int(i) for i in np.argsort(-mags) if mags[i] >= 0.2 * mags.max()]
-    how = "cannot be told apart by the model at all" if structural else \
-        f"is not determined by this log (+-{100 * min(std_log, 99.99):.0f} % along it)"
     if len(idx) == 1:
         name = names[idx[0]]
-        if structural:
-            return f"{name} does not change the measured outputs: it cannot be identified from them"
-        return f"{name} {how}"
+        if idx[0] >= n_theta:
+            return f"{name} cannot be told apart from the states themselves: it is not identifiable"
+        return f"{name} does not change the measured outputs: it cannot be identified from them"
     if len(idx) == 2 and all(i < n_theta for i in idx):
         a, b = idx
-        va, vb = v[a], v[b]
-        exponent = -va / vb  # the data depend on names[a] * names[b]**exponent only
+        exponent = -v[a] / v[b]  # the data depend on names[a] * names[b]**exponent only
         na, nb = names[a], names[b]
-        if abs(exponent - 1.0) < 0.1:
-            combo = f"{na}*{nb}"
-        elif abs(exponent + 1.0) < 0.1:
-            combo = f"{na}/{nb}"
-        elif abs(exponent - 2.0) < 0.1:
-            combo = f"{na}*{nb}^2"
-        elif abs(exponent + 2.0) < 0.1:
-            combo = f"{na}/{nb}^2"
-        elif abs(exponent - 0.5) < 0.05:
-            combo = f"{na}*sqrt({nb})"
-        elif abs(exponent + 0.5) < 0.05:
-            combo = f"{na}/sqrt({nb})"
-        else:
-            combo = f"{na}*{nb}^{exponent:.2g}"
-        if structural:
-            return f"{na} and {nb} only appear as {combo} here: fix one of them (--set) to identify the other"
-        return f"{na} and {nb}: only {combo} is determined by this log (+-{100 * min(std_log, 99.99):.0f} % along the other direction)"
+        forms = {1.0: f"{na}*{nb}", -1.0: f"{na}/{nb}", 2.0: f"{na}*{nb}^2",
+                 -2.0: f"{na}/{nb}^2", 0.5: f"{na}*sqrt({nb})", -0.5: f"{na}/sqrt({nb})"}
+        combo = next((f for e, f in forms.items() if abs(exponent - e) < 0.05 * max(1.0, abs(e))),
+                     f"{na}*{nb}^{exponent:.3g}")
+        return f"{na} and {nb} only appear as {combo} here: fix one of them (--set) to identify the other"
     parts = ", ".join(f"{names[i]} {v[i] / mags.max():+.2f}" for i in idx)
-    return (f"{', '.join(names[i] for i in idx)} are determined only in combination: the data "
-            f"{'cannot' if structural else 'barely'} tell apart relative changes along ({parts})")
+    return (f"{_and([names[i] for i in idx])} are determined only in combination: the data "
+            f"cannot tell apart relative changes along ({parts})")
 
 
 __all__ = ["BACKENDS", "FORMAT", "Estimate", "Identification", "OutputFit", "check_free", "identify"]
