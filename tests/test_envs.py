@@ -48,6 +48,8 @@ def test_make_with_module_prefix() -> None:
     env = gym.make("equilibrist.envs:equilibrist/cartpole-balance-v0")
     obs, _ = env.reset(seed=0)
     assert obs.shape == (2,) and obs.dtype == np.float64
+    assert env.observation_space.sample().shape == (2,)  # no overflow warning
+    assert env.observation_space.contains(np.array([1e300, -1e300]))
     env.close()
 
 

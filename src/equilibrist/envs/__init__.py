@@ -24,8 +24,9 @@ Action
 Observation
     The rig's measured outputs (the system's sensors) with its sensor
     noise, or the full state with ``observe="state"``; float64, angles as
-    they are (never wrapped). The space's bounds are the largest finite
-    doubles: every finite value is an observation.
+    they are (never wrapped). The space's bounds are half the largest
+    double (about 9e307): every value a state can take is an observation,
+    and ``observation_space.sample()`` does not overflow.
 Step
     One control period of the task's rate (``rate=`` changes it), the
     plant integrated as :func:`equilibrist.simulate` does it: the

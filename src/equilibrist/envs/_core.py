@@ -26,8 +26,9 @@ OBSERVE = ("outputs", "state")
 ACTION_UNITS = ("normalized", "physical")
 # Reward per second for staying inside the region (balance).
 ALIVE_BONUS = 1.0
-# The largest finite double: the observation space's bound ("any finite value").
-FINITE = float(np.finfo(np.float64).max)
+# The observation space's bound: half the largest double, so "any finite
+# value" and ``observation_space.sample()`` does not overflow (high - low).
+FINITE = float(np.finfo(np.float64).max) / 2
 REWARD_KINDS = {"balance": 0, "swingup": 1}
 
 
