@@ -6,12 +6,12 @@ so they are marked slow; they still run in CI (two cores are enough).
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
@@ -76,30 +76,41 @@ def test_a_worker_killed_mid_study_changes_nothing(tmp_path, local_table, cluste
     assert out.read_bytes() == local_table.read_bytes()
 
 
+# Long enough per chunk (300 runs of 3 s) that the study is still running when
+# the interrupt arrives after its second chunk.
+LONG = ["--vary", "m_p=0.1:0.4:12", "--runs", "300", "--duration", "3", "--x0",
+        "theta=-0.25:0.25", "--metrics", "basic", "--seed", "9", "--no-progress"]
+
+
 @pytest.mark.slow
-def test_an_interrupted_study_resumes_to_the_same_bytes(tmp_path, local_table):
+def test_an_interrupted_study_resumes_to_the_same_bytes(tmp_path, capsys):
+    whole = tmp_path / "whole.parquet"
+    assert main(["sweep", "cartpole", *LONG, "--out", str(whole)]) == 0
     out = tmp_path / "resumed.parquet"
     parts = tmp_path / "resumed.parquet.parts"
-    cmd = [sys.executable, "-m", "equilibrist.cli.main", "sweep", "cartpole", *ARGS,
+    cmd = [sys.executable, "-m", "equilibrist.cli.main", "sweep", "cartpole", *LONG,
            "--chunk-size", "1", "--out", str(out)]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and proc.poll() is None:
         if len(list(parts.glob("chunk-*.parquet"))) >= 2:
             break
-        time.sleep(0.02)
+        time.sleep(0.01)
     assert proc.poll() is None, proc.communicate()
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
     assert "--resume" in err
     assert not out.exists()
-    done_before = {p.name for p in parts.glob("chunk-*.parquet")}
-    assert 2 <= len(done_before) < 6
+    done_before = {int(p.stem.split("-")[1]) for p in parts.glob("chunk-*.parquet")}
+    assert 2 <= len(done_before) < 12
     assert not list(parts.glob(".*.tmp"))
-    stamps = {p.name: p.stat().st_mtime_ns for p in parts.glob("chunk-*.parquet")}
-    seen: list[int] = []
-    study = _study()
-    run_study(study, out, resume=True, chunk_size=1, on_chunk=lambda c, d: seen.append(c))
-    assert not (set(seen) & {int(Path(n).stem.split("-")[1]) for n in stamps})
-    assert out.read_bytes() == local_table.read_bytes()
+    capsys.readouterr()
+    assert main(["sweep", "cartpole", *LONG, "--chunk-size", "1", "--out", str(out),
+                 "--resume", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    # Nothing already done is computed again.
+    assert summary["resumed_chunks"] == len(done_before)
+    assert summary["computed_chunks"] == 12 - len(done_before)
+    assert out.read_bytes() == whole.read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["resumed.parquet", "whole.parquet"]
