@@ -158,6 +158,8 @@ def plot_study(
                 ax.set_xticks(pos, [_label(v) for v in ux])
             if axes[x].log:
                 ax.set_xscale("log")
+                ax.minorticks_off()
+                ax.set_xticks(pos, [_label(v) for v in ux])
         ax.set_xlabel(x)
         ax.set_ylabel(metric)
         ax.grid(True, alpha=0.3)
