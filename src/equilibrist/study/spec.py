@@ -455,7 +455,9 @@ def make_study(
 
     problems: list[str] = []
     registry.lookup_family(system)  # an unknown system is its own clear error
-    fixed = dict(settings or {})
+    # Numbers as floats: a study file's 1 and the command line's 1.0 are one study.
+    fixed = {k: float(v) if isinstance(v, int | float) and not isinstance(v, bool) else v
+             for k, v in (settings or {}).items()}
     sysm = get_system(system, **fixed)
     spec = sysm.spec
     if sysm.n_inputs == 0:
