@@ -224,7 +224,7 @@ EXPORTERS: dict[str, Callable[..., Any]] = {}
 
 
 #: Modules that register an exporter when first asked (name -> module).
-EXPORTER_MODULES = {"swingup": "equilibrist.export.swingup_c"}
+EXPORTER_MODULES = {"swingup": "equilibrist.export.swingup_c", "mpc": "equilibrist.export.mpc_c"}
 
 
 def load_exporter(name: str) -> Callable[..., Any] | None:
