@@ -9,8 +9,9 @@ in this process) open a session each on the cart-pole and, for D seconds:
   simulation in real time, ratio 1.00);
 * push every 2 s and time the push to the first frame that shows it acting
   (``push_seq`` echoed, the push's input nonzero);
-* retune a Bryson scale every 3 s and time the tune to its ``design`` frame,
-  and read the design's own duration (goal: < 100 ms).
+* one of them retunes a Bryson scale every 3 s (a student moving a slider
+  while the others watch); the tune is timed to its ``design`` frame, and
+  the design's own duration read from it (goal: < 100 ms).
 
 The server's CPU is read from ``/proc`` (user + system time of its process
 over the measured window) in percent of one core.
@@ -70,7 +71,7 @@ async def _client(url: str, seconds: float, index: int, out: list[dict]) -> None
                 push_sent[seq] = time.perf_counter()
                 await ws.send(json.dumps({"type": "push", "size": 0.3, "seq": seq}))
                 next_push += 2.0
-            if now >= next_tune and pending_tune is None:
+            if index == 0 and now >= next_tune and pending_tune is None:
                 seq += 1
                 scale = 0.1 if scale == 0.2 else 0.2
                 tune_sent[seq] = time.perf_counter()
@@ -162,6 +163,10 @@ def main() -> int:
         "design_ms_p95": pct(designs, 0.95),
         "tunes": len(tunes),
         "server_cpu_percent_of_one_core": 100 * cpu,
+        # What one session costs the server, whatever share of the machine it got:
+        # CPU per second of simulated real time and per frame sent.
+        "server_cpu_ms_per_session_second": 1e3 * cpu / args.sessions / statistics.median(rt),
+        "server_cpu_ms_per_frame": 1e3 * cpu / args.sessions / statistics.median(fps),
         "cores": os.cpu_count(),
         "load_average": os.getloadavg()[0],
     }
@@ -180,7 +185,10 @@ def main() -> int:
               f"95th percentile {summary['tune_to_design_ms_p95']:.0f} ms ({len(tunes)} tunes); "
               f"the design itself median {summary['design_ms_median']:.0f} ms, "
               f"95th percentile {summary['design_ms_p95']:.0f} ms")
-        print(f"  server CPU: {summary['server_cpu_percent_of_one_core']:.0f} % of one core")
+        print(f"  server CPU: {summary['server_cpu_percent_of_one_core']:.0f} % of one core; "
+              f"{summary['server_cpu_ms_per_session_second']:.1f} ms per session per simulated "
+              f"second ({summary['server_cpu_ms_per_frame']:.2f} ms per frame sent, its samples "
+              "included)")
     return 0
 
 

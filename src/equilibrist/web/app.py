@@ -197,11 +197,16 @@ def create_app(
 
 
 async def _send(ws: Any, message: dict[str, Any]) -> None:
+    from starlette.websockets import WebSocketDisconnect
+
     try:
         text = json.dumps(message, separators=(",", ":"), allow_nan=False, default=_plain)
     except ValueError:  # a number that is not finite (a state that diverged): null in JSON
         text = json.dumps(_clean(message), separators=(",", ":"), allow_nan=False, default=_plain)
-    await ws.send_text(text)
+    try:
+        await ws.send_text(text)
+    except RuntimeError:  # the socket closed meanwhile (starlette says so with a RuntimeError)
+        raise WebSocketDisconnect(1006) from None
 
 
 def _plain(obj: Any) -> Any:

@@ -260,7 +260,7 @@
       const h = document.createElement("h4"); h.textContent = title;
       box.appendChild(h);
       area.appendChild(box);
-      const plot = new uPlot({ width, height: 150, legend: { show: true }, cursor: { show: false },
+      const plot = new uPlot({ width, height: 150, legend: { show: true, live: false }, cursor: { show: false },
         scales: { x: { time: false } }, series: [{ label: "t [s]" }, ...series] }, [[]], box);
       state.charts.push({ plot, dataFn });
     };
