@@ -134,8 +134,9 @@ def derive_tree(tree: Tree, d: Derivation) -> SymbolicModel:
                 origin = _expand(anchor - rot * _column(joint.pos))
                 spin = spin + d.qd[j] * axis
             else:
+                # The anchor stays where the slide starts (on the parent), as
+                # MuJoCo's xanchor: the link drawn from it shows the extension.
                 origin = _expand(origin + q * axis)
-                anchor = _expand(origin + rot * _column(joint.pos))
             positions[joint.name] = anchor
             links.append((parent_point if n == 0 else tree.joints[body.joints[n - 1]].name, joint.name))
             if joint.armature:
