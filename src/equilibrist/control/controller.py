@@ -63,6 +63,7 @@ import hashlib
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -323,7 +324,9 @@ class LinearController:
 
     def __getstate__(self) -> dict[str, Any]:
         # The design stays behind when the controller goes to another process.
-        return {**self.__dict__, "design": None}
+        state = {**self.__dict__, "design": None}
+        state.pop("_packed", None)
+        return state
 
     # -- sizes -------------------------------------------------------------------------------
     @property
@@ -370,8 +373,13 @@ class LinearController:
     def packed(self) -> np.ndarray:
         """The controller as one float vector: :data:`LINEAR_HEADER`, then :data:`LINEAR_BLOCKS`.
 
-        This is the parameter vector of the compiled ``linear_*`` functions.
+        This is the parameter vector of the compiled ``linear_*`` functions
+        (a new array each call).
         """
+        return self._packed.copy()
+
+    @cached_property
+    def _packed(self) -> np.ndarray:
         # Without an estimate the estimate has no rows (linear_estimate writes nothing).
         sizes = {"n": int(self.Ez.shape[0]), "m": self.n_inputs, "ny": self.n_outputs,
                  "nr": self.n_references, "nz": self.n_z}

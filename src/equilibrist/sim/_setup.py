@@ -526,16 +526,17 @@ def build(
             change_values.append({k: float(v) for k, v in e.values.items()})
 
     # Region of the balancing task. A controller made at another operating
-    # point (design --at) holds the system there: the system's region moves
-    # with it, by the distance between the two points.
+    # point (design --at) outside that region holds the system there: the
+    # system's region moves with it, by the distance between the two points.
     region_spec = dict(system.spec.region if region is None else region)
-    if region is None and designed and _has_operating_point(system):
+    outside_op = [name for name, (lo_r, hi_r) in region_spec.items()
+                  if name in names and not lo_r < x_op[names.index(name)] < hi_r]
+    if region is None and designed and outside_op and _has_operating_point(system):
         canonical = system.operating_point().x
-        for name, (lo_r, hi_r) in list(region_spec.items()):
-            if name in names:
-                shift = float(x_op[names.index(name)] - canonical[names.index(name)])
-                if shift != 0.0:
-                    region_spec[name] = (float(lo_r) + shift, float(hi_r) + shift)
+        for name in outside_op:
+            lo_r, hi_r = region_spec[name]
+            shift = float(x_op[names.index(name)] - canonical[names.index(name)])
+            region_spec[name] = (float(lo_r) + shift, float(hi_r) + shift)
     reg = np.array([[-np.inf] * n, [np.inf] * n])
     for name, bounds in region_spec.items():
         if name not in names:

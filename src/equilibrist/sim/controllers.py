@@ -93,6 +93,8 @@ class StateFeedback:
     tracked: tuple[str, ...] = ()
     rate: float | None = None
     design: Any = field(default=None, repr=False)
+    _forms: dict[Any, LinearController] = field(default_factory=dict, init=False, repr=False,
+                                                compare=False)
 
     kind = "lqr"
 
@@ -119,11 +121,14 @@ class StateFeedback:
     def linear(self, state_names: Sequence[str], input_names: Sequence[str] | None = None
                ) -> LinearController:
         """This controller in the one linear form, for a plant with these states and inputs."""
-        return LinearController.state_feedback(
-            self.K, x_op=self.x_op, u_op=self.u_op, state_names=state_names,
-            input_names=input_names, Kc=self.Kc, tracked=self.tracked, rate=self.rate,
-            design=self.design,
-        )
+        key = (tuple(state_names), None if input_names is None else tuple(input_names))
+        if key not in self._forms:
+            self._forms[key] = LinearController.state_feedback(
+                self.K, x_op=self.x_op, u_op=self.u_op, state_names=state_names,
+                input_names=input_names, Kc=self.Kc, tracked=self.tracked, rate=self.rate,
+                design=self.design,
+            )
+        return self._forms[key]
 
     def runtime(self, state_names: Sequence[str]) -> LinearRuntime:
         """A Python controller doing the same as the compiled core (for checks)."""
@@ -161,6 +166,8 @@ class LQG:
     tracked: tuple[str, ...] = ()
     x_hat0: np.ndarray | None = None
     design: Any = field(default=None, repr=False)
+    _forms: dict[Any, LinearController] = field(default_factory=dict, init=False, repr=False,
+                                                compare=False)
 
     kind = "lqg"
 
@@ -206,6 +213,13 @@ class LQG:
     def linear(self, state_names: Sequence[str], input_names: Sequence[str] | None = None
                ) -> LinearController:
         """This controller in the one linear form, for a plant with these states and inputs."""
+        key = (tuple(state_names), None if input_names is None else tuple(input_names))
+        if key not in self._forms:
+            self._forms[key] = self._linear(state_names, input_names)
+        return self._forms[key]
+
+    def _linear(self, state_names: Sequence[str], input_names: Sequence[str] | None
+                ) -> LinearController:
         try:
             return LinearController.lqg(
                 self.K, Ad=self.Ad, Bd=self.Bd, Kf=self.Kf, outputs=self.outputs,

@@ -63,10 +63,10 @@ _HEADER = (
     "from numba import njit, prange  # noqa: E402\n\n"
 )
 _CONTROLLER_JIT = (
-    "_ctrl_jit = njit(cache=True, error_model=\"numpy\", _nrt=False)  # noqa: E402\n"
+    "_ctrl_jit = njit(cache=True, error_model=\"numpy\", _nrt=False, inline=\"always\")  # noqa: E402\n"
 )
 _LOADED: dict[Path, types.ModuleType] = {}
-_PATHS: dict[tuple[Path, str], Path] = {}
+_PATHS: dict[tuple[Path, str], Path] = {}  # (system module, section) -> kernel
 
 
 def _template_body() -> str:
@@ -75,6 +75,9 @@ def _template_body() -> str:
     if not sep:  # pragma: no cover - a broken install
         raise RuntimeError("the simulation kernel template has lost its marker line")
     return body.split("\n", 1)[1]
+
+
+_SECTIONS: dict[str, str] = {}
 
 
 def controller_section(controller: NonlinearController | None = None) -> str:
@@ -86,6 +89,10 @@ def controller_section(controller: NonlinearController | None = None) -> str:
     Every function of the section is compiled like the core's helpers
     (no reference counting), so a controller may slice its arrays freely.
     """
+    key = "" if controller is None else controller.source + repr(controller.has_estimate)
+    known = _SECTIONS.get(key)
+    if known is not None:
+        return known
     parts = ["# --- calling convention (equilibrist.sim.layout) ---\n",
              layout.constants_source(), "\n", _CONTROLLER_JIT, LINEAR_SOURCE, "\n"]
     names = list(LINEAR_FUNCTIONS)
@@ -103,14 +110,15 @@ def controller_section(controller: NonlinearController | None = None) -> str:
                    f"controller_estimate = {estimate}\n")
     parts += [f"{name} = _ctrl_jit({name})\n" for name in names]
     parts.append(binding)
-    return "".join(parts)
+    _SECTIONS[key] = "".join(parts)
+    return _SECTIONS[key]
 
 
 def kernel_path(system: System, controller: NonlinearController | None = None) -> Path:
     """Where the kernel module of *system* (and *controller*) lives in the cache (written if missing)."""
     module_path = system.compiled.module_path
     section = controller_section(controller)
-    key = (module_path, hashlib.sha256(section.encode()).hexdigest())
+    key = (module_path, section)
     known = _PATHS.get(key)
     if known is not None and known.exists():
         return known
