@@ -32,8 +32,10 @@ _LINK_COLORS = (COLORS["body"], COLORS["link"], COLORS["link2"], COLORS["mark"],
 
 def can_draw(system: object) -> bool:
     """Whether *system*'s model records the points a generic drawing needs."""
-    functions = system.functions  # type: ignore[attr-defined]
-    return len(functions.POINTS) > 0
+    # Scenes take any object with a system's attributes; one without a
+    # compiled model (a stand-in) has no points to draw.
+    functions = getattr(system, "functions", None)
+    return functions is not None and len(functions.POINTS) > 0
 
 
 class GenericScene(Scene):
