@@ -23,8 +23,9 @@ region of each angle) carry a slack ``s_k`` per constrained state and step,
 penalized by ``rho_1 s + rho_2 s^2``. The L1 weight ``rho_1`` makes the
 penalty exact: as long as a trajectory that meets the constraints exists,
 the slack stays zero; the L2 weight keeps the problem strictly convex.
-Defaults: ``rho_1 = 1e3`` and ``rho_2 = 1e4`` times the largest diagonal
-entry of ``Q`` (per unit of the constrained state, squared for ``rho_2``).
+Defaults: ``rho_1 = 100`` and ``rho_2 = 4`` times the largest diagonal
+entry of ``Q``: a large L2 weight would make the QP badly conditioned
+(thousands of OSQP iterations instead of some 75).
 The input limits are hard: the command never leaves them.
 
 *Solver.* First the unconstrained case is solved exactly: the LQR's own
@@ -66,10 +67,13 @@ if TYPE_CHECKING:
 #: Tolerances of the QP (absolute and relative); polishing then solves the
 #: active set's KKT system exactly. The unconstrained case is not left to them.
 EPS = 1e-6
+#: OSQP's iteration cap: a bounded solve time (the iterate it stops at is still
+#: clipped to the hard limits, and the next sample starts warm from it).
+MAX_ITER = 500
 #: Default horizon [samples].
 HORIZON = 30
 #: Default soft-constraint weights, relative to the largest diagonal entry of Q.
-RHO_L1, RHO_L2 = 1e3, 1e4
+RHO_L1, RHO_L2 = 1e2, 4.0
 #: Track parameter bounding the cart's coordinate.
 TRACK = ("x_max", "x")
 
@@ -280,7 +284,7 @@ class MPCRuntime:
         self._lo, self._hi, self._E = lo, hi, E
         self._solver = _osqp().OSQP()
         self._solver.setup(H, q, A, lo, hi, eps_abs=EPS, eps_rel=EPS, polishing=True,
-                           polish_refine_iter=10, max_iter=4000, verbose=False,
+                           polish_refine_iter=10, max_iter=MAX_ITER, verbose=False,
                            warm_starting=True)
         self._idx = [ctrl.state_names.index(o) for o in ctrl.output_names]
         self.solve_times: list[float] = []
