@@ -76,19 +76,16 @@ def plot_study_file(args: argparse.Namespace) -> int:
 
 def load_result(path: str | Path) -> Any:
     """A saved run (``SimResult``) or batch (``BatchResult``), whichever the file holds."""
-    import json
-
-    import numpy as np
-
     from equilibrist.sim import BatchResult, SimResult
+    from equilibrist.sim.result import read_npz
     from equilibrist.viz.output import VizError
 
     p = Path(path)
     if not p.exists():
         raise VizError(f"no result file {str(p)!r}")
     try:
-        with np.load(p, allow_pickle=False) as data:
-            fmt = json.loads(str(data["meta"])).get("format", "")
+        meta, _ = read_npz(p)
+        fmt = str(meta.get("format", "")) if isinstance(meta, dict) else ""
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
         fmt = ""
     if fmt.startswith("equilibrist-batch"):
