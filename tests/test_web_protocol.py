@@ -42,7 +42,7 @@ def client(app):
         yield c
 
 
-def receive_until(ws, predicate, limit=400):
+def receive_until(ws, predicate, limit=2000):
     """Frames until *predicate* holds for one (returned); fails after *limit* frames."""
     for _ in range(limit):
         msg = json.loads(ws.receive_text())
