@@ -96,8 +96,12 @@ def run(args: argparse.Namespace) -> int:
     first = args.system
     if first is not None:
         catalogue.check(first)  # a system that cannot be played is one line, before the port
-    app = create_app(catalogue, system=first)
-    sock = bind(args.host, port)
+    sock = bind(args.host, port)  # a port in use is said at once, before the warm-up
+    try:
+        app = create_app(catalogue, system=first)
+    except BaseException:
+        sock.close()
+        raise
     bound_port = sock.getsockname()[1]
     shown = f"[{args.host}]" if ":" in args.host else args.host
     url = f"http://{shown}:{bound_port}/"

@@ -185,8 +185,12 @@ def create_app(
                 with contextlib.suppress(asyncio.CancelledError, Exception):
                     await streamer
 
+    async def favicon(request: Request) -> Response:
+        return Response(status_code=204, headers=_HEADERS)
+
     routes = [
         Route("/", index),
+        Route("/favicon.ico", favicon),
         Route("/download/{token}/{kind}", download),
         WebSocketRoute("/ws", socket),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
