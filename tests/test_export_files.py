@@ -162,10 +162,13 @@ def test_an_existing_folder_keeps_other_files(tmp_path, wheel_design) -> None:
     folder.mkdir()
     (folder / "notes.txt").write_text("keep me")
     vec = _vectors(wheel_design, "lqg", "double", n_steps=10)
-    done = export_c(wheel_design, folder, vectors=vec)
+    with pytest.raises(ExportError, match="--force"):
+        export_c(wheel_design, folder, vectors=vec)
+    assert sorted(p.name for p in folder.iterdir()) == ["notes.txt"]
+    done = export_c(wheel_design, folder, vectors=vec, force=True)
     assert (folder / "notes.txt").read_text() == "keep me"
     assert done.header.is_file() and done.source.is_file()
-    assert sorted(p.name for p in folder.iterdir() if p.name.startswith(".")) == []
+    assert sorted(p.name for p in folder.iterdir() if p.name.startswith(".")) == [".made-by-equilibrist"]
 
 
 def test_bad_options_write_nothing(tmp_path, wheel_design) -> None:

@@ -46,7 +46,7 @@ def test_saturated_and_applied_follow_the_limits(noisy_run):
 
 def test_npz_round_trip_is_lossless(noisy_run, tmp_path):
     r = noisy_run
-    back = SimResult.load(r.save(tmp_path / "run"))
+    back = SimResult.load(r.save(tmp_path / "run.npz"))
     for name in ("time", "states", "estimates", "measurements", "commanded", "saturated",
                  "applied", "reference", "x_op", "u_op", "final_state"):
         np.testing.assert_array_equal(getattr(back, name), getattr(r, name))

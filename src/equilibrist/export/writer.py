@@ -59,7 +59,7 @@ def check_rate(rate: object) -> float:
 
 
 # Every export folder holds this file: a folder without it is the user's.
-EXPORT_MARKER = ".equilibrist-export"
+EXPORT_MARKER = ".made-by-equilibrist"
 
 
 def check_folder(out: object, *, force: bool = False) -> Path:
