@@ -78,7 +78,13 @@ def derive(d):  # type: ignore[no-untyped-def]
     ]
     energy = (cart.kinetic_energy(N) + pole.kinetic_energy(N)
               + p["m_p"] * p["g"] * centre.pos_from(O).dot(N.y))
-    return d.kane(bodies=[cart, pole], loads=loads, energy=energy)
+    # Named points and the links between them: what the generic drawing of
+    # the demo, the animations and the playground shows of this rig.
+    tip = pivot.locatenew("tip", 2 * p["l"] * pole_frame.y)
+    points = {"track_left": O.locatenew("left", -0.4 * N.x), "track_right": O.locatenew("right", 0.4 * N.x),
+              "cart": pivot, "pole_centre": centre, "pole_tip": tip}
+    links = [("track_left", "track_right"), ("cart", "pole_tip")]
+    return d.kane(bodies=[cart, pole], loads=loads, energy=energy, points=points, links=links)
 
 
 if __name__ == "__main__":

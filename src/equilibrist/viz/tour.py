@@ -202,7 +202,7 @@ def tour_controlled(
 
     began = time.perf_counter()
     sc = scenario or SCENARIOS.get(system.name) or default_scenario(system)
-    slug = _slug(system.key)
+    slug = _slug(_label(system))
     sub = folder / slug
     sub.mkdir(parents=True, exist_ok=True)
     d = design(system, rate=system.spec.control_rate)
@@ -268,7 +268,7 @@ def tour_controlled(
     final = final_error(main, watched)
     errors = ", ".join(f"{w} {_fmt(v, main.unit(w), digits=2)}" for w, v in final.items())
     row = (
-        system.key,
+        _label(system),
         f"LQG {rate}",
         ("-" if main.fell or not sc.push else f"> {sc.duration - push_at:.0f} s")
         if after is None else f"{after:.2f} s",
@@ -397,7 +397,7 @@ def _section(system: Any, slug: str, story: list[str], images: list[Image],
     return Section(
         anchor=slug,
         title=system.spec.title,
-        subtitle=f"{system.key}: {system.spec.description}",
+        subtitle=f"{_label(system)}: {system.spec.description}",
         story=story[1:],
         images=images,
         facts=facts,
@@ -463,7 +463,7 @@ def tour_gyroscope(
     from equilibrist.viz.plots import plot_comparison, plot_response
 
     began = time.perf_counter()
-    slug = _slug(system.key)
+    slug = _slug(_label(system))
     sub = folder / slug
     sub.mkdir(parents=True, exist_ok=True)
     euler = system.spec.variant[1] if system.spec.variant else "zxz"
@@ -493,7 +493,7 @@ def tour_gyroscope(
     energy = {k: _relative_drift([system.energy(x) for x in (r.states[0], r.states[-1])])
               for k, r in runs.items()}
     fell = any(r.fell for r in runs.values())
-    row = (system.key, "none (no input)", "-", "-",
+    row = (_label(system), "none (no input)", "-", "-",
            f"theta drift {_fmt(drift['steady'], 'rad')} (steady)", "no" if fell else "yes")
     story = [
         f"The wheel spins at {GYRO_SPIN:g} rad/s with its axis tilted {math.degrees(GYRO_THETA):.0f}° "
@@ -551,6 +551,14 @@ def tour_one(
                                extras=system.name in extras, progress=progress)
     return tour_gyroscope(system, folder, size=size, fps=fps, max_frames=max_frames,
                           progress=progress)
+
+
+def _label(system: Any) -> str:
+    """How the report names a system: its key, or a user's file by its own name."""
+    key = str(system.key)
+    if key == system.spec.key:
+        return key
+    return f"{system.name} ({Path(key).name})"
 
 
 def _tour_in_worker(key: str, params: dict[str, float], folder: str, options: dict[str, Any]) -> Outcome:
