@@ -22,7 +22,8 @@ from equilibrist.numeric.system import System, get_system
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "tests" / "models"
 SHIPPED = [ROOT / "examples" / "furuta.xml", ROOT / "examples" / "pendubot.urdf"]
-TEST_MODELS = [MODELS / "cartpole.xml", MODELS / "spatial.xml", MODELS / "slides.xml", MODELS / "arm.urdf"]
+TEST_MODELS = [MODELS / "cartpole.xml", MODELS / "spatial.xml", MODELS / "slides.xml", MODELS / "arm.urdf",
+               MODELS / "planar.urdf"]
 ALL = SHIPPED + TEST_MODELS
 
 

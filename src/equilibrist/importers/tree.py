@@ -249,7 +249,18 @@ def read_tree(
         compiled_names.append(jname)
     order = list(range(model.njnt))
     if joint_order is not None:
-        order = [compiled_names.index(n) for n in joint_order]
+        # The file's document order; MuJoCo expands a URDF planar joint into
+        # <name>_TX, <name>_TY, <name>_RZ, which keep its place, in order.
+        def rank(j: int) -> int:
+            name = compiled_names[j]
+            if name in joint_order:
+                return joint_order.index(name)
+            owners = [k for k, n in enumerate(joint_order) if name.startswith(n + "_")]
+            if not owners:
+                raise DefinitionError(f"{where}: joint {name!r} of the compiled model is not in the file")
+            return max(owners, key=lambda k: len(joint_order[k]))
+
+        order = sorted(range(model.njnt), key=rank)
     position = {j: k for k, j in enumerate(order)}
     joints = []
     for j in order:

@@ -39,7 +39,7 @@ class Transmission:
 
 @dataclass(frozen=True)
 class UrdfFacts:
-    joint_order: tuple[str, ...]  # moving joints in document order
+    joint_order: tuple[str, ...]  # joints that are not fixed, in document order
     transmissions: tuple[Transmission, ...]
 
 
@@ -97,7 +97,7 @@ def read_urdf(file: Path, data: bytes) -> UrdfFacts:
             raise DefinitionError(
                 f"{where}: link {link_name!r} has no <inertial>: a moving link needs its mass and inertia"
             )
-    order = tuple(j.get("name", "") for j in root.findall("joint") if j.get("type") in _MOVING)
+    order = tuple(j.get("name", "") for j in root.findall("joint") if j.get("type") != "fixed")
     transmissions = []
     driven: dict[str, str] = {}
     for t in root.findall("transmission"):
