@@ -264,3 +264,229 @@ def test_a_terminated_demo_leaves_nothing(tmp_path) -> None:
     assert proc.returncode != 0
     assert b"Traceback" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+# -- Ctrl-C stops a long run, with or without a progress bar --------------------
+
+def _interrupt_after_start(argv: list[str], folder: Path) -> tuple[int, bytes, bytes, float]:
+    """Start the command with stdout to a pipe, interrupt it while it works.
+
+    Returns the exit status, stdout, stderr and the seconds from SIGINT to its end.
+    """
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-m", "equilibrist.cli.main", *argv],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=folder)
+    try:
+        # Working: the process has spent CPU time beyond its start (imports, the core's load).
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            fields = Path(f"/proc/{proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+            cpu = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+            if cpu > 4.0 or proc.poll() is not None:
+                break
+            time.sleep(0.1)
+        assert proc.poll() is None, "the command ended before it could be interrupted"
+        sent = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+        took = time.monotonic() - sent
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc.returncode, out, err, took
+
+
+@pytest.mark.parametrize("argv", [
+    # One long run: 3000 s at 500 physics steps a sample (3e8 steps).
+    ["simulate", "cartpole", "--duration", "3000", "--physics-step", "1e-5", "--json",
+     "--out", "run.npz"],
+    ["simulate", "cartpole", "--duration", "3000", "--physics-step", "1e-5", "--no-progress",
+     "--out", "run.npz"],
+    # Many short runs: 1e9 steps in all.
+    ["batch", "cartpole", "--runs", "100000", "--duration", "10", "--json", "--out", "b.csv"],
+], ids=["simulate-json-pipe", "simulate-no-progress", "batch-json-pipe"])
+def test_ctrl_c_stops_a_long_run_without_a_progress_bar(tmp_path, argv) -> None:
+    code, out, err, took = _interrupt_after_start(argv, tmp_path)
+    assert code == 130, err
+    assert err.decode().strip() == "equilibrist: interrupted"
+    assert out == b""
+    # Calls of the compiled core last about 0.2 s; a loaded machine stretches them.
+    assert took < 3.0, f"took {took:.1f} s to stop"
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_run_made_in_many_calls_equals_the_run_in_one(monkeypatch) -> None:
+    from equilibrist import get_system
+    from equilibrist.control.controller import LinearController
+    from equilibrist.control.design import design
+    from equilibrist.sim import run as run_module
+    from equilibrist.sim.events import ParameterChange, Pulse
+    from equilibrist.sim.noise import Noise
+
+    system = get_system("cartpole")
+    d = design(system, outputs=["x", "theta"], rate=200.0)
+    ctrl = LinearController.from_design(d, kind="lqg")
+    kwargs = dict(duration=2.0, x0={"theta": 0.1}, noise=Noise.from_design(d), seed=7,
+                  events=[Pulse(0.5, 20.0, 0.05), ParameterChange(1.0, {"m_p": 1.3})])
+    whole = run_module.simulate(system, ctrl, **kwargs)  # one call of the core (400 samples)
+    assert whole.n_rows <= run_module._FIRST_CHUNK_STEPS // 5
+    monkeypatch.setattr(run_module, "_FIRST_CHUNK_STEPS", 1)
+    monkeypatch.setattr(run_module, "CHUNK_SECONDS", 1e-12)  # then one sample a call
+    pieces = run_module.simulate(system, ctrl, **kwargs)
+    for name in ("states", "estimates", "measurements", "commanded", "applied"):
+        np.testing.assert_array_equal(getattr(pieces, name), getattr(whole, name))
+    np.testing.assert_array_equal(pieces.final_state, whole.final_state)
+
+
+# -- work is bounded before it starts -------------------------------------------
+
+def test_an_absurd_physics_step_is_refused_before_any_work(capsys) -> None:
+    assert main(["simulate", "cartpole", "--physics-step", "1e-12", "--json"]) == 2
+    line = capsys.readouterr().err.strip()
+    assert len(line.splitlines()) == 1
+    # 5 s at 200 Hz is 1000 samples of 5e-3 s / 1e-12 s = 5e9 steps each.
+    assert "5e+12 physics steps" in line and "--max-steps" in line and "hours" in line
+
+
+def test_max_steps_is_the_bound_it_says(capsys) -> None:
+    # 1 s at 200 Hz with the default 1 ms step: 200 samples of 5 steps.
+    argv = ["simulate", "cartpole", "--duration", "1", "--noise", "off", "--json"]
+    assert main([*argv, "--max-steps", "999"]) == 2
+    assert "1e+03 physics steps" in capsys.readouterr().err
+    assert main([*argv, "--max-steps", "1000"]) == 0
+    capsys.readouterr()
+    batch = ["batch", "cartpole", "--runs", "10", "--duration", "1", "--json"]
+    assert main([*batch, "--max-steps", "9999"]) == 2
+    assert "a batch of 10 runs asks for 1e+04 physics steps" in capsys.readouterr().err
+    assert main([*batch, "--max-steps", "1e4"]) == 0
+    capsys.readouterr()
+    assert main([*argv, "--max-steps", "inf"]) == 0
+    capsys.readouterr()
+    for bad in ("0", "-5", "nan", "many"):
+        assert main([*argv, "--max-steps", bad]) == 2
+        _one_line_or_success(2, capsys.readouterr().err)
+
+
+def test_the_python_api_bounds_work_too() -> None:
+    from equilibrist import get_system
+    from equilibrist.errors import SimulationError
+    from equilibrist.sim import simulate
+    from equilibrist.sim.batch import simulate_batch
+
+    system = get_system("cartpole")
+    with pytest.raises(SimulationError, match="max_steps="):
+        simulate(system, duration=5.0, rate=200.0, physics_step=1e-12)
+    with pytest.raises(SimulationError, match="a batch of 1000000 runs"):
+        simulate_batch(system, runs=1_000_000, duration=100.0, rate=200.0)
+    with pytest.raises(SimulationError, match="max_steps"):
+        simulate(system, duration=1.0, rate=200.0, max_steps="lots")  # type: ignore[arg-type]
+    assert simulate(system, duration=0.1, rate=200.0, max_steps=100).n_rows == 21
+
+
+# -- spreads are checked as spreads ----------------------------------------------
+
+@pytest.mark.parametrize("seed", ["0", "1", "2", "3"])
+def test_a_spread_that_leaves_the_valid_range_is_refused_whatever_the_draw(capsys, seed) -> None:
+    assert main(["batch", "cartpole", "--runs", "4", "--duration", "0.1", "--spread", "m_p=1.5",
+                 "--seed", seed]) == 2
+    line = capsys.readouterr().err.strip()
+    assert "m_p" in line and "-0.5 to 2.5" in line and "(0, inf)" in line and "below 1" in line
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(rel=st.floats(0.0, 3.0), name=st.sampled_from(["m_p", "l", "b_c", "g", "F_max"]))
+def test_spreads_fail_or_not_independently_of_the_draw(rel, name) -> None:
+    from equilibrist import get_system
+    from equilibrist.errors import SimulationError
+    from equilibrist.sim.batch import sample_uniform
+
+    system = get_system("cartpole")
+    param = {p.name: p for p in system.spec.all_parameters}[name]
+    outcomes = []
+    for seed in range(3):
+        try:
+            _, params = sample_uniform(system, 50, spread={name: rel}, seed=seed)
+        except SimulationError as exc:
+            outcomes.append(str(exc))
+        else:
+            outcomes.append("ok")
+            assert all(param.check(float(v)) is None for v in params[name])
+    assert len(set(outcomes)) == 1
+    nominal = system.params[name]
+    ends = (nominal * (1 - rel), nominal * (1 + rel))
+    assert (outcomes[0] == "ok") == all(param.check(v) is None for v in ends)
+
+
+# -- files the options promise ----------------------------------------------------
+
+def test_batch_out_csv_writes_the_table_the_help_promises(tmp_path, capsys) -> None:
+    import csv
+
+    with pytest.raises(SystemExit):
+        main(["batch", "--help"])
+    assert "FILE.csv" in capsys.readouterr().out.replace("\n", " ")
+    out = tmp_path / "b.csv"
+    assert main(["batch", "cartpole", "--runs", "6", "--duration", "1", "--x0", "theta=-0.3:0.3",
+                 "--json", "--out", str(out)]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["saved"] == str(out)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.csv"]
+    lines = out.read_text().splitlines()
+    assert lines[0].startswith("#")
+    rows = list(csv.DictReader(lines[1:]))
+    assert len(rows) == 6
+    assert [int(float(r["run"])) for r in rows] == list(range(6))
+    assert sum(float(r["fell"]) == 0 for r in rows) == summary["stayed_up"]
+    assert all(-0.3 <= float(r["theta_0"]) <= 0.3 for r in rows)
+    assert {"x_0", "m_p", "peak_F", "rms_F", "time_saturated"} <= set(rows[0])
+
+
+@pytest.mark.parametrize("command", [["simulate", "cartpole"],
+                                     ["batch", "cartpole", "--runs", "2"]])
+@pytest.mark.parametrize("name", ["", " ", "run.txt", "run"])
+def test_a_bad_out_is_refused_before_running(tmp_path, capsys, monkeypatch, command, name) -> None:
+    from equilibrist.sim import batch as batch_module
+    from equilibrist.sim import run as run_module
+
+    def never(*args, **kwargs):
+        raise AssertionError("a run started")
+
+    monkeypatch.setattr(run_module, "_run_compiled", never)
+    monkeypatch.setattr(batch_module, "Kernel", never)
+    monkeypatch.chdir(tmp_path)
+    assert main([*command, "--duration", "0.5", "--out", name]) == 2
+    _one_line_or_success(2, capsys.readouterr().err)
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- references the plant can take; the peaks named for what they are --------------
+
+@pytest.mark.parametrize("signal", ["ramp:1e308", "step:1e300", "ramp:-1e308@1", "square:1e305:1"])
+def test_a_reference_beyond_any_command_is_refused(capsys, signal) -> None:
+    assert main(["simulate", "cartpole", "--controller", "lqr", "--reference", signal,
+                 "--json"]) == 2
+    line = capsys.readouterr().err.strip()
+    assert len(line.splitlines()) == 1 and "reference of x" in line and "finite" in line
+
+
+def test_a_reference_outside_the_region_still_runs_and_falls(capsys) -> None:
+    # The rig would leave its track: the run says so, it is not refused.
+    assert main(["simulate", "cartpole", "--controller", "lqr", "--reference", "step:50",
+                 "--noise", "off", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["fell"] is True
+
+
+def test_peak_command_and_peak_input_are_named_for_what_they_are(capsys) -> None:
+    # A 5 N actuator against a 0.3 rad start: the command exceeds what acts.
+    assert main(["simulate", "cartpole", "--controller", "lqr", "--set", "F_max=5", "F_min=-5",
+                 "--x0", "theta=0.3", "--duration", "1", "--noise", "off", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["peak_command"]["F"] > 5.0
+    assert out["peak_input"]["F"] == pytest.approx(5.0, abs=1e-12)
+    assert out["time_saturated"] > 0

@@ -105,7 +105,7 @@ def test_batch_json_and_file(tmp_path, capsys):
 
 def test_batch_too_large_is_refused(capsys):
     code = main(["batch", "cartpole", "--runs", "2000000", "--duration", "100", "--rate",
-                 "1000", "--trajectories", "--noise", "off"])
+                 "1000", "--trajectories", "--noise", "off", "--max-steps", "inf"])
     err = capsys.readouterr().err
     assert code == 2
     assert "of memory" in err and "TiB" in err and len(err.strip().splitlines()) == 1

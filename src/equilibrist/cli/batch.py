@@ -10,15 +10,20 @@ import argparse
 from typing import Any
 
 from equilibrist.cli import common
-from equilibrist.cli.simulate import _seed, add_run_options, build_run, show_progress
+from equilibrist.cli.simulate import _seed, add_run_options, build_run, check_out, show_progress
 
 _EPILOG = """\
 Run i starts from initial states drawn uniformly from the --x0 ranges
 (NAME=LOW:HIGH; NAME=VALUE fixes a component) with the plant's parameters
 drawn uniformly within nominal * (1 +- REL) for each --spread PARAM=REL; the
-controller keeps its nominal design. Draws and noise come from --seed.
+controller keeps its nominal design. Draws and noise come from --seed. A
+spread is checked as a whole before anything runs: its range must stay within
+the parameter's valid range (REL < 1 for a parameter that must stay positive).
 --json prints {"runs", "stayed_up", "fraction_up", "steps_per_second", ...};
---out FILE.npz saves every run's initial state, parameters and outcome.
+--out FILE.npz saves every run's initial state, parameters and outcome;
+--out FILE.csv writes them as a table, one row per run (run, the initial
+states NAME_0, the parameters, fell, fell_at, peak_INPUT, rms_INPUT,
+time_saturated, peak_dev_STATE). --max-steps bounds runs x physics steps.
 """
 
 
@@ -70,6 +75,7 @@ def run(args: argparse.Namespace) -> int:
 
     runs = _count(args.runs, "--runs")
     workers = None if args.workers is None else _count(args.workers, "--workers")
+    check_out(args, "a batch")
     system, options = build_run(args)
     spread = {k: common.parse_number(v, f"--spread {k}")
               for k, v in common.parse_assignments(args.spread, "--spread").items()}
@@ -81,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     options.pop("outputs")
     batch = simulate_batch(system, runs=runs, x0=x0s, params=params, workers=workers,
                            record=args.trajectories, progress=show_progress(args), **options)
-    saved = batch.save(args.out) if args.out else None
+    saved = batch.save(args.out) if args.out is not None else None
     summary: dict[str, Any] = batch.summary()
     summary["seed"] = _seed(args.seed)
     if args.json:

@@ -36,8 +36,11 @@ seconds (default 0.1 s), beside the actuator (not saturated).
 its design). --reference step:V[@T] | ramp:SLOPE[@T] | square:AMP:PERIOD |
 file:PATH: track it with the reference gain K_c (lqr or lqg).
 Weights --q --r --qn --rn are comma-separated diagonals as in 'equilibrist
-design'. --json prints the summary metrics (fell, fell_at, settling_time,
-overshoot, peak_input, rms_input, time_saturated, final_error,
+design'. A reference must stay finite and within 1e12 times the tracked
+state's region of the operating point over the run. --json prints the
+summary metrics (fell, fell_at, settling_time, overshoot, peak_command (the
+largest command, before the actuator's limits), peak_input (the largest
+input that acted), rms_input, time_saturated, final_error,
 estimation_error_rms, ...). --out FILE.npz saves the run (FILE.csv exports
 a table that starts with the log 'equilibrist identify' reads: t, the inputs,
 the measured outputs; then the true states and the rest).
@@ -48,6 +51,12 @@ chirp:AMP:F0:F1[:SWEEP], a sine of amplitude AMP (the input's unit) whose
 frequency rises linearly from F0 to F1 Hz over SWEEP seconds (default the
 whole run); prbs:AMP:PERIOD, +-AMP switching at multiples of PERIOD seconds
 by an 11-bit maximal-length shift register whose bits are fixed by --seed.
+
+Work is bounded: a run needing more than --max-steps physics steps (default
+1e10; duration x rate x physics steps per period) is refused before it
+starts, with the count and the least time it would take; --max-steps N (or
+inf) asks for it anyway. Ctrl-C stops a run within about a second, with or
+without the progress bar.
 """
 
 
@@ -84,8 +93,44 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     common.add_params(p)
     common.add_design_options(p)
     p.add_argument("--out", metavar="FILE", help="save the result (.npz; .csv exports a table)")
+    p.add_argument("--max-steps", metavar="N",
+                   help="the most physics steps the command may take, over all runs (default "
+                   f"{_setup_default_steps():.0e}; 'inf' for no bound): more is refused before "
+                   "anything runs, with the count and an estimate of the time")
     p.add_argument("--no-progress", action="store_true", help="never show a progress bar")
     common.add_json(p)
+
+
+def _setup_default_steps() -> float:
+    from equilibrist.sim._setup import DEFAULT_MAX_STEPS
+
+    return float(DEFAULT_MAX_STEPS)
+
+
+def parse_max_steps(text: str | None) -> float | None:
+    """--max-steps as a bound (None: no bound), the default without the option."""
+    if text is None:
+        return _setup_default_steps()
+    if text.strip().lower() in ("inf", "infinity"):
+        return None
+    v = common.parse_number(text, "--max-steps")
+    if v < 1:
+        raise common.UsageError(f"--max-steps {text}: expected a number of physics steps >= 1 "
+                                "(or inf for no bound)")
+    return v
+
+
+def check_out(args: argparse.Namespace, what: str) -> None:
+    """Refuse a bad --out name before anything runs (an empty one is not 'no file')."""
+    if args.out is None:
+        return
+    from pathlib import Path
+
+    from equilibrist.sim.result import check_result_path
+
+    if not args.out.strip():
+        raise common.UsageError(f"--out {args.out!r}: expected a file name (NAME.npz or NAME.csv)")
+    check_result_path(Path(args.out), what)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -245,6 +290,7 @@ def build_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
         "reference": reference,
         "events": parse_events(args, system),
         "outputs": outputs,
+        "max_steps": parse_max_steps(args.max_steps),
     }
     if kind == "swingup":
         # A swing-up starts hanging: only the task's region (the cart's track) ends it.
@@ -264,17 +310,40 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
+def run_metrics(result: Any) -> dict[str, Any]:
+    """The run's metrics with ``peak_command`` (before the actuator's limits) beside
+    ``peak_input`` (the largest input that acted), each named for what it is."""
+    import numpy as np
+
+    metrics = dict(result.metrics())
+    names = list(result.input_names)
+    peak_command = dict(zip(names, np.abs(result.commanded).max(axis=0).tolist(), strict=True))
+    peak_input = dict(zip(names, np.abs(result.applied).max(axis=0).tolist(), strict=True))
+    out: dict[str, Any] = {}
+    for key, value in metrics.items():
+        if key == "peak_input":
+            out["peak_command"] = peak_command
+            out["peak_input"] = peak_input
+        else:
+            out[key] = value
+    if "peak_input" not in out:
+        out["peak_command"] = peak_command
+        out["peak_input"] = peak_input
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
     from equilibrist.sim.run import simulate
 
+    check_out(args, "the run")
     system, options = build_run(args)
     result = simulate(system, x0=parse_x0(args.x0), progress=show_progress(args),
                       excitation=parse_excitation(args), **options)
-    saved = result.save(args.out) if args.out else None
+    saved = result.save(args.out) if args.out is not None else None
     from equilibrist.viz.cli_hooks import handle_outputs
 
     handle_outputs(args, result, system=system)
-    metrics = result.metrics()
+    metrics = run_metrics(result)
     if args.json:
         out = dict(metrics)
         if saved is not None:

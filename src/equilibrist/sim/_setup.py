@@ -30,6 +30,52 @@ PLANTS = ("nonlinear", "linear")
 DEFAULT_MAX_STEP = 1e-3
 # Fraction of the available memory a run or batch may take.
 MEMORY_FRACTION = 0.5
+# The most physics steps a run (or a batch, over all its runs) may take
+# unless asked for more (``max_steps=``, ``--max-steps``): some minutes of
+# work on a fast machine, hours on a slow one. A mistyped physics step
+# (1e-12 s) asks for a million times more and is refused before anything runs.
+DEFAULT_MAX_STEPS = 10_000_000_000
+# A generous speed of the compiled core per core [physics steps per second]:
+# the time a refused request would take is stated as at least this long.
+FAST_STEPS_PER_SECOND = 1e8
+
+
+def _fmt_seconds(s: float) -> str:
+    for unit, size in (("years", 365.25 * 86400), ("days", 86400), ("hours", 3600), ("minutes", 60)):
+        if s >= 2 * size:
+            return f"{s / size:.3g} {unit}"
+    return f"{s:.3g} s"
+
+
+def check_steps(steps: float, what: str, max_steps: float | None, threads: int = 1) -> str | None:
+    """The problem with a run or batch of *steps* physics steps, if more than *max_steps*.
+
+    ``max_steps=None`` (or infinite) sets no bound.
+    """
+    if max_steps is None or steps <= max_steps:
+        return None
+    at_least = steps / (FAST_STEPS_PER_SECOND * max(1, threads))
+    return (
+        f"{what} asks for {steps:.3g} physics steps, more than the {max_steps:.3g} allowed "
+        f"(it would take at least {_fmt_seconds(at_least)} at "
+        f"{FAST_STEPS_PER_SECOND / 1e6:.0f} M steps/s per core): use a larger physics step, a "
+        f"shorter duration or fewer runs, or ask for it anyway with --max-steps {steps:.3g} "
+        f"(max_steps={steps:.3g} in Python)"
+    )
+
+
+def check_max_steps(value: object) -> float | None:
+    """*value* as a bound on physics steps (None or inf: no bound)."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating):
+        raise SimulationError(f"max_steps = {value!r}: expected a number of physics steps >= 1 "
+                              "(or None for no bound)")
+    v = float(value)
+    if math.isnan(v) or v < 1:
+        raise SimulationError(f"max_steps = {value!r}: expected a number of physics steps >= 1 "
+                              "(or None for no bound)")
+    return None if math.isinf(v) else v
 
 
 def available_memory() -> int:
@@ -275,6 +321,36 @@ def _initial_state(system: System, x0: object, x_op: np.ndarray, problems: list[
     return arr
 
 
+# How far a reference may go from the operating point, in units of the
+# tracked state's region (its width; 1 in the state's unit where unbounded).
+REFERENCE_REACH = 1e12
+
+
+def _check_reference(ref: np.ndarray, times: np.ndarray, tracked: Sequence[str],
+                     r_op: np.ndarray, region_spec: Mapping[str, tuple[float, float]]) -> None:
+    """Refuse a reference that is not finite, or so far away its command would overflow.
+
+    A reference may lie outside the system's region (the run then falls,
+    as it would on the rig), but not beyond :data:`REFERENCE_REACH` times
+    that region's width from the operating point: the command ``K_c r``
+    of such a value is no longer a number the plant can take.
+    """
+    for j, name in enumerate(tracked):
+        col = ref[:, j]
+        lo, hi = region_spec.get(name, (-math.inf, math.inf))
+        width = float(hi) - float(lo)
+        scale = width if math.isfinite(width) and width > 0 else 1.0
+        reach = REFERENCE_REACH * scale
+        bad = ~np.isfinite(col) | (np.abs(col - r_op[j]) > reach)
+        if bad.any():
+            k = int(np.nonzero(bad)[0][0])
+            raise SimulationError(
+                f"the reference of {name} is {col[k]:g} at t = {times[k]:g} s: a reference must "
+                f"stay finite and within {reach:g} of the operating point {r_op[j]:g} "
+                f"({REFERENCE_REACH:g} times the width of {name}'s region)"
+            )
+
+
 def _has_operating_point(system: System) -> bool:
     try:
         system.operating_point()
@@ -319,8 +395,16 @@ def build(
     outputs: Sequence[str] | None,
     region: Mapping[str, tuple[float, float]] | None,
     excitation: object = None,
+    max_steps: object = DEFAULT_MAX_STEPS,
+    runs: int = 1,
+    threads: int = 1,
 ) -> Setup:
-    """Validate the settings of a run (collecting every problem) and pack them."""
+    """Validate the settings of a run (collecting every problem) and pack them.
+
+    *max_steps* bounds the physics steps of the run, or of *runs* of them
+    (a batch on *threads* threads); None sets no bound.
+    """
+    bound = check_max_steps(max_steps)
     problems: list[str] = []
     n, m = system.n_states, system.n_inputs
     names = system.state_names
@@ -386,8 +470,17 @@ def build(
                     h = period / k
         if dur is not None:
             exact = dur * run_rate
-            n_samples = round(exact) if abs(exact - round(exact)) < 1e-9 * max(1.0, exact) else math.ceil(exact)
-            n_samples = max(1, int(n_samples))
+            if not math.isfinite(exact):
+                problems.append(f"duration {dur:g} s at {run_rate:g} Hz is too many samples to count")
+            else:
+                n_samples = round(exact) if abs(exact - round(exact)) < 1e-9 * max(1.0, exact) else math.ceil(exact)
+                n_samples = max(1, int(n_samples))
+            if n_sub is not None and n_samples is not None:
+                what = "the run" if runs == 1 else f"a batch of {runs} runs"
+                too_many = check_steps(float(n_samples) * n_sub * runs, what, bound, threads)
+                if too_many:
+                    # Alone: the other settings' checks (memory) would only confuse it.
+                    raise SimulationError(too_many)
 
     # Initial state, measured outputs.
     lo, hi = system.input_limits
@@ -598,6 +691,7 @@ def build(
     ref = np.zeros((n_rows, len(tracked)))
     if ref_signal is not None:
         ref = np.ascontiguousarray(ref_signal.evaluate(times, x_op[r_idx]), dtype=float)
+        _check_reference(ref, times, tracked, x_op[r_idx], region_spec)
     elif ctrl_tracked:
         ref = np.ascontiguousarray(np.tile(x_op[ctrl_r_idx], (n_rows, 1)), dtype=float)
     uff = np.zeros((n_rows, m))
@@ -610,6 +704,10 @@ def build(
                                   "(open loop, linear or nonlinear), not of a Python one")
         excite = as_signal(excitation)
         uff = np.ascontiguousarray(uff + excite.evaluate(times, np.zeros(m)))
+    if not np.all(np.isfinite(uff)):
+        k = int(np.nonzero(~np.all(np.isfinite(uff), axis=1))[0][0])
+        raise SimulationError(f"the input added to the command is not finite at t = {times[k]:g} s "
+                              f"({uff[k].tolist()}): expected finite values over the run")
 
     return Setup(
         system=system, controller=ctrl, compiled=compiled, estimates=estimates,

@@ -32,6 +32,7 @@ import numpy as np
 
 from equilibrist.atomic import atomic_path, write_text
 from equilibrist.errors import SimulationError, nearest
+from equilibrist.mechanics.spec import Parameter
 from equilibrist.numeric.system import System
 from equilibrist.sim import _setup, layout
 from equilibrist.sim.events import Event
@@ -45,9 +46,24 @@ from equilibrist.sim.noise import (
     seed_sequence,
 )
 from equilibrist.sim.result import SimResult, check_result_path, read_npz
-from equilibrist.sim.run import _result, _run_python, fall_reason
+from equilibrist.sim.run import (
+    _FIRST_CHUNK_STEPS,
+    _progress_bar,
+    _result,
+    _run_python,
+    fall_reason,
+    next_chunk,
+)
 
 FORMAT = "equilibrist-batch-1"
+
+
+def _threads(workers: object) -> int:
+    """The threads a batch would use (for the estimate of a refused batch's time)."""
+    count = os.cpu_count() or 1
+    if isinstance(workers, int | np.integer) and not isinstance(workers, bool) and workers >= 1:
+        count = min(count, int(workers))
+    return count
 
 
 def child_seed(base: np.random.SeedSequence, index: int) -> np.random.SeedSequence:
@@ -368,6 +384,7 @@ def simulate_batch(
     workers: int | None = None,
     max_memory: float | None = None,
     progress: bool = False,
+    max_steps: float | None = _setup.DEFAULT_MAX_STEPS,
 ) -> BatchResult:
     """*runs* independent runs of the same closed loop, in parallel.
 
@@ -387,6 +404,16 @@ def simulate_batch(
         the available memory, before anything is allocated).
     workers : int, optional
         Threads (default: all cores).
+    max_steps : float or None
+        The most physics steps the batch may take over all its runs
+        (default :data:`~equilibrist.sim._setup.DEFAULT_MAX_STEPS`); a batch
+        that needs more is refused before it starts. None: no bound.
+
+    The runs are made in calls of the compiled core of bounded wall time
+    (:data:`~equilibrist.sim.run.CHUNK_SECONDS`, groups of runs sized from
+    the measured speed), so Ctrl-C stops a batch between two of them; a
+    group has at least one run per thread, so a batch whose single runs
+    each take longer than that is stopped after its current runs.
 
     Other parameters are those of :func:`~equilibrist.sim.run.simulate`.
     Linear and nonlinear controllers run compiled, in threads; Python
@@ -407,6 +434,7 @@ def simulate_batch(
         system, controller, duration=duration, rate=rate, physics_step=physics_step,
         integrator=integrator, rtol=rtol, atol=atol, plant=plant, x0=template_x0, delay=delay,
         noise=noise, reference=reference, events=events, outputs=None, region=region,
+        max_steps=max_steps, runs=runs, threads=_threads(workers),
     )
     n, m = system.n_states, system.n_inputs
     n_sets = len(setup.change_values) + 1
@@ -454,8 +482,7 @@ def simulate_batch(
     )
     threads = set_workers(workers)
     steps_per_run = setup.n_samples * setup.n_sub
-    chunk = runs if not progress else max(4 * threads, math.ceil(2_000_000 / max(1, steps_per_run)))
-    from equilibrist.sim.run import _progress_bar
+    chunk = max(threads, math.ceil(_FIRST_CHUNK_STEPS / max(1, steps_per_run)))
 
     def run_arrays(sl: slice) -> dict[str, np.ndarray]:
         return dict(x0s=x0s[sl], rngs=rngs[sl], p_sets_r=p_sets_r[sl], lin_r=lin_r[sl],
@@ -465,14 +492,19 @@ def simulate_batch(
     if not kernel.compiled:
         # Load (or compile) the core outside the timing: steps_per_second is the runs' speed.
         kernel.run_many(**shared, **run_arrays(slice(0, 0)))
-    bar = _progress_bar(runs, progress and runs > chunk, "runs")
+    bar = _progress_bar(runs, progress, "runs")
     elapsed = 0.0
+    start = 0
     try:
-        for start in range(0, runs, chunk):
+        while start < runs:
             sl = slice(start, min(runs, start + chunk))
             t0 = time.perf_counter()
             kernel.run_many(**shared, **run_arrays(sl))
-            elapsed += time.perf_counter() - t0
+            took = time.perf_counter() - t0
+            elapsed += took
+            # Whole groups of one run per thread: a smaller group leaves threads idle.
+            chunk = max(threads, next_chunk(sl.stop - sl.start, took) // threads * threads)
+            start = sl.stop
             if bar is not None:
                 bar.update(sl.stop - sl.start)
     finally:
@@ -612,6 +644,23 @@ def _code(res: SimResult, names: Sequence[str]) -> int:
     return {"not finite": -2, "integrator failed": -3}.get(res.fell_state or "", -1)
 
 
+def _spread_problem(param: Parameter, nominal: float, rel: float) -> str | None:
+    """Why a relative spread *rel* of *param* about *nominal* is refused, or None.
+
+    The draws lie within ``nominal * (1 +- rel)``: the whole of that range
+    must be valid, whatever the draw, so a spread is checked as a spread.
+    """
+    ends = sorted((nominal * (1.0 - rel), nominal * (1.0 + rel)))
+    if all(param.check(v) is None for v in ends):
+        return None
+    hint = ""
+    if param.low == 0.0 and rel >= 1.0 and nominal > 0:
+        hint = "; a parameter that must stay positive takes a relative spread below 1"
+    return (f"spread {param.name}={rel:g} draws {param.name} from {ends[0]:g} to {ends[1]:g} "
+            f"(nominal {nominal:g} times 1 +- {rel:g}), outside its valid range "
+            f"{param.range_text}{hint}")
+
+
 def sample_uniform(
     system: System, runs: int, *, ranges: Mapping[str, tuple[float, float]] | None = None,
     spread: Mapping[str, float] | None = None, seed: SeedLike = None,
@@ -638,13 +687,21 @@ def sample_uniform(
             continue
         x0s[:, system.state_names.index(name)] = gen.uniform(lo, hi, runs)
     params: dict[str, np.ndarray] = {}
+    by_name = {p.name: p for p in system.spec.all_parameters}
     for name, rel in (spread or {}).items():
-        if name not in system.params:
+        if name not in system.params or name not in by_name:
             problems.append(f"unknown parameter {name!r} of {system.key}: "
-                            f"{nearest(name, list(system.params))}")
+                            f"{nearest(str(name), list(system.params))}")
+            continue
+        if isinstance(rel, bool) or not isinstance(rel, int | float | np.integer | np.floating):
+            problems.append(f"spread of {name} = {rel!r}: expected a relative spread, a number >= 0")
             continue
         if not (math.isfinite(rel) and rel >= 0):
             problems.append(f"spread of {name} must be a number >= 0, got {rel}")
+            continue
+        problem = _spread_problem(by_name[name], float(system.params[name]), float(rel))
+        if problem:
+            problems.append(problem)
             continue
         nominal = system.params[name]
         params[name] = nominal * (1.0 + gen.uniform(-rel, rel, runs))

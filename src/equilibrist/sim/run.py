@@ -24,8 +24,8 @@ operating point; the result is reported in absolute ones.
 
 from __future__ import annotations
 
-import math
 import sys
+import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -39,8 +39,19 @@ from equilibrist.sim.kernel import Kernel
 from equilibrist.sim.noise import Noise, SeedLike, describe_seed, generator_state, seed_sequence
 from equilibrist.sim.result import SimResult
 
-# Physics steps per call of the core when a progress bar is shown.
-_CHUNK_STEPS = 200_000
+# The compiled core does not see signals: a long run is made of calls of
+# bounded wall time (the core resumes a run at any sample), and Ctrl-C,
+# handled between them, stops a run within about this long. The first call
+# is short; the next are sized from the measured speed.
+CHUNK_SECONDS = 0.2
+_FIRST_CHUNK_STEPS = 20_000
+
+
+def next_chunk(chunk: int, seconds: float) -> int:
+    """The size of the next call of the core after *chunk* units took *seconds*."""
+    if seconds <= 0:
+        return chunk * 4
+    return max(1, min(chunk * 4, int(chunk * CHUNK_SECONDS / seconds)))
 
 
 def fall_reason(code: int, state_names: Sequence[str]) -> str:
@@ -71,6 +82,7 @@ def simulate(
     region: Mapping[str, tuple[float, float]] | None = None,
     progress: bool = False,
     excitation: object = None,
+    max_steps: float | None = _setup.DEFAULT_MAX_STEPS,
 ) -> SimResult:
     """Simulate *system* under *controller* for *duration* seconds.
 
@@ -124,6 +136,10 @@ def simulate(
         Added to the controller's command before the actuator's limits
         (:class:`~equilibrist.sim.signals.Chirp`, :class:`~equilibrist.sim.signals.PRBS`):
         an identification experiment. The logged input is what acted.
+    max_steps : float or None
+        The most physics steps the run may take (default
+        :data:`~equilibrist.sim._setup.DEFAULT_MAX_STEPS`); a run that needs
+        more is refused before it starts. None: no bound.
 
     Returns
     -------
@@ -133,7 +149,7 @@ def simulate(
         system, controller, duration=duration, rate=rate, physics_step=physics_step,
         integrator=integrator, rtol=rtol, atol=atol, plant=plant, x0=x0, delay=delay,
         noise=noise, reference=reference, events=events, outputs=outputs, region=region,
-        excitation=excitation,
+        excitation=excitation, max_steps=max_steps,
     )
     seq = seed_sequence(seed) if (noise is not None or seed is not None) else None
     rng = generator_state(seq) if seq is not None else np.zeros(4, dtype=np.uint64)
@@ -173,14 +189,16 @@ def _run_compiled(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
         acc_cols=setup.acc_cols, rec=rec, acc=acc, status=status, fell_x=fell_x,
     )
     total = setup.n_rows
-    chunk = total if not progress else max(1, _CHUNK_STEPS // setup.n_sub)
-    bar = _progress_bar(total, progress and total > chunk, "samples")
+    chunk = max(1, _FIRST_CHUNK_STEPS // setup.n_sub)
+    bar = _progress_bar(total, progress, "samples")
     k = 0
     rows, fell = layout.STATUS["rows"], layout.STATUS["fell"]
     try:
         while k < total:
             k_end = min(total, k + chunk)
+            t0 = time.perf_counter()
             kernel.run_one(k_start=k, k_end=k_end, **arrays)
+            chunk = next_chunk(k_end - k, time.perf_counter() - t0)
             if bar is not None:
                 bar.update(int(status[rows]) - bar.n)
             if status[fell] or status[rows] < k_end:
@@ -321,7 +339,3 @@ def _result(setup: _setup.Setup, rec: np.ndarray, rows: int, status: np.ndarray,
         final_state=x_end.copy(),
         settings=settings,
     )
-
-
-def steps_per_second(n_steps: float, seconds: float) -> float:
-    return n_steps / seconds if seconds > 0 else math.inf
