@@ -66,6 +66,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     common.add_params(p)
     common.add_params(p)
     common.add_params(p)
+    common.add_params(p)
     common.add_json(p)
     p.set_defaults(func=run)
 
