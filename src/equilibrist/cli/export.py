@@ -64,9 +64,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="noise seed of the test-vector run")
     common.add_set(p)
     common.add_params(p)
-    common.add_params(p)
-    common.add_params(p)
-    common.add_params(p)
     common.add_json(p)
     p.set_defaults(func=run)
 
