@@ -490,3 +490,84 @@ def test_peak_command_and_peak_input_are_named_for_what_they_are(capsys) -> None
     assert out["peak_command"]["F"] > 5.0
     assert out["peak_input"]["F"] == pytest.approx(5.0, abs=1e-12)
     assert out["time_saturated"] > 0
+
+
+# -- the Python API: every user mistake is an EquilibristError naming the argument --
+
+WRONG = [None, "abc", "", 3, -1, 2.5, float("nan"), float("inf"), True, [], [1, "a"], {},
+         {"m_p": "heavy"}, {3: 1.0}, {"theta": "a"}, ("a", "b"), object(), b"bytes",
+         np.array(["x"]), [[1, 2], [3]], {"theta": (0, 1)}, {"theta": (0, 1, "many")}]
+
+
+def _api_calls():
+    from equilibrist import get_system
+    from equilibrist.control.design import design
+    from equilibrist.export.writer import export_c
+    from equilibrist.sim import simulate
+    from equilibrist.sim.batch import monte_carlo, region_of_attraction, simulate_batch
+    from equilibrist.tasks import get_task
+
+    system = get_system("cartpole")
+    run = {"duration": 0.05, "rate": 200.0}
+    return {
+        "design.system": design,
+        "design.outputs": lambda v: design(system, outputs=v),
+        "design.rate": lambda v: design(system, rate=v),
+        "design.q": lambda v: design(system, q=v),
+        "design.at": lambda v: design(system, at=v),
+        "design.discretization": lambda v: design(system, rate=200.0, discretization=v),
+        "simulate.system": lambda v: simulate(v, **run),
+        "simulate.controller": lambda v: simulate(system, v, **run),
+        "simulate.reference": lambda v: simulate(system, design(system, rate=200.0), reference=v, **run),
+        "simulate.x0": lambda v: simulate(system, x0=v, **run),
+        "simulate.duration": lambda v: simulate(system, duration=v, rate=200.0),
+        "simulate.events": lambda v: simulate(system, events=v, **run),
+        "simulate.outputs": lambda v: simulate(system, outputs=v, **run),
+        "simulate.region": lambda v: simulate(system, region=v, **run),
+        "simulate.noise": lambda v: simulate(system, noise=v, **run),
+        "simulate.seed": lambda v: simulate(system, seed=v, **run),
+        "simulate.integrator": lambda v: simulate(system, integrator=v, **run),
+        "simulate.plant": lambda v: simulate(system, plant=v, **run),
+        "simulate.delay": lambda v: simulate(system, delay=v, **run),
+        "simulate.excitation": lambda v: simulate(system, excitation=v, **run),
+        "simulate.max_steps": lambda v: simulate(system, max_steps=v, **run),
+        "simulate_batch.system": lambda v: simulate_batch(v, runs=2, **run),
+        "simulate_batch.runs": lambda v: simulate_batch(system, runs=v, **run),
+        "simulate_batch.params": lambda v: simulate_batch(system, runs=2, params=v, **run),
+        "simulate_batch.x0": lambda v: simulate_batch(system, runs=2, x0=v, **run),
+        "simulate_batch.workers": lambda v: simulate_batch(system, runs=2, workers=v, **run),
+        "region_of_attraction.grid": lambda v: region_of_attraction(system, None, grid=v, **run),
+        "region_of_attraction.samples": lambda v: region_of_attraction(system, None, samples=v,
+                                                                       runs=2, **run),
+        "monte_carlo.spread": lambda v: monte_carlo(system, None, spread=v, runs=2, **run),
+        "monte_carlo.runs": lambda v: monte_carlo(system, None, spread={"m_p": 0.1}, runs=v, **run),
+        "export_c.design": lambda v: export_c(v, "never-written"),
+        "get_task.system": lambda v: get_task(v, "balance"),
+        "get_task.name": lambda v: get_task(system, v),
+        "envs.make.system": lambda v: _make_env(system=v),
+        "envs.make.rate": lambda v: _make_env(rate=v),
+        "envs.make.params": lambda v: _make_env(params=v),
+    }
+
+
+def _make_env(**kwargs):
+    import gymnasium as gym
+
+    import equilibrist.envs  # noqa: F401  (registers the ids)
+
+    return gym.make("equilibrist/cartpole-balance-v0", **kwargs)
+
+
+API_CALLS = _api_calls()
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(entry=st.sampled_from(sorted(API_CALLS)), value=st.sampled_from(WRONG))
+def test_wrong_types_through_the_api_are_equilibrist_errors(tmp_path_factory, monkeypatch,
+                                                            entry, value) -> None:
+    monkeypatch.chdir(tmp_path_factory.mktemp("api"))
+    try:
+        API_CALLS[entry](value)
+    except EquilibristError as exc:
+        assert str(exc).strip() and "\n" not in str(exc).strip()
+    assert not Path("never-written").exists()

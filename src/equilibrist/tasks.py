@@ -180,6 +180,9 @@ def _scales(system: System, names: tuple[str, ...]) -> np.ndarray:
 
 def get_task(system: System, name: str) -> Task:
     """The task *name* (``"balance"``, ``"swingup"``) posed on *system*."""
+    if not isinstance(system, System):
+        raise UnknownNameError(f"task: system = {system!r}: expected a System "
+                               f"(equilibrist.get_system(name)), not {type(system).__name__}")
     if not isinstance(name, str):
         raise UnknownNameError(f"task: expected a task name, got {type(name).__name__}")
     offered = task_names(system)

@@ -607,7 +607,31 @@ def design(
     UnknownNameError
         An output that is not a state.
     """
+    from equilibrist.numeric.system import System as _System
+
+    if not isinstance(system, _System):
+        raise DesignError(f"system = {system!r}: expected a System (equilibrist.get_system(name)), "
+                          f"not {type(system).__name__}")
     problems: list[str] = []
+    if outputs is not None and (isinstance(outputs, str | bytes) or not isinstance(outputs, Sequence)
+                                or not all(isinstance(o, str) for o in outputs)):
+        problems.append(f"outputs = {outputs!r}: expected a list of state names")
+    if at is not None and not isinstance(at, Mapping):
+        problems.append(f"at = {at!r}: expected a mapping {{state: value}}")
+    elif at:
+        for key, value in at.items():
+            if not isinstance(key, str):
+                problems.append(f"at: {key!r} is not a state name of {system.key} "
+                                f"({', '.join(system.state_names)})")
+            elif isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating) \
+                    or not math.isfinite(float(value)):
+                problems.append(f"at: {key} = {value!r} is not a finite number")
+    if not isinstance(discretization, str):
+        problems.append(f"discretization = {discretization!r}: expected one of {', '.join(METHODS)}")
+        discretization = "zoh"
+    if not isinstance(kalman_form, str):
+        problems.append(f"kalman_form = {kalman_form!r}: expected one of {', '.join(FORMS)}")
+        kalman_form = "current"
     if discretization not in METHODS:
         problems.append(
             f"discretization {discretization!r} is unknown: expected one of {', '.join(METHODS)}"

@@ -58,6 +58,9 @@ def bind_system(system: object, params: Mapping[str, object] | None) -> System:
     if params is not None and not isinstance(params, Mapping):
         raise EnvError(f"params: expected a mapping of parameter values, got {type(params).__name__}")
     values = dict(params or {})
+    names = [k for k in values if not isinstance(k, str)]
+    if names:
+        raise EnvError(f"params: parameter names are text, got {names[0]!r}")
     if isinstance(system, System):
         return system.with_params(**values) if values else system  # type: ignore[arg-type]
     if not isinstance(system, str):

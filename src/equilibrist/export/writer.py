@@ -39,6 +39,11 @@ def controller_data(design: Any, *, controller: str = "lqg") -> ControllerData:
         A continuous design (no rate), or anything :func:`from_design` refuses.
     """
     check_controller(controller)
+    from equilibrist.control.design import Design
+
+    if not isinstance(design, Design):
+        raise ExportError(f"design = {design!r}: expected a Design (equilibrist.control.design."
+                          f"design(system, rate=...)), not {type(design).__name__}")
     if getattr(design, "discrete", None) is None or not getattr(design, "rate", None):
         raise ExportError(
             f"the design of {getattr(design, 'system_key', 'the system')} is continuous: "

@@ -292,7 +292,7 @@ def _initial_state(system: System, x0: object, x_op: np.ndarray, problems: list[
             if name not in system.state_names:
                 from equilibrist.errors import nearest
 
-                problems.append(f"initial state: no state {name!r} ({nearest(name, system.state_names)})")
+                problems.append(f"initial state: no state {name!r} ({nearest(str(name), system.state_names)})")
                 continue
             try:
                 v = float(value)
@@ -351,6 +351,21 @@ def _check_reference(ref: np.ndarray, times: np.ndarray, tracked: Sequence[str],
             )
 
 
+def check_system(system: object) -> None:
+    """Refuse anything but a :class:`~equilibrist.numeric.system.System` as the plant."""
+    if not isinstance(system, System):
+        raise SimulationError(
+            f"system = {system!r}: expected a System (equilibrist.get_system(name)), "
+            f"not {type(system).__name__}"
+        )
+
+
+def _names(value: object) -> bool:
+    """Whether *value* is a list (or tuple) of names."""
+    return (isinstance(value, Sequence) and not isinstance(value, str | bytes)
+            and all(isinstance(v, str) for v in value))
+
+
 def _has_operating_point(system: System) -> bool:
     try:
         system.operating_point()
@@ -405,7 +420,41 @@ def build(
     (a batch on *threads* threads); None sets no bound.
     """
     bound = check_max_steps(max_steps)
+    check_system(system)
     problems: list[str] = []
+    if isinstance(events, str | bytes) or not isinstance(events, Sequence | tuple | list):
+        problems.append(f"events = {events!r}: expected a list of events (Kick, Pulse, Impulse, "
+                        "ParameterChange)")
+        events = ()
+    if outputs is not None and not _names(outputs):
+        problems.append(f"outputs = {outputs!r}: expected a list of state names")
+        outputs = None
+    if region is not None and not isinstance(region, Mapping):
+        problems.append(f"region = {region!r}: expected a mapping {{state: (low, high)}}")
+        region = None
+    elif region is not None:
+        checked: dict[str, tuple[float, float]] = {}
+        for name, bounds in region.items():
+            try:
+                lo_b, hi_b = (float(b) for b in bounds)
+            except (TypeError, ValueError):
+                problems.append(f"region of {name!r}: expected (low, high), got {bounds!r}")
+                continue
+            if math.isnan(lo_b) or math.isnan(hi_b):
+                problems.append(f"region of {name!r}: low and high must be numbers, got {bounds!r}")
+                continue
+            checked[str(name) if isinstance(name, str) else repr(name)] = (lo_b, hi_b)
+        region = checked
+    if not isinstance(delay, bool | np.bool_):
+        problems.append(f"delay = {delay!r}: expected True or False")
+    if not isinstance(integrator, str):
+        problems.append(f"integrator = {integrator!r}: expected one of {', '.join(INTEGRATORS)}")
+        integrator = "rk4"
+    if not isinstance(plant, str):
+        problems.append(f"plant = {plant!r}: expected one of {', '.join(PLANTS)}")
+        plant = "nonlinear"
+    if problems:
+        raise SimulationError("; ".join(problems))
     n, m = system.n_states, system.n_inputs
     names = system.state_names
     # Operating point: the controller's, else the system's canonical one.

@@ -58,6 +58,27 @@ from equilibrist.sim.run import (
 FORMAT = "equilibrist-batch-1"
 
 
+def _count(value: object, name: str) -> int:
+    """*value* as a whole number >= 1, or a :class:`SimulationError` naming *name*."""
+    if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+        raise SimulationError(f"{name} = {value!r}: expected a whole number >= 1")
+    return int(value)
+
+
+def _floats(value: object, what: str) -> np.ndarray:
+    """*value* as an array of floats, or a :class:`SimulationError` naming *what*."""
+    try:
+        return np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise SimulationError(f"{what} = {value!r}: expected numbers") from None
+
+
+def _mapping(value: object, what: str, expected: str) -> Mapping[Any, Any]:
+    if not isinstance(value, Mapping):
+        raise SimulationError(f"{what} = {value!r}: expected a mapping {expected}")
+    return value
+
+
 def _threads(workers: object) -> int:
     """The threads a batch would use (for the estimate of a refused batch's time)."""
     count = os.cpu_count() or 1
@@ -301,8 +322,8 @@ def _initial_states(system: System, x0: object, runs: int, x_op: np.ndarray) -> 
         out = np.tile(x_op, (runs, 1))
         for name, values in x0.items():
             if name not in system.state_names:
-                raise SimulationError(f"initial state: no state {name!r} ({nearest(name, system.state_names)})")
-            v = np.asarray(values, dtype=float)
+                raise SimulationError(f"initial state: no state {name!r} ({nearest(str(name), system.state_names)})")
+            v = _floats(values, f"initial {name}")
             if v.ndim == 0:
                 v = np.full(runs, float(v))
             if v.shape != (runs,):
@@ -310,7 +331,7 @@ def _initial_states(system: System, x0: object, runs: int, x_op: np.ndarray) -> 
             out[:, system.state_names.index(name)] = v
         arr = out
     else:
-        arr = np.asarray(x0, dtype=float)
+        arr = _floats(x0, "initial states x0")
         if arr.ndim == 1:
             arr = np.tile(arr, (runs, 1))
         if arr.shape != (runs, n):
@@ -333,9 +354,13 @@ def _parameter_matrix(system: System, params: Mapping[str, object] | None, runs:
     problems = []
     for name, values in params.items():
         if name not in by_name:
-            problems.append(f"unknown parameter {name!r} of {system.key}: {nearest(name, names)}")
+            problems.append(f"unknown parameter {name!r} of {system.key}: {nearest(str(name), names)}")
             continue
-        v = np.asarray(values, dtype=float)
+        try:
+            v = np.asarray(values, dtype=float)
+        except (TypeError, ValueError):
+            problems.append(f"parameter {name} = {values!r}: expected a number or one number per run")
+            continue
         if v.ndim == 0:
             v = np.full(runs, float(v))
         if v.shape != (runs,):
@@ -421,14 +446,17 @@ def simulate_batch(
     pickled to them, so it must be defined at module level), or one by
     one in this process with ``workers=1``.
     """
-    if isinstance(runs, bool) or not isinstance(runs, int | np.integer) or runs < 1:
-        raise SimulationError(f"runs must be a positive whole number, got {runs!r}")
-    runs = int(runs)
+    _setup.check_system(system)
+    runs = _count(runs, "runs")
+    if workers is not None:
+        workers = _count(workers, "workers")
+    if params is not None and not isinstance(params, Mapping):
+        raise SimulationError(f"params = {params!r}: expected a mapping {{parameter: values per run}}")
     # A system without a canonical point (the zxz gyroscope) has no default
     # initial state: the settings are checked on the first run's.
     template_x0 = None
     if x0 is not None and not _setup._has_operating_point(system):
-        given = np.asarray(x0, dtype=float)
+        given = _floats(x0, "initial states x0")
         template_x0 = given[0] if given.ndim == 2 else given
     setup = _setup.build(
         system, controller, duration=duration, rate=rate, physics_step=physics_step,
@@ -671,6 +699,12 @@ def sample_uniform(
     Returns ``(x0s, params)`` for :func:`simulate_batch`. States not in
     *ranges* stay at *x_op* (default: the canonical operating point).
     """
+    _setup.check_system(system)
+    runs = _count(runs, "runs")
+    if ranges is not None:
+        _mapping(ranges, "ranges", "{state: (low, high)}")
+    if spread is not None:
+        _mapping(spread, "spread", "{parameter: relative spread}")
     if x_op is None:
         x_op, _ = _setup.operating_point(system, None)
     _setup.check_memory(runs * (system.n_states + len(spread or {})) * 8.0,
@@ -678,9 +712,14 @@ def sample_uniform(
     gen = np.random.default_rng(seed_sequence(seed))
     x0s = np.tile(np.asarray(x_op, dtype=float), (runs, 1))
     problems = []
-    for name, (lo, hi) in (ranges or {}).items():
+    for name, bounds in (ranges or {}).items():
         if name not in system.state_names:
-            problems.append(f"no state {name!r} ({nearest(name, system.state_names)})")
+            problems.append(f"no state {name!r} ({nearest(str(name), system.state_names)})")
+            continue
+        try:
+            lo, hi = (float(b) for b in bounds)
+        except (TypeError, ValueError):
+            problems.append(f"range of {name} = {bounds!r}: expected (low, high)")
             continue
         if not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi:
             problems.append(f"range of {name}: {lo}:{hi} must be finite with low <= high")
@@ -741,17 +780,26 @@ def region_of_attraction(
     *seed*. The other states start at the operating point. *options* go to
     :func:`simulate_batch` (``duration`` is required).
     """
+    _setup.check_system(system)
     if (grid is None) == (samples is None):
         raise SimulationError("give either grid={state: (low, high, count)} or samples={state: (low, high)}")
     ctrl_x_op, _ = _setup.operating_point(system, controller)
     if grid is not None:
+        _mapping(grid, "grid", "{state: (low, high, count)}")
+        if not grid:
+            raise SimulationError("grid = {}: expected at least one state {state: (low, high, count)}")
         names = tuple(grid)
         axes = []
         for name, spec in grid.items():
-            lo, hi, count = spec
-            if int(count) < 1:
-                raise SimulationError(f"grid of {name}: count must be >= 1")
-            axes.append(np.linspace(float(lo), float(hi), int(count)))
+            try:
+                lo, hi, count = spec
+                lo_f, hi_f = float(lo), float(hi)
+            except (TypeError, ValueError):
+                raise SimulationError(f"grid of {name} = {spec!r}: expected (low, high, count)") from None
+            count = _count(count, f"the grid's count of {name}")
+            if not (math.isfinite(lo_f) and math.isfinite(hi_f)):
+                raise SimulationError(f"grid of {name}: low and high must be finite, got {spec!r}")
+            axes.append(np.linspace(lo_f, hi_f, count))
         mesh = np.meshgrid(*axes, indexing="ij")
         points = np.column_stack([g.reshape(-1) for g in mesh])
         x0s = np.tile(ctrl_x_op, (points.shape[0], 1))
@@ -762,7 +810,10 @@ def region_of_attraction(
     else:
         if runs is None:
             raise SimulationError("random samples need runs=...")
-        names = tuple(samples)  # type: ignore[arg-type]
+        _mapping(samples, "samples", "{state: (low, high)}")
+        if not samples:
+            raise SimulationError("samples = {}: expected at least one state {state: (low, high)}")
+        names = tuple(samples)
         x0s, _ = sample_uniform(system, runs, ranges=samples, seed=seed, x_op=ctrl_x_op)
         points = x0s[:, [system.state_names.index(n) for n in names]]
     batch = simulate_batch(system, controller, runs=points.shape[0], x0=x0s, seed=seed, **options)
@@ -797,6 +848,7 @@ def monte_carlo(
     :func:`simulate_batch` (``duration`` is required). The draws and the
     noise seeds come from two children of *seed*.
     """
+    _mapping(spread, "spread", "{parameter: relative spread}")
     base = seed_sequence(seed)
     _, params = sample_uniform(system, runs, spread=spread, seed=child_seed(base, 0))
     batch = simulate_batch(system, controller, runs=runs, x0=x0, params=params,

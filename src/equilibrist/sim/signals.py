@@ -31,7 +31,10 @@ def _vector(value: Value | None, base: np.ndarray, what: str) -> np.ndarray:
     """*value* as a vector of the signal's width (a scalar only for width 1)."""
     if value is None:
         return np.array(base, dtype=float)
-    arr = np.atleast_1d(np.asarray(value, dtype=float)).reshape(-1)
+    try:
+        arr = np.atleast_1d(np.asarray(value, dtype=float)).reshape(-1)
+    except (TypeError, ValueError):
+        raise SimulationError(f"{what} {value!r} is not a number or a vector of numbers") from None
     if arr.size != base.size:
         raise DimensionError(f"{what} has {arr.size} values, expected {base.size}")
     if not np.all(np.isfinite(arr)):
@@ -40,7 +43,10 @@ def _vector(value: Value | None, base: np.ndarray, what: str) -> np.ndarray:
 
 
 def _finite(value: float, what: str) -> float:
-    v = float(value)
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise SimulationError(f"{what} = {value!r} is not a number") from None
     if not math.isfinite(v):
         raise SimulationError(f"{what} = {value!r} is not a finite number")
     return v
@@ -363,6 +369,12 @@ def as_signal(value: object) -> Signal:
         return value
     if callable(value):
         return Function(value)
+    if isinstance(value, str | bytes):
+        raise SimulationError(
+            f"signal {value!r}: text is not a signal; give a number, a vector, a signal "
+            "(Step, Ramp, Square, Samples, Chirp, PRBS), a function of time, or parse the "
+            "command line's syntax with parse_signal"
+        )
     return Constant(value)  # type: ignore[arg-type]
 
 
