@@ -88,7 +88,7 @@ LAW_NAMES = ("cart", "wheel", "rotary", "acrobot")
 # --- layout of the parameters ``cp`` and of the state ``z`` (one place: the source,
 # the Python runtime and the C export read these) -----------------------------------
 CP_SLOTS = ("law", "T", "ke", "amax", "e0", "kx", "kv", "kp", "c_in", "c_out", "alpha",
-            "beta", "u_min", "u_max", "u_op")
+            "beta", "u_min", "u_max", "u_op", "kd")
 N_PHYS = 8
 N_STATES = 4  # every rig with a swing-up has two coordinates
 CP_BLOCKS = (("phys", N_PHYS), ("x_op", N_STATES), ("K", N_STATES), ("S", N_STATES * N_STATES),
@@ -192,16 +192,23 @@ def su_pump(x0, x1, x2, x3, p):
     i2 = p[ph + 6]
     g = p[ph + 7]
     t2 = su_wrap(x1)
-    v = su_clip(-p[SU_KP] * t2 - p[SU_KV] * x3 + ke * e * x2, -amax, amax)
     c2 = math.cos(t2)
     s2 = math.sin(t2)
-    d1 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2
-    d2 = m2 * (lc2 * lc2 + l1 * lc2 * c2) + i2
-    phi2 = m2 * lc2 * g * math.sin(x0 + t2)
-    phi1 = (-m2 * l1 * lc2 * x3 * x3 * s2 - 2.0 * m2 * l1 * lc2 * x3 * x2 * s2
-            + (m1 * lc1 + m2 * l1) * g * math.sin(x0) + phi2)
-    return (v * (m2 * lc2 * lc2 + i2 - d2 * d2 / d1) - d2 / d1 * phi1
-            + m2 * l1 * lc2 * x2 * x2 * s2 + phi2)
+    m11 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2
+    m12 = m2 * (lc2 * lc2 + l1 * lc2 * c2) + i2
+    m22 = m2 * lc2 * lc2 + i2
+    det = m11 * m22 - m12 * m12
+    hg2 = m2 * l1 * lc2 * s2 * x2 * x2 + m2 * lc2 * g * math.sin(x0 + t2)
+    hg1 = (-m2 * l1 * lc2 * s2 * (2.0 * x2 * x3 + x3 * x3)
+           + (m1 * lc1 + m2 * l1) * g * math.sin(x0) + m2 * lc2 * g * math.sin(x0 + t2))
+    # Xin and Kaneda's energy law: V = ke (E - E0)^2 / 2 + kd x3^2 / 2 + kp t2^2 / 2
+    # falls as dV/dt = -kv x3^2 (while the motor is not saturated).
+    kd = p[SU_KD]
+    num = -(p[SU_KV] * x3 + p[SU_KP] * t2) * det + kd * (m11 * hg2 - m12 * hg1)
+    den = ke * e * det + kd * m11
+    if den == 0.0:
+        return 0.0
+    return num / den
 
 
 def su_xhat(z, y, p, i):
@@ -382,6 +389,7 @@ class SwingUpTuning:
     catch_fraction: float = 1.0
     release_factor: float = 4.0
     accel: float = 20.0
+    k_d: float = 0.0
 
 
 #: Default tuning of each law for the catalogue's defaults.
@@ -389,7 +397,8 @@ TUNING: Mapping[str, SwingUpTuning] = {
     "cartpole": SwingUpTuning(k_energy=5.0, a_max=6.0, k_x=6.0, k_v=2.0),
     "reaction_wheel_pendulum": SwingUpTuning(k_energy=0.5, a_max=0.2, catch_fraction=10.0, accel=40.0),
     "furuta": SwingUpTuning(k_energy=40.0, a_max=0.05, catch_fraction=20.0, accel=100.0),
-    "acrobot": SwingUpTuning(k_energy=1.0, a_max=40.0, k_p=40.0, k_v=8.0),
+    "acrobot": SwingUpTuning(k_energy=1.0, a_max=20.0, k_p=60.0, k_v=30.0, k_d=30.0,
+                             release_factor=20.0),
 }
 
 
@@ -530,7 +539,7 @@ def swingup(
     cp = np.zeros(CP["end"])
     values = {
         "law": LAWS[system.name], "T": 1.0 / hz, "ke": tune.k_energy, "amax": tune.a_max,
-        "e0": tune.e0, "kx": tune.k_x, "kv": tune.k_v, "kp": tune.k_p, "c_in": c_in,
+        "e0": tune.e0, "kx": tune.k_x, "kv": tune.k_v, "kp": tune.k_p, "kd": tune.k_d, "c_in": c_in,
         "c_out": tune.release_factor * c_in, "alpha": alpha, "beta": beta,
         "u_min": lo[0], "u_max": hi[0], "u_op": u_op[0],
     }

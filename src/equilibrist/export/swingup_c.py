@@ -113,16 +113,22 @@ static double su_pump(double x0, double x1, double x2, double x3, const double *
         double m1 = p[ph], m2 = p[ph + 1], l1 = p[ph + 2], lc1 = p[ph + 3], lc2 = p[ph + 4];
         double i1 = p[ph + 5], i2 = p[ph + 6], g = p[ph + 7];
         double t2 = su_wrap(x1);
-        double v = su_clip(-p[SU_KP] * t2 - p[SU_KV] * x3 + ke * e * x2, -amax, amax);
         double c2 = cos(t2);
         double s2 = sin(t2);
-        double d1 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2;
-        double d2 = m2 * (lc2 * lc2 + l1 * lc2 * c2) + i2;
-        double phi2 = m2 * lc2 * g * sin(x0 + t2);
-        double phi1 = (-m2 * l1 * lc2 * x3 * x3 * s2 - 2.0 * m2 * l1 * lc2 * x3 * x2 * s2
-                       + (m1 * lc1 + m2 * l1) * g * sin(x0) + phi2);
-        return (v * (m2 * lc2 * lc2 + i2 - d2 * d2 / d1) - d2 / d1 * phi1
-                + m2 * l1 * lc2 * x2 * x2 * s2 + phi2);
+        double m11 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2;
+        double m12 = m2 * (lc2 * lc2 + l1 * lc2 * c2) + i2;
+        double m22 = m2 * lc2 * lc2 + i2;
+        double det = m11 * m22 - m12 * m12;
+        double hg2 = m2 * l1 * lc2 * s2 * x2 * x2 + m2 * lc2 * g * sin(x0 + t2);
+        double hg1 = (-m2 * l1 * lc2 * s2 * (2.0 * x2 * x3 + x3 * x3)
+                      + (m1 * lc1 + m2 * l1) * g * sin(x0) + m2 * lc2 * g * sin(x0 + t2));
+        /* Xin and Kaneda's energy law: V = ke (E - E0)^2 / 2 + kd x3^2 / 2 + kp t2^2 / 2
+           falls as dV/dt = -kv x3^2 (while the motor is not saturated). */
+        double kd = p[SU_KD];
+        double num = -(p[SU_KV] * x3 + p[SU_KP] * t2) * det + kd * (m11 * hg2 - m12 * hg1);
+        double den = ke * e * det + kd * m11;
+        if (den == 0.0) return 0.0;
+        return num / den;
     }
 }
 
