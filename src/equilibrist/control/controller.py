@@ -100,23 +100,49 @@ def linear_constants() -> dict[str, int]:
     return {f"_LIN_{name.upper()}": i for i, name in enumerate(LINEAR_HEADER)}
 
 
+def linear_sizes(p: np.ndarray) -> dict[str, int] | None:
+    """The sizes ``nz, ny, nr, m, n`` in the header of the packed vector *p* (None if it has none)."""
+    if p.shape[0] < len(LINEAR_HEADER):
+        return None
+    return {key: int(p[LINEAR_HEADER.index(key)]) for key in ("nz", "ny", "nr", "m", "n")}
+
+
+def linear_layout_source(sizes: Mapping[str, int] | None = None) -> str:
+    """Source of ``linear_layout(p)``: the sizes and block offsets :data:`LINEAR_SOURCE` reads.
+
+    It returns the :data:`LINEAR_HEADER` slots in order. Without *sizes*
+    they are read from the header of *p* at every call (any packed
+    controller); with *sizes* (``nz, ny, nr, m, n``) the function returns
+    them, and the offsets they imply, as literals, so that the compiled
+    loops of the linear library have fixed trip counts and constant
+    indices (numba's compiler unrolls them). Such a source serves only
+    vectors of exactly those sizes; the sums and their order are the same
+    either way, so the results are too, bit for bit.
+    """
+    head = 'def linear_layout(p):\n    """Sizes and offsets of the packed controller *p*."""\n'
+    if sizes is None:
+        items = [f"int(p[_LIN_{name.upper()}])" for name in LINEAR_HEADER]
+        return head + "    return (" + ", ".join(items) + ")\n"
+    values = {key: int(sizes[key]) for key in ("nz", "ny", "nr", "m", "n")}
+    offset = len(LINEAR_HEADER)
+    for name, dims in LINEAR_BLOCKS:
+        values[name] = offset
+        offset += math.prod(values[d] for d in dims)
+    return head + "    return (" + ", ".join(str(values[name]) for name in LINEAR_HEADER) + ")\n"
+
+
 #: The compiled linear controller: plain Python that numba compiles into every
 #: simulation core, and that :class:`LinearController` runs as is in Python.
 #: Every sum runs in one fixed order (z, then y, then r, then u), the order the
-#: exported C code repeats.
+#: exported C code repeats. It reads its sizes and block offsets through
+#: ``linear_layout`` (:func:`linear_layout_source`), defined beside it: from the
+#: vector's header in Python and in a nonlinear controller's core, as literals
+#: in the core of one linear controller.
 LINEAR_SOURCE = '''
 def linear_output(t, z, y, r, p, u_out):
     """u = u_op + Cc z + Dy (y - y_op) + Dr (r - r_op) (absolute u, not saturated)."""
-    nz = int(p[_LIN_NZ])
-    ny = int(p[_LIN_NY])
-    nr = int(p[_LIN_NR])
-    m = int(p[_LIN_M])
-    o_cc = int(p[_LIN_CC])
-    o_dy = int(p[_LIN_DY])
-    o_dr = int(p[_LIN_DR])
-    o_u0 = int(p[_LIN_U_OP])
-    o_y0 = int(p[_LIN_Y_OP])
-    o_r0 = int(p[_LIN_R_OP])
+    (nz, ny, nr, m, n, o_ac, o_by, o_br, o_bu, o_cc, o_dy, o_dr, o_ez, o_ey,
+     o_u0, o_y0, o_r0, o_x0) = linear_layout(p)
     for i in range(m):
         v = 0.0
         for j in range(nz):
@@ -130,17 +156,8 @@ def linear_output(t, z, y, r, p, u_out):
 
 def linear_update(t, z, y, r, u_applied, p, z_out):
     """z_out = Ac z + By (y - y_op) + Br (r - r_op) + Bu (u_applied - u_op)."""
-    nz = int(p[_LIN_NZ])
-    ny = int(p[_LIN_NY])
-    nr = int(p[_LIN_NR])
-    m = int(p[_LIN_M])
-    o_ac = int(p[_LIN_AC])
-    o_by = int(p[_LIN_BY])
-    o_br = int(p[_LIN_BR])
-    o_bu = int(p[_LIN_BU])
-    o_u0 = int(p[_LIN_U_OP])
-    o_y0 = int(p[_LIN_Y_OP])
-    o_r0 = int(p[_LIN_R_OP])
+    (nz, ny, nr, m, n, o_ac, o_by, o_br, o_bu, o_cc, o_dy, o_dr, o_ez, o_ey,
+     o_u0, o_y0, o_r0, o_x0) = linear_layout(p)
     for i in range(nz):
         v = 0.0
         for j in range(nz):
@@ -156,13 +173,8 @@ def linear_update(t, z, y, r, u_applied, p, z_out):
 
 def linear_estimate(t, z, y, r, p, x_out):
     """x_out = x_op + Ez z + Ey (y - y_op): the state estimate behind the command."""
-    nz = int(p[_LIN_NZ])
-    ny = int(p[_LIN_NY])
-    n = int(p[_LIN_N])
-    o_ez = int(p[_LIN_EZ])
-    o_ey = int(p[_LIN_EY])
-    o_y0 = int(p[_LIN_Y_OP])
-    o_x0 = int(p[_LIN_X_OP])
+    (nz, ny, nr, m, n, o_ac, o_by, o_br, o_bu, o_cc, o_dy, o_dr, o_ez, o_ey,
+     o_u0, o_y0, o_r0, o_x0) = linear_layout(p)
     for i in range(n):
         v = 0.0
         for j in range(nz):
@@ -182,7 +194,8 @@ def _python_linear() -> dict[str, Any]:
     """:data:`LINEAR_SOURCE` executed as plain Python (the reference the core is checked on)."""
     if not _PY_LINEAR:
         namespace: dict[str, Any] = {"math": math, "np": np, **linear_constants()}
-        exec(compile(LINEAR_SOURCE, "<equilibrist linear controller>", "exec"), namespace)
+        exec(compile(linear_layout_source() + LINEAR_SOURCE, "<equilibrist linear controller>",
+                     "exec"), namespace)
         _PY_LINEAR.update({name: namespace[name] for name in LINEAR_FUNCTIONS})
     return _PY_LINEAR
 
@@ -1149,6 +1162,8 @@ __all__ = [
     "build_controller",
     "check_source",
     "linear_constants",
+    "linear_layout_source",
+    "linear_sizes",
     "register_controller",
     "registered_controllers",
     "supervisor_source",

@@ -51,6 +51,8 @@ from equilibrist.control.controller import (
     LINEAR_SOURCE,
     NonlinearController,
     check_source,
+    linear_layout_source,
+    linear_sizes,
 )
 from equilibrist.numeric.system import System
 from equilibrist.sim import layout
@@ -67,6 +69,9 @@ _CONTROLLER_JIT = (
 )
 _LOADED: dict[Path, types.ModuleType] = {}
 _PATHS: dict[tuple[Path, str], Path] = {}  # (system module, section) -> kernel
+#: The sizes of a linear controller, ``(nz, ny, nr, m, n)``.
+Sizes = tuple[int, int, int, int, int]
+_SIZE_KEYS = ("nz", "ny", "nr", "m", "n")
 
 
 def _template_body() -> str:
@@ -80,7 +85,8 @@ def _template_body() -> str:
 _SECTIONS: dict[str, str] = {}
 
 
-def controller_section(controller: NonlinearController | None = None) -> str:
+def controller_section(controller: NonlinearController | None = None,
+                       sizes: Sizes | None = None) -> str:
     """The generated source between the system's ``f`` and the core's body.
 
     The layout's constants, the linear library, and the functions the core
@@ -88,14 +94,26 @@ def controller_section(controller: NonlinearController | None = None) -> str:
     ``controller_estimate``): the linear library's own, or *controller*'s.
     Every function of the section is compiled like the core's helpers
     (no reference counting), so a controller may slice its arrays freely.
+
+    With *sizes* (a linear controller's ``nz, ny, nr, m, n``; only without
+    *controller*) the linear library's sizes and offsets are literals of
+    the section (:func:`~equilibrist.control.controller.linear_layout_source`):
+    the core of one linear controller, with its loops unrolled. Without,
+    they are read from the packed vector (any linear controller, and the
+    linear controllers a nonlinear one embeds).
     """
-    key = "" if controller is None else controller.source + repr(controller.has_estimate)
+    if controller is not None and sizes is not None:
+        raise ValueError("fixed linear sizes are for the linear controller's own core")
+    key = (repr(sizes) if controller is None
+           else controller.source + repr(controller.has_estimate))
     known = _SECTIONS.get(key)
     if known is not None:
         return known
+    fixed = None if sizes is None else dict(zip(_SIZE_KEYS, sizes, strict=True))
     parts = ["# --- calling convention (equilibrist.sim.layout) ---\n",
-             layout.constants_source(), "\n", _CONTROLLER_JIT, LINEAR_SOURCE, "\n"]
-    names = list(LINEAR_FUNCTIONS)
+             layout.constants_source(), "\n", _CONTROLLER_JIT, linear_layout_source(fixed),
+             LINEAR_SOURCE, "\n"]
+    names = ["linear_layout", *LINEAR_FUNCTIONS]
     if controller is None:
         binding = ("controller_output = linear_output\n"
                    "controller_update = linear_update\n"
@@ -114,10 +132,12 @@ def controller_section(controller: NonlinearController | None = None) -> str:
     return _SECTIONS[key]
 
 
-def kernel_path(system: System, controller: NonlinearController | None = None) -> Path:
-    """Where the kernel module of *system* (and *controller*) lives in the cache (written if missing)."""
+def kernel_path(system: System, controller: NonlinearController | None = None,
+                sizes: Sizes | None = None) -> Path:
+    """Where the kernel module of *system* (and *controller*, or a linear controller's
+    *sizes*) lives in the cache (written if missing)."""
     module_path = system.compiled.module_path
-    section = controller_section(controller)
+    section = controller_section(controller, sizes)
     key = (module_path, section)
     known = _PATHS.get(key)
     if known is not None and known.exists():
@@ -145,12 +165,15 @@ def kernel_path(system: System, controller: NonlinearController | None = None) -
     return path
 
 
-def load_kernel(system: System, controller: NonlinearController | None = None) -> types.ModuleType:
+def load_kernel(system: System, controller: NonlinearController | None = None,
+                sizes: Sizes | None = None) -> types.ModuleType:
     """The compiled core of *system* (a module whose entries compile on first call).
 
-    With a nonlinear *controller*, the core that runs it (one per source).
+    With a nonlinear *controller*, the core that runs it (one per source);
+    with a linear controller's *sizes*, the core specialized to them (see
+    :func:`controller_section`).
     """
-    path = kernel_path(system, controller)
+    path = kernel_path(system, controller, sizes)
     if path in _LOADED:
         return _LOADED[path]
     name = f"equilibrist_simkernel_{path.stem}"
@@ -176,22 +199,46 @@ class Kernel:
     The array arguments are those of the template's entries (see its
     docstring and :mod:`equilibrist.sim.layout`); this class is the one
     place that passes them in order.
+
+    Without a nonlinear controller, ``run_one`` and ``run_many`` run in the
+    core specialized to the sizes of the packed linear controller they are
+    given (``cp``; one module per system and sizes, loaded on first use);
+    the other entries, and a nonlinear controller's runs, in :attr:`module`.
     """
 
     def __init__(self, system: System, controller: NonlinearController | None = None) -> None:
+        self.system = system
+        self.controller = controller
         self.module = load_kernel(system, controller)
+        self._core: types.ModuleType | None = None
+        self._core_sizes: Sizes | None = None
+
+    def core(self, cp: Any) -> types.ModuleType:
+        """The module whose ``run_one``/``run_many`` run controller parameters *cp*."""
+        if self.controller is not None:
+            return self.module
+        found = linear_sizes(cp)
+        if found is None:
+            return self.module
+        sizes: Sizes = (found["nz"], found["ny"], found["nr"], found["m"], found["n"])
+        if self._core is None or sizes != self._core_sizes:
+            self._core = load_kernel(self.system, None, sizes)
+            self._core_sizes = sizes
+        return self._core
 
     @property
     def compiled(self) -> bool:
-        """Whether ``run_many`` is compiled (or loaded) in this process already."""
-        return bool(self.module.run_many.overloads)
+        """Whether ``run_many`` is compiled (or loaded) in this process already
+        (for a linear controller: in the core of the last sizes it ran)."""
+        module = self.module if self.controller is not None else self._core
+        return module is not None and bool(module.run_many.overloads)
 
     def run_one(self, *, k_start: int, k_end: int, iopts: Any, fopts: Any, x: Any, z: Any,
                 u_prev: Any, rng: Any, op: Any, c_idx: Any, cp: Any, ref: Any, uff: Any,
                 lv: Any, lw: Any, p_sets: Any, p_switch: Any, lin_s: Any, region: Any,
                 kicks: Any, kick_value: Any, pulses: Any, pulse_value: Any, rec_cols: Any,
                 acc_cols: Any, rec: Any, acc: Any, status: Any, fell_x: Any) -> None:
-        self.module.run_one(
+        self.core(cp).run_one(
             k_start, k_end, iopts, fopts, x, z, u_prev, rng, op, c_idx, cp, ref, uff, lv, lw,
             p_sets, p_switch, lin_s, region, kicks, kick_value, pulses, pulse_value,
             rec_cols, acc_cols, rec, acc, status, fell_x,
@@ -202,7 +249,7 @@ class Kernel:
                  p_switch: Any, lin_r: Any, region: Any, kicks: Any, kick_value: Any,
                  pulses: Any, pulse_value: Any, rec_cols: Any, acc_cols: Any, recs: Any,
                  accs: Any, statuses: Any, fell_xs: Any, x_ends: Any) -> None:
-        self.module.run_many(
+        self.core(cp).run_many(
             iopts, fopts, x0s, z0, rngs, op, c_idx, cp, ref, uff, lv, lw, p_sets_r, p_switch,
             lin_r, region, kicks, kick_value, pulses, pulse_value, rec_cols, acc_cols, recs,
             accs, statuses, fell_xs, x_ends,
