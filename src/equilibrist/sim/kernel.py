@@ -69,6 +69,7 @@ _CONTROLLER_JIT = (
 )
 _LOADED: dict[Path, types.ModuleType] = {}
 _PATHS: dict[tuple[Path, str], Path] = {}  # (system module, section) -> kernel
+_BY_SECTION: dict[tuple[Path, str], types.ModuleType] = {}  # the same key -> loaded module
 #: The sizes of a linear controller, ``(nz, ny, nr, m, n)``.
 Sizes = tuple[int, int, int, int, int]
 _SIZE_KEYS = ("nz", "ny", "nr", "m", "n")
@@ -173,8 +174,13 @@ def load_kernel(system: System, controller: NonlinearController | None = None,
     with a linear controller's *sizes*, the core specialized to them (see
     :func:`controller_section`).
     """
+    key = (system.compiled.module_path, controller_section(controller, sizes))
+    loaded = _BY_SECTION.get(key)
+    if loaded is not None:  # in memory already: no look at the disk
+        return loaded
     path = kernel_path(system, controller, sizes)
     if path in _LOADED:
+        _BY_SECTION[key] = _LOADED[path]
         return _LOADED[path]
     name = f"equilibrist_simkernel_{path.stem}"
     module = sys.modules.get(name)
@@ -190,6 +196,7 @@ def load_kernel(system: System, controller: NonlinearController | None = None,
             del sys.modules[name]
             raise
     _LOADED[path] = module
+    _BY_SECTION[key] = module
     return module
 
 
