@@ -195,3 +195,26 @@ def test_demo_animates_a_swing_up(tmp_path: object) -> None:
     with Image.open(path) as gif:
         assert gif.size == (160, 120) and gif.n_frames >= 2
     assert "Swing-up from hanging" in caption
+
+
+def test_acrobot_swings_up_in_most_noisy_starts() -> None:
+    """Over 200 seeded noisy hanging starts, most acrobots end upright and still after 15 s.
+
+    Judged on the simulated plant's final state (both links within 0.1 rad
+    of upright, rates under 0.5 rad/s), not on the supervisor's mode.
+    """
+    from equilibrist.sim.batch import simulate_batch
+    from equilibrist.sim.noise import Noise
+
+    system = get_system("acrobot")
+    task = get_task(system, "swingup")
+    d = _design(system)
+    ctrl = swingup(system, design=d)
+    runs = 200
+    x0 = task.draw_initials(np.random.default_rng(7), runs)
+    b = simulate_batch(system, ctrl, runs=runs, duration=task.duration, x0=x0, seed=7,
+                       noise=Noise.from_design(d), region=task.region)
+    end = np.asarray(b.final_state) - system.operating_point().x
+    angles = np.abs(np.remainder(end[:, :2] + math.pi, 2 * math.pi) - math.pi)
+    up = (angles.max(axis=1) < 0.1) & (np.abs(end[:, 2:]).max(axis=1) < 0.5)
+    assert up.mean() >= 0.5, f"only {100 * up.mean():.1f} % of {runs} starts end upright"

@@ -29,14 +29,29 @@ saturated by the actuator and its centering terms are small (``dE/dt =
 -c k_E (E - E0) |theta_dot cos theta|`` with ``c > 0``); it stops rising
 when ``E`` reaches ``E0`` (default 0: the upright's energy).
 
-*Partial feedback linearization with energy shaping* for the acrobot
-(Spong 1995, "The swing up control problem for the acrobot", IEEE Control
-Systems 15; the energy-shaping variant of Xin and Kaneda): the elbow's
-torque makes the elbow's acceleration ``v`` exactly (collocated
-linearization of the two-link equations), and
-``v = -k_p theta2 - k_d theta2_dot + k_E (E_top - E) theta1_dot``,
-saturated at ``a_max``: the bent elbow follows the shoulder's swing while
-the total energy is below the upright's ``E_top``.
+*Energy shaping on the collocated joint* for the acrobot (Xin and Kaneda,
+"Analysis of the energy-based swing-up control of the Acrobot", Int. J.
+Robust Nonlinear Control 17 (2007), on the partial feedback
+linearization of Spong 1995, "The swing up control problem for the acrobot",
+IEEE Control Systems 15). ``E`` is the total energy from upright, which
+changes at the rate ``dE/dt = tau theta2_dot``. The elbow's torque is the one
+that makes ``V = k_E (E - E0)^2 / 2 + k_D theta2_dot^2 / 2 + k_P theta2^2 / 2``
+fall as ``dV/dt = -k_V theta2_dot^2``:
+``tau = (-(k_V theta2_dot + k_P theta2) det M + k_D (M11 (h2 + g2) - M12 (h1
++ g1))) / (k_E (E - E0) det M + k_D M11)`` (``M`` the inertia matrix, ``h``
+the velocity terms, ``g`` gravity's). The acrobot thus tends to the upright's
+energy with the elbow straight and still: link 1 swinging as one rigid
+pendulum on the homoclinic orbit, which comes to upright slowly and straight
+through the balance's catch region. The denominator keeps its sign for
+``k_D > k_E (E0 - E_hanging) max(det M / M11)`` (about 40 for the catalogue's
+acrobot); the default ``k_D = 30`` lies below that bound, for a faster
+start from hanging: at the hanging energy it holds while ``|theta2| < 1.4
+rad``, and more widely as ``E`` rises; where the denominator passes through
+zero the motor's limit bounds the command. (In trials on the catalogue's
+acrobot, with Gymnasium's heavy links ``I1 = I2 = 1 kg m^2``, Spong's
+own reference for the elbow, ``alpha atan(theta1_dot)`` under a stiff PD,
+and a PD with an energy term left the energy oscillating below the
+upright's: the two links traded it rather than gained it.)
 
 *Supervisor.* The balancing controller is the design's discrete LQR
 ``u = u_op - K (x_hat - x_op)`` (Riccati solution ``S``). Its catch region
@@ -44,7 +59,10 @@ is the level set ``V = dx' S dx < c_in`` on which the LQR's command just
 reaches the actuator limit, ``c_sat = min_j u_lim_j^2 / (K S^-1 K')_jj``
 (inside it the linear closed loop neither saturates nor leaves the set);
 ``c_in = catch_fraction * c_sat``. It hands back to pumping when
-``V > c_out = release_factor * c_in`` (hysteresis). Angles are wrapped to
+``V > c_out = release_factor * c_in`` (hysteresis; 20 for the acrobot, whose
+``S`` weighs the rates so heavily that the estimated rates' noise alone
+lifts ``V`` above ``4 c_in`` now and then while it balances well inside
+``c_in``). Angles are wrapped to
 within half a turn of upright; coordinates whose value does not matter (the
 reaction wheel's angle, the rotary pendulum's arm) are *free*: the balance
 holds them where they were when it caught the pendulum.
@@ -366,18 +384,21 @@ class SwingUpTuning:
         ``k_E``, per joule (acrobot: the energy's gain on the elbow's acceleration).
     a_max:
         Bound of the pumping term: a cart acceleration [m/s^2] for the
-        cart-pole, a torque [N m] for the wheel and the rotary pendulum, an
-        elbow acceleration [rad/s^2] for the acrobot.
+        cart-pole, a torque [N m] for the wheel and the rotary pendulum
+        (the acrobot's law does not use it: the motor's limit bounds its torque).
     e0:
         Target energy above upright [J].
     k_x, k_v:
-        Centering (cart position) and damping (cart, wheel or arm speed) gains.
+        Centering (cart position) and damping (cart, wheel or arm speed)
+        gains; acrobot: ``k_V``, the elbow's damping in ``dV/dt``.
     k_p:
-        The acrobot's elbow stiffness.
+        The acrobot's elbow stiffness ``k_P``.
     catch_fraction, release_factor:
         ``c_in = catch_fraction * c_sat``, ``c_out = release_factor * c_in``.
     accel:
         The acceleration the rate estimator tracks (its process noise) [rad/s^2 or m/s^2].
+    k_d:
+        The acrobot's ``k_D``, the weight of the elbow's kinetic term in ``V``.
     """
 
     k_energy: float
