@@ -16,6 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
+from equilibrist.errors import NoEquilibriumError
 from equilibrist.numeric.system import get_system
 from equilibrist.systems import registry
 
@@ -98,7 +99,7 @@ def test_spec_metadata(entry: registry.Entry) -> None:
 def test_operating_point_is_equilibrium(entry: registry.Entry) -> None:
     system = system_for(entry)
     if entry.spec.operating_point is None:
-        with pytest.raises(Exception, match="no canonical operating point"):
+        with pytest.raises(NoEquilibriumError, match="no canonical operating point"):
             system.operating_point()
         return
     eq = system.operating_point()

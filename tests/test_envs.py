@@ -15,6 +15,7 @@ from gymnasium.utils.env_checker import check_env
 import equilibrist.envs.vector as vector_module
 from equilibrist import envs, get_system
 from equilibrist.envs import EnvError, EquilibristEnv, EquilibristVectorEnv
+from equilibrist.errors import UnknownNameError
 from equilibrist.sim.run import simulate
 from equilibrist.systems import registry
 from equilibrist.tasks import get_task, task_names
@@ -240,9 +241,9 @@ def test_bad_options_are_reported_together() -> None:
     text = str(err.value)
     for part in ("physics_step", "observe", "m_q", "F_max", "spread of l"):
         assert part in text
-    with pytest.raises(Exception, match="task"):
+    with pytest.raises(UnknownNameError, match="task"):
         EquilibristEnv("cartpole", "walk")
-    with pytest.raises(Exception, match="swingup"):
+    with pytest.raises(UnknownNameError, match="swingup"):
         EquilibristEnv("seesaw", "swingup")
     env = EquilibristEnv("cartpole", "balance")
     with pytest.raises(EnvError, match="reset"):

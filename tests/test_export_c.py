@@ -19,6 +19,8 @@ from equilibrist.export import c_code
 from equilibrist.export.data import from_design
 from equilibrist.export.native import STRICT_FLAGS, compile_controller, compiler
 from equilibrist.numeric.system import get_system
+from support import require
+from support.export import measurements, reference_run
 
 SYSTEMS = ("cartpole", "reaction_wheel_pendulum", "wheeled_pendulum", "ball_beam", "seesaw")
 
@@ -32,39 +34,6 @@ def designs():
     out["cartpole", "predictor"] = design(get_system("cartpole"), rate=200, kalman_form="predictor")
     out["seesaw", "predictor"] = design(get_system("seesaw"), rate=100, kalman_form="predictor")
     return out
-
-
-def reference_run(data, ys, rs):
-    """The controller of the ControllerData docstring, in numpy double precision."""
-    z = np.zeros(data.n_states)
-    us, xs = [], []
-    for y, r in zip(ys, rs, strict=True):
-        dy = y - data.y0
-        if data.controller == "lqr":
-            xhat = y - data.x0
-        elif data.form == "current":
-            xhat = z + data.Kf @ (dy - data.C @ z)
-        else:
-            xhat = z
-        u = np.clip(data.u0 - data.K @ xhat + data.Kc @ (r - data.r0), data.u_min, data.u_max)
-        if data.controller == "lqg" and data.form == "current":
-            z = data.Ad @ xhat + data.Bd @ (u - data.u0)
-        elif data.controller == "lqg":
-            z = data.Ad @ z + data.Bd @ (u - data.u0) + data.Kf @ (dy - data.C @ z)
-        us.append(u)
-        xs.append(data.x0 + xhat)
-    return np.array(us), np.array(xs)
-
-
-def measurements(data, n_steps: int, seed: int):
-    """Noisy measurements around a slow excursion, with references that move."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(n_steps)[:, None]
-    span = np.maximum(np.abs(data.y0), 0.05)
-    ys = data.y0 + 0.5 * span * np.sin(0.05 * t + np.arange(data.n_measured)) + \
-        0.01 * span * rng.standard_normal((n_steps, data.n_measured))
-    rs = data.r0 + 0.05 * np.sign(np.sin(0.02 * t)) * np.ones(data.n_references)
-    return ys, rs
 
 
 CASES = [(name, "current", "lqg") for name in SYSTEMS] + [
@@ -240,11 +209,7 @@ def test_a_continuous_design_or_no_input_is_refused() -> None:
 
 def test_arduino_sketch_compiles_as_cpp(designs, tmp_path) -> None:
     """The sketch against a stand-in of the Arduino core, compiled as the IDE would (C++)."""
-    import shutil
-
-    cxx = shutil.which("g++") or shutil.which("c++")
-    if cxx is None:
-        pytest.skip("no C++ compiler")
+    cxx = require("g++", "c++")
     data = from_design(designs["seesaw", "current"])
     (tmp_path / f"{data.name}.h").write_text(c_code.header(data, precision="float", version="t"))
     (tmp_path / f"{data.name}.c").write_text(c_code.source(data, precision="float", version="t"))

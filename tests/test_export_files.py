@@ -8,7 +8,6 @@ are covered by test_export_sim.py), so these tests exercise the files.
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -21,19 +20,21 @@ from equilibrist.export.data import from_design
 from equilibrist.export.vectors import make_vectors
 from equilibrist.export.writer import export_c
 from equilibrist.numeric.system import get_system
+from support import require
+from support.export import measurements, reference_run
 
-pytestmark = pytest.mark.skipif(shutil.which("make") is None, reason="needs make")
+
+@pytest.fixture(autouse=True)
+def _make() -> None:
+    """Every test here builds with make: without it they fail (CI has it)."""
+    require("make")
 
 
 def _reference(data, ys, rs):
-    from test_export_c import reference_run
-
     return reference_run(data, ys, rs)[0]
 
 
 def _vectors(d, controller: str, precision: str, *, n_steps: int = 300, spoil: float = 0.0):
-    from test_export_c import measurements
-
     data = from_design(d, controller=controller)
     ys, rs = measurements(data, n_steps, seed=5)
     us = _reference(data, ys, rs)
@@ -126,8 +127,6 @@ def test_desktop_example_balances_the_linear_model(built, precision) -> None:
 
 
 def test_desktop_example_reads_measurements_from_stdin(built, wheel_design) -> None:
-    from test_export_c import measurements
-
     data = built["double"].data
     ys, _ = measurements(data, 50, seed=9)
     text = "\n".join(" ".join(repr(float(v)) for v in row) for row in ys) + "\n"

@@ -10,7 +10,6 @@ the simulation, must pass its own 'make check'.
 
 from __future__ import annotations
 
-import shutil
 import subprocess
 
 import numpy as np
@@ -22,6 +21,7 @@ from equilibrist.export.vectors import RELATIVE_TOLERANCE, c_controller, record,
 from equilibrist.export.writer import export_c
 from equilibrist.numeric.system import get_system
 from equilibrist.sim import LQG, StateFeedback, simulate
+from support import require
 
 pytestmark = pytest.mark.slow
 
@@ -109,20 +109,18 @@ def test_vectors_are_the_simulated_run(runs) -> None:
     assert np.array_equal(vec.r, ref.reference)
 
 
-@pytest.mark.skipif(shutil.which("make") is None, reason="needs make")
 @pytest.mark.parametrize(("name", "precision"), [("wheeled_pendulum", "double"),
                                                   ("ball_beam", "float")])
 def test_shipped_export_passes_its_own_check(tmp_path, name, precision) -> None:
     system = get_system(name)
     d = design(system, rate=system.spec.control_rate)
     done = export_c(d, tmp_path / "out", precision=precision, system=system)
-    proc = subprocess.run(["make", "-C", str(done.folder), "check"], capture_output=True,
+    proc = subprocess.run([require("make"), "-C", str(done.folder), "check"], capture_output=True,
                           text=True, check=False)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert f"{done.vectors.n_steps} steps match" in proc.stdout
 
 
-@pytest.mark.skipif(shutil.which("make") is None, reason="needs make")
 def test_command_line_export(tmp_path, capsys) -> None:
     out = tmp_path / "seesaw_float"
     assert main(["export", "seesaw", "--precision", "float", "--rate", "100", "--duration", "2",
@@ -132,7 +130,7 @@ def test_command_line_export(tmp_path, capsys) -> None:
     info = json.loads(capsys.readouterr().out)
     assert info["rate"] == 100.0 and info["precision"] == "float" and info["controller"] == "lqg"
     assert info["vector_steps"] == 201
-    proc = subprocess.run(["make", "-C", str(out), "check"], capture_output=True, text=True,
+    proc = subprocess.run([require("make"), "-C", str(out), "check"], capture_output=True, text=True,
                           check=False)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert info["design_id"] in proc.stdout and "rate=100 Hz" in proc.stdout

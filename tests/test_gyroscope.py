@@ -18,7 +18,7 @@ import sympy as sp
 from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
-from equilibrist.errors import SingularConfigurationError
+from equilibrist.errors import SingularConfigurationError, UnknownNameError
 from equilibrist.mechanics import rotations
 from equilibrist.numeric.system import get_system
 from equilibrist.systems import _gyro_tools as gt
@@ -343,5 +343,5 @@ def test_region_means_axis_above_horizontal() -> None:
 
 
 def test_steady_precession_refuses_other_systems() -> None:
-    with pytest.raises(Exception, match="gyroscope"):
+    with pytest.raises(UnknownNameError, match="gyroscope"):
         gt.steady_precession_rates(get_system("cartpole"), 1.0, 100.0)

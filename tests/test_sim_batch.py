@@ -17,8 +17,8 @@ from equilibrist.sim import (
     simulate_batch,
 )
 from equilibrist.sim.batch import BatchResult, child_seed, sample_uniform
-from test_sim_noise import _noise
-from test_sim_support import cartpole, lqg, state_feedback
+from support.sim import cartpole, lqg, state_feedback
+from support.sim import cartpole_noise as _noise
 
 
 def test_batch_equals_runs_one_by_one():

@@ -8,8 +8,8 @@ import pytest
 from equilibrist.errors import SimulationError
 from equilibrist.sim import OpenLoop, Pulse, Ramp, Step, simulate
 from equilibrist.sim.controllers import StateFeedback
-from test_sim_noise import _noise
-from test_sim_support import cartpole, lqg, state_feedback
+from support.sim import cartpole, lqg, state_feedback
+from support.sim import cartpole_noise as _noise
 
 
 @pytest.mark.parametrize("form", ["current", "predictor"])
@@ -33,7 +33,7 @@ def test_python_path_reproduces_compiled_tracking():
     sysm = cartpole()
     base = state_feedback(sysm, rate=500.0)
     # Kc for the cart position: -1 / (C (A - B K)^-1 B) of the sampled loop.
-    from test_sim_support import zoh
+    from support.sim import zoh
 
     lm = sysm.linearize()
     Ad, Bd = zoh(lm.A, lm.B, 1 / 500)
@@ -121,7 +121,8 @@ def test_run_cut_into_pieces_equals_one_piece(monkeypatch, integrator):
     opts = dict(duration=1.0, x0={"theta": 0.1}, noise=_noise(sysm, 100.0), seed=4,
                 integrator=integrator, physics_step=2.5e-3, rtol=1e-6, atol=1e-9)
     whole = simulate(sysm, ctrl, **opts)
-    monkeypatch.setattr(run_module, "_CHUNK_STEPS", 28)  # pieces of 7 samples
+    monkeypatch.setattr(run_module, "_FIRST_CHUNK_STEPS", 28)  # a first piece of 7 samples,
+    monkeypatch.setattr(run_module, "CHUNK_SECONDS", 1e-12)  # then pieces of one sample
     pieces = simulate(sysm, ctrl, progress=True, **opts)
     np.testing.assert_array_equal(pieces.states, whole.states)
     np.testing.assert_array_equal(pieces.estimates, whole.estimates)

@@ -18,7 +18,7 @@ from equilibrist.sim import (
     Stepper,
     simulate,
 )
-from test_sim_support import cartpole, state_feedback
+from support.sim import cartpole, state_feedback
 
 
 def _rk4_reference(sysm, x, u, h, n):

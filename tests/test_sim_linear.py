@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from equilibrist.sim import LQG, StateFeedback, simulate
-from test_sim_support import Q_REF, R_REF, cartpole, lqg, lqr, state_feedback, zoh
+from support.sim import Q_REF, R_REF, cartpole, lqg, lqr, state_feedback, zoh
 
 X0 = np.array([0.1, 0.15, -0.2, 0.3])
 

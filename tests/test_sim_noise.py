@@ -10,7 +10,8 @@ import pytest
 from equilibrist.sim import Noise, simulate
 from equilibrist.sim.kernel import load_kernel
 from equilibrist.sim.noise import generator_state
-from test_sim_support import cartpole, lqg
+from support.sim import cartpole, lqg
+from support.sim import cartpole_noise as _noise
 
 MASK = (1 << 64) - 1
 
@@ -61,15 +62,6 @@ def test_core_generator_is_standard_normal():
     assert abs(out.mean()) < 0.01
     assert abs(out.std() - 1.0) < 0.01
     assert abs(np.mean(out[:-1] * out[1:])) < 0.01  # no lag-one correlation
-
-
-def _noise(sysm, rate):
-    names = sysm.state_names
-    g = np.zeros((4, 2))
-    g[names.index("x_dot"), 0] = 1.0
-    g[names.index("theta_dot"), 1] = 1.0
-    return Noise(process_gain=g, process_intensity=np.diag([0.01, 0.02]),
-                 measurement_covariance=np.diag([1e-6, 4e-6]), outputs=("x", "theta"))
 
 
 def test_seeded_runs_are_reproducible_and_seeds_differ():

@@ -8,8 +8,8 @@ import pytest
 from equilibrist.errors import SimulationError, UnknownNameError
 from equilibrist.sim import Kick, SimResult, Step, simulate
 from equilibrist.sim.controllers import StateFeedback
-from test_sim_noise import _noise
-from test_sim_support import cartpole, lqg, state_feedback
+from support.sim import cartpole, lqg, state_feedback
+from support.sim import cartpole_noise as _noise
 
 
 @pytest.fixture(scope="module")

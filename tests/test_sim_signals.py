@@ -12,7 +12,7 @@ from equilibrist.errors import DimensionError, SimulationError
 from equilibrist.numeric.system import get_system
 from equilibrist.sim import Noise, Ramp, Samples, Square, Step, simulate
 from equilibrist.sim.signals import parse_signal
-from test_sim_support import cartpole, state_feedback
+from support.sim import cartpole, state_feedback
 
 T = np.array([0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 2.5])
 BASE = np.array([0.1])

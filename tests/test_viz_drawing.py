@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from equilibrist.errors import UnknownNameError
 from equilibrist.numeric.system import get_system
 from equilibrist.systems import registry
 from equilibrist.viz.frames import FrameRenderer, draw_state
@@ -258,7 +259,7 @@ def test_unknown_system_and_tiny_frames_are_refused():
     class Fake:
         name = "nope"
 
-    with pytest.raises(Exception, match="no drawing for system 'nope'"):
+    with pytest.raises(UnknownNameError, match="no drawing for system 'nope'"):
         scene_for(Fake())
     with pytest.raises(VizError, match="too small"):
         FrameRenderer(get_system("cartpole"), width=20, height=10)

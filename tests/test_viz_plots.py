@@ -11,6 +11,7 @@ import pytest
 from PIL import Image
 
 from equilibrist.control import design
+from equilibrist.errors import UnknownNameError
 from equilibrist.numeric.system import get_system
 from equilibrist.viz.output import VizError
 from equilibrist.viz.plots import (
@@ -86,7 +87,7 @@ def test_response_plot_names_axes_with_units_and_draws_limits_reference_estimate
 def test_response_plot_in_radians_and_for_a_subset(cartpole):
     fig = plot_response(make_run(cartpole), states=["theta"], rates=False, degrees=False)
     assert _labels(fig) == ["theta [rad]", "F [N]"]
-    with pytest.raises(Exception, match="no state 'thetta'"):
+    with pytest.raises(UnknownNameError, match="no state 'thetta'"):
         plot_response(make_run(cartpole), states=["thetta"])
 
 

@@ -131,7 +131,7 @@ class CompiledModel:
 
     @cached_property
     def functions(self) -> types.ModuleType:
-        """The generated module (``f``, ``jac``, ``mass_det``, ``energy``, ``conserved``)."""
+        """The generated module (``f``, ``jac``, ``mass_matrix``, ``energy``, ``conserved``, ``points``)."""
         name = f"equilibrist_generated_{self.module_path.stem}"
         if name in sys.modules:
             return sys.modules[name]

@@ -12,8 +12,6 @@ in the order of the spec's states, inputs and parameters):
     ``out[:] = x_dot``.
 ``jac(x, u, p, A, B)``
     ``A[:, :] = df/dx``, ``B[:, :] = df/du``.
-``mass_det(x, p)``
-    ``det M(q)`` (1.0 for a first-order model); zero where the model is singular.
 ``energy(x, p)``
     The conserved energy (NaN when the model states none).
 ``conserved(x, p, out)``
@@ -118,11 +116,7 @@ def generate_source(model: SymbolicModel) -> str:
     mass = [] if model.M is None else [model.M[i, j] for i in range(nq) for j in range(nq)]
     out += _unpack(model, with_inputs=False, used=_free(mass))
     out += _body(mass, [f"out[{i}, {j}]" for i in range(nq) for j in range(nq)], subs, printer)
-    out += ["    return None", "", "", "def mass_det(x, p):"]
-    det = sp.Integer(1) if model.M is None else model.M.det(method="berkowitz")
-    out += _unpack(model, with_inputs=False, used=_free([det]))
-    out += _body([det], ["result"], subs, printer)
-    out += ["    return result", "", "", "def energy(x, p):"]
+    out += ["    return None", "", "", "def energy(x, p):"]
     energy = sp.nan if model.energy is None else model.energy
     out += _unpack(model, with_inputs=False, used=_free([energy]))
     out += _body([energy], ["result"], subs, printer)

@@ -1,7 +1,7 @@
 """Helpers for the simulation tests: controllers built from scratch with scipy.
 
 They do not use :mod:`equilibrist.control`, so the simulator's tests check
-it against matrices computed independently. (No tests in this module.)
+it against matrices computed independently.
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ import scipy.linalg as sl
 
 from equilibrist.numeric.system import get_system
 from equilibrist.sim import LQG, StateFeedback
+from equilibrist.sim.noise import Noise
 
 Q_REF = np.diag([10.0, 10.0, 1.0, 1.0])
 R_REF = np.array([[0.1]])
@@ -69,3 +70,13 @@ def lqg(system=None, *, rate: float = 200.0, form: str = "current",
     Kf = M if form == "current" else Ad @ M
     return LQG(K=K, Ad=Ad, Bd=Bd, Kf=Kf, outputs=outputs, x_op=lm.x0, u_op=lm.u0,
                rate=rate, form=form)
+
+
+def cartpole_noise(sysm, rate):
+    """Process noise on the cart-pole's two rates, sensor noise on x and theta."""
+    names = sysm.state_names
+    g = np.zeros((4, 2))
+    g[names.index("x_dot"), 0] = 1.0
+    g[names.index("theta_dot"), 1] = 1.0
+    return Noise(process_gain=g, process_intensity=np.diag([0.01, 0.02]),
+                 measurement_covariance=np.diag([1e-6, 4e-6]), outputs=("x", "theta"))
