@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import os
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -63,18 +64,27 @@ def test_check_env_passes_without_warning(env_id: str) -> None:
     env.close()
 
 
-def test_model_file_environments() -> None:
+def test_model_file_environments(tmp_path) -> None:
     examples = os.path.join(os.path.dirname(__file__), "..", "examples")
     # An MJCF model, drawn from its kinematic tree.
     env = _make("equilibrist/balance-v0", system=os.path.join(examples, "furuta.xml"))
     check_env(env)
-    # A system declared in a Python file; it has no drawing, so no render modes.
-    env = _make("equilibrist/balance-v0", system=os.path.join(examples, "my_cartpole.py"))
+    # A system declared in a Python file that names its points: drawn generically.
+    mine = os.path.join(examples, "my_cartpole.py")
+    env = _make("equilibrist/balance-v0", system=mine, render_mode="rgb_array")
+    assert env.metadata["render_modes"] == ["rgb_array"]
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.ndim == 3 and frame.shape[2] == 3 and frame.std() > 0
+    # The same file without its points has no drawing, so no render modes.
+    text = Path(mine).read_text().replace(", points=points, links=links", "")
+    bare = tmp_path / "bare_cartpole.py"
+    bare.write_text(text.replace('name="my_cartpole"', 'name="bare_cartpole"'))
+    env = _make("equilibrist/balance-v0", system=str(bare))
     assert env.metadata["render_modes"] == []
     check_env(env)
     with pytest.raises(EnvError, match="no drawing"):
-        gym.make("equilibrist/balance-v0", system=os.path.join(examples, "my_cartpole.py"),
-                 render_mode="rgb_array")
+        gym.make("equilibrist/balance-v0", system=str(bare), render_mode="rgb_array")
     with pytest.raises(EnvError, match="give the system"):
         gym.make("equilibrist/balance-v0")
 

@@ -105,8 +105,8 @@ def test_damaged_cache_files_are_rebuilt(tmp_path, monkeypatch) -> None:
 @pytest.mark.parametrize(
     ("argv", "needle"),
     [
-        (["simulate", "cartpole", "--duration", "1e9", "--json"], "TiB of memory"),
-        (["batch", "cartpole", "--runs", "4", "--duration", "1e9", "--json"], "TiB of memory"),
+        (["simulate", "cartpole", "--duration", "1e9", "--max-steps", "inf", "--json"], "TiB of memory"),
+        (["batch", "cartpole", "--runs", "4", "--duration", "1e9", "--max-steps", "inf", "--json"], "TiB of memory"),
         (["batch", "cartpole", "--runs", "100000000000", "--duration", "1", "--json"], "TiB of memory"),
         (["simulate", "cartpole", "--rate", "0.01", "--json"], "too slow for cartpole"),
         (["export", "cartpole", "--rate", "1e-6", "--out", "unused"], "too slow for cartpole"),

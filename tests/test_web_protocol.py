@@ -258,11 +258,16 @@ def test_a_failed_design_keeps_the_previous_controller(client):
 
 
 def test_push_moves_the_cart_by_the_impulse(client):
-    """A push of F for T seconds changes the cart's momentum by about F T (the loop acts too)."""
+    """A push of F for T seconds changes the cart's speed by about F T / (m_c + m_p).
+
+    The controller is off (the loop would fight the push), the run starts at
+    rest upright without noise, so the push alone acts; the free pole takes
+    a little of it, hence the band.
+    """
     with client.websocket_connect("/ws") as ws:
         first = opening(ws)
         sysm = first["system"]
-        ws.send_text(json.dumps({"type": "tune", "noise": 0}))
+        ws.send_text(json.dumps({"type": "tune", "noise": 0, "controller": "off"}))
         receive_until(ws, lambda m: m["type"] == "design")
         ws.send_text(json.dumps({"type": "reset"}))
         time.sleep(0.3)
@@ -275,7 +280,7 @@ def test_push_moves_the_cart_by_the_impulse(client):
         m_total = 10.0 + 1.0  # the cart-pole's default cart and pole masses
         expected = full * 0.05 / m_total
         gained = after["x"][i_xdot] - before["x"][i_xdot]
-        assert 0.3 * expected < gained < 2.0 * expected
+        assert 0.8 * expected < gained < 1.3 * expected
 
 
 def test_controller_off_falls_and_reset_recovers(client):
