@@ -38,6 +38,7 @@ import math
 import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import PurePath
 from typing import Any
 
 import numpy as np
@@ -72,7 +73,15 @@ def check_precision(precision: str) -> str:
 
 
 def c_identifier(text: str) -> str:
-    """*text* made into a lower-case C identifier (``gyroscope[euler=xyz]`` -> ``gyroscope_euler_xyz``)."""
+    """*text* made into a lower-case C identifier (``gyroscope[euler=xyz]`` -> ``gyroscope_euler_xyz``).
+
+    A system file's key (its path) gives the file's own name
+    (``/home/me/robots/furuta.xml`` -> ``furuta``).
+    """
+    from equilibrist.systems.files import looks_like_path
+
+    if looks_like_path(text):
+        text = PurePath(text).stem
     ident = re.sub(r"[^0-9A-Za-z]+", "_", text).strip("_").lower()
     if not ident:
         ident = "controller"
