@@ -37,6 +37,7 @@ bench: $(STAMP)
 	$(PY) bench/bench_envs.py
 	$(PY) bench/bench_swingup.py
 	$(PY) bench/bench_mpc.py
+	$(PY) bench/bench_import.py
 
 clean:
 	rm -rf $(VENV) report build
