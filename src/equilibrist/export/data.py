@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from equilibrist.control.controller import LinearController
+from equilibrist.control.design import Design
 from equilibrist.errors import EquilibristError, ExportError
 
 CONTROLLERS = ("lqg", "lqr")
@@ -240,7 +241,7 @@ def _units(system: Any, names: tuple[str, ...], default: tuple[str, ...]) -> tup
     return tuple("" for _ in names)
 
 
-def from_design(design: Any, *, controller: str = "lqg") -> ControllerData:
+def from_design(design: Design, *, controller: str = "lqg") -> ControllerData:
     """The :class:`ControllerData` of a design.
 
     Parameters
@@ -266,17 +267,19 @@ def from_design(design: Any, *, controller: str = "lqg") -> ControllerData:
     check_controller(controller)
     plant = design.plant
     discrete = design.discrete
-    system = str(getattr(design, "system_key", "") or getattr(plant, "system", ""))
+    system = design.system_key
     state_names = tuple(plant.state_names)
     input_names = tuple(plant.input_names)
     n, m = len(state_names), len(input_names)
     if m == 0:
         raise ExportError(f"{system} has no input: there is no controller to export")
     problems: list[str] = []
-    params = dict(getattr(design, "params", None) or plant.params)
-    state_units = _units(None, state_names, tuple(getattr(plant, "state_units", ()) or ()))
-    input_units = _units(None, input_names, tuple(getattr(plant, "input_units", ()) or ()))
-    dt = float(getattr(design, "dt", None) or discrete.dt)
+    if discrete is None or design.dt is None:
+        raise ExportError(f"the design of {system} is continuous: export needs a digital design (a rate)")
+    params = dict(design.params)
+    state_units = _units(None, state_names, tuple(plant.state_units))
+    input_units = _units(None, input_names, tuple(plant.input_units))
+    dt = float(design.dt)
     if not (math.isfinite(dt) and dt > 0):
         problems.append(f"the sample period {dt!r} s is not a positive number")
     x0 = _array(plant.x0, "x0", (n,), problems)
@@ -286,14 +289,14 @@ def from_design(design: Any, *, controller: str = "lqg") -> ControllerData:
     K = _array(design.K, "K", (m, n), problems)
 
     if controller == "lqg":
-        form = str(getattr(design, "kalman_form", "current"))
+        form = design.kalman_form
         if form not in FORMS:
             problems.append(f"Kalman form {form!r} is unknown: expected one of {', '.join(FORMS)}")
         measured = tuple(discrete.output_names)
         p = len(measured)
         C = _array(discrete.C, "C", (p, n), problems)
         Kf = _array(design.Kf, "Kf", (n, p), problems)
-        D = np.asarray(getattr(discrete, "D", np.zeros((p, m))), dtype=float)
+        D = np.asarray(discrete.D, dtype=float)
         if D.size and np.any(D != 0):
             problems.append("the measurements depend on the input (D != 0): not supported")
         if p == 0:
@@ -314,8 +317,8 @@ def from_design(design: Any, *, controller: str = "lqg") -> ControllerData:
         state_units[int(np.argmax(row))] if selection else "" for row in np.asarray(C)
     )
 
-    Kc_raw = getattr(design, "Kc", None)
-    tracked = tuple(getattr(design, "tracked", ()) or ()) if Kc_raw is not None else ()
+    Kc_raw = design.Kc
+    tracked = tuple(design.tracked) if Kc_raw is not None else ()
     if Kc_raw is None:
         Kc = np.zeros((m, 0))
         r0 = np.zeros(0)
@@ -344,19 +347,16 @@ def from_design(design: Any, *, controller: str = "lqg") -> ControllerData:
         raise ExportError(f"cannot export the {controller} controller of {system}: " + "; ".join(problems))
 
     y0 = np.asarray(C) @ np.asarray(x0)
-    weights = {}
-    for label in ("Q", "R", "QN", "RN", "G"):
-        value = getattr(design, label, None)
-        if value is not None:
-            weights[label] = np.asarray(value, dtype=float)
+    weights = {label: np.asarray(value, dtype=float) for label, value in
+               (("Q", design.Q), ("R", design.R), ("QN", design.QN), ("RN", design.RN), ("G", design.G))}
     if controller == "lqr":
         weights = {k: v for k, v in weights.items() if k in ("Q", "R")}
-    rate = float(getattr(design, "rate", 1.0 / dt))
+    rate = float(design.rate) if design.rate else 1.0 / dt
     settings = {
         "system": system,
         "controller": controller,
         "rate": f"{rate:.12g} Hz",
-        "discretization": str(getattr(design, "discretization", "zoh")),
+        "discretization": design.discretization,
     }
     if controller == "lqg":
         settings["kalman_form"] = form

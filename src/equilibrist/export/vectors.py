@@ -20,9 +20,11 @@ from typing import Any
 
 import numpy as np
 
+from equilibrist.control.design import Design
 from equilibrist.errors import ExportError
 from equilibrist.export.c_code import Vectors
 from equilibrist.export.data import ControllerData, check_controller, check_precision
+from equilibrist.numeric.system import System
 
 # Fractions of the input's activity accepted by the shipped test program.
 RELATIVE_TOLERANCE = {"double": 1e-9, "float": 1e-4}
@@ -113,7 +115,7 @@ class CController:
         self.compiled.close()
 
 
-def c_controller(design: Any, *, controller: str = "lqg", precision: str = "double",
+def c_controller(design: Design, *, controller: str = "lqg", precision: str = "double",
                  x_estimate: Any | None = None) -> CController:
     """Generate, compile and load *design*'s C controller as a simulation controller.
 
@@ -126,7 +128,7 @@ def c_controller(design: Any, *, controller: str = "lqg", precision: str = "doub
                        x_estimate)
 
 
-def scenario(design: Any, system: Any, *, duration: float | None = None) -> dict[str, Any]:
+def scenario(design: Design, system: System, *, duration: float | None = None) -> dict[str, Any]:
     """The settings of the recorded run: start, reference step, noise, rate.
 
     The run starts with each coordinate that has a design scale displaced by
@@ -136,11 +138,13 @@ def scenario(design: Any, system: Any, *, duration: float | None = None) -> dict
     """
     from equilibrist.sim import Noise, Step
 
+    if design.rate is None:
+        raise ExportError(f"the design of {design.system_key} is continuous: test vectors need a rate")
     plant = design.plant
-    scales = getattr(system.spec, "design_scales", {}) or {}
+    scales = system.spec.design_scales
     length = DEFAULT_DURATION if duration is None else float(duration)
     x0 = np.array(plant.x0, dtype=float)
-    coordinates = tuple(getattr(system.spec, "coordinates", ()) or plant.state_names)
+    coordinates = system.spec.coordinates
     for i, name in enumerate(plant.state_names):
         if name in coordinates and scales.get(name):
             x0[i] += START_FRACTION * float(scales[name])
@@ -151,14 +155,14 @@ def scenario(design: Any, system: Any, *, duration: float | None = None) -> dict
         reference = Step(value=r0 + step, at=0.5 * length)
     return {
         "duration": length,
-        "rate": float(design.rate),
+        "rate": design.rate,
         "x0": x0,
         "noise": Noise.from_design(design),
         "reference": reference,
     }
 
 
-def record(design: Any, system: Any, *, controller: str = "lqg", precision: str = "double",
+def record(design: Design, system: System, *, controller: str = "lqg", precision: str = "double",
            duration: float | None = None, seed: int = 0) -> Vectors:
     """Test vectors from a noisy closed-loop run of the simulation's own controller.
 

@@ -44,9 +44,9 @@ def controller_data(design: Any, *, controller: str = "lqg") -> ControllerData:
     if not isinstance(design, Design):
         raise ExportError(f"design = {design!r}: expected a Design (equilibrist.control.design."
                           f"design(system, rate=...)), not {type(design).__name__}")
-    if getattr(design, "discrete", None) is None or not getattr(design, "rate", None):
+    if design.discrete is None or not design.rate:
         raise ExportError(
-            f"the design of {getattr(design, 'system_key', 'the system')} is continuous: "
+            f"the design of {design.system_key} is continuous: "
             "a digital controller needs a sample rate (design it with rate=...)"
         )
     return from_design(design, controller=controller)
