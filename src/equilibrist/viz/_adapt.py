@@ -2,19 +2,24 @@
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from equilibrist.viz.output import VizError
 from equilibrist.viz.runs import Run
 
+if TYPE_CHECKING:  # the simulation layer is imported only when a result is shown
+    from equilibrist.numeric.system import System
+    from equilibrist.sim.result import SimResult
+
 # How an event of the simulation's settings is named on a plot.
 _EVENT_NAMES = {"kick": "push", "pulse": "push", "impulse": "push",
                 "parameter_change": "parameters change"}
 
 
-def system_of(key: str, params: Any = None) -> Any:
+def system_of(key: str, params: Mapping[str, float] | None = None) -> System:
     """The bound system of a registry *key* (``"gyroscope[euler=xyz]"``) with *params*."""
     from equilibrist.numeric.system import system_from_key
 
@@ -35,18 +40,18 @@ def _label(settings: Any) -> str:
     return ", ".join(bits)
 
 
-def run_from_result(result: Any, *, system: Any = None, label: str | None = None) -> Run:
+def run_from_result(result: SimResult, *, system: System | None = None, label: str | None = None) -> Run:
     """The :class:`Run` of a :class:`~equilibrist.sim.SimResult`."""
-    needed = ("system", "time", "states", "commanded", "applied", "measurements")
-    missing = [n for n in needed if not hasattr(result, n)]
-    if missing:
+    from equilibrist.sim.result import SimResult
+
+    if not isinstance(result, SimResult):
         raise VizError(
             f"cannot show a {type(result).__name__}: it is not a simulation result "
-            f"(it has no {', '.join(missing)})"
+            "(equilibrist.sim.simulate returns one; SimResult.load reads a saved one)"
         )
     if system is None:
-        system = system_of(result.system, getattr(result, "params", None))
-    settings = dict(getattr(result, "settings", {}) or {})
+        system = system_of(result.system, result.params)
+    settings = dict(result.settings)
     events = []
     for e in settings.get("events") or ():
         kind = str(e.get("kind", ""))
@@ -60,13 +65,12 @@ def run_from_result(result: Any, *, system: Any = None, label: str | None = None
             unit = system.state_units[list(system.state_names).index(e["state"])]
             what = f"kick {e['state']} {float(e['value']):+g} {unit}"
         events.append((float(e["time"]), what))
-    if getattr(result, "fell", False) and getattr(result, "fell_at", None) is not None:
+    if result.fell and result.fell_at is not None:
         events.append((float(result.fell_at), f"fell ({result.fell_state})"))
-    reference = np.asarray(result.reference) if result.reference is not None else None
-    ref_names = tuple(getattr(result, "reference_names", ()))
-    if reference is None or reference.ndim != 2 or reference.shape[1] == 0:
-        reference, ref_names = None, ()
-    n_inputs = np.asarray(result.applied).shape[1] if np.ndim(result.applied) == 2 else 0
+    has_reference = result.reference.ndim == 2 and result.reference.shape[1] > 0
+    reference = result.reference if has_reference else None
+    ref_names = tuple(result.reference_names) if has_reference else ()
+    n_inputs = len(result.input_names)
     return Run.from_arrays(
         system,
         result.time,
@@ -80,7 +84,7 @@ def run_from_result(result: Any, *, system: Any = None, label: str | None = None
         reference_names=ref_names,
         label=label if label is not None else _label(settings),
         events=events,
-        fell=bool(getattr(result, "fell", False)),
-        x_op=getattr(result, "x_op", None),
-        u_op=getattr(result, "u_op", None),
+        fell=result.fell,
+        x_op=result.x_op,
+        u_op=result.u_op,
     )
