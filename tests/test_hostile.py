@@ -571,3 +571,23 @@ def test_wrong_types_through_the_api_are_equilibrist_errors(tmp_path_factory, mo
     except EquilibristError as exc:
         assert str(exc).strip() and "\n" not in str(exc).strip()
     assert not Path("never-written").exists()
+
+
+def test_peak_command_and_peak_input_are_named_for_what_they_are() -> None:
+    from equilibrist import get_system
+    from equilibrist.control.design import design
+    from equilibrist.sim import simulate, simulate_batch
+    from equilibrist.sim.controllers import StateFeedback
+
+    cart = get_system("cartpole", F_min=-5.0, F_max=5.0)
+    d = design(cart, rate=200)
+    ctrl = StateFeedback.from_design(d)
+    run = simulate(cart, ctrl, duration=1.0, x0={"theta": 0.2})
+    metrics = run.metrics()
+    # The command asks for more than the 5 N actuator gives; the input applied is the limit.
+    assert metrics["peak_command"]["F"] > 5.0
+    assert metrics["peak_input"]["F"] == pytest.approx(5.0)
+    batch = simulate_batch(cart, ctrl, duration=1.0, runs=3, x0={"theta": [0.2, 0.2, 0.2]})
+    assert np.all(batch.peak_command[:, 0] > 5.0)
+    np.testing.assert_allclose(batch.peak_input[:, 0], 5.0)
+    np.testing.assert_allclose(batch.peak_command[0], abs(run.commanded).max(axis=0))

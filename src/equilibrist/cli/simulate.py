@@ -311,25 +311,9 @@ def _fmt(v: Any) -> str:
 
 
 def run_metrics(result: Any) -> dict[str, Any]:
-    """The run's metrics with ``peak_command`` (before the actuator's limits) beside
+    """The run's metrics: ``peak_command`` (before the actuator's limits) beside
     ``peak_input`` (the largest input that acted), each named for what it is."""
-    import numpy as np
-
-    metrics = dict(result.metrics())
-    names = list(result.input_names)
-    peak_command = dict(zip(names, np.abs(result.commanded).max(axis=0).tolist(), strict=True))
-    peak_input = dict(zip(names, np.abs(result.applied).max(axis=0).tolist(), strict=True))
-    out: dict[str, Any] = {}
-    for key, value in metrics.items():
-        if key == "peak_input":
-            out["peak_command"] = peak_command
-            out["peak_input"] = peak_input
-        else:
-            out[key] = value
-    if "peak_input" not in out:
-        out["peak_command"] = peak_command
-        out["peak_input"] = peak_input
-    return out
+    return dict(result.metrics())
 
 
 def run(args: argparse.Namespace) -> int:

@@ -447,6 +447,7 @@ def _run(
     a_sat = acc_cols[_ACC_N_SAT]
     a_dx = acc_cols[_ACC_PEAK_DX]
     a_est = acc_cols[_ACC_SUM_EST2]
+    a_peak_app = acc_cols[_ACC_PEAK_U_APP]
     for k in range(k_start, k_end):
         _switch(p_sets, p_switch, k * n_sub, pcur)
         if k == 0:
@@ -478,6 +479,7 @@ def _run(
                 rec[k, c_app + i] = u_app[i]
         for i in range(m):
             acc[a_peak + i] = max(acc[a_peak + i], abs(u_cmd[i]))
+            acc[a_peak_app + i] = max(acc[a_peak_app + i], abs(u_app[i]))
             acc[a_u2 + i] += u_app[i] * u_app[i]
         if saturated:
             acc[a_sat] += 1.0

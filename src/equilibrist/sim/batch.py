@@ -55,7 +55,8 @@ from equilibrist.sim.run import (
     next_chunk,
 )
 
-FORMAT = "equilibrist-batch-1"
+# Format 2 adds the peak command beside the peak input applied.
+FORMAT = "equilibrist-batch-2"
 
 
 def _count(value: object, name: str) -> int:
@@ -107,7 +108,10 @@ class BatchResult:
         state that left its region (-2 not finite, -3 integrator failed, -1 none).
     final_state, fell_x : ndarray, shape (runs, n_states)
     peak_input, rms_input : ndarray, shape (runs, n_inputs)
-        Largest ``|command|`` and RMS of the applied input.
+        Largest ``|input|`` applied (after the actuator's limits) and RMS of
+        the applied input.
+    peak_command : ndarray, shape (runs, n_inputs)
+        Largest ``|command|`` (the controller's, before the limits).
     time_saturated : ndarray, shape (runs,)
     peak_deviation, estimation_error_rms : ndarray, shape (runs, n_states)
     rows : ndarray, shape (runs,)
@@ -130,6 +134,7 @@ class BatchResult:
     fell_x: np.ndarray
     final_state: np.ndarray
     peak_input: np.ndarray
+    peak_command: np.ndarray
     rms_input: np.ndarray
     time_saturated: np.ndarray
     peak_deviation: np.ndarray
@@ -144,8 +149,8 @@ class BatchResult:
 
     def __post_init__(self) -> None:
         for name in ("x0", "params", "fell", "fell_at", "fell_code", "fell_x", "final_state",
-                     "peak_input", "rms_input", "time_saturated", "peak_deviation",
-                     "estimation_error_rms", "rows", "trajectories"):
+                     "peak_input", "peak_command", "rms_input", "time_saturated",
+                     "peak_deviation", "estimation_error_rms", "rows", "trajectories"):
             v = getattr(self, name)
             if v is not None:
                 v = np.asarray(v)
@@ -241,6 +246,7 @@ class BatchResult:
         }
         arrays = {k: getattr(self, k) for k in (
             "x0", "params", "fell", "fell_at", "fell_code", "fell_x", "final_state", "peak_input",
+            "peak_command",
             "rms_input", "time_saturated", "peak_deviation", "rows")}
         if self.estimation_error_rms is not None:
             arrays["estimation_error_rms"] = self.estimation_error_rms
@@ -256,6 +262,7 @@ class BatchResult:
         cols += [(n, self.params[:, i]) for i, n in enumerate(self.parameter_names)]
         cols += [("fell", self.fell.astype(float)), ("fell_at", self.fell_at)]
         cols += [(f"peak_{n}", self.peak_input[:, i]) for i, n in enumerate(self.input_names)]
+        cols += [(f"peak_command_{n}", self.peak_command[:, i]) for i, n in enumerate(self.input_names)]
         cols += [(f"rms_{n}", self.rms_input[:, i]) for i, n in enumerate(self.input_names)]
         cols += [("time_saturated", self.time_saturated)]
         cols += [(f"peak_dev_{n}", self.peak_deviation[:, i]) for i, n in enumerate(self.state_names)]
@@ -275,7 +282,9 @@ class BatchResult:
         except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
             raise SimulationError(f"{p} is not a saved batch: {exc}") from None
         if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-            raise SimulationError(f"{p} is not a saved batch")
+            found = meta.get("format") if isinstance(meta, dict) else None
+            raise SimulationError(f"{p} is not a saved batch of this version (format {found!r}, "
+                                  f"expected {FORMAT!r}): run the batch again")
         _check_batch_file(p, meta, arrays)
         return cls(
             system=meta["system"], state_names=tuple(meta["state_names"]),
@@ -288,7 +297,8 @@ class BatchResult:
 
 
 _BATCH_ARRAYS = ("x0", "params", "fell", "fell_at", "fell_code", "fell_x", "final_state",
-                 "peak_input", "rms_input", "time_saturated", "peak_deviation", "rows")
+                 "peak_input", "peak_command", "rms_input", "time_saturated", "peak_deviation",
+                 "rows")
 
 
 def _check_batch_file(p: Path, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
@@ -561,7 +571,8 @@ def _batch_result(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
         system=sysm.key, state_names=sysm.state_names, input_names=sysm.input_names,
         parameter_names=sysm.spec.parameter_names, x0=x0s, params=pmat, fell=fell,
         fell_at=fell_at, fell_code=code, fell_x=fell_xs, final_state=x_ends,
-        peak_input=accs[:, acc["peak_u"]], rms_input=np.sqrt(accs[:, acc["sum_u2"]] / count),
+        peak_input=accs[:, acc["peak_u_app"]], peak_command=accs[:, acc["peak_u"]],
+        rms_input=np.sqrt(accs[:, acc["sum_u2"]] / count),
         time_saturated=accs[:, acc["n_sat"].start] / setup.rate,
         peak_deviation=accs[:, acc["peak_dx"]],
         estimation_error_rms=(np.sqrt(accs[:, acc["sum_est2"]] / count)
@@ -648,6 +659,7 @@ def _python_runs(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
                               fell_code=_code(res, sysm.state_names),
                               fell_step=0 if res.fell_at is None else round(res.fell_at / setup.h))
         accs[i, acc["peak_u"]] = np.abs(res.commanded).max(axis=0)
+        accs[i, acc["peak_u_app"]] = np.abs(res.applied).max(axis=0)
         accs[i, acc["sum_u2"]] = (res.applied**2).sum(axis=0)
         accs[i, acc["n_sat"]] = np.count_nonzero(np.any(res.saturated != res.commanded, axis=1))
         accs[i, acc["peak_dx"]] = np.abs(res.states - res.x_op).max(axis=0)

@@ -189,8 +189,10 @@ class SimResult:
         ``overshoot``: per watched output, the largest excursion past the
         target on the side opposite the initial error, as a fraction of that
         error (None for an output that starts on target).
-        ``peak_input``: the largest ``|command|``; ``rms_input``: RMS of the
-        applied input (both absolute, per input); ``time_saturated``: time
+        ``peak_command``: the largest ``|command|`` (the controller's, before
+        the actuator's limits); ``peak_input``: the largest ``|input|``
+        applied; ``rms_input``: RMS of the applied input (all absolute, per
+        input); ``time_saturated``: time
         with any command outside its limits [s]; ``final_error``: watched
         output minus target at the end; ``estimation_error_rms``: RMS of
         estimate minus truth per state (None without estimate).
@@ -240,7 +242,8 @@ class SimResult:
             "duration": float(self.time[-1]) if self.n_rows else 0.0,
             "settling_time": settling,
             "overshoot": overshoot,
-            "peak_input": dict(zip(self.input_names, np.abs(self.commanded).max(axis=0).tolist(), strict=True)),
+            "peak_command": dict(zip(self.input_names, np.abs(self.commanded).max(axis=0).tolist(), strict=True)),
+            "peak_input": dict(zip(self.input_names, np.abs(self.applied).max(axis=0).tolist(), strict=True)),
             "rms_input": dict(zip(self.input_names, np.sqrt(np.mean(self.applied**2, axis=0)).tolist(), strict=True)),
             # Samples whose command was clipped, times the sample period (the
             # compiled batch counts the same way, the last sample included).
