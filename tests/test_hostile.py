@@ -573,7 +573,7 @@ def test_wrong_types_through_the_api_are_equilibrist_errors(tmp_path_factory, mo
     assert not Path("never-written").exists()
 
 
-def test_peak_command_and_peak_input_are_named_for_what_they_are() -> None:
+def test_peak_command_and_peak_input_in_runs_and_batches() -> None:
     from equilibrist import get_system
     from equilibrist.control.design import design
     from equilibrist.sim import simulate, simulate_batch
