@@ -38,6 +38,7 @@ from equilibrist.control.controller import (
     PythonController,
     as_python_controller,
 )
+from equilibrist.control.design import Design
 from equilibrist.errors import DimensionError, EquilibristError, SimulationError
 from equilibrist.numeric.system import System
 from equilibrist.sim.signals import Signal, as_signal
@@ -108,14 +109,15 @@ class StateFeedback:
         _check_tracking(self, m)
 
     @classmethod
-    def from_design(cls, design: Any, *, tracking: bool = False) -> StateFeedback:
+    def from_design(cls, design: Design, *, tracking: bool = False) -> StateFeedback:
         """The design's gain (its discrete gain when it has a rate) and operating point."""
+        _check_design(design)
         plant = design.plant
         kc = _design_kc(design) if tracking else None
         return cls(
             K=design.K, x_op=plant.x0, u_op=plant.u0, Kc=kc,
             tracked=tuple(design.tracked) if tracking else (),
-            rate=getattr(design, "rate", None), design=design,
+            rate=design.rate, design=design,
         )
 
     def linear(self, state_names: Sequence[str], input_names: Sequence[str] | None = None
@@ -193,9 +195,10 @@ class LQG:
         _check_tracking(self, m)
 
     @classmethod
-    def from_design(cls, design: Any, *, tracking: bool = False) -> LQG:
+    def from_design(cls, design: Design, *, tracking: bool = False) -> LQG:
         """The design's discrete Kalman filter and gain (it needs a sample rate)."""
-        if getattr(design, "discrete", None) is None or getattr(design, "Kf", None) is None:
+        _check_design(design)
+        if design.discrete is None or design.rate is None:
             raise SimulationError(
                 "an LQG controller needs a design with a sample rate (its discrete Kalman "
                 "filter): design(system, rate=...)"
@@ -206,7 +209,7 @@ class LQG:
         return cls(
             K=design.K, Ad=disc.A, Bd=disc.B, Kf=design.Kf, outputs=tuple(plant.output_names),
             x_op=plant.x0, u_op=plant.u0, rate=float(design.rate),
-            form=getattr(design, "kalman_form", "current"), Kc=kc,
+            form=design.kalman_form, Kc=kc,
             tracked=tuple(design.tracked) if tracking else (), design=design,
         )
 
@@ -242,10 +245,16 @@ class LQG:
                 "tracked": list(self.tracked)}
 
 
-def _design_kc(design: Any) -> np.ndarray:
-    kc = getattr(design, "Kc", None)
+def _check_design(design: object) -> None:
+    if not isinstance(design, Design):
+        raise SimulationError(f"design: expected a Design (equilibrist.control.design.design), "
+                              f"got {type(design).__name__}")
+
+
+def _design_kc(design: Design) -> np.ndarray:
+    kc = design.Kc
     if kc is None:
-        note = getattr(design, "kc_note", "") or "the design has no reference gain"
+        note = design.kc_note or "the design has no reference gain"
         raise SimulationError(f"reference tracking needs K_c: {note}")
     return np.asarray(kc, dtype=float)
 

@@ -22,10 +22,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Any
 
 import numpy as np
 
+from equilibrist.control.design import Design
 from equilibrist.errors import DimensionError, SimulationError
 
 
@@ -99,14 +99,17 @@ class Noise:
         object.__setattr__(self, "outputs", tuple(self.outputs))
 
     @classmethod
-    def from_design(cls, design: Any, *, rate: float | None = None) -> Noise:
+    def from_design(cls, design: Design, *, rate: float | None = None) -> Noise:
         """The covariances a design assumed: ``G``, ``QN`` and ``R_d``.
 
         A continuous design has no ``R_d``: then ``R = RN / T`` with ``T = 1 /
         rate`` the simulation's control period (*rate* is required then).
         """
+        if not isinstance(design, Design):
+            raise SimulationError(f"design: expected a Design (equilibrist.control.design.design), "
+                                  f"got {type(design).__name__}")
         plant = design.plant
-        rd = getattr(design, "Rd", None)
+        rd = design.Rd
         if rd is None:
             if rate is None:
                 raise SimulationError(
