@@ -451,10 +451,14 @@ def make_study(
         Naming every problem.
     """
     from equilibrist.numeric.system import get_system
-    from equilibrist.systems import registry
+    from equilibrist.systems import files, registry
 
     problems: list[str] = []
-    registry.lookup_family(system)  # an unknown system is its own clear error
+    # An unknown system or a bad system file is its own clear error.
+    if files.looks_like_path(system):
+        files.from_file(system)
+    else:
+        registry.lookup_family(system)
     # Numbers as floats: a study file's 1 and the command line's 1.0 are one study.
     fixed = {k: float(v) if isinstance(v, int | float) and not isinstance(v, bool) else v
              for k, v in (settings or {}).items()}
