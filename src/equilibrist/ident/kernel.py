@@ -14,13 +14,10 @@ first loaded.
 from __future__ import annotations
 
 import hashlib
-import importlib.util
-import os
-import sys
-import tempfile
 import types
 from pathlib import Path
 
+from equilibrist.numeric.cache import import_generated, write_generated
 from equilibrist.numeric.system import System
 
 _MARKER = "# ---8<--- shooting body"
@@ -47,20 +44,7 @@ def shooting_path(system: System) -> Path:
     module_path = system.compiled.module_path
     path = module_path.with_name(f"{module_path.stem}_shoot_{digest}.py")
     if not path.exists():
-        source = module_path.read_text() + _HEADER + body
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".")
-        try:
-            with os.fdopen(fd, "w") as fh:
-                fh.write(source)
-            # Never replace a module another process wrote: numba's on-disk
-            # cache is keyed on the source file's time stamp.
-            if path.exists():
-                Path(tmp).unlink()
-            else:
-                os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        write_generated(path, module_path.read_text() + _HEADER + body)
     return path
 
 
@@ -69,19 +53,7 @@ def load_shooting(system: System) -> types.ModuleType:
     path = shooting_path(system)
     if path in _LOADED:
         return _LOADED[path]
-    name = f"equilibrist_shoot_{path.stem}"
-    module = sys.modules.get(name)
-    if module is None:
-        spec = importlib.util.spec_from_file_location(name, path)
-        if spec is None or spec.loader is None:  # pragma: no cover
-            raise RuntimeError(f"cannot load the shooting integrator {path}")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        try:
-            spec.loader.exec_module(module)
-        except BaseException:
-            del sys.modules[name]
-            raise
+    module = import_generated(f"equilibrist_shoot_{path.stem}", path)
     _LOADED[path] = module
     return module
 

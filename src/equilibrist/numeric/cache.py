@@ -175,13 +175,48 @@ def _check_module(module: types.ModuleType, entry: Entry) -> None:
         raise ImportError("generated model has the wrong size")
 
 
+def write_generated(path: Path, source: str) -> None:
+    """Write a generated module to *path* once, whole; never replace one that exists.
+
+    Compiled cores built on generated modules (the simulation's, the
+    identification's) are cached by numba keyed on the source file's time
+    stamp: a module another process already wrote is left as it is.
+    """
+    if path.exists():
+        return
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(source)
+        if path.exists():
+            Path(tmp).unlink()
+        else:
+            os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def import_generated(name: str, path: Path) -> types.ModuleType:
+    """The generated module at *path*, imported once per process under *name*."""
+    module = sys.modules.get(name)
+    if module is None:
+        module = _import(name, path)
+    return module
+
+
 def _import(name: str, path: Path) -> types.ModuleType:
     spec = importlib.util.spec_from_file_location(name, path)
     if spec is None or spec.loader is None:
         raise ImportError(f"cannot load {path}")
     module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    # In sys.modules while it runs: numba's cache finds a module's functions there.
     sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[name]
+        raise
     return module
 
 

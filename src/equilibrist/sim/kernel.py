@@ -38,10 +38,6 @@ from __future__ import annotations
 
 import ast
 import hashlib
-import importlib.util
-import os
-import sys
-import tempfile
 import types
 from pathlib import Path
 from typing import Any
@@ -54,6 +50,7 @@ from equilibrist.control.controller import (
     linear_layout_source,
     linear_sizes,
 )
+from equilibrist.numeric.cache import import_generated, write_generated
 from equilibrist.numeric.system import System
 from equilibrist.sim import layout
 
@@ -149,19 +146,7 @@ def kernel_path(system: System, controller: NonlinearController | None = None,
     if not path.exists():
         source = module_path.read_text() + _HEADER + section + "\n" + body
         ast.parse(source)  # a broken controller source fails here, not inside numba
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".")
-        try:
-            with os.fdopen(fd, "w") as fh:
-                fh.write(source)
-            # Never replace a kernel another process wrote: numba's on-disk
-            # cache is keyed on the source file's time stamp.
-            if path.exists():
-                Path(tmp).unlink()
-            else:
-                os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        write_generated(path, source)
     _PATHS[key] = path
     return path
 
@@ -182,19 +167,7 @@ def load_kernel(system: System, controller: NonlinearController | None = None,
     if path in _LOADED:
         _BY_SECTION[key] = _LOADED[path]
         return _LOADED[path]
-    name = f"equilibrist_simkernel_{path.stem}"
-    module = sys.modules.get(name)
-    if module is None:
-        spec = importlib.util.spec_from_file_location(name, path)
-        if spec is None or spec.loader is None:  # pragma: no cover
-            raise RuntimeError(f"cannot load the simulation kernel {path}")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        try:
-            spec.loader.exec_module(module)
-        except BaseException:
-            del sys.modules[name]
-            raise
+    module = import_generated(f"equilibrist_simkernel_{path.stem}", path)
     _LOADED[path] = module
     _BY_SECTION[key] = module
     return module
