@@ -3,8 +3,8 @@
 :class:`Core` is built from a system, a task and the environment's options;
 the single environment and the vector environment read the same one, so
 both step exactly the same numbers. It is the only Python code that knows
-the slots of the core's settings arrays (``ei``, ``ef``; see the
-environments section of ``equilibrist/sim/_kernel_template.py``).
+the slots of the core's settings arrays (``ei``, ``ef``; see
+``equilibrist/sim/_env_template.py``).
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
 """The compiled simulation core: one numba module per system, cached on disk.
 
-The core's source is written once, in ``_kernel_template.py``. For each
+The core's source is written once, in ``_kernel_template.py`` (and the
+environments' steps in ``_env_template.py``). For each
 system it is appended to a copy of the system's generated dynamics (the
 numeric layer's ``f``), after the calling convention's constants
 (:mod:`equilibrist.sim.layout`) and the controller's source: the linear
@@ -73,11 +74,15 @@ _SIZE_KEYS = ("nz", "ny", "nr", "m", "n")
 
 
 def _template_body() -> str:
-    text = (Path(__file__).parent / "_kernel_template.py").read_text()
-    _head, sep, body = text.partition(_MARKER)
-    if not sep:  # pragma: no cover - a broken install
-        raise RuntimeError("the simulation kernel template has lost its marker line")
-    return body.split("\n", 1)[1]
+    """The simulation core's body, then the environments' steps (two template files)."""
+    bodies = []
+    for name in ("_kernel_template.py", "_env_template.py"):
+        text = (Path(__file__).parent / name).read_text()
+        _head, sep, body = text.partition(_MARKER)
+        if not sep:  # pragma: no cover - a broken install
+            raise RuntimeError(f"the kernel template {name} has lost its marker line")
+        bodies.append(body.split("\n", 1)[1])
+    return "\n\n".join(bodies)
 
 
 _SECTIONS: dict[str, str] = {}
