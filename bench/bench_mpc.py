@@ -14,7 +14,13 @@
    a grid of starts (cart at the centre, initial cart speed x pole angle),
    clipped LQR and MPC side by side, saved as ``docs/images/mpc_roa.png``.
 
-    python bench/bench_mpc.py [--json] [--grid 9] [--no-figure]
+``--solve-only`` runs part 1 alone, timing each sample's solve by this
+thread's CPU time (``time.thread_time``: what the solver itself costs,
+whatever else runs on the machine) and by the wall clock, and reports the
+median, the 99th percentile and the worst of both against the 5 ms period,
+with OSQP's iteration count (median, worst) and its cap.
+
+    python bench/bench_mpc.py [--json] [--grid 9] [--no-figure] [--solve-only] [--repeat 1]
 """
 
 from __future__ import annotations
@@ -37,27 +43,81 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 class _Timed(MPCRuntime):
-    """The MPC runtime recording each sample's CPU time as well."""
+    """The MPC runtime timing each sample's whole solve (wall clock and this thread's CPU)."""
 
     def __init__(self, *args: object, **kwargs: object) -> None:
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
         self.cpu_times: list[float] = []
+        self.wall_times: list[float] = []
         self.statuses: list[str] = []
+        self.iterations: list[int] = []
 
     def solve(self, dx0: np.ndarray) -> np.ndarray:
-        c0 = time.process_time()
+        c0, w0 = time.thread_time(), time.perf_counter()
         du = super().solve(dx0)
-        self.cpu_times.append(time.process_time() - c0)
+        w1, c1 = time.perf_counter(), time.thread_time()
+        self.cpu_times.append(c1 - c0)
+        self.wall_times.append(w1 - w0)
         self.statuses.append(self.last_status)
+        self.iterations.append(self.last_iterations)
         return du
+
+
+STARTS = [{"theta": 0.5}, {"theta": -0.4, "theta_dot": 1.0}, {"x_dot": 2.0},
+          {"x": 0.6, "x_dot": 1.5, "theta": 0.1}]
+
+
+def _ms(values: list[float]) -> dict[str, float]:
+    a = 1e3 * np.asarray(values)
+    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)),
+            "worst": float(a.max())}
+
+
+def solve_only(horizon: int = 30, repeat: int = 1) -> dict[str, object]:
+    """Per-sample solve times only (thread CPU and wall), *repeat* passes over the starts."""
+    import os
+
+    from equilibrist.control.mpc import MAX_ITER
+
+    system = get_system("cartpole")
+    d = design(system, rate=200.0)
+    ctrl = mpc(system, design=d, horizon=horizon, estimator="state")
+    cpu: list[float] = []
+    wall: list[float] = []
+    osqp_cpu: list[float] = []
+    osqp_wall: list[float] = []
+    iters: list[int] = []
+    for _ in range(repeat):
+        for x0 in STARTS:
+            rt = _Timed(ctrl)
+            simulate(system, rt, duration=2.0, x0=x0, region={})
+            cpu += rt.cpu_times
+            wall += rt.wall_times
+            for c, w, st, it in zip(rt.cpu_times, rt.wall_times, rt.statuses, rt.iterations,
+                                    strict=True):
+                if st != "unconstrained":
+                    osqp_cpu.append(c)
+                    osqp_wall.append(w)
+                    iters.append(it)
+    period = 5.0
+    return {
+        "horizon": horizon, "rate": 200.0, "period_ms": period, "samples": len(cpu),
+        "samples_solved_by_osqp": len(osqp_cpu), "max_iter": MAX_ITER,
+        "load_average": [round(v, 2) for v in os.getloadavg()],
+        "cpu_ms": _ms(cpu), "wall_ms": _ms(wall),
+        "osqp_cpu_ms": _ms(osqp_cpu), "osqp_wall_ms": _ms(osqp_wall),
+        "osqp_iterations": {"median": float(np.median(iters)), "p99": float(np.percentile(iters, 99)),
+                            "worst": int(max(iters)), "at_cap": int(sum(i >= MAX_ITER for i in iters))},
+        "cpu_over_period": int(sum(1e3 * c > period for c in cpu)),
+        "wall_over_period": int(sum(1e3 * w > period for w in wall)),
+    }
 
 
 def solve_times(horizon: int = 30) -> dict[str, object]:
     system = get_system("cartpole")
     d = design(system, rate=200.0)
     ctrl = mpc(system, design=d, horizon=horizon, estimator="state")
-    starts = [{"theta": 0.5}, {"theta": -0.4, "theta_dot": 1.0}, {"x_dot": 2.0},
-              {"x": 0.6, "x_dot": 1.5, "theta": 0.1}]
+    starts = STARTS
     wall: list[float] = []
     cpu: list[float] = []
     solved: list[float] = []
@@ -157,9 +217,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--grid", type=int, default=9)
     ap.add_argument("--no-figure", action="store_true")
+    ap.add_argument("--solve-only", action="store_true",
+                    help="only the per-sample solve times (thread CPU and wall)")
+    ap.add_argument("--repeat", type=int, default=1, help="passes over the starts (--solve-only)")
     args = ap.parse_args(argv)
-    out = {"solve_times": solve_times(), "python_control": python_control(),
-           "regions": regions(args.grid, not args.no_figure)}
+    out: dict[str, dict[str, object]]
+    if args.solve_only:
+        out = {"solve_only": solve_only(repeat=args.repeat)}
+    else:
+        out = {"solve_times": solve_times(), "python_control": python_control(),
+               "regions": regions(args.grid, not args.no_figure)}
     if args.json:
         json.dump(out, sys.stdout, indent=2)
         print()

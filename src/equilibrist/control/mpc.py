@@ -286,27 +286,24 @@ class MPCRuntime:
         self._solver.setup(H, q, A, lo, hi, eps_abs=EPS, eps_rel=EPS, polishing=True,
                            polish_refine_iter=10, max_iter=MAX_ITER, verbose=False,
                            warm_starting=True)
-        self._idx = [ctrl.state_names.index(o) for o in ctrl.output_names]
+        self.front = KalmanFront(ctrl)
         self.solve_times: list[float] = []
         self.reset()
 
+    @property
+    def z(self) -> np.ndarray:
+        """The filter's state: the predicted deviation ``xhat_{k|k-1} - x_op``."""
+        return self.front.z
+
     def reset(self) -> None:
-        n = self.ctrl.problem.n
-        self.z = np.zeros(n)  # the filter's predicted deviation
-        self._xhat = np.zeros(n)
+        self.front.reset()
         self._warm: np.ndarray | None = None
         self.estimate = None
         self.last_status = ""
+        self.last_iterations = 0
 
     def _state(self, y: np.ndarray) -> np.ndarray:
-        c = self.ctrl
-        dy = np.asarray(y, dtype=float) - c.x_op[self._idx]
-        if c.estimator == "state":
-            return dy.copy()
-        assert c.Kf is not None
-        if c.form == "current":
-            return self.z + c.Kf @ (dy - self.z[self._idx])
-        return self.z.copy()
+        return self.front.estimate(y)
 
     def lqr_feasible(self, dx0: np.ndarray) -> bool:
         """Whether the LQR's own trajectory from *dx0* meets every constraint over the horizon.
@@ -337,6 +334,7 @@ class MPCRuntime:
             if self.lqr_feasible(dx0):
                 self.solve_times.append(time.perf_counter() - t0)
                 self.last_status = "unconstrained"
+                self.last_iterations = 0
                 self._warm = None
                 return -self.ctrl.K @ np.asarray(dx0, dtype=float)
         shift = self._E @ dx0
@@ -347,6 +345,7 @@ class MPCRuntime:
         res = self._solver.solve()
         self.solve_times.append(time.perf_counter() - t0)
         self.last_status = str(res.info.status)
+        self.last_iterations = int(res.info.iter)
         sol = np.asarray(res.x, dtype=float)
         du_lqr = -self.ctrl.K @ np.asarray(dx0, dtype=float)
         if not np.all(np.isfinite(sol)):
@@ -365,11 +364,50 @@ class MPCRuntime:
 
     def output(self, t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray:
         dx = self._state(y)
-        self._xhat = dx
         self.estimate = self.ctrl.x_op + dx
         return self.ctrl.u_op + self.solve(dx)
 
     def update(self, t: float, y: np.ndarray, r: np.ndarray, u_applied: np.ndarray) -> None:
+        self.front.update(y, u_applied)
+
+
+class KalmanFront:
+    """The estimator in front of the MPC: the design's discrete Kalman filter, or the state itself.
+
+    ``estimate(y)`` is the deviation ``dx`` the QP starts from (the filter's
+    ``current`` form corrects the prediction with this sample's measurement,
+    the ``predictor`` form uses the prediction), ``update(y, u_applied)``
+    predicts the next sample. Its state ``z`` is the predicted deviation
+    ``xhat_{k|k-1} - x_op`` (zero at the start). With ``estimator="state"``
+    the measurement is the full state and ``z`` stays empty of meaning.
+    """
+
+    def __init__(self, ctrl: MPC) -> None:
+        self.ctrl = ctrl
+        self._idx = [ctrl.state_names.index(o) for o in ctrl.output_names]
+        self.reset()
+
+    def reset(self) -> None:
+        n = self.ctrl.problem.n
+        self.z = np.zeros(n)
+        self._xhat = np.zeros(n)
+
+    def estimate(self, y: np.ndarray) -> np.ndarray:
+        """The deviation of the state estimate at this sample, from the measurement *y*."""
+        c = self.ctrl
+        dy = np.asarray(y, dtype=float) - c.x_op[self._idx]
+        if c.estimator == "state":
+            dx = dy.copy()
+        elif c.form == "current":
+            assert c.Kf is not None
+            dx = self.z + c.Kf @ (dy - self.z[self._idx])
+        else:
+            dx = self.z.copy()
+        self._xhat = dx
+        return dx
+
+    def update(self, y: np.ndarray, u_applied: np.ndarray) -> None:
+        """Predict the next sample's state (after :meth:`estimate` of this one)."""
         c = self.ctrl
         if c.estimator == "state" or c.Kf is None or c.design is None:
             return
@@ -381,6 +419,35 @@ class MPCRuntime:
         else:
             dy = np.asarray(y, dtype=float) - c.x_op[self._idx]
             self.z = Ad @ self.z + Bd @ du + c.Kf @ (dy - self.z[self._idx])
+
+    def linear_form(self) -> dict[str, np.ndarray]:
+        """The filter as blocks of the linear controller form (deviations, row-major).
+
+        ``z+ = Ac z + By dy + Bu du_applied`` and ``dx = Ez z + Ey dy``: for the
+        ``current`` form ``Ez = I - M C``, ``Ey = M``, ``Ac = Ad Ez``,
+        ``By = Ad M``; for the ``predictor`` form ``Ez = I``, ``Ey = 0``,
+        ``Ac = Ad - L C``, ``By = L``; ``Bu = Bd`` in both. The same filter as
+        :meth:`estimate` and :meth:`update`, with its products taken in
+        another order (equal to round-off).
+        """
+        c = self.ctrl
+        if c.estimator == "state" or c.Kf is None or c.design is None:
+            raise ControllerError("the MPC measures the full state: it has no Kalman filter")
+        n = c.problem.n
+        Ad = np.asarray(c.design.discrete.A, dtype=float)
+        Bd = np.asarray(c.design.discrete.B, dtype=float)
+        Kf = np.asarray(c.Kf, dtype=float)
+        C = np.zeros((len(self._idx), n))
+        for row, i in enumerate(self._idx):
+            C[row, i] = 1.0
+        if c.form == "current":
+            Ez, Ey = np.eye(n) - Kf @ C, Kf
+            Ac, By = Ad @ Ez, Ad @ Kf
+        else:
+            Ez, Ey = np.eye(n), np.zeros_like(Kf)
+            Ac, By = Ad - Kf @ C, Kf
+        return {"Ac": Ac, "By": By, "Bu": Bd, "Ez": Ez, "Ey": Ey,
+                "y_op": c.x_op[self._idx]}
 
 
 def soft_bounds(system: System, x_op: np.ndarray) -> dict[str, tuple[float, float]]:
@@ -486,4 +553,5 @@ def _build(request: ControllerRequest) -> MPCRuntime:
     return ctrl.runtime()
 
 
-__all__ = ["EPS", "HORIZON", "MPC", "MPCProblem", "MPCRuntime", "mpc", "soft_bounds"]
+__all__ = ["EPS", "HORIZON", "MAX_ITER", "MPC", "KalmanFront", "MPCProblem", "MPCRuntime", "mpc",
+           "soft_bounds"]
