@@ -7,11 +7,14 @@ import json
 import math
 import sys
 from collections.abc import Iterable, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from equilibrist.errors import EquilibristError, ParameterError
+
+if TYPE_CHECKING:
+    from equilibrist.numeric.system import System
 
 
 class UsageError(EquilibristError, ValueError):
@@ -154,7 +157,7 @@ def add_params(parser: argparse.ArgumentParser) -> None:
                         "writes); --set values override them")
 
 
-def load_system(args: argparse.Namespace) -> Any:
+def load_system(args: argparse.Namespace) -> System:
     """The system named on the command line with its ``--params`` and ``--set`` values."""
     from equilibrist.numeric.system import get_system
 

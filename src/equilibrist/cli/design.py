@@ -61,14 +61,17 @@ def run(args: argparse.Namespace) -> int:
     if kind == "none":
         raise common.UsageError("--controller none is the open loop: there is nothing to design")
     if kind not in ("lqr", "lqg"):
-        from equilibrist.control.controller import ControllerRequest, build_controller
+        from equilibrist.control.controller import (
+            ControllerRequest,
+            build_controller,
+            describe_controller,
+        )
 
         request = ControllerRequest(system=system, rate=rate,
                                     design_options=common.design_options(args),
                                     options=common.controller_options(args))
         built = build_controller(kind, request)
-        describe = getattr(built, "describe", None)
-        info = describe() if callable(describe) else {"kind": kind}
+        info = {"kind": kind} if built is None else describe_controller(built, kind)
         if args.json:
             common.print_json(info)
         else:

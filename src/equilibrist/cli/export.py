@@ -4,17 +4,17 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import Any
+from typing import TYPE_CHECKING
 
 from equilibrist.cli import common
+
+if TYPE_CHECKING:
+    from equilibrist.export.writer import ExportReport
+    from equilibrist.numeric.system import System
 
 # The registry's names (equilibrist.control.controller.CONTROLLER_KINDS).
 CONTROLLERS = ("lqg", "lqr", "swingup", "mpc", "none")
 PRECISIONS = ("double", "float")
-# The names of equilibrist.control's discretization methods and Kalman forms,
-# written out so that building the parser does not import scipy.
-# Sample rate [Hz] for a system whose spec names no control rate of its rig.
-FALLBACK_RATE = 200.0
 
 _EPILOG = """\
 Writes into --out (default ./<system>_<controller>): <name>.h and <name>.c
@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     if system.n_inputs == 0:
         raise ExportError(f"{system.key} has no input: there is no controller to export")
     if rate is None:
-        rate = check_rate(getattr(system.spec, "control_rate", None) or FALLBACK_RATE)
+        rate = check_rate(system.spec.control_rate)
 
     if args.controller not in ("lqg", "lqr"):
         from equilibrist.control.controller import ControllerRequest, build_controller
@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     return _report(args, done, system)
 
 
-def _report(args: argparse.Namespace, done: Any, system: Any) -> int:
+def _report(args: argparse.Namespace, done: ExportReport, system: System) -> int:
     if args.json:
         common.print_json({
             "folder": str(done.folder),

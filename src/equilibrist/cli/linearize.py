@@ -3,12 +3,16 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from equilibrist.cli import common
 from equilibrist.errors import NoEquilibriumError
+
+if TYPE_CHECKING:
+    from equilibrist.numeric.linear import LinearModel
+    from equilibrist.numeric.system import Equilibrium, System
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -29,7 +33,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def point(system: Any, at: list[str], inputs: list[str]) -> Any:
+def point(system: System, at: list[str], inputs: list[str]) -> Equilibrium:
     """The equilibrium named by ``--at``/``--input`` (free components solved)."""
     state = {k: common.parse_number(v, f"--at {k}") for k, v in common.parse_assignments(at, "--at").items()}
     given = {k: common.parse_number(v, f"--input {k}")
@@ -70,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def render(system: Any, lm: Any) -> str:
+def render(system: System, lm: LinearModel) -> str:
     """Readable text of a linearization."""
     lines = [f"{system.key}: linearization at"]
     lines.append("  x0: " + ", ".join(f"{n} = {v:.6g}" for n, v in zip(lm.state_names, lm.x0, strict=True)))

@@ -11,9 +11,12 @@ from __future__ import annotations
 import argparse
 import zipfile
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from equilibrist.cli import common
+
+if TYPE_CHECKING:
+    from equilibrist.sim import BatchResult, SimResult
 
 _EPILOG = """\
 The picture is written beside the first file with the suffix .png unless
@@ -74,7 +77,7 @@ def plot_study_file(args: argparse.Namespace) -> int:
     return 0
 
 
-def load_result(path: str | Path) -> Any:
+def load_result(path: str | Path) -> SimResult | BatchResult:
     """A saved run (``SimResult``) or batch (``BatchResult``), whichever the file holds."""
     from equilibrist.sim import BatchResult, SimResult
     from equilibrist.sim.result import read_npz

@@ -12,9 +12,15 @@ import math
 import os
 import stat
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from equilibrist.cli import common
+
+if TYPE_CHECKING:
+    from equilibrist.control.controller import AnyController
+    from equilibrist.numeric.system import System
+    from equilibrist.sim.events import Event
+    from equilibrist.sim.signals import PRBS, Chirp
 
 # The registry's names (equilibrist.control.controller.CONTROLLER_KINDS).
 CONTROLLERS = ("lqr", "lqg", "swingup", "mpc", "none")
@@ -180,11 +186,11 @@ def _split_time(item: str, option: str) -> tuple[float, str]:
     return time, rest
 
 
-def parse_events(args: argparse.Namespace, system: Any) -> list[Any]:
+def parse_events(args: argparse.Namespace, system: System) -> list[Event]:
     """The --push, --kick and --change items as simulation events."""
     from equilibrist.sim.events import Kick, ParameterChange, Pulse
 
-    events: list[Any] = []
+    events: list[Event] = []
     for item in args.push:
         t, rest = _split_time(item, "--push")
         parts = rest.split(":")
@@ -205,7 +211,7 @@ def parse_events(args: argparse.Namespace, system: Any) -> list[Any]:
     return events
 
 
-def parse_excitation(args: argparse.Namespace) -> Any:
+def parse_excitation(args: argparse.Namespace) -> Chirp | PRBS | None:
     """The --excite signal (None without one)."""
     if args.excite is None:
         return None
@@ -233,7 +239,7 @@ def _stdout_is_pipe() -> bool:
         return True
 
 
-def build_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
+def build_run(args: argparse.Namespace) -> tuple[System, dict[str, Any]]:
     """The system and the keyword arguments of ``simulate`` from the options."""
     from equilibrist.sim.noise import Noise
     from equilibrist.sim.signals import parse_signal
@@ -248,7 +254,7 @@ def build_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     noise_on = args.noise == "on"
     design_kwargs = common.design_options(args)
     outputs = design_kwargs.pop("outputs")
-    controller: Any = None
+    controller: AnyController | None = None
     noise = None
     if kind == "none":
         for flag in ("q", "r", "qn", "rn"):
@@ -266,14 +272,18 @@ def build_run(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
             noise = Noise.from_design(d)
         outputs = None
     else:
-        from equilibrist.control.controller import ControllerRequest, build_controller
+        from equilibrist.control.controller import (
+            ControllerRequest,
+            build_controller,
+            measured_outputs,
+        )
 
         request = ControllerRequest(
             system=system, rate=rate, design_options={"outputs": outputs, **design_kwargs},
             tracking=reference is not None, options=common.controller_options(args),
         )
         controller = build_controller(kind, request)
-        measured = getattr(controller, "outputs", None) or outputs
+        measured = measured_outputs(controller) or outputs
         if noise_on:
             noise = Noise.from_spec(system, outputs=measured, rate=rate)
         outputs = None

@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from equilibrist.cli import common
+
+if TYPE_CHECKING:
+    from equilibrist.study.spec import Study
 
 _EPILOG = """\
 Varied quantities (--vary, repeatable): any physical parameter of the system
@@ -110,7 +113,7 @@ def _sample(text: str | None) -> int | None:
     return _count(n, "--sample random:N")
 
 
-def build_study(args: argparse.Namespace) -> Any:
+def build_study(args: argparse.Namespace) -> Study:
     """The :class:`~equilibrist.study.Study` of the command line (or its --study file)."""
     from equilibrist.study import load_study_file, make_study
 

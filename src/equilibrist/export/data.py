@@ -39,7 +39,6 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import PurePath
-from typing import Any
 
 import numpy as np
 
@@ -216,7 +215,7 @@ class ControllerData:
         return h.hexdigest()[:12]
 
 
-def _array(value: Any, name: str, shape: tuple[int, ...], problems: list[str]) -> np.ndarray:
+def _array(value: object, name: str, shape: tuple[int, ...], problems: list[str]) -> np.ndarray:
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):
@@ -235,7 +234,7 @@ def _array(value: Any, name: str, shape: tuple[int, ...], problems: list[str]) -
     return arr
 
 
-def _units(system: Any, names: tuple[str, ...], default: tuple[str, ...]) -> tuple[str, ...]:
+def _units(names: tuple[str, ...], default: tuple[str, ...]) -> tuple[str, ...]:
     if default and len(default) == len(names):
         return tuple(default)
     return tuple("" for _ in names)
@@ -277,8 +276,8 @@ def from_design(design: Design, *, controller: str = "lqg") -> ControllerData:
     if discrete is None or design.dt is None:
         raise ExportError(f"the design of {system} is continuous: export needs a digital design (a rate)")
     params = dict(design.params)
-    state_units = _units(None, state_names, tuple(plant.state_units))
-    input_units = _units(None, input_names, tuple(plant.input_units))
+    state_units = _units(state_names, tuple(plant.state_units))
+    input_units = _units(input_names, tuple(plant.input_units))
     dt = float(design.dt)
     if not (math.isfinite(dt) and dt > 0):
         problems.append(f"the sample period {dt!r} s is not a positive number")

@@ -18,13 +18,16 @@ import subprocess
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from equilibrist.errors import ExportError
 from equilibrist.export import c_code
 from equilibrist.export.data import ControllerData, check_precision
+
+if TYPE_CHECKING:
+    from equilibrist.control.design import Design
 
 # The flags of the export's Makefile, plus position-independent code for a shared library.
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
@@ -179,7 +182,7 @@ class CompiledController:
 
 
 def compile_controller(
-    design: Any,
+    design: Design | ControllerData,
     *,
     controller: str = "lqg",
     precision: str = "double",

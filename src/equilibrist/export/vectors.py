@@ -16,15 +16,19 @@ millionths of the activity over a noisy run).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import numpy.typing as npt
 
 from equilibrist.control.design import Design
 from equilibrist.errors import ExportError
 from equilibrist.export.c_code import Vectors
 from equilibrist.export.data import ControllerData, check_controller, check_precision
 from equilibrist.numeric.system import System
+
+if TYPE_CHECKING:
+    from equilibrist.export.native import CompiledController
 
 # Fractions of the input's activity accepted by the shipped test program.
 RELATIVE_TOLERANCE = {"double": 1e-9, "float": 1e-4}
@@ -50,7 +54,8 @@ def tolerance(data: ControllerData, u: np.ndarray, precision: str) -> np.ndarray
     return RELATIVE_TOLERANCE[precision] * scale
 
 
-def make_vectors(data: ControllerData, y: Any, r: Any, u: Any, x_init: Any, *,
+def make_vectors(data: ControllerData, y: npt.ArrayLike, r: npt.ArrayLike, u: npt.ArrayLike,
+                 x_init: npt.ArrayLike, *,
                  precision: str) -> Vectors:
     """:class:`Vectors` from arrays, with the tolerance of :func:`tolerance`."""
     ys = np.asarray(y, dtype=float).reshape(-1, data.n_measured)
@@ -80,7 +85,7 @@ class CController:
         the operating point (``init``), as the simulation's LQG does.
     """
 
-    def __init__(self, compiled: Any, x_estimate: Any | None = None) -> None:
+    def __init__(self, compiled: CompiledController, x_estimate: npt.ArrayLike | None = None) -> None:
         self.compiled = compiled
         self.x_estimate = None if x_estimate is None else np.asarray(x_estimate, dtype=float)
         self.reset()
@@ -104,7 +109,7 @@ class CController:
         self.compiled.reset(self.x_estimate)
         self.estimate = self.compiled.estimate()
 
-    def step(self, t: float, y: Any, r: Any) -> np.ndarray:
+    def step(self, t: float, y: npt.ArrayLike, r: npt.ArrayLike | None) -> np.ndarray:
         """One sample of the C code: absolute ``y`` (and ``r``) in, saturated ``u`` out."""
         ref = np.asarray(r, dtype=float).reshape(-1) if r is not None else np.zeros(0)
         u = self.compiled.step(y, ref if ref.size else None)
@@ -116,7 +121,7 @@ class CController:
 
 
 def c_controller(design: Design, *, controller: str = "lqg", precision: str = "double",
-                 x_estimate: Any | None = None) -> CController:
+                 x_estimate: npt.ArrayLike | None = None) -> CController:
     """Generate, compile and load *design*'s C controller as a simulation controller.
 
     See :func:`~equilibrist.export.native.compile_controller` for the build

@@ -14,11 +14,15 @@ import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Protocol
 
 from equilibrist.errors import ExportError
 from equilibrist.export import c_code
 from equilibrist.export.data import ControllerData, check_controller, check_precision, from_design
+
+if TYPE_CHECKING:
+    from equilibrist.control.design import Design
+    from equilibrist.numeric.system import System
 
 ARDUINO_FOLDER = "example_arduino"
 
@@ -30,7 +34,7 @@ def generator_version() -> str:
     return f"equilibrist {__version__}"
 
 
-def controller_data(design: Any, *, controller: str = "lqg") -> ControllerData:
+def controller_data(design: Design | object, *, controller: str = "lqg") -> ControllerData:
     """:func:`~equilibrist.export.data.from_design` for a discrete design.
 
     Raises
@@ -222,17 +226,53 @@ def _umask() -> int:
     return mask
 
 
+class ExportedController(Protocol):
+    """What every export reports of the controller it wrote."""
+
+    @property
+    def fingerprint(self) -> str: ...
+    @property
+    def controller(self) -> str: ...
+    @property
+    def rate(self) -> float: ...
+
+
+class ExportedVectors(Protocol):
+    """What every export reports of its recorded test vectors."""
+
+    @property
+    def n_steps(self) -> int: ...
+
+
+class ExportReport(Protocol):
+    """What every exporter returns (:class:`Export` and the other controllers' exports):
+    the fields the command line reports."""
+
+    @property
+    def folder(self) -> Path: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def files(self) -> Mapping[str, str]: ...
+    @property
+    def precision(self) -> str: ...
+    @property
+    def data(self) -> ExportedController: ...
+    @property
+    def vectors(self) -> ExportedVectors: ...
+
+
 #: Exporters of the controllers the registry builds beyond LQR and LQG (``--controller
 #: swingup``...): name -> ``exporter(controller, out, *, system, precision, duration, seed,
 #: force) -> Export``. A module adds one with :func:`register_exporter`.
-EXPORTERS: dict[str, Callable[..., Any]] = {}
+EXPORTERS: dict[str, Callable[..., ExportReport]] = {}
 
 
 #: Modules that register an exporter when first asked (name -> module).
 EXPORTER_MODULES = {"swingup": "equilibrist.export.swingup_c", "mpc": "equilibrist.export.mpc_c"}
 
 
-def load_exporter(name: str) -> Callable[..., Any] | None:
+def load_exporter(name: str) -> Callable[..., ExportReport] | None:
     """The exporter of controller *name*, importing its module when needed (None: none)."""
     if name not in EXPORTERS and name in EXPORTER_MODULES:
         import importlib
@@ -241,10 +281,10 @@ def load_exporter(name: str) -> Callable[..., Any] | None:
     return EXPORTERS.get(name)
 
 
-def register_exporter(name: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+def register_exporter(name: str) -> Callable[[Callable[..., ExportReport]], Callable[..., ExportReport]]:
     """Decorator: *exporter* writes the C code of the registry's controller *name*."""
 
-    def add(exporter: Callable[..., Any]) -> Callable[..., Any]:
+    def add(exporter: Callable[..., ExportReport]) -> Callable[..., ExportReport]:
         EXPORTERS[name] = exporter
         return exporter
 
@@ -252,7 +292,7 @@ def register_exporter(name: str) -> Callable[[Callable[..., Any]], Callable[...,
 
 
 def export_c(
-    design: Any,
+    design: Design,
     out: str | os.PathLike[str],
     *,
     controller: str = "lqg",
@@ -260,7 +300,7 @@ def export_c(
     vectors: c_code.Vectors | None = None,
     duration: float | None = None,
     seed: int = 0,
-    system: Any | None = None,
+    system: System | None = None,
     force: bool = False,
 ) -> Export:
     """Write the C99 library of *design*'s digital controller, with examples and tests.
@@ -330,13 +370,13 @@ def export_c(
     )
 
 
-def _system_of(design: Any) -> Any:
+def _system_of(design: Design) -> System:
     from equilibrist.numeric.system import system_from_key
 
     return system_from_key(str(design.system_key), design.params)
 
 
-def _describe(system: Any, data: ControllerData) -> tuple[str, tuple[tuple[str, float, str, str], ...]]:
+def _describe(system: System | None, data: ControllerData) -> tuple[str, tuple[tuple[str, float, str, str], ...]]:
     if system is None:
         return "", tuple((k, float(v), "", "") for k, v in data.params.items())
     spec = system.spec
