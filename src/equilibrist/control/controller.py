@@ -1017,6 +1017,31 @@ class NonlinearRuntime(PythonControllerBase):
 AnyController = LinearController | NonlinearController | PythonController
 
 
+@runtime_checkable
+class DescribedController(Protocol):
+    """A controller that describes itself (the linear, nonlinear and MPC controllers)."""
+
+    def describe(self) -> dict[str, object]:
+        """Its kind and settings, for ``design`` and reports (JSON-ready)."""
+        ...
+
+
+def describe_controller(ctrl: AnyController, kind: str) -> dict[str, object]:
+    """``ctrl.describe()``, or ``{"kind": kind}`` for a controller that does not describe itself."""
+    if isinstance(ctrl, DescribedController):
+        return ctrl.describe()
+    return {"kind": kind}
+
+
+def measured_outputs(ctrl: AnyController | None) -> tuple[str, ...] | None:
+    """The states *ctrl* measures, in the order of its ``y`` (None: the run's outputs)."""
+    if ctrl is None:
+        return None
+    if isinstance(ctrl, LinearController | NonlinearController):
+        return ctrl.output_names
+    return ctrl.outputs
+
+
 def as_python_controller(obj: object) -> PythonController:
     """*obj* as a :class:`PythonController`: itself, or through :class:`StepAdapter`."""
     if all(callable(getattr(obj, name, None)) for name in ("reset", "output", "update")) and all(
