@@ -196,3 +196,26 @@ def test_step_functions_run_through_the_adapter():
     assert fn.rate is None and fn.output(0.0, np.zeros(1), np.zeros(0))[0] == 2.0
     with pytest.raises(ControllerError, match="is not a controller"):
         as_python_controller(3)
+
+
+def test_python_controller_names_what_the_user_wrote():
+    from equilibrist.control.controller import (
+        PythonControllerBase,
+        as_python_controller,
+        python_controller_name,
+    )
+
+    def hold(t, y, r):
+        return np.zeros(1)
+
+    class Mine(PythonControllerBase):
+        def output(self, t, y, r):
+            return np.zeros(1)
+
+    class Stepper:
+        def step(self, t, y, r):
+            return np.zeros(1)
+
+    assert python_controller_name(as_python_controller(hold)) == "hold"
+    assert python_controller_name(as_python_controller(Mine())) == "Mine"
+    assert python_controller_name(as_python_controller(Stepper())) == "Stepper"

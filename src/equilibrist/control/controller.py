@@ -61,6 +61,7 @@ from __future__ import annotations
 import ast
 import hashlib
 import math
+import types
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -1040,6 +1041,14 @@ def measured_outputs(ctrl: AnyController | None) -> tuple[str, ...] | None:
     if isinstance(ctrl, LinearController | NonlinearController):
         return ctrl.output_names
     return ctrl.outputs
+
+
+def python_controller_name(py: PythonController) -> str:
+    """The class (or function) name of the controller the user wrote (through the adapter)."""
+    target = py.target if isinstance(py, StepAdapter) else py
+    if isinstance(target, types.FunctionType | types.MethodType | types.BuiltinFunctionType):
+        return target.__name__
+    return type(target).__name__
 
 
 def as_python_controller(obj: object) -> PythonController:

@@ -37,6 +37,7 @@ from equilibrist.control.controller import (
     NonlinearController,
     PythonController,
     as_python_controller,
+    python_controller_name,
 )
 from equilibrist.control.design import Design
 from equilibrist.errors import DimensionError, EquilibristError, SimulationError
@@ -328,5 +329,4 @@ def as_controller(obj: object, system: System | None = None,
             hint = (" (for a design: LinearController.from_design(design), LQG.from_design(design) "
                     "or StateFeedback.from_design(design))")
         raise SimulationError(f"{exc}{hint}") from exc
-    target = getattr(py, "target", py)
-    return Resolved(py, None, {"kind": "python", "name": type(target).__name__})
+    return Resolved(py, None, {"kind": "python", "name": python_controller_name(py)})
