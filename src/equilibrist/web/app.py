@@ -34,7 +34,7 @@ from typing import Any
 
 from equilibrist.errors import EquilibristError
 from equilibrist.web.protocol import ProtocolError, parse
-from equilibrist.web.session import Catalogue, Session, design_for
+from equilibrist.web.session import Catalogue, Session, redesign
 
 #: Frames per second streamed to each page.
 FPS = 40.0
@@ -303,10 +303,10 @@ async def _receive(ws: Any, session: Session) -> None:
         designing += 1
         ticket = designing
         session.pending_design = ticket
-        d, seconds, error = await asyncio.to_thread(design_for, system, settings)
+        d, seconds, error, runner, built = await asyncio.to_thread(redesign, system, settings)
         if session.pending_design != ticket or session.base.spec is not system.spec:
             continue  # a later change, or another system, superseded this one
-        session.install(settings, system, d, seconds, error)
+        session.install(settings, system, d, seconds, error, runner, built)
 
 
 __all__ = ["FPS", "MAX_SESSIONS", "create_app"]

@@ -24,8 +24,9 @@ from equilibrist.errors import EquilibristError
 #: Largest text frame accepted from a client, in bytes.
 MAX_MESSAGE_BYTES = 16 * 1024
 
-#: Controllers a client may pick (the registered ones, in picker order).
-CONTROLLERS = ("lqg", "lqr", "off")
+#: Controllers a client may pick (the registered ones, in picker order). A session
+#: refuses those that do not apply to its system (:attr:`Limits.unavailable`).
+CONTROLLERS = ("lqg", "lqr", "swingup", "mpc", "off")
 
 # Ranges of the session-independent settings.
 RATE_RANGE = (5.0, 2000.0)  # control rate [Hz]
@@ -43,6 +44,7 @@ FIELDS: dict[str, tuple[frozenset[str], frozenset[str]]] = {
     "push": (frozenset({"size", "duration"}), frozenset({"size"})),
     "kick": (frozenset({"angle"}), frozenset({"angle"})),
     "reset": (frozenset({"kick"}), frozenset()),
+    "hang": (frozenset(), frozenset()),
     "pause": (frozenset({"paused"}), frozenset({"paused"})),
     "full": (frozenset(), frozenset()),
     "seen": (frozenset({"frame"}), frozenset({"frame"})),
@@ -65,11 +67,19 @@ class Limits:
         ``{state or input name: (low, high)}`` of the Bryson scales.
     params:
         ``{parameter name: (low, high)}`` of the tunable physical parameters.
+    unavailable:
+        ``{controller: reason}`` of the :data:`CONTROLLERS` that do not apply
+        to the system (a ``tune`` asking for one is refused with the reason).
+    hanging:
+        Why the system cannot be started hanging (``hang`` is refused with
+        it); None when it can.
     """
 
     systems: tuple[str, ...]
     scales: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     params: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    unavailable: Mapping[str, str] = field(default_factory=dict)
+    hanging: str | None = None
 
 
 @dataclass(frozen=True)
@@ -190,6 +200,8 @@ def _tune(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
             raise ProtocolError(
                 f"controller {_short(c)} is unknown: expected one of {', '.join(CONTROLLERS)}"
             )
+        if c in limits.unavailable:
+            raise ProtocolError(f"controller {c!r} does not apply: {limits.unavailable[c]}")
         out["controller"] = c
     if "rate" in data:
         out["rate"] = _number(data["rate"], "rate", *RATE_RANGE)
@@ -221,6 +233,12 @@ def _reset(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
     return {}
 
 
+def _hang(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+    if limits.hanging is not None:
+        raise ProtocolError(f"hang is refused: {limits.hanging}")
+    return {}
+
+
 def _pause(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
     value = data["paused"]
     if not isinstance(value, bool):
@@ -245,6 +263,7 @@ _FIELD_CHECKS = {
     "push": _push,
     "kick": _kick,
     "reset": _reset,
+    "hang": _hang,
     "pause": _pause,
     "full": _full,
     "seen": _seen,

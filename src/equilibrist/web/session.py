@@ -57,6 +57,7 @@ import numpy as np
 
 from equilibrist.errors import DesignError, EquilibristError
 from equilibrist.web.protocol import CONTROLLERS, Limits, Message
+from equilibrist.web.runners import KINDS, Runner, build_runner, hanging_refusal, unavailable
 
 if TYPE_CHECKING:
     from equilibrist.control.controller import LinearController
@@ -88,6 +89,14 @@ DIGITS = 5
 MAX_UNSEEN = 12
 #: Chart samples kept for a page that is behind (the oldest are dropped).
 MAX_CHART_SAMPLES = 2000
+#: Share of the wall time a batch of samples may take before the page is told the loop lags.
+LAG_SHARE = 0.8
+#: Seconds between two lag warnings of one session.
+LAG_WARN_EVERY = 5.0
+#: The picker's labels of the controllers.
+LABELS = {"lqg": "LQG (Kalman filter + LQR)", "lqr": "LQR (true state)",
+          "swingup": "Swing-up (energy pumping, then LQR)", "mpc": "MPC (constrained, OSQP)",
+          "off": "Off"}
 
 
 class SessionError(EquilibristError, ValueError):
@@ -208,8 +217,13 @@ def make_design(system: System, settings: Settings) -> Design:
     return design(system, q=q, r=r, rn=rn, outputs=outputs, rate=settings.rate)
 
 
-def describe_design(d: Design, controller: str, seconds: float) -> dict[str, Any]:
-    """The ``design`` frame: gains, poles, margins (JSON-ready)."""
+def describe_design(d: Design, controller: str, seconds: float,
+                    runner: Runner | None = None, controller_seconds: float = 0.0) -> dict[str, Any]:
+    """The ``design`` frame: gains, poles, margins (JSON-ready).
+
+    *seconds* is the time of the LQG design, *controller_seconds* the time
+    of building the swing-up or the MPC (*runner*) on it.
+    """
     full = d.to_dict()
     return {
         "type": "design",
@@ -228,7 +242,10 @@ def describe_design(d: Design, controller: str, seconds: float) -> dict[str, Any
         "notes": full["notes"],
         "x0": full["x0"],
         "u0": full["u0"],
-        "milliseconds": round(seconds * 1e3, 2),
+        "milliseconds": round((seconds + controller_seconds) * 1e3, 2),
+        "design_milliseconds": round(seconds * 1e3, 2),
+        "controller_milliseconds": round(controller_seconds * 1e3, 2),
+        "controller_info": None if runner is None else runner.describe(),
     }
 
 
@@ -274,7 +291,8 @@ class _Loop:
     """The controllers of one design: LQG (in charge, or its filter running alongside for
     the estimate and a bumpless switch) and LQR on the true state."""
 
-    def __init__(self, d: Design, system: System, previous: _Loop | None = None) -> None:
+    def __init__(self, d: Design, system: System, previous: _Loop | None = None,
+                 runner: Runner | None = None, x_estimate: np.ndarray | None = None) -> None:
         from equilibrist.control.controller import LinearController
 
         self.design = d
@@ -287,10 +305,30 @@ class _Loop:
         if previous is not None:
             # The new filter goes on from the previous one's estimate.
             self.lqg.start_at(previous.lqg.estimate())
+        # The swing-up or the MPC, when one is in charge: it goes on from the previous
+        # one of its kind (a retune), or starts at the estimate in force (a switch).
+        self.runner = runner
+        self.runner_pick: np.ndarray | None = None
+        self.runner_sigma = np.zeros(0)
+        if runner is not None:
+            prev = previous.runner if previous is not None else None
+            if prev is not None and prev.kind == runner.kind:
+                runner.adopt(prev)
+            elif x_estimate is not None:
+                runner.start_at(x_estimate)
+            if all(o in self.outputs for o in runner.outputs):
+                # The runner reads the same noisy measurement as the filter.
+                self.runner_pick = np.array([self.outputs.index(o) for o in runner.outputs],
+                                            dtype=np.int64)
+            else:
+                noise = system.spec.sensor_noise
+                self.runner_sigma = np.array([float(noise.get(o, 0.0)) for o in runner.outputs])
 
     def reset(self) -> None:
         self.lqg.z = np.array(self.lqg.ctrl.z0, dtype=float)
         self.lqr.z = np.array(self.lqr.ctrl.z0, dtype=float)
+        if self.runner is not None:
+            self.runner.reset()
 
 
 @dataclass
@@ -381,6 +419,8 @@ class Session:
         self.kernel = load_kernel(system)
         self.scene: Scene = scene_for(system)
         self.loop = _Loop(d, system)
+        self.unavailable = unavailable(base)
+        self.hang_refusal = hanging_refusal(base)
         self.limits = self._limits()
         self.state_names = system.state_names
         coords = [s for s in system.state_names if not s.endswith("_dot")] or list(system.state_names)
@@ -390,10 +430,9 @@ class Session:
             dtype=np.int64)
         self.process_sigma = np.array([float(spec.process_noise[system.state_names[i]])
                                        for i in self.rate_index])
-        region = spec.region
-        self.region_idx = np.array([system.state_index(s) for s in region], dtype=np.int64)
-        self.region_lo = np.array([region[s][0] for s in region], dtype=float)
-        self.region_hi = np.array([region[s][1] for s in region], dtype=float)
+        self.hanging = False
+        self.last_lag_warning = -math.inf
+        self._apply_region()
         self._apply_rate()
         self.design_message = describe_design(d, settings.controller, seconds)
         self.messages.append(self.describe())
@@ -425,7 +464,23 @@ class Session:
             high = min(high, p.high if not p.high_open else math.nextafter(p.high, -math.inf))
             params[p.name] = (low, high)
         return Limits(self.catalogue.names, types.MappingProxyType(scales),
-                      types.MappingProxyType(params))
+                      types.MappingProxyType(params),
+                      unavailable=types.MappingProxyType(dict(self.unavailable)),
+                      hanging=self.hang_refusal)
+
+    def _apply_region(self) -> None:
+        """The region in force: the swing-up task's (the track only) while a swing-up runs
+        or the run started hanging, the system's (the balance's) otherwise."""
+        from equilibrist.tasks import get_task
+
+        system = self.system
+        if (self.settings.controller == "swingup" or self.hanging) and self.hang_refusal is None:
+            region = dict(get_task(system, "swingup").region)
+        else:
+            region = dict(system.spec.region)
+        self.region_idx = np.array([system.state_index(s) for s in region], dtype=np.int64)
+        self.region_lo = np.array([region[s][0] for s in region], dtype=float)
+        self.region_hi = np.array([region[s][1] for s in region], dtype=float)
 
     def _apply_rate(self) -> None:
         rate = self.settings.rate
@@ -448,10 +503,21 @@ class Session:
         self.wall0: float | None = now
         self.k_since = 0
 
-    def reset(self, kick: float = 0.0) -> None:
-        """Back to the operating point, the main angle offset by *kick*."""
-        self.x = self.loop.x_op.copy()
-        self.x[self.angle_index] += kick
+    def reset(self, kick: float = 0.0, *, hang: bool = False) -> None:
+        """Back to the operating point, the main angle offset by *kick*; or, with *hang*,
+        to the hanging position (the swing-up task's start, drawn with its small offsets)."""
+        if hang:
+            from equilibrist.tasks import get_task
+
+            self.x = np.array(get_task(self.system, "swingup").draw_initial(self.rng), dtype=float)
+        else:
+            self.x = self.loop.x_op.copy()
+            self.x[self.angle_index] += kick
+        if hang != self.hanging:
+            self.hanging = hang
+            self._apply_region()
+        self.mode: str | None = None
+        self.mode_since = 0.0
         self.t = 0.0
         self.k = 0
         self.loop.reset()
@@ -510,6 +576,10 @@ class Session:
             "main_state": system.state_names[self.angle_index],
             "view": list(view),
             "controllers": list(CONTROLLERS),
+            "controller_options": [
+                {"name": c, "label": LABELS[c], "available": c not in self.unavailable,
+                 "reason": self.unavailable.get(c)} for c in CONTROLLERS],
+            "hang": {"available": self.hang_refusal is None, "reason": self.hang_refusal},
             "settings": self.settings.to_dict(),
             "scales": scales,
             "params": params,
@@ -537,6 +607,8 @@ class Session:
                 self.x[self.angle_index] += f["angle"]
         elif message.type == "reset":
             self.reset(kick=f.get("kick", 0.0))
+        elif message.type == "hang":
+            self.reset(hang=True)
         elif message.type == "pause":
             self.paused = f["paused"]
             self._anchor(None)
@@ -555,9 +627,12 @@ class Session:
         return tuned_system(self.base, settings)
 
     def install(self, settings: Settings, system: System, d: Design | None,
-                seconds: float, error: str | None) -> None:
-        """Take *settings* into force: the plant always, the controller when *d* is a design."""
+                seconds: float, error: str | None, runner: Runner | None = None,
+                controller_seconds: float = 0.0) -> None:
+        """Take *settings* into force: the plant always, the controller when *d* is a design
+        (with *runner*, the swing-up or MPC built on it, when one is asked for)."""
         rate_changed = settings.rate != self.settings.rate
+        previous_kind = self.settings.controller
         if d is None:
             # The previous controller stays, with its own rate.
             settings = Settings(self.settings.controller if error else settings.controller,
@@ -570,15 +645,39 @@ class Session:
         low, high = system.input_limits
         self.u_low, self.u_high = np.asarray(low, float), np.asarray(high, float)
         if d is not None:
-            self.loop = _Loop(d, system, previous=self.loop)
-            self.design_message = describe_design(d, settings.controller, seconds)
+            leaving_swingup = previous_kind == "swingup" and settings.controller != "swingup"
+            if leaving_swingup:
+                # The swing-up may have caught the pendulum a turn away from the operating point.
+                self._wrap_angles()
+            self.loop = _Loop(d, system, previous=self.loop, runner=runner, x_estimate=self.xhat)
+            if leaving_swingup:
+                # The filter ran on a linear model far from where the pendulum was: start it
+                # at the swing-up's own estimate.
+                self.loop.lqg.start_at(self.xhat)
+            self.design_message = describe_design(d, settings.controller, seconds, runner,
+                                                  controller_seconds)
             self.messages.append(self.design_message)
+            self.mode = None if runner is None else runner.mode
+            self.mode_since = self.t
+        self._apply_region()
         if rate_changed:
             self._apply_rate()  # a new rate starts a new recording
         if error:
             self.messages.append({"type": "design_error", "message": error,
                                   "controller": self.settings.controller,
                                   "settings": self.settings.to_dict()})
+
+    def _wrap_angles(self) -> None:
+        """Each angle (a coordinate in rad) and its estimate within half a turn of the operating point."""
+        system = self.system
+        x_op = self.loop.x_op
+        for i in range(len(system.spec.coordinates)):
+            if system.state_units[i] == "rad":
+                turns = round((self.x[i] - x_op[i]) / (2 * math.pi))
+                if turns:
+                    self.x[i] -= 2 * math.pi * turns
+                    self.xhat = np.array(self.xhat, dtype=float)
+                    self.xhat[i] -= 2 * math.pi * turns
 
     # -- simulation ---------------------------------------------------------------------------
     def advance_to(self, now: float) -> int:
@@ -592,15 +691,46 @@ class Session:
         assert self.wall0 is not None
         due = int((now - self.wall0) * self.settings.rate) - self.k_since
         limit = int(MAX_CATCH_UP * self.settings.rate)
-        if due > limit:  # stalled (a slow machine, a debugger): skip ahead
+        skipped = due > limit
+        if skipped:  # stalled (a slow machine, a debugger): skip ahead
             self.wall0 += (due - limit) / self.settings.rate
             due = limit
+        if self.loop.runner is None:
+            for _ in range(max(0, due)):
+                self._sample()
+                self.k_since += 1
+                if self.fell is not None:
+                    break
+            return max(0, due)
+        # A swing-up or an MPC: the page is told when the samples cost more than their time.
+        began = time.perf_counter()
         for _ in range(max(0, due)):
             self._sample()
             self.k_since += 1
             if self.fell is not None:
                 break
+        spent = time.perf_counter() - began
+        if (due >= 4 and spent > LAG_SHARE * due * self.period) or skipped:
+            self._warn_lag(spent / max(due, 1), skipped)
         return max(0, due)
+
+    def _warn_lag(self, per_sample: float, skipped: bool) -> None:
+        now = time.monotonic()
+        if now - self.last_lag_warning < LAG_WARN_EVERY:
+            return
+        self.last_lag_warning = now
+        runner = self.loop.runner
+        what = "the MPC's solves" if runner is not None and runner.kind == "mpc" else "the controller"
+        stats = runner.solve_stats() if runner is not None else None
+        worst = f" (worst solve {stats['worst_ms']:.2f} ms)" if stats else ""
+        self.messages.append({
+            "type": "warning",
+            "message": (f"the loop cannot keep real time: {what} and the plant take "
+                        f"{per_sample * 1e3:.2f} ms a sample{worst} against a period of "
+                        f"{self.period * 1e3:.2f} ms"
+                        + ("; the simulation skipped ahead" if skipped else "")
+                        + ": lower the control rate"),
+        })
 
     def _sample(self) -> None:
         loop, x = self.loop, self.x
@@ -610,15 +740,35 @@ class Session:
         kind = self.settings.controller
         # The filter runs whichever controller is in charge, so that switching is bumpless.
         u_lqg = loop.lqg.output(y)
+        runner = loop.runner if kind in KINDS else None
+        y_r = y
         if kind == "lqg":
             u_cmd = u_lqg
         elif kind == "lqr":
             u_cmd = loop.lqr.output(x[loop.lqr.idx])
+        elif runner is not None:
+            if loop.runner_pick is not None:
+                y_r = y[loop.runner_pick]
+            else:
+                y_r = x[runner.idx]
+                if self.settings.noise > 0 and loop.runner_sigma.size:
+                    y_r = y_r + (self.settings.noise * loop.runner_sigma
+                                 * self.rng.standard_normal(loop.runner_sigma.size))
+            u_cmd = runner.output(self.t, y_r)
         else:
             u_cmd = loop.u_op
         u_sat = np.minimum(np.maximum(u_cmd, self.u_low), self.u_high)
-        xhat = x.copy() if kind == "lqr" else loop.lqg.estimate()
+        if kind == "lqr":
+            xhat = x.copy()
+        elif runner is not None and runner.estimate is not None:
+            xhat = runner.estimate
+        else:
+            xhat = loop.lqg.estimate()
         loop.lqg.update(u_sat)
+        if runner is not None:
+            runner.update(self.t, y_r, u_sat)
+            if runner.mode != self.mode:
+                self.mode, self.mode_since = runner.mode, self.t
         u_app = u_sat.copy()
         if self.push_left > 0:
             u_app[0] += self.push_value
@@ -706,6 +856,10 @@ class Session:
             "fell": self.fell,
             "margin": self.margin(),
             "controller": self.settings.controller,
+            "mode": self.mode,
+            "mode_since": round(self.mode_since, 4),
+            "hanging": self.hanging,
+            "solve": self.loop.runner.solve_stats() if self.loop.runner is not None else None,
             "shapes": shapes,
             "samples": {"t": self.chart_t, "x": self.chart_x, "xhat": self.chart_xhat,
                         "u": self.chart_u},
@@ -774,7 +928,9 @@ class Session:
 
         kind = self.settings.controller
         if kind == "off":
-            raise SessionError("the controller is off: pick LQG or LQR to export it")
+            raise SessionError("the controller is off: pick LQG, LQR, swing-up or MPC to export it")
+        if self.loop.runner is not None:
+            return self._export_runner(self.loop.runner)
         d, system = self.loop.design, self.system
         data = controller_data(d, controller=kind)
         vectors = record(d, system, controller=kind, precision="double")
@@ -786,6 +942,28 @@ class Session:
             for rel, (text, _what) in files.items():
                 zf.writestr(f"{data.name}/{rel}", text)
         return buf.getvalue()
+
+    def _export_runner(self, runner: Runner) -> bytes:
+        """The swing-up's or the MPC's C export (``equilibrist export --controller ...``), zipped."""
+        import tempfile
+        from pathlib import Path
+
+        from equilibrist.web.runners import export_folder
+
+        top = f"{self.system.name}_{runner.kind}"
+        with tempfile.TemporaryDirectory(prefix="equilibrist-play-") as tmp:
+            folder = Path(tmp) / top
+            export_folder(runner, self.system, str(folder))
+            return _zip_folder(folder, top)
+
+
+def _zip_folder(folder: Any, top: str) -> bytes:
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
+        for path in sorted(folder.rglob("*")):
+            if path.is_file():
+                zf.write(path, f"{top}/{path.relative_to(folder).as_posix()}")
+    return buf.getvalue()
 
 
 def design_for(system: System, settings: Settings) -> tuple[Design | None, float, str | None]:
@@ -805,5 +983,27 @@ def design_for(system: System, settings: Settings) -> tuple[Design | None, float
     return d, seconds, None
 
 
+def redesign(system: System, settings: Settings) -> tuple[Design | None, float, str | None,
+                                                         Runner | None, float]:
+    """Design for *settings*, and build the swing-up or MPC on the design when it is asked for.
+
+    Returns ``(design or None, design seconds, error or None, runner or None,
+    controller seconds)``; a controller that cannot be built is an error
+    like a failed design (the previous controller keeps running).
+    """
+    d, seconds, error = design_for(system, settings)
+    if d is None or settings.controller not in KINDS:
+        return d, seconds, error, None, 0.0
+    began = time.perf_counter()
+    try:
+        runner = build_runner(settings.controller, system, d)
+    except EquilibristError as exc:
+        return None, seconds, str(exc), None, time.perf_counter() - began
+    except (ArithmeticError, np.linalg.LinAlgError, ValueError) as exc:
+        return None, seconds, f"the {settings.controller} controller failed: {exc}", None, \
+            time.perf_counter() - began
+    return d, seconds, None, runner, time.perf_counter() - began
+
+
 __all__ = ["Catalogue", "Session", "SessionError", "Settings", "design_for", "make_design",
-           "tuned_system"]
+           "redesign", "tuned_system"]

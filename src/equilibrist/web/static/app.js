@@ -65,6 +65,7 @@
       $("controller").value = msg.controller;
       tuneDone();
     },
+    warning(msg) { showMessage(msg.message); },
     error(msg) {
       showMessage(msg.message);
       if (state.tuneInFlight !== null && msg.seq === state.tuneInFlight) tuneDone();
@@ -88,7 +89,24 @@
       picker.appendChild(opt);
     }
     picker.value = sys.name;
-    $("controller").value = sys.settings.controller;
+    // The controllers, those that do not apply to this system disabled with the reason.
+    const ctl = $("controller");
+    if (sys.controller_options) {
+      ctl.innerHTML = "";
+      for (const c of sys.controller_options) {
+        const opt = document.createElement("option");
+        opt.value = c.name;
+        opt.textContent = c.available ? c.label : `${c.label} — not for this system`;
+        opt.disabled = !c.available;
+        if (c.reason) opt.title = c.reason;
+        ctl.appendChild(opt);
+      }
+    }
+    ctl.value = sys.settings.controller;
+    const hang = $("hang");
+    hang.disabled = !(sys.hang && sys.hang.available);
+    hang.title = hang.disabled ? sys.hang.reason : "Start again hanging at rest, to watch a swing-up";
+    state.history = [];
     $("title").textContent = `${sys.title} (${sys.key})`;
     $("caption").textContent = sys.caption;
     buildSliders(sys);
@@ -188,8 +206,16 @@
       html += `<tr><th>${esc(d.inputs[i])}</th>` + row.map((v) => `<td>${fmtNum(v)}</td>`).join("") + "</tr>";
     });
     gains.innerHTML = html + "</tbody>";
-    const info = `${d.controller.toUpperCase()} design at ${fmtNum(d.rate)} Hz, redesigned in ${d.milliseconds.toFixed(1)} ms` +
-      (d.notes.length ? ` — ${d.notes.join("; ")}` : "");
+    let info = `${d.controller.toUpperCase()} design at ${fmtNum(d.rate)} Hz, redesigned in ${d.milliseconds.toFixed(1)} ms`;
+    const ci = d.controller_info;
+    if (ci && ci.kind === "mpc") {
+      info = `MPC (horizon ${ci.horizon}, ${ci.estimator === "kalman" ? "Kalman filter in front" : "full state"}, soft bounds on ${ci.soft.join(", ") || "none"}) ` +
+        `at ${fmtNum(d.rate)} Hz, redesigned in ${d.milliseconds.toFixed(1)} ms (design ${d.design_milliseconds.toFixed(1)} ms, QP and OSQP setup ${d.controller_milliseconds.toFixed(1)} ms)`;
+    } else if (ci && ci.kind === "swingup") {
+      info = `Swing-up (${ci.law} law; catch at V < ${fmtNum(ci.c_in)}, release at V > ${fmtNum(ci.c_out)}) handing over to the LQR below, ` +
+        `at ${fmtNum(d.rate)} Hz, redesigned in ${d.milliseconds.toFixed(1)} ms`;
+    }
+    info += d.notes.length ? ` — ${d.notes.join("; ")}` : "";
     $("design-info").textContent = info;
     const m = d.margins;
     $("loop-margins").innerHTML = m ? (
@@ -320,7 +346,8 @@
     // Say what has been drawn, so that the server never runs ahead of a slow page.
     if (f.n % 4 === 0) send({ type: "seen", frame: f.n }, false);
     // The last frames' states, for the page's tests.
-    state.history.push({ t: f.t, x: f.x, push: f.push, pushes: f.pushes });
+    state.history.push({ t: f.t, x: f.x, u: f.u, push: f.push, pushes: f.pushes, mode: f.mode,
+      controller: f.controller });
     if (state.history.length > 240) state.history.shift();
     for (const s of f.shapes) state.shapes.set(s.key, s);
     appendSamples(f.samples);
@@ -337,9 +364,10 @@
       st.textContent = `Fell at t = ${f.fell.at.toFixed(2)} s: ${f.fell.state} left its region. Press Reset.`;
       st.className = "fell";
     } else {
-      st.textContent = `${f.paused ? "Paused" : "Running"} (${f.controller === "off" ? "controller off" : f.controller.toUpperCase()}), t = ${f.t.toFixed(2)} s`;
+      st.textContent = `${f.paused ? "Paused" : "Running"} (${NAMES[f.controller] || f.controller}${f.hanging ? ", started hanging" : ""}), t = ${f.t.toFixed(2)} s`;
       st.className = "";
     }
+    showMode(f);
     if (f.margin) {
       $("margin").value = f.margin.fraction;
       $("margin-text").textContent = `${Math.round(100 * f.margin.fraction)} % (${f.margin.state})`;
@@ -350,6 +378,27 @@
       for (const c of state.charts) c.plot.setData(c.dataFn(state.data));
       state.lastFrameAt = now;
     }
+  }
+
+  const NAMES = { lqg: "LQG", lqr: "LQR", swingup: "swing-up", mpc: "MPC", off: "controller off" };
+
+  function showMode(f) {
+    // The swing-up's supervisor (pumping or balancing), the MPC's solve times.
+    let mode = "";
+    if (f.mode) {
+      mode = `mode: ${f.mode}` + (f.mode_since > 0 ? ` since t = ${f.mode_since.toFixed(2)} s` : "");
+      if (f.controller === "swingup" && f.mode === "balancing" && f.mode_since > 0) mode += " (caught: the LQR balances)";
+    }
+    if ($("mode").textContent !== mode) { $("mode").textContent = mode; $("chart-mode").textContent = mode; }
+    const chartMode = $("chart-mode");
+    chartMode.className = `chart-mode ${f.mode || ""}`;
+    let solve = "";
+    if (f.solve) {
+      const period = state.design ? 1000 / state.design.rate : null;
+      solve = `MPC solve per sample: median ${f.solve.median_ms.toFixed(3)} ms, worst ${f.solve.worst_ms.toFixed(3)} ms` +
+        (period ? ` (period ${period.toFixed(2)} ms)` : "") + ` over the last ${f.solve.samples} samples`;
+    }
+    if ($("solve").textContent !== solve) $("solve").textContent = solve;
   }
 
   // ---- the drawing ---------------------------------------------------------------------------
@@ -448,6 +497,10 @@
     $("push-left").onclick = () => push(-(state.sys ? state.sys.push.size : 0.5));
     $("push-right").onclick = () => push(state.sys ? state.sys.push.size : 0.5);
     $("reset").onclick = () => send({ type: "reset", kick: +$("kick").value });
+    $("hang").onclick = () => {
+      send({ type: "hang" });
+      if ($("controller").value !== "swingup") showMessage("Hanging: pick Swing-up in the Controller menu to bring it up.");
+    };
     $("kick-now").onclick = () => send({ type: "kick", angle: +$("kick").value });
     const showKick = () => { $("kick-value").textContent = `${(+$("kick").value).toFixed(2)} ${state.sys ? state.sys.state_units[state.sys.states.indexOf(state.sys.main_state)] || "" : ""}`; };
     $("kick").addEventListener("input", showKick); showKick();
