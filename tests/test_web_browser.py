@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import os
 import shutil
 import signal
@@ -174,3 +175,75 @@ def test_controller_off_falls(page):
     time.sleep(0.3)
     button(page, "Reset").click()
     wait_for(lambda: "Running" in page.find_element(By.ID, "status").text, 60, "the restart")
+
+
+def wrapped(angle):
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def test_swingup_from_hanging(page):
+    """Swing-up picked, Hang pressed: the pole starts hanging, pumps, comes up and balances."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    began = time.monotonic()
+    states = page.execute_script("return window.playground.sys.states")
+    i_th, i_x = states.index("theta"), states.index("x")
+    Select(page.find_element(By.ID, "controller")).select_by_value("swingup")
+    wait_for(lambda: page.execute_script(
+        "const d = window.playground.design; return d && d.controller === 'swingup'"), 30,
+        "the swing-up's design")
+    button(page, "Hang").click()
+    wait_for(lambda: (f := frame(page))["hanging"] and f["t"] < 1.0
+             and abs(abs(f["x"][i_th]) - math.pi) < 0.3, 30, "the pole hanging")
+    up = wait_for(lambda: (f := frame(page))["mode"] == "balancing" and f["hanging"]
+                  and abs(wrapped(f["x"][i_th])) < 0.1 and f, 40, "the pole up and balanced")
+    assert up["fell"] is None and 0.5 < up["t"] < 10.0
+    assert "mode: balancing" in page.find_element(By.ID, "mode").text
+    history = page.execute_script("return window.playground.history")
+    run = [h for h in history if h["t"] <= up["t"]]
+    assert any(h["mode"] == "pumping" for h in run)  # it pumped before it caught
+    assert max(abs(h["x"][i_x]) for h in run) < 1.0  # on its track
+    assert time.monotonic() - began < 60
+
+
+def test_mpc_rejects_a_push_within_its_limits(page):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    began = time.monotonic()
+    states = page.execute_script("return window.playground.sys.states")
+    i_th = states.index("theta")
+    Select(page.find_element(By.ID, "controller")).select_by_value("mpc")
+    wait_for(lambda: page.execute_script(
+        "const d = window.playground.design; return d && d.controller === 'mpc'"), 30,
+        "the MPC's design")
+    button(page, "Reset").click()
+    wait_for(lambda: (f := frame(page))["solve"] is not None and not f["hanging"], 30, "the MPC running")
+    assert "MPC solve per sample: median" in page.find_element(By.ID, "solve").text
+    pushes = frame(page)["pushes"]
+    button(page, "Push right").click()
+    wait_for(lambda: (f := frame(page))["pushes"] > pushes and f["push"] == 0, 30, "the push")
+    t_push = frame(page)["t"]
+    settled = wait_for(lambda: (f := frame(page))["t"] > t_push + 2.0 and f, 30, "2 s after the push")
+    assert settled["fell"] is None and abs(settled["x"][i_th]) < 0.1
+    lo, hi = page.execute_script("return window.playground.sys.input_limits[0]")
+    history = page.execute_script("return window.playground.history")
+    after = [h for h in history if h["t"] >= t_push - 0.2]
+    assert after and all(lo - 1e-9 <= h["u_cmd"][0] <= hi + 1e-9 for h in after)
+    assert any(h["push"] != 0 for h in history)
+    assert time.monotonic() - began < 60
+
+
+def test_picker_disables_swingup_where_there_is_none(page):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    Select(page.find_element(By.ID, "system")).select_by_value("seesaw")
+    wait_for(lambda: page.execute_script(
+        "const s = window.playground.sys; return s && s.name === 'seesaw'"), 60, "the seesaw")
+    option = page.find_element(By.CSS_SELECTOR, "#controller option[value='swingup']")
+    assert not option.is_enabled()
+    assert "no hanging position" in option.get_attribute("title")
+    assert page.find_element(By.CSS_SELECTOR, "#controller option[value='mpc']").is_enabled()
+    assert not page.find_element(By.ID, "hang").is_enabled()

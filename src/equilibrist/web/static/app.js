@@ -346,7 +346,7 @@
     // Say what has been drawn, so that the server never runs ahead of a slow page.
     if (f.n % 4 === 0) send({ type: "seen", frame: f.n }, false);
     // The last frames' states, for the page's tests.
-    state.history.push({ t: f.t, x: f.x, u: f.u, push: f.push, pushes: f.pushes, mode: f.mode,
+    state.history.push({ t: f.t, x: f.x, u: f.u, u_cmd: f.u_cmd, push: f.push, pushes: f.pushes, mode: f.mode,
       controller: f.controller });
     if (state.history.length > 240) state.history.shift();
     for (const s of f.shapes) state.shapes.set(s.key, s);
