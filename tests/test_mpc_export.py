@@ -1,4 +1,5 @@
-"""The MPC through OSQP's generated C code: within the solver's tolerance of Python, make check."""
+"""The MPC through OSQP's generated C code, with or without its Kalman filter: within the solver's
+tolerance of Python, the filter to round-off, make check, and in the loop."""
 
 from __future__ import annotations
 
@@ -8,10 +9,19 @@ import subprocess
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from equilibrist import get_system
-from equilibrist.control.mpc import mpc
-from equilibrist.export.mpc_c import PythonReference, export_mpc, footprint
+from equilibrist.control.design import design
+from equilibrist.control.mpc import KalmanFront, MPCRuntime, mpc
+from equilibrist.export.mpc_c import (
+    Z_TOLERANCE,
+    CompiledMPC,
+    PythonReference,
+    export_mpc,
+    footprint,
+)
+from equilibrist.sim.run import simulate
 
 
 def test_generated_solver_matches_python_and_make_check_passes(tmp_path: Path) -> None:
@@ -37,3 +47,88 @@ def test_reference_is_the_runtime_on_unconstrained_states() -> None:
     ref = PythonReference(ctrl)
     x = ctrl.x_op + np.array([0.02, 0.01, 0.0, 0.0])
     np.testing.assert_allclose(ref.step(x), ctrl.u_op - ctrl.K @ (x - ctrl.x_op), atol=1e-3)
+
+
+def _make_check(folder: Path) -> str:
+    assert shutil.which("make") and shutil.which("cc"), "make check needs make and a C compiler"
+    proc = subprocess.run(["make", "check"], cwd=folder, capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return proc.stdout
+
+
+@pytest.mark.parametrize("form", ["current", "predictor"])
+def test_kalman_filter_in_front_make_check(tmp_path: Path, form: str) -> None:
+    """The MPC on the measured outputs: the C filter and QP against the Python ones on a noisy run."""
+    system = get_system("cartpole")
+    ctrl = mpc(system, design=design(system, rate=200.0, kalman_form=form), horizon=30)
+    assert ctrl.estimator == "kalman" and ctrl.outputs == ("x", "theta") and ctrl.form == form
+    folder = export_mpc(ctrl, tmp_path / "mpc", duration=0.5, seed=3)
+    out = _make_check(folder)
+    worst = float(re.search(r"worst difference (\S+),", out).group(1))  # type: ignore[union-attr]
+    worst_z = float(re.search(r"filter state: worst (\S+),", out).group(1))  # type: ignore[union-attr]
+    assert worst < 1e-5 and worst_z < Z_TOLERANCE
+    header = (folder / "mpc.h").read_text()
+    assert "mpc_output(const mpc_filter *f, const double y[2], double u[1])" in header
+    # The recorded run is constrained: the commands reach the input limit.
+    text = (folder / "mpc_vectors.h").read_text()
+    u = np.array([float(v) for v in re.findall(r"\{([-0-9.e+]+)\}",
+                                                text.split("vec_u[")[1].split("vec_z")[0])])
+    assert np.isclose(np.abs(u).max(), 200.0, atol=1e-6)
+
+
+def test_filter_form_is_the_runtime_filter() -> None:
+    """The linear form written into C equals the runtime's filter on random data (round-off)."""
+    system = get_system("cartpole")
+    for form in ("current", "predictor"):
+        ctrl = mpc(system, design=design(system, rate=200.0, kalman_form=form), horizon=5)
+        front = KalmanFront(ctrl)
+        blocks = front.linear_form()
+        rng = np.random.default_rng(4)
+        z = np.zeros(4)
+        for _ in range(50):
+            y = ctrl.x_op[[0, 1]] + rng.normal(scale=0.1, size=2)
+            ua = ctrl.u_op + rng.normal(scale=10.0, size=1)
+            dy = y - blocks["y_op"]
+            dx = blocks["Ez"] @ z + blocks["Ey"] @ dy
+            np.testing.assert_allclose(front.estimate(y), dx, rtol=0, atol=1e-12)
+            z = blocks["Ac"] @ z + blocks["By"] @ dy + blocks["Bu"] @ (ua - ctrl.u_op)
+            front.update(y, ua)
+            np.testing.assert_allclose(front.z, z, rtol=0, atol=1e-12)
+
+
+def test_compiled_mpc_with_filter_closes_the_loop() -> None:
+    """The C MPC with its Kalman filter balances the nonlinear cart-pole from noisy measurements,
+    inside the hard limits, and follows the simulated controller's run."""
+    from equilibrist.sim.noise import Noise
+
+    system = get_system("cartpole")
+    d = design(system, rate=200.0)
+    ctrl = mpc(system, design=d, horizon=30)
+    c = CompiledMPC(ctrl)
+    try:
+        x0 = {"theta": 0.4}
+        res = simulate(system, c, duration=2.0, x0=x0, noise=Noise.from_design(d), seed=1)
+        ref = simulate(system, MPCRuntime(ctrl), duration=2.0, x0=x0, noise=Noise.from_design(d),
+                       seed=1)
+    finally:
+        c.close()
+    assert not res.fell and abs(res.final_state[1]) < 0.05
+    lo, hi = system.input_limits
+    assert np.all(res.commanded >= lo - 1e-9) and np.all(res.commanded <= hi + 1e-9)
+    assert np.isclose(np.abs(res.commanded).max(), hi[0])
+    span = np.ptp(ref.states, axis=0)
+    assert np.all(np.abs(res.states - ref.states) <= 1e-3 * span)
+
+
+def test_command_line_export_has_the_filter(tmp_path: Path) -> None:
+    exe = Path(__file__).resolve().parents[1] / ".venv" / "bin" / "equilibrist"
+    cmd = [str(exe)] if exe.exists() else ["equilibrist"]
+    out = tmp_path / "cart"
+    proc = subprocess.run([*cmd, "export", "cartpole", "--controller", "mpc", "--horizon", "20",
+                           "--out", str(out)], capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert "mpc_update" in (out / "mpc.h").read_text()
+    assert "filter state: worst" in _make_check(out)
+    again = subprocess.run([*cmd, "export", "cartpole", "--controller", "mpc", "--horizon", "20",
+                            "--out", str(out)], capture_output=True, text=True, check=False)
+    assert again.returncode == 0, again.stderr

@@ -295,6 +295,10 @@ class MPCRuntime:
         """The filter's state: the predicted deviation ``xhat_{k|k-1} - x_op``."""
         return self.front.z
 
+    @z.setter
+    def z(self, value: np.ndarray) -> None:
+        self.front.z = np.array(value, dtype=float)
+
     def reset(self) -> None:
         self.front.reset()
         self._warm: np.ndarray | None = None

@@ -313,10 +313,6 @@ def recorded_vectors(ctrl: NonlinearController, system: Any, *, duration: float 
             "u": np.array(res.commanded)}
 
 
-def _rows(mat: np.ndarray) -> str:
-    return ",\n    ".join("{" + ", ".join(repr(float(v)) for v in row) + "}" for row in mat)
-
-
 def check_files(name: str, vectors: dict[str, np.ndarray]) -> dict[str, str]:
     """``<name>_vectors.h``, ``test_<name>.c`` and a ``Makefile`` whose ``make check`` runs them.
 
@@ -324,22 +320,10 @@ def check_files(name: str, vectors: dict[str, np.ndarray]) -> dict[str, str]:
     the library and requires every command to equal the recorded one
     exactly (double precision, no contraction of multiply-adds).
     """
-    k = len(vectors["y"])
-    vec = (
-        f"/* Recorded by equilibrist: {k} samples of a swing-up under the Python controller. */\n"
-        f"#define N_VECTORS {k}\n"
-        f"static const double vec_y[{k}][2] = {{\n    {_rows(vectors['y'])}\n}};\n"
-        f"static const double vec_u_applied[{k}][1] = {{\n    {_rows(vectors['u_applied'])}\n}};\n"
-        f"static const double vec_u[{k}][1] = {{\n    {_rows(vectors['u'])}\n}};\n"
-    )
-    prog = f"""/* test_{name}.c: the library against the recorded Python commands, exactly. */
-#include <stdio.h>
-#include "{name}.h"
-#include "{name}_vectors.h"
+    from equilibrist.export._check import check_files as shared
 
-int main(void)
-{{
-    {name}_state s;
+    k = len(vectors["y"])
+    program = f"""    {name}_state s;
     int k, bad = 0;
     {name}_init(&s);
     for (k = 0; k < N_VECTORS; ++k) {{
@@ -352,18 +336,13 @@ int main(void)
         {name}_update(&s, vec_y[k], vec_u_applied[k]);
     }}
     printf("%d samples, %d mismatches\\n", N_VECTORS, bad);
-    return bad != 0;
-}}
-"""
-    make = (
-        "CC ?= cc\n"
-        "CFLAGS ?= -std=c99 -Wall -Wextra -Werror -pedantic -O2 -ffp-contract=off\n\n"
-        f"test_{name}: test_{name}.c {name}.c {name}.h {name}_vectors.h\n"
-        f"\t$(CC) $(CFLAGS) -o $@ test_{name}.c {name}.c -lm\n\n"
-        f"check: test_{name}\n\t./test_{name}\n\n"
-        f"clean:\n\trm -f test_{name}\n\n.PHONY: check clean\n"
+    return bad != 0;"""
+    return shared(
+        name, {"y": vectors["y"], "u_applied": vectors["u_applied"], "u": vectors["u"]},
+        comment=f"Recorded by equilibrist: {k} samples of a swing-up under the Python controller.",
+        program=program, what="the library against the recorded Python commands, exactly.",
+        cflags="-std=c99 -Wall -Wextra -Werror -pedantic -O2 -ffp-contract=off",
     )
-    return {f"{name}_vectors.h": vec, f"test_{name}.c": prog, "Makefile": make}
 
 
 def export_swingup(ctrl: NonlinearController, system: Any, folder: str | Path, *,
