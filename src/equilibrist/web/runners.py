@@ -144,7 +144,12 @@ class MPCRunner:
         self.times: deque[float] = deque(maxlen=SOLVE_WINDOW)
         self.solved = 0  # samples that called OSQP (not the exact unconstrained case)
         self.estimate: np.ndarray | None = None
-        self.mode = "balancing"
+
+    @property
+    def mode(self) -> str:
+        """``"constrained"`` when the last sample solved the QP, ``"unconstrained"`` when the
+        LQR's own move was the QP's minimizer (no constraint active over the horizon)."""
+        return "unconstrained" if self.runtime.last_status in ("unconstrained", "") else "constrained"
 
     def reset(self) -> None:
         self.runtime.reset()

@@ -769,6 +769,10 @@ class Session:
             runner.update(self.t, y_r, u_sat)
             if runner.mode != self.mode:
                 self.mode, self.mode_since = runner.mode, self.t
+                if self.hanging and self.mode == "balancing":
+                    # Caught: from now on the run is a balance like any other.
+                    self.hanging = False
+                    self._apply_region()
         u_app = u_sat.copy()
         if self.push_left > 0:
             u_app[0] += self.push_value

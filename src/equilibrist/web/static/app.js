@@ -388,6 +388,7 @@
     if (f.mode) {
       mode = `mode: ${f.mode}` + (f.mode_since > 0 ? ` since t = ${f.mode_since.toFixed(2)} s` : "");
       if (f.controller === "swingup" && f.mode === "balancing" && f.mode_since > 0) mode += " (caught: the LQR balances)";
+      if (f.controller === "mpc") mode += f.mode === "constrained" ? " (a constraint is active: OSQP solves the QP)" : " (no constraint active: the LQR's move)";
     }
     if ($("mode").textContent !== mode) { $("mode").textContent = mode; $("chart-mode").textContent = mode; }
     const chartMode = $("chart-mode");
