@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import itertools
 import json
 import os
 import signal
@@ -139,7 +140,9 @@ async def _client(url: str, seconds: float, index: int, out: list[dict], kind: s
     wall = half[-1][0] - half[0][0] if len(half) > 1 else 0.0
     out.append({
         "frames_per_second": (len(half) - 1) / wall if wall > 0 else 0.0,
-        "realtime": (half[-1][1] - half[0][1]) / wall if wall > 0 else 0.0,
+        # Simulated time advanced (a hang or a reset starts it again at 0) over wall time.
+        "realtime": sum(max(0.0, b[1] - a[1]) for a, b in itertools.pairwise(half)) / wall
+        if wall > 0 else 0.0,
         "push_latency": push_latency,
         "tune_latency": tune_latency,
         "design_ms": design_ms,
