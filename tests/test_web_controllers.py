@@ -174,6 +174,15 @@ def test_swingup_chosen_upright_just_balances_and_survives_a_retune(client):
         frames = [receive_until(ws, lambda m: m["type"] == "frame") for _ in range(20)]
         assert all(fr["mode"] == "balancing" and fr["fell"] is None for fr in frames)
         assert all(abs(fr["x"][i_th]) < 0.2 for fr in frames)
+        # A new rate and a new actuator limit redesign the swing-up too.
+        ws.send_text(json.dumps({"type": "tune", "rate": 100, "limit": 0.8}))
+        d = receive_until(ws, lambda m: m["type"] == "design")
+        assert d["controller"] == "swingup" and d["rate"] == 100.0
+        assert d["controller_info"]["c_in"] > 0
+        time.sleep(0.5)
+        f = receive_until(ws, lambda m: m["type"] == "frame" and m["t"] > 0.3)
+        assert f["mode"] == "balancing" and f["fell"] is None
+        assert f["u_limits"][1][0] == pytest.approx(0.8 * sysm["input_limits"][0][1])
 
 
 def test_mpc_holds_a_push_within_its_limits(client):
