@@ -234,6 +234,11 @@ def test_downloads_of_the_swingup_and_the_mpc(client, tmp_path):
         assert got.status_code == 200, got.text
         names = zipfile.ZipFile(io.BytesIO(got.content)).namelist()
         assert "cartpole_mpc/mpc.c" in names and any(n.startswith("cartpole_mpc/osqp/") for n in names)
+        zipfile.ZipFile(io.BytesIO(got.content)).extractall(tmp_path)
+        # OSQP's generated solver, compiled, replays the Python MPC's recorded commands.
+        done = subprocess.run([make, "-s", "-C", str(tmp_path / "cartpole_mpc"), "check"], check=False,
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stdout + done.stderr
 
 
 def test_a_failed_mpc_design_keeps_the_mpc(client):
