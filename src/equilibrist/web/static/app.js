@@ -239,7 +239,8 @@
     ctx.clearRect(0, 0, W, H);
     const sets = [
       { poles: d.open_loop_poles, color: "#999", mark: "+" },
-      { poles: d.estimator_poles, color: "#e8871e", mark: "o" },
+      // The swing-up estimates with its own trackers, not the design's Kalman filter.
+      { poles: d.controller === "swingup" ? [] : d.estimator_poles, color: "#e8871e", mark: "o" },
       { poles: d.poles, color: "#3b6fb6", mark: "x" },
     ].map((s) => ({ ...s, pts: s.poles.map((p) => sPlane(p, d.rate)).filter((p) => p) }));
     let reach = 1;
