@@ -1,0 +1,294 @@
+"""The compiled core gives the same numbers, to the bit, as the release it was measured in.
+
+Every optimization of the simulation core (the linear controller's code
+specialized to its sizes and zeros, the recording and accumulating only of
+what is asked, the noise-free integrator step) promises results identical
+to the bit to those of the generic loop. The digests below were taken from
+that generic loop (before those optimizations) on this project's reference
+platform (x86-64, numba's LLVM, glibc's libm); a platform whose libm rounds
+``sin`` differently gives other digests, and this file says which arrays
+differ. Independent truths of the simulation are tested elsewhere
+(test_sim_systems, test_sim_linear, test_sim_noise); this file pins the
+numbers, LQR and LQG, single runs and batches, with noise, events,
+delay, references, both integrators and the linear plant.
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import pytest
+
+from equilibrist.control.controller import LinearController
+from equilibrist.control.design import design
+from equilibrist.numeric.system import get_system
+from equilibrist.sim import (
+    Impulse,
+    Kick,
+    Noise,
+    ParameterChange,
+    Pulse,
+    StateFeedback,
+    simulate,
+    simulate_batch,
+)
+from equilibrist.sim.signals import Step
+
+RESULT_ARRAYS = ("states", "estimates", "measurements", "commanded", "saturated", "applied",
+                 "final_state")
+BATCH_ARRAYS = ("fell", "fell_at", "fell_code", "fell_x", "final_state", "peak_input",
+                "peak_command", "rms_input", "time_saturated", "peak_deviation",
+                "estimation_error_rms", "rows", "trajectories")
+
+
+def digest(array: object) -> str:
+    if array is None:
+        return "none"
+    a = np.ascontiguousarray(array)
+    return hashlib.sha256(str(a.dtype).encode() + str(a.shape).encode() + a.tobytes()).hexdigest()[:16]
+
+
+def digests(result: object, names: tuple[str, ...]) -> dict[str, str]:
+    return {name: digest(getattr(result, name)) for name in names}
+
+
+def _cartpole_lqr_continuous():
+    system = get_system("cartpole")
+    lm = system.linearize()
+    import scipy.linalg as sl
+
+    q, r = np.diag([10.0, 10.0, 1.0, 1.0]), np.array([[0.1]])
+    p = sl.solve_continuous_are(lm.A, lm.B, q, r)
+    k = np.linalg.solve(r, lm.B.T @ p)
+    return system, StateFeedback(K=k, x_op=lm.x0, u_op=lm.u0)
+
+
+def scenario(name: str) -> object:
+    """The run or batch called *name* (each a few thousand samples)."""
+    if name == "lqr-1khz":  # the benchmark's workload, 2 s
+        system, lqr = _cartpole_lqr_continuous()
+        return simulate(system, lqr, duration=2.0, rate=1000.0, physics_step=1e-3,
+                        x0=[0.0, 0.2, 0.0, 0.0])
+    if name == "lqr-saturating-delay":
+        system = get_system("cartpole")
+        ctrl = LinearController.from_design(design(system, rate=200.0), kind="lqr")
+        return simulate(system, ctrl, duration=2.0, x0={"theta": 0.5}, delay=True,
+                        events=[Kick(0.3, "theta_dot", 0.4)])
+    if name == "lqg-noise-events":
+        system = get_system("cartpole")
+        d = design(system, rate=200.0)
+        ctrl = LinearController.from_design(d, kind="lqg")
+        return simulate(system, ctrl, duration=2.0, x0={"theta": 0.2}, noise=Noise.from_design(d),
+                        seed=3, events=[Pulse(0.7, 20.0, 0.05), Impulse(1.1, 2.0),
+                                        ParameterChange(1.5, {"m_p": 1.3})])
+    if name == "lqg-predictor-tracking":
+        system = get_system("cartpole")
+        d = design(system, rate=100.0, outputs=["x", "theta"], kalman_form="predictor")
+        ctrl = LinearController.from_design(d, kind="lqg", tracking=True)
+        return simulate(system, ctrl, duration=3.0, x0={"theta": 0.1}, noise=Noise.from_design(d),
+                        seed=5, reference=Step(0.5, at=0.5))
+    if name == "lqg-reaction-wheel":
+        system = get_system("reaction_wheel_pendulum")
+        d = design(system, rate=250.0)
+        ctrl = LinearController.from_design(d, kind="lqg")
+        return simulate(system, ctrl, duration=2.0, noise=Noise.from_design(d), seed=11,
+                        x0={system.state_names[0]: 0.1})
+    if name == "lqr-adaptive":
+        system = get_system("cartpole")
+        ctrl = LinearController.from_design(design(system, rate=100.0), kind="lqr")
+        return simulate(system, ctrl, duration=1.0, x0={"theta": 0.3}, integrator="adaptive")
+    if name == "lqg-linear-plant":
+        system = get_system("cartpole")
+        d = design(system, rate=200.0)
+        return simulate(system, LinearController.from_design(d, kind="lqg"), duration=1.0,
+                        x0={"theta": 0.2}, plant="linear", noise=Noise.from_design(d), seed=2)
+    if name == "lqr-negative-zeros":  # -0.0 in the state must stay what it was
+        system, lqr = _cartpole_lqr_continuous()
+        return simulate(system, lqr, duration=0.5, rate=1000.0, physics_step=1e-3,
+                        x0=[-0.0, 0.2, -0.0, -0.0])
+    if name == "open-loop-at-rest-negative-zeros":  # the equilibrium: every derivative is +-0
+        system = get_system("cartpole")
+        return simulate(system, None, duration=0.5, rate=100.0, x0=[-0.0, -0.0, -0.0, -0.0])
+    if name == "open-loop-falls":
+        system = get_system("cartpole")
+        return simulate(system, None, duration=3.0, rate=100.0, x0={"theta": 0.05},
+                        events=[Kick(0.2, "x_dot", 0.1)])
+    if name == "batch-lqg-recorded":
+        system = get_system("cartpole")
+        d = design(system, rate=200.0)
+        ctrl = LinearController.from_design(d, kind="lqg")
+        return simulate_batch(system, ctrl, runs=6, duration=1.5,
+                              x0={"theta": np.linspace(-0.4, 0.4, 6)},
+                              params={"m_p": np.linspace(0.8, 1.4, 6)},
+                              noise=Noise.from_design(d), seed=21, record=True, workers=2)
+    if name == "batch-lqr-outcomes":
+        system, lqr = _cartpole_lqr_continuous()
+        return simulate_batch(system, lqr, runs=40, duration=2.0, rate=1000.0, physics_step=1e-3,
+                              x0={"theta": np.linspace(-1.2, 1.2, 40)}, workers=2)
+    if name == "batch-lqr-noise":
+        system = get_system("cartpole")
+        d = design(system, rate=200.0)
+        ctrl = LinearController.from_design(d, kind="lqr")
+        return simulate_batch(system, ctrl, runs=10, duration=1.0,
+                              x0={"theta": np.linspace(-0.3, 0.3, 10)},
+                              noise=Noise.from_design(d), seed=4, workers=2)
+    raise KeyError(name)
+
+
+# Taken from the generic loop (see the module docstring).
+EXPECTED: dict[str, dict[str, str]] = {
+    "lqr-1khz": {
+        "states": "ec8eca8337da4ee1",
+        "estimates": "ec8eca8337da4ee1",
+        "measurements": "ec8eca8337da4ee1",
+        "commanded": "342640c51e4866d4",
+        "saturated": "342640c51e4866d4",
+        "applied": "342640c51e4866d4",
+        "final_state": "c122225c8d1d8326",
+    },
+    "lqr-saturating-delay": {
+        "states": "212258f76f3676cb",
+        "estimates": "212258f76f3676cb",
+        "measurements": "212258f76f3676cb",
+        "commanded": "ebf86884e3493b8e",
+        "saturated": "40b039ccf49f1b87",
+        "applied": "f2c25a8fe549a5b8",
+        "final_state": "d3598e22add2275a",
+    },
+    "lqg-noise-events": {
+        "states": "af782c73902d8f6f",
+        "estimates": "c5450975a121a24b",
+        "measurements": "48aeff69087ecb62",
+        "commanded": "d2f5e373cb17937c",
+        "saturated": "82b808b99604989f",
+        "applied": "82b808b99604989f",
+        "final_state": "2a48454d7549269d",
+    },
+    "lqg-predictor-tracking": {
+        "states": "b6201aea20f68fd3",
+        "estimates": "bc23ad5a1c186b62",
+        "measurements": "1b6e3c5b934819ce",
+        "commanded": "4bfb070617fca2db",
+        "saturated": "4bfb070617fca2db",
+        "applied": "4bfb070617fca2db",
+        "final_state": "74ddb887f822305a",
+    },
+    "lqg-reaction-wheel": {
+        "states": "a888cd0c50387eb6",
+        "estimates": "22a23cc66ac6b6e4",
+        "measurements": "f7d3af12b2f5ad60",
+        "commanded": "a0d5137534996a1f",
+        "saturated": "a0d5137534996a1f",
+        "applied": "a0d5137534996a1f",
+        "final_state": "952f435dc8ba9ebb",
+    },
+    "lqr-adaptive": {
+        "states": "238d8a69af9476b5",
+        "estimates": "238d8a69af9476b5",
+        "measurements": "238d8a69af9476b5",
+        "commanded": "f72caa62f318c1f6",
+        "saturated": "f72caa62f318c1f6",
+        "applied": "f72caa62f318c1f6",
+        "final_state": "a0ff2f905826b789",
+    },
+    "lqg-linear-plant": {
+        "states": "98e76932c2b1a225",
+        "estimates": "99e857e645f5b586",
+        "measurements": "b10d03b2428041c9",
+        "commanded": "299068821fc9f2ad",
+        "saturated": "31e81538a492c295",
+        "applied": "31e81538a492c295",
+        "final_state": "b0ae9ac2d462fdc8",
+    },
+    "open-loop-falls": {
+        "states": "ef6223298a3f6cf4",
+        "estimates": "none",
+        "measurements": "f6550416f2541630",
+        "commanded": "e8d0eccf220d1c5b",
+        "saturated": "e8d0eccf220d1c5b",
+        "applied": "e8d0eccf220d1c5b",
+        "final_state": "9c79de5eed724f2b",
+    },
+    "batch-lqg-recorded": {
+        "fell": "b08263a01bb3ed88",
+        "fell_at": "4effff3f5b15c210",
+        "fell_code": "0ea920c2bde894e9",
+        "fell_x": "657a8232a19d90d1",
+        "final_state": "db8f4a655a4a082c",
+        "peak_input": "a6845c8bdbd61b12",
+        "peak_command": "ff135b526cfdd89e",
+        "rms_input": "27012c46233d118c",
+        "time_saturated": "03fa368ccefcd3a3",
+        "peak_deviation": "d73aa9a01b717d1a",
+        "estimation_error_rms": "32762924a2358112",
+        "rows": "e64f3662ef173cb9",
+        "trajectories": "5d907dd23402d409",
+    },
+    "batch-lqr-outcomes": {
+        "fell": "195550dc41841fae",
+        "fell_at": "efb273493f6be537",
+        "fell_code": "8efc4cf56b84254f",
+        "fell_x": "552463a295a5895b",
+        "final_state": "801ae866cc5dcbdf",
+        "peak_input": "e2ba7d07bddcbf2f",
+        "peak_command": "fd7293a60509a8bc",
+        "rms_input": "493e85329ce720b7",
+        "time_saturated": "becca3894bde74ed",
+        "peak_deviation": "0c2ae730843d828e",
+        "estimation_error_rms": "8e041ffa2c4e882f",
+        "rows": "d2885874b0fefb03",
+        "trajectories": "none",
+    },
+    "batch-lqr-noise": {
+        "fell": "dc12ad490f541138",
+        "fell_at": "f66ecb3ae6a5ed0b",
+        "fell_code": "c37fc27f4eb48f66",
+        "fell_x": "33245eb5fa89eeec",
+        "final_state": "dc132e0aed4a7dcf",
+        "peak_input": "4264eb636364185f",
+        "peak_command": "4264eb636364185f",
+        "rms_input": "c72eadddd6a56c09",
+        "time_saturated": "13e862f160a6c463",
+        "peak_deviation": "1fddf578602805dd",
+        "estimation_error_rms": "df4eb4864b087cb7",
+        "rows": "e8fdc33cd961d431",
+        "trajectories": "none",
+    },
+    "lqr-negative-zeros": {
+        "states": "0a756ab88d46f648",
+        "estimates": "f1883c68db0bd880",
+        "measurements": "0a756ab88d46f648",
+        "commanded": "ebb9eec6b2c6adb3",
+        "saturated": "ebb9eec6b2c6adb3",
+        "applied": "ebb9eec6b2c6adb3",
+        "final_state": "42332a2788a4e531",
+    },
+    "open-loop-at-rest-negative-zeros": {
+        "states": "730af0d5193d591a",
+        "estimates": "none",
+        "measurements": "a5a9aaaed5a82bd4",
+        "commanded": "b3054cd4ec281cca",
+        "saturated": "b3054cd4ec281cca",
+        "applied": "b3054cd4ec281cca",
+        "final_state": "291d224189edb466",
+    },
+}
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_the_core_gives_the_recorded_numbers(name: str) -> None:
+    result = scenario(name)
+    names = BATCH_ARRAYS if name.startswith("batch") else RESULT_ARRAYS
+    got = digests(result, names)
+    differ = [k for k in names if got[k] != EXPECTED[name][k]]
+    assert not differ, f"{name}: {', '.join(differ)} differ from the recorded numbers"
+
+
+def test_every_scenario_is_pinned() -> None:
+    assert set(EXPECTED) == {
+        "lqr-1khz", "lqr-saturating-delay", "lqg-noise-events", "lqg-predictor-tracking",
+        "lqg-reaction-wheel", "lqr-adaptive", "lqg-linear-plant", "open-loop-falls",
+        "batch-lqg-recorded", "batch-lqr-outcomes", "batch-lqr-noise", "lqr-negative-zeros",
+        "open-loop-at-rest-negative-zeros",
+    }
