@@ -265,6 +265,35 @@ def test_bad_options_are_reported_together() -> None:
         env.step(np.zeros(3))
 
 
+def test_unknown_options_name_the_nearest() -> None:
+    with pytest.raises(EnvError, match=r"unknown option 'physics_stp'.*physics_step"):
+        gym.make("equilibrist/cartpole-balance-v0", physics_stp=0.001)
+    with pytest.raises(EnvError, match="unknown option 'rates'"):
+        gym.make_vec("equilibrist/cartpole-balance-v0", num_envs=2,
+                     vectorization_mode="vector_entry_point", rates=100.0)
+
+
+def test_compiled_slots_agree_with_the_packing() -> None:
+    """The template's slot constants are the ones the settings are packed by."""
+    from equilibrist.envs import _core
+
+    core = _make("equilibrist/cartpole-swingup-v0", randomize={"m_p": 0.1}).core
+    kernel = core.kernel
+    for prefix, names, first in (("_CI_", _core.CI_SLOTS, 0), ("_CF_", _core.CF_SLOTS, 0),
+                                 ("_US_", _core.US_SLOTS, 4)):
+        for i, name in enumerate(names):
+            assert getattr(kernel, prefix + name.upper()) == first + i, name
+    ci, cf = core.ci, core.cf
+    slot = {name: ci[i] for i, name in enumerate(_core.CI_SLOTS)}
+    n = core.system.n_states
+    np.testing.assert_array_equal(cf[slot["o_region"]:slot["o_region"] + 2 * n],
+                                  core.region.ravel())
+    np.testing.assert_array_equal(ci[slot["o_rnd_idx"]:slot["o_rnd_idx"] + 1], core.rnd_idx)
+    np.testing.assert_array_equal(cf[slot["o_lw"]:], core.lw.ravel())
+    assert len(ci) == slot["o_rnd_idx"] + core.rnd_idx.size
+    assert cf[slot["o_rnd_spread"]] == core.rnd_spread[0] == 0.1
+
+
 # -- rendering ---------------------------------------------------------------------------------
 
 
@@ -407,6 +436,23 @@ def test_vector_rejects_bad_input() -> None:
         vec.step(np.array([[0.0], [np.inf]]))
     with pytest.raises(ValueError, match="shape"):
         vec.step(np.zeros((3, 1)))
+    # A bad action steps no copy at all.
+    before = vec.states
+    with pytest.raises(EnvError, match="finite"):
+        vec.step(np.array([[0.5], [np.nan]]))
+    np.testing.assert_array_equal(vec.states, before)
+
+
+def test_vector_returns_fresh_arrays() -> None:
+    """A step's arrays are its own: the next step does not write into them."""
+    vec = _vec(8, noise=False)
+    vec.reset(seed=0)
+    first = vec.step(np.full((8, 1), 0.3))[:4]
+    kept = [a.copy() for a in first]
+    vec.step(np.full((8, 1), -0.3))
+    for a, b in zip(first, kept, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert first[0].flags.c_contiguous and first[0].flags.writeable
     with pytest.raises(EnvError, match="num_envs"):
         EquilibristVectorEnv(0, "cartpole")
 

@@ -3,8 +3,12 @@
 :class:`Core` is built from a system, a task and the environment's options;
 the single environment and the vector environment read the same one, so
 both step exactly the same numbers. It is the only Python code that knows
-the slots of the core's settings arrays (``ei``, ``ef``; see
-``equilibrist/sim/_env_template.py``).
+the slots of the core's settings arrays (``ci``, ``cf``) and of a copy's
+rows (``fs``, ``us``); ``equilibrist/sim/_env_template.py`` names the same
+slots (``_CI_*``, ``_CF_*``, ``_US_*``), and the tests check both agree.
+
+:func:`make_core` is also where the single and the vector environment
+share their options: both take :data:`OPTION_DEFAULTS` and hand them here.
 """
 
 from __future__ import annotations
@@ -30,6 +34,26 @@ ALIVE_BONUS = 1.0
 # value" and ``observation_space.sample()`` does not overflow (high - low).
 FINITE = float(np.finfo(np.float64).max) / 2
 REWARD_KINDS = {"balance": 0, "swingup": 1}
+#: The slots of ``ci``'s head: sizes, switches, and the offsets of ``cf``'s
+#: blocks and of ``ci``'s own index blocks (the template's ``_CI_*``).
+CI_SLOTS = (
+    "n_sub", "n_samples", "observe_state", "reward", "physical", "chunks", "autoreset",
+    "ny", "nw", "nlv", "nhang", "nrnd", "np",
+    "o_c_idx", "o_hang", "o_rnd_idx",
+    "o_region", "o_op", "o_iscale", "o_start", "o_spread", "o_p_nom", "o_rnd_spread", "o_lv",
+    "o_lw",
+)
+#: The slots of ``cf``'s head (the template's ``_CF_*``); its blocks follow.
+CF_SLOTS = ("h", "dt", "bonus")
+#: A copy's ``us`` row: four generator words, then these (the template's ``_US_*``).
+US_SLOTS = ("k", "auto")
+US_WIDTH = 4 + len(US_SLOTS)
+#: The environments' options and their defaults (the single and the vector
+#: environment take the same ones).
+OPTION_DEFAULTS: dict[str, object] = {
+    "params": None, "rate": None, "physics_step": None, "observe": "outputs", "noise": True,
+    "randomize": None, "action_units": "normalized", "alive_bonus": ALIVE_BONUS,
+}
 
 
 class EnvError(EquilibristError, ValueError):
@@ -115,8 +139,8 @@ class Core:
     p_nom: np.ndarray
     rnd_idx: np.ndarray
     rnd_spread: np.ndarray
-    ei: np.ndarray
-    ef: np.ndarray
+    ci: np.ndarray
+    cf: np.ndarray
 
     @property
     def period(self) -> float:
@@ -137,10 +161,34 @@ class Core:
         u = a if self.action_units == "physical" else lo + 0.5 * (a + 1.0) * (hi - lo)
         return np.minimum(np.maximum(u, lo), hi)
 
-    def with_chunks(self, chunks: int) -> np.ndarray:
-        ei = self.ei.copy()
-        ei[5] = max(1, int(chunks))
-        return ei
+    @property
+    def n_params(self) -> int:
+        return int(self.p_nom.shape[0])
+
+    def settings(self, *, chunks: int = 1, autoreset: bool = False) -> np.ndarray:
+        """``ci`` for a step of blocks of *chunks* copies, with or without autoreset."""
+        ci = self.ci.copy()
+        ci[CI_SLOTS.index("chunks")] = max(1, int(chunks))
+        ci[CI_SLOTS.index("autoreset")] = int(autoreset)
+        return ci
+
+    def rows(self, copies: int) -> tuple[np.ndarray, np.ndarray]:
+        """Fresh per-copy rows ``fs`` ``[x | p | energy upright, hanging]`` and ``us``
+        ``[generator words | periods taken | autoreset due]``, at the task's start."""
+        n = self.system.n_states
+        fs = np.zeros((copies, n + self.n_params + 2))
+        fs[:, :n] = np.asarray(self.task.start, dtype=float)
+        fs[:, n:n + self.n_params] = self.p_nom
+        return fs, np.zeros((copies, US_WIDTH), dtype=np.uint64)
+
+    def state_of(self, fs: np.ndarray) -> np.ndarray:
+        """The states in rows *fs* (a view)."""
+        return fs[:, :self.system.n_states]
+
+    def params_of(self, fs: np.ndarray) -> np.ndarray:
+        """The parameter vectors in rows *fs* (a view)."""
+        n = self.system.n_states
+        return fs[:, n:n + self.n_params]
 
     def describe(self) -> dict[str, object]:
         return {
@@ -271,13 +319,23 @@ def build_core(
         dtype=np.int64,
     )
     n_samples = max(1, math.ceil(tsk.duration * run_rate - 1e-9))
-    ei = np.array(
-        [n_sub, n_samples, int(observe == "state"), REWARD_KINDS[tsk.name],
-         int(action_units == "physical"), 1],
-        dtype=np.int64,
-    )
-    ef = np.array([h, 1.0 / run_rate, bonus])
     rnd_idx = np.array([pnames.index(k) for k in rnd], dtype=np.int64)
+    op = np.concatenate([tsk.x_op, tsk.u_op]).astype(float)
+    sc = np.concatenate([tsk.state_scales, tsk.input_scales]).astype(float)
+    rnd_spread = np.array(list(rnd.values()), dtype=float)
+    p_nom = np.array(sysm.p, dtype=float)
+    ci, cf = _pack(
+        ints={"n_sub": n_sub, "n_samples": n_samples, "observe_state": int(observe == "state"),
+              "reward": REWARD_KINDS[tsk.name], "physical": int(action_units == "physical"),
+              "chunks": 1, "autoreset": 0, "ny": len(c_idx), "nw": lw.shape[1],
+              "nlv": lv.shape[0], "nhang": len(hang), "nrnd": len(rnd_idx), "np": len(p_nom)},
+        index_blocks={"c_idx": c_idx, "hang": hang, "rnd_idx": rnd_idx},
+        floats={"h": h, "dt": 1.0 / run_rate, "bonus": bonus},
+        float_blocks={"region": region, "op": op, "iscale": 1.0 / sc,
+                      "start": np.asarray(tsk.start, dtype=float),
+                      "spread": np.asarray(tsk.spread, dtype=float), "p_nom": p_nom,
+                      "rnd_spread": rnd_spread, "lv": lv, "lw": lw},
+    )
     return Core(
         system=sysm, task=tsk, rate=float(run_rate), physics_step=float(h), n_sub=int(n_sub),
         n_samples=int(n_samples), observe=observe,
@@ -285,11 +343,27 @@ def build_core(
         action_units=action_units, noise=spec_noise, randomize=dict(rnd), alive_bonus=bonus,
         kernel=load_kernel(sysm), c_idx=c_idx, lv=np.ascontiguousarray(lv),
         lw=np.ascontiguousarray(lw), region=region,
-        op=np.concatenate([tsk.x_op, tsk.u_op]).astype(float),
-        sc=np.concatenate([tsk.state_scales, tsk.input_scales]).astype(float),
-        hang=hang, p_nom=np.array(sysm.p, dtype=float), rnd_idx=rnd_idx,
-        rnd_spread=np.array(list(rnd.values()), dtype=float), ei=ei, ef=ef,
+        op=op, sc=sc, hang=hang, p_nom=p_nom, rnd_idx=rnd_idx, rnd_spread=rnd_spread,
+        ci=ci, cf=cf,
     )
+
+
+def _pack(ints: Mapping[str, int], index_blocks: Mapping[str, np.ndarray],
+          floats: Mapping[str, float], float_blocks: Mapping[str, np.ndarray]
+          ) -> tuple[np.ndarray, np.ndarray]:
+    """``ci`` and ``cf``: the heads in slot order, then the blocks (row-major), each
+    block's offset written in ``ci``'s slot ``o_<name>``."""
+    head = dict(ints)
+    ci_tail: list[int] = []
+    for name, block in index_blocks.items():
+        head[f"o_{name}"] = len(CI_SLOTS) + len(ci_tail)
+        ci_tail.extend(int(v) for v in np.asarray(block).ravel())
+    cf_list = [float(floats[name]) for name in CF_SLOTS]
+    for name, block in float_blocks.items():
+        head[f"o_{name}"] = len(cf_list)
+        cf_list.extend(float(v) for v in np.asarray(block, dtype=float).ravel())
+    ci = np.array([int(head[name]) for name in CI_SLOTS] + ci_tail, dtype=np.int64)
+    return ci, np.array(cf_list, dtype=np.float64)
 
 
 def unknown_task(task: object) -> UnknownNameError:

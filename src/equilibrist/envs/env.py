@@ -15,8 +15,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from equilibrist.envs._core import FINITE, Core, EnvError, build_core
-from equilibrist.errors import DimensionError
+from equilibrist.envs._core import FINITE, OPTION_DEFAULTS, Core, EnvError, build_core
+from equilibrist.errors import DimensionError, nearest
 from equilibrist.sim.noise import generator_state
 
 # Backends of matplotlib that draw to files only.
@@ -56,6 +56,51 @@ def _spaces(core: Core) -> tuple[spaces.Box, spaces.Box]:
         action = spaces.Box(-1.0, 1.0, (m,), np.float64)
     observation = spaces.Box(-FINITE, FINITE, (core.n_obs,), np.float64)
     return action, observation
+
+
+def open_core(system: object, task: str, options: Mapping[str, Any], render_mode: str | None,
+              modes: tuple[str, ...], what: str) -> tuple[Core, list[str]]:
+    """The core of an environment's options, and the render modes it offers.
+
+    The single and the vector environment both start here. *modes* are the
+    render modes the kind of environment *what* has; of those, a system
+    without a drawing offers none, and ``"human"`` only where a window can
+    open. Every option is checked (unknown ones too, with their nearest
+    names) and reported in one :class:`EnvError`.
+    """
+    if render_mode is not None and render_mode not in modes:
+        raise EnvError(
+            f"render_mode={render_mode!r}: {what} renders {' or '.join(map(repr, modes))}"
+        )
+    unknown = [k for k in options if k not in OPTION_DEFAULTS]
+    if unknown:
+        known = tuple(OPTION_DEFAULTS)
+        raise EnvError("; ".join(
+            f"unknown option {k!r} ({nearest(k, known)})" for k in unknown
+        ))
+    core = build_core(system, task, **{**OPTION_DEFAULTS, **options})
+    no_drawing = drawing_problem(core)
+    no_window = display_problem() if "human" in modes else None
+    if render_mode is not None and no_drawing is not None:
+        raise EnvError(f"render_mode={render_mode!r}: {no_drawing}")
+    if render_mode == "human" and no_window is not None:
+        raise EnvError(
+            f"render_mode='human' opens a window, but {no_window}: use render_mode='rgb_array'"
+        )
+    offered = [] if no_drawing else [m for m in modes if m != "human" or no_window is None]
+    return core, offered
+
+
+def compiled_entry(dispatcher: Any, sample_args: tuple[object, ...]) -> Any:
+    """The compiled function *dispatcher* runs for arguments typed as *sample_args*.
+
+    Calling it skips numba's look-up of the argument types (a few hundred
+    nanoseconds for these calls); the caller passes arrays of exactly these
+    types (its own, and actions made float64 and C-contiguous).
+    """
+    from numba import typeof
+
+    return dispatcher.compile(tuple(typeof(a) for a in sample_args))
 
 
 class Renderer:
@@ -117,6 +162,10 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         A catalogue name, the path of a model file (``"robot.xml"``) or a
         bound :class:`~equilibrist.numeric.system.System`.
     task : {"balance", "swingup"}
+    render_mode : {"rgb_array", "human"}, optional
+
+    Other Parameters
+    ----------------
     params : mapping, optional
         Parameter values (``{"m_p": 2.0}``).
     rate : float, optional
@@ -135,7 +184,9 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         itself bounded by its limits.
     alive_bonus : float
         Balance reward per second inside the region.
-    render_mode : {"rgb_array", "human"}, optional
+
+    The options (:data:`~equilibrist.envs._core.OPTION_DEFAULTS`) are the
+    vector environment's too; an unknown one is an :class:`EnvError`.
     """
 
     metadata: dict[str, Any] = {"render_modes": ["rgb_array", "human"], "render_fps": 50}  # noqa: RUF012
@@ -145,50 +196,28 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         system: object = None,
         task: str = "balance",
         *,
-        params: Mapping[str, object] | None = None,
-        rate: float | None = None,
-        physics_step: float | None = None,
-        observe: str = "outputs",
-        noise: bool = True,
-        randomize: Mapping[str, object] | None = None,
-        action_units: str = "normalized",
-        alive_bonus: float = 1.0,
         render_mode: str | None = None,
+        **options: Any,
     ) -> None:
-        if render_mode is not None and render_mode not in type(self).metadata["render_modes"]:
-            raise EnvError(f"render_mode={render_mode!r}: expected 'rgb_array' or 'human'")
-        core = build_core(
-            system, task, params=params, rate=rate, physics_step=physics_step, observe=observe,
-            noise=noise, randomize=randomize, action_units=action_units, alive_bonus=alive_bonus,
-        )
-        # Rendering is offered where the system has a drawing, a window where one can open.
-        no_drawing = drawing_problem(core)
-        problem = display_problem()
-        modes = [] if no_drawing else ["rgb_array"] if problem else ["rgb_array", "human"]
-        if render_mode is not None and no_drawing is not None:
-            raise EnvError(f"render_mode={render_mode!r}: {no_drawing}")
-        if render_mode == "human" and problem is not None:
-            raise EnvError(
-                f"render_mode='human' opens a window, but {problem}: use render_mode='rgb_array'"
-            )
+        core, modes = open_core(system, task, options, render_mode, ("rgb_array", "human"),
+                                "an environment")
         self.core = core
         self.render_mode = render_mode
         self.metadata = {"render_modes": modes, "render_fps": core.rate}
         self.action_space, self.observation_space = _spaces(core)
+        # One row of the compiled step's arrays: this environment is copy 0.
+        self._fs, self._us = core.rows(1)
+        self._ci = core.settings()
+        self._cf = core.cf
         n, m = core.system.n_states, core.system.n_inputs
-        self._x = np.array(core.task.start, dtype=float)
-        self._p = core.p_nom.copy()
-        self._rng = np.zeros(4, dtype=np.uint64)
-        self._k = np.zeros(1, dtype=np.int64)
-        self._eref = np.zeros(2)
+        self._x = self._fs[0, :n]  # views of the row
+        self._p = self._fs[0, n:n + core.n_params]
         self._u = np.zeros(m)
         self._ready = False
-        self._step_fn = core.kernel.env_step_one
-        self._consts = (core.ei, core.ef, core.c_idx, core.lv, core.lw, core.region, core.op,
-                        core.sc, core.hang)
         self._ashape = (m,)
         self._n = n
         self._renderer = Renderer(core, render_mode) if render_mode is not None else None
+        self._step_fn: Any = None
 
     # -- the episode --------------------------------------------------------------
     @property
@@ -205,7 +234,7 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
     @property
     def time(self) -> float:
         """Seconds since the episode began."""
-        return float(self._k[0]) / self.core.rate
+        return float(self._us[0, 4]) / self.core.rate
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -241,14 +270,15 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
             x0 = given
         self._x[:] = x0
         self._p[:] = p
-        self._rng[:] = generator_state(np.random.SeedSequence(noise_seed))
-        self._k[0] = 0
+        self._us[0, :4] = generator_state(np.random.SeedSequence(noise_seed))
         self._u[:] = core.task.u_op
-        if core.ei[3] == 1:
-            self._eref[0] = core.kernel.env_energy(core.op, self._p)
-            self._eref[1] = core.kernel.env_energy(np.array(core.task.start, dtype=float), self._p)
-        obs = np.empty((1, core.n_obs))
-        core.kernel.env_observe(self._x, core.c_idx, core.lv, self._rng, core.ei[2], obs)
+        obs = np.empty(core.n_obs)
+        core.kernel.env_begin(self._fs, self._us, obs, self._cf, self._ci)
+        if self._step_fn is None:
+            self._step_fn = compiled_entry(
+                core.kernel.env_step_one,
+                (np.zeros(self._ashape), self._fs, self._us, obs, self._cf, self._ci),
+            )
         self._ready = True
         info: dict[str, Any] = {"state": self._x.copy(), "noise_seed": noise_seed}
         if core.randomize:
@@ -256,13 +286,13 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
             info["params"] = {names[i]: float(self._p[i]) for i in core.rnd_idx}
         if self.render_mode == "human":
             self.render()
-        return obs[0], info
+        return obs, info
 
     def step(self, action: object) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """One control period with *action* held; see :mod:`equilibrist.envs`."""
         if not self._ready:
             raise EnvError("call reset() before step()")
-        a = np.asarray(action, dtype=np.float64)
+        a = np.ascontiguousarray(action, dtype=np.float64)
         if a.shape != self._ashape:
             if a.size != self._ashape[0]:
                 raise DimensionError(
@@ -270,16 +300,15 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
                     f"({', '.join(self.core.system.input_names)})"
                 )
             a = a.reshape(self._ashape)
-        obs = np.empty((1, self.core.n_obs))
-        reward, status = self._step_fn(a, self._x, self._p, self._rng, self._k, self._eref, obs,
-                                       *self._consts)
+        obs = np.empty(self.core.n_obs)
+        reward, status = self._step_fn(a, self._fs, self._us, obs, self._cf, self._ci)
         if status == 3:
             raise EnvError(f"action {a.tolist()} is not a finite number")
         if self._renderer is not None:
             self._u = self.core.physical_input(a)
             if self.render_mode == "human":
                 self.render()
-        return obs[0], reward, status == 1, status == 2, {}
+        return obs, reward, status == 1, status == 2, {}
 
     # -- pictures -------------------------------------------------------------------
     def render(self) -> np.ndarray | None:

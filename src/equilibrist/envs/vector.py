@@ -21,7 +21,7 @@ continues every copy's stream.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -29,8 +29,8 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from equilibrist.envs._core import EnvError, build_core
-from equilibrist.envs.env import Renderer, _spaces, drawing_problem
+from equilibrist.envs._core import EnvError
+from equilibrist.envs.env import Renderer, _spaces, compiled_entry, open_core
 from equilibrist.errors import DimensionError
 
 # Fewer copies than this step on one thread: starting a parallel region
@@ -61,68 +61,46 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         system: object = None,
         task: str = "balance",
         *,
-        params: Mapping[str, object] | None = None,
-        rate: float | None = None,
-        physics_step: float | None = None,
-        observe: str = "outputs",
-        noise: bool = True,
-        randomize: Mapping[str, object] | None = None,
-        action_units: str = "normalized",
-        alive_bonus: float = 1.0,
         render_mode: str | None = None,
+        **options: Any,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
             raise EnvError(f"num_envs must be a whole number >= 1, got {num_envs!r}")
-        if render_mode not in (None, "rgb_array"):
-            raise EnvError(f"render_mode={render_mode!r}: a vector environment renders 'rgb_array' only")
-        core = build_core(
-            system, task, params=params, rate=rate, physics_step=physics_step, observe=observe,
-            noise=noise, randomize=randomize, action_units=action_units, alive_bonus=alive_bonus,
-        )
-        no_drawing = drawing_problem(core)
-        if render_mode is not None and no_drawing is not None:
-            raise EnvError(f"render_mode={render_mode!r}: {no_drawing}")
+        core, modes = open_core(system, task, options, render_mode, ("rgb_array",),
+                                "a vector environment")
         self.core = core
         self.num_envs = int(num_envs)
         self.render_mode = render_mode
-        self.metadata = {**type(self).metadata, "render_fps": core.rate,
-                         "render_modes": [] if no_drawing else ["rgb_array"]}
+        self.metadata = {**type(self).metadata, "render_fps": core.rate, "render_modes": modes}
         self.single_action_space, self.single_observation_space = _spaces(core)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         N, m = self.num_envs, core.system.n_inputs
-        self._xs = np.tile(np.asarray(core.task.start, dtype=float), (N, 1))
-        self._ps = np.tile(core.p_nom, (N, 1))
-        self._rngs = np.zeros((N, 4), dtype=np.uint64)
-        self._ks = np.zeros(N, dtype=np.int64)
-        self._erefs = np.zeros((N, 2))
-        self._auto = np.zeros(N, dtype=np.bool_)
-        self._obs = np.zeros((N, core.n_obs))
+        # Every copy's row of the compiled step's arrays (see _core.Core.rows).
+        self._fs, self._us = core.rows(N)
         self._actions = np.zeros((N, m))
         self._seeded = False
         self._ready = False
-        ei = core.with_chunks(_chunks())
-        self._ei = ei
-        self._start = np.ascontiguousarray(core.task.start, dtype=float)
-        self._spread = np.ascontiguousarray(core.task.spread, dtype=float)
-        parallel = self.num_envs >= PARALLEL_MIN and int(ei[5]) > 1
-        self._step_fn = core.kernel.env_step_many if parallel else core.kernel.env_step_serial
-        self._step_consts = (ei, core.ef, core.c_idx, core.lv, core.lw, core.region, core.op,
-                             core.sc, core.hang, self._start, self._spread, core.p_nom,
-                             core.rnd_idx, core.rnd_spread)
+        chunks = _chunks()
+        self.parallel = N >= PARALLEL_MIN and chunks > 1
+        self._ci = core.settings(chunks=chunks if self.parallel else 1, autoreset=True)
+        self._cf = core.cf
+        self._dispatcher = core.kernel.env_step_many if self.parallel else core.kernel.env_step_serial
+        self._step_fn: Any = None
         self._ashape = (N, m)
+        self._obs_shape = (N, core.n_obs)
         self._renderer = Renderer(core, "rgb_array") if render_mode is not None else None
 
     # -- state of the copies ---------------------------------------------------------
     @property
     def states(self) -> np.ndarray:
         """The true states of the copies now, ``(num_envs, n_states)`` (a copy)."""
-        return self._xs.copy()
+        return self.core.state_of(self._fs).copy()
 
     @property
     def parameters(self) -> np.ndarray:
         """Each copy's parameter vector, ``(num_envs, n_params)`` (a copy)."""
-        return self._ps.copy()
+        return self.core.params_of(self._fs).copy()
 
     def _seed(self, seed: int | Sequence[int] | None) -> None:
         N = self.num_envs
@@ -144,7 +122,7 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
                 [np.random.SeedSequence(int(s)).generate_state(4, np.uint64) for s in seeds]
             )
         words[~words.any(axis=1), 0] = np.uint64(1)  # xoshiro's one forbidden state
-        self._rngs[:] = words
+        self._us[:, :4] = words
         self._seeded = True
 
     def reset(
@@ -159,15 +137,10 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
                 None if first is None else int(first)
             )
             self._seed(seed)
-        core = self.core
-        mask = np.ones(self.num_envs, dtype=np.bool_)
-        obs = np.empty((self.num_envs, core.n_obs))
-        core.kernel.env_reset_many(mask, self._xs, self._ps, self._rngs, self._ks, self._erefs, obs,
-                                   self._ei, core.c_idx, core.lv, self._start, self._spread,
-                                   core.p_nom, core.rnd_idx, core.rnd_spread, core.op)
-        self._auto[:] = False
+        obs = np.empty(self._obs_shape)
+        self.core.kernel.env_reset_many(self._fs, self._us, obs, self._cf, self._ci)
         self._ready = True
-        return obs, {"state": self._xs.copy()}
+        return obs, {"state": self.states}
 
     def step(
         self, actions: object
@@ -175,34 +148,38 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         """One control period of every copy (next-step autoreset)."""
         if not self._ready:
             raise EnvError("call reset() before step()")
-        a = np.asarray(actions, dtype=np.float64)
+        a = np.ascontiguousarray(actions, dtype=np.float64)
         if a.shape != self._ashape:
             if a.size != self._ashape[0] * self._ashape[1]:
                 raise DimensionError(
                     f"actions have shape {a.shape}, expected {self._ashape} (num_envs, inputs)"
                 )
             a = a.reshape(self._ashape)
-        if not np.isfinite(a).all():
-            raise EnvError("an action is not a finite number")
         N = self.num_envs
-        obs = np.empty((N, self.core.n_obs))
+        # Fresh arrays every step, as Gymnasium's own vector environments return.
+        obs = np.empty(self._obs_shape)
         rewards = np.empty(N)
-        terminated = np.empty(N, dtype=np.bool_)
-        truncated = np.empty(N, dtype=np.bool_)
+        flags = np.empty((2, N), dtype=np.bool_)
+        step = self._step_fn
+        if step is None:
+            step = self._step_fn = compiled_entry(
+                self._dispatcher, (a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
+            )
+        if step(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci):
+            raise EnvError("an action is not a finite number (no copy was stepped)")
         if self._renderer is not None:
             self._actions = a.copy()
-        self._step_fn(a, self._xs, self._ps, self._rngs, self._ks, self._erefs, self._auto, obs,
-                      rewards, terminated, truncated, *self._step_consts)
-        return obs, rewards, terminated, truncated, {}
+        return obs, rewards, flags[0], flags[1], {}
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         """Every copy's picture (``rgb_array``), as the single environment draws it."""
         if self._renderer is None:
             raise EnvError("render() needs render_mode='rgb_array'")
         core = self.core
+        states = core.state_of(self._fs)
         return tuple(
-            self._renderer.frame(self._xs[i], core.physical_input(self._actions[i]),
-                                 float(self._ks[i]) / core.rate)
+            self._renderer.frame(states[i], core.physical_input(self._actions[i]),
+                                 float(self._us[i, 4]) / core.rate)
             for i in range(self.num_envs)
         )
 

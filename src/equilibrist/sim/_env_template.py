@@ -26,88 +26,130 @@ from equilibrist.sim.layout import *  # noqa: F403
 # steps with process noise held over each, the region checked after each
 # physics step, the sensors read with noise at the next sample.
 #
-# Settings (written by ``equilibrist.envs._core.Layout``, the only Python
-# code that knows these slots):
-#   ei = [n_sub, n_samples, observe_state, reward_kind, action_physical, n_chunks]
-#   ef = [h, dt, alive_bonus]
-#   op = [x_op | u_op]; sc = [state scales | input scales] (the task's cost)
-#   hang: indices of the coordinates a swing-up raises
-#   rnd_idx, rnd_spread: randomized parameters and their relative spreads
-# Per copy: x (state), p (parameters), k (periods taken), rng (xoshiro256**
-# words), eref = [energy upright, energy hanging] (swing-up shaping).
-# ``status`` of a step: 0 running, 1 fell (terminated), 2 out of time
-# (truncated), 3 the action was not a finite number (nothing was done).
+# Every entry takes the same few arrays (a call from Python costs about a
+# tenth of a microsecond per array argument, more than stepping a copy):
+#   fs (copies, n + n_p + 2) float64: per copy [x | p | energy upright, energy hanging]
+#   us (copies, 6) uint64: per copy [xoshiro256** words (4) | periods taken | autoreset due]
+#   cf float64 and ci int64: the settings, written by ``equilibrist.envs._core``
+#     (the only Python code that knows the slots below); ci's head holds the
+#     sizes and the offsets of cf's blocks and of ci's own index blocks.
+# ``status`` of a copy's step: 0 running, 1 fell (terminated), 2 out of time
+# (truncated).
 
-_ENV_SCR = 12
+_CI_N_SUB = 0
+_CI_N_SAMPLES = 1
+_CI_OBSERVE_STATE = 2
+_CI_REWARD = 3
+_CI_PHYSICAL = 4
+_CI_CHUNKS = 5
+_CI_AUTORESET = 6
+_CI_NY = 7
+_CI_NW = 8
+_CI_NLV = 9
+_CI_NHANG = 10
+_CI_NRND = 11
+_CI_NP = 12
+_CI_O_C_IDX = 13
+_CI_O_HANG = 14
+_CI_O_RND_IDX = 15
+_CI_O_REGION = 16
+_CI_O_OP = 17
+_CI_O_ISCALE = 18
+_CI_O_START = 19
+_CI_O_SPREAD = 20
+_CI_O_P_NOM = 21
+_CI_O_RND_SPREAD = 22
+_CI_O_LV = 23
+_CI_O_LW = 24
+_CF_H = 0
+_CF_DT = 1
+_CF_BONUS = 2
+_US_K = 4
+_US_AUTO = 5
+_U0 = np.uint64(0)
+_U1 = np.uint64(1)
+
+_ENV_SCR = 9  # scratch rows: u, w, zbuf, k1, k2, k3, k4, xt, xprev
 _env_energy = _bare(energy)
 
 
 @_inline
-def _env_region(x, region):
-    """-1 inside; the first state outside its region; -2 if not finite (as ``simulate``)."""
+def _env_width(fs, ci):
+    return max(_N, _M, ci[_CI_NY], ci[_CI_NW]) + 2
+
+
+@_inline
+def _env_observe(x, rng, orow, cf, ci, zbuf):
+    """*orow*: the state, or the measured outputs with sensor noise (as ``_measure``).
+
+    The sensor noise is drawn either way, so that an environment observing
+    the state follows the same run as one observing the outputs.
+    """
+    ny = ci[_CI_NY]
+    nlv = ci[_CI_NLV]
+    if nlv > 0:
+        _normals(rng, zbuf, ny)
+    if ci[_CI_OBSERVE_STATE] != 0:
+        for i in range(_N):
+            orow[i] = x[i]
+        return
+    o_c = ci[_CI_O_C_IDX]
+    o_lv = ci[_CI_O_LV]
+    for j in range(ny):
+        y = x[ci[o_c + j]]
+        if nlv > 0:
+            v = 0.0
+            for c in range(ny):
+                v += cf[o_lv + j * ny + c] * zbuf[c]
+            y += v
+        orow[j] = y
+
+
+@_inline
+def _env_input(a, p, physical, u):
+    """The saturated input of action *a* (limits from *p*, as the core saturates)."""
+    base = p.shape[0] - 2 * _M
+    for i in range(_M):
+        lo = p[base + 2 * i]
+        hi = p[base + 2 * i + 1]
+        v = a[i] if physical != 0 else lo + 0.5 * (a[i] + 1.0) * (hi - lo)
+        u[i] = min(max(v, lo), hi)
+
+
+@_inline
+def _env_outside(x, cf, o_region):
+    """-1 inside; the first state outside its region; -2 if not finite (as ``_outside``)."""
     for i in range(_N):
         if not math.isfinite(x[i]):
             return -2
     for i in range(_N):
-        if x[i] <= region[0, i] or x[i] >= region[1, i]:
+        if x[i] <= cf[o_region + i] or x[i] >= cf[o_region + _N + i]:
             return i
     return -1
 
 
 @_inline
-def _env_observe(x, c_idx, lv, rng, observe_state, obs, r, zbuf):
-    """Row *r* of *obs*: the state, or the measured outputs with sensor noise.
+def _env_physics(x, u, p, rng, cf, ci, w, zbuf, k1, k2, k3, k4, xt, xprev):
+    """One control period; the region code at a fall (the last finite state kept), else -1.
 
-    The sensor noise is drawn either way, so that an environment observing
-    the state follows the same run as one observing the outputs.
+    *w* is zero on entry and stays so without process noise.
     """
-    ny = c_idx.shape[0]
-    if lv.shape[0] > 0:
-        _normals(rng, zbuf, ny)
-    if observe_state != 0:
-        for i in range(_N):
-            obs[r, i] = x[i]
-        return
-    for j in range(ny):
-        v = 0.0
-        if lv.shape[0] > 0:
-            for c in range(ny):
-                v += lv[j, c] * zbuf[c]
-        obs[r, j] = x[c_idx[j]] + v
-
-
-@_inline
-def _env_input(a, p, physical, u):
-    """The saturated input of action *a*; False if *a* is not finite."""
-    base = p.shape[0] - 2 * _M
-    for i in range(_M):
-        if not math.isfinite(a[i]):
-            return False
-        lo = p[base + 2 * i]
-        hi = p[base + 2 * i + 1]
-        v = a[i] if physical != 0 else lo + 0.5 * (a[i] + 1.0) * (hi - lo)
-        u[i] = min(max(v, lo), hi)
-    return True
-
-
-@_inline
-def _env_physics(x, u, p, lw, rng, n_sub, h, region, w, zbuf, k1, k2, k3, k4, xt, xprev):
-    """One control period; the region code at a fall (the last finite state kept), else -1."""
-    nw = lw.shape[1]
-    for i in range(_N):
-        w[i] = 0.0
-    for _s in range(n_sub):
+    nw = ci[_CI_NW]
+    o_lw = ci[_CI_O_LW]
+    o_region = ci[_CI_O_REGION]
+    h = cf[_CF_H]
+    for _s in range(ci[_CI_N_SUB]):
         if nw > 0:
             _normals(rng, zbuf, nw)
             for i in range(_N):
                 v = 0.0
                 for c in range(nw):
-                    v += lw[i, c] * zbuf[c]
+                    v += cf[o_lw + i * nw + c] * zbuf[c]
                 w[i] = v
         for i in range(_N):
             xprev[i] = x[i]
         _rk4(x, u, p, w, h, k1, k2, k3, k4, xt)
-        code = _env_region(x, region)
+        code = _env_outside(x, cf, o_region)
         if code != -1:
             if code == -2:
                 for i in range(_N):
@@ -117,24 +159,29 @@ def _env_physics(x, u, p, lw, rng, n_sub, h, region, w, zbuf, k1, k2, k3, k4, xt
 
 
 @_inline
-def _env_reward(x, u, p, kind, ef, op, sc, hang, eref0, eref1):
+def _env_reward(x, u, p, eref0, eref1, cf, ci):
     """Reward of a period ending in *x* with *u* applied (see ``equilibrist.envs``)."""
-    dt = ef[1]
-    if kind == 0:
+    dt = cf[_CF_DT]
+    o_op = ci[_CI_O_OP]
+    if ci[_CI_REWARD] == 0:
+        o_s = ci[_CI_O_ISCALE]
         c = 0.0
         for i in range(_N):
-            d = (x[i] - op[i]) / sc[i]
+            d = (x[i] - cf[o_op + i]) * cf[o_s + i]
             c += d * d
         for i in range(_M):
-            d = (u[i] - op[_N + i]) / sc[_N + i]
+            d = (u[i] - cf[o_op + _N + i]) * cf[o_s + _N + i]
             c += d * d
         # Never below zero: struggling must not earn less than falling at once.
-        return dt * max(0.0, ef[2] - c)
+        return dt * max(0.0, cf[_CF_BONUS] - c)
+    nh = ci[_CI_NHANG]
+    o_h = ci[_CI_O_HANG]
     up = 0.0
-    for j in range(hang.shape[0]):
-        up += 0.5 * (1.0 + math.cos(x[hang[j]] - op[hang[j]]))
-    if hang.shape[0] > 0:
-        up /= hang.shape[0]
+    for j in range(nh):
+        q = ci[o_h + j]
+        up += 0.5 * (1.0 + math.cos(x[q] - cf[o_op + q]))
+    if nh > 0:
+        up /= nh
     gap = eref0 - eref1
     if gap == 0.0:
         gap = 1.0
@@ -143,191 +190,170 @@ def _env_reward(x, u, p, kind, ef, op, sc, hang, eref0, eref1):
 
 
 @_inline
-def _env_draw(x, p, rng, start, spread, p_nom, rnd_idx, rnd_spread):
-    """A start drawn from the task's distribution and randomized parameters."""
-    for i in range(_N):
-        x[i] = start[i] + (2.0 * _uniform(rng) - 1.0) * spread[i]
-    for i in range(p.shape[0]):
-        p[i] = p_nom[i]
-    for j in range(rnd_idx.shape[0]):
-        p[rnd_idx[j]] = p_nom[rnd_idx[j]] * (1.0 + (2.0 * _uniform(rng) - 1.0) * rnd_spread[j])
-
-
-@_jit
-def env_energy(x, p):
-    """The model's energy (the swing-up's shaping reads it)."""
-    return _env_energy(x, p)
-
-
-@_jit
-def env_observe(x, c_idx, lv, rng, observe_state, obs):
-    """The observation of *x* into ``obs[0]`` (draws the sensor noise)."""
-    zbuf = np.zeros(max(c_idx.shape[0], 1) + 2)
-    _env_observe(x, c_idx, lv, rng, observe_state, obs, 0, zbuf)
-
-
-@_jit
-def env_step_one(a, x, p, rng, k, eref, obs, ei, ef, c_idx, lv, lw, region, op, sc, hang):
-    """One control period of one environment: ``(reward, status)`` (see the section's notes).
-
-    *x*, *rng* and ``k[0]`` carry the episode; ``obs[0]`` receives the observation.
-    """
-    scr = np.zeros((_ENV_SCR, max(_N, _M, lw.shape[1], c_idx.shape[0]) + 2))
-    u = scr[0]
-    if not _env_input(a, p, ei[4], u):
-        return 0.0, 3
-    code = _env_physics(x, u, p, lw, rng, ei[0], ef[0], region, scr[1], scr[2], scr[3],
-                        scr[4], scr[5], scr[6], scr[7], scr[8])
-    k[0] += 1
-    _env_observe(x, c_idx, lv, rng, ei[2], obs, 0, scr[2])
-    reward = _env_reward(x, u, p, ei[3], ef, op, sc, hang, eref[0], eref[1])
-    if code != -1:
-        return reward, 1
-    if k[0] >= ei[1]:
-        return reward, 2
-    return reward, 0
+def _env_begin(r, fs, us, orow, cf, ci, zbuf):
+    """Start copy *r*'s episode from the state and parameters in its row: the
+    shaping's reference energies, the step count, the first observation."""
+    n_p = ci[_CI_NP]
+    p = fs[r, _N: _N + n_p]
+    if ci[_CI_REWARD] == 1:
+        o_op = ci[_CI_O_OP]
+        o_st = ci[_CI_O_START]
+        fs[r, _N + n_p] = _env_energy(cf[o_op: o_op + _N], p)
+        fs[r, _N + n_p + 1] = _env_energy(cf[o_st: o_st + _N], p)
+    us[r, _US_K] = _U0
+    us[r, _US_AUTO] = _U0
+    _env_observe(fs[r, :_N], us[r, :4], orow, cf, ci, zbuf)
 
 
 @_inline
-def _env_reset_copy(r, xs, ps, rng, ks, erefs, obs, x, p, ei, c_idx, lv, start, spread,
-                    p_nom, rnd_idx, rnd_spread, op, zbuf):
-    _env_draw(x, p, rng, start, spread, p_nom, rnd_idx, rnd_spread)
+def _env_draw(r, fs, us, cf, ci):
+    """Copy *r*'s start from the task's distribution and its randomized parameters,
+    drawn from its own generator."""
+    rng = us[r, :4]
+    o_st = ci[_CI_O_START]
+    o_sp = ci[_CI_O_SPREAD]
     for i in range(_N):
-        xs[r, i] = x[i]
-    for i in range(p.shape[0]):
-        ps[r, i] = p[i]
-    ks[r] = 0
-    if ei[3] == 1:
-        erefs[r, 0] = _env_energy(op, p)
-        erefs[r, 1] = _env_energy(start, p)
-    _env_observe(x, c_idx, lv, rng, ei[2], obs, r, zbuf)
+        fs[r, i] = cf[o_st + i] + (2.0 * _uniform(rng) - 1.0) * cf[o_sp + i]
+    o_pn = ci[_CI_O_P_NOM]
+    n_p = ci[_CI_NP]
+    for i in range(n_p):
+        fs[r, _N + i] = cf[o_pn + i]
+    o_ri = ci[_CI_O_RND_IDX]
+    o_rs = ci[_CI_O_RND_SPREAD]
+    for j in range(ci[_CI_NRND]):
+        q = ci[o_ri + j]
+        fs[r, _N + q] = cf[o_pn + q] * (1.0 + (2.0 * _uniform(rng) - 1.0) * cf[o_rs + j])
 
 
 @_inline
-def _env_width(ps, lw, c_idx):
-    return max(_N, _M, lw.shape[1], c_idx.shape[0], ps.shape[1]) + 2
+def _env_step_copy(r, a, fs, us, orow, cf, ci, u, w, zbuf, k1, k2, k3, k4, xt, xprev):
+    """One control period of copy *r* with action *a*: ``(reward, status)``.
 
-
-@_bare
-def _env_reset_range(lo, hi, mask, xs, ps, rngs, ks, erefs, obs, ei, c_idx, lv, start, spread,
-                     p_nom, rnd_idx, rnd_spread, op, scr, rng):
-    # Compiled without reference counting, like the core's loops: *scr*
-    # (rows x, p, zbuf) and *rng* are made by the entry that calls it.
-    x = scr[0]
-    p = scr[1, : ps.shape[1]]
-    zbuf = scr[2]
-    for r in range(lo, hi):
-        if mask[r]:
-            for i in range(4):
-                rng[i] = rngs[r, i]
-            _env_reset_copy(r, xs, ps, rng, ks, erefs, obs, x, p, ei, c_idx, lv, start,
-                            spread, p_nom, rnd_idx, rnd_spread, op, zbuf)
-            for i in range(4):
-                rngs[r, i] = rng[i]
-
-
-@njit(cache=True, error_model="numpy", parallel=True)
-def env_reset_many(mask, xs, ps, rngs, ks, erefs, obs, ei, c_idx, lv, start, spread,
-                   p_nom, rnd_idx, rnd_spread, op):
-    """Reset the copies where *mask* is set: draw each one's start and parameters
-    from its own generator and observe it into its row of *obs*."""
-    n_copies = xs.shape[0]
-    chunks = max(1, min(ei[5], n_copies))
-    scrs = np.zeros((chunks, 3, _env_width(ps, lv, c_idx)))
-    rbuf = np.zeros((chunks, 4), dtype=np.uint64)
-    for c in prange(chunks):
-        _env_reset_range(c * n_copies // chunks, (c + 1) * n_copies // chunks, mask, xs, ps,
-                         rngs, ks, erefs, obs, ei, c_idx, lv, start, spread, p_nom, rnd_idx,
-                         rnd_spread, op, scrs[c], rbuf[c])
-
-
-@_bare
-def _env_step_range(lo, hi, actions, xs, ps, rngs, ks, erefs, auto, obs, rewards, terminated,
-                    truncated, ei, ef, c_idx, lv, lw, region, op, sc, hang, start, spread,
-                    p_nom, rnd_idx, rnd_spread, scr, rng):
-    """Copies ``lo .. hi - 1`` of a vector step; the number of non-finite actions.
-
-    Compiled without reference counting (a reference-counted loop handing
-    arrays to the dynamics runs several times slower): *scr* (``_ENV_SCR``
-    rows of ``_env_width``) and *rng* (4 words) come from the entry.
+    A copy whose episode ended at its previous step (autoreset due) is reset
+    instead: its action is ignored, its reward is 0.
     """
-    # Rows of the copies' arrays are used in place (views cost nothing here).
-    u = scr[1]
-    w = scr[2]
-    zbuf = scr[3]
-    k1 = scr[4]
-    k2 = scr[5]
-    k3 = scr[6]
-    k4 = scr[7]
-    xt = scr[8]
-    xprev = scr[9]
+    if us[r, _US_AUTO] != _U0:
+        _env_draw(r, fs, us, cf, ci)
+        _env_begin(r, fs, us, orow, cf, ci, zbuf)
+        return 0.0, 0
+    n_p = ci[_CI_NP]
+    x = fs[r, :_N]
+    p = fs[r, _N: _N + n_p]
+    rng = us[r, :4]
+    _env_input(a, p, ci[_CI_PHYSICAL], u)
+    code = _env_physics(x, u, p, rng, cf, ci, w, zbuf, k1, k2, k3, k4, xt, xprev)
+    k = np.int64(us[r, _US_K]) + 1
+    us[r, _US_K] = np.uint64(k)
+    _env_observe(x, rng, orow, cf, ci, zbuf)
+    reward = _env_reward(x, u, p, fs[r, _N + n_p], fs[r, _N + n_p + 1], cf, ci)
+    status = 1 if code != -1 else 2 if k >= ci[_CI_N_SAMPLES] else 0
+    if status != 0 and ci[_CI_AUTORESET] != 0:
+        us[r, _US_AUTO] = _U1
+    return reward, status
+
+
+@_inline
+def _env_bad_actions(actions):
+    """How many actions are not finite numbers (then no copy is stepped)."""
     bad = 0
-    for r in range(lo, hi):
-        terminated[r] = False
-        truncated[r] = False
-        x = xs[r]
-        p = ps[r]
-        rng_r = rngs[r]
-        if auto[r]:
-            _env_reset_copy(r, xs, ps, rng_r, ks, erefs, obs, x, p, ei, c_idx, lv,
-                            start, spread, p_nom, rnd_idx, rnd_spread, op, zbuf)
-            rewards[r] = 0.0
-            auto[r] = False
-            continue
-        if not _env_input(actions[r], p, ei[4], u):
-            bad += 1
-            continue
-        code = _env_physics(x, u, p, lw, rng_r, ei[0], ef[0], region, w, zbuf,
-                            k1, k2, k3, k4, xt, xprev)
-        ks[r] += 1
-        _env_observe(x, c_idx, lv, rng_r, ei[2], obs, r, zbuf)
-        rewards[r] = _env_reward(x, u, p, ei[3], ef, op, sc, hang, erefs[r, 0], erefs[r, 1])
-        if code != -1:
-            terminated[r] = True
-            auto[r] = True
-        elif ks[r] >= ei[1]:
-            truncated[r] = True
-            auto[r] = True
+    for r in range(actions.shape[0]):
+        for i in range(actions.shape[1]):
+            if not math.isfinite(actions[r, i]):
+                bad += 1
     return bad
 
 
-@njit(cache=True, error_model="numpy", parallel=True)
-def env_step_many(actions, xs, ps, rngs, ks, erefs, auto, obs, rewards, terminated,
-                  truncated, ei, ef, c_idx, lv, lw, region, op, sc, hang, start, spread,
-                  p_nom, rnd_idx, rnd_spread):
-    """One control period of every copy, in parallel; Gymnasium's next-step autoreset.
+@_bare
+def _env_step_range(lo, hi, actions, fs, us, obs, rewards, flags, cf, ci, scr):
+    """Copies ``lo .. hi - 1`` of a vector step.
 
-    A copy whose previous step ended (``auto``) is reset instead of stepped
-    (its action ignored, reward 0); a copy that ends now is flagged in
-    ``auto`` for the next call. Returns the number of copies whose action
-    was not a finite number (they are left as they were).
+    Compiled without reference counting (a reference-counted loop handing
+    arrays to the dynamics runs several times slower; row views cost
+    nothing here): *scr* (``_ENV_SCR`` zeroed rows) comes from the entry.
     """
-    n_copies = xs.shape[0]
-    chunks = max(1, min(ei[5], n_copies))
-    bad = np.zeros(chunks, dtype=np.int64)
-    scrs = np.zeros((chunks, _ENV_SCR, _env_width(ps, lw, c_idx)))
-    rbuf = np.zeros((chunks, 4), dtype=np.uint64)
+    u = scr[0]
+    w = scr[1]
+    zbuf = scr[2]
+    k1 = scr[3]
+    k2 = scr[4]
+    k3 = scr[5]
+    k4 = scr[6]
+    xt = scr[7]
+    xprev = scr[8]
+    for r in range(lo, hi):
+        reward, status = _env_step_copy(r, actions[r], fs, us, obs[r], cf, ci, u, w, zbuf,
+                                        k1, k2, k3, k4, xt, xprev)
+        rewards[r] = reward
+        flags[0, r] = status == 1
+        flags[1, r] = status == 2
+
+
+@njit(cache=True, error_model="numpy", parallel=True)
+def env_step_many(actions, fs, us, obs, rewards, flags, cf, ci):
+    """One control period of every copy, in parallel (``ci``'s chunk count of
+    contiguous blocks of copies); Gymnasium's next-step autoreset.
+
+    Returns the number of actions that are not finite numbers: when there
+    is one, nothing is done.
+    """
+    bad = _env_bad_actions(actions)
+    if bad > 0:
+        return bad
+    n_copies = fs.shape[0]
+    chunks = max(1, min(ci[_CI_CHUNKS], n_copies))
+    scrs = np.zeros((chunks, _ENV_SCR, _env_width(fs, ci)))
     for c in prange(chunks):
-        bad[c] = _env_step_range(
-            c * n_copies // chunks, (c + 1) * n_copies // chunks, actions, xs, ps, rngs, ks,
-            erefs, auto, obs, rewards, terminated, truncated, ei, ef, c_idx, lv, lw, region, op,
-            sc, hang, start, spread, p_nom, rnd_idx, rnd_spread, scrs[c], rbuf[c],
-        )
-    total = 0
-    for c in range(chunks):
-        total += bad[c]
-    return total
+        _env_step_range(c * n_copies // chunks, (c + 1) * n_copies // chunks, actions, fs, us,
+                        obs, rewards, flags, cf, ci, scrs[c])
+    return 0
 
 
 @_jit
-def env_step_serial(actions, xs, ps, rngs, ks, erefs, auto, obs, rewards, terminated,
-                    truncated, ei, ef, c_idx, lv, lw, region, op, sc, hang, start, spread,
-                    p_nom, rnd_idx, rnd_spread):
+def env_step_serial(actions, fs, us, obs, rewards, flags, cf, ci):
     """``env_step_many`` on one thread (few copies: a parallel region costs more than it saves)."""
-    scr = np.zeros((_ENV_SCR, _env_width(ps, lw, c_idx)))
-    rng = np.zeros(4, dtype=np.uint64)
-    return _env_step_range(
-        0, xs.shape[0], actions, xs, ps, rngs, ks, erefs, auto, obs, rewards, terminated,
-        truncated, ei, ef, c_idx, lv, lw, region, op, sc, hang, start, spread, p_nom, rnd_idx,
-        rnd_spread, scr, rng,
-    )
+    bad = _env_bad_actions(actions)
+    if bad > 0:
+        return bad
+    scr = np.zeros((_ENV_SCR, _env_width(fs, ci)))
+    _env_step_range(0, fs.shape[0], actions, fs, us, obs, rewards, flags, cf, ci, scr)
+    return 0
+
+
+@_bare
+def _env_one(a, fs, us, obs, cf, ci, scr):
+    return _env_step_copy(0, a, fs, us, obs, cf, ci, scr[0], scr[1], scr[2], scr[3], scr[4],
+                          scr[5], scr[6], scr[7], scr[8])
+
+
+@_jit
+def env_step_one(a, fs, us, obs, cf, ci):
+    """One control period of the single environment in row 0: ``(reward, status)``,
+    status 3 when the action is not a finite number (nothing done)."""
+    for i in range(a.shape[0]):
+        if not math.isfinite(a[i]):
+            return 0.0, 3
+    scr = np.zeros((_ENV_SCR, _env_width(fs, ci)))
+    return _env_one(a, fs, us, obs, cf, ci, scr)
+
+
+@_jit
+def env_begin(fs, us, obs, cf, ci):
+    """Start row 0's episode from the state and parameters written in it (the
+    single environment's reset); *obs* receives the first observation."""
+    zbuf = np.zeros(_env_width(fs, ci))
+    _env_begin(0, fs, us, obs, cf, ci, zbuf)
+
+
+@_bare
+def _env_reset_range(lo, hi, fs, us, obs, cf, ci, zbuf):
+    for r in range(lo, hi):
+        _env_draw(r, fs, us, cf, ci)
+        _env_begin(r, fs, us, obs[r], cf, ci, zbuf)
+
+
+@_jit
+def env_reset_many(fs, us, obs, cf, ci):
+    """Reset every copy: draw each one's start and parameters from its own
+    generator and observe it into its row of *obs*."""
+    zbuf = np.zeros(_env_width(fs, ci))
+    _env_reset_range(0, fs.shape[0], fs, us, obs, cf, ci, zbuf)
