@@ -387,7 +387,9 @@ def test_vector_seeding() -> None:
 
 
 def test_vector_parallel_equals_serial(monkeypatch: pytest.MonkeyPatch) -> None:
+    """One thread, all threads, and switching between them every other step: the same numbers."""
     runs = []
+    monkeypatch.setattr(vector_module, "PROBE_EVERY", 2)
     for minimum in (1, 10**9):
         monkeypatch.setattr(vector_module, "PARALLEL_MIN", minimum)
         vec = _vec(64, randomize={"m_c": 0.3})
@@ -395,6 +397,8 @@ def test_vector_parallel_equals_serial(monkeypatch: pytest.MonkeyPatch) -> None:
         rng = np.random.default_rng(1)
         trace = [vec.step(rng.uniform(-1, 1, (64, 1)))[:4] for _ in range(50)]
         runs.append(trace)
+        both = all(entry is not None for entry in vec._entries)
+        assert both == (minimum == 1)
     for one, two in zip(*runs, strict=True):
         for p, q in zip(one, two, strict=True):
             np.testing.assert_array_equal(p, q)

@@ -21,6 +21,8 @@ continues every copy's stream.
 
 from __future__ import annotations
 
+import math
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -36,6 +38,15 @@ from equilibrist.errors import DimensionError
 # Fewer copies than this step on one thread: starting a parallel region
 # (waking the other threads and waiting for them) costs more than it saves.
 PARALLEL_MIN = 256
+# From PARALLEL_MIN copies up, one step in PROBE_EVERY runs the other way
+# (one thread or all), and the faster of the two by the moving average of
+# their times per step (weight SMOOTHING for the newest, a time counted at
+# most OUTLIER times the average) steps the others. On a machine whose other
+# cores are taken, the parallel step waits for descheduled threads and can
+# run several times slower than one thread.
+PROBE_EVERY = 50
+SMOOTHING = 0.25
+OUTLIER = 3.0
 
 
 def _chunks() -> int:
@@ -82,10 +93,17 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._seeded = False
         self._ready = False
         chunks = _chunks()
+        #: Whether steps may run on several threads (from PARALLEL_MIN copies up).
         self.parallel = N >= PARALLEL_MIN and chunks > 1
-        self._ci = core.settings(chunks=chunks if self.parallel else 1, autoreset=True)
+        self._ci = core.settings(chunks=chunks, autoreset=True)
         self._cf = core.cf
-        self._dispatcher = core.kernel.env_step_many if self.parallel else core.kernel.env_step_serial
+        # The entries, one thread then parallel, resolved at the first step.
+        self._dispatchers = (core.kernel.env_step_serial, core.kernel.env_step_many)
+        self._entries: list[Any] = [None, None]
+        self._mode = int(self.parallel)
+        self._cost = [math.inf, math.inf]  # seconds per step, moving averages
+        self._warm = [False, False]  # a mode's first (warming) step is not timed
+        self._steps = 0
         self._step_fn: Any = None
         self._ashape = (N, m)
         self._obs_shape = (N, core.n_obs)
@@ -162,14 +180,54 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         flags = np.empty((2, N), dtype=np.bool_)
         step = self._step_fn
         if step is None:
-            step = self._step_fn = compiled_entry(
-                self._dispatcher, (a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
-            )
-        if step(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci):
+            step = self._step_fn = self._entry(self._mode, (a, obs, rewards, flags))
+        if not self.parallel:
+            bad = step(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
+        else:
+            bad = self._timed_step(a, obs, rewards, flags)
+        if bad:
             raise EnvError("an action is not a finite number (no copy was stepped)")
         if self._renderer is not None:
             self._actions = a.copy()
         return obs, rewards, flags[0], flags[1], {}
+
+    def _entry(self, mode: int, outputs: tuple[np.ndarray, ...]) -> Any:
+        entry = self._entries[mode]
+        if entry is None:
+            a, obs, rewards, flags = outputs
+            entry = self._entries[mode] = compiled_entry(
+                self._dispatchers[mode],
+                (a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci),
+            )
+        return entry
+
+    def _timed_step(self, a: np.ndarray, obs: np.ndarray, rewards: np.ndarray,
+                    flags: np.ndarray) -> int:
+        """A step on one thread or on all, whichever has been faster lately
+        (see ``PROBE_EVERY``); both give the same numbers."""
+        self._steps += 1
+        mode = self._mode
+        if self._steps % PROBE_EVERY == 0 or self._cost[1 - mode] == math.inf:
+            mode = 1 - mode
+        entry = self._entry(mode, (a, obs, rewards, flags))
+        start = time.perf_counter()
+        bad = entry(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
+        spent = time.perf_counter() - start
+        cost = self._cost
+        if not self._warm[mode]:
+            self._warm[mode] = True
+        elif cost[mode] == math.inf:
+            cost[mode] = spent
+        else:
+            spent = min(spent, OUTLIER * cost[mode])
+            cost[mode] = SMOOTHING * spent + (1.0 - SMOOTHING) * cost[mode]
+        self._mode = 0 if cost[0] < cost[1] else 1
+        return int(bad)
+
+    @property
+    def threads_in_use(self) -> int:
+        """How many threads the next step runs on (1, or numba's thread count)."""
+        return _chunks() if self.parallel and self._mode == 1 else 1
 
     def render(self) -> tuple[np.ndarray, ...] | None:
         """Every copy's picture (``rgb_array``), as the single environment draws it."""
