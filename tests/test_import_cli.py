@@ -60,6 +60,19 @@ def test_export_builds_and_replays_in_c(capsys, tmp_path: Path) -> None:
     assert "steps match the vectors" in proc.stdout
 
 
+def test_pendubot_export_says_what_to_change_and_exports_with_it(capsys, tmp_path: Path) -> None:
+    # The imported model's default design (the whole torque range as its Bryson scale)
+    # saturates and loses the recorded run's start; the message names the remedy, and the
+    # remedy (the catalogue pendubot's torque scale, R = 1 / 0.5^2) exports.
+    folder = tmp_path / "pendubot_c"
+    assert main(["export", PENDUBOT, "--out", str(folder), "--duration", "2"]) == 2
+    err = capsys.readouterr().err
+    assert "fell at" in err and "a larger --r" in err and "Traceback" not in err
+    assert not folder.exists()
+    assert main(["export", PENDUBOT, "--out", str(folder), "--duration", "2", "--r", "4"]) == 0
+    assert (folder / "Makefile").exists()
+
+
 def test_demo_report_of_a_model_file(capsys, tmp_path: Path) -> None:
     out = tmp_path / "report"
     assert main(["demo", FURUTA, "--out", str(out)]) == 0
