@@ -197,7 +197,7 @@ def record(design: Design, system: System, *, controller: str = "lqg", precision
             f"the recorded run of the {controller} controller of {data.system} fell at "
             f"t = {result.fell_at:.3g} s ({result.fell_state} left its region): "
             "the design does not hold the plant, so there are no test vectors to ship (the run "
-            f"starts {START_FRACTION:g} of each angle's design scale off the operating point; a "
+            f"starts {START_FRACTION:g} of each coordinate's design scale off the operating point; a "
             "gentler design, a larger --r, may hold it)"
         )
     r = result.reference if tracking else np.zeros((result.n_rows, 0))
