@@ -7,7 +7,10 @@ step of Gymnasium's CartPole, which has no noise), against
 * ``gymnasium.make_vec("CartPole-v1", num_envs=N, vectorization_mode="vector_entry_point")``
   (Gymnasium's own numpy vector cart-pole, explicit Euler) for N = 16, 256, 4096;
 * the same vector environment kept on one thread (below 256 copies it is
-  on one thread anyway), to separate the compiled loop from the threads;
+  on one thread anyway), to separate the compiled loop from the threads
+  (from 256 copies up the vector environment itself steps on one thread or
+  on all, whichever has been faster lately; the "thr" column is the number
+  of threads it ended on);
 * Gymnasium's ``SyncVectorEnv`` of the same equilibrist environment
   (``vectorization_mode="sync"``: the generic way to vectorize an environment);
 * a single environment's ``step()`` against Gymnasium's ``CartPole-v1``
@@ -94,9 +97,10 @@ def vector_case(n: int, seconds: float, repeats: int) -> dict[str, float]:
         "sync": _timer(lambda: sync.step(a_ours), seconds / 4),
     }
     t = best_of(timers, repeats)
+    threads = ours.unwrapped.threads_in_use  # type: ignore[attr-defined]
     for env in (ours, serial, theirs, sync):
         env.close()
-    return {k: n / v for k, v in t.items()}  # env-steps per second
+    return {**{k: n / v for k, v in t.items()}, "threads": threads}  # env-steps per second
 
 
 def single_case(seconds: float, repeats: int) -> dict[str, float]:
@@ -146,10 +150,10 @@ def main() -> None:
     print(f"cart-pole balance, 50 Hz, one RK4 step per period, no noise; {threads} numba threads; "
           f"load average {results['load_before']:.1f} -> {results['load_after']:.1f}")
     print("env-steps per second (M/s); ratios are equilibrist's vector env over the peer")
-    print(f"{'N':>5s} {'ours':>8s} {'1 thread':>9s} {'gym vec':>8s} {'x gym vec':>10s} "
+    print(f"{'N':>5s} {'ours':>8s} {'thr':>4s} {'1 thread':>9s} {'gym vec':>8s} {'x gym vec':>10s} "
           f"{'1 thr x gym':>12s} {'sync':>8s} {'x sync':>8s}")
     for n, r in rows:
-        print(f"{n:5d} {r['ours'] / 1e6:8.3f} {r['one_thread'] / 1e6:9.3f} "
+        print(f"{n:5d} {r['ours'] / 1e6:8.3f} {r['threads']:4d} {r['one_thread'] / 1e6:9.3f} "
               f"{r['gymnasium'] / 1e6:8.3f} {r['ours'] / r['gymnasium']:10.2f} "
               f"{r['one_thread'] / r['gymnasium']:12.2f} {r['sync'] / 1e6:8.4f} "
               f"{r['ours'] / r['sync']:8.1f}")

@@ -390,6 +390,7 @@ def test_vector_parallel_equals_serial(monkeypatch: pytest.MonkeyPatch) -> None:
     """One thread, all threads, and switching between them every other step: the same numbers."""
     runs = []
     monkeypatch.setattr(vector_module, "PROBE_EVERY", 2)
+    monkeypatch.setattr(vector_module, "PROBE_SHARE", 0.0)
     for minimum in (1, 10**9):
         monkeypatch.setattr(vector_module, "PARALLEL_MIN", minimum)
         vec = _vec(64, randomize={"m_c": 0.3})
@@ -402,6 +403,45 @@ def test_vector_parallel_equals_serial(monkeypatch: pytest.MonkeyPatch) -> None:
     for one, two in zip(*runs, strict=True):
         for p, q in zip(one, two, strict=True):
             np.testing.assert_array_equal(p, q)
+
+
+def test_vector_runs_the_faster_way(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The switch between one thread and all, on a fake clock: it settles on the
+    faster way, follows a change, and probes a much slower way rarely."""
+    monkeypatch.setattr(vector_module, "PARALLEL_MIN", 1)
+    vec = _vec(4, noise=False)
+    vec.reset(seed=0)
+    now = [0.0]
+    cost = {0: 1.0, 1: 0.5}  # seconds per step: one thread, all threads
+    runs = {0: 0, 1: 0}
+
+    def way(mode: int):
+        def entry(*args: object) -> int:
+            now[0] += cost[mode]
+            runs[mode] += 1
+            return 0
+        return entry
+
+    vec._entries[:] = [way(0), way(1)]
+    monkeypatch.setattr(vector_module.time, "perf_counter", lambda: now[0])
+    a = np.zeros((4, 1))
+    for _ in range(200):
+        vec.step(a)
+    assert vec.threads_in_use > 1 and runs[0] < 10
+    cost[1] = 40.0  # the other cores got busy: all threads now 40 times slower
+    for _ in range(10):
+        vec.step(a)
+    assert vec.threads_in_use == 1
+    runs.update({0: 0, 1: 0})
+    for _ in range(5000):
+        vec.step(a)
+    assert vec.threads_in_use == 1
+    share = runs[1] * cost[1] / (runs[0] * cost[0] + runs[1] * cost[1])
+    assert 0 < share < 2 / vector_module.PROBE_SHARE  # still probed, rarely
+    cost[1] = 0.5  # quiet again
+    for _ in range(3000):
+        vec.step(a)
+    assert vec.threads_in_use > 1
 
 
 def test_vector_sensor_noise_has_the_rigs_spread() -> None:

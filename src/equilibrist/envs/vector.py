@@ -2,8 +2,10 @@
 
 :class:`EquilibristVectorEnv` is what ``gymnasium.make_vec(id, num_envs=N,
 vectorization_mode="vector_entry_point")`` builds. One call of the core
-steps every copy (``numba.prange`` over blocks of copies, on every core);
-Python does the same fixed amount of work whatever the number of copies.
+steps every copy (``numba.prange`` over as many blocks of copies as
+threads, or one thread: see ``PROBE_EVERY``); Python does the same fixed
+amount of work whatever the number of copies. Every step returns fresh
+arrays, as Gymnasium's own vector environments do.
 
 Autoreset follows Gymnasium 1.x's default (next step): the step that ends
 a copy's episode returns its last observation with ``terminated`` or
@@ -38,13 +40,17 @@ from equilibrist.errors import DimensionError
 # Fewer copies than this step on one thread: starting a parallel region
 # (waking the other threads and waiting for them) costs more than it saves.
 PARALLEL_MIN = 256
-# From PARALLEL_MIN copies up, one step in PROBE_EVERY runs the other way
-# (one thread or all), and the faster of the two by the moving average of
-# their times per step (weight SMOOTHING for the newest, a time counted at
-# most OUTLIER times the average) steps the others. On a machine whose other
-# cores are taken, the parallel step waits for descheduled threads and can
-# run several times slower than one thread.
+# From PARALLEL_MIN copies up, a step now and then runs the other way (one
+# thread or all: a probe), and the faster of the two steps the others: the
+# way in use by the moving average of its times per step (weight SMOOTHING
+# for the newest, a time counted at most OUTLIER times the average), the
+# other by its last probe. On a
+# machine whose other cores are taken, the parallel step waits for
+# descheduled threads and can run many times slower than one thread. Probes
+# come every PROBE_EVERY steps, or rarer when the other way is much slower,
+# so that they take at most about 1 / PROBE_SHARE of the time.
 PROBE_EVERY = 50
+PROBE_SHARE = 20.0
 SMOOTHING = 0.25
 OUTLIER = 3.0
 
@@ -103,7 +109,7 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._mode = int(self.parallel)
         self._cost = [math.inf, math.inf]  # seconds per step, moving averages
         self._warm = [False, False]  # a mode's first (warming) step is not timed
-        self._steps = 0
+        self._countdown = 0  # steps before the next probe
         self._step_fn: Any = None
         self._ashape = (N, m)
         self._obs_shape = (N, core.n_obs)
@@ -205,22 +211,28 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
                     flags: np.ndarray) -> int:
         """A step on one thread or on all, whichever has been faster lately
         (see ``PROBE_EVERY``); both give the same numbers."""
-        self._steps += 1
+        cost = self._cost
         mode = self._mode
-        if self._steps % PROBE_EVERY == 0 or self._cost[1 - mode] == math.inf:
+        probe = self._countdown <= 0 or cost[1 - mode] == math.inf
+        if probe:
             mode = 1 - mode
+        else:
+            self._countdown -= 1
         entry = self._entry(mode, (a, obs, rewards, flags))
         start = time.perf_counter()
         bad = entry(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
         spent = time.perf_counter() - start
-        cost = self._cost
         if not self._warm[mode]:
             self._warm[mode] = True
         elif cost[mode] == math.inf:
             cost[mode] = spent
-        else:
+        elif probe:
+            cost[mode] = spent  # a rare sample: taken as it is
+        else:  # a spike of the way in use alone does not switch
             spent = min(spent, OUTLIER * cost[mode])
             cost[mode] = SMOOTHING * spent + (1.0 - SMOOTHING) * cost[mode]
+        if probe and math.inf not in cost:
+            self._countdown = max(PROBE_EVERY, int(PROBE_SHARE * cost[mode] / max(cost[1 - mode], 1e-12)))
         self._mode = 0 if cost[0] < cost[1] else 1
         return int(bad)
 
