@@ -178,7 +178,8 @@ def test_identify_from_the_command_line_then_design_on_the_result(cart_csv, tmp_
     doc = json.loads(capsys.readouterr().out)
     est = doc["estimates"]["m_p"]
     assert abs(est["value"] - 1.3) < 3 * est["std_error"]
-    assert doc["method"]["name"] == "multiple shooting"
+    assert doc["method"]["name"] == "prediction error"
+    assert doc["method"]["start"] == "multiple shooting"
     assert set(doc["outputs"]) == {"x", "theta"}
     assert 0 < doc["outputs"]["theta"]["nrmse"] < 0.5
     assert doc["outputs"]["x"]["whiteness"]["test"] == "Ljung-Box"

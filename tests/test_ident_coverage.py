@@ -114,16 +114,7 @@ def _pole_check(nominal, result: Identification, truth: dict[str, float]) -> Non
     assert np.all(np.abs(d) <= 4.0 * np.sqrt(np.diag(cov_p)) + 1e-9 * np.abs(p_true)), (p_est, p_true)
 
 
-# The control-moment-gyroscope robot's estimate misses the truth by 3.3
-# standard errors on seed 0 (also with 2-sample segments, so not the segment
-# length): a known miss of the method on this rig whose cause is not yet
-# found; strict, so that the day it passes is noticed.
-KNOWN_MISSES = {"cmg_robot": "m_body misses the truth by 3.3 standard errors on seed 0"}
-ACTUATED = [
-    pytest.param(e.spec.key, marks=pytest.mark.xfail(strict=True, reason=KNOWN_MISSES[e.spec.name]))
-    if e.spec.name in KNOWN_MISSES else e.spec.key
-    for e in registry.all_entries() if e.spec.inputs
-]
+ACTUATED = [e.spec.key for e in registry.all_entries() if e.spec.inputs]
 
 
 @pytest.mark.slow
@@ -143,7 +134,7 @@ def test_every_actuated_system_recovers_its_parameters(key):
             run, log = _log(plant, nominal, seed=seed, duration=8.0, amplitude=amplitude / 4)
         assert not run.fell
         result = identify(nominal, log, free)
-        assert result.method["name"] == "multiple shooting"
+        assert result.method["name"] == "prediction error"
         z.extend(_z(result, truth))
         _pole_check(nominal, result, truth)
     z = np.array(z)

@@ -311,6 +311,11 @@ def check_free(system: System, free: Sequence[str]) -> tuple[str, ...]:
 
 def _van_loan(A: np.ndarray, GQG: np.ndarray, T: float) -> np.ndarray:
     """``int_0^T e^(A s) GQG e^(A' s) ds``."""
+    return _discretize(A, GQG, T)[1]
+
+
+def _discretize(A: np.ndarray, GQG: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
+    """``e^(A T)`` and ``int_0^T e^(A s) GQG e^(A' s) ds`` (Van Loan: one exponential)."""
     from scipy.linalg import expm
 
     n = A.shape[0]
@@ -319,8 +324,9 @@ def _van_loan(A: np.ndarray, GQG: np.ndarray, T: float) -> np.ndarray:
     M[:n, n:] = GQG
     M[n:, n:] = A.T
     E = expm(M * T)
-    Q = E[n:, n:].T @ E[:n, n:]
-    return (Q + Q.T) / 2
+    Ad = E[n:, n:].T
+    Q = Ad @ E[:n, n:]
+    return Ad, (Q + Q.T) / 2
 
 
 def _guess_states(system: System, log: Log) -> np.ndarray:
@@ -537,6 +543,15 @@ def _shooter(system: System, backend: str) -> ShootFunction:
         return _solve_ivp_shoot(system)
     raise IdentificationError(f"backend {backend!r}: expected one of {', '.join(BACKENDS)}")
 
+
+
+def _filter(system: System, backend: str) -> Callable[..., None]:
+    if backend == "compiled":
+        from equilibrist.ident.kernel import load_shooting
+
+        filt: Callable[..., None] = load_shooting(system).innovations
+        return filt
+    return _solve_ivp_filter(system)
 
 def _sensor_prior(system: System, log: Log, given: Mapping[str, float] | None) -> np.ndarray:
     given = dict(given or {})
@@ -763,8 +778,241 @@ def identify(
         sol = fit(sol.x)
         if max(abs(ratio_q - 1.0), float(np.max(np.abs(ratio_y - 1.0)))) < 0.05:
             break
-    return _answer(system, log, prob, sol, theta0, q, q_scale, L, dt, backend, max_step, A, floor,
-                   (lo, hi))
+
+    # The estimate: the prediction errors of the model's Kalman filter, from the
+    # multiple-shooting solution. The shooting residuals leave the process noise
+    # acting inside a segment unmodelled, and the closed loop's input answers
+    # that noise, so their minimum is biased where the process noise matters;
+    # the filter's errors are white at the truth, whatever the feedback.
+    theta, off, xs = prob.split(sol.x)
+    nh = prob.n_head
+    pred = _Predictor(
+        system=system, log=log, free_idx=free_idx, n_theta=len(free), offsets=offsets, p_base=p0,
+        c_idx=c_idx, n_sub=n_sub, dt=dt, x_lin=np.median(xs, axis=0), u_lin=u_mean, floor=floor,
+        q=q.copy(), sigma_y=sigma_y.copy(), filter=_filter(system, backend),
+        step=np.concatenate([1e-6 * np.where(theta0 != 0, np.abs(theta0), 1.0),
+                             1e-4 * sigma_y[: prob.n_off], step_x]),
+    )
+    lo_p = np.concatenate([lo[:nh], np.full(n, -np.inf)])
+    hi_p = np.concatenate([hi[:nh], np.full(n, np.inf)])
+
+    def fit_errors(z_start: np.ndarray) -> Any:
+        pred.set_weight(z_start)
+        with np.errstate(all="ignore"):
+            return least_squares(
+                pred.residuals, z_start, jac=pred.jacobian, bounds=(lo_p, hi_p), method="trf",
+                x_scale="jac", ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=max_nfev,
+            )
+
+    z_p = np.clip(np.concatenate([theta, off[: prob.n_off], xs[0]]), lo_p, hi_p)
+    psol = fit_errors(z_p)
+    nfev = int(sol.nfev) + int(psol.nfev)
+    for _ in range(NOISE_PASSES if reestimate_noise else 0):
+        ratio_q, ratio_y = pred.noise_levels(psol.x)
+        pred.q = pred.q * ratio_q
+        pred.sigma_y = pred.sigma_y * ratio_y
+        q_scale *= ratio_q
+        if max(abs(ratio_q - 1.0), float(np.max(np.abs(ratio_y - 1.0)))) < 0.05:
+            break
+        psol = fit_errors(psol.x)
+        nfev += int(psol.nfev)
+    return _answer(system, log, prob, sol, pred, psol, theta0, q_scale, L, dt, backend, max_step,
+                   (lo, hi), nfev)
+
+
+# -- the prediction-error stage ------------------------------------------------------
+
+
+@dataclass
+class _Predictor:
+    """The one-step prediction errors of a Kalman filter of the model, as residuals.
+
+    The filter predicts with the nonlinear model (RK4, the logged input held)
+    and corrects with the steady-state gain of the model's linearization,
+    recomputed for every parameter vector; the decision variables are the
+    free parameters, the sensor offsets (with ``offsets``) and the filter's
+    initial state.
+    """
+
+    system: System
+    log: Log
+    free_idx: np.ndarray
+    n_theta: int
+    offsets: bool
+    p_base: np.ndarray
+    c_idx: np.ndarray
+    n_sub: np.ndarray
+    dt: float
+    x_lin: np.ndarray
+    u_lin: np.ndarray
+    floor: np.ndarray
+    q: np.ndarray
+    sigma_y: np.ndarray
+    filter: Callable[..., None]
+    step: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the least difference step
+    weight: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    memo: dict[tuple[Any, ...], Any] = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return self.system.n_states
+
+    @property
+    def ny(self) -> int:
+        return self.c_idx.shape[0]
+
+    @property
+    def n_off(self) -> int:
+        return self.ny if self.offsets else 0
+
+    @property
+    def n_head(self) -> int:
+        return self.n_theta + self.n_off
+
+    def split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        theta = z[: self.n_theta]
+        off = z[self.n_theta : self.n_head] if self.offsets else np.zeros(self.ny)
+        return theta, off, z[self.n_head :]
+
+    def p_of(self, theta: np.ndarray) -> np.ndarray:
+        p = self.p_base.copy()
+        p[self.free_idx] = theta
+        return p
+
+    def gain(self, p: np.ndarray, q_factor: float = 1.0,
+             sigma_y: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The steady-state gain ``K`` and innovation covariance ``S`` at parameters *p*,
+        with the process noise ``q_factor * q`` and the sensors' *sigma_y*.
+
+        Remembered per parameter vector (the Jacobian's columns of the initial
+        state and offsets share one), the discretization too (the noise search
+        shares one): both are small dense problems, solved thousands of times.
+        """
+        from scipy.linalg import solve_discrete_are
+
+        sigma_y = self.sigma_y if sigma_y is None else sigma_y
+        if len(self.memo) > 256:
+            self.memo.clear()
+        key = (p.tobytes(), self.q.tobytes(), float(q_factor), sigma_y.tobytes())
+        if key in self.memo:
+            return self.memo[key]
+        n, ny = self.n, self.ny
+        lin_key = key[:2]
+        if lin_key not in self.memo:
+            A = np.empty((n, n))
+            B = np.empty((n, self.system.n_inputs))
+            with np.errstate(all="ignore"):
+                self.system.functions.jac(self.x_lin, self.u_lin, p, A, B)
+            if not np.all(np.isfinite(A)):
+                A = np.zeros((n, n))
+            self.memo[lin_key] = _discretize(A, np.diag(self.q), self.dt)
+        Ad, Qv = self.memo[lin_key]
+        C = np.zeros((ny, n))
+        C[np.arange(ny), self.c_idx] = 1.0
+        Qd = q_factor * Qv + np.diag(self.floor)
+        R = np.diag(sigma_y**2)
+        P = _filter_riccati(Ad, C, Qd, R)
+        if P is None:
+            try:
+                P = solve_discrete_are(Ad.T, C.T, Qd, R)
+            except (ValueError, np.linalg.LinAlgError):
+                P = Qd.copy()
+        S = C @ P @ C.T + R
+        out = (P @ C.T @ np.linalg.inv(S), (S + S.T) / 2)
+        self.memo[key] = out
+        return out
+
+    def errors(self, z: np.ndarray, q_factor: float = 1.0,
+               sigma_y: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The prediction errors (n_rows, ny) at *z*, and their covariance ``S``."""
+        theta, off, x0 = self.split(z)
+        p = self.p_of(theta)
+        K, S = self.gain(p, q_factor, sigma_y)
+        e = np.empty((self.log.n_rows, self.ny))
+        with np.errstate(all="ignore"):
+            self.filter(p, np.ascontiguousarray(x0, dtype=float), self.log.time, self.log.inputs,
+                        self.n_sub, self.c_idx, np.ascontiguousarray(K), self.log.outputs,
+                        np.ascontiguousarray(off, dtype=float), e)
+        return e, S
+
+    def set_weight(self, z: np.ndarray) -> None:
+        """Weight the errors by the innovation covariance at *z* (held during a fit)."""
+        _e, S = self.errors(z)
+        self.weight = np.linalg.inv(np.linalg.cholesky(S))
+
+    def residuals(self, z: np.ndarray) -> np.ndarray:
+        e, _S = self.errors(z)
+        r = (e @ self.weight.T).ravel()
+        return np.where(np.isfinite(r), r, 1e10)
+
+    def jacobian(self, z: np.ndarray) -> np.ndarray:
+        """Central differences, column by column (the filter runs once per column and side)."""
+        h = np.maximum(1e-6 * np.abs(z), self.step)
+        cols = []
+        for a in range(z.size):
+            zp = z.copy()
+            zm = z.copy()
+            zp[a] += h[a]
+            zm[a] -= h[a]
+            cols.append((self.residuals(zp) - self.residuals(zm)) / (2 * h[a]))
+        J = np.column_stack(cols)
+        J[~np.isfinite(J)] = 0.0
+        return J
+
+    def noise_levels(self, z: np.ndarray) -> tuple[float, np.ndarray]:
+        """The process noise's scale and the sensors' standard deviations that make the
+        filter's prediction errors most likely at *z* (factors on the current ones)."""
+        from scipy.optimize import minimize
+
+        n_rows = self.log.n_rows
+        has_q = bool(np.any(self.q > 0))
+
+        def nll(v: np.ndarray) -> float:
+            e, S = self.errors(z, math.exp(v[0]) if has_q else 1.0, self.sigma_y * np.exp(v[1:]))
+            if not np.all(np.isfinite(e)):
+                return math.inf
+            _sign, logdet = np.linalg.slogdet(S)
+            return float(n_rows * logdet + np.einsum("ki,ij,kj->", e, np.linalg.inv(S), e))
+
+        v0 = np.zeros(1 + self.ny)
+        simplex = np.vstack([v0, 0.2 * np.eye(v0.size)])  # factors of 1.2 to start
+        res = minimize(nll, v0, method="Nelder-Mead",
+                       options={"xatol": 0.005, "fatol": 0.05, "maxfev": 400,
+                                "initial_simplex": simplex})
+        v = np.clip(res.x, -math.log(1e3), math.log(1e3)) if math.isfinite(res.fun) else v0
+        return (math.exp(v[0]) if has_q else 1.0), np.exp(v[1:])
+
+
+def _solve_ivp_filter(system: System) -> Callable[..., None]:
+    """The Kalman filter's prediction errors with :func:`scipy.integrate.solve_ivp`
+    over each sample interval (the same loop as the compiled filter)."""
+    from scipy.integrate import solve_ivp
+
+    fn = system.functions.f
+    n = system.n_states
+
+    def innovations(p: np.ndarray, x0: np.ndarray, t: np.ndarray, u: np.ndarray, n_sub: np.ndarray,
+                    c_idx: np.ndarray, gain: np.ndarray, y: np.ndarray, off: np.ndarray,
+                    e: np.ndarray) -> None:
+        x = x0.copy()
+        for k in range(t.shape[0]):
+            e[k] = y[k] - off - x[c_idx]
+            x = x + gain @ e[k]
+            if k + 1 < t.shape[0]:
+                uk = u[k]
+
+                def rhs(_t: float, xx: np.ndarray, uk: np.ndarray = uk) -> np.ndarray:
+                    out = np.empty(n)
+                    fn(xx, uk, p, out)
+                    return out
+
+                if not np.all(np.isfinite(x)):
+                    e[k + 1:] = np.nan
+                    return
+                sol = solve_ivp(rhs, (t[k], t[k + 1]), x, method="RK45", rtol=1e-8, atol=1e-10)
+                x = sol.y[:, -1] if sol.success else np.full(n, np.nan)
+
+    return innovations
 
 
 def _information_inverse(H: np.ndarray) -> np.ndarray:
@@ -795,23 +1043,27 @@ def _leverage(J: Any, groups: Sequence[np.ndarray]) -> np.ndarray:
     return np.array(out)
 
 
-def _answer(system: System, log: Log, prob: _Problem, sol: Any, theta0: np.ndarray, q: np.ndarray,
-            q_scale: float, L: int, dt: float, backend: str, max_step: float, A: np.ndarray,
-            floor: np.ndarray, lo_hi: tuple[np.ndarray, np.ndarray]) -> Identification:
+def _answer(system: System, log: Log, prob: _Problem, sol: Any, pred: _Predictor, psol: Any,
+            theta0: np.ndarray, q_scale: float, L: int, dt: float, backend: str, max_step: float,
+            lo_hi: tuple[np.ndarray, np.ndarray], nfev: int) -> Identification:
     from scipy.stats import chi2
 
-    theta, off, xs = prob.split(sol.x)
+    theta, off, x0 = pred.split(psol.x)
     # A parameter that ended at a bound is reported at the bound itself.
-    theta = np.where(sol.active_mask[: prob.n_theta] < 0, lo_hi[0][: prob.n_theta], theta)
-    theta = np.where(sol.active_mask[: prob.n_theta] > 0, lo_hi[1][: prob.n_theta], theta)
+    theta = np.where(psol.active_mask[: pred.n_theta] < 0, lo_hi[0][: pred.n_theta], theta)
+    theta = np.where(psol.active_mask[: pred.n_theta] > 0, lo_hi[1][: pred.n_theta], theta)
+    z = np.concatenate([theta, psol.x[pred.n_theta:]])
+    # The replay: each shooting segment from its state, with the estimated parameters.
+    _theta_ms, _off_ms, xs = prob.split(sol.x)
     yhat, _xend = prob.run(prob.p_of(theta)[None], xs[None])
     replayed = yhat[0] + off
-    r = prob.residuals(sol.x)
-    J = prob.jacobian(sol.x)
+    pred.set_weight(z)
+    r = pred.residuals(z)
+    J = pred.jacobian(z)
     n_res, n_dec = J.shape
     s2 = float(r @ r) / max(1, n_res - n_dec)
-    H = (J.T @ J).toarray()
-    nh = prob.n_head
+    H = J.T @ J
+    nh = pred.n_head
     Haa, Hab, Hbb = H[:nh, :nh], H[:nh, nh:], H[nh:, nh:]
     try:
         from scipy.linalg import cho_factor, cho_solve
@@ -828,7 +1080,7 @@ def _answer(system: System, log: Log, prob: _Problem, sol: Any, theta0: np.ndarr
     mag = np.abs(theta)
     sd_t = sd_abs[: prob.n_theta]
     theta_scale = np.where(mag > 0.1 * sd_t, mag, np.where(sd_t > 0, sd_t, 1.0))
-    scale = np.concatenate([theta_scale, prob.sigma_y[: prob.n_off]])
+    scale = np.concatenate([theta_scale, pred.sigma_y[: prob.n_off]])
     Sl = S * np.outer(scale, scale)
     lam, V = np.linalg.eigh(Sl)
     lam_max = float(max(lam.max(), 1e-300))
@@ -882,7 +1134,7 @@ def _answer(system: System, log: Log, prob: _Problem, sol: Any, theta0: np.ndarr
             if math.isfinite(corr[i, j]) and abs(corr[i, j]) > 0.99 and not (undetermined[i] or undetermined[j]):
                 warnings.append(f"{names[i]} and {names[j]} are correlated {corr[i, j]:+.3f}: "
                                 "the log barely tells them apart")
-    at_bound = {name for a, name in enumerate(prob.free) if sol.active_mask[a] != 0}
+    at_bound = {name for a, name in enumerate(prob.free) if psol.active_mask[a] != 0}
     for e in estimates:
         if (math.isfinite(e.std_error) and math.isfinite(e.relative_error)
                 and e.relative_error > WEAK_LOG_STD and e.name in prob.free
@@ -891,12 +1143,13 @@ def _answer(system: System, log: Log, prob: _Problem, sol: Any, theta0: np.ndarr
                             "(standard error over estimate)")
     for a, name in enumerate(prob.free):
         if name in at_bound:
-            bound = lo_hi[0][a] if sol.active_mask[a] < 0 else lo_hi[1][a]
+            bound = lo_hi[0][a] if psol.active_mask[a] < 0 else lo_hi[1][a]
             warnings.append(f"{name} ended at the bound of its valid range ({bound:g}): the log "
                             "asks for a value outside it (or the data do not determine it)")
-    if not sol.success:
-        warnings.append(f"the optimizer stopped before converging: {sol.message}")
-    innov = _innovations(system, log, prob, theta, off, xs[0], A, q, floor, dt)
+    if not psol.success:
+        warnings.append(f"the optimizer stopped before converging: {psol.message}")
+    e_pred, S_pred = pred.errors(z)
+    innov = e_pred / np.sqrt(np.diag(S_pred))
     fits = []
     for j, name in enumerate(log.output_names):
         y = log.outputs[:, j]
@@ -905,7 +1158,7 @@ def _answer(system: System, log: Log, prob: _Problem, sol: Any, theta0: np.ndarr
         nrmse = float(np.linalg.norm(e) / denom) if denom > 0 else math.inf
         qv, pv, lags = _ljung_box(innov[:, j], chi2)
         fits.append(OutputFit(name, system.state_units[prob.c_idx[j]], nrmse,
-                              float(np.sqrt(np.mean(e**2))), float(prob.sigma_y[j]), qv, pv, lags))
+                              float(np.sqrt(np.mean(e**2))), float(pred.sigma_y[j]), qv, pv, lags))
     not_white = [f.name for f in fits if not f.white]
     if not_white:
         warnings.append(
@@ -916,16 +1169,18 @@ def _answer(system: System, log: Log, prob: _Problem, sol: Any, theta0: np.ndarr
     seg_seconds = L * dt
     n_seg = prob.n_seg
     desc = (
-        f"multiple shooting: {n_seg} segments of {L} samples ({seg_seconds:g} s), each segment's "
-        f"initial state estimated, continuity defects weighted by the process noise; the logged "
-        f"input replayed with zero-order hold; RK4 at <= {max_step:g} s "
+        f"prediction error: the one-step prediction errors of a Kalman filter of the model (the "
+        f"nonlinear model predicts, the steady-state gain of its linearization at the parameters "
+        f"corrects), weighted by their covariance, the filter's initial state estimated; started "
+        f"from a multiple-shooting fit ({n_seg} segments of {L} samples, {seg_seconds:g} s); the "
+        f"logged input replayed with zero-order hold; RK4 at <= {max_step:g} s "
         f"({'compiled' if backend == 'compiled' else 'scipy solve_ivp'}); "
-        f"scipy least_squares (trf), {sol.nfev} evaluations"
+        f"scipy least_squares (trf), {nfev} evaluations"
     )
     params = dict(system.params)
     for a, name in enumerate(prob.free):
         params[name] = float(theta[a])
-    x0 = dict(zip(system.state_names, xs[0].tolist(), strict=True))
+    x_init = dict(zip(system.state_names, x0.tolist(), strict=True))
     return Identification(
         system=system.key,
         params=params,
@@ -940,9 +1195,10 @@ def _answer(system: System, log: Log, prob: _Problem, sol: Any, theta0: np.ndarr
         measured=log.outputs,
         replayed=replayed,
         segment_starts=prob.bounds[:-1].copy(),
-        initial_state=x0,
+        initial_state=x_init,
         method={
-            "name": "multiple shooting",
+            "name": "prediction error",
+            "start": "multiple shooting",
             "description": desc,
             "segments": n_seg,
             "segment_samples": L,
@@ -952,14 +1208,14 @@ def _answer(system: System, log: Log, prob: _Problem, sol: Any, theta0: np.ndarr
             "backend": backend,
             "samples": log.n_rows,
             "duration": log.duration,
-            "evaluations": int(sol.nfev),
+            "evaluations": nfev,
             "residual_variance": s2,
-            "converged": bool(sol.success),
+            "converged": bool(psol.success),
         },
         source=log.source,
         noise={
-            "sensor_std": dict(zip(log.output_names, prob.sigma_y.tolist(), strict=True)),
-            "process_intensity": dict(zip(system.state_names, q.tolist(), strict=True)),
+            "sensor_std": dict(zip(log.output_names, pred.sigma_y.tolist(), strict=True)),
+            "process_intensity": dict(zip(system.state_names, pred.q.tolist(), strict=True)),
             "process_scale": q_scale,
         },
     )
