@@ -29,6 +29,15 @@ Conventions of the core (all arrays float64 unless said otherwise):
 - Randomness: xoshiro256** on a 4-word ``uint64`` state per run, normal
   deviates by Marsaglia's polar method, drawn in a fixed order (the measurement noise of a
   sample, then the process noise of each of its physics steps).
+- Work is done only when asked: the trajectory is written with
+  ``iopts[_IO_RECORD]``, the accumulators (peaks, sums) with
+  ``iopts[_IO_ACCUMULATE]``, and the controller's estimate is computed only
+  for one of them. A noise-free RK4 step skips the (zero) noise terms when
+  that gives the same bits (no state is a negative zero).
+- Stopping: ``run_one`` and ``run_many`` read a one-element ``int64`` array
+  *stop* at every sample and every 4096 physics steps and return when it is
+  non-zero. They release the GIL, so another Python thread (the one that
+  receives Ctrl-C) can set it while they run.
 
 Nothing allocates inside the loops over samples and physics steps; scratch
 space is allocated once per run (or per call of a Python-facing entry).
@@ -174,6 +183,35 @@ def _rk4(x, u, p, w, h, k1, k2, k3, k4, xt):
     _fjit(xt, u, p, k4)
     for i in range(_N):
         x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i] + 6.0 * w[i])
+
+
+@_inline
+def _rk4_free(x, u, p, h, k1, k2, k3, k4, xt):
+    """``_rk4`` without process noise: the same bits as ``_rk4`` with ``w = 0`` unless a
+    state is a negative zero (see ``_no_negative_zero``)."""
+    _fjit(x, u, p, k1)
+    for i in range(_N):
+        xt[i] = x[i] + 0.5 * h * k1[i]
+    _fjit(xt, u, p, k2)
+    for i in range(_N):
+        xt[i] = x[i] + 0.5 * h * k2[i]
+    _fjit(xt, u, p, k3)
+    for i in range(_N):
+        xt[i] = x[i] + h * k3[i]
+    _fjit(xt, u, p, k4)
+    for i in range(_N):
+        x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+
+
+@_inline
+def _no_negative_zero(x):
+    """True unless a state is ``-0.0``: the only case where adding a zero noise term
+    (``k + 0.0`` turns ``-0.0`` into ``+0.0``) changes an RK4 step's result."""
+    clean = True
+    for i in range(_N):
+        if x[i] == 0.0 and math.copysign(1.0, x[i]) < 0.0:
+            clean = False
+    return clean
 
 
 @_bare
@@ -322,12 +360,13 @@ def _measure(x, c_idx, lv, rng, y, zbuf):
 def _advance(
     k, x, u_app, op, p_sets, p_switch, lin_s, region, kicks, kick_value, pulses, pulse_value,
     lw, rng, iopts, fopts, status, pcur, k1, k2, k3, k4, xt, ubuf, wvec, zbuf, xprev, fell_x, wk,
+    stop,
 ):
-    """The physics steps between samples *k* and *k + 1*; True when the run fell.
+    """The physics steps between samples *k* and *k + 1*; True when the run fell or was stopped.
 
     *pcur* holds the parameter set in force; *wk* is the adaptive
     integrator's scratch (its row 12 carries the step size from one physics
-    step to the next within the sample).
+    step to the next within the sample). *stop* is read every 4096 steps.
     """
     n = _N
     m = _M
@@ -341,6 +380,8 @@ def _advance(
     wk[12, 0] = h
     for j in range(n_sub):
         s = k * n_sub + j
+        if (j & 4095) == 4095 and stop[0] != 0:
+            return True
         _switch(p_sets, p_switch, s, pcur)
         for e in range(kicks.shape[0]):
             if kicks[e, 0] == s:
@@ -360,7 +401,10 @@ def _advance(
         for i in range(n):
             xprev[i] = x[i]
         if integrator == _INT_RK4:
-            _rk4(x, ubuf, pcur, wvec, h, k1, k2, k3, k4, xt)
+            if nw == 0 and _no_negative_zero(x):
+                _rk4_free(x, ubuf, pcur, h, k1, k2, k3, k4, xt)
+            else:
+                _rk4(x, ubuf, pcur, wvec, h, k1, k2, k3, k4, xt)
         elif integrator == _INT_ADAPTIVE:
             ok = _dopri(x, ubuf, pcur, wvec, h, fopts[_FO_RTOL], fopts[_FO_ATOL], wk)
         else:
@@ -389,7 +433,7 @@ def _run(
     k_start, k_end, iopts, fopts, x, z, u_prev, rng,
     op, c_idx, cp, ref, uff, lv, lw,
     p_sets, p_switch, lin_s, region, kicks, kick_value, pulses, pulse_value,
-    rec_cols, acc_cols, rec, acc, status, scr,
+    rec_cols, acc_cols, rec, acc, status, scr, stop,
 ):
     """Samples ``k_start .. k_end - 1`` of one closed-loop run (resumable).
 
@@ -402,15 +446,20 @@ def _run(
 
     At each sample: measure, ``controller_output`` (plus *uff*), saturate
     with the limits of the parameter set in force (and delay), record and
-    accumulate, then ``controller_update`` with the input that acts.
+    accumulate (each only if asked), then ``controller_update`` with the
+    input that acts. A non-zero ``stop[0]`` ends the call at the next
+    sample (or within 4096 physics steps); the run is then unfinished.
     """
     n = _N
     m = _M
     n_samples = iopts[_IO_N_SAMPLES]
     record = iopts[_IO_RECORD] != 0
+    accumulate = iopts[_IO_ACCUMULATE] != 0
     delay = iopts[_IO_DELAY] != 0
     n_sub = iopts[_IO_N_SUB]
-    estimates = iopts[_IO_ESTIMATES] != 0
+    has_estimate = iopts[_IO_ESTIMATES] != 0
+    # The estimate is computed only where it is recorded or accumulated.
+    estimates = has_estimate and (record or accumulate)
     rate = fopts[_FO_RATE]
     ny = c_idx.shape[0]
     nz = z.shape[0]
@@ -449,6 +498,8 @@ def _run(
     a_est = acc_cols[_ACC_SUM_EST2]
     a_peak_app = acc_cols[_ACC_PEAK_U_APP]
     for k in range(k_start, k_end):
+        if stop[0] != 0:
+            return
         _switch(p_sets, p_switch, k * n_sub, pcur)
         if k == 0:
             for i in range(m):
@@ -477,17 +528,18 @@ def _run(
                 rec[k, c_cmd + i] = u_cmd[i]
                 rec[k, c_sat + i] = u_sat[i]
                 rec[k, c_app + i] = u_app[i]
-        for i in range(m):
-            acc[a_peak + i] = max(acc[a_peak + i], abs(u_cmd[i]))
-            acc[a_peak_app + i] = max(acc[a_peak_app + i], abs(u_app[i]))
-            acc[a_u2 + i] += u_app[i] * u_app[i]
-        if saturated:
-            acc[a_sat] += 1.0
-        for i in range(n):
-            acc[a_dx + i] = max(acc[a_dx + i], abs(x[i] - op[i]))
-            if estimates:
-                e = xhat[i] - x[i]
-                acc[a_est + i] += e * e
+        if accumulate:
+            for i in range(m):
+                acc[a_peak + i] = max(acc[a_peak + i], abs(u_cmd[i]))
+                acc[a_peak_app + i] = max(acc[a_peak_app + i], abs(u_app[i]))
+                acc[a_u2 + i] += u_app[i] * u_app[i]
+            if saturated:
+                acc[a_sat] += 1.0
+            for i in range(n):
+                acc[a_dx + i] = max(acc[a_dx + i], abs(x[i] - op[i]))
+                if estimates:
+                    e = xhat[i] - x[i]
+                    acc[a_est + i] += e * e
         status[_ST_ROWS] = k + 1
         if nz > 0:
             controller_update(t, z, y, r, u_app, cp, znew)
@@ -507,17 +559,21 @@ def _run(
         if _advance(
             k, x, u_app, op, p_sets, p_switch, lin_s, region, kicks, kick_value, pulses,
             pulse_value, lw, rng, iopts, fopts, status, pcur, k1, k2, k3, k4, xt, ubuf, wvec,
-            zbuf, xprev, fell_x, wk,
+            zbuf, xprev, fell_x, wk, stop,
         ):
             return
 
 
-@_jit
+# Never set: the stop flag of the entries that are not stopped (advance_one).
+_NO_STOP = np.zeros(1, dtype=np.int64)
+
+
+@njit(cache=True, error_model="numpy", nogil=True)
 def run_one(
     k_start, k_end, iopts, fopts, x, z, u_prev, rng,
     op, c_idx, cp, ref, uff, lv, lw,
     p_sets, p_switch, lin_s, region, kicks, kick_value, pulses, pulse_value,
-    rec_cols, acc_cols, rec, acc, status, fell_x,
+    rec_cols, acc_cols, rec, acc, status, fell_x, stop,
 ):
     """One run (or a resumable piece of one): see ``_run``; *fell_x* gets the state at a fall."""
     scr = _scratch(p_sets.shape[1], c_idx.shape[0], lw.shape[1], z.shape[0])
@@ -525,20 +581,21 @@ def run_one(
         k_start, k_end, iopts, fopts, x, z, u_prev, rng,
         op, c_idx, cp, ref, uff, lv, lw,
         p_sets, p_switch, lin_s, region, kicks, kick_value, pulses, pulse_value,
-        rec_cols, acc_cols, rec, acc, status, scr,
+        rec_cols, acc_cols, rec, acc, status, scr, stop,
     )
     for i in range(_N):
         fell_x[i] = scr[_S_FELL_X, i]
 
 
-@njit(cache=True, error_model="numpy", parallel=True)
+@njit(cache=True, error_model="numpy", parallel=True, nogil=True)
 def run_many(
     iopts, fopts, x0s, z0, rngs,
     op, c_idx, cp, ref, uff, lv, lw,
     p_sets_r, p_switch, lin_r, region, kicks, kick_value, pulses, pulse_value,
-    rec_cols, acc_cols, recs, accs, statuses, fell_xs, x_ends,
+    rec_cols, acc_cols, recs, accs, statuses, fell_xs, x_ends, stop,
 ):
-    """Independent runs over the leading axis of the per-run arrays, in parallel."""
+    """Independent runs over the leading axis of the per-run arrays, in parallel (each
+    stops at a non-zero ``stop[0]``)."""
     n_runs = x0s.shape[0]
     n_rows = iopts[_IO_N_SAMPLES] + 1
     for r in prange(n_runs):
@@ -551,7 +608,7 @@ def run_many(
             0, n_rows, iopts, fopts, x, z, u_prev, rng,
             op, c_idx, cp, ref, uff, lv, lw,
             p_sets_r[r], p_switch, lin_r[r], region, kicks, kick_value, pulses, pulse_value,
-            rec_cols, acc_cols, recs[r], accs[r], statuses[r], scr,
+            rec_cols, acc_cols, recs[r], accs[r], statuses[r], scr, stop,
         )
         for i in range(_N):
             x_ends[r, i] = x[i]
@@ -588,7 +645,7 @@ def _advance_bare(
     return _advance(
         k, x, u_app, op, p_sets, p_switch, lin_s, region, kicks, kick_value, pulses,
         pulse_value, lw, rng, iopts, fopts, status, pcur, k1, k2, k3, k4, xt, ubuf, wvec,
-        zbuf, xprev, fell_x, wk,
+        zbuf, xprev, fell_x, wk, _NO_STOP,
     )
 
 

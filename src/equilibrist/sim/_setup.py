@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+import weakref
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -170,10 +171,12 @@ class Setup:
         """The nonlinear controller whose kernel runs this setup, if any."""
         return self.controller if isinstance(self.controller, NonlinearController) else None
 
-    def iopts(self, *, record: bool = True) -> np.ndarray:
+    def iopts(self, *, record: bool = True, accumulate: bool = True) -> np.ndarray:
+        """The core's integer options: *record* the trajectory, *accumulate* the peaks
+        and sums of a batch's outcomes (a single run's come from its trajectory)."""
         return layout.IOPTS.pack(
             np.int64, n_samples=self.n_samples, record=int(record), delay=int(self.delay),
-            n_sub=self.n_sub, estimates=int(self.estimates),
+            n_sub=self.n_sub, estimates=int(self.estimates), accumulate=int(accumulate),
             integrator=layout.INTEGRATORS["linear" if self.plant == "linear" else self.integrator],
         )
 
@@ -183,15 +186,17 @@ class Setup:
 
     @property
     def sizes(self) -> dict[str, int]:
-        return {"n": self.system.n_states, "m": self.system.n_inputs, "ny": len(self.outputs)}
+        return {"n": self.x_op.shape[0], "m": self.u_op.shape[0], "ny": len(self.outputs)}
 
     @property
     def rec_cols(self) -> np.ndarray:
-        return layout.RECORD.offsets(**self.sizes)
+        return layout.RECORD.offsets(n=self.x_op.shape[0], m=self.u_op.shape[0],
+                                     ny=len(self.outputs))
 
     @property
     def acc_cols(self) -> np.ndarray:
-        return layout.ACC.offsets(**self.sizes)
+        return layout.ACC.offsets(n=self.x_op.shape[0], m=self.u_op.shape[0],
+                                  ny=len(self.outputs))
 
     @property
     def record_width(self) -> int:
@@ -366,12 +371,40 @@ def _names(value: object) -> bool:
             and all(isinstance(v, str) for v in value))
 
 
+# What is known of a system (it is immutable): whether it has a canonical
+# operating point, and initial states checked regular. Solving the point
+# and the mass matrix's condition number cost more than a short run.
+_KNOWN: weakref.WeakKeyDictionary[System, dict[Any, bool]] = weakref.WeakKeyDictionary()
+_KNOWN_MAX = 256
+
+
+def _known(system: System) -> dict[Any, bool]:
+    known = _KNOWN.get(system)
+    if known is None or len(known) > _KNOWN_MAX:
+        known = _KNOWN[system] = {}
+    return known
+
+
 def _has_operating_point(system: System) -> bool:
-    try:
-        system.operating_point()
-    except NoEquilibriumError:
-        return False
-    return True
+    known = _known(system)
+    found = known.get("operating point")
+    if found is None:
+        try:
+            system.operating_point()
+            found = True
+        except NoEquilibriumError:
+            found = False
+        known["operating point"] = found
+    return found
+
+
+def _check_regular(system: System, x: np.ndarray) -> None:
+    """``system.check_regular(x)``, remembered for the states it passed."""
+    known = _known(system)
+    key = x.tobytes()
+    if key not in known:
+        system.check_regular(x)
+        known[key] = True
 
 
 def operating_point(system: System, controller: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -548,7 +581,7 @@ def build(
     x_init = _initial_state(system, x0, x_op, problems)
     if not problems:
         try:
-            system.check_regular(x_init)
+            _check_regular(system, x_init)
         except EquilibristError as exc:
             problems.append(f"the initial state is not usable: {exc}")
 
@@ -737,6 +770,7 @@ def build(
     check_memory(n_rows * (2 * n + ny + 4 * m + 2 * max(len(tracked), len(ctrl_tracked)) + 2) * 8.0,
                  f"a run of {n_rows} samples", None)
     times = np.arange(n_samples + 1) / run_rate
+    times.flags.writeable = False  # shared by the results' time axes
     ref = np.zeros((n_rows, len(tracked)))
     if ref_signal is not None:
         ref = np.ascontiguousarray(ref_signal.evaluate(times, x_op[r_idx]), dtype=float)

@@ -47,12 +47,11 @@ from equilibrist.sim.noise import (
 )
 from equilibrist.sim.result import SimResult, check_result_path, read_npz
 from equilibrist.sim.run import (
-    _FIRST_CHUNK_STEPS,
     _progress_bar,
     _result,
     _run_python,
+    call_interruptibly,
     fall_reason,
-    next_chunk,
 )
 
 # Format 2 adds the peak command beside the peak input applied.
@@ -444,11 +443,11 @@ def simulate_batch(
         (default :data:`~equilibrist.sim._setup.DEFAULT_MAX_STEPS`); a batch
         that needs more is refused before it starts. None: no bound.
 
-    The runs are made in calls of the compiled core of bounded wall time
-    (:data:`~equilibrist.sim.run.CHUNK_SECONDS`, groups of runs sized from
-    the measured speed), so Ctrl-C stops a batch between two of them; a
-    group has at least one run per thread, so a batch whose single runs
-    each take longer than that is stopped after its current runs.
+    The runs are made in one call of the compiled core, which hands them
+    to the threads a few at a time (so that runs that end early, having
+    fallen, leave no thread idle) and reads a stop flag at every sample:
+    Ctrl-C stops a batch at once, however long its runs
+    (:func:`~equilibrist.sim.run.call_interruptibly`).
 
     Other parameters are those of :func:`~equilibrist.sim.run.simulate`.
     Linear and nonlinear controllers run compiled, in threads; Python
@@ -511,43 +510,56 @@ def simulate_batch(
     statuses = np.zeros((runs, len(layout.STATUS)), dtype=np.int64)
     fell_xs = np.zeros((runs, n))
     x_ends = np.zeros((runs, n))
+    stop = np.zeros(1, dtype=np.int64)
     shared = dict(
         iopts=setup.iopts(record=record), fopts=setup.fopts, z0=setup.z0, op=setup.op,
         c_idx=setup.c_idx, cp=setup.cp, ref=setup.ref, uff=setup.uff, lv=setup.lv, lw=setup.lw,
         p_switch=setup.p_switch, region=setup.region, kicks=setup.kicks,
         kick_value=setup.kick_value, pulses=setup.pulses, pulse_value=setup.pulse_value,
-        rec_cols=setup.rec_cols, acc_cols=setup.acc_cols,
+        rec_cols=setup.rec_cols, acc_cols=setup.acc_cols, stop=stop,
+        core=kernel.core(setup.cp),
     )
-    threads = set_workers(workers)
-    steps_per_run = setup.n_samples * setup.n_sub
-    chunk = max(threads, math.ceil(_FIRST_CHUNK_STEPS / max(1, steps_per_run)))
 
     def run_arrays(sl: slice) -> dict[str, np.ndarray]:
         return dict(x0s=x0s[sl], rngs=rngs[sl], p_sets_r=p_sets_r[sl], lin_r=lin_r[sl],
                     recs=recs[sl], accs=accs[sl], statuses=statuses[sl], fell_xs=fell_xs[sl],
                     x_ends=x_ends[sl])
 
-    if not kernel.compiled:
-        # Load (or compile) the core outside the timing: steps_per_second is the runs' speed.
+    if not kernel.compiled(setup.cp):
+        # Load (or compile) the core here, outside the timing (steps_per_second is the
+        # runs' speed) and where Ctrl-C reaches it.
         kernel.run_many(**shared, **run_arrays(slice(0, 0)))
+    timing: list[float] = []
+
+    def work() -> None:
+        # Numba's thread count and chunk size belong to the thread that calls the core.
+        import numba
+
+        threads = set_workers(workers)
+        # A few runs at a time per thread (dynamic scheduling): runs that fall early
+        # leave no thread idle, and the hand-out costs nothing next to a run.
+        numba.set_parallel_chunksize(max(1, min(16, runs // (8 * threads))))
+        t0 = time.perf_counter()
+        try:
+            kernel.run_many(**shared, **run_arrays(slice(0, runs)))
+        finally:
+            timing.append(time.perf_counter() - t0)
+            numba.set_parallel_chunksize(0)
+
     bar = _progress_bar(runs, progress, "runs")
-    elapsed = 0.0
-    start = 0
+    st = layout.STATUS
+
+    def show() -> None:
+        if bar is not None:
+            done = (statuses[:, st["fell"]] != 0) | (statuses[:, st["rows"]] >= setup.n_rows)
+            bar.update(int(np.count_nonzero(done)) - bar.n)
+
     try:
-        while start < runs:
-            sl = slice(start, min(runs, start + chunk))
-            t0 = time.perf_counter()
-            kernel.run_many(**shared, **run_arrays(sl))
-            took = time.perf_counter() - t0
-            elapsed += took
-            # Whole groups of one run per thread: a smaller group leaves threads idle.
-            chunk = max(threads, next_chunk(sl.stop - sl.start, took) // threads * threads)
-            start = sl.stop
-            if bar is not None:
-                bar.update(sl.stop - sl.start)
+        call_interruptibly(work, stop, show)
     finally:
         if bar is not None:
             bar.close()
+    elapsed = timing[0]
     return _batch_result(setup, x0s, pmat, seqs, statuses, accs, fell_xs, x_ends,
                          recs if record else None, elapsed)
 

@@ -10,7 +10,18 @@ every built-in linear controller, or a
 :class:`~equilibrist.control.controller.NonlinearController`'s own source
 (with the linear library beside it). The result is written to the numeric
 cache folder, keyed by the generated module's hash and the hash of
-everything appended, as ``<system>_<hash>_sim_<hash>.py``. Its functions
+everything appended, as ``<system>_<hash>_sim_<hash>.py``.
+
+The core that runs a linear controller in ``simulate`` and
+``simulate_batch`` is generated for that controller's *pattern*
+(:func:`~equilibrist.control.controller.linear_pattern`: its sizes, and
+which coefficients are exact zeros and ones): the linear library is then
+written out term by term
+(:func:`~equilibrist.control.controller.linear_unrolled_source`), with the
+same results to the bit as the generic loops. An LQR and an LQG of a
+system are two cores, each compiled once and cached on disk; designs of the
+same kind for the same system share one (their zeros and ones are those of
+the form, not of the weights). Its functions
 are ``njit(cache=True)``, so numba keeps their machine code in that
 folder's ``__pycache__``: a process compiles a system's core once (per
 nonlinear controller source), later processes load it.
@@ -49,7 +60,9 @@ from equilibrist.control.controller import (
     NonlinearController,
     check_source,
     linear_layout_source,
+    linear_pattern,
     linear_sizes,
+    linear_unrolled_source,
 )
 from equilibrist.numeric.cache import import_generated, write_generated
 from equilibrist.numeric.system import System
@@ -71,6 +84,9 @@ _BY_SECTION: dict[tuple[Path, str], types.ModuleType] = {}  # the same key -> lo
 #: The sizes of a linear controller, ``(nz, ny, nr, m, n)``.
 Sizes = tuple[int, int, int, int, int]
 _SIZE_KEYS = ("nz", "ny", "nr", "m", "n")
+#: What the linear library of a core is specialized to: a controller's sizes (its loops
+#: with literal trip counts), or its :func:`linear_pattern` (written out term by term).
+Linear = Sizes | bytes
 
 
 def _template_body() -> str:
@@ -89,7 +105,7 @@ _SECTIONS: dict[str, str] = {}
 
 
 def controller_section(controller: NonlinearController | None = None,
-                       sizes: Sizes | None = None) -> str:
+                       sizes: Linear | None = None) -> str:
     """The generated source between the system's ``f`` and the core's body.
 
     The layout's constants, the linear library, and the functions the core
@@ -98,12 +114,16 @@ def controller_section(controller: NonlinearController | None = None,
     Every function of the section is compiled like the core's helpers
     (no reference counting), so a controller may slice its arrays freely.
 
-    With *sizes* (a linear controller's ``nz, ny, nr, m, n``; only without
-    *controller*) the linear library's sizes and offsets are literals of
-    the section (:func:`~equilibrist.control.controller.linear_layout_source`):
-    the core of one linear controller, with its loops unrolled. Without,
-    they are read from the packed vector (any linear controller, and the
-    linear controllers a nonlinear one embeds).
+    Only without *controller*: with *sizes* a linear controller's
+    ``nz, ny, nr, m, n``, the linear library's sizes and offsets are
+    literals of the section
+    (:func:`~equilibrist.control.controller.linear_layout_source`), so
+    numba unrolls its loops; with a pattern (bytes, from
+    :func:`~equilibrist.control.controller.linear_pattern`) the library is
+    written out term by term for that pattern
+    (:func:`~equilibrist.control.controller.linear_unrolled_source`).
+    Without either, they are read from the packed vector (any linear
+    controller, and the linear controllers a nonlinear one embeds).
     """
     if controller is not None and sizes is not None:
         raise ValueError("fixed linear sizes are for the linear controller's own core")
@@ -112,10 +132,13 @@ def controller_section(controller: NonlinearController | None = None,
     known = _SECTIONS.get(key)
     if known is not None:
         return known
-    fixed = None if sizes is None else dict(zip(_SIZE_KEYS, sizes, strict=True))
+    if isinstance(sizes, bytes):
+        library = linear_unrolled_source(sizes)
+    else:
+        fixed = None if sizes is None else dict(zip(_SIZE_KEYS, sizes, strict=True))
+        library = linear_layout_source(fixed) + LINEAR_SOURCE
     parts = ["# --- calling convention (equilibrist.sim.layout) ---\n",
-             layout.constants_source(), "\n", _CONTROLLER_JIT, linear_layout_source(fixed),
-             LINEAR_SOURCE, "\n"]
+             layout.constants_source(), "\n", _CONTROLLER_JIT, library, "\n"]
     names = ["linear_layout", *LINEAR_FUNCTIONS]
     if controller is None:
         binding = ("controller_output = linear_output\n"
@@ -136,7 +159,7 @@ def controller_section(controller: NonlinearController | None = None,
 
 
 def kernel_path(system: System, controller: NonlinearController | None = None,
-                sizes: Sizes | None = None) -> Path:
+                sizes: Linear | None = None) -> Path:
     """Where the kernel module of *system* (and *controller*, or a linear controller's
     *sizes*) lives in the cache (written if missing)."""
     module_path = system.compiled.module_path
@@ -157,12 +180,12 @@ def kernel_path(system: System, controller: NonlinearController | None = None,
 
 
 def load_kernel(system: System, controller: NonlinearController | None = None,
-                sizes: Sizes | None = None) -> types.ModuleType:
+                sizes: Linear | None = None) -> types.ModuleType:
     """The compiled core of *system* (a module whose entries compile on first call).
 
     With a nonlinear *controller*, the core that runs it (one per source);
-    with a linear controller's *sizes*, the core specialized to them (see
-    :func:`controller_section`).
+    with a linear controller's *sizes* or pattern, the core specialized to
+    them (see :func:`controller_section`).
     """
     key = (system.compiled.module_path, controller_section(controller, sizes))
     loaded = _BY_SECTION.get(key)
@@ -178,6 +201,25 @@ def load_kernel(system: System, controller: NonlinearController | None = None,
     return module
 
 
+_KEYS: dict[bytes, Linear | None] = {}  # packed controller -> what its core is made for
+
+
+def _linear_key(cp: Any) -> Linear | None:
+    """The pattern (or the sizes) the core of packed linear controller *cp* is made for."""
+    raw = cp.tobytes()
+    if raw in _KEYS:
+        return _KEYS[raw]
+    key: Linear | None = linear_pattern(cp)
+    if key is None:
+        found = linear_sizes(cp)
+        if found is not None:
+            key = (found["nz"], found["ny"], found["nr"], found["m"], found["n"])
+    if len(_KEYS) > 1024:
+        _KEYS.clear()
+    _KEYS[raw] = key
+    return key
+
+
 class Kernel:
     """A loaded core, called with keyword arguments only.
 
@@ -186,58 +228,66 @@ class Kernel:
     place that passes them in order.
 
     Without a nonlinear controller, ``run_one`` and ``run_many`` run in the
-    core specialized to the sizes of the packed linear controller they are
-    given (``cp``; one module per system and sizes, loaded on first use);
-    the other entries, and a nonlinear controller's runs, in :attr:`module`.
+    core specialized to the packed linear controller they are given (``cp``:
+    its :func:`~equilibrist.control.controller.linear_pattern`, or its sizes
+    when it is too large to write out; one module per system and pattern,
+    loaded on first use); the other entries, and a nonlinear controller's
+    runs, in :attr:`module`.
+
+    ``run_one`` and ``run_many`` release the GIL and return early when
+    ``stop[0]`` (a one-element ``int64`` array) is set, from another thread.
     """
 
     def __init__(self, system: System, controller: NonlinearController | None = None) -> None:
         self.system = system
         self.controller = controller
         self.module = load_kernel(system, controller)
-        self._core: types.ModuleType | None = None
-        self._core_sizes: Sizes | None = None
+        self._cores: dict[Linear, types.ModuleType] = {}
+        self._last: types.ModuleType | None = None
 
     def core(self, cp: Any) -> types.ModuleType:
         """The module whose ``run_one``/``run_many`` run controller parameters *cp*."""
         if self.controller is not None:
             return self.module
-        found = linear_sizes(cp)
-        if found is None:
+        key = _linear_key(cp)
+        if key is None:
             return self.module
-        sizes: Sizes = (found["nz"], found["ny"], found["nr"], found["m"], found["n"])
-        if self._core is None or sizes != self._core_sizes:
-            self._core = load_kernel(self.system, None, sizes)
-            self._core_sizes = sizes
-        return self._core
+        module = self._cores.get(key)
+        if module is None:
+            module = self._cores[key] = load_kernel(self.system, None, key)
+        self._last = module
+        return module
 
-    @property
-    def compiled(self) -> bool:
-        """Whether ``run_many`` is compiled (or loaded) in this process already
-        (for a linear controller: in the core of the last sizes it ran)."""
-        module = self.module if self.controller is not None else self._core
-        return module is not None and bool(module.run_many.overloads)
+    def compiled(self, cp: Any) -> bool:
+        """Whether ``run_one`` and ``run_many`` for controller parameters *cp* are compiled
+        (or loaded from the cache) in this process already."""
+        module = self.core(cp)
+        return bool(module.run_one.overloads) and bool(module.run_many.overloads)
 
     def run_one(self, *, k_start: int, k_end: int, iopts: Any, fopts: Any, x: Any, z: Any,
                 u_prev: Any, rng: Any, op: Any, c_idx: Any, cp: Any, ref: Any, uff: Any,
                 lv: Any, lw: Any, p_sets: Any, p_switch: Any, lin_s: Any, region: Any,
                 kicks: Any, kick_value: Any, pulses: Any, pulse_value: Any, rec_cols: Any,
-                acc_cols: Any, rec: Any, acc: Any, status: Any, fell_x: Any) -> None:
-        self.core(cp).run_one(
+                acc_cols: Any, rec: Any, acc: Any, status: Any, fell_x: Any,
+                stop: Any, core: Any = None) -> None:
+        """One run, or samples ``k_start .. k_end - 1`` of one (*core*: :meth:`core` of *cp*,
+        if the caller has it already)."""
+        (core or self.core(cp)).run_one(
             k_start, k_end, iopts, fopts, x, z, u_prev, rng, op, c_idx, cp, ref, uff, lv, lw,
             p_sets, p_switch, lin_s, region, kicks, kick_value, pulses, pulse_value,
-            rec_cols, acc_cols, rec, acc, status, fell_x,
+            rec_cols, acc_cols, rec, acc, status, fell_x, stop,
         )
 
     def run_many(self, *, iopts: Any, fopts: Any, x0s: Any, z0: Any, rngs: Any, op: Any,
                  c_idx: Any, cp: Any, ref: Any, uff: Any, lv: Any, lw: Any, p_sets_r: Any,
                  p_switch: Any, lin_r: Any, region: Any, kicks: Any, kick_value: Any,
                  pulses: Any, pulse_value: Any, rec_cols: Any, acc_cols: Any, recs: Any,
-                 accs: Any, statuses: Any, fell_xs: Any, x_ends: Any) -> None:
-        self.core(cp).run_many(
+                 accs: Any, statuses: Any, fell_xs: Any, x_ends: Any, stop: Any,
+                 core: Any = None) -> None:
+        (core or self.core(cp)).run_many(
             iopts, fopts, x0s, z0, rngs, op, c_idx, cp, ref, uff, lv, lw, p_sets_r, p_switch,
             lin_r, region, kicks, kick_value, pulses, pulse_value, rec_cols, acc_cols, recs,
-            accs, statuses, fell_xs, x_ends,
+            accs, statuses, fell_xs, x_ends, stop,
         )
 
     def measure_one(self, *, x: Any, c_idx: Any, lv: Any, rng: Any, y: Any) -> None:

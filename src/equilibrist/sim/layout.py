@@ -45,6 +45,9 @@ class Slots:
         return {f"_{self.prefix}_{n.upper()}": i for i, n in enumerate(self.names)}
 
 
+_OFFSETS: dict[tuple[str, tuple[tuple[str, int], ...]], np.ndarray] = {}
+
+
 @dataclass(frozen=True)
 class Blocks:
     """Consecutive blocks of columns whose widths depend on the run's sizes.
@@ -60,12 +63,16 @@ class Blocks:
         return {name: (1 if sym == "1" else int(sizes[sym])) for name, sym in self.blocks}
 
     def offsets(self, **sizes: int) -> np.ndarray:
-        """Start column of each block, then the total width (``int64``)."""
-        widths = self.sizes(sizes)
-        out = np.zeros(len(self.blocks) + 1, dtype=np.int64)
-        for i, (name, _sym) in enumerate(self.blocks):
-            out[i + 1] = out[i] + widths[name]
-        return out
+        """Start column of each block, then the total width (``int64``; a new array)."""
+        key = tuple(sorted(sizes.items()))
+        known = _OFFSETS.get((self.prefix, key))
+        if known is None:
+            widths = self.sizes(sizes)
+            known = np.zeros(len(self.blocks) + 1, dtype=np.int64)
+            for i, (name, _sym) in enumerate(self.blocks):
+                known[i + 1] = known[i] + widths[name]
+            _OFFSETS[(self.prefix, key)] = known
+        return known.copy()
 
     def slices(self, **sizes: int) -> dict[str, slice]:
         off = self.offsets(**sizes)
@@ -80,8 +87,10 @@ class Blocks:
         return out
 
 
-#: Integer options of a run.
-IOPTS = Slots("IO", ("n_samples", "record", "delay", "n_sub", "integrator", "estimates"))
+#: Integer options of a run: ``record`` the trajectory, ``accumulate`` the peaks and sums;
+#: ``estimates`` whether the controller has an estimate (computed only for one of them).
+IOPTS = Slots("IO", ("n_samples", "record", "delay", "n_sub", "integrator", "estimates",
+                     "accumulate"))
 #: Float options of a run (``rate`` gives the sample times ``t_k = k / rate``).
 FOPTS = Slots("FO", ("h", "rtol", "atol", "rate"))
 #: A run's status (``int64``): rows written, fell (0/1), the fell code, the physics step it fell.

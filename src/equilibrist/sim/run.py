@@ -25,9 +25,10 @@ operating point; the result is reported in absolute ones.
 from __future__ import annotations
 
 import sys
+import threading
 import time
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -39,12 +40,19 @@ from equilibrist.sim.kernel import Kernel
 from equilibrist.sim.noise import Noise, SeedLike, describe_seed, generator_state, seed_sequence
 from equilibrist.sim.result import SimResult
 
-# The compiled core does not see signals: a long run is made of calls of
-# bounded wall time (the core resumes a run at any sample), and Ctrl-C,
-# handled between them, stops a run within about this long. The first call
-# is short; the next are sized from the measured speed.
+# A run of at most this many physics steps (RK4 or the linear plant) is one
+# call of the compiled core in the calling thread: a few milliseconds, too
+# short for Ctrl-C to wait for, too short to pay for a thread. A longer run
+# is made in the helper thread of `call_interruptibly`, in calls of the core
+# that grow to about CHUNK_SECONDS each (the core resumes a run at any
+# sample); the core reads a stop flag at every sample, so Ctrl-C stops it
+# at once whatever the size of a call.
 CHUNK_SECONDS = 0.2
 _FIRST_CHUNK_STEPS = 20_000
+# How often the waiting thread looks at the run (progress bar, Ctrl-C) [s].
+_POLL_SECONDS = 0.05
+
+T = TypeVar("T")
 
 
 def next_chunk(chunk: int, seconds: float) -> int:
@@ -52,6 +60,45 @@ def next_chunk(chunk: int, seconds: float) -> int:
     if seconds <= 0:
         return chunk * 4
     return max(1, min(chunk * 4, int(chunk * CHUNK_SECONDS / seconds)))
+
+
+def call_interruptibly(work: Callable[[], T], stop: np.ndarray,
+                       poll: Callable[[], None] | None = None) -> T:
+    """``work()``, a call of the compiled core that reads *stop*, stoppable by Ctrl-C.
+
+    Signals reach Python only in the main thread, and only between bytecodes:
+    while the core runs there, Ctrl-C waits for it. So from the main thread
+    *work* runs in a helper thread (the core's entries release the GIL) while
+    this one waits in short intervals, calling *poll* (a progress bar). A
+    KeyboardInterrupt (Ctrl-C; on the command line SIGTERM too) sets
+    ``stop[0]``, which the core reads at every sample, waits for the helper
+    to return and is raised again. From any other thread, which receives no
+    signals, *work* runs right there.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return work()
+    box: dict[str, Any] = {}
+
+    def target() -> None:
+        try:
+            box["value"] = work()
+        except BaseException as exc:  # handed to the waiting thread
+            box["error"] = exc
+
+    helper = threading.Thread(target=target, name="equilibrist-core", daemon=True)
+    helper.start()
+    try:
+        while helper.is_alive():
+            helper.join(_POLL_SECONDS)
+            if poll is not None:
+                poll()
+    except BaseException:
+        stop[0] = 1
+        helper.join()
+        raise
+    if "error" in box:
+        raise box["error"]
+    return box["value"]
 
 
 def fall_reason(code: int, state_names: Sequence[str]) -> str:
@@ -171,39 +218,54 @@ def _progress_bar(total: int, enabled: bool, unit: str) -> Any:
 def _run_compiled(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
                   seq: np.random.SeedSequence | None, progress: bool) -> SimResult:
     n = setup.system.n_states
-    m = setup.system.n_inputs
     x = setup.x0.copy()
-    z = setup.z0.copy()
-    u_prev = np.zeros(m)
     p_sets = setup.p_sets(np.array(setup.system.p))
     rec = np.empty((setup.n_rows, setup.record_width))
-    acc = np.zeros(setup.acc_len)
     status = np.zeros(len(layout.STATUS), dtype=np.int64)
     fell_x = np.zeros(n)
+    stop = np.zeros(1, dtype=np.int64)
+    core = kernel.core(setup.cp)
+    # A single run's metrics come from its trajectory: nothing is accumulated.
     arrays = dict(
-        iopts=setup.iopts(), fopts=setup.fopts, x=x, z=z, u_prev=u_prev, rng=rng, op=setup.op,
-        c_idx=setup.c_idx, cp=setup.cp, ref=setup.ref, uff=setup.uff, lv=setup.lv, lw=setup.lw,
-        p_sets=p_sets, p_switch=setup.p_switch, lin_s=setup.linear_blocks(p_sets),
-        region=setup.region, kicks=setup.kicks, kick_value=setup.kick_value,
-        pulses=setup.pulses, pulse_value=setup.pulse_value, rec_cols=setup.rec_cols,
-        acc_cols=setup.acc_cols, rec=rec, acc=acc, status=status, fell_x=fell_x,
+        iopts=setup.iopts(accumulate=False), fopts=setup.fopts, x=x, z=setup.z0.copy(),
+        u_prev=np.zeros(setup.system.n_inputs), rng=rng, op=setup.op, c_idx=setup.c_idx,
+        cp=setup.cp, ref=setup.ref, uff=setup.uff, lv=setup.lv, lw=setup.lw, p_sets=p_sets,
+        p_switch=setup.p_switch, lin_s=setup.linear_blocks(p_sets), region=setup.region,
+        kicks=setup.kicks, kick_value=setup.kick_value, pulses=setup.pulses,
+        pulse_value=setup.pulse_value, rec_cols=setup.rec_cols, acc_cols=setup.acc_cols,
+        rec=rec, acc=np.zeros(setup.acc_len), status=status, fell_x=fell_x, stop=stop,
+        core=core,
     )
     total = setup.n_rows
-    chunk = max(1, _FIRST_CHUNK_STEPS // setup.n_sub)
-    bar = _progress_bar(total, progress, "samples")
-    k = 0
     rows, fell = layout.STATUS["rows"], layout.STATUS["fell"]
-    try:
-        while k < total:
+    if setup.integrator != "adaptive" and setup.n_samples * setup.n_sub <= _FIRST_CHUNK_STEPS:
+        kernel.run_one(k_start=0, k_end=total, **arrays)
+        return _result(setup, rec, int(status[rows]), status, fell_x, x, seq,
+                       estimates=setup.estimates)
+    if not core.run_one.overloads:  # compiled (or loaded) here: Ctrl-C can stop that
+        kernel.run_one(k_start=0, k_end=0, **arrays)
+
+    def pieces() -> None:
+        # Calls that grow to about CHUNK_SECONDS: the run resumes at any sample.
+        chunk = max(1, _FIRST_CHUNK_STEPS // setup.n_sub)
+        k = 0
+        while k < total and not stop[0]:
             k_end = min(total, k + chunk)
             t0 = time.perf_counter()
             kernel.run_one(k_start=k, k_end=k_end, **arrays)
             chunk = next_chunk(k_end - k, time.perf_counter() - t0)
-            if bar is not None:
-                bar.update(int(status[rows]) - bar.n)
             if status[fell] or status[rows] < k_end:
                 break
             k = k_end
+
+    bar = _progress_bar(total, progress, "samples")
+
+    def show() -> None:
+        if bar is not None:
+            bar.update(int(status[rows]) - bar.n)
+
+    try:
+        call_interruptibly(pieces, stop, show)
     finally:
         if bar is not None:
             bar.close()
@@ -306,10 +368,17 @@ def _outside(x: np.ndarray, region: np.ndarray) -> int:
 def _result(setup: _setup.Setup, rec: np.ndarray, rows: int, status: np.ndarray,
             fell_x: np.ndarray, x_end: np.ndarray, seq: np.random.SeedSequence | None,
             *, estimates: bool) -> SimResult:
+    """The result of a run recorded in *rec* (its first *rows* rows).
+
+    The result's arrays are read-only views of *rec* (which nothing else
+    keeps), not copies; a run that ended early is copied, so that it does
+    not keep the unused rows alive.
+    """
     sysm = setup.system
     cols = layout.RECORD.slices(**setup.sizes)
     st = layout.STATUS
-    r = rec[:rows]
+    r = rec[:rows] if 2 * rows > rec.shape[0] else rec[:rows].copy()
+    r.flags.writeable = False
     fell = bool(status[st["fell"]])
     settings = setup.describe()
     settings["seed"] = None if seq is None else describe_seed(seq)

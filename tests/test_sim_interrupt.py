@@ -1,0 +1,152 @@
+"""Ctrl-C (and SIGTERM) stop a long run or batch at once, whatever the size of its runs.
+
+The compiled core reads a stop flag at every sample and runs in a helper
+thread while the main thread, which receives the signals, waits; so a
+single run of minutes, or a batch whose every run takes minutes, stops
+within a fraction of a second, prints its one line and writes nothing.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from equilibrist.numeric.system import get_system
+from equilibrist.sim import simulate, simulate_batch
+
+# Each single run takes minutes: 2000 s of the cart-pole with a 10 us physics step is
+# 2e8 RK4 steps (more than ten seconds even on a fast core), 2e9 for the batch's runs.
+SIMULATE = ["simulate", "cartpole", "--duration", "2000", "--physics-step", "1e-5",
+            "--no-progress", "--noise", "off", "--out", "run.npz"]
+BATCH = ["batch", "cartpole", "--runs", "4", "--duration", "20000", "--physics-step", "1e-5",
+         "--no-progress", "--noise", "off", "--max-steps", "1e11", "--out", "batch.npz"]
+
+
+def _command(argv: list[str], folder: Path) -> subprocess.Popen[bytes]:
+    return subprocess.Popen([sys.executable, "-m", "equilibrist.cli.main", *argv],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=folder)
+
+
+def _cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+@pytest.fixture(scope="module")
+def warm(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """The cores of both commands compiled (and cached) before any is interrupted."""
+    folder = tmp_path_factory.mktemp("warm")
+    for argv in (SIMULATE, BATCH):
+        short = [a if a not in ("2000", "20000") else "0.01" for a in argv]
+        done = subprocess.run([sys.executable, "-m", "equilibrist.cli.main", *short],
+                              check=False, cwd=folder, capture_output=True, timeout=900)
+        assert done.returncode == 0, done.stderr.decode()
+
+
+@pytest.mark.parametrize("argv", [SIMULATE, BATCH], ids=["simulate", "batch"])
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_stops_a_long_run_at_once(warm, tmp_path, argv, signum) -> None:
+    proc = _command(argv, tmp_path)
+    try:
+        # Started and working in the core: 1.5 s of its own CPU time (imports and the
+        # cached core's load take less), so the signal lands inside the compiled loop.
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if _cpu_seconds(proc.pid) >= 1.5:
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, proc.communicate()[1].decode()
+        sent = time.monotonic()
+        proc.send_signal(signum)
+        out, err = proc.communicate(timeout=60)
+        took = time.monotonic() - sent
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err.decode()
+    assert err.decode().strip() == "equilibrist: interrupted"
+    assert out == b""
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+    assert took < 2.0, f"took {took:.2f} s to stop"
+
+
+def test_the_stop_flag_ends_the_core_from_another_thread() -> None:
+    # The core releases the GIL and reads the flag at every sample: set from this thread
+    # while a helper runs a run of 2e8 steps, it ends that run where it is.
+    from equilibrist.sim import _setup, layout
+    from equilibrist.sim.kernel import Kernel
+
+    system = get_system("cartpole")
+    setup = _setup.build(system, None, duration=2000.0, rate=100.0, physics_step=1e-5,
+                         integrator="rk4", rtol=1e-8, atol=1e-10, plant="nonlinear",
+                         x0={"theta": 0.0}, delay=False, noise=None, reference=None, events=(),
+                         outputs=None, region={})
+    kernel = Kernel(system)
+    p_sets = setup.p_sets(np.array(system.p))
+    status = np.zeros(len(layout.STATUS), dtype=np.int64)
+    stop = np.zeros(1, dtype=np.int64)
+    arrays = dict(
+        iopts=setup.iopts(), fopts=setup.fopts, x=setup.x0.copy(), z=setup.z0.copy(),
+        u_prev=np.zeros(1), rng=np.zeros(4, dtype=np.uint64), op=setup.op, c_idx=setup.c_idx,
+        cp=setup.cp, ref=setup.ref, uff=setup.uff, lv=setup.lv, lw=setup.lw, p_sets=p_sets,
+        p_switch=setup.p_switch, lin_s=setup.linear_blocks(p_sets), region=setup.region,
+        kicks=setup.kicks, kick_value=setup.kick_value, pulses=setup.pulses,
+        pulse_value=setup.pulse_value, rec_cols=setup.rec_cols, acc_cols=setup.acc_cols,
+        rec=np.empty((setup.n_rows, setup.record_width)), acc=np.zeros(setup.acc_len),
+        status=status, fell_x=np.zeros(4), stop=stop,
+    )
+    kernel.run_one(k_start=0, k_end=2, **arrays)  # compiled, and two samples made
+    helper = threading.Thread(target=lambda: kernel.run_one(k_start=2, k_end=setup.n_rows,
+                                                            **arrays))
+    helper.start()
+    while status[layout.STATUS["rows"]] < 20:  # the helper is in the loop
+        time.sleep(0.01)
+    stop[0] = 1
+    helper.join(30)
+    assert not helper.is_alive()
+    rows = int(status[layout.STATUS["rows"]])
+    assert 20 <= rows < setup.n_rows and not status[layout.STATUS["fell"]]
+
+
+def test_a_keyboard_interrupt_while_waiting_stops_the_core(monkeypatch) -> None:
+    # The waiting thread's poll raises KeyboardInterrupt as Ctrl-C would: the core stops
+    # within a sample and the interrupt goes on to the caller.
+    system = get_system("cartpole")
+    calls = []
+
+    def interrupt() -> None:
+        calls.append(time.monotonic())
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+
+    from equilibrist.sim import run as run_module
+
+    real = run_module.call_interruptibly
+
+    def with_poll(work, stop, poll=None):  # type: ignore[no-untyped-def]
+        return real(work, stop, interrupt)
+
+    monkeypatch.setattr(run_module, "call_interruptibly", with_poll)
+    began = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        simulate(system, None, duration=2000.0, rate=100.0, physics_step=1e-5,
+                 x0={"theta": 0.0}, region={})
+    assert time.monotonic() - began < 60  # the run alone would take minutes
+    from equilibrist.sim import batch as batch_module
+
+    monkeypatch.setattr(batch_module, "call_interruptibly", with_poll)
+    calls.clear()
+    began = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        simulate_batch(system, None, runs=2, duration=20000.0, rate=100.0, physics_step=1e-5,
+                       region={}, max_steps=None)
+    assert time.monotonic() - began < 60
