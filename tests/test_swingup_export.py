@@ -23,11 +23,20 @@ from equilibrist.sim.run import simulate
 from equilibrist.tasks import get_task
 
 
-@pytest.mark.parametrize("name", ["cartpole", "acrobot", "furuta", "reaction_wheel_pendulum"])
-def test_c_commands_equal_python_exactly(name: str) -> None:
-    """On recorded vectors (noisy swing-up), every C command is the Python one, bit for bit."""
+@pytest.mark.parametrize(("name", "balance", "form"), [
+    ("cartpole", "lqr", "current"), ("acrobot", "lqr", "current"), ("furuta", "lqr", "current"),
+    ("reaction_wheel_pendulum", "lqr", "current"), ("cartpole", "lqg", "current"),
+    ("reaction_wheel_pendulum", "lqg", "predictor"), ("furuta", "lqg", "current"),
+])
+def test_c_commands_equal_python_exactly(name: str, balance: str, form: str) -> None:
+    """On recorded vectors (noisy swing-up), every C command is the Python one, bit for bit
+    (and its estimate; with the LQG hand-over, the filter's state too)."""
+    from equilibrist.control.design import design
+    from equilibrist.control.swingup import Z
+
     system = get_system(name)
-    ctrl = swingup(system)
+    d = design(system, rate=system.spec.control_rate, kalman_form=form)
+    ctrl = swingup(system, design=d, balance=balance)
     vec = recorded_vectors(ctrl, system, duration=3.0, seed=2)
     py = SwingUpRuntime(ctrl, compiled=False)
     c = CompiledSwingUp(ctrl)
@@ -39,7 +48,10 @@ def test_c_commands_equal_python_exactly(name: str) -> None:
             np.testing.assert_array_equal(py.estimate, c.estimate)
             py.update(0.0, y, np.zeros(0), ua)
             c.update(0.0, y, np.zeros(0), ua)
+            np.testing.assert_array_equal(py.z, c._z)
         assert py.mode == "balance" or name == "acrobot"
+        if balance == "lqg":
+            assert np.any(py.z[Z["kz"]:Z["kz"] + 4] != 0.0), "the filter must have run"
     finally:
         c.close()
 
@@ -89,3 +101,19 @@ def test_command_line_export_and_refusal(tmp_path: Path) -> None:
     assert bad.returncode == 2
     assert bad.stderr.strip().count("\n") == 0 and "no swing-up" in bad.stderr
     assert not (tmp_path / "bb").exists()
+
+
+def test_command_line_lqg_hand_over(tmp_path: Path) -> None:
+    """``--balance lqg`` reaches the builder: the exported library balances with the LQG."""
+    exe = Path(__file__).resolve().parents[1] / ".venv" / "bin" / "equilibrist"
+    cmd = [str(exe)] if exe.exists() else ["equilibrist"]
+    out = tmp_path / "furuta"
+    proc = subprocess.run([*cmd, "export", "furuta", "--controller", "swingup", "--balance", "lqg",
+                           "--out", str(out)], capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert "balanced by the LQG" in (out / "swingup.h").read_text()
+    check = subprocess.run(["make", "check"], cwd=out, capture_output=True, text=True, check=False)
+    assert check.returncode == 0 and "0 mismatches" in check.stdout
+    bad = subprocess.run([*cmd, "export", "furuta", "--controller", "swingup", "--balance", "pid",
+                          "--out", str(tmp_path / "x")], capture_output=True, text=True, check=False)
+    assert bad.returncode == 2 and not (tmp_path / "x").exists()

@@ -252,20 +252,28 @@ def add_design_options(parser: argparse.ArgumentParser) -> None:
               "default the canonical operating point")
     parser.add_argument("--horizon", metavar="N", default=None,
                         help="prediction horizon of --controller mpc [samples] (default 30)")
+    parser.add_argument("--balance", choices=("lqr", "lqg"), default=None,
+                        help="what balances after --controller swingup's catch (default lqr)")
 
 
 def controller_options(args: argparse.Namespace) -> dict[str, Any]:
-    """Options of the registry's controller builders (``--horizon`` for MPC)."""
+    """Options of the registry's controller builders (``--horizon`` for MPC, ``--balance``
+    for the swing-up)."""
+    out: dict[str, Any] = {}
+    balance = getattr(args, "balance", None)
+    if balance is not None:
+        out["balance"] = balance
     value = getattr(args, "horizon", None)
     if value is None:
-        return {}
+        return out
     try:
         horizon = int(value)
     except ValueError:
         horizon = 0
     if horizon < 1 or str(horizon) != str(value).strip():
         raise UsageError(f"--horizon must be a whole number of samples >= 1, got {value!r}")
-    return {"horizon": horizon}
+    out["horizon"] = horizon
+    return out
 
 
 def design_options(args: argparse.Namespace) -> dict[str, Any]:

@@ -67,6 +67,15 @@ within half a turn of upright; coordinates whose value does not matter (the
 reaction wheel's angle, the rotary pendulum's arm) are *free*: the balance
 holds them where they were when it caught the pendulum.
 
+*LQG hand-over* (``balance="lqg"``). The balance runs on the design's
+discrete Kalman filter instead of the tracker: started at the catch from
+the tracker's estimate (its state ``kz``, the predicted deviation from the
+held reference, becomes ``Ad dx + Bd du`` of that sample), then
+``dx = kz + M (dy - C kz)`` (``current`` form) or ``dx = kz`` with
+``kz+ = Ad kz + Bd du + L (dy - C kz)`` (``predictor``), the contract's LQG
+sums. While balancing the supervisor judges ``V`` on this estimate; the
+tracker keeps running for the hand-back to pumping.
+
 *Estimator.* The rigs measure angles and positions only. The controller
 estimates the rates with a steady-state alpha-beta tracker per measured
 coordinate (the Kalman filter of a constant-velocity model; gains from
@@ -106,12 +115,16 @@ LAW_NAMES = ("cart", "wheel", "rotary", "acrobot")
 # --- layout of the parameters ``cp`` and of the state ``z`` (one place: the source,
 # the Python runtime and the C export read these) -----------------------------------
 CP_SLOTS = ("law", "T", "ke", "amax", "e0", "kx", "kv", "kp", "c_in", "c_out", "alpha",
-            "beta", "u_min", "u_max", "u_op", "kd")
+            "beta", "u_min", "u_max", "u_op", "kd", "lqg", "kform")
 N_PHYS = 8
 N_STATES = 4  # every rig with a swing-up has two coordinates
 CP_BLOCKS = (("phys", N_PHYS), ("x_op", N_STATES), ("K", N_STATES), ("S", N_STATES * N_STATES),
-             ("wrap", N_STATES), ("free", N_STATES))
-Z_SLOTS = (("init", 1), ("mode", 1), ("xhat", N_STATES), ("ref", N_STATES))
+             ("wrap", N_STATES), ("free", N_STATES), ("Ad", N_STATES * N_STATES),
+             ("Bd", N_STATES), ("Kf", N_STATES * 2))
+Z_SLOTS = (("init", 1), ("mode", 1), ("xhat", N_STATES), ("ref", N_STATES), ("kz", N_STATES))
+
+#: The balancing controllers the supervisor can hand over to (``balance=``).
+BALANCES = ("lqr", "lqg")
 
 MODE_PUMP, MODE_BALANCE = 0.0, 1.0
 
@@ -267,6 +280,33 @@ def su_level(d0, d1, d2, d3, p):
     return v
 
 
+def su_kest(z, y, p, i):
+    # The Kalman filter's estimate (deviation from the held reference) of state i
+    # while the LQG balances: current form kz + M (dy - C kz), predictor form kz.
+    kz = SU_Z_KZ
+    if p[SU_KFORM] != 0.0:
+        return z[kz + i]
+    m = SU_KF + 2 * i
+    e0 = su_dev(y[0], z[SU_Z_REF], p, 0) - z[kz]
+    e1 = su_dev(y[1], z[SU_Z_REF + 1], p, 1) - z[kz + 1]
+    return z[kz + i] + p[m] * e0 + p[m + 1] * e1
+
+
+def su_kpred(z, y, p, i, d0, d1, d2, d3, du, balancing):
+    # The filter's prediction of state i for the next sample from this sample's
+    # estimate d (at the hand-over: the tracker's), the predictor form's correction
+    # once it runs.
+    a = SU_AD + 4 * i
+    v = p[a] * d0 + p[a + 1] * d1 + p[a + 2] * d2 + p[a + 3] * d3 + p[SU_BD + i] * du
+    if balancing and p[SU_KFORM] != 0.0:
+        kz = SU_Z_KZ
+        m = SU_KF + 2 * i
+        e0 = su_dev(y[0], z[SU_Z_REF], p, 0) - z[kz]
+        e1 = su_dev(y[1], z[SU_Z_REF + 1], p, 1) - z[kz + 1]
+        v = v + p[m] * e0 + p[m + 1] * e1
+    return v
+
+
 def su_mode(z, v, p):
     if z[SU_Z_MODE] == 1.0:
         if v <= p[SU_C_OUT]:
@@ -287,6 +327,11 @@ def output(t, z, y, r, p, u_out):
     d1 = su_dev(x1, su_ref(z, x1, p, 1, bal), p, 1)
     d2 = su_dev(x2, su_ref(z, x2, p, 2, bal), p, 2)
     d3 = su_dev(x3, su_ref(z, x3, p, 3, bal), p, 3)
+    if bal and p[SU_LQG] != 0.0:
+        d0 = su_kest(z, y, p, 0)
+        d1 = su_kest(z, y, p, 1)
+        d2 = su_kest(z, y, p, 2)
+        d3 = su_kest(z, y, p, 3)
     mode = su_mode(z, su_level(d0, d1, d2, d3, p), p)
     if mode == 1.0:
         k = SU_K
@@ -306,9 +351,23 @@ def update(t, z, y, r, u_applied, p, z_out):
     r1 = su_ref(z, x1, p, 1, bal)
     r2 = su_ref(z, x2, p, 2, bal)
     r3 = su_ref(z, x3, p, 3, bal)
-    v = su_level(su_dev(x0, r0, p, 0), su_dev(x1, r1, p, 1), su_dev(x2, r2, p, 2),
-                 su_dev(x3, r3, p, 3), p)
-    mode = su_mode(z, v, p)
+    d0 = su_dev(x0, r0, p, 0)
+    d1 = su_dev(x1, r1, p, 1)
+    d2 = su_dev(x2, r2, p, 2)
+    d3 = su_dev(x3, r3, p, 3)
+    lqg = p[SU_LQG] != 0.0
+    if bal and lqg:
+        d0 = su_kest(z, y, p, 0)
+        d1 = su_kest(z, y, p, 1)
+        d2 = su_kest(z, y, p, 2)
+        d3 = su_kest(z, y, p, 3)
+    mode = su_mode(z, su_level(d0, d1, d2, d3, p), p)
+    du = u_applied[0] - p[SU_U_OP]
+    for i in range(4):
+        if lqg and mode == 1.0:
+            z_out[SU_Z_KZ + i] = su_kpred(z, y, p, i, d0, d1, d2, d3, du, bal)
+        else:
+            z_out[SU_Z_KZ + i] = 0.0
     z_out[SU_Z_INIT] = 1.0
     z_out[SU_Z_MODE] = mode
     z_out[SU_Z_REF] = r0
@@ -322,6 +381,10 @@ def update(t, z, y, r, u_applied, p, z_out):
 
 
 def estimate(t, z, y, r, p, x_out):
+    if z[SU_Z_MODE] == 1.0 and p[SU_LQG] != 0.0:
+        for i in range(4):
+            x_out[i] = z[SU_Z_REF + i] + su_kest(z, y, p, i)
+        return
     x_out[0] = su_xhat(z, y, p, 0)
     x_out[1] = su_xhat(z, y, p, 1)
     x_out[2] = su_xhat(z, y, p, 2)
@@ -499,6 +562,7 @@ def swingup(
     design: Design | None = None,
     tuning: SwingUpTuning | None = None,
     rate: float | None = None,
+    balance: str = "lqr",
 ) -> NonlinearController:
     """The swing-up controller of *system* (cart-pole, reaction wheel, rotary pendulum, acrobot).
 
@@ -513,6 +577,12 @@ def swingup(
         Gains; default :data:`TUNING` of the system.
     rate:
         Sample rate [Hz]; default the design's, else the rig's ``control_rate``.
+    balance:
+        What balances after the catch: ``"lqr"`` (the design's discrete LQR on
+        the controller's own alpha-beta estimate) or ``"lqg"`` (the design's
+        Kalman filter, in its ``current`` or ``predictor`` form, started at
+        the hand-over from the alpha-beta estimate, and the LQR on its
+        estimate; the tracker keeps running for a hand-back to pumping).
 
     Returns
     -------
@@ -523,10 +593,13 @@ def swingup(
     Raises
     ------
     ControllerError
-        A system without a swing-up law, or a design at another rate.
+        A system without a swing-up law, a design at another rate, or an
+        unknown *balance*.
     """
     from equilibrist.control.design import design as make_design
 
+    if balance not in BALANCES:
+        raise ControllerError(f"balance {balance!r}: expected one of {', '.join(BALANCES)}")
     if system.name not in LAWS:
         raise ControllerError(
             f"{system.name} has no swing-up: it exists for {', '.join(LAWS)}"
@@ -563,6 +636,8 @@ def swingup(
         "e0": tune.e0, "kx": tune.k_x, "kv": tune.k_v, "kp": tune.k_p, "kd": tune.k_d, "c_in": c_in,
         "c_out": tune.release_factor * c_in, "alpha": alpha, "beta": beta,
         "u_min": lo[0], "u_max": hi[0], "u_op": u_op[0],
+        "lqg": 1.0 if balance == "lqg" else 0.0,
+        "kform": 1.0 if design.kalman_form == "predictor" else 0.0,
     }
     for key, value in values.items():
         cp[CP[key]] = value
@@ -574,8 +649,21 @@ def swingup(
         cp[CP["wrap"] + i] = 1.0 if system.state_units[i] == "rad" else 0.0
     if law in ("wheel", "rotary"):
         cp[CP["free"]] = 1.0
+    # The design's Kalman filter: Ad, Bd, and its gain with one column per coordinate
+    # (zero for a coordinate the design does not measure).
+    disc = design.discrete
+    if disc is None:
+        raise ControllerError(f"the swing-up needs a discrete balancing design: design(system, rate={hz:g})")
+    cp[CP["Ad"]:CP["Ad"] + n * n] = np.asarray(disc.A, dtype=float).reshape(-1)
+    cp[CP["Bd"]:CP["Bd"] + n] = np.asarray(disc.B, dtype=float).reshape(-1)
+    Kf = np.asarray(design.Kf, dtype=float).reshape(n, -1)
+    gain = np.zeros((n, 2))
+    for col, out in enumerate(eq.output_names):
+        gain[:, names.index(out)] = Kf[:, col]
+    cp[CP["Kf"]:CP["Kf"] + 2 * n] = gain.reshape(-1)
     settings = {
-        "law": law, "c_in": c_in, "c_out": tune.release_factor * c_in,
+        "law": law, "balance": balance, "kalman_form": design.kalman_form if balance == "lqg" else "",
+        "c_in": c_in, "c_out": tune.release_factor * c_in,
         "alpha": alpha, "beta": beta,
         "tuning": {k: getattr(tune, k) for k in tune.__dataclass_fields__},
     }
@@ -600,4 +688,4 @@ def _build(request: ControllerRequest) -> NonlinearController:
         raise ControllerError(
             f"{system.name} has no swing-up: it exists for {', '.join(LAWS)}"
         )
-    return swingup(system, design=request.design())
+    return swingup(system, design=request.design(), balance=str(request.options.get("balance", "lqr")))
