@@ -6,9 +6,10 @@ a 20 s closed-loop log at 200 Hz (4,001 samples) recorded by the simulator
 b_p = 0.02, process and sensor noise, a PRBS of 20 N switching every 0.2 s
 on the command).
 
-The same least-squares loop (multiple shooting, scipy ``least_squares``,
-central-difference Jacobian over all segments at once) runs with the two
-integrators of the segments:
+The same least-squares loops (multiple shooting for the start, then the
+prediction errors of the model's Kalman filter; scipy ``least_squares``,
+central-difference Jacobians) run with the two integrators of the segments
+and of the filter's predictions:
 
 * ``compiled``: RK4 at 1 ms with the logged input held, numba-compiled over
   the system's generated ``f`` (``equilibrist.ident.kernel``);
@@ -16,8 +17,8 @@ integrators of the segments:
   over each sample interval (the held input jumps at every sample), on the
   same generated ``f`` in plain Python.
 
-Both run the first pass of the fit (fixed noise weights) with the same cap on
-least-squares evaluations, so they do the same iterations; the estimates are
+Both run the fit with fixed noise levels and the same cap on least-squares
+evaluations in each stage, so they do the same iterations; the estimates are
 compared to show it is the same work. The compiled integrator's complete fit
 (noise re-estimation, statistics) is timed too. The first (compiling) call is
 not timed.
@@ -59,7 +60,7 @@ def record() -> Log:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--evaluations", type=int, default=3,
-                        help="least-squares evaluations of the timed loop (default 3)")
+                        help="least-squares evaluations of each stage of the timed loop (default 3)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
     cart = get_system("cartpole")
@@ -100,10 +101,10 @@ def main() -> None:
         return
     print(f"workload: {out['workload']}")
     print(f"  full fit, compiled RK4     {t_full:8.2f} s  ({full.method['evaluations']} "
-          "evaluations in the last pass, noise re-estimated, statistics)")
+          "evaluations, noise re-estimated, statistics)")
     for e in full.estimates:
         print(f"    {e.name:4} = {e.value:.5g} +- {e.std_error:.2g}   (truth {TRUTH[e.name]:g})")
-    print(f"  same loop, {args.evaluations} evaluations:")
+    print(f"  same loops, {args.evaluations} evaluations per stage:")
     print(f"    compiled RK4 (numba)     {t_c:8.2f} s")
     print(f"    scipy solve_ivp (RK45)   {t_s:8.2f} s   compiled is {ratio:.0f}x faster (goal >= 20)")
     print(f"  same work: |estimates compiled - solve_ivp| = {out['max_estimate_difference']:.2e}")

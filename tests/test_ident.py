@@ -241,3 +241,35 @@ def test_compiled_and_solve_ivp_replays_agree():
     # (the same RK4 steps of 1 ms with the input held).
     np.testing.assert_allclose(out["compiled"][0][0, :, :], run.states[:, :2], atol=1e-12)
     np.testing.assert_allclose(out["compiled"][1][0, :-1], run.states[bounds[1:-1]], atol=1e-12)
+
+
+def test_compiled_and_solve_ivp_filters_agree():
+    """The Kalman filter's prediction errors (the fit's residuals): compiled RK4
+    against scipy's adaptive integrator, and without noise from the true state
+    and parameters, zero (the filter predicts the simulator's run exactly)."""
+    cart = get_system("cartpole")
+    d = design(cart, rate=200.0)
+    run = simulate(cart.with_params(m_p=1.2), LQG.from_design(d), duration=0.5,
+                   excitation=PRBS(10.0, 0.05, seed=2), x0={"theta": 0.05})
+    log = Log.from_arrays(cart, run.time, run.applied, {o: run.measurement(o) for o in run.output_names})
+    from equilibrist.ident.fit import _filter
+
+    p = np.array(cart.with_params(m_p=1.2).p)
+    n_sub = np.full(100, 5, dtype=np.int64)
+    c_idx = np.array([0, 1], dtype=np.int64)
+    gain = np.random.default_rng(0).uniform(0.0, 0.5, (4, 2))
+    out = {}
+    for backend in ("compiled", "solve_ivp"):
+        for x0, y in ((run.states[0], log.outputs), (run.states[0] + 0.01, log.outputs + 0.003)):
+            e = np.empty((101, 2))
+            _filter(cart, backend)(p, x0.copy(), log.time, log.inputs, n_sub, c_idx, gain, y,
+                                   np.array([0.001, 0.0]), e)
+            out[backend, float(x0[0])] = e
+    for key in [k for k in out if k[0] == "compiled"]:
+        np.testing.assert_allclose(out[key], out["solve_ivp", key[1]], atol=1e-8)
+    # From the true state and parameters, the errors are zero: the filter predicts
+    # the simulator's run exactly (the same RK4 steps of 1 ms with the input held).
+    e = np.empty((101, 2))
+    _filter(cart, "compiled")(p, run.states[0].copy(), log.time, log.inputs, n_sub, c_idx, gain,
+                              log.outputs, np.zeros(2), e)
+    np.testing.assert_allclose(e, 0.0, atol=1e-12)

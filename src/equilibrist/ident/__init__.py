@@ -6,7 +6,8 @@
 >>> result = identify(cart, read_log(cart, "run.csv"), ["m_p", "b_c", "b_p"])  # doctest: +SKIP
 >>> result.params                  # every parameter, the free ones at their estimates  # doctest: +SKIP
 
-See :mod:`equilibrist.ident.fit` for the method (multiple shooting) and
+See :mod:`equilibrist.ident.fit` for the method (multiple shooting for the start, then the
+prediction errors of the model's Kalman filter) and
 :mod:`equilibrist.ident.log` for the log's format.
 """
 

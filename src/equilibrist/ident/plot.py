@@ -12,8 +12,8 @@ from equilibrist.ident.fit import Identification
 def plot_fit(result: Identification, path: str | Path) -> Path:
     """Plot measured and replayed outputs, and the residuals, to *path* (.png or .svg).
 
-    The replay is the one the fit scores: each shooting segment integrated
-    from its estimated initial state with the logged input.
+    The replay is the shooting stage's: each segment integrated from its
+    estimated initial state with the logged input, at the final parameters.
     """
     from matplotlib.figure import Figure
 
@@ -51,7 +51,7 @@ def plot_fit(result: Identification, path: str | Path) -> Path:
         f"{e.name} = {e.value:.4g}" + (f" +- {e.std_error:.2g}" if np.isfinite(e.std_error) else "")
         for e in result.estimates
     )
-    fig.suptitle(f"{result.system}: {est}\n{result.method['name']}, "
+    fig.suptitle(f"{result.system}: {est}\n{result.method['name']}; replayed in "
                  f"{result.method['segments']} segments of {result.method['segment_seconds']:g} s",
                  fontsize=10)
     return save_figure(fig, p)
