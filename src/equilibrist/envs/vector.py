@@ -44,15 +44,20 @@ PARALLEL_MIN = 256
 # thread or all: a probe), and the faster of the two steps the others: the
 # way in use by the moving average of its times per step (weight SMOOTHING
 # for the newest, a time counted at most OUTLIER times the average), the
-# other by its last probe. On a
-# machine whose other cores are taken, the parallel step waits for
-# descheduled threads and can run many times slower than one thread. Probes
-# come every PROBE_EVERY steps, or rarer when the other way is much slower,
-# so that they take at most about 1 / PROBE_SHARE of the time.
+# other by its last probe. On a machine whose other cores are taken, the
+# parallel step waits for descheduled threads and can run many times slower
+# than one thread. Probes come every PROBE_EVERY steps, or rarer when the
+# other way is much slower, so that they take at most about 1 / PROBE_SHARE
+# of the time.
 PROBE_EVERY = 50
 PROBE_SHARE = 20.0
 SMOOTHING = 0.25
 OUTLIER = 3.0
+# Looked up once: a step of few copies takes a few microseconds in all.
+_F64 = np.float64
+_BOOL = np.bool_
+_empty = np.empty
+_contiguous = np.ascontiguousarray
 
 
 def _chunks() -> int:
@@ -97,7 +102,6 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._fs, self._us = core.rows(N)
         self._actions = np.zeros((N, m))
         self._seeded = False
-        self._ready = False
         chunks = _chunks()
         #: Whether steps may run on several threads (from PARALLEL_MIN copies up).
         self.parallel = N >= PARALLEL_MIN and chunks > 1
@@ -113,6 +117,7 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._step_fn: Any = None
         self._ashape = (N, m)
         self._obs_shape = (N, core.n_obs)
+        self._flags_shape = (2, N)
         self._renderer = Renderer(core, "rgb_array") if render_mode is not None else None
 
     # -- state of the copies ---------------------------------------------------------
@@ -163,34 +168,34 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             self._seed(seed)
         obs = np.empty(self._obs_shape)
         self.core.kernel.env_reset_many(self._fs, self._us, obs, self._cf, self._ci)
-        self._ready = True
+        if self._step_fn is None:  # resolved once; set, it also says reset was called
+            N = self.num_envs
+            self._step_fn = self._entry(self._mode, (np.zeros(self._ashape), obs, np.empty(N),
+                                                     np.empty(self._flags_shape, dtype=_BOOL)))
         return obs, {"state": self.states}
 
     def step(
         self, actions: object
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """One control period of every copy (next-step autoreset)."""
-        if not self._ready:
+        step = self._step_fn
+        if step is None:
             raise EnvError("call reset() before step()")
-        a = np.ascontiguousarray(actions, dtype=np.float64)
+        a = _contiguous(actions, dtype=_F64)
         if a.shape != self._ashape:
             if a.size != self._ashape[0] * self._ashape[1]:
                 raise DimensionError(
                     f"actions have shape {a.shape}, expected {self._ashape} (num_envs, inputs)"
                 )
             a = a.reshape(self._ashape)
-        N = self.num_envs
         # Fresh arrays every step, as Gymnasium's own vector environments return.
-        obs = np.empty(self._obs_shape)
-        rewards = np.empty(N)
-        flags = np.empty((2, N), dtype=np.bool_)
-        step = self._step_fn
-        if step is None:
-            step = self._step_fn = self._entry(self._mode, (a, obs, rewards, flags))
-        if not self.parallel:
-            bad = step(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
-        else:
+        obs = _empty(self._obs_shape)
+        rewards = _empty(self.num_envs)
+        flags = _empty(self._flags_shape, dtype=_BOOL)
+        if self.parallel:
             bad = self._timed_step(a, obs, rewards, flags)
+        else:
+            bad = step(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
         if bad:
             raise EnvError("an action is not a finite number (no copy was stepped)")
         if self._renderer is not None:
@@ -232,7 +237,8 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             spent = min(spent, OUTLIER * cost[mode])
             cost[mode] = SMOOTHING * spent + (1.0 - SMOOTHING) * cost[mode]
         if probe and math.inf not in cost:
-            self._countdown = max(PROBE_EVERY, int(PROBE_SHARE * cost[mode] / max(cost[1 - mode], 1e-12)))
+            ratio = cost[mode] / max(cost[1 - mode], 1e-12)
+            self._countdown = max(PROBE_EVERY, int(PROBE_SHARE * ratio))
         self._mode = 0 if cost[0] < cost[1] else 1
         return int(bad)
 
