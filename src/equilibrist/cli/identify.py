@@ -18,14 +18,16 @@ this format (with more columns, which are recognised and not used).
 
 The fit: the parameters named by --free (the others at their values, with
 --set and --params), and with --offsets a constant offset of each sensor,
-by simulation error on the system's derived model (scipy least_squares).
-The rigs balance unstable systems in closed loop, so the log is replayed by
-multiple shooting: segments of --segment seconds (default: as long as the
-process noise stays below the sensor noise over one), each from an estimated
-initial state, with the logged input held between samples; the continuity
-defects between segments are residuals weighted by the process noise. Noise
-levels start from the system's spec (--sensor-noise, --process-noise
-override them) and are re-estimated from the residuals.
+on the system's derived model (scipy least_squares), in two stages. The rigs
+balance unstable systems in closed loop, so the start is multiple shooting:
+segments of --segment seconds (default: as long as the process noise stays
+below the sensor noise over one), each from an estimated initial state, with
+the logged input held between samples; the continuity defects between
+segments are residuals weighted by the process noise. The estimate then
+minimizes the one-step prediction errors of the model's Kalman filter, which
+stay unbiased where the controller answers the process noise. Noise levels
+start from the system's spec (--sensor-noise, --process-noise override them)
+and are re-estimated from the residuals.
 
 The answer: each estimate with its standard error, the correlation matrix,
 the directions the log cannot tell apart in words, the NRMSE of each output,
