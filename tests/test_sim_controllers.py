@@ -128,3 +128,23 @@ def test_run_cut_into_pieces_equals_one_piece(monkeypatch, integrator):
     np.testing.assert_array_equal(pieces.estimates, whole.estimates)
     python = simulate(sysm, ctrl.runtime(sysm.state_names), **opts)
     np.testing.assert_allclose(python.states, whole.states, rtol=0, atol=1e-10)
+
+
+def test_settings_asked_again_run_the_same_and_check_each_initial_state():
+    # simulate remembers validated settings; another initial state is still checked.
+    sysm = cartpole()
+    ctrl = lqg(sysm, rate=100.0)
+    opts = dict(duration=0.3, noise=_noise(sysm, 100.0), seed=2)
+    first = simulate(sysm, ctrl, x0={"theta": 0.1}, **opts)
+    other = simulate(sysm, ctrl, x0={"theta": -0.15}, **opts)
+    again = simulate(sysm, ctrl, x0={"theta": 0.1}, **opts)
+    np.testing.assert_array_equal(again.states, first.states)
+    np.testing.assert_array_equal(again.estimates, first.estimates)
+    assert other.states[0, sysm.state_names.index("theta")] == -0.15
+    assert other.settings["x0"][sysm.state_names.index("theta")] == -0.15
+    with pytest.raises(SimulationError, match="no state 'thet'"):
+        simulate(sysm, ctrl, x0={"thet": 0.1}, **opts)
+    with pytest.raises(SimulationError, match="initial state has 3 values"):
+        simulate(sysm, ctrl, x0=[0.0, 0.1, 0.0], **opts)
+    with pytest.raises(SimulationError, match="not a finite number"):
+        simulate(sysm, ctrl, x0={"theta": float("nan")}, **opts)

@@ -212,8 +212,10 @@ class Setup:
         Each change sets its parameters from its time on, on top of the
         parameters before it.
         """
-        names = self.system.spec.parameter_names
         base = np.asarray(base, dtype=float)
+        if not self.change_values:
+            return np.ascontiguousarray(base[..., None, :])
+        names = self.system.spec.parameter_names
         sets = [base]
         for values in self.change_values:
             nxt = sets[-1].copy()
@@ -424,6 +426,63 @@ def operating_point(system: System, controller: Any) -> tuple[np.ndarray, np.nda
     return np.array(eq.x), np.array(eq.u)
 
 
+# Settings of compiled runs validated and packed before, keyed by everything but the
+# initial state (immutable values only: the system, a compiled controller, the noise,
+# by identity; the other settings by value). A run asked again with another initial
+# state only checks and replaces that state.
+_BUILT: dict[tuple[Any, ...], tuple[object, object, Setup]] = {}  # key -> (controller, noise, setup)
+_BUILT_MAX = 8
+_IMMUTABLE_CONTROLLERS = (StateFeedback, LQG, LinearController, NonlinearController)
+
+
+def _scalar(value: object) -> bool:
+    return value is None or isinstance(value, bool | int | float | str)
+
+
+def _built_key(system: System, controller: object, settings: dict[str, Any]) -> tuple[Any, ...] | None:
+    """The key of :data:`_BUILT` for these settings, or None when they are not all immutable."""
+    if controller is not None and not isinstance(controller, _IMMUTABLE_CONTROLLERS):
+        return None
+    noise = settings["noise"]
+    if noise is not None and not isinstance(noise, Noise):
+        return None
+    events = settings["events"]
+    if (settings["reference"] is not None or settings["excitation"] is not None
+            or settings["region"] is not None
+            or not (isinstance(events, tuple | list) and len(events) == 0)):
+        return None
+    outputs = settings["outputs"]
+    if outputs is not None and not (isinstance(outputs, tuple) and _names(outputs)):
+        return None
+    scalars = tuple((k, v) for k, v in settings.items()
+                    if k not in ("noise", "reference", "excitation", "region", "events",
+                                 "outputs", "x0"))
+    if not all(_scalar(v) for _k, v in scalars):
+        return None
+    return (id(system), id(controller), id(noise), outputs, scalars)
+
+
+def _with_x0(known: Setup, system: System, x0: object) -> Setup | None:
+    """*known* with initial state *x0*, if *x0* passes the checks :func:`build` makes of it."""
+    if x0 is None or (isinstance(x0, Mapping) and not x0):
+        designed = known.compiled and not (isinstance(known.controller, LinearController)
+                                           and known.controller.kind == "none")
+        if not designed and not _has_operating_point(system):
+            return None
+    problems: list[str] = []
+    try:
+        x_init = _initial_state(system, x0, known.x_op, problems)
+        if problems:
+            return None
+        _check_regular(system, x_init)
+    except Exception:  # any problem: the full validation says what it is
+        return None
+    fresh = object.__new__(Setup)
+    fresh.__dict__.update(known.__dict__)
+    fresh.__dict__["x0"] = x_init if x_init is not known.x_op else x_init.copy()
+    return fresh
+
+
 def build(
     system: System,
     controller: object,
@@ -450,8 +509,57 @@ def build(
     """Validate the settings of a run (collecting every problem) and pack them.
 
     *max_steps* bounds the physics steps of the run, or of *runs* of them
-    (a batch on *threads* threads); None sets no bound.
+    (a batch on *threads* threads); None sets no bound. Settings met before
+    (the same system, compiled controller and noise, the same numbers; any
+    initial state) are not validated and packed again: only the initial
+    state is.
     """
+    settings: dict[str, Any] = dict(duration=duration, rate=rate, physics_step=physics_step,
+                    integrator=integrator, rtol=rtol, atol=atol, plant=plant, x0=x0,
+                    delay=delay, noise=noise, reference=reference, events=events,
+                    outputs=outputs, region=region, excitation=excitation,
+                    max_steps=max_steps, runs=runs, threads=threads)
+    key = _built_key(system, controller, settings) if isinstance(system, System) else None
+    if key is not None:
+        entry = _BUILT.get(key)
+        # The entry keeps its objects alive, so their ids name them.
+        if entry is not None and entry[0] is controller and entry[1] is noise \
+                and entry[2].system is system:
+            fresh = _with_x0(entry[2], system, x0)
+            if fresh is not None:
+                return fresh
+    setup = _build(system, controller, **settings)
+    if key is not None and setup.compiled:
+        if len(_BUILT) >= _BUILT_MAX:
+            _BUILT.pop(next(iter(_BUILT)))
+        _BUILT[key] = (controller, noise, setup)
+    return setup
+
+
+def _build(
+    system: System,
+    controller: object,
+    *,
+    duration: float,
+    rate: float | None,
+    physics_step: float | None,
+    integrator: str,
+    rtol: float,
+    atol: float,
+    plant: str,
+    x0: object,
+    delay: bool,
+    noise: Noise | None,
+    reference: object,
+    events: Sequence[ev.Event],
+    outputs: Sequence[str] | None,
+    region: Mapping[str, tuple[float, float]] | None,
+    excitation: object = None,
+    max_steps: object = DEFAULT_MAX_STEPS,
+    runs: int = 1,
+    threads: int = 1,
+) -> Setup:
+    """:func:`build` without the memory of settings met before."""
     bound = check_max_steps(max_steps)
     check_system(system)
     problems: list[str] = []
