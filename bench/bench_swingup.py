@@ -14,7 +14,10 @@ Speed: the swing-up batch's physics steps per second against the LQR
 balance batch of the same system, runs and duration (one run of this
 script, same machine).
 
-    python bench/bench_swingup.py [--runs 1000] [--json]
+``--balance lqg`` measures the swing-up that hands over to the design's
+LQG instead of the LQR on its own tracker (docs/swingup.md).
+
+    python bench/bench_swingup.py [--runs 1000] [--json] [--balance lqr|lqg]
 """
 
 from __future__ import annotations
@@ -82,11 +85,11 @@ def swing_times(ctrl: object, batch: object, n_out: int, m: int) -> np.ndarray:
     return np.where(mode == 1.0, (last + 1) / ctrl.rate, np.nan)  # type: ignore[attr-defined]
 
 
-def bench_system(name: str, runs: int, seed: int) -> dict[str, object]:
+def bench_system(name: str, runs: int, seed: int, balance: str = "lqr") -> dict[str, object]:
     system = get_system(name)
     task = get_task(system, "swingup")
     d = design(system, rate=task.rate)
-    ctrl = swingup(system, design=d)
+    ctrl = swingup(system, design=d, balance=balance)
     noise = Noise.from_design(d)
     rng = np.random.default_rng(seed)
     x0 = task.draw_initials(rng, runs)
@@ -123,7 +126,7 @@ def bench_system(name: str, runs: int, seed: int) -> dict[str, object]:
     lqr_rate = lb.steps / t_lqr
     good = times[ok]
     return {
-        "system": name, "runs": runs, "success": float(ok.mean()),
+        "system": name, "balance": balance, "runs": runs, "success": float(ok.mean()),
         "swingup_time_median": float(np.median(good)) if good.size else None,
         "swingup_time_p90": float(np.percentile(good, 90)) if good.size else None,
         "swingup_time_max": float(good.max()) if good.size else None,
@@ -138,10 +141,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--systems", default=",".join(LAWS))
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--balance", choices=("lqr", "lqg"), default="lqr",
+                    help="what balances after the catch (default lqr)")
     args = ap.parse_args(argv)
     rows = []
     for name in args.systems.split(","):
-        row = bench_system(name, args.runs, args.seed)
+        row = bench_system(name, args.runs, args.seed, args.balance)
         rows.append(row)
         if not args.json:
             med = row["swingup_time_median"]

@@ -73,8 +73,9 @@ the tracker's estimate (its state ``kz``, the predicted deviation from the
 held reference, becomes ``Ad dx + Bd du`` of that sample), then
 ``dx = kz + M (dy - C kz)`` (``current`` form) or ``dx = kz`` with
 ``kz+ = Ad kz + Bd du + L (dy - C kz)`` (``predictor``), the contract's LQG
-sums. While balancing the supervisor judges ``V`` on this estimate; the
-tracker keeps running for the hand-back to pumping.
+sums. The supervisor is the default's (``V`` on the tracker's estimate,
+the same hysteresis): the filter only makes the balancing command, and it
+starts afresh at every catch.
 
 *Estimator.* The rigs measure angles and positions only. The controller
 estimates the rates with a steady-state alpha-beta tracker per measured
@@ -327,12 +328,12 @@ def output(t, z, y, r, p, u_out):
     d1 = su_dev(x1, su_ref(z, x1, p, 1, bal), p, 1)
     d2 = su_dev(x2, su_ref(z, x2, p, 2, bal), p, 2)
     d3 = su_dev(x3, su_ref(z, x3, p, 3, bal), p, 3)
-    if bal and p[SU_LQG] != 0.0:
+    mode = su_mode(z, su_level(d0, d1, d2, d3, p), p)
+    if mode == 1.0 and bal and p[SU_LQG] != 0.0:
         d0 = su_kest(z, y, p, 0)
         d1 = su_kest(z, y, p, 1)
         d2 = su_kest(z, y, p, 2)
         d3 = su_kest(z, y, p, 3)
-    mode = su_mode(z, su_level(d0, d1, d2, d3, p), p)
     if mode == 1.0:
         k = SU_K
         raw = p[SU_U_OP] - (p[k] * d0 + p[k + 1] * d1 + p[k + 2] * d2 + p[k + 3] * d3)
@@ -356,12 +357,12 @@ def update(t, z, y, r, u_applied, p, z_out):
     d2 = su_dev(x2, r2, p, 2)
     d3 = su_dev(x3, r3, p, 3)
     lqg = p[SU_LQG] != 0.0
-    if bal and lqg:
+    mode = su_mode(z, su_level(d0, d1, d2, d3, p), p)
+    if mode == 1.0 and bal and lqg:
         d0 = su_kest(z, y, p, 0)
         d1 = su_kest(z, y, p, 1)
         d2 = su_kest(z, y, p, 2)
         d3 = su_kest(z, y, p, 3)
-    mode = su_mode(z, su_level(d0, d1, d2, d3, p), p)
     du = u_applied[0] - p[SU_U_OP]
     for i in range(4):
         if lqg and mode == 1.0:

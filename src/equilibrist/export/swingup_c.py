@@ -227,14 +227,14 @@ void NAME_output(const NAME_state *s, const double y[2], double u[1])
     double d1 = su_dev(x1, su_ref(z, x1, p, 1, bal), p, 1);
     double d2 = su_dev(x2, su_ref(z, x2, p, 2, bal), p, 2);
     double d3 = su_dev(x3, su_ref(z, x3, p, 3, bal), p, 3);
-    double mode, raw;
-    if (bal && p[SU_LQG] != 0.0) {
+    double mode = su_mode(z, su_level(d0, d1, d2, d3, p), p);
+    double raw;
+    if (mode == 1.0 && bal && p[SU_LQG] != 0.0) {
         d0 = su_kest(z, y, p, 0);
         d1 = su_kest(z, y, p, 1);
         d2 = su_kest(z, y, p, 2);
         d3 = su_kest(z, y, p, 3);
     }
-    mode = su_mode(z, su_level(d0, d1, d2, d3, p), p);
     if (mode == 1.0) {
         int k = SU_K;
         raw = p[SU_U_OP] - (p[k] * d0 + p[k + 1] * d1 + p[k + 2] * d2 + p[k + 3] * d3);
@@ -265,13 +265,13 @@ void NAME_update(NAME_state *s, const double y[2], const double u_applied[1])
     d2 = su_dev(x2, r2, p, 2);
     d3 = su_dev(x3, r3, p, 3);
     lqg = p[SU_LQG] != 0.0;
-    if (bal && lqg) {
+    mode = su_mode(z, su_level(d0, d1, d2, d3, p), p);
+    if (mode == 1.0 && bal && lqg) {
         d0 = su_kest(z, y, p, 0);
         d1 = su_kest(z, y, p, 1);
         d2 = su_kest(z, y, p, 2);
         d3 = su_kest(z, y, p, 3);
     }
-    mode = su_mode(z, su_level(d0, d1, d2, d3, p), p);
     du = u_applied[0] - p[SU_U_OP];
     for (i = 0; i < 4; ++i) {
         if (lqg && mode == 1.0) {
