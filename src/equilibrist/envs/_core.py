@@ -7,8 +7,9 @@ the slots of the core's settings arrays (``ci``, ``cf``) and of a copy's
 rows (``fs``, ``us``); ``equilibrist/sim/_env_template.py`` names the same
 slots (``_CI_*``, ``_CF_*``, ``_US_*``), and the tests check both agree.
 
-:func:`make_core` is also where the single and the vector environment
-share their options: both take :data:`OPTION_DEFAULTS` and hand them here.
+The single and the vector environment take the same options,
+:data:`OPTION_DEFAULTS`, and both check them through one function
+(:func:`equilibrist.envs.env.open_core`, which builds the core here).
 """
 
 from __future__ import annotations
