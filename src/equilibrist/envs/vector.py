@@ -44,12 +44,14 @@ PARALLEL_MIN = 256
 # thread or all: a probe), and the faster of the two steps the others: the
 # way in use by the moving average of its times per step (weight SMOOTHING
 # for the newest, a time counted at most OUTLIER times the average), the
-# other by its last probe. On a machine whose other cores are taken, the
-# parallel step waits for descheduled threads and can run many times slower
-# than one thread. Probes come every PROBE_EVERY steps, or rarer when the
-# other way is much slower, so that they take at most about 1 / PROBE_SHARE
-# of the time.
+# other by its last probe. A probe is PROBE_STEPS steps, the last one timed
+# (the first wakes threads that went to sleep). On a machine whose other
+# cores are taken, the parallel step waits for descheduled threads and can
+# run many times slower than one thread. Probes come every PROBE_EVERY
+# steps, or rarer when the other way is much slower, so that they take at
+# most about 1 / PROBE_SHARE of the time.
 PROBE_EVERY = 50
+PROBE_STEPS = 2
 PROBE_SHARE = 20.0
 SMOOTHING = 0.25
 OUTLIER = 3.0
@@ -112,8 +114,8 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._entries: list[Any] = [None, None]
         self._mode = int(self.parallel)
         self._cost = [math.inf, math.inf]  # seconds per step, moving averages
-        self._warm = [False, False]  # a mode's first (warming) step is not timed
         self._countdown = 0  # steps before the next probe
+        self._probe_left = 0  # steps left of the probe under way
         self._step_fn: Any = None
         self._ashape = (N, m)
         self._obs_shape = (N, core.n_obs)
@@ -218,28 +220,32 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         (see ``PROBE_EVERY``); both give the same numbers."""
         cost = self._cost
         mode = self._mode
-        probe = self._countdown <= 0 or cost[1 - mode] == math.inf
-        if probe:
+        if self._probe_left == 0 and (self._countdown <= 0 or cost[1 - mode] == math.inf):
+            self._probe_left = PROBE_STEPS
+        probing = self._probe_left > 0
+        if probing:
             mode = 1 - mode
+            self._probe_left -= 1
         else:
             self._countdown -= 1
         entry = self._entry(mode, (a, obs, rewards, flags))
         start = time.perf_counter()
         bad = entry(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
         spent = time.perf_counter() - start
-        if not self._warm[mode]:
-            self._warm[mode] = True
-        elif cost[mode] == math.inf:
-            cost[mode] = spent
-        elif probe:
+        if probing and self._probe_left > 0:
+            return int(bad)  # a probe's first step wakes the threads: not timed
+        if probing or cost[mode] == math.inf:
             cost[mode] = spent  # a rare sample: taken as it is
         else:  # a spike of the way in use alone does not switch
             spent = min(spent, OUTLIER * cost[mode])
             cost[mode] = SMOOTHING * spent + (1.0 - SMOOTHING) * cost[mode]
-        if probe and math.inf not in cost:
+        if probing and math.inf not in cost:
             ratio = cost[mode] / max(cost[1 - mode], 1e-12)
-            self._countdown = max(PROBE_EVERY, int(PROBE_SHARE * ratio))
-        self._mode = 0 if cost[0] < cost[1] else 1
+            self._countdown = max(PROBE_EVERY, int(PROBE_STEPS * PROBE_SHARE * ratio))
+        if math.inf not in cost:
+            self._mode = 0 if cost[0] < cost[1] else 1
+        elif probing:
+            self._mode = mode  # the only way timed so far
         return int(bad)
 
     @property
