@@ -22,7 +22,9 @@ busy machine slows all contenders alike; the first (compiling) call is not
 timed. The C and equilibrist final states are compared, so the two loops are
 the same workload.
 
-Usage: ``python bench/bench_sim.py [--repeats N] [--batch-runs N] [--json]``.
+Usage: ``python bench/bench_sim.py [--repeats N] [--batch-runs N] [--rounds N] [--json]``
+(a shorter run: ``--rounds 1 --batch-runs 2000``). The machine's load average
+before and after is printed with the figures.
 Goals (issue 4): single run >= 0.4 of C's speed (>= 100x python-control);
 LQG <= 2x the LQR loop; batch >= 0.5 of C's two-core speed.
 """
@@ -31,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -85,6 +88,7 @@ def main() -> int:
                         help="interleaved rounds (the best round's figures are kept)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
+    load_before = os.getloadavg()[0]
 
     import control as ct
 
@@ -164,6 +168,8 @@ def main() -> int:
     steps = round(DURATION / DT)
     n_batch = args.batch_runs * steps
     res = {
+        "load_average": [load_before, os.getloadavg()[0]],
+        "cores": os.cpu_count(),
         "workload": "cartpole, continuous LQR Q=diag(10,10,1,1) R=0.1 at 1 kHz ZOH, RK4 1 ms, "
                     "x0=[0,0.2,0,0], 10 s",
         "steps_per_run": steps,
@@ -206,6 +212,8 @@ def main() -> int:
         return 0
     rt = res["ratios"]
     sps = res["steps_per_second"]
+    print(f"load average of the machine: {res['load_average'][0]:.1f} before, "
+          f"{res['load_average'][1]:.1f} after ({res['cores']} cores)")
     print(f"workload: {res['workload']} ({steps} steps per run)")
     print(f"  C (gcc -O2)          single {res['c_single_ms']:8.3f} ms  {sps['c_single'] / 1e6:6.2f} M steps/s")
     print(f"  equilibrist LQR      single {res['equilibrist_single_ms']:8.3f} ms  "
