@@ -150,3 +150,57 @@ def test_a_keyboard_interrupt_while_waiting_stops_the_core(monkeypatch) -> None:
         simulate_batch(system, None, runs=2, duration=20000.0, rate=100.0, physics_step=1e-5,
                        region={}, max_steps=None)
     assert time.monotonic() - began < 60
+
+
+PYTHON_BATCH = '''
+import sys
+
+import numpy as np
+
+from equilibrist.control.controller import PythonControllerBase
+from equilibrist.numeric.system import get_system
+from equilibrist.sim import simulate_batch
+
+
+class Still(PythonControllerBase):
+    rate = 100.0
+    outputs = ("x", "theta", "x_dot", "theta_dot")
+
+    def output(self, t, y, r):
+        return np.zeros(1)
+
+
+if __name__ == "__main__":
+    print("started", flush=True)
+    try:
+        simulate_batch(get_system("cartpole"), Still(), runs=2, duration=1e5, workers=2,
+                       region={}, max_steps=None)
+    except KeyboardInterrupt:
+        print("interrupted", flush=True)
+        sys.exit(130)
+'''
+
+
+def test_a_signal_stops_a_batch_of_python_controllers_in_worker_processes(tmp_path) -> None:
+    # The runs are in worker processes, which the signal (sent to this process alone,
+    # as `kill` does) does not reach: they are ended, not waited for.
+    script = tmp_path / "python_batch.py"
+    script.write_text(PYTHON_BATCH)
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, cwd=tmp_path)
+    try:
+        assert proc.stdout is not None
+        assert proc.stdout.readline() == b"started\n"
+        time.sleep(4.0)  # the workers are spawned and running their runs
+        assert proc.poll() is None
+        sent = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+        took = time.monotonic() - sent
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err.decode()
+    assert out == b"interrupted\n"
+    assert took < 2.0, f"took {took:.2f} s to stop"

@@ -22,7 +22,6 @@ import pickle
 import time
 import zipfile
 from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -609,10 +608,23 @@ def _python_batch(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
         payload = _portable(setup)
         chunks = np.array_split(np.arange(runs), count)
         ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=count, mp_context=ctx) as pool:
-            futures = [pool.submit(_python_worker, payload, x0s[c], pmat[c],
-                                   [seqs[i] for i in c], record) for c in chunks]
-            parts = [f.result() for f in futures]
+        pool = ctx.Pool(count)
+        try:
+            pending = [pool.apply_async(_python_worker, (payload, x0s[c], pmat[c],
+                                                         [seqs[i] for i in c], record))
+                       for c in chunks]
+            parts = []
+            for job in pending:
+                while not job.ready():  # short waits: Ctrl-C is seen at once
+                    job.wait(0.1)
+                parts.append(job.get())
+        except BaseException:
+            pool.terminate()  # the workers' runs are not waited for
+            raise
+        else:
+            pool.close()
+        finally:
+            pool.join()
     elapsed = time.perf_counter() - t0
     statuses, accs, fell_xs, x_ends, recs = (np.concatenate(a) for a in zip(*parts, strict=True))
     setup0 = _setup.Setup(**{**setup.__dict__, "estimates": False})
