@@ -537,13 +537,13 @@ def simulate_batch(
         threads = set_workers(workers)
         # A few runs at a time per thread (dynamic scheduling): runs that fall early
         # leave no thread idle, and the hand-out costs nothing next to a run.
-        numba.set_parallel_chunksize(max(1, min(16, runs // (8 * threads))))
+        before = numba.set_parallel_chunksize(max(1, min(16, runs // (8 * threads))))
         t0 = time.perf_counter()
         try:
             kernel.run_many(**shared, **run_arrays(slice(0, runs)))
         finally:
             timing.append(time.perf_counter() - t0)
-            numba.set_parallel_chunksize(0)
+            numba.set_parallel_chunksize(before)
 
     bar = _progress_bar(runs, progress, "runs")
     st = layout.STATUS
