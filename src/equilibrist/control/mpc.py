@@ -54,6 +54,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -70,6 +71,9 @@ EPS = 1e-6
 #: OSQP's iteration cap: a bounded solve time (the iterate it stops at is still
 #: clipped to the hard limits, and the next sample starts warm from it).
 MAX_ITER = 500
+#: A solve stopped by the iteration cap is applied only if its primal residual (the largest
+#: violation of the model and the constraints by its plan) is at most this; else the LQR.
+PRIMAL_TOL = 1e-2
 #: Default horizon [samples].
 HORIZON = 30
 #: Default soft-constraint weights, relative to the largest diagonal entry of Q.
@@ -158,6 +162,50 @@ class MPCProblem:
             Gx[rows, k * m:(k + 1) * m] += self.B
         return Fx, Gx
 
+    @cached_property
+    def soft_predictions(self) -> tuple[np.ndarray, np.ndarray]:
+        """``Fu, Fs``: the LQR's own trajectory from ``dx_0`` (``du_k = -K dx_k``) has the
+        stacked moves ``Fu dx_0`` (``k = 0..N-1``) and constrained states ``Fs dx_0``
+        (``k = 1..N``, in the order of the soft rows of :meth:`matrices`)."""
+        n, m, N = self.n, self.m, self.horizon
+        Fx, _ = self.predictions()
+        Fu = np.vstack([-self.K @ Fx[k * n:(k + 1) * n] for k in range(N)]).reshape(N * m, n)
+        Fs = Fx[n:][[k * n + i for k in range(N) for i in self.soft_index]]
+        return Fu, Fs
+
+    def soft_rows(self) -> tuple[int, int]:
+        """First rows of the lower and the upper soft bounds in :meth:`matrices`' constraints."""
+        base = (self.horizon + 1) * self.n + self.horizon * self.m
+        return base, base + self.horizon * self.n_soft
+
+    def bounds(self, dx0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+               E: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The constraint bounds at the deviation *dx0* (``lo, hi, E`` from :meth:`matrices`).
+
+        ``lo - E dx0`` and ``hi - E dx0``, with one relaxation: a soft bound
+        that the state already violates now cannot be met in the first
+        samples (the cart-pole is non-minimum phase: returning a cart starts
+        by moving it further out), so its bound over the horizon is widened
+        to the LQR's own trajectory from *dx0*. The QP then only improves on
+        the LQR's return instead of demanding the impossible.
+        """
+        dx0 = np.asarray(dx0, dtype=float)
+        l, u = lo - E @ dx0, hi - E @ dx0
+        ns = self.n_soft
+        if ns:
+            c = dx0[list(self.soft_index)]
+            out = (c > self.soft_hi) | (c < self.soft_lo)
+            if np.any(out):
+                _, Fs = self.soft_predictions
+                xs = (Fs @ dx0).reshape(self.horizon, ns)
+                r_lo, r_hi = self.soft_rows()
+                nsl = self.horizon * ns
+                lows = l[r_lo:r_lo + nsl].reshape(self.horizon, ns)
+                highs = u[r_hi:r_hi + nsl].reshape(self.horizon, ns)
+                lows[:, out] = np.minimum(lows[:, out], xs[:, out])
+                highs[:, out] = np.maximum(highs[:, out], xs[:, out])
+        return l, u
+
     def matrices(self) -> tuple[Any, np.ndarray, Any, np.ndarray, np.ndarray, np.ndarray]:
         """``P, q, A, l, u`` of OSQP's form at ``dx_0 = 0``, and ``E``: the bounds
         at ``dx_0`` are ``l - E dx_0`` and ``u - E dx_0``.
@@ -173,10 +221,10 @@ class MPCProblem:
         W = self.R + self.B.T @ self.P @ self.B
         H = sparse.block_diag(
             [sparse.csc_matrix((nx, nx)), sparse.kron(sparse.eye(N), 2.0 * W)]
-            + ([2.0 * self.rho_l2 * sparse.eye(nsl)] if ns else []),
+            + ([sparse.diags(np.tile(2.0 * np.broadcast_to(self.rho_l2, (ns,)), N))] if ns else []),
             format="csc",
         )
-        q = np.concatenate([np.zeros(nx + nv), np.full(nsl, self.rho_l1)])
+        q = np.concatenate([np.zeros(nx + nv), np.tile(np.broadcast_to(self.rho_l1, (ns,)), N)])
         Acl = self.A - self.B @ self.K
         # dx_0 = x0; -dx_{k+1} + Acl dx_k + B v_k = 0.
         Ax = sparse.kron(sparse.eye(N + 1), -sparse.eye(n)) + sparse.kron(
@@ -286,6 +334,8 @@ class MPCRuntime:
         self._solver.setup(H, q, A, lo, hi, eps_abs=EPS, eps_rel=EPS, polishing=True,
                            polish_refine_iter=10, max_iter=MAX_ITER, verbose=False,
                            warm_starting=True)
+        self._u_lo = np.tile(prob.u_lo, prob.horizon)
+        self._u_hi = np.tile(prob.u_hi, prob.horizon)
         self.front = KalmanFront(ctrl)
         self.solve_times: list[float] = []
         self.reset()
@@ -305,6 +355,7 @@ class MPCRuntime:
         self.estimate = None
         self.last_status = ""
         self.last_iterations = 0
+        self.fallbacks = 0
 
     def _state(self, y: np.ndarray) -> np.ndarray:
         return self.front.estimate(y)
@@ -314,20 +365,23 @@ class MPCRuntime:
 
         Then it is the QP's minimizer (the unconstrained minimizer of the
         quadratic part, with zero slack), and the controller applies it
-        exactly instead of solving.
+        exactly instead of solving. One product with the precomputed
+        predictions ``Fu`` and ``Fs`` (:attr:`MPCProblem.soft_predictions`)
+        against the stacked bounds (:meth:`MPCProblem.bounds`).
         """
         prob = self.ctrl.problem
-        K = self.ctrl.K
-        x = np.array(dx0, dtype=float)
-        idx = list(prob.soft_index)
-        for _ in range(prob.horizon):
-            u = -K @ x
-            if np.any(u < prob.u_lo) or np.any(u > prob.u_hi):
-                return False
-            x = prob.A @ x + prob.B @ u
-            if idx and (np.any(x[idx] < prob.soft_lo) or np.any(x[idx] > prob.soft_hi)):
-                return False
-        return True
+        dx0 = np.asarray(dx0, dtype=float)
+        Fu, Fs = prob.soft_predictions
+        us = Fu @ dx0
+        if np.any(us < self._u_lo) or np.any(us > self._u_hi):
+            return False
+        if not prob.n_soft:
+            return True
+        l, u = prob.bounds(dx0, self._lo, self._hi, self._E)
+        r_lo, r_hi = prob.soft_rows()
+        nsl = prob.horizon * prob.n_soft
+        xs = Fs @ dx0
+        return bool(np.all(xs >= l[r_lo:r_lo + nsl]) and np.all(xs <= u[r_hi:r_hi + nsl]))
 
     def solve(self, dx0: np.ndarray) -> np.ndarray:
         """The first move ``du_0`` of the QP from the deviation *dx0*."""
@@ -341,8 +395,8 @@ class MPCRuntime:
                 self.last_iterations = 0
                 self._warm = None
                 return -self.ctrl.K @ np.asarray(dx0, dtype=float)
-        shift = self._E @ dx0
-        self._solver.update(l=self._lo - shift, u=self._hi - shift)
+        l, u = prob.bounds(dx0, self._lo, self._hi, self._E)
+        self._solver.update(l=l, u=u)
         if self._warm is not None:
             self._solver.warm_start(x=self._warm)
         t0 = time.perf_counter()
@@ -356,6 +410,9 @@ class MPCRuntime:
             # No usable solution: the LQR, inside the hard limits.
             self._warm = None
             return np.clip(du_lqr, prob.u_lo, prob.u_hi)
+        # A solve that is not "solved" is applied only when its iterate is a plan that meets the
+        # model and the constraints to PRIMAL_TOL (a feasible, suboptimal plan); else the LQR.
+        usable = self.last_status == "solved" or float(res.info.prim_res) <= PRIMAL_TOL
         N, n, ns = prob.horizon, prob.n, prob.n_soft
         nx = (N + 1) * n
         warm = np.zeros_like(sol)
@@ -364,6 +421,11 @@ class MPCRuntime:
         warm[nx : nx + (N - 1) * m] = sol[nx + m : nx + N * m]
         warm[nx + N * m : nx + N * m + (N - 1) * ns] = sol[nx + N * m + ns :]
         self._warm = warm
+        if not usable:
+            # Not converged and not feasible: the LQR, inside the hard limits (the iterate
+            # still warm-starts the next sample).
+            self.fallbacks += 1
+            return np.clip(du_lqr, prob.u_lo, prob.u_hi)
         return np.clip(du_lqr + sol[nx : nx + m], prob.u_lo, prob.u_hi)
 
     def output(self, t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray:

@@ -93,12 +93,16 @@ class PythonReference:
 
     def solve(self, dx: np.ndarray) -> np.ndarray:
         """The command at the state deviation *dx*."""
+        from equilibrist.control.mpc import PRIMAL_TOL
+
         prob = self.ctrl.problem
-        shift = self.E @ dx
-        self.solver.update(l=self.lo - shift, u=self.hi - shift)
+        l, u = prob.bounds(dx, self.lo, self.hi, self.E)
+        self.solver.update(l=l, u=u)
         res = self.solver.solve()
         v0 = (prob.horizon + 1) * prob.n
-        du = -prob.K @ dx + np.asarray(res.x)[v0:v0 + prob.m]
+        du = -prob.K @ dx
+        if str(res.info.status) == "solved" or float(res.info.prim_res) <= PRIMAL_TOL:
+            du = du + np.asarray(res.x)[v0:v0 + prob.m]
         return self.ctrl.u_op + np.clip(du, prob.u_lo, prob.u_hi)
 
     def step(self, y: np.ndarray) -> np.ndarray:
@@ -244,8 +248,13 @@ def library_files(ctrl: MPC, *, name: str = "mpc") -> dict[str, str]:
         for path in sorted(Path(tmp).rglob("*")):
             if path.is_file():
                 generated[path.relative_to(tmp).as_posix()] = path.read_text()
+    from equilibrist.control.mpc import PRIMAL_TOL
+
     n, m, ny = prob.n, prob.m, len(ctrl.output_names)
     nc = int(E.shape[0])
+    ns = prob.n_soft
+    _, Fs = prob.soft_predictions
+    r_lo, r_hi = prob.soft_rows()
     v0 = (prob.horizon + 1) * n
     up = name.upper()
     lines = [
@@ -276,20 +285,40 @@ def library_files(ctrl: MPC, *, name: str = "mpc") -> dict[str, str]:
         _array("E", E), _array("L0", _finite(lo)), _array("U0", _finite(hi)),
         _array("K", prob.K), _array("X_OP", ctrl.x_op), _array("U_OP", ctrl.u_op),
         _array("U_LO", prob.u_lo), _array("U_HI", prob.u_hi), "",
+        f"#define NS {ns}", f"#define NH {prob.horizon}", f"#define R_LO {r_lo}",
+        f"#define R_HI {r_hi}", f"#define PRIMAL_TOL {PRIMAL_TOL!r}",
+        _array("FS", Fs), _array("S_LO", prob.soft_lo), _array("S_HI", prob.soft_hi),
+        "static const int S_IDX[" + str(max(1, ns)) + "] = {"
+        + (", ".join(str(i) for i in prob.soft_index) or "0") + "};",
         "static OSQPFloat l_now[NC];", "static OSQPFloat u_now[NC];", "",
         "static int solve_at(const OSQPFloat dx[NX], double u[NU])",
         "{",
-        "    int i, j;",
+        "    int i, j, use;",
         "    for (i = 0; i < NC; ++i) {",
         "        OSQPFloat s = 0.0;",
         "        for (j = 0; j < NX; ++j) s += E[i * NX + j] * dx[j];",
         "        l_now[i] = L0[i] - s;",
         "        u_now[i] = U0[i] - s;",
         "    }",
+        "    /* A soft bound the state already violates: widened to the LQR's own trajectory. */",
+        "    for (j = 0; j < NS; ++j) {",
+        "        OSQPFloat c = dx[S_IDX[j]];",
+        "        int k;",
+        "        if (c <= S_HI[j] && c >= S_LO[j]) continue;",
+        "        for (k = 0; k < NH; ++k) {",
+        "            int row = k * NS + j, q;",
+        "            OSQPFloat xs = 0.0;",
+        "            for (q = 0; q < NX; ++q) xs += FS[row * NX + q] * dx[q];",
+        "            if (xs < l_now[R_LO + row]) l_now[R_LO + row] = xs;",
+        "            if (xs > u_now[R_HI + row]) u_now[R_HI + row] = xs;",
+        "        }",
+        "    }",
         "    osqp_update_data_vec(&solver, OSQP_NULL, l_now, u_now);",
         "    osqp_solve(&solver);",
+        "    /* Not solved and its plan not feasible to PRIMAL_TOL: the LQR (clipped). */",
+        "    use = solver.info->status_val == OSQP_SOLVED || solver.info->prim_res <= PRIMAL_TOL;",
         "    for (i = 0; i < NU; ++i) {",
-        "        OSQPFloat du = solver.solution->x[V0 + i];",
+        "        OSQPFloat du = use ? solver.solution->x[V0 + i] : 0.0;",
         "        for (j = 0; j < NX; ++j) du -= K[i * NX + j] * dx[j];",
         "        if (du < U_LO[i]) du = U_LO[i];",
         "        if (du > U_HI[i]) du = U_HI[i];",

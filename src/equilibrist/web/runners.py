@@ -165,7 +165,7 @@ class MPCRunner:
 
     def _set_filter(self, z: np.ndarray) -> None:
         # The filter's predicted deviation: the runtime's own ``z``, or its Kalman front's.
-        target: Any = getattr(self.runtime, "front", None) or self.runtime
+        target: Any = self.runtime.front
         target.z = np.array(z, dtype=float)
 
     def output(self, t: float, y: np.ndarray) -> np.ndarray:
