@@ -87,10 +87,12 @@ def solve_only(horizon: int = 30, repeat: int = 1) -> dict[str, object]:
     osqp_cpu: list[float] = []
     osqp_wall: list[float] = []
     iters: list[int] = []
+    fallbacks = 0
     for _ in range(repeat):
         for x0 in STARTS:
             rt = _Timed(ctrl)
             simulate(system, rt, duration=2.0, x0=x0, region={})
+            fallbacks += rt.fallbacks
             cpu += rt.cpu_times
             wall += rt.wall_times
             for c, w, st, it in zip(rt.cpu_times, rt.wall_times, rt.statuses, rt.iterations,
@@ -108,6 +110,8 @@ def solve_only(horizon: int = 30, repeat: int = 1) -> dict[str, object]:
         "osqp_cpu_ms": _ms(osqp_cpu), "osqp_wall_ms": _ms(osqp_wall),
         "osqp_iterations": {"median": float(np.median(iters)), "p99": float(np.percentile(iters, 99)),
                             "worst": int(max(iters)), "at_cap": int(sum(i >= MAX_ITER for i in iters))},
+        # Capped solves whose plan was not feasible to PRIMAL_TOL: the clipped LQR was applied.
+        "fallbacks_to_lqr": fallbacks,
         "cpu_over_period": int(sum(1e3 * c > period for c in cpu)),
         "wall_over_period": int(sum(1e3 * w > period for w in wall)),
     }

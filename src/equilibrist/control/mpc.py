@@ -70,7 +70,7 @@ if TYPE_CHECKING:
 EPS = 1e-6
 #: OSQP's iteration cap: a bounded solve time (the iterate it stops at is still
 #: clipped to the hard limits, and the next sample starts warm from it).
-MAX_ITER = 500
+MAX_ITER = 400
 #: A solve stopped by the iteration cap is applied only if its primal residual (the largest
 #: violation of the model and the constraints by its plan) is at most this; else the LQR.
 PRIMAL_TOL = 1e-2
