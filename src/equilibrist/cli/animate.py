@@ -40,6 +40,7 @@ def run(args: argparse.Namespace) -> int:
     import sys
 
     from equilibrist.cli.plot import load_result
+    from equilibrist.sim import SimResult
     from equilibrist.viz.animation import animate_result
     from equilibrist.viz.output import ANIMATION_FORMATS, VizError, check_suffix
 
@@ -51,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     if args.fps <= 0 or args.max_frames < 1:
         raise common.UsageError("--fps must be positive and --max-frames at least 1")
     result = load_result(src)
-    if hasattr(result, "parameter_names"):
+    if not isinstance(result, SimResult):
         raise VizError(f"{str(src)!r} is a batch: animate one run (save it with 'equilibrist "
                        "simulate --out'), or plot the batch with 'equilibrist plot'")
     width, height = args.size

@@ -102,6 +102,7 @@ def load_result(path: str | Path) -> SimResult | BatchResult:
 
 
 def run(args: argparse.Namespace) -> int:
+    from equilibrist.sim import BatchResult
     from equilibrist.viz import plots
     from equilibrist.viz.output import FIGURE_FORMATS, VizError, check_suffix
 
@@ -113,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
     labels = common.parse_names(args.labels, "--labels")
     degrees = not args.radians
     results = [load_result(f) for f in args.files]
-    batches = [r for r in results if hasattr(r, "parameter_names")]
+    batches = [r for r in results if isinstance(r, BatchResult)]
     if batches:
         if len(results) > 1:
             raise VizError("plot one batch at a time (a batch file cannot be compared with others)")

@@ -415,8 +415,8 @@ def operating_point(system: System, controller: Any) -> tuple[np.ndarray, np.nda
     A system without a canonical point (the zxz gyroscope) runs open loop
     about zero input, with deviations measured from zero.
     """
-    if isinstance(controller, StateFeedback | LQG | LinearController | NonlinearController) and (
-        getattr(controller, "kind", "") != "none"
+    if isinstance(controller, NonlinearController) or (
+        isinstance(controller, StateFeedback | LQG | LinearController) and controller.kind != "none"
     ):
         return np.array(controller.x_op), np.array(controller.u_op)
     try:

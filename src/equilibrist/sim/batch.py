@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from equilibrist.atomic import atomic_path, write_text
+from equilibrist.control.controller import PythonController, python_controller_name
 from equilibrist.errors import SimulationError, nearest
 from equilibrist.mechanics.spec import Parameter
 from equilibrist.numeric.system import System
@@ -638,7 +639,8 @@ def _portable(setup: _setup.Setup) -> bytes:
     try:
         return pickle.dumps((setup.system.key, dict(setup.system.params), fields))
     except (pickle.PicklingError, TypeError, AttributeError) as exc:
-        name = type(getattr(setup.controller, "target", setup.controller)).__name__
+        name = (python_controller_name(setup.controller)
+                if isinstance(setup.controller, PythonController) else type(setup.controller).__name__)
         raise SimulationError(
             f"the Python controller {name} cannot be sent to worker processes ({exc}): define "
             "it at module level (not in a function, not a lambda), or run the batch in this "

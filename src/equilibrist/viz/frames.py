@@ -13,12 +13,15 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from equilibrist.viz.output import VizError, save_figure
 from equilibrist.viz.scenes import COLORS, Scene, Shape, _nice, scene_for
+
+if TYPE_CHECKING:
+    from equilibrist.numeric.system import System
 
 # Colour of an input gauge within limits, and when the command saturates.
 _GAUGE = "#9b30c8"
@@ -331,8 +334,8 @@ def _fit(extent: tuple[float, float, float, float], aspect: float) -> tuple[floa
     return (x0, x1, y0 - grow, y1 + grow)
 
 
-def _title(system: Any) -> str:
-    return getattr(system.spec, "title", "") or system.key
+def _title(system: System) -> str:
+    return system.spec.title or system.key
 
 
 def draw_state(

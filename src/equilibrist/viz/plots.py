@@ -231,7 +231,7 @@ def plot_response(
 
 
 def _run_title(run: Run) -> str:
-    name = getattr(run.system.spec, "title", run.key)
+    name = run.system.spec.title or run.key
     bits = [name]
     if run.label:
         bits.append(run.label)
@@ -318,7 +318,7 @@ def plot_comparison(
     for ax, name in zip(axes, names, strict=False):
         i = first.state_names.index(name)
         ax.set_ylabel(axis_label(name, display_unit(first.state_units[i], degrees=degrees)[1]))
-    low, high = first.system.input_limits if n_in else ([], [])
+    low, high = first.system.input_limits if n_in else (np.zeros(0), np.zeros(0))
     for j in range(n_in):
         ax = axes[len(names) + j]
         for v in (low[j], high[j]):
@@ -329,7 +329,7 @@ def plot_comparison(
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time [s]")
     _legend(fig, list(axes))
-    _title(fig, title or f"{getattr(first.system.spec, 'title', first.key)}: comparison")
+    _title(fig, title or f"{first.system.spec.title or first.key}: comparison")
     return _finish(fig, path)
 
 
@@ -437,7 +437,7 @@ def plot_fan(
     axes[-1].set_xlabel("time [s]")
     _legend(fig, list(axes))
     n_fell = sum(fell)
-    _title(fig, title or f"{getattr(first.system.spec, 'title', first.key)}: {len(runs)} runs, "
+    _title(fig, title or f"{first.system.spec.title or first.key}: {len(runs)} runs, "
                 f"{n_fell} fell")
     return _finish(fig, path)
 
@@ -664,13 +664,15 @@ def plot_batch(batch: Any, path: str | Path | None = None, *, degrees: bool = Tr
     -------
     matplotlib.figure.Figure
     """
+    from equilibrist.sim.batch import BatchResult, MonteCarloResult, RegionOfAttraction
     from equilibrist.viz._adapt import system_of
 
-    batch = getattr(batch, "batch", batch)
-    for name in ("x0", "params", "fell", "state_names", "parameter_names", "system"):
-        if not hasattr(batch, name):
-            raise VizError(f"cannot plot a {type(batch).__name__} as a batch (it has no {name})")
-    if getattr(batch, "trajectories", None) is not None:
+    if isinstance(batch, MonteCarloResult | RegionOfAttraction):
+        batch = batch.batch
+    if not isinstance(batch, BatchResult):
+        raise VizError(f"cannot plot a {type(batch).__name__} as a batch: expected a BatchResult "
+                       "(equilibrist.sim.simulate_batch, BatchResult.load)")
+    if batch.trajectories is not None:
         return plot_fan([batch.run(i) for i in range(batch.runs)], path, degrees=degrees,
                         title=title, dpi=dpi)
     system = system_of(batch.system)
@@ -685,7 +687,7 @@ def plot_batch(batch: Any, path: str | Path | None = None, *, degrees: bool = Tr
             varied.append((n, batch.params[:, j]))
     ok = ~np.asarray(batch.fell, bool)
     runs = len(ok)
-    head = title or (f"{getattr(system.spec, 'title', batch.system)}: {int(ok.sum())} of {runs} "
+    head = title or (f"{system.spec.title or batch.system}: {int(ok.sum())} of {runs} "
                      "runs stayed up")
     if len(varied) >= 2:
         (xn, xv), (yn, yv) = varied[:2]

@@ -12,11 +12,15 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from equilibrist.viz.output import VizError
+
+if TYPE_CHECKING:
+    from equilibrist.numeric.system import System
+    from equilibrist.sim.result import SimResult
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,7 +57,7 @@ class Run:
         then ask the system for its canonical one).
     """
 
-    system: Any
+    system: System
     t: np.ndarray
     x: np.ndarray
     u: np.ndarray | None = None
@@ -72,7 +76,7 @@ class Run:
     @classmethod
     def from_arrays(
         cls,
-        system: Any,
+        system: System,
         t: object,
         x: object,
         *,
@@ -181,7 +185,7 @@ class Run:
         return replace(self, label=label)
 
 
-def as_run(result: Any, *, system: Any = None, label: str | None = None) -> Run:
+def as_run(result: SimResult | Run, *, system: System | None = None, label: str | None = None) -> Run:
     """The :class:`Run` view of a simulation result (or a Run itself).
 
     Parameters
