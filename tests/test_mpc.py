@@ -167,3 +167,19 @@ def test_survives_every_push_the_clipped_lqr_survives(estimator: str) -> None:
             assert not res.fell, (push, seed)
             assert abs(res.final_state[0]) < 0.2 * x_max and abs(res.final_state[1]) < 0.05, (push, seed)
     assert compared >= 12 and beyond >= 2
+
+
+def test_an_unsolved_qp_is_not_applied_blindly(cart: tuple[object, object]) -> None:
+    """OSQP stopped after 2 iterations on a constrained state: its plan is far from feasible, so
+    the command is the clipped LQR's (K from an independent dlqr call), and the fallback counted."""
+    system, d = cart
+    ctrl = mpc(system, design=d, horizon=30, estimator="state")  # type: ignore[arg-type]
+    K = dlqr(d.discrete.A, d.discrete.B, d.Q, d.R).K  # type: ignore[attr-defined]
+    rt = MPCRuntime(ctrl)
+    rt._solver.update_settings(max_iter=2, polishing=False)
+    dx = np.array([0.95, 0.0, 1.0, 0.0])
+    assert not rt.lqr_feasible(dx)
+    du = rt.solve(dx)
+    assert rt.last_status != "solved" and rt.fallbacks == 1
+    lo, hi = ctrl.problem.u_lo, ctrl.problem.u_hi
+    np.testing.assert_allclose(du, np.clip(-K @ dx, lo, hi), rtol=0, atol=1e-9)
