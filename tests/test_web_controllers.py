@@ -19,6 +19,8 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     from starlette.testclient import TestClient
 
+from tests.support.web import receive_until
+
 from equilibrist.web.app import create_app
 from equilibrist.web.protocol import CONTROLLERS, Limits, ProtocolError, parse
 from equilibrist.web.session import Catalogue, Session, redesign
@@ -38,14 +40,6 @@ def app():
 def client(app):
     with TestClient(app) as c:
         yield c
-
-
-def receive_until(ws, predicate, limit=3000):
-    for _ in range(limit):
-        msg = json.loads(ws.receive_text())
-        if predicate(msg):
-            return msg
-    raise AssertionError("the expected frame never came")
 
 
 def opening(ws):

@@ -23,6 +23,7 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     from starlette.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
+from tests.support.web import next_frame, receive_until
 
 from equilibrist.web.app import create_app
 from equilibrist.web.protocol import MAX_MESSAGE_BYTES, Limits, ProtocolError, parse
@@ -40,19 +41,6 @@ def app():
 def client(app):
     with TestClient(app) as c:
         yield c
-
-
-def receive_until(ws, predicate, limit=2000):
-    """Frames until *predicate* holds for one (returned); fails after *limit* frames."""
-    for _ in range(limit):
-        msg = json.loads(ws.receive_text())
-        if predicate(msg):
-            return msg
-    raise AssertionError("the expected frame never came")
-
-
-def next_frame(ws):
-    return receive_until(ws, lambda m: m["type"] == "frame")
 
 
 def opening(ws):
