@@ -14,13 +14,16 @@
     ``make check`` builds the test program from it and the library's
     sources and runs it; ``make clean``.
 
-Used by the swing-up's and the MPC's exports (:mod:`equilibrist.export.swingup_c`,
+:class:`ControllerExport` is what those exports return (the fields the
+command line reports). Used by the swing-up's and the MPC's exports (:mod:`equilibrist.export.swingup_c`,
 :mod:`equilibrist.export.mpc_c`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -106,3 +109,31 @@ def check_files(
 
 
 __all__ = ["c_rows", "check_files", "vectors_header"]
+
+
+@dataclass(frozen=True)
+class Described:
+    """What the command line's report reads of an exported controller (id, kind, rate)."""
+
+    fingerprint: str
+    controller: str
+    rate: float
+
+
+@dataclass(frozen=True)
+class Steps:
+    """How many recorded samples the export's test replays."""
+
+    n_steps: int
+
+
+@dataclass(frozen=True)
+class ControllerExport:
+    """What a controller's exporter wrote (an :class:`~equilibrist.export.writer.ExportReport`)."""
+
+    folder: Path
+    name: str
+    files: Mapping[str, str]
+    precision: str
+    data: Described
+    vectors: Steps

@@ -42,17 +42,18 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from equilibrist.errors import ExportError
+from equilibrist.export._check import ControllerExport, Described, Steps
 from equilibrist.export.writer import register_exporter
 
 if TYPE_CHECKING:
-    from equilibrist.control.mpc import MPC
+    from equilibrist.control.mpc import MPC, MPCRuntime
+    from equilibrist.numeric.system import System
 
 
 def _array(name: str, values: np.ndarray) -> str:
@@ -484,32 +485,12 @@ class CompiledMPC:
         self._dir.cleanup()
 
 
-@dataclass(frozen=True)
-class _Described:
-    fingerprint: str
-    controller: str
-    rate: float
-
-
-@dataclass(frozen=True)
-class _Steps:
-    n_steps: int
-
-
-@dataclass(frozen=True)
-class MPCExport:
-    """What :func:`export_files` wrote (the fields the command line reports)."""
-
-    folder: Path
-    name: str
-    files: Mapping[str, str]
-    precision: str
-    data: _Described
-    vectors: _Steps
+#: What :func:`export_files` returns (kept under its former name).
+MPCExport = ControllerExport
 
 
 @register_exporter("mpc")
-def export_files(built: Any, out: str | Path, *, system: Any, precision: str = "double",
+def export_files(built: MPCRuntime, out: str | Path, *, system: System, precision: str = "double",
                  duration: float | None = None, seed: int = 0, force: bool = False) -> MPCExport:
     """``equilibrist export SYSTEM --controller mpc``: OSQP's generated solver, driver, ``make check``.
 
@@ -544,7 +525,7 @@ def export_files(built: Any, out: str | Path, *, system: Any, precision: str = "
              "test_mpc.c": "test program", "Makefile": "make check"}
     steps = round((duration or 1.0) * ctrl.rate) + 1
     return MPCExport(folder=folder, name="mpc", files=files, precision="double",
-                     data=_Described(digest, "mpc", ctrl.rate), vectors=_Steps(steps))
+                     data=Described(digest, "mpc", ctrl.rate), vectors=Steps(steps))
 
 
 __all__ = ["SETTINGS", "Z_TOLERANCE", "CompiledMPC", "MPCExport", "PythonReference", "export_files", "export_mpc",

@@ -31,8 +31,6 @@ from __future__ import annotations
 import ctypes
 import hashlib
 import tempfile
-from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -40,10 +38,12 @@ import numpy as np
 
 from equilibrist.control.swingup import N_STATES, Z, layout_constants
 from equilibrist.errors import ExportError
+from equilibrist.export._check import ControllerExport, Described, Steps
 from equilibrist.export.writer import register_exporter
 
 if TYPE_CHECKING:
     from equilibrist.control.controller import NonlinearController
+    from equilibrist.numeric.system import System
 
 #: The C library functions the exported code calls.
 MATH_FUNCTIONS = ("cos", "sin", "floor")
@@ -350,7 +350,7 @@ def swingup_files(ctrl: NonlinearController, *, name: str = "swingup") -> dict[s
     return {f"{name}.h": header, f"{name}.c": source}
 
 
-def recorded_vectors(ctrl: NonlinearController, system: Any, *, duration: float = 4.0,
+def recorded_vectors(ctrl: NonlinearController, system: System, *, duration: float = 4.0,
                      seed: int = 0) -> dict[str, np.ndarray]:
     """Test vectors: a swing-up of *system* under the plain-Python controller, with sensor noise.
 
@@ -404,7 +404,7 @@ def check_files(name: str, vectors: dict[str, np.ndarray]) -> dict[str, str]:
     )
 
 
-def export_swingup(ctrl: NonlinearController, system: Any, folder: str | Path, *,
+def export_swingup(ctrl: NonlinearController, system: System, folder: str | Path, *,
                    name: str = "swingup", seed: int = 0) -> Path:
     """Write the swing-up library, its recorded test vectors and ``make check`` into *folder*."""
     out = Path(folder)
@@ -416,34 +416,12 @@ def export_swingup(ctrl: NonlinearController, system: Any, folder: str | Path, *
     return out
 
 
-@dataclass(frozen=True)
-class _Described:
-    """What the command line's report reads of an export (name, id, rate, kind)."""
-
-    fingerprint: str
-    controller: str
-    rate: float
-
-
-@dataclass(frozen=True)
-class _Steps:
-    n_steps: int
-
-
-@dataclass(frozen=True)
-class SwingUpExport:
-    """What :func:`export_files` wrote (the fields the command line reports)."""
-
-    folder: Path
-    name: str
-    files: Mapping[str, str]
-    precision: str
-    data: _Described
-    vectors: _Steps
+#: What :func:`export_files` returns (kept under its former name).
+SwingUpExport = ControllerExport
 
 
 @register_exporter("swingup")
-def export_files(ctrl: NonlinearController, out: str | Path, *, system: Any,
+def export_files(ctrl: NonlinearController, out: str | Path, *, system: System,
                  precision: str = "double", duration: float | None = None, seed: int = 0,
                  force: bool = False) -> SwingUpExport:
     """``equilibrist export SYSTEM --controller swingup``: the library, vectors, ``make check``."""
@@ -466,7 +444,7 @@ def export_files(ctrl: NonlinearController, out: str | Path, *, system: Any,
     }
     digest = hashlib.sha256(ctrl.params.tobytes() + ctrl.source.encode()).hexdigest()[:12]
     return SwingUpExport(folder=folder, name=name, files=what, precision="double",
-                         data=_Described(digest, "swingup", ctrl.rate), vectors=_Steps(len(vec["y"])))
+                         data=Described(digest, "swingup", ctrl.rate), vectors=Steps(len(vec["y"])))
 
 
 class CompiledSwingUp:
