@@ -379,30 +379,22 @@ def _guess_states(system: System, log: Log) -> np.ndarray:
 
 
 @dataclass
-class _Problem:
+class _Unknowns:
+    """What both fits share: the decision vector's head (the free parameters, then the
+    sensor offsets with ``offsets``) and the parameter vector it sets."""
+
     system: System
     log: Log
-    free: tuple[str, ...]
-    offsets: bool
-    bounds: np.ndarray
-    n_sub: np.ndarray
-    c_idx: np.ndarray
-    sigma_y: np.ndarray
-    W: np.ndarray  # (n_seg - 1, n, n) whitening of the defects
-    shoot: ShootFunction
     free_idx: np.ndarray
+    offsets: bool
     p_base: np.ndarray
-    step_theta: np.ndarray
-    step_x: np.ndarray
-    cache: dict[str, Any] = field(default_factory=dict)
+    c_idx: np.ndarray
+    n_sub: np.ndarray
+    sigma_y: np.ndarray
 
     @property
     def n(self) -> int:
         return self.system.n_states
-
-    @property
-    def n_seg(self) -> int:
-        return self.bounds.shape[0] - 1
 
     @property
     def ny(self) -> int:
@@ -410,7 +402,7 @@ class _Problem:
 
     @property
     def n_theta(self) -> int:
-        return len(self.free)
+        return len(self.free_idx)
 
     @property
     def n_off(self) -> int:
@@ -420,16 +412,37 @@ class _Problem:
     def n_head(self) -> int:
         return self.n_theta + self.n_off
 
-    def split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def head(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(theta, offsets, rest)`` of a decision vector (zero offsets without ``offsets``)."""
         theta = z[: self.n_theta]
         off = z[self.n_theta : self.n_head] if self.offsets else np.zeros(self.ny)
-        xs = z[self.n_head :].reshape(self.n_seg, self.n)
-        return theta, off, xs
+        return theta, off, z[self.n_head :]
 
     def p_of(self, theta: np.ndarray) -> np.ndarray:
         p = self.p_base.copy()
         p[self.free_idx] = theta
         return p
+
+
+@dataclass
+class _Problem(_Unknowns):
+    """Multiple shooting: the head, then the state at the start of each segment."""
+
+    free: tuple[str, ...]
+    bounds: np.ndarray
+    W: np.ndarray  # (n_seg - 1, n, n) whitening of the defects
+    shoot: ShootFunction
+    step_theta: np.ndarray
+    step_x: np.ndarray
+    cache: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_seg(self) -> int:
+        return self.bounds.shape[0] - 1
+
+    def split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        theta, off, rest = self.head(z)
+        return theta, off, rest.reshape(self.n_seg, self.n)
 
     def run(self, P: np.ndarray, XS: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         K = P.shape[0]
@@ -809,7 +822,7 @@ def identify(
     theta, off, xs = prob.split(sol.x)
     nh = prob.n_head
     pred = _Predictor(
-        system=system, log=log, free_idx=free_idx, n_theta=len(free), offsets=offsets, p_base=p0,
+        system=system, log=log, free_idx=free_idx, offsets=offsets, p_base=p0,
         c_idx=c_idx, n_sub=n_sub, dt=dt, x_lin=np.median(xs, axis=0), u_lin=u_mean, floor=floor,
         q=q.copy(), sigma_y=sigma_y.copy(), filter=_filter(system, backend),
         step=np.concatenate([1e-6 * np.where(theta0 != 0, np.abs(theta0), 1.0),
@@ -846,7 +859,7 @@ def identify(
 
 
 @dataclass
-class _Predictor:
+class _Predictor(_Unknowns):
     """The one-step prediction errors of a Kalman filter of the model, as residuals.
 
     The filter predicts with the nonlinear model (RK4, the logged input held)
@@ -856,50 +869,18 @@ class _Predictor:
     initial state.
     """
 
-    system: System
-    log: Log
-    free_idx: np.ndarray
-    n_theta: int
-    offsets: bool
-    p_base: np.ndarray
-    c_idx: np.ndarray
-    n_sub: np.ndarray
     dt: float
     x_lin: np.ndarray
     u_lin: np.ndarray
     floor: np.ndarray
     q: np.ndarray
-    sigma_y: np.ndarray
     filter: Callable[..., None]
     step: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the least difference step
     weight: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     memo: dict[tuple[Any, ...], Any] = field(default_factory=dict)
 
-    @property
-    def n(self) -> int:
-        return self.system.n_states
-
-    @property
-    def ny(self) -> int:
-        return self.c_idx.shape[0]
-
-    @property
-    def n_off(self) -> int:
-        return self.ny if self.offsets else 0
-
-    @property
-    def n_head(self) -> int:
-        return self.n_theta + self.n_off
-
     def split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        theta = z[: self.n_theta]
-        off = z[self.n_theta : self.n_head] if self.offsets else np.zeros(self.ny)
-        return theta, off, z[self.n_head :]
-
-    def p_of(self, theta: np.ndarray) -> np.ndarray:
-        p = self.p_base.copy()
-        p[self.free_idx] = theta
-        return p
+        return self.head(z)
 
     def gain(self, p: np.ndarray, q_factor: float = 1.0,
              sigma_y: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
