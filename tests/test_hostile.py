@@ -269,36 +269,16 @@ def test_a_terminated_demo_leaves_nothing(tmp_path) -> None:
 # -- Ctrl-C stops a long run, with or without a progress bar --------------------
 
 def _interrupt_after_start(argv: list[str], folder: Path) -> tuple[int, bytes, bytes, float]:
-    """Start the command with stdout to a pipe, interrupt it while it works.
+    """Start the command with stdout to a pipe, interrupt it while it works (past its start:
+    4 s of its own CPU, beyond the imports and the core's load).
 
     Returns the exit status, stdout, stderr and the seconds from SIGINT to its end.
     """
     import signal
-    import subprocess
-    import sys
-    import time
 
-    proc = subprocess.Popen([sys.executable, "-m", "equilibrist.cli.main", *argv],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=folder)
-    try:
-        # Working: the process has spent CPU time beyond its start (imports, the core's load).
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline:
-            fields = Path(f"/proc/{proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
-            cpu = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-            if cpu > 4.0 or proc.poll() is not None:
-                break
-            time.sleep(0.1)
-        assert proc.poll() is None, "the command ended before it could be interrupted"
-        sent = time.monotonic()
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=60)
-        took = time.monotonic() - sent
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    return proc.returncode, out, err, took
+    from tests.support.signals import after_cpu, signal_while_working, start
+
+    return signal_while_working(start(argv, folder), signal.SIGINT, after_cpu(4.0))
 
 
 @pytest.mark.parametrize("argv", [

@@ -8,16 +8,15 @@ within a fraction of a second, prints its one line and writes nothing.
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
+from tests.support.signals import after_cpu, signal_while_working, start
 
 from equilibrist.numeric.system import get_system
 from equilibrist.sim import simulate, simulate_batch
@@ -28,16 +27,6 @@ SIMULATE = ["simulate", "cartpole", "--duration", "2000", "--physics-step", "1e-
             "--no-progress", "--noise", "off", "--out", "run.npz"]
 BATCH = ["batch", "cartpole", "--runs", "4", "--duration", "20000", "--physics-step", "1e-5",
          "--no-progress", "--noise", "off", "--max-steps", "1e11", "--out", "batch.npz"]
-
-
-def _command(argv: list[str], folder: Path) -> subprocess.Popen[bytes]:
-    return subprocess.Popen([sys.executable, "-m", "equilibrist.cli.main", *argv],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=folder)
-
-
-def _cpu_seconds(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 @pytest.fixture(scope="module")
@@ -54,25 +43,10 @@ def warm(tmp_path_factory: pytest.TempPathFactory) -> None:
 @pytest.mark.parametrize("argv", [SIMULATE, BATCH], ids=["simulate", "batch"])
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_stops_a_long_run_at_once(warm, tmp_path, argv, signum) -> None:
-    proc = _command(argv, tmp_path)
-    try:
-        # Started and working in the core: 1.5 s of its own CPU time (imports and the
-        # cached core's load take less), so the signal lands inside the compiled loop.
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and proc.poll() is None:
-            if _cpu_seconds(proc.pid) >= 1.5:
-                break
-            time.sleep(0.05)
-        assert proc.poll() is None, proc.communicate()[1].decode()
-        sent = time.monotonic()
-        proc.send_signal(signum)
-        out, err = proc.communicate(timeout=60)
-        took = time.monotonic() - sent
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    assert proc.returncode == 130, err.decode()
+    # Started and working in the core: 1.5 s of its own CPU time (imports and the
+    # cached core's load take less), so the signal lands inside the compiled loop.
+    code, out, err, took = signal_while_working(start(argv, tmp_path), signum, after_cpu(1.5))
+    assert code == 130, err.decode()
     assert err.decode().strip() == "equilibrist: interrupted"
     assert out == b""
     assert sorted(p.name for p in tmp_path.iterdir()) == []
@@ -188,19 +162,13 @@ def test_a_signal_stops_a_batch_of_python_controllers_in_worker_processes(tmp_pa
     script.write_text(PYTHON_BATCH)
     proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, cwd=tmp_path)
-    try:
+
+    def ready(proc: subprocess.Popen[bytes]) -> None:
         assert proc.stdout is not None
         assert proc.stdout.readline() == b"started\n"
         time.sleep(4.0)  # the workers are spawned and running their runs
-        assert proc.poll() is None
-        sent = time.monotonic()
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=60)
-        took = time.monotonic() - sent
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    assert proc.returncode == 130, err.decode()
+
+    code, out, err, took = signal_while_working(proc, signal.SIGINT, ready)
+    assert code == 130, err.decode()
     assert out == b"interrupted\n"
     assert took < 2.0, f"took {took:.2f} s to stop"
