@@ -528,38 +528,6 @@ def build(
             fresh = _with_x0(entry[2], system, x0)
             if fresh is not None:
                 return fresh
-    setup = _build(system, controller, **settings)
-    if key is not None and setup.compiled:
-        if len(_BUILT) >= _BUILT_MAX:
-            _BUILT.pop(next(iter(_BUILT)))
-        _BUILT[key] = (controller, noise, setup)
-    return setup
-
-
-def _build(
-    system: System,
-    controller: object,
-    *,
-    duration: float,
-    rate: float | None,
-    physics_step: float | None,
-    integrator: str,
-    rtol: float,
-    atol: float,
-    plant: str,
-    x0: object,
-    delay: bool,
-    noise: Noise | None,
-    reference: object,
-    events: Sequence[ev.Event],
-    outputs: Sequence[str] | None,
-    region: Mapping[str, tuple[float, float]] | None,
-    excitation: object = None,
-    max_steps: object = DEFAULT_MAX_STEPS,
-    runs: int = 1,
-    threads: int = 1,
-) -> Setup:
-    """:func:`build` without the memory of settings met before."""
     bound = check_max_steps(max_steps)
     check_system(system)
     problems: list[str] = []
@@ -900,7 +868,7 @@ def _build(
         raise SimulationError(f"the input added to the command is not finite at t = {times[k]:g} s "
                               f"({uff[k].tolist()}): expected finite values over the run")
 
-    return Setup(
+    setup = Setup(
         system=system, controller=ctrl, compiled=compiled, estimates=estimates,
         description=resolved.description, cp=cp, z0=z0, rate=run_rate,
         h=h, n_sub=n_sub, n_samples=n_samples, integrator=integrator, rtol=float(tol_r or rtol),
@@ -915,3 +883,8 @@ def _build(
         pulse_value=np.array(pulse_value, dtype=float), region=reg, region_spec=region_spec,
         duration=float(dur), reference=ref_signal, excitation=excite,
     )
+    if key is not None and setup.compiled:
+        if len(_BUILT) >= _BUILT_MAX:
+            _BUILT.pop(next(iter(_BUILT)))
+        _BUILT[key] = (controller, noise, setup)
+    return setup
