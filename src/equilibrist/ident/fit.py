@@ -891,7 +891,6 @@ class _Predictor(_Unknowns):
         state and offsets share one), the discretization too (the noise search
         shares one): both are small dense problems, solved thousands of times.
         """
-        from scipy.linalg import solve_discrete_are
 
         sigma_y = self.sigma_y if sigma_y is None else sigma_y
         if len(self.memo) > 256:
@@ -913,15 +912,7 @@ class _Predictor(_Unknowns):
         C = np.zeros((ny, n))
         C[np.arange(ny), self.c_idx] = 1.0
         Qd = q_factor * Qv + np.diag(self.floor)
-        R = np.diag(sigma_y**2)
-        P = _filter_riccati(Ad, C, Qd, R)
-        if P is None:
-            try:
-                P = solve_discrete_are(Ad.T, C.T, Qd, R)
-            except (ValueError, np.linalg.LinAlgError):
-                P = Qd.copy()
-        S = C @ P @ C.T + R
-        out = (P @ C.T @ np.linalg.inv(S), (S + S.T) / 2)
+        out = _steady_gain(Ad, C, Qd, np.diag(sigma_y**2))
         self.memo[key] = out
         return out
 
@@ -1249,7 +1240,7 @@ def _kalman(system: System, log: Log, prob: _Problem, theta: np.ndarray, off: np
             x0: np.ndarray, A: np.ndarray, q: np.ndarray, floor: np.ndarray,
             dt: float) -> tuple[np.ndarray, np.ndarray]:
     """Prediction errors of a Kalman filter of the model, and their covariance."""
-    from scipy.linalg import expm, solve_discrete_are
+    from scipy.linalg import expm
 
     from equilibrist.ident.kernel import load_shooting
 
@@ -1258,21 +1249,29 @@ def _kalman(system: System, log: Log, prob: _Problem, theta: np.ndarray, off: np
     C[np.arange(ny), prob.c_idx] = 1.0
     Ad = expm(A * dt)
     Qd = _van_loan(A, np.diag(q), dt) + np.diag(floor)
-    R = np.diag(prob.sigma_y**2)
-    P = _filter_riccati(Ad, C, Qd, R)
-    if P is None:
-        try:
-            P = solve_discrete_are(Ad.T, C.T, Qd, R)
-        except (ValueError, np.linalg.LinAlgError):
-            P = Qd.copy()
-    Sinn = C @ P @ C.T + R
-    gain = P @ C.T @ np.linalg.inv(Sinn)
+    gain, Sinn = _steady_gain(Ad, C, Qd, np.diag(prob.sigma_y**2))
     e = np.empty((log.n_rows, ny))
     load_shooting(system).innovations(
         prob.p_of(theta), np.ascontiguousarray(x0, dtype=float), log.time, log.inputs,
         prob.n_sub, prob.c_idx, np.ascontiguousarray(gain), log.outputs,
         np.ascontiguousarray(off, dtype=float), e)
     return e, Sinn
+
+
+def _steady_gain(Ad: np.ndarray, C: np.ndarray, Qd: np.ndarray,
+                 R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The steady-state Kalman gain ``K`` and innovation covariance ``S`` of the sampled
+    model (the filter Riccati equation by iteration, else scipy's DARE, else ``P = Qd``)."""
+    from scipy.linalg import solve_discrete_are
+
+    P = _filter_riccati(Ad, C, Qd, R)
+    if P is None:
+        try:
+            P = solve_discrete_are(Ad.T, C.T, Qd, R)
+        except (ValueError, np.linalg.LinAlgError):
+            P = Qd.copy()
+    S = C @ P @ C.T + R
+    return P @ C.T @ np.linalg.inv(S), (S + S.T) / 2
 
 
 def _filter_riccati(Ad: np.ndarray, C: np.ndarray, Qd: np.ndarray, R: np.ndarray) -> np.ndarray | None:
