@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 
@@ -123,10 +125,8 @@ def test_registered() -> None:
 
 def test_command_line_horizon() -> None:
     import subprocess
-    from pathlib import Path
 
-    exe = Path(__file__).resolve().parents[1] / ".venv" / "bin" / "equilibrist"
-    cmd = [str(exe)] if exe.exists() else ["equilibrist"]
+    cmd = [sys.executable, "-m", "equilibrist.cli.main"]
     bad = subprocess.run([*cmd, "simulate", "cartpole", "--controller", "mpc", "--horizon", "0"],
                          capture_output=True, text=True, check=False)
     assert bad.returncode == 2 and "--horizon" in bad.stderr

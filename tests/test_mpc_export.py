@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -121,8 +122,7 @@ def test_compiled_mpc_with_filter_closes_the_loop() -> None:
 
 
 def test_command_line_export_has_the_filter(tmp_path: Path) -> None:
-    exe = Path(__file__).resolve().parents[1] / ".venv" / "bin" / "equilibrist"
-    cmd = [str(exe)] if exe.exists() else ["equilibrist"]
+    cmd = [sys.executable, "-m", "equilibrist.cli.main"]
     out = tmp_path / "cart"
     proc = subprocess.run([*cmd, "export", "cartpole", "--controller", "mpc", "--horizon", "20",
                            "--out", str(out)], capture_output=True, text=True, check=False)

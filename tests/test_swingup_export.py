@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -88,8 +89,7 @@ def test_exported_code_closes_the_loop() -> None:
 
 
 def test_command_line_export_and_refusal(tmp_path: Path) -> None:
-    exe = Path(__file__).resolve().parents[1] / ".venv" / "bin" / "equilibrist"
-    cmd = [str(exe)] if exe.exists() else ["equilibrist"]
+    cmd = [sys.executable, "-m", "equilibrist.cli.main"]
     out = tmp_path / "cart"
     proc = subprocess.run([*cmd, "export", "cartpole", "--controller", "swingup", "--out", str(out)],
                           capture_output=True, text=True, check=False)
@@ -105,8 +105,7 @@ def test_command_line_export_and_refusal(tmp_path: Path) -> None:
 
 def test_command_line_lqg_hand_over(tmp_path: Path) -> None:
     """``--balance lqg`` reaches the builder: the exported library balances with the LQG."""
-    exe = Path(__file__).resolve().parents[1] / ".venv" / "bin" / "equilibrist"
-    cmd = [str(exe)] if exe.exists() else ["equilibrist"]
+    cmd = [sys.executable, "-m", "equilibrist.cli.main"]
     out = tmp_path / "furuta"
     proc = subprocess.run([*cmd, "export", "furuta", "--controller", "swingup", "--balance", "lqg",
                            "--out", str(out)], capture_output=True, text=True, check=False)
