@@ -18,7 +18,8 @@
 thread's CPU time (``time.thread_time``: what the solver itself costs,
 whatever else runs on the machine) and by the wall clock, and reports the
 median, the 99th percentile and the worst of both against the 5 ms period,
-with OSQP's iteration count (median, worst) and its cap.
+with DAQP's iteration count (median, worst), how many solves ended at its
+cap and how many samples fell back to the clipped LQR.
 
     python bench/bench_mpc.py [--json] [--grid 9] [--no-figure] [--solve-only] [--repeat 1]
 """
@@ -77,15 +78,15 @@ def solve_only(horizon: int = 30, repeat: int = 1) -> dict[str, object]:
     """Per-sample solve times only (thread CPU and wall), *repeat* passes over the starts."""
     import os
 
-    from equilibrist.control.mpc import MAX_ITER
+    from equilibrist.control.mpc import ITER_LIMIT
 
     system = get_system("cartpole")
     d = design(system, rate=200.0)
     ctrl = mpc(system, design=d, horizon=horizon, estimator="state")
     cpu: list[float] = []
     wall: list[float] = []
-    osqp_cpu: list[float] = []
-    osqp_wall: list[float] = []
+    qp_cpu: list[float] = []
+    qp_wall: list[float] = []
     iters: list[int] = []
     fallbacks = 0
     for _ in range(repeat):
@@ -98,19 +99,19 @@ def solve_only(horizon: int = 30, repeat: int = 1) -> dict[str, object]:
             for c, w, st, it in zip(rt.cpu_times, rt.wall_times, rt.statuses, rt.iterations,
                                     strict=True):
                 if st != "unconstrained":
-                    osqp_cpu.append(c)
-                    osqp_wall.append(w)
+                    qp_cpu.append(c)
+                    qp_wall.append(w)
                     iters.append(it)
     period = 5.0
     return {
         "horizon": horizon, "rate": 200.0, "period_ms": period, "samples": len(cpu),
-        "samples_solved_by_osqp": len(osqp_cpu), "max_iter": MAX_ITER,
+        "samples_solved_by_daqp": len(qp_cpu), "iter_limit": ITER_LIMIT,
         "load_average": [round(v, 2) for v in os.getloadavg()],
         "cpu_ms": _ms(cpu), "wall_ms": _ms(wall),
-        "osqp_cpu_ms": _ms(osqp_cpu), "osqp_wall_ms": _ms(osqp_wall),
-        "osqp_iterations": {"median": float(np.median(iters)), "p99": float(np.percentile(iters, 99)),
-                            "worst": int(max(iters)), "at_cap": int(sum(i >= MAX_ITER for i in iters))},
-        # Capped solves whose plan was not feasible to PRIMAL_TOL: the clipped LQR was applied.
+        "daqp_cpu_ms": _ms(qp_cpu), "daqp_wall_ms": _ms(qp_wall),
+        "daqp_iterations": {"median": float(np.median(iters)), "p99": float(np.percentile(iters, 99)),
+                            "worst": int(max(iters)), "at_cap": int(sum(i >= ITER_LIMIT for i in iters))},
+        # Solves that ended without a solution: the clipped LQR was applied.
         "fallbacks_to_lqr": fallbacks,
         "cpu_over_period": int(sum(1e3 * c > period for c in cpu)),
         "wall_over_period": int(sum(1e3 * w > period for w in wall)),
@@ -136,11 +137,11 @@ def solve_times(horizon: int = 30) -> dict[str, object]:
     w, c = np.array(wall), np.array(cpu)
     return {
         "horizon": horizon, "rate": 200.0, "period_ms": 5.0, "samples": len(w),
-        "samples_solved_by_osqp": len(solved),
+        "samples_solved_by_daqp": len(solved),
         "wall_median_ms": 1e3 * float(np.median(w)), "wall_worst_ms": 1e3 * float(w.max()),
         "cpu_median_ms": 1e3 * float(np.median(c)), "cpu_worst_ms": 1e3 * float(c.max()),
-        "osqp_wall_median_ms": 1e3 * float(np.median(solved)) if solved else None,
-        "osqp_wall_worst_ms": 1e3 * float(np.max(solved)) if solved else None,
+        "daqp_wall_median_ms": 1e3 * float(np.median(solved)) if solved else None,
+        "daqp_wall_worst_ms": 1e3 * float(np.max(solved)) if solved else None,
     }
 
 

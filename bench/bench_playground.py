@@ -28,7 +28,7 @@ costs under each controller (the session's whole sample: sensors,
 controller, actuator, the plant's RK4 steps, the recording), the swing-up
 also with its functions compiled by numba (the peer of the plain-Python
 runtime the playground runs), and the redesign time of each controller
-(the design, plus the swing-up's or the MPC's construction with OSQP's
+(the design, plus the swing-up's or the MPC's construction with DAQP's
 setup).
 
 Usage: ``python bench/bench_playground.py [--sessions 20] [--seconds 20] [--swingup 1] [--mpc 1]

@@ -50,7 +50,7 @@ def test_terminal_cost_makes_any_horizon_the_lqr(cart: tuple[object, object]) ->
 
 
 def test_closed_loop_equals_lqr_closed_loop(cart: tuple[object, object]) -> None:
-    """Same run, MPC (through OSQP) and LQR: states agree to 1e-6 of each state's range."""
+    """Same run, MPC (every sample through DAQP) and LQR: states agree to 1e-6 of each state's range."""
     from equilibrist.control.controller import LinearController
 
     system, d = cart
@@ -170,16 +170,93 @@ def test_survives_every_push_the_clipped_lqr_survives(estimator: str) -> None:
 
 
 def test_an_unsolved_qp_is_not_applied_blindly(cart: tuple[object, object]) -> None:
-    """OSQP stopped after 2 iterations on a constrained state: its plan is far from feasible, so
-    the command is the clipped LQR's (K from an independent dlqr call), and the fallback counted."""
+    """DAQP stopped after 1 iteration on a constrained state: no solution, so the command is the
+    clipped LQR's (K from an independent dlqr call), the fallback counted, and the next sample
+    starts cold and is solved."""
     system, d = cart
     ctrl = mpc(system, design=d, horizon=30, estimator="state")  # type: ignore[arg-type]
     K = dlqr(d.discrete.A, d.discrete.B, d.Q, d.R).K  # type: ignore[attr-defined]
     rt = MPCRuntime(ctrl)
-    rt._solver.update_settings(max_iter=2, polishing=False)
+    rt._solver.settings = {"iter_limit": 1}
     dx = np.array([0.95, 0.0, 1.0, 0.0])
     assert not rt.lqr_feasible(dx)
     du = rt.solve(dx)
-    assert rt.last_status != "solved" and rt.fallbacks == 1
+    assert rt.last_status == "iteration limit" and rt.fallbacks == 1
     lo, hi = ctrl.problem.u_lo, ctrl.problem.u_hi
     np.testing.assert_allclose(du, np.clip(-K @ dx, lo, hi), rtol=0, atol=1e-9)
+    rt._solver.settings = {"iter_limit": 1000}
+    rt.solve(dx)
+    assert rt.last_status == "solved" and rt.fallbacks == 1
+
+
+def _sparse_reference(d: object, dx0: np.ndarray, horizon: int, soft: tuple[int, ...],
+                      lo: np.ndarray, hi: np.ndarray, u_lim: float, rho: tuple[float, float]
+                      ) -> float:
+    """The MPC's QP in its original variables (states, moves, slacks), built here from the
+    design's A, B, Q, R and Riccati S alone and solved by an interior-point solver (Clarabel):
+    the first move."""
+    import clarabel
+    from scipy import sparse
+
+    A, B = np.asarray(d.discrete.A), np.asarray(d.discrete.B)  # type: ignore[attr-defined]
+    Q, R, P = np.asarray(d.Q), np.asarray(d.R), np.asarray(d.S)  # type: ignore[attr-defined]
+    n, m, N, ns = 4, 1, horizon, len(soft)
+    nx, nu, nsl = (N + 1) * n, N * m, N * ns
+    H = sparse.block_diag([sparse.kron(sparse.eye(N), 2 * Q), 2 * P, sparse.kron(sparse.eye(N), 2 * R),
+                           2 * rho[1] * sparse.eye(nsl)], format="csc")
+    q = np.concatenate([np.zeros(nx + nu), np.full(nsl, rho[0])])
+    dyn = sparse.hstack([sparse.kron(sparse.eye(N + 1), -np.eye(n)) + sparse.kron(sparse.eye(N + 1, k=-1), A),
+                         sparse.kron(sparse.vstack([sparse.csc_matrix((1, N)), sparse.eye(N)]), B),
+                         sparse.csc_matrix((nx, nsl))])
+    C = np.zeros((ns, n))
+    for row, i in enumerate(soft):
+        C[row, i] = 1.0
+    Cx = sparse.kron(sparse.hstack([sparse.csc_matrix((N, 1)), sparse.eye(N)]), C)
+    rows = sparse.vstack([
+        dyn,
+        sparse.hstack([sparse.csc_matrix((nu, nx)), sparse.eye(nu), sparse.csc_matrix((nu, nsl))]),
+        sparse.hstack([Cx, sparse.csc_matrix((nsl, nu)), sparse.eye(nsl)]),
+        sparse.hstack([Cx, sparse.csc_matrix((nsl, nu)), -sparse.eye(nsl)]),
+        sparse.hstack([sparse.csc_matrix((nsl, nx + nu)), sparse.eye(nsl)]),
+    ], format="csc")
+    # Clarabel's form: rows x + slack = b, the slack in a cone (zero for the model's equations,
+    # nonnegative for the bounds: b - rows x >= 0).
+    first = np.concatenate([dx0, np.zeros(nx - n)])
+    eye_u = sparse.hstack([sparse.csc_matrix((nu, nx)), sparse.eye(nu), sparse.csc_matrix((nu, nsl))])
+    soft_lo = sparse.hstack([Cx, sparse.csc_matrix((nsl, nu)), sparse.eye(nsl)])
+    soft_hi = sparse.hstack([Cx, sparse.csc_matrix((nsl, nu)), -sparse.eye(nsl)])
+    slack = sparse.hstack([sparse.csc_matrix((nsl, nx + nu)), sparse.eye(nsl)])
+    rows = sparse.vstack([-dyn, eye_u, -eye_u, -soft_lo, soft_hi, -slack], format="csc")
+    b = np.concatenate([first, np.full(2 * nu, u_lim), -np.tile(lo, N), np.tile(hi, N),
+                        np.zeros(nsl)])
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = 1e-12
+    solver = clarabel.DefaultSolver(sparse.triu(H, format="csc"), q, rows, b,
+                                    [clarabel.ZeroConeT(nx), clarabel.NonnegativeConeT(2 * nu + 3 * nsl)],
+                                    settings)
+    res = solver.solve()
+    assert str(res.status) in ("Solved", "AlmostSolved"), res.status
+    return float(res.x[nx])
+
+
+@pytest.mark.parametrize("dx0", [[0.0, 0.5, 0.0, 0.0], [0.987, -0.141, 0.217, 0.758],
+                                 [0.736, -0.249, 2.146, -0.728], [0.797, 0.037, 2.083, -0.761],
+                                 [-0.866, -0.015, -1.871, 0.429]])
+def test_constrained_move_equals_an_independent_formulation(cart: tuple[object, object],
+                                                          dx0: list[float]) -> None:
+    """With constraints active (the input at its limit, the track), DAQP's first move on the
+    condensed, prestabilized QP equals the original sparse QP's (states, moves and slacks as
+    variables) solved by another kind of solver (Clarabel's interior point). The states are
+    inside the soft bounds (outside them the MPC widens those bounds: MPCProblem.soft_limits)."""
+    system, d = cart
+    ctrl = mpc(system, design=d, horizon=30, estimator="state")  # type: ignore[arg-type]
+    p = ctrl.problem
+    rt = MPCRuntime(ctrl)
+    x = np.array(dx0)
+    assert not rt.lqr_feasible(x)
+    du = float(rt.solve(x)[0])
+    assert rt.last_status == "solved"
+    ref = _sparse_reference(d, x, 30, p.soft_index, p.soft_lo, p.soft_hi, float(p.u_hi[0]),
+                            (p.rho_l1, p.rho_l2))
+    assert du == pytest.approx(ref, abs=1e-6 * float(p.u_hi[0]))

@@ -227,9 +227,9 @@ def test_downloads_of_the_swingup_and_the_mpc(client, tmp_path):
         got = client.get(f"/download/{token}/controller.zip")
         assert got.status_code == 200, got.text
         names = zipfile.ZipFile(io.BytesIO(got.content)).namelist()
-        assert "cartpole_mpc/mpc.c" in names and any(n.startswith("cartpole_mpc/osqp/") for n in names)
+        assert "cartpole_mpc/mpc.c" in names and any(n.startswith("cartpole_mpc/daqp/src/") for n in names)
         zipfile.ZipFile(io.BytesIO(got.content)).extractall(tmp_path)
-        # OSQP's generated solver, compiled, replays the Python MPC's recorded commands.
+        # DAQP's sources and the driver, compiled, replay the Python MPC's recorded commands.
         done = subprocess.run([make, "-s", "-C", str(tmp_path / "cartpole_mpc"), "check"], check=False,
                               capture_output=True, text=True, timeout=300)
         assert done.returncode == 0, done.stdout + done.stderr

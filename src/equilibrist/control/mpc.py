@@ -1,4 +1,4 @@
-"""Constrained linear model predictive control (MPC), solved by OSQP.
+"""Constrained linear model predictive control (MPC), solved exactly by DAQP.
 
 At every sample the controller solves, for the deviation ``dx_0`` of the
 (estimated) state from the operating point, the quadratic program
@@ -24,9 +24,7 @@ penalized by ``rho_1 s + rho_2 s^2``. The L1 weight ``rho_1`` makes the
 penalty exact: as long as a trajectory that meets the constraints exists,
 the slack stays zero; the L2 weight keeps the problem strictly convex.
 Defaults: ``rho_1 = 100`` and ``rho_2 = 4`` times the largest diagonal
-entry of ``Q``: a large L2 weight would make the QP badly conditioned
-(thousands of OSQP iterations instead of some 75).
-The input limits are hard: the command never leaves them.
+entry of ``Q``. The input limits are hard: the command never leaves them.
 
 *A bound already violated.* A soft bound that the (estimated) state
 violates now cannot be met in the first samples, and on a non-minimum-phase
@@ -35,26 +33,37 @@ short horizon with a heavy slack penalty then prefers plans that keep the
 violation small over the next samples and lose the cart for good (a cart
 carried past the track's end by a 250 N push ran away to 12 m at 200 Hz, ``N = 30``).
 So such a bound is widened over the horizon to the LQR's own trajectory
-from the current state (:meth:`MPCProblem.bounds`): the LQR's return is
-always a plan with zero slack, and the QP only improves on it (in practice,
-with the input within its limits, the LQR's move is applied exactly).
+from the current state (:meth:`MPCProblem.soft_limits`): the LQR's return is
+always a plan with zero slack, and the QP only improves on it.
 Bounds the state meets keep their full weight.
 
+*The QP.* The moves are written ``du_k = -K dx_k + v_k`` (the LQR plus a
+correction) and the states are eliminated (:attr:`MPCProblem.condensed`):
+the variables are the ``N m`` corrections and the ``N`` slack vectors, the
+Hessian is block diagonal (``2 (R + B'PB)`` per move: the Riccati
+solution absorbs the states' cost) and only the constraints' bounds depend
+on ``dx_0`` (:meth:`MPCProblem.qp_bounds`).
+
 *Solver.* First the unconstrained case is solved exactly: the LQR's own
-trajectory from ``dx_0`` (``du_k = -K dx_k``) minimizes the quadratic part
-of the cost, so when it meets every constraint over the horizon (slack
-zero) it is the QP's minimizer, and the controller applies ``-K dx_0``
-to round-off without calling the solver (one product with the LQR's
-precomputed predictions, :attr:`MPCProblem.soft_predictions`). Otherwise
-OSQP (sparse formulation, variables ``[dx_0..dx_N, du_0..du_{N-1},
-s_1..s_N]``), warm-started from the previous solution shifted by one
-sample, with ``eps_abs = eps_rel = 1e-6``, solution polishing (the polished
-solution solves the KKT system of the active set exactly) and at most
-:data:`MAX_ITER` iterations (a bounded solve time). A solve that stops
-at the cap is applied only if its plan meets the model and the constraints
-to :data:`PRIMAL_TOL` (a feasible, suboptimal plan); otherwise the clipped
-LQR is applied. ``exact_unconstrained=False`` on the runtime sends every
-sample to OSQP.
+trajectory from ``dx_0`` (``v = 0``) minimizes the quadratic part of the
+cost, so when it meets every constraint over the horizon (slack zero) it
+is the QP's minimizer, and the controller applies ``-K dx_0`` to
+round-off without calling the solver. Otherwise DAQP, a dual active-set
+solver: it ends on the exact optimal active set (the solution solves that
+set's KKT system to round-off, not to an iterative tolerance), and starts
+from the previous sample's working set, so a sample whose active set did
+not change costs one or two iterations. The data are factorized once; each
+sample updates only the bounds. The iteration cap :data:`ITER_LIMIT` bounds
+the solve time; a QP that ends without a solution (the cap, or a failure)
+gets the clipped LQR and the next sample a cold start (counted in
+``fallbacks``). ``exact_unconstrained=False`` on the runtime sends every
+sample to DAQP.
+
+An earlier release solved the sparse form of the same QP with OSQP (ADMM).
+Its slack penalty's scale made ADMM slow: on the cart-pole at 200 Hz,
+``N = 30``, about two thirds of the constrained samples stopped at its
+iteration cap with first moves up to 70 N from the optimum. DAQP solves all
+of them, in 0.02 ms (median) from a warm start (bench/README.md).
 
 *Estimator.* With ``estimator="kalman"`` (the default when the measured
 outputs are not the full state) the design's discrete Kalman filter (its
@@ -82,16 +91,14 @@ if TYPE_CHECKING:
     from equilibrist.control.design import Design
     from equilibrist.numeric.system import System
 
-#: Tolerances of the QP (absolute and relative); polishing then solves the
-#: active set's KKT system exactly. The unconstrained case is not left to them.
-EPS = 1e-6
-#: OSQP's iteration cap: a bounded solve time (about 3 ms on the development machine at
-#: N = 30, under the 5 ms period at 200 Hz; see bench/README.md). A capped iterate is
-#: applied only if it is feasible to PRIMAL_TOL, and the next sample starts warm from it.
-MAX_ITER = 400
-#: A solve stopped by the iteration cap is applied only if its primal residual (the largest
-#: violation of the model and the constraints by its plan) is at most this; else the LQR.
-PRIMAL_TOL = 1e-2
+#: DAQP's bound for "no bound".
+INF = 1e30
+#: DAQP's iteration cap (a bounded solve time). A cold start of the cart-pole's QP at
+#: N = 30 takes at most about 75 iterations; a warm one a few (bench/README.md).
+ITER_LIMIT = 1000
+#: DAQP's exit flags: > 0 solved.
+STATUS = {1: "solved", 2: "solved (soft)", -1: "infeasible", -2: "cycling", -3: "unbounded",
+          -4: "iteration limit", -5: "nonconvex", -6: "overdetermined working set"}
 #: Default horizon [samples].
 HORIZON = 30
 #: Default soft-constraint weights, relative to the largest diagonal entry of Q.
@@ -100,14 +107,14 @@ RHO_L1, RHO_L2 = 1e2, 4.0
 TRACK = ("x_max", "x")
 
 
-def _osqp() -> Any:
+def _daqp() -> Any:
     try:
-        import osqp
+        import daqp
     except ModuleNotFoundError as exc:  # pragma: no cover - the extra is missing
         raise ControllerError(
-            "the MPC controller needs OSQP: pip install 'equilibrist[mpc]'"
+            "the MPC controller needs DAQP: pip install 'equilibrist[mpc]'"
         ) from exc
-    return osqp
+    return daqp
 
 
 @dataclass(frozen=True, eq=False)
@@ -160,7 +167,8 @@ class MPCProblem:
 
     @property
     def n_variables(self) -> int:
-        return (self.horizon + 1) * self.n + self.horizon * (self.m + self.n_soft)
+        """The QP's variables: the corrections ``v`` and the slacks ``s``."""
+        return self.horizon * (self.m + self.n_soft)
 
     def predictions(self) -> tuple[np.ndarray, np.ndarray]:
         """``Fx, Gx`` with the stacked states ``[dx_0..dx_N] = Fx dx_0 + Gx v``.
@@ -184,97 +192,77 @@ class MPCProblem:
     def soft_predictions(self) -> tuple[np.ndarray, np.ndarray]:
         """``Fu, Fs``: the LQR's own trajectory from ``dx_0`` (``du_k = -K dx_k``) has the
         stacked moves ``Fu dx_0`` (``k = 0..N-1``) and constrained states ``Fs dx_0``
-        (``k = 1..N``, in the order of the soft rows of :meth:`matrices`)."""
+        (``k = 1..N``, step-major: ``[k * n_soft + j]`` is ``soft_index[j]`` at step ``k + 1``)."""
         n, m, N = self.n, self.m, self.horizon
         Fx, _ = self.predictions()
         Fu = np.vstack([-self.K @ Fx[k * n:(k + 1) * n] for k in range(N)]).reshape(N * m, n)
         Fs = Fx[n:][[k * n + i for k in range(N) for i in self.soft_index]]
         return Fu, Fs
 
-    def soft_rows(self) -> tuple[int, int]:
-        """First rows of the lower and the upper soft bounds in :meth:`matrices`' constraints."""
-        base = (self.horizon + 1) * self.n + self.horizon * self.m
-        return base, base + self.horizon * self.n_soft
+    @cached_property
+    def condensed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``H, f, A`` of the condensed QP ``min 1/2 z'Hz + f'z``, ``bl <= [z; Az] <= bu``.
 
-    def bounds(self, dx0: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-               E: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The constraint bounds at the deviation *dx0* (``lo, hi, E`` from :meth:`matrices`).
+        Variables ``z = [v_0..v_{N-1}, s_1..s_N]``. The cost is
+        ``dx_0' P dx_0 + sum v_k' (R + B'PB) v_k`` plus the slacks' penalty
+        (``P`` solves the Riccati equation, so the prestabilized moves leave
+        ``H`` block diagonal). The rows of ``A``: the moves
+        ``du_k = -K dx_k + v_k`` (hard bounds), then ``C dx_k + s_k`` (lower
+        soft bounds) and ``C dx_k - s_k`` (upper soft bounds), ``k = 1..N``;
+        :meth:`qp_bounds` gives their bounds at ``dx_0``.
+        """
+        n, m, N, ns = self.n, self.m, self.horizon, self.n_soft
+        nv, nsl = N * m, N * ns
+        _, Gx = self.predictions()
+        W = self.R + self.B.T @ self.P @ self.B
+        H = np.zeros((nv + nsl, nv + nsl))
+        H[:nv, :nv] = np.kron(np.eye(N), 2.0 * W)
+        H[nv:, nv:] = np.diag(np.tile(2.0 * np.broadcast_to(self.rho_l2, (ns,)), N))
+        f = np.concatenate([np.zeros(nv), np.tile(np.broadcast_to(self.rho_l1, (ns,)), N)])
+        Mu = np.eye(nv) - np.kron(np.eye(N), self.K) @ Gx[: N * n]
+        Ms = Gx[n:][[k * n + i for k in range(N) for i in self.soft_index]]
+        eye = np.eye(nsl)
+        A = np.block([[Mu, np.zeros((nv, nsl))], [Ms, eye], [Ms, -eye]])
+        return H, f, A
 
-        ``lo - E dx0`` and ``hi - E dx0``, with one relaxation: a soft bound
+    def soft_limits(self, dx0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The soft bounds over the horizon at *dx0* (deviations, ordered as ``Fs``'s rows).
+
+        ``soft_lo, soft_hi`` at every step, with one relaxation: a soft bound
         that the state already violates now cannot be met in the first
         samples (the cart-pole is non-minimum phase: returning a cart starts
         by moving it further out), so its bound over the horizon is widened
         to the LQR's own trajectory from *dx0*. The QP then only improves on
         the LQR's return instead of demanding the impossible.
         """
-        dx0 = np.asarray(dx0, dtype=float)
-        l, u = lo - E @ dx0, hi - E @ dx0
-        ns = self.n_soft
+        N, ns = self.horizon, self.n_soft
+        lows = np.tile(self.soft_lo, (N, 1))
+        highs = np.tile(self.soft_hi, (N, 1))
         if ns:
             c = dx0[list(self.soft_index)]
             out = (c > self.soft_hi) | (c < self.soft_lo)
             if np.any(out):
                 _, Fs = self.soft_predictions
-                xs = (Fs @ dx0).reshape(self.horizon, ns)
-                r_lo, r_hi = self.soft_rows()
-                nsl = self.horizon * ns
-                lows = l[r_lo:r_lo + nsl].reshape(self.horizon, ns)
-                highs = u[r_hi:r_hi + nsl].reshape(self.horizon, ns)
+                xs = (Fs @ dx0).reshape(N, ns)
                 lows[:, out] = np.minimum(lows[:, out], xs[:, out])
                 highs[:, out] = np.maximum(highs[:, out], xs[:, out])
-        return l, u
+        return lows.reshape(-1), highs.reshape(-1)
 
-    def matrices(self) -> tuple[Any, np.ndarray, Any, np.ndarray, np.ndarray, np.ndarray]:
-        """``P, q, A, l, u`` of OSQP's form at ``dx_0 = 0``, and ``E``: the bounds
-        at ``dx_0`` are ``l - E dx_0`` and ``u - E dx_0``.
-
-        Variables ``[dx_0..dx_N, v_0..v_{N-1}, s_1..s_N]`` (sparse form) with
-        the moves ``du_k = -K dx_k + v_k``: the cost is
-        ``dx_0' P dx_0 + sum v_k' (R + B'PB) v_k`` plus the slacks' penalty.
-        """
-        from scipy import sparse
-
-        n, m, N, ns = self.n, self.m, self.horizon, self.n_soft
-        nx, nv, nsl = (N + 1) * n, N * m, N * ns
-        W = self.R + self.B.T @ self.P @ self.B
-        H = sparse.block_diag(
-            [sparse.csc_matrix((nx, nx)), sparse.kron(sparse.eye(N), 2.0 * W)]
-            + ([sparse.diags(np.tile(2.0 * np.broadcast_to(self.rho_l2, (ns,)), N))] if ns else []),
-            format="csc",
-        )
-        q = np.concatenate([np.zeros(nx + nv), np.tile(np.broadcast_to(self.rho_l1, (ns,)), N)])
-        Acl = self.A - self.B @ self.K
-        # dx_0 = x0; -dx_{k+1} + Acl dx_k + B v_k = 0.
-        Ax = sparse.kron(sparse.eye(N + 1), -sparse.eye(n)) + sparse.kron(
-            sparse.eye(N + 1, k=-1), Acl)
-        Bv = sparse.kron(sparse.vstack([sparse.csc_matrix((1, N)), sparse.eye(N)]), self.B)
-        Aeq = sparse.hstack([Ax, Bv, sparse.csc_matrix((nx, nsl))])
-        E_eq = np.zeros((nx, n))
-        E_eq[:n] = np.eye(n)
-        # Hard input bounds on du_k = -K dx_k + v_k.
-        Ku = sparse.hstack([sparse.kron(sparse.eye(N), -self.K), sparse.csc_matrix((nv, n))])
-        Ain = sparse.hstack([Ku, sparse.eye(nv), sparse.csc_matrix((nv, nsl))])
-        rows = [Aeq, Ain]
-        # Equality rows: l = u = -x0 on the first block (so E = E_eq with l - E x0).
-        lows = [np.zeros(nx), np.tile(self.u_lo, N)]
-        highs = [np.zeros(nx), np.tile(self.u_hi, N)]
-        Es = [E_eq, np.zeros((nv, n))]
-        if ns:
-            Cs = np.zeros((ns, n))
-            for row, i in enumerate(self.soft_index):
-                Cs[row, i] = 1.0
-            sel = sparse.hstack([sparse.csc_matrix((N, 1)), sparse.eye(N)])
-            Cx = sparse.kron(sel, Cs)
-            eye = sparse.eye(nsl)
-            zero_v = sparse.csc_matrix((nsl, nv))
-            # lo <= C dx_k + s_k; C dx_k - s_k <= hi (k = 1..N); s >= 0.
-            rows += [sparse.hstack([Cx, zero_v, eye]), sparse.hstack([Cx, zero_v, -eye]),
-                     sparse.hstack([sparse.csc_matrix((nsl, nx + nv)), eye])]
-            lows += [np.tile(self.soft_lo, N), np.full(nsl, -np.inf), np.zeros(nsl)]
-            highs += [np.full(nsl, np.inf), np.tile(self.soft_hi, N), np.full(nsl, np.inf)]
-            Es += [np.zeros((nsl, n))] * 3
-        return (H, q, sparse.vstack(rows, format="csc"), np.concatenate(lows),
-                np.concatenate(highs), np.vstack(Es))
+    def qp_bounds(self, dx0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``bu, bl`` of the condensed QP at *dx0*: first the variables' own bounds
+        (``v`` free, ``s >= 0``), then the rows of :attr:`condensed`'s ``A``
+        (infinite bounds are :data:`INF`, DAQP's)."""
+        dx0 = np.asarray(dx0, dtype=float)
+        N, m, ns = self.horizon, self.m, self.n_soft
+        nv, nsl = N * m, N * ns
+        Fu, Fs = self.soft_predictions
+        us, xs = Fu @ dx0, Fs @ dx0
+        lo_s, hi_s = self.soft_limits(dx0)
+        inf_v, inf_s = np.full(nv, INF), np.full(nsl, INF)
+        bu = np.concatenate([inf_v, inf_s, np.tile(self.u_hi, N) - us, inf_s, hi_s - xs])
+        bl = np.concatenate([-inf_v, np.zeros(nsl), np.tile(self.u_lo, N) - us, lo_s - xs,
+                             -inf_s])
+        return bu, bl
 
 
 @dataclass(frozen=True, eq=False)
@@ -321,7 +309,7 @@ class MPC:
         return self.output_names
 
     def runtime(self) -> MPCRuntime:
-        """A new running controller (its own OSQP workspace)."""
+        """A new running controller (its own DAQP workspace)."""
         return MPCRuntime(self)
 
     def describe(self) -> dict[str, object]:
@@ -330,7 +318,7 @@ class MPC:
                 "estimator": self.estimator, "outputs": list(self.output_names),
                 "soft": [self.state_names[i] for i in p.soft_index],
                 "soft_lo": p.soft_lo.tolist(), "soft_hi": p.soft_hi.tolist(),
-                "rho_l1": p.rho_l1, "rho_l2": p.rho_l2, "eps": EPS}
+                "rho_l1": p.rho_l1, "rho_l2": p.rho_l2, "solver": "daqp"}
 
 
 class MPCRuntime:
@@ -346,14 +334,13 @@ class MPCRuntime:
         self.outputs: tuple[str, ...] | None = ctrl.output_names
         self.estimate: np.ndarray | None = None
         prob = ctrl.problem
-        H, q, A, lo, hi, E = prob.matrices()
-        self._lo, self._hi, self._E = lo, hi, E
-        self._solver = _osqp().OSQP()
-        self._solver.setup(H, q, A, lo, hi, eps_abs=EPS, eps_rel=EPS, polishing=True,
-                           polish_refine_iter=10, max_iter=MAX_ITER, verbose=False,
-                           warm_starting=True)
-        self._u_lo = np.tile(prob.u_lo, prob.horizon)
-        self._u_hi = np.tile(prob.u_hi, prob.horizon)
+        H, f, A = prob.condensed
+        bu, bl = prob.qp_bounds(np.zeros(prob.n))
+        self._cold = np.zeros(bu.size, dtype=np.intc)
+        self._solver = _daqp().Model()
+        self._solver.setup(H, f, A, bu, bl, self._cold)
+        self._solver.settings = {"iter_limit": ITER_LIMIT}
+        self._rows = prob.n_variables
         self.front = KalmanFront(ctrl)
         self.solve_times: list[float] = []
         self.reset()
@@ -369,7 +356,7 @@ class MPCRuntime:
 
     def reset(self) -> None:
         self.front.reset()
-        self._warm: np.ndarray | None = None
+        self._solver.update(sense=self._cold)  # an empty working set
         self.estimate = None
         self.last_status = ""
         self.last_iterations = 0
@@ -378,73 +365,49 @@ class MPCRuntime:
     def _state(self, y: np.ndarray) -> np.ndarray:
         return self.front.estimate(y)
 
+    def _zero_feasible(self, bu: np.ndarray, bl: np.ndarray) -> bool:
+        rows = slice(self._rows, None)
+        return bool(np.all(bl[rows] <= 0.0) and np.all(bu[rows] >= 0.0))
+
     def lqr_feasible(self, dx0: np.ndarray) -> bool:
         """Whether the LQR's own trajectory from *dx0* meets every constraint over the horizon.
 
-        Then it is the QP's minimizer (the unconstrained minimizer of the
-        quadratic part, with zero slack), and the controller applies it
-        exactly instead of solving. One product with the precomputed
-        predictions ``Fu`` and ``Fs`` (:attr:`MPCProblem.soft_predictions`)
-        against the stacked bounds (:meth:`MPCProblem.bounds`).
+        Then it is the QP's minimizer (``v = 0``, the unconstrained minimizer
+        of the quadratic part, with zero slack), and the controller applies
+        it exactly instead of solving: ``z = 0`` within the bounds of
+        :meth:`MPCProblem.qp_bounds` (one product with the precomputed
+        predictions ``Fu`` and ``Fs``).
         """
-        prob = self.ctrl.problem
-        dx0 = np.asarray(dx0, dtype=float)
-        Fu, Fs = prob.soft_predictions
-        us = Fu @ dx0
-        if np.any(us < self._u_lo) or np.any(us > self._u_hi):
-            return False
-        if not prob.n_soft:
-            return True
-        l, u = prob.bounds(dx0, self._lo, self._hi, self._E)
-        r_lo, r_hi = prob.soft_rows()
-        nsl = prob.horizon * prob.n_soft
-        xs = Fs @ dx0
-        return bool(np.all(xs >= l[r_lo:r_lo + nsl]) and np.all(xs <= u[r_hi:r_hi + nsl]))
+        return self._zero_feasible(*self.ctrl.problem.qp_bounds(dx0))
 
     def solve(self, dx0: np.ndarray) -> np.ndarray:
         """The first move ``du_0`` of the QP from the deviation *dx0*."""
         prob = self.ctrl.problem
         m = prob.m
-        if self.exact_unconstrained:
-            t0 = time.perf_counter()
-            if self.lqr_feasible(dx0):
-                self.solve_times.append(time.perf_counter() - t0)
-                self.last_status = "unconstrained"
-                self.last_iterations = 0
-                self._warm = None
-                return -self.ctrl.K @ np.asarray(dx0, dtype=float)
-        l, u = prob.bounds(dx0, self._lo, self._hi, self._E)
-        self._solver.update(l=l, u=u)
-        if self._warm is not None:
-            self._solver.warm_start(x=self._warm)
+        dx0 = np.asarray(dx0, dtype=float)
         t0 = time.perf_counter()
-        res = self._solver.solve()
+        bu, bl = prob.qp_bounds(dx0)
+        du_lqr = -self.ctrl.K @ dx0
+        if self.exact_unconstrained and self._zero_feasible(bu, bl):
+            self.solve_times.append(time.perf_counter() - t0)
+            self.last_status = "unconstrained"
+            self.last_iterations = 0
+            return du_lqr
+        # Only the bounds change: DAQP keeps its factorization and starts from the last
+        # sample's working set.
+        self._solver.update(bupper=bu, blower=bl)
+        sol, _, flag, info = self._solver.solve()
         self.solve_times.append(time.perf_counter() - t0)
-        self.last_status = str(res.info.status)
-        self.last_iterations = int(res.info.iter)
-        sol = np.asarray(res.x, dtype=float)
-        du_lqr = -self.ctrl.K @ np.asarray(dx0, dtype=float)
-        if not np.all(np.isfinite(sol)):
-            # No usable solution: the LQR, inside the hard limits.
-            self._warm = None
-            return np.clip(du_lqr, prob.u_lo, prob.u_hi)
-        # A solve that is not "solved" is applied only when its iterate is a plan that meets the
-        # model and the constraints to PRIMAL_TOL (a feasible, suboptimal plan); else the LQR.
-        usable = self.last_status == "solved" or float(res.info.prim_res) <= PRIMAL_TOL
-        N, n, ns = prob.horizon, prob.n, prob.n_soft
-        nx = (N + 1) * n
-        warm = np.zeros_like(sol)
-        # Shift states, corrections and slacks by one sample for the next warm start.
-        warm[: N * n] = sol[n:nx]
-        warm[nx : nx + (N - 1) * m] = sol[nx + m : nx + N * m]
-        warm[nx + N * m : nx + N * m + (N - 1) * ns] = sol[nx + N * m + ns :]
-        self._warm = warm
-        if not usable:
-            # Not converged and not feasible: the LQR, inside the hard limits (the iterate
-            # still warm-starts the next sample).
+        self.last_status = STATUS.get(int(flag), f"exit flag {flag}")
+        self.last_iterations = int(info["iterations"])
+        if flag <= 0 or not np.all(np.isfinite(sol[:m])):
+            # No solution (cannot happen for a feasible QP short of the cap): the LQR, inside
+            # the hard limits, and a cold start next time.
             self.fallbacks += 1
+            self._solver.update(sense=self._cold)
             return np.clip(du_lqr, prob.u_lo, prob.u_hi)
-        return np.clip(du_lqr + sol[nx : nx + m], prob.u_lo, prob.u_hi)
+        # The solution meets the hard bounds to DAQP's primal tolerance; the clip makes it exact.
+        return np.clip(du_lqr + sol[:m], prob.u_lo, prob.u_hi)
 
     def output(self, t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray:
         dx = self._state(y)
@@ -637,5 +600,5 @@ def _build(request: ControllerRequest) -> MPCRuntime:
     return ctrl.runtime()
 
 
-__all__ = ["EPS", "HORIZON", "MAX_ITER", "MPC", "KalmanFront", "MPCProblem", "MPCRuntime", "mpc",
+__all__ = ["HORIZON", "INF", "ITER_LIMIT", "MPC", "KalmanFront", "MPCProblem", "MPCRuntime", "mpc",
            "soft_bounds"]

@@ -78,7 +78,7 @@ def check_files(
     what:
         What the test program checks (its first comment).
     sources:
-        C sources besides ``<name>.c`` (Makefile syntax, e.g. ``$(wildcard osqp/src/*.c)``).
+        C sources besides ``<name>.c`` (Makefile syntax, e.g. ``$(wildcard daqp/src/*.c)``).
     cflags:
         The default ``CFLAGS``.
     include:

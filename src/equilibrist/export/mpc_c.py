@@ -1,17 +1,30 @@
-"""The constrained MPC as C code: OSQP's own code generation plus a fixed driver.
+"""The constrained MPC as C code: DAQP's own C sources plus a generated driver.
 
 :func:`export_mpc` writes into a folder:
 
-``osqp/``
-    OSQP's embedded C code for this very QP (``osqp`` 1.x ``codegen``,
-    vectors mode: the matrices are fixed, the bounds change every sample),
-    with its workspace (``workspace.c``: every matrix and vector of the
-    solver as static data; no dynamic memory).
+``daqp/``
+    DAQP's C sources (``src/``, ``include/``, its MIT ``LICENSE``), the
+    same release (0.11.0) as the ``daqp`` Python package that solves the
+    simulated controller's QP, shipped with equilibrist.
 ``<name>.h``, ``<name>.c``
-    ``int <name>_step(const double x[n], double u[m])``: the MPC at the
-    full state ``x``: the bounds at ``dx = x - x_op`` (``l - E dx``,
-    ``u - E dx``), ``osqp_update_data_vec``, ``osqp_solve``, then
-    ``u = u_op + clip(-K dx + v_0)``. Returns OSQP's status (1: solved).
+    The QP's data as constants (the condensed Hessian, linear cost and
+    constraint rows of :attr:`~equilibrist.control.mpc.MPCProblem.condensed`,
+    the LQR's predictions ``Fu``, ``Fs``, the gain, the limits) and::
+
+        int <name>_setup(void);
+        int <name>_step(const double x[n], double u[m]);
+
+    ``<name>_setup`` sets DAQP's workspace up (once: it factorizes the
+    Hessian and allocates the workspace with ``malloc``; afterwards it only
+    empties the working set) and returns 0, or DAQP's negative setup flag.
+    ``<name>_step`` (which calls ``<name>_setup`` itself the first time) is
+    the MPC at the full state ``x``, computed as the simulated controller
+    computes it (:meth:`~equilibrist.control.mpc.MPCRuntime.solve`): the
+    bounds at ``dx = x - x_op``; the LQR's move exactly when the LQR's
+    trajectory meets every constraint (returns 0); else DAQP from the last
+    sample's working set (returns DAQP's exit flag: 1 or 2 solved; a
+    negative flag means no solution, and the clipped LQR's move is applied
+    and the working set emptied). ``u = u_op + clip(-K dx + v_0)``.
 
     With the Kalman filter in front (``estimator="kalman"``, the default
     when the measured outputs are not the full state) also::
@@ -31,12 +44,15 @@
 ``<name>_vectors.h``, ``test_<name>.c``, ``Makefile``
     ``make check`` replays a recorded noisy closed-loop run (measurements
     and applied inputs) through the C controller and requires each command
-    within ``tolerance`` of the Python controller's
-    (:class:`PythonReference`: the same filter, and the same QP with the
-    same OSQP settings through OSQP's Python interface; the embedded code
-    neither polishes nor adapts its step size, so neither does the
-    reference), and the filter's state after each update equal to the
-    Python filter's to round-off (``Z_TOLERANCE`` relative).
+    within ``tolerance`` of the simulated controller's (the same QP, solved
+    by the same DAQP through its Python interface) and the filter's state
+    after each update equal to the Python filter's to round-off
+    (``Z_TOLERANCE`` relative).
+
+Math functions: the driver calls none; DAQP calls ``sqrt``, ``fabs`` and
+``fmax`` from the C library's ``libm`` (linked with ``-lm``).
+Memory: :func:`footprint` measures the code and static data with ``size``
+and the heap that ``<name>_setup`` allocates by wrapping ``malloc``.
 """
 
 from __future__ import annotations
@@ -55,71 +71,32 @@ if TYPE_CHECKING:
     from equilibrist.control.mpc import MPC, MPCRuntime
     from equilibrist.numeric.system import System
 
+#: DAQP's C sources, shipped with the package.
+DAQP_SOURCES = Path(__file__).with_name("daqp")
 
-def _array(name: str, values: np.ndarray) -> str:
+
+def _array(name: str, values: np.ndarray, *, const: bool = True) -> str:
     flat = ", ".join(repr(float(v)) for v in np.asarray(values, dtype=float).reshape(-1))
     size = max(1, int(np.size(values)))
-    return f"static const OSQPFloat {name}[{size}] = {{{flat or '0.0'}}};"
+    return f"static {'const ' if const else ''}c_float {name}[{size}] = {{{flat or '0.0'}}};"
 
 
-def _finite(values: np.ndarray, big: float = 1e30) -> np.ndarray:
-    return np.clip(np.asarray(values, dtype=float), -big, big)
+def _daqp_files() -> dict[str, str]:
+    """DAQP's sources, relative path under ``daqp/`` -> text."""
+    return {f"daqp/{p.relative_to(DAQP_SOURCES).as_posix()}": p.read_text()
+            for p in sorted(DAQP_SOURCES.rglob("*")) if p.is_file() and p.suffix in (".c", ".h", "")}
 
 
-#: OSQP's settings of the exported solver (embedded code: no polishing, no rho adaptation).
-SETTINGS = {"eps_abs": 1e-6, "eps_rel": 1e-6, "polishing": False, "adaptive_rho": False,
-            "max_iter": 4000, "verbose": False, "warm_starting": True}
-
-
-class PythonReference:
-    """The exported controller's computation through OSQP's Python interface (same settings).
-
-    ``step(y)`` is the command at the measurement *y* (the full state when
-    ``estimator="state"``), ``update(y, u_applied)`` advances the filter
-    (:class:`~equilibrist.control.mpc.KalmanFront`, the simulated
-    controller's own), ``front.z`` its state.
-    """
-
-    def __init__(self, ctrl: MPC) -> None:
-        import osqp
-
-        from equilibrist.control.mpc import KalmanFront
-
-        self.ctrl = ctrl
-        H, q, A, lo, hi, E = ctrl.problem.matrices()
-        self.lo, self.hi, self.E = _finite(lo), _finite(hi), E
-        self.solver = osqp.OSQP()
-        self.solver.setup(H, q, A, self.lo, self.hi, **SETTINGS)
-        self.front = KalmanFront(ctrl)
-
-    def solve(self, dx: np.ndarray) -> np.ndarray:
-        """The command at the state deviation *dx*."""
-        from equilibrist.control.mpc import PRIMAL_TOL
-
-        prob = self.ctrl.problem
-        l, u = prob.bounds(dx, self.lo, self.hi, self.E)
-        self.solver.update(l=l, u=u)
-        res = self.solver.solve()
-        v0 = (prob.horizon + 1) * prob.n
-        du = -prob.K @ dx
-        if str(res.info.status) == "solved" or float(res.info.prim_res) <= PRIMAL_TOL:
-            du = du + np.asarray(res.x)[v0:v0 + prob.m]
-        return self.ctrl.u_op + np.clip(du, prob.u_lo, prob.u_hi)
-
-    def step(self, y: np.ndarray) -> np.ndarray:
-        """The command at the measurement *y* (the filter's estimate, or the state)."""
-        return self.solve(self.front.estimate(y))
-
-    def update(self, y: np.ndarray, u_applied: np.ndarray) -> None:
-        self.front.update(y, u_applied)
+def _daqp_c_files(folder: Path) -> list[Path]:
+    return sorted((folder / "daqp" / "src").glob("*.c"))
 
 
 def record(ctrl: MPC, *, x0: Mapping[str, float] | None = None, duration: float = 1.0,
            seed: int = 0) -> dict[str, np.ndarray]:
     """Recorded vectors: a closed-loop run of the simulated MPC with the design's sensor noise.
 
-    ``y`` (measurements), ``u_applied``, and the reference's commands ``u``
-    and filter states ``z`` (after each update) on them.
+    ``y`` (measurements), ``u_applied``, and a fresh simulated controller's
+    commands ``u`` and filter states ``z`` (after each update) on them.
     """
     from equilibrist.control.mpc import MPCRuntime
     from equilibrist.numeric.system import system_from_key
@@ -131,11 +108,12 @@ def record(ctrl: MPC, *, x0: Mapping[str, float] | None = None, duration: float 
     run = simulate(system, MPCRuntime(ctrl), duration=duration, x0=dict(x0 or {"theta": 0.5}),
                    region={}, noise=Noise.from_design(design), seed=seed)
     ys, applied = np.array(run.measurements), np.array(run.applied)
-    ref = PythonReference(ctrl)
+    ref = MPCRuntime(ctrl)
     us, zs = [], []
-    for y, ua in zip(ys, applied, strict=True):
-        us.append(ref.step(y))
-        ref.update(y, ua)
+    no_r = np.zeros(0)
+    for k, (y, ua) in enumerate(zip(ys, applied, strict=True)):
+        us.append(ref.output(k / ctrl.rate, y, no_r))
+        ref.update(k / ctrl.rate, y, no_r, ua)
         zs.append(ref.front.z.copy())
     return {"y": ys, "u_applied": applied, "u": np.array(us), "z": np.array(zs)}
 
@@ -146,7 +124,7 @@ Z_TOLERANCE = 1e-12
 
 def export_mpc(ctrl: MPC, folder: str | Path, *, name: str = "mpc",
                x0: dict[str, float] | None = None, duration: float = 1.0,
-               tolerance: float = 1e-3, seed: int = 0) -> Path:
+               tolerance: float = 1e-6, seed: int = 0) -> Path:
     """Write the MPC's C code, recorded vectors and ``make check`` into *folder*.
 
     *x0* starts the recorded run (default: the pole at 0.5 rad, which
@@ -163,9 +141,9 @@ def export_mpc(ctrl: MPC, folder: str | Path, *, name: str = "mpc",
 
 
 def mpc_files(ctrl: MPC, *, name: str = "mpc", x0: dict[str, float] | None = None,
-              duration: float = 1.0, tolerance: float = 1e-3, seed: int = 0) -> dict[str, str]:
-    """Every file of the MPC's export, relative path -> text (OSQP's generated code under
-    ``osqp/``, the library, the recorded vectors, the test program and the Makefile)."""
+              duration: float = 1.0, tolerance: float = 1e-6, seed: int = 0) -> dict[str, str]:
+    """Every file of the MPC's export, relative path -> text (DAQP's sources under ``daqp/``,
+    the library, the recorded vectors, the test program and the Makefile)."""
     from equilibrist.export._check import check_files
 
     kalman = ctrl.estimator == "kalman"
@@ -218,48 +196,32 @@ def mpc_files(ctrl: MPC, *, name: str = "mpc", x0: dict[str, float] | None = Non
     checks = check_files(
         name, arrays, program=program, defines=defines,
         comment=f"Recorded by equilibrist: {len(vectors['y'])} samples of the MPC in closed loop "
-                "with sensor noise; commands of the same QP through OSQP's Python interface.",
+                "with sensor noise; commands of the simulated controller (DAQP's Python interface).",
         what="the C MPC against the Python controller on recorded measurements.",
-        sources=("$(wildcard osqp/src/*.c)", "osqp/workspace.c"),
-        include=("osqp", "osqp/inc/public", "osqp/inc/private"),
+        sources=("$(wildcard daqp/src/*.c)",),
+        include=("daqp/include",),
         cflags="-O2 -std=c99 -ffp-contract=off",
     )
     return {**files, **checks}
 
 
 def library_files(ctrl: MPC, *, name: str = "mpc") -> dict[str, str]:
-    """The library alone, relative path -> text: OSQP's generated code under ``osqp/``,
+    """The library alone, relative path -> text: DAQP's sources under ``daqp/``,
     ``<name>.h`` and ``<name>.c``."""
-    import tempfile
-
-    import osqp
-
+    from equilibrist.control.mpc import INF, ITER_LIMIT, KalmanFront
     from equilibrist.export.linear_c import LINEAR_C
 
     if not name.isidentifier():
         raise ExportError(f"the library's name must be a C identifier, got {name!r}")
     kalman = ctrl.estimator == "kalman"
     prob = ctrl.problem
-    H, q, A, lo, hi, E = prob.matrices()
-    solver = osqp.OSQP()
-    solver.setup(H, q, A, _finite(lo), _finite(hi), **SETTINGS)
-    generated: dict[str, str] = {}
-    with tempfile.TemporaryDirectory(prefix="equilibrist-osqp-") as tmp:
-        solver.codegen(str(Path(tmp) / "osqp"), parameters="vectors", force_rewrite=True)
-        for path in sorted(Path(tmp).rglob("*")):
-            if path.is_file():
-                generated[path.relative_to(tmp).as_posix()] = path.read_text()
-    from equilibrist.control.mpc import PRIMAL_TOL
-
-    n, m, ny = prob.n, prob.m, len(ctrl.output_names)
-    nc = int(E.shape[0])
-    ns = prob.n_soft
-    _, Fs = prob.soft_predictions
-    r_lo, r_hi = prob.soft_rows()
-    v0 = (prob.horizon + 1) * n
+    H, f, A = prob.condensed
+    Fu, Fs = prob.soft_predictions
+    n, m, ny, N, ns = prob.n, prob.m, len(ctrl.output_names), prob.horizon, prob.n_soft
+    nz, na = prob.n_variables, int(A.shape[0])
     up = name.upper()
     lines = [
-        f"/* {name}: constrained MPC (horizon {prob.horizon}) solved by OSQP's generated code,",
+        f"/* {name}: constrained MPC (horizon {N}) solved by DAQP,",
         f" * generated by equilibrist. Sample rate {ctrl.rate:g} Hz. Input: "
         f"{', '.join(ctrl.input_names)}.",
         f" * State: {', '.join(ctrl.state_names)}."
@@ -267,6 +229,10 @@ def library_files(ctrl: MPC, *, name: str = "mpc") -> dict[str, str]:
            if kalman else " */"),
         f"#ifndef {up}_H", f"#define {up}_H", f"#define {up}_NX {n}", f"#define {up}_NU {m}",
         f"#define {up}_RATE_HZ {ctrl.rate!r}", "",
+        "/* Sets DAQP's workspace up (once; later calls empty its working set). 0: ready. */",
+        f"int {name}_setup(void);",
+        "/* The MPC at the full state x: 0 (the LQR's move, exact), DAQP's exit flag (1, 2:",
+        " * solved; negative: not solved, the clipped LQR's move). */",
         f"int {name}_step(const double x[{n}], double u[{m}]);",
     ]
     if kalman:
@@ -280,63 +246,119 @@ def library_files(ctrl: MPC, *, name: str = "mpc") -> dict[str, str]:
         ]
     header = "\n".join([*lines, "#endif", ""])
     body = [
-        f'/* {name}.c: generated by equilibrist (the QP of equilibrist.control.mpc). */',
-        "#include <stddef.h>", '#include "osqp.h"', '#include "workspace.h"', f'#include "{name}.h"',
-        "", f"#define NC {nc}", f"#define NX {n}", f"#define NU {m}", f"#define V0 {v0}", "",
-        _array("E", E), _array("L0", _finite(lo)), _array("U0", _finite(hi)),
+        f"/* {name}.c: generated by equilibrist (the QP of equilibrist.control.mpc). */",
+        "#include <stddef.h>", '#include "api.h"', '#include "utils.h"', f'#include "{name}.h"', "",
+        f"#define NX {n}", f"#define NU {m}", f"#define NH {N}", f"#define NS {ns}",
+        f"#define NV {N * m}", f"#define NSL {N * ns}", f"#define NZ {nz}", f"#define NM {nz + na}",
+        f"#define BIG {INF!r}", f"#define ITER_LIMIT {ITER_LIMIT}", "",
+        "/* The condensed QP (variables: the corrections v, then the slacks s). */",
+        _array("QP_H", H, const=False), _array("QP_F", f, const=False),
+        _array("QP_A", A, const=False),
+        "/* The LQR's own trajectory: moves FU dx, constrained states FS dx. */",
+        _array("FU", Fu), _array("FS", Fs),
         _array("K", prob.K), _array("X_OP", ctrl.x_op), _array("U_OP", ctrl.u_op),
-        _array("U_LO", prob.u_lo), _array("U_HI", prob.u_hi), "",
-        f"#define NS {ns}", f"#define NH {prob.horizon}", f"#define R_LO {r_lo}",
-        f"#define R_HI {r_hi}", f"#define PRIMAL_TOL {PRIMAL_TOL!r}",
-        _array("FS", Fs), _array("S_LO", prob.soft_lo), _array("S_HI", prob.soft_hi),
+        _array("U_LO", prob.u_lo), _array("U_HI", prob.u_hi),
+        _array("S_LO", prob.soft_lo), _array("S_HI", prob.soft_hi),
         "static const int S_IDX[" + str(max(1, ns)) + "] = {"
         + (", ".join(str(i) for i in prob.soft_index) or "0") + "};",
-        "static OSQPFloat l_now[NC];", "static OSQPFloat u_now[NC];", "",
-        "static int solve_at(const OSQPFloat dx[NX], double u[NU])",
+        "static c_float BU[NM], BL[NM], SOL[NZ], LAM[NM];",
+        "static int COLD[NM];  /* an empty working set */",
+        "static DAQPProblem QP;", "static DAQPWorkspace WORK;", "static int READY = 0;", "",
+        "/* The bounds at dx (MPCProblem.qp_bounds): the variables' own, then the rows'. */",
+        "static void bounds_at(const c_float dx[NX])",
         "{",
-        "    int i, j, use;",
-        "    for (i = 0; i < NC; ++i) {",
-        "        OSQPFloat s = 0.0;",
-        "        for (j = 0; j < NX; ++j) s += E[i * NX + j] * dx[j];",
-        "        l_now[i] = L0[i] - s;",
-        "        u_now[i] = U0[i] - s;",
+        "    int i, j, k;",
+        "    for (i = 0; i < NV; ++i) { BU[i] = BIG; BL[i] = -BIG; }",
+        "    for (i = NV; i < NZ; ++i) { BU[i] = BIG; BL[i] = 0.0; }",
+        "    for (i = 0; i < NV; ++i) {",
+        "        c_float us = 0.0;",
+        "        for (j = 0; j < NX; ++j) us += FU[i * NX + j] * dx[j];",
+        "        BU[NZ + i] = U_HI[i % NU] - us;",
+        "        BL[NZ + i] = U_LO[i % NU] - us;",
         "    }",
-        "    /* A soft bound the state already violates: widened to the LQR's own trajectory. */",
         "    for (j = 0; j < NS; ++j) {",
-        "        OSQPFloat c = dx[S_IDX[j]];",
-        "        int k;",
-        "        if (c <= S_HI[j] && c >= S_LO[j]) continue;",
+        "        /* A soft bound the state already violates: widened to the LQR's trajectory. */",
+        "        c_float c = dx[S_IDX[j]];",
+        "        int out = c > S_HI[j] || c < S_LO[j];",
         "        for (k = 0; k < NH; ++k) {",
         "            int row = k * NS + j, q;",
-        "            OSQPFloat xs = 0.0;",
+        "            c_float xs = 0.0, lo = S_LO[j], hi = S_HI[j];",
         "            for (q = 0; q < NX; ++q) xs += FS[row * NX + q] * dx[q];",
-        "            if (xs < l_now[R_LO + row]) l_now[R_LO + row] = xs;",
-        "            if (xs > u_now[R_HI + row]) u_now[R_HI + row] = xs;",
+        "            if (out && xs < lo) lo = xs;",
+        "            if (out && xs > hi) hi = xs;",
+        "            BU[NZ + NV + row] = BIG;",
+        "            BL[NZ + NV + row] = lo - xs;",
+        "            BU[NZ + NV + NSL + row] = hi - xs;",
+        "            BL[NZ + NV + NSL + row] = -BIG;",
         "        }",
         "    }",
-        "    osqp_update_data_vec(&solver, OSQP_NULL, l_now, u_now);",
-        "    osqp_solve(&solver);",
-        "    /* Not solved and its plan not feasible to PRIMAL_TOL: the LQR (clipped). */",
-        "    use = solver.info->status_val == OSQP_SOLVED || solver.info->prim_res <= PRIMAL_TOL;",
-        "    for (i = 0; i < NU; ++i) {",
-        "        OSQPFloat du = use ? solver.solution->x[V0 + i] : 0.0;",
-        "        for (j = 0; j < NX; ++j) du -= K[i * NX + j] * dx[j];",
-        "        if (du < U_LO[i]) du = U_LO[i];",
-        "        if (du > U_HI[i]) du = U_HI[i];",
-        "        u[i] = U_OP[i] + du;",
+        "}", "",
+        f"int {name}_setup(void)",
+        "{",
+        "    c_float zero[NX] = {0.0};",
+        "    int flag;",
+        "    if (READY) {",
+        "        QP.sense = COLD;",
+        "        daqp_update_ldp(DAQP_UPDATE_sense, &WORK, &QP);",
+        "        return 0;",
         "    }",
-        "    return (int)solver.info->status_val;",
+        "    bounds_at(zero);",
+        "    QP.n = NZ; QP.m = NM; QP.ms = NZ;",
+        "    QP.H = QP_H; QP.f = QP_F; QP.A = QP_A; QP.bupper = BU; QP.blower = BL;",
+        "    QP.sense = COLD; QP.break_points = NULL; QP.nh = 0; QP.problem_type = 0;",
+        "    allocate_daqp_settings(&WORK);",
+        "    WORK.settings->iter_limit = ITER_LIMIT;",
+        "    flag = setup_daqp(&QP, &WORK, NULL);",
+        "    if (flag < 0) return flag;",
+        "    READY = 1;",
+        "    return 0;",
+        "}", "",
+        "static int solve_at(const c_float dx[NX], double u[NU])",
+        "{",
+        "    int i, j, feasible = 1, ok;",
+        "    c_float du[NU];",
+        "    DAQPResult res;",
+        "    if (!READY && " + name + "_setup() != 0) return -100;",
+        "    bounds_at(dx);",
+        "    for (i = 0; i < NU; ++i) {",
+        "        du[i] = 0.0;",
+        "        for (j = 0; j < NX; ++j) du[i] -= K[i * NX + j] * dx[j];",
+        "    }",
+        "    for (i = NZ; i < NM; ++i) if (BL[i] > 0.0 || BU[i] < 0.0) { feasible = 0; break; }",
+        "    if (feasible) {",
+        "        /* The LQR's trajectory meets every constraint: it is the QP's minimizer. */",
+        "        for (i = 0; i < NU; ++i) u[i] = U_OP[i] + du[i];",
+        "        return 0;",
+        "    }",
+        "    /* Only the bounds change: DAQP starts from the last sample's working set. */",
+        "    daqp_update_ldp(DAQP_UPDATE_d, &WORK, &QP);",
+        "    res.x = SOL; res.lam = LAM;",
+        "    daqp_solve(&res, &WORK);",
+        "    ok = res.exitflag > 0;",
+        "    for (i = 0; i < NU; ++i) ok = ok && SOL[i] - SOL[i] == 0.0;  /* finite */",
+        "    if (!ok) {",
+        "        /* No solution: the LQR inside the hard limits, and a cold start next time. */",
+        "        QP.sense = COLD;",
+        "        daqp_update_ldp(DAQP_UPDATE_sense, &WORK, &QP);",
+        "    }",
+        "    for (i = 0; i < NU; ++i) {",
+        "        c_float d = ok ? du[i] + SOL[i] : du[i];",
+        "        if (d < U_LO[i]) d = U_LO[i];",
+        "        if (d > U_HI[i]) d = U_HI[i];",
+        "        u[i] = U_OP[i] + d;",
+        "    }",
+        "    return res.exitflag;",
         "}", "",
         f"int {name}_step(const double x[NX], double u[NU])",
         "{",
-        "    OSQPFloat dx[NX];",
+        "    c_float dx[NX];",
         "    int i;",
         "    for (i = 0; i < NX; ++i) dx[i] = x[i] - X_OP[i];",
         "    return solve_at(dx, u);",
         "}", "",
     ]
     if kalman:
-        form = PythonReference(ctrl).front.linear_form()
+        form = KalmanFront(ctrl).linear_form()
         body += [
             "#define EQ_REAL double", LINEAR_C,
             f"#define NY {ny}",
@@ -350,47 +372,74 @@ def library_files(ctrl: MPC, *, name: str = "mpc") -> dict[str, str]:
             f"void {name}_init({name}_filter *f)",
             "{", "    int i;", "    for (i = 0; i < NX; ++i) f->z[i] = 0.0;", "}", "",
             f"void {name}_estimate(const {name}_filter *f, const double y[NY], double x[NX])",
-            "{", "    OSQPFloat dx[NX];", "    int i;",
+            "{", "    c_float dx[NX];", "    int i;",
             "    eq_linear_estimate(&FILTER, f->z, y, dx);",
             "    for (i = 0; i < NX; ++i) x[i] = X_OP[i] + dx[i];", "}", "",
             f"int {name}_output(const {name}_filter *f, const double y[NY], double u[NU])",
-            "{", "    OSQPFloat dx[NX];",
+            "{", "    c_float dx[NX];",
             "    eq_linear_estimate(&FILTER, f->z, y, dx);",
             "    return solve_at(dx, u);", "}", "",
             f"void {name}_update({name}_filter *f, const double y[NY], const double u_applied[NU])",
-            "{", "    OSQPFloat z[NX];", "    int i;",
+            "{", "    c_float z[NX];", "    int i;",
             "    eq_linear_update(&FILTER, f->z, y, NULL, u_applied, z);",
             "    for (i = 0; i < NX; ++i) f->z[i] = z[i];", "}", "",
         ]
     source = "\n".join(body)
-    return {**generated, f"{name}.h": header, f"{name}.c": source}
+    return {**_daqp_files(), f"{name}.h": header, f"{name}.c": source}
 
 
-def footprint(folder: str | Path, *, name: str = "mpc") -> dict[str, int]:
-    """Bytes of code (text), initialized data and zeroed data of the library alone
-    (OSQP's sources, its workspace and the driver; without the test and its vectors),
-    measured with the C compiler and ``size`` on the object files."""
+#: A program that sets the exported MPC up once, counting what it allocates.
+_HEAP_PROGRAM = """#include <stdio.h>
+#include <stdlib.h>
+#include "{name}.h"
+static size_t total = 0;
+void *__real_malloc(size_t n);
+void *__real_calloc(size_t k, size_t n);
+void *__wrap_malloc(size_t n) {{ total += n; return __real_malloc(n); }}
+void *__wrap_calloc(size_t k, size_t n) {{ total += k * n; return __real_calloc(k, n); }}
+int main(void) {{
+    double x[{n}] = {{0.0}}, u[{m}];
+    if ({name}_setup() != 0) return 1;
+    {name}_step(x, u);
+    printf("%lu\\n", (unsigned long)total);
+    return 0;
+}}
+"""
+
+
+def footprint(folder: str | Path, *, name: str = "mpc", n: int = 4, m: int = 1) -> dict[str, int]:
+    """Bytes of the library alone (DAQP's sources and the driver; without the test and its
+    vectors): code (``text``), initialized and zeroed static data (``data``, ``bss``), measured
+    with the C compiler and ``size`` on the object files, and ``heap``: what
+    ``<name>_setup`` allocates (DAQP's workspace), counted by a program linked with
+    ``malloc`` and ``calloc`` wrapped. *n*, *m*: the controller's states and inputs."""
     import subprocess
     import tempfile
 
     from equilibrist.export.native import compiler
 
     src = Path(folder)
-    files = [*sorted((src / "osqp" / "src").glob("*.c")), src / "osqp" / "workspace.c",
-             src / f"{name}.c"]
+    files = [*_daqp_c_files(src), src / f"{name}.c"]
+    inc = [f"-I{src / 'daqp' / 'include'}", f"-I{src}"]
     total = {"text": 0, "data": 0, "bss": 0}
     with tempfile.TemporaryDirectory() as tmp:
         for i, f in enumerate(files):
             obj = Path(tmp) / f"{i}.o"
-            subprocess.run([*compiler(), "-O2", "-std=c99", f"-I{src / 'osqp'}",
-                            f"-I{src / 'osqp' / 'inc' / 'public'}",
-                            f"-I{src / 'osqp' / 'inc' / 'private'}", f"-I{src}", "-c", str(f),
-                            "-o", str(obj)], check=True, capture_output=True)
+            subprocess.run([*compiler(), "-O2", "-std=c99", *inc, "-c", str(f), "-o", str(obj)],
+                           check=True, capture_output=True)
             out = subprocess.run(["size", str(obj)], check=True, capture_output=True, text=True)
             text, data, bss = (int(v) for v in out.stdout.splitlines()[1].split()[:3])
             total["text"] += text
             total["data"] += data
             total["bss"] += bss
+        prog = Path(tmp) / "heap.c"
+        prog.write_text(_HEAP_PROGRAM.format(name=name, n=n, m=m))
+        exe = Path(tmp) / "heap"
+        subprocess.run([*compiler(), "-O2", "-std=c99", *inc, str(prog), *map(str, files),
+                        "-Wl,--wrap=malloc,--wrap=calloc", "-o", str(exe), "-lm"],
+                       check=True, capture_output=True)
+        run = subprocess.run([str(exe)], check=True, capture_output=True, text=True)
+        total["heap"] = int(run.stdout.strip())
     return total
 
 
@@ -400,7 +449,7 @@ class CompiledMPC:
     A :class:`~equilibrist.control.controller.PythonController` (``reset``,
     ``output``, ``update``) on the controller's measured outputs, so the
     code that runs on the robot closes the loop in the simulation. Each
-    instance compiles its own copy (OSQP's workspace is static data).
+    instance compiles its own copy (the driver's workspace is static data).
     """
 
     def __init__(self, ctrl: MPC, *, name: str = "mpc") -> None:
@@ -420,10 +469,9 @@ class CompiledMPC:
         for rel, text in library_files(ctrl, name=name).items():
             (folder / rel).parent.mkdir(parents=True, exist_ok=True)
             (folder / rel).write_text(text)
-        sources = [*sorted((folder / "osqp" / "src").glob("*.c")), folder / "osqp" / "workspace.c",
-                   folder / f"{name}.c"]
+        sources = [*_daqp_c_files(folder), folder / f"{name}.c"]
         lib = folder / f"lib{name}.so"
-        inc = [f"-I{folder / d}" for d in ("osqp", "osqp/inc/public", "osqp/inc/private", ".")]
+        inc = [f"-I{folder / 'daqp' / 'include'}", f"-I{folder}"]
         proc = subprocess.run([*compiler(), "-O2", "-std=c99", "-ffp-contract=off", "-fPIC",
                                "-shared", *inc, *map(str, sources), "-o", str(lib), "-lm"],
                               capture_output=True, text=True, check=False)
@@ -432,6 +480,8 @@ class CompiledMPC:
                               + " | ".join((proc.stderr or proc.stdout).strip().splitlines()[:6]))
         self._lib: Any = ctypes.CDLL(str(lib))
         dp = ctypes.POINTER(ctypes.c_double)
+        self._setup = self._lib[f"{name}_setup"]
+        self._setup.argtypes, self._setup.restype = [], ctypes.c_int
         self._step = self._lib[f"{name}_step"]
         self._step.argtypes, self._step.restype = [dp, dp], ctypes.c_int
         if self._kalman:
@@ -458,6 +508,9 @@ class CompiledMPC:
         return self._z.copy()
 
     def reset(self) -> None:
+        flag = int(self._setup())
+        if flag != 0:
+            raise ExportError(f"the exported MPC's DAQP setup failed (flag {flag})")
         if self._kalman:
             self._call("init", self._z)
         self.estimate = None
@@ -492,7 +545,7 @@ MPCExport = ControllerExport
 @register_exporter("mpc")
 def export_files(built: MPCRuntime, out: str | Path, *, system: System, precision: str = "double",
                  duration: float | None = None, seed: int = 0, force: bool = False) -> MPCExport:
-    """``equilibrist export SYSTEM --controller mpc``: OSQP's generated solver, driver, ``make check``.
+    """``equilibrist export SYSTEM --controller mpc``: DAQP's sources, the driver, ``make check``.
 
     The controller exported is the one simulated: with the Kalman filter in
     front when the design's measured outputs are not the full state.
@@ -517,10 +570,10 @@ def export_files(built: MPCRuntime, out: str | Path, *, system: System, precisio
                             + (b"" if ctrl.Kf is None else np.asarray(ctrl.Kf).tobytes())
                             ).hexdigest()[:12]
     kalman = ctrl.estimator == "kalman"
-    files = {"osqp/": "OSQP's generated solver and workspace",
+    files = {"daqp/": "DAQP's C sources (the QP solver, MIT licence)",
              "mpc.h": "the interface" + (" (Kalman filter in front)" if kalman else ""),
              "mpc.c": ("the Kalman filter and " if kalman else "")
-             + "the step: bounds at the state, OSQP, the move",
+             + "the QP's data and the step: bounds at the state, DAQP, the move",
              "mpc_vectors.h": "recorded measurements and the Python controller's commands",
              "test_mpc.c": "test program", "Makefile": "make check"}
     steps = round((duration or 1.0) * ctrl.rate) + 1
@@ -528,5 +581,5 @@ def export_files(built: MPCRuntime, out: str | Path, *, system: System, precisio
                      data=Described(digest, "mpc", ctrl.rate), vectors=Steps(steps))
 
 
-__all__ = ["SETTINGS", "Z_TOLERANCE", "CompiledMPC", "MPCExport", "PythonReference", "export_files", "export_mpc",
+__all__ = ["DAQP_SOURCES", "Z_TOLERANCE", "CompiledMPC", "MPCExport", "export_files", "export_mpc",
            "footprint", "mpc_files", "record"]

@@ -28,8 +28,9 @@ The supervisor's mode (pumping or balancing) is the controller state's
 
 *MPC* (:mod:`equilibrist.control.mpc`): the constrained MPC of the design
 (Kalman filter in front where the sensors do not measure the full state),
-OSQP called at every sample. The runner keeps the last solve times for the
-page (median and worst over the last :data:`SOLVE_WINDOW` samples).
+DAQP solving its QP at every sample where the LQR's own move does not
+meet every constraint. The runner keeps the last solve times for the page
+(median and worst over the last :data:`SOLVE_WINDOW` samples).
 """
 
 from __future__ import annotations
@@ -67,8 +68,8 @@ def unavailable(system: System) -> dict[str, str]:
         out["swingup"] = f"{system.key} has no hanging position to swing up from"
     elif system.name not in LAWS:
         out["swingup"] = f"{system.key} has no swing-up law: it exists for {', '.join(LAWS)}"
-    if importlib.util.find_spec("osqp") is None:
-        out["mpc"] = "the MPC needs OSQP: pip install 'equilibrist[mpc]'"
+    if importlib.util.find_spec("daqp") is None:
+        out["mpc"] = "the MPC needs DAQP: pip install 'equilibrist[mpc]'"
     return out
 
 
@@ -142,7 +143,7 @@ class MPCRunner:
         self.idx = np.array([system.state_index(o) for o in self.outputs], dtype=np.int64)
         self.setup_seconds = setup_seconds
         self.times: deque[float] = deque(maxlen=SOLVE_WINDOW)
-        self.solved = 0  # samples that called OSQP (not the exact unconstrained case)
+        self.solved = 0  # samples that called DAQP (not the exact unconstrained case)
         self.estimate: np.ndarray | None = None
 
     @property

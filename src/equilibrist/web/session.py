@@ -95,7 +95,7 @@ LAG_SHARE = 0.8
 LAG_WARN_EVERY = 5.0
 #: The picker's labels of the controllers.
 LABELS = {"lqg": "LQG (Kalman filter + LQR)", "lqr": "LQR (true state)",
-          "swingup": "Swing-up (energy pumping, then LQR)", "mpc": "MPC (constrained, OSQP)",
+          "swingup": "Swing-up (energy pumping, then LQR)", "mpc": "MPC (constrained, DAQP)",
           "off": "Off"}
 
 

@@ -210,7 +210,7 @@
     const ci = d.controller_info;
     if (ci && ci.kind === "mpc") {
       info = `MPC (horizon ${ci.horizon}, ${ci.estimator === "kalman" ? "Kalman filter in front" : "full state"}, soft bounds on ${ci.soft.join(", ") || "none"}) ` +
-        `at ${fmtNum(d.rate)} Hz, redesigned in ${d.milliseconds.toFixed(1)} ms (design ${d.design_milliseconds.toFixed(1)} ms, QP and OSQP setup ${d.controller_milliseconds.toFixed(1)} ms)`;
+        `at ${fmtNum(d.rate)} Hz, redesigned in ${d.milliseconds.toFixed(1)} ms (design ${d.design_milliseconds.toFixed(1)} ms, QP and DAQP setup ${d.controller_milliseconds.toFixed(1)} ms)`;
     } else if (ci && ci.kind === "swingup") {
       info = `Swing-up (${ci.law} law; catch at V < ${fmtNum(ci.c_in)}, release at V > ${fmtNum(ci.c_out)}) handing over to the LQR below, ` +
         `at ${fmtNum(d.rate)} Hz, redesigned in ${d.milliseconds.toFixed(1)} ms`;
@@ -389,7 +389,7 @@
     if (f.mode) {
       mode = `mode: ${f.mode}` + (f.mode_since > 0 ? ` since t = ${f.mode_since.toFixed(2)} s` : "");
       if (f.controller === "swingup" && f.mode === "balancing" && f.mode_since > 0) mode += " (caught: the LQR balances)";
-      if (f.controller === "mpc") mode += f.mode === "constrained" ? " (a constraint is active: OSQP solves the QP)" : " (no constraint active: the LQR's move)";
+      if (f.controller === "mpc") mode += f.mode === "constrained" ? " (a constraint is active: DAQP solves the QP)" : " (no constraint active: the LQR's move)";
     }
     if ($("mode").textContent !== mode) { $("mode").textContent = mode; $("chart-mode").textContent = mode; }
     const chartMode = $("chart-mode");
