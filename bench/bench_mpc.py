@@ -27,6 +27,8 @@ cap and how many samples fell back to the clipped LQR.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import sys
 import time
@@ -165,7 +167,8 @@ def python_control(horizon: int = 30, steps: int = 3) -> dict[str, object]:
     for k in range(steps):
         x0 = np.array([0.0, 0.5 - 0.1 * k, 0.0, 0.0])
         t0 = time.perf_counter()
-        res = opt.solve_ocp(sysd, timepts, x0, cost, constraints, terminal_cost=terminal)
+        with contextlib.redirect_stdout(io.StringIO()):  # its summary would spoil --json
+            res = opt.solve_ocp(sysd, timepts, x0, cost, constraints, terminal_cost=terminal)
         times.append(time.perf_counter() - t0)
         t0 = time.perf_counter()
         du = rt.solve(x0)

@@ -63,7 +63,7 @@ An earlier release solved the sparse form of the same QP with OSQP (ADMM).
 Its slack penalty's scale made ADMM slow: on the cart-pole at 200 Hz,
 ``N = 30``, about two thirds of the constrained samples stopped at its
 iteration cap with first moves up to 70 N from the optimum. DAQP solves all
-of them, in 0.02 ms (median) from a warm start (bench/README.md).
+of them: 0.08 ms median, 0.6 ms worst per sample (bench/README.md).
 
 *Estimator.* With ``estimator="kalman"`` (the default when the measured
 outputs are not the full state) the design's discrete Kalman filter (its
@@ -96,6 +96,8 @@ INF = 1e30
 #: DAQP's iteration cap (a bounded solve time). A cold start of the cart-pole's QP at
 #: N = 30 takes at most about 75 iterations; a warm one a few (bench/README.md).
 ITER_LIMIT = 1000
+#: DAQP's primal feasibility tolerance (the constraints of its exact active set hold to it).
+EPS = 1e-6
 #: DAQP's exit flags: > 0 solved.
 STATUS = {1: "solved", 2: "solved (soft)", -1: "infeasible", -2: "cycling", -3: "unbounded",
           -4: "iteration limit", -5: "nonconvex", -6: "overdetermined working set"}
@@ -248,20 +250,40 @@ class MPCProblem:
                 highs[:, out] = np.maximum(highs[:, out], xs[:, out])
         return lows.reshape(-1), highs.reshape(-1)
 
-    def qp_bounds(self, dx0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``bu, bl`` of the condensed QP at *dx0*: first the variables' own bounds
-        (``v`` free, ``s >= 0``), then the rows of :attr:`condensed`'s ``A``
-        (infinite bounds are :data:`INF`, DAQP's)."""
-        dx0 = np.asarray(dx0, dtype=float)
+    @cached_property
+    def _bound_map(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``bu0, bl0, E``: the bounds of :meth:`qp_bounds` are ``bu0 - E dx0``, ``bl0 - E dx0``
+        (before the widening of violated soft bounds)."""
         N, m, ns = self.horizon, self.m, self.n_soft
         nv, nsl = N * m, N * ns
         Fu, Fs = self.soft_predictions
-        us, xs = Fu @ dx0, Fs @ dx0
-        lo_s, hi_s = self.soft_limits(dx0)
         inf_v, inf_s = np.full(nv, INF), np.full(nsl, INF)
-        bu = np.concatenate([inf_v, inf_s, np.tile(self.u_hi, N) - us, inf_s, hi_s - xs])
-        bl = np.concatenate([-inf_v, np.zeros(nsl), np.tile(self.u_lo, N) - us, lo_s - xs,
+        bu = np.concatenate([inf_v, inf_s, np.tile(self.u_hi, N), inf_s, np.tile(self.soft_hi, N)])
+        bl = np.concatenate([-inf_v, np.zeros(nsl), np.tile(self.u_lo, N), np.tile(self.soft_lo, N),
                              -inf_s])
+        E = np.vstack([np.zeros((self.n_variables, self.n)), Fu, Fs, Fs])
+        return bu, bl, E
+
+    def qp_bounds(self, dx0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``bu, bl`` of the condensed QP at *dx0*: first the variables' own bounds
+        (``v`` free, ``s >= 0``), then the rows of :attr:`condensed`'s ``A``
+        (infinite bounds are :data:`INF`, DAQP's): the moves' hard bounds
+        less the LQR's moves ``Fu dx0``, the soft bounds (:meth:`soft_limits`)
+        less the LQR's constrained states ``Fs dx0``."""
+        dx0 = np.asarray(dx0, dtype=float)
+        bu0, bl0, E = self._bound_map
+        shift = E @ dx0
+        bu, bl = bu0 - shift, bl0 - shift
+        ns = self.n_soft
+        if ns:
+            c = dx0[list(self.soft_index)]
+            if np.any((c > self.soft_hi) | (c < self.soft_lo)):
+                N, nsl = self.horizon, self.horizon * ns
+                lower = self.n_variables + N * self.m
+                xs = shift[lower:lower + nsl]
+                lo_s, hi_s = self.soft_limits(dx0)
+                bl[lower:lower + nsl] = lo_s - xs
+                bu[lower + nsl:] = hi_s - xs
         return bu, bl
 
 
@@ -318,7 +340,7 @@ class MPC:
                 "estimator": self.estimator, "outputs": list(self.output_names),
                 "soft": [self.state_names[i] for i in p.soft_index],
                 "soft_lo": p.soft_lo.tolist(), "soft_hi": p.soft_hi.tolist(),
-                "rho_l1": p.rho_l1, "rho_l2": p.rho_l2, "solver": "daqp"}
+                "rho_l1": p.rho_l1, "rho_l2": p.rho_l2, "eps": EPS, "solver": "daqp"}
 
 
 class MPCRuntime:
@@ -339,7 +361,7 @@ class MPCRuntime:
         self._cold = np.zeros(bu.size, dtype=np.intc)
         self._solver = _daqp().Model()
         self._solver.setup(H, f, A, bu, bl, self._cold)
-        self._solver.settings = {"iter_limit": ITER_LIMIT}
+        self._solver.settings = {"iter_limit": ITER_LIMIT, "primal_tol": EPS}
         self._rows = prob.n_variables
         self.front = KalmanFront(ctrl)
         self.solve_times: list[float] = []
@@ -600,5 +622,5 @@ def _build(request: ControllerRequest) -> MPCRuntime:
     return ctrl.runtime()
 
 
-__all__ = ["HORIZON", "INF", "ITER_LIMIT", "MPC", "KalmanFront", "MPCProblem", "MPCRuntime", "mpc",
+__all__ = ["EPS", "HORIZON", "INF", "ITER_LIMIT", "MPC", "KalmanFront", "MPCProblem", "MPCRuntime", "mpc",
            "soft_bounds"]

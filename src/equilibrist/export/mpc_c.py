@@ -208,7 +208,7 @@ def mpc_files(ctrl: MPC, *, name: str = "mpc", x0: dict[str, float] | None = Non
 def library_files(ctrl: MPC, *, name: str = "mpc") -> dict[str, str]:
     """The library alone, relative path -> text: DAQP's sources under ``daqp/``,
     ``<name>.h`` and ``<name>.c``."""
-    from equilibrist.control.mpc import INF, ITER_LIMIT, KalmanFront
+    from equilibrist.control.mpc import EPS, INF, ITER_LIMIT, KalmanFront
     from equilibrist.export.linear_c import LINEAR_C
 
     if not name.isidentifier():
@@ -250,7 +250,8 @@ def library_files(ctrl: MPC, *, name: str = "mpc") -> dict[str, str]:
         "#include <stddef.h>", '#include "api.h"', '#include "utils.h"', f'#include "{name}.h"', "",
         f"#define NX {n}", f"#define NU {m}", f"#define NH {N}", f"#define NS {ns}",
         f"#define NV {N * m}", f"#define NSL {N * ns}", f"#define NZ {nz}", f"#define NM {nz + na}",
-        f"#define BIG {INF!r}", f"#define ITER_LIMIT {ITER_LIMIT}", "",
+        f"#define BIG {INF!r}", f"#define ITER_LIMIT {ITER_LIMIT}", f"#define PRIMAL_TOL {EPS!r}",
+        "",
         "/* The condensed QP (variables: the corrections v, then the slacks s). */",
         _array("QP_H", H, const=False), _array("QP_F", f, const=False),
         _array("QP_A", A, const=False),
@@ -308,6 +309,7 @@ def library_files(ctrl: MPC, *, name: str = "mpc") -> dict[str, str]:
         "    QP.sense = COLD; QP.break_points = NULL; QP.nh = 0; QP.problem_type = 0;",
         "    allocate_daqp_settings(&WORK);",
         "    WORK.settings->iter_limit = ITER_LIMIT;",
+        "    WORK.settings->primal_tol = PRIMAL_TOL;",
         "    flag = setup_daqp(&QP, &WORK, NULL);",
         "    if (flag < 0) return flag;",
         "    READY = 1;",
