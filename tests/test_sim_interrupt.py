@@ -172,3 +172,29 @@ def test_a_signal_stops_a_batch_of_python_controllers_in_worker_processes(tmp_pa
     assert code == 130, err.decode()
     assert out == b"interrupted\n"
     assert took < 2.0, f"took {took:.2f} s to stop"
+
+
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
+def test_an_interrupt_a_finalizer_swallowed_still_stops_the_core() -> None:
+    """A signal whose KeyboardInterrupt lands in a __del__ is printed as ignored and lost;
+    the command line's handler also records it, and the core's call raises it: the run
+    of 2e8 steps ends at once instead of running on."""
+    import signal as signals
+
+    from equilibrist import interrupt
+    from equilibrist.cli.main import _terminated
+
+    class Finalized:
+        def __del__(self) -> None:
+            _terminated(signals.SIGTERM, None)  # what a signal arriving here does
+
+    system = get_system("cartpole")
+    try:
+        Finalized()  # collected at once: its KeyboardInterrupt is swallowed
+        assert interrupt.requested()
+        start = time.monotonic()
+        with pytest.raises(KeyboardInterrupt):
+            simulate(system, None, duration=2000.0, rate=100.0, physics_step=1e-5)
+        assert time.monotonic() - start < 2.0
+    finally:
+        interrupt.clear()

@@ -53,4 +53,4 @@ def signal_while_working(proc: subprocess.Popen[bytes], signum: int,
     finally:
         if proc.poll() is None:
             proc.kill()
-            proc.wait()
+            proc.communicate()  # reaps it and closes its pipes

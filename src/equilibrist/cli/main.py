@@ -71,14 +71,22 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _terminated(signum: int, _frame: object) -> None:
-    # Unwind like Ctrl-C, so that staging folders and temporary files are removed.
+    # Unwind like Ctrl-C, so that staging folders and temporary files are removed; and
+    # record it, so that an exception swallowed by a finalizer still stops the work.
+    from equilibrist import interrupt
+
+    interrupt.request()
     raise KeyboardInterrupt
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     if argv is None and threading.current_thread() is threading.main_thread():
-        # The command itself (not a caller's process): a kill ends it cleanly.
+        # The command itself (not a caller's process): a kill or Ctrl-C ends it cleanly.
+        from equilibrist import interrupt
+
+        interrupt.clear()
         signal.signal(signal.SIGTERM, _terminated)
+        signal.signal(signal.SIGINT, _terminated)
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

@@ -32,6 +32,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from equilibrist import interrupt
 from equilibrist.errors import SimulationError
 from equilibrist.numeric.system import System
 from equilibrist.sim import _setup, layout
@@ -73,10 +74,14 @@ def call_interruptibly(work: Callable[[], T], stop: np.ndarray,
     KeyboardInterrupt (Ctrl-C; on the command line SIGTERM too) sets
     ``stop[0]``, which the core reads at every sample, waits for the helper
     to return and is raised again. From any other thread, which receives no
-    signals, *work* runs right there.
+    signals, *work* runs right there. An interrupt recorded by the command
+    line's handlers (:mod:`equilibrist.interrupt`) is raised here too, so one
+    whose exception a finalizer swallowed still stops the run.
     """
     if threading.current_thread() is not threading.main_thread():
         return work()
+    # An interrupt whose exception a finalizer swallowed (equilibrist.interrupt).
+    interrupt.raise_if_requested()
     box: dict[str, Any] = {}
 
     def target() -> None:
@@ -90,6 +95,7 @@ def call_interruptibly(work: Callable[[], T], stop: np.ndarray,
     try:
         while helper.is_alive():
             helper.join(_POLL_SECONDS)
+            interrupt.raise_if_requested()
             if poll is not None:
                 poll()
     except BaseException:
