@@ -37,7 +37,6 @@ from pathlib import Path
 import numpy as np
 
 from equilibrist import get_system
-from equilibrist.control.controller import LinearController
 from equilibrist.control.design import design
 from equilibrist.control.mpc import MPCRuntime, mpc
 from equilibrist.sim.run import simulate
@@ -182,42 +181,19 @@ def python_control(horizon: int = 30, steps: int = 3) -> dict[str, object]:
 
 
 def regions(grid: int, figure: bool) -> dict[str, object]:
+    """Both regions of attraction (equilibrist.viz.mpc_demo, the report's own figure)."""
+    from equilibrist.viz.mpc_demo import plot_regions
+    from equilibrist.viz.mpc_demo import regions as kept_starts
+
     system = get_system("cartpole")
-    d = design(system, rate=50.0)
-    region = {"x": (-1.0, 1.0), "theta": (-1.2, 1.2)}
-    lqr = LinearController.from_design(d, kind="lqr")
-    ctrl = mpc(system, design=d, horizon=40, estimator="state",
-               constraints={"x": (-0.95, 0.95), "theta": (-1.2, 1.2)})
-    speeds = np.linspace(-3.0, 3.0, grid)
-    angles = np.linspace(-0.6, 0.6, grid)
-    up = {"lqr": np.zeros((grid, grid), dtype=bool), "mpc": np.zeros((grid, grid), dtype=bool)}
-    for i, th in enumerate(angles):
-        for j, v in enumerate(speeds):
-            x0 = {"x": 0.0, "x_dot": float(v), "theta": float(th)}
-            up["lqr"][i, j] = not simulate(system, lqr, duration=4.0, x0=x0, region=region).fell
-            up["mpc"][i, j] = not simulate(system, ctrl.runtime(), duration=4.0, x0=x0,
-                                           region=region).fell
+    speeds, angles, kept = kept_starts(system, grid)
+    lqr, ours = kept.values()
     if figure:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, axes = plt.subplots(1, 2, figsize=(9, 4), sharey=True)
-        for ax, key, title in ((axes[0], "lqr", "clipped LQR"), (axes[1], "mpc", "MPC, N = 40")):
-            ax.pcolormesh(speeds, angles, up[key], cmap="RdYlGn", vmin=0, vmax=1, shading="nearest")
-            ax.set_title(f"{title}: {int(up[key].sum())} of {up[key].size} kept")
-            ax.set_xlabel("initial cart speed [m/s]")
-        axes[0].set_ylabel("initial pole angle [rad]")
-        fig.suptitle("Cart-pole at 50 Hz, cart at the centre of a 2 m track: green stays up and on it")
-        fig.tight_layout()
         out = ROOT / "docs" / "images" / "mpc_roa.png"
         out.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(out, dpi=90)
-        plt.close(fig)
-    return {"grid": grid, "lqr_kept": int(up["lqr"].sum()), "mpc_kept": int(up["mpc"].sum()),
-            "mpc_only": int((up["mpc"] & ~up["lqr"]).sum()),
-            "lqr_only": int((up["lqr"] & ~up["mpc"]).sum())}
+        plot_regions(system, speeds, angles, kept, out)
+    return {"grid": grid, "lqr_kept": int(lqr.sum()), "mpc_kept": int(ours.sum()),
+            "mpc_only": int((ours & ~lqr).sum()), "lqr_only": int((lqr & ~ours).sum())}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -145,6 +145,10 @@ def test_demo_of_one_system_writes_its_report(name, tmp_path, capsys):
             if src.endswith(".gif"):
                 assert im.size == (160, 120) and im.n_frames > 10
     assert "Equations of motion" in page and "http" not in page
+    if name == "cartpole":
+        # The constrained MPC's case against the clipped LQR, and both regions of attraction.
+        assert "cartpole/mpc_track.png" in links.src and "cartpole/mpc_regions.png" in links.src
+        assert "the clipped LQR left the region" in page and "the MPC stayed up" in page
     runs = sorted(Path(out).rglob("*.npz"))
     assert runs, "the demo keeps its runs for 'equilibrist plot'"
 

@@ -486,6 +486,61 @@ def plot_region_of_attraction(
     When the points form a full grid, the map is drawn as cells; otherwise
     as a scatter of points.
     """
+    fig = _figure(width, height, dpi)
+    _region_axes(fig, fig.add_subplot(), x_values, y_values, stayed_up, x_name=x_name,
+                 y_name=y_name, x_unit=x_unit, y_unit=y_unit, degrees=degrees,
+                 title=title or "region of attraction")
+    return _finish(fig, path)
+
+
+def plot_regions_side_by_side(
+    maps: Mapping[str, tuple[Sequence[float] | np.ndarray, Sequence[float] | np.ndarray,
+                             Sequence[bool] | np.ndarray]],
+    path: str | Path | None = None,
+    *,
+    x_name: str,
+    y_name: str,
+    x_unit: str = "",
+    y_unit: str = "",
+    degrees: bool = True,
+    title: str | None = None,
+    width: float = 9.5,
+    height: float = 4.3,
+    dpi: float = 100.0,
+) -> Any:
+    """Regions of attraction of several controllers over the same starts, side by side.
+
+    Parameters
+    ----------
+    maps : mapping of label to (x values, y values, stayed up)
+        Each controller's map, as :func:`plot_region_of_attraction` takes it;
+        each panel is titled with its label and how many starts it kept.
+    path, x_name, y_name, x_unit, y_unit, degrees, title, width, height, dpi
+        As for :func:`plot_region_of_attraction`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    if not maps:
+        raise VizError("regions side by side need at least one map")
+    fig = _figure(width, height, dpi)
+    axes = np.atleast_1d(fig.subplots(1, len(maps), sharey=True))
+    for ax, (label, (xv, yv, ok)) in zip(axes, maps.items(), strict=True):
+        kept = int(np.sum(np.asarray(ok, bool)))
+        _region_axes(fig, ax, xv, yv, ok, x_name=x_name, y_name=y_name, x_unit=x_unit,
+                     y_unit=y_unit, degrees=degrees,
+                     title=f"{label}: {kept} of {np.size(ok)} starts kept")
+    if title:
+        _title(fig, title)
+    return _finish(fig, path)
+
+
+def _region_axes(fig: Any, ax: Any, x_values: Sequence[float] | np.ndarray,
+                 y_values: Sequence[float] | np.ndarray, stayed_up: Sequence[bool] | np.ndarray,
+                 *, x_name: str, y_name: str, x_unit: str, y_unit: str, degrees: bool,
+                 title: str) -> None:
+    """One region-of-attraction map on *ax*: cells for a full grid, else points."""
     xv = np.asarray(x_values, float).reshape(-1)
     yv = np.asarray(y_values, float).reshape(-1)
     ok = np.asarray(stayed_up, bool).reshape(-1)
@@ -497,8 +552,6 @@ def plot_region_of_attraction(
     fx, ux = display_unit(x_unit, degrees=degrees)
     fy, uy = display_unit(y_unit, degrees=degrees)
     xv, yv = fx * xv, fy * yv
-    fig = _figure(width, height, dpi)
-    ax = fig.add_subplot()
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
 
@@ -518,8 +571,7 @@ def plot_region_of_attraction(
     ax.plot([0], [0], marker="+", color="#111111", ms=10, ls="none")
     ax.set_xlabel(axis_label(f"initial {x_name}", ux))
     ax.set_ylabel(axis_label(f"initial {y_name}", uy))
-    ax.set_title(_wrap(fig, title or "region of attraction"), fontsize="medium")
-    return _finish(fig, path)
+    ax.set_title(_wrap(fig, title), fontsize="medium")
 
 
 def _edges(centres: np.ndarray) -> np.ndarray:

@@ -257,6 +257,10 @@ def tour_controlled(
         images.insert(1, Image(f"{slug}/swingup.gif", caption))
     if extras:
         images += _extras(system, d, sub, slug, sc, progress=progress)
+        if system.name == "cartpole":
+            from equilibrist.viz.mpc_demo import mpc_images
+
+            images += mpc_images(system, sub, slug)
 
     m = main.metrics()
     u_name, u_unit = system.input_names[0], system.input_units[0]
