@@ -20,7 +20,8 @@ Conventions (float64 arrays unless said otherwise):
   defect).
 """
 
-
+# The RK4 step (_rk4_free) is appended from equilibrist/sim/_rk4_template.py.
+# ruff: noqa: F821
 import numpy as np
 from numba import njit
 
@@ -36,24 +37,10 @@ def f(x, u, p, out):
 # ---8<--- shooting body: everything below is copied into each system's module
 
 _sjit = njit(cache=True, error_model="numpy")
-_sf = njit(cache=True, error_model="numpy", inline="always")(f)
-_SN = N_STATES
-
-
-@njit(cache=True, error_model="numpy", inline="always")
-def _srk4(x, u, p, h, k1, k2, k3, k4, xt):
-    _sf(x, u, p, k1)
-    for i in range(_SN):
-        xt[i] = x[i] + 0.5 * h * k1[i]
-    _sf(xt, u, p, k2)
-    for i in range(_SN):
-        xt[i] = x[i] + 0.5 * h * k2[i]
-    _sf(xt, u, p, k3)
-    for i in range(_SN):
-        xt[i] = x[i] + h * k3[i]
-    _sf(xt, u, p, k4)
-    for i in range(_SN):
-        x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+# The names the RK4 step (equilibrist.sim._rk4_template, appended below) uses.
+_inline = njit(cache=True, error_model="numpy", inline="always")
+_fjit = _inline(f)
+_N = N_STATES
 
 
 @_sjit
@@ -64,7 +51,7 @@ def shoot_many(P, XS, bounds, t, u, n_sub, c_idx, yhat, xend):
     states; ``yhat`` (K, n_rows, ny) and ``xend`` (K, n_seg, n) are written.
     A state that stops being finite stays so (the residuals say it).
     """
-    n = _SN
+    n = _N
     ny = c_idx.shape[0]
     n_seg = bounds.shape[0] - 1
     x = np.empty(n)
@@ -85,7 +72,7 @@ def shoot_many(P, XS, bounds, t, u, n_sub, c_idx, yhat, xend):
                 h = (t[k + 1] - t[k]) / steps
                 uk = u[k]
                 for _ in range(steps):
-                    _srk4(x, uk, p, h, k1, k2, k3, k4, xt)
+                    _rk4_free(x, uk, p, h, k1, k2, k3, k4, xt)
             for i in range(n):
                 xend[c, s, i] = x[i]
         last = bounds[n_seg]
@@ -101,7 +88,7 @@ def innovations(p, x0, t, u, n_sub, c_idx, gain, y, off, e):
     corrected by ``gain`` times the error; ``e[k]`` is the measurement at
     ``t[k]`` minus ``off`` minus its prediction.
     """
-    n = _SN
+    n = _N
     ny = c_idx.shape[0]
     x = x0.copy()
     k1 = np.empty(n)
@@ -123,4 +110,4 @@ def innovations(p, x0, t, u, n_sub, c_idx, gain, y, off, e):
             h = (t[k + 1] - t[k]) / steps
             uk = u[k]
             for _ in range(steps):
-                _srk4(x, uk, p, h, k1, k2, k3, k4, xt)
+                _rk4_free(x, uk, p, h, k1, k2, k3, k4, xt)

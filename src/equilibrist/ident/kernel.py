@@ -1,6 +1,7 @@
 """The compiled multiple-shooting integrator: one numba module per system, cached on disk.
 
-The integrator's source is written once, in ``_shoot_template.py``. For each
+The integrator's source is written once, in ``_shoot_template.py`` (its RK4
+step is the simulation core's, ``equilibrist/sim/_rk4_template.py``). For each
 system it is appended to a copy of the system's generated dynamics (the
 numeric layer's ``f``, which compiles unchanged with numba) and written to
 the numeric cache folder as ``<system>_<hash>_shoot_<hash>.py``; its
@@ -17,12 +18,12 @@ import hashlib
 import types
 from pathlib import Path
 
-from equilibrist.numeric.cache import import_generated, write_generated
+from equilibrist.numeric.cache import import_generated, template_body, write_generated
 from equilibrist.numeric.system import System
 
-_MARKER = "# ---8<--- shooting body"
 _HEADER = (
     "\n\n# --- multiple-shooting integrator (equilibrist.ident._shoot_template) ---\n"
+    "import math  # noqa: E402\n"
     "import numpy as np  # noqa: E402\n"
     "from numba import njit  # noqa: E402\n\n"
 )
@@ -30,11 +31,9 @@ _LOADED: dict[Path, types.ModuleType] = {}
 
 
 def _body() -> str:
-    text = (Path(__file__).parent / "_shoot_template.py").read_text()
-    _head, sep, body = text.partition(_MARKER)
-    if not sep:  # pragma: no cover - a broken install
-        raise RuntimeError("the shooting template has lost its marker line")
-    return body.split("\n", 1)[1]
+    """The integrator's loops, then the simulation core's RK4 step (the same arithmetic)."""
+    return template_body(Path(__file__).parent / "_shoot_template.py",
+                         Path(__file__).parents[1] / "sim" / "_rk4_template.py")
 
 
 def shooting_path(system: System) -> Path:

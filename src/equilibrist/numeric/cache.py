@@ -175,6 +175,28 @@ def _check_module(module: types.ModuleType, entry: Entry) -> None:
         raise ImportError("generated model has the wrong size")
 
 
+#: The line of a template file below which its text is copied into generated modules.
+TEMPLATE_MARKER = "# ---8<---"
+
+
+def template_body(*paths: Path) -> str:
+    """The text below the marker line (:data:`TEMPLATE_MARKER`) of each template file, joined.
+
+    The compiled cores' templates (``sim/_kernel_template.py``,
+    ``sim/_rk4_template.py``, ``sim/_env_template.py``,
+    ``ident/_shoot_template.py``) are Python files that lint and read as
+    such above that line; below it is what each system's generated module
+    gets, after the system's ``f``.
+    """
+    bodies = []
+    for path in paths:
+        _head, sep, body = path.read_text().partition(TEMPLATE_MARKER)
+        if not sep:  # pragma: no cover - a broken install
+            raise RuntimeError(f"the template {path.name} has lost its marker line")
+        bodies.append(body.split("\n", 1)[1])
+    return "\n\n".join(bodies)
+
+
 def write_generated(path: Path, source: str) -> None:
     """Write a generated module to *path* once, whole; never replace one that exists.
 

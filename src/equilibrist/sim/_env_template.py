@@ -148,11 +148,7 @@ def _env_physics(x, u, p, rng, cf, ci, w, zbuf, k1, k2, k3, k4, xt, xprev):
                 w[i] = v
         for i in range(_N):
             xprev[i] = x[i]
-        # As the simulation core chooses: the same bits as _rk4 with w = 0.
-        if nw == 0 and _no_negative_zero(x):
-            _rk4_free(x, u, p, h, k1, k2, k3, k4, xt)
-        else:
-            _rk4(x, u, p, w, h, k1, k2, k3, k4, xt)
+        _rk4_step(x, u, p, w, nw, h, k1, k2, k3, k4, xt)
         code = _env_outside(x, cf, o_region)
         if code != -1:
             if code == -2:

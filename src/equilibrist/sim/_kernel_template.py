@@ -167,53 +167,6 @@ def _deriv(x, u, p, w, out):
         out[i] += w[i]
 
 
-@_inline
-def _rk4(x, u, p, w, h, k1, k2, k3, k4, xt):
-    # The scratch vectors are separate arrays made once per run: a row view
-    # made here, in the innermost loop, would cost reference counting.
-    _fjit(x, u, p, k1)
-    for i in range(_N):
-        xt[i] = x[i] + 0.5 * h * (k1[i] + w[i])
-    _fjit(xt, u, p, k2)
-    for i in range(_N):
-        xt[i] = x[i] + 0.5 * h * (k2[i] + w[i])
-    _fjit(xt, u, p, k3)
-    for i in range(_N):
-        xt[i] = x[i] + h * (k3[i] + w[i])
-    _fjit(xt, u, p, k4)
-    for i in range(_N):
-        x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i] + 6.0 * w[i])
-
-
-@_inline
-def _rk4_free(x, u, p, h, k1, k2, k3, k4, xt):
-    """``_rk4`` without process noise: the same bits as ``_rk4`` with ``w = 0`` unless a
-    state is a negative zero (see ``_no_negative_zero``)."""
-    _fjit(x, u, p, k1)
-    for i in range(_N):
-        xt[i] = x[i] + 0.5 * h * k1[i]
-    _fjit(xt, u, p, k2)
-    for i in range(_N):
-        xt[i] = x[i] + 0.5 * h * k2[i]
-    _fjit(xt, u, p, k3)
-    for i in range(_N):
-        xt[i] = x[i] + h * k3[i]
-    _fjit(xt, u, p, k4)
-    for i in range(_N):
-        x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-
-
-@_inline
-def _no_negative_zero(x):
-    """True unless a state is ``-0.0``: the only case where adding a zero noise term
-    (``k + 0.0`` turns ``-0.0`` into ``+0.0``) changes an RK4 step's result."""
-    clean = True
-    for i in range(_N):
-        if x[i] == 0.0 and math.copysign(1.0, x[i]) < 0.0:
-            clean = False
-    return clean
-
-
 @_bare
 def _dopri(x, u, p, w, h, rtol, atol, wk):
     """Integrate over ``[0, h]`` with adaptive Dormand-Prince steps; False if it gives up."""
@@ -401,10 +354,7 @@ def _advance(
         for i in range(n):
             xprev[i] = x[i]
         if integrator == _INT_RK4:
-            if nw == 0 and _no_negative_zero(x):
-                _rk4_free(x, ubuf, pcur, h, k1, k2, k3, k4, xt)
-            else:
-                _rk4(x, ubuf, pcur, wvec, h, k1, k2, k3, k4, xt)
+            _rk4_step(x, ubuf, pcur, wvec, nw, h, k1, k2, k3, k4, xt)
         elif integrator == _INT_ADAPTIVE:
             ok = _dopri(x, ubuf, pcur, wvec, h, fopts[_FO_RTOL], fopts[_FO_ATOL], wk)
         else:

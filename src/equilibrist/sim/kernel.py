@@ -64,11 +64,10 @@ from equilibrist.control.controller import (
     linear_sizes,
     linear_unrolled_source,
 )
-from equilibrist.numeric.cache import import_generated, write_generated
+from equilibrist.numeric.cache import import_generated, template_body, write_generated
 from equilibrist.numeric.system import System
 from equilibrist.sim import layout
 
-_MARKER = "# ---8<--- kernel body"
 _HEADER = (
     "\n\n# --- simulation core (equilibrist.sim._kernel_template) ---\n"
     "import math  # noqa: E402\n"
@@ -90,15 +89,10 @@ Linear = Sizes | bytes
 
 
 def _template_body() -> str:
-    """The simulation core's body, then the environments' steps (two template files)."""
-    bodies = []
-    for name in ("_kernel_template.py", "_env_template.py"):
-        text = (Path(__file__).parent / name).read_text()
-        _head, sep, body = text.partition(_MARKER)
-        if not sep:  # pragma: no cover - a broken install
-            raise RuntimeError(f"the kernel template {name} has lost its marker line")
-        bodies.append(body.split("\n", 1)[1])
-    return "\n\n".join(bodies)
+    """The simulation core's body, its RK4 step, then the environments' steps."""
+    here = Path(__file__).parent
+    return template_body(*(here / name for name in
+                           ("_kernel_template.py", "_rk4_template.py", "_env_template.py")))
 
 
 _SECTIONS: dict[str, str] = {}
