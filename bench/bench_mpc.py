@@ -75,7 +75,7 @@ def _ms(values: list[float]) -> dict[str, float]:
             "worst": float(a.max())}
 
 
-def solve_only(horizon: int = 30, repeat: int = 1) -> dict[str, object]:
+def solve_times(horizon: int = 30, repeat: int = 1) -> dict[str, object]:
     """Per-sample solve times only (thread CPU and wall), *repeat* passes over the starts."""
     import os
 
@@ -116,33 +116,6 @@ def solve_only(horizon: int = 30, repeat: int = 1) -> dict[str, object]:
         "fallbacks_to_lqr": fallbacks,
         "cpu_over_period": int(sum(1e3 * c > period for c in cpu)),
         "wall_over_period": int(sum(1e3 * w > period for w in wall)),
-    }
-
-
-def solve_times(horizon: int = 30) -> dict[str, object]:
-    system = get_system("cartpole")
-    d = design(system, rate=200.0)
-    ctrl = mpc(system, design=d, horizon=horizon, estimator="state")
-    starts = STARTS
-    wall: list[float] = []
-    cpu: list[float] = []
-    solved: list[float] = []
-    statuses: list[str] = []
-    for x0 in starts:
-        rt = _Timed(ctrl)
-        simulate(system, rt, duration=2.0, x0=x0, region={})
-        wall += rt.solve_times
-        cpu += rt.cpu_times
-        statuses += rt.statuses
-        solved += [t for t, s in zip(rt.solve_times, rt.statuses, strict=True) if s != "unconstrained"]
-    w, c = np.array(wall), np.array(cpu)
-    return {
-        "horizon": horizon, "rate": 200.0, "period_ms": 5.0, "samples": len(w),
-        "samples_solved_by_daqp": len(solved),
-        "wall_median_ms": 1e3 * float(np.median(w)), "wall_worst_ms": 1e3 * float(w.max()),
-        "cpu_median_ms": 1e3 * float(np.median(c)), "cpu_worst_ms": 1e3 * float(c.max()),
-        "daqp_wall_median_ms": 1e3 * float(np.median(solved)) if solved else None,
-        "daqp_wall_worst_ms": 1e3 * float(np.max(solved)) if solved else None,
     }
 
 
@@ -207,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     out: dict[str, dict[str, object]]
     if args.solve_only:
-        out = {"solve_only": solve_only(repeat=args.repeat)}
+        out = {"solve_only": solve_times(repeat=args.repeat)}
     else:
         out = {"solve_times": solve_times(), "python_control": python_control(),
                "regions": regions(args.grid, not args.no_figure)}

@@ -19,7 +19,7 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     from starlette.testclient import TestClient
 
-from tests.support.web import receive_until
+from tests.support.web import opening, receive_until
 
 from equilibrist.web.app import create_app
 from equilibrist.web.protocol import CONTROLLERS, Limits, ProtocolError, parse
@@ -40,15 +40,6 @@ def app():
 def client(app):
     with TestClient(app) as c:
         yield c
-
-
-def opening(ws):
-    seen = {}
-    while len(seen) < 3:
-        msg = json.loads(ws.receive_text())
-        if msg["type"] in ("hello", "system", "design"):
-            seen[msg["type"]] = msg
-    return seen
 
 
 def wrapped(angle):

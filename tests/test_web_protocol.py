@@ -23,7 +23,7 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     from starlette.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
-from tests.support.web import next_frame, receive_until
+from tests.support.web import next_frame, opening, receive_until
 
 from equilibrist.web.app import create_app
 from equilibrist.web.protocol import MAX_MESSAGE_BYTES, Limits, ProtocolError, parse
@@ -41,16 +41,6 @@ def app():
 def client(app):
     with TestClient(app) as c:
         yield c
-
-
-def opening(ws):
-    """The hello, system and design frames that open a session."""
-    seen = {}
-    while len(seen) < 3:
-        msg = json.loads(ws.receive_text())
-        if msg["type"] in ("hello", "system", "design"):
-            seen[msg["type"]] = msg
-    return seen
 
 
 # -- the protocol alone --------------------------------------------------------------------

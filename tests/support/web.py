@@ -20,3 +20,13 @@ def receive_until(ws: Any, predicate: Callable[[dict[str, Any]], bool],
 def next_frame(ws: Any) -> dict[str, Any]:
     """The next ``frame`` message."""
     return receive_until(ws, lambda m: m["type"] == "frame")
+
+
+def opening(ws: Any) -> dict[str, dict[str, Any]]:
+    """The hello, system and design frames that open a session, by type."""
+    seen: dict[str, dict[str, Any]] = {}
+    while len(seen) < 3:
+        msg = json.loads(ws.receive_text())
+        if msg["type"] in ("hello", "system", "design"):
+            seen[msg["type"]] = msg
+    return seen

@@ -109,13 +109,22 @@ RHO_L1, RHO_L2 = 1e2, 4.0
 TRACK = ("x_max", "x")
 
 
+#: Why the MPC cannot run when its solver is not installed.
+MISSING_SOLVER = "the MPC controller needs DAQP: pip install 'equilibrist[mpc]'"
+
+
+def solver_missing() -> str | None:
+    """:data:`MISSING_SOLVER` when DAQP is not installed (without importing it), else None."""
+    import importlib.util
+
+    return MISSING_SOLVER if importlib.util.find_spec("daqp") is None else None
+
+
 def _daqp() -> Any:
     try:
         import daqp
     except ModuleNotFoundError as exc:  # pragma: no cover - the extra is missing
-        raise ControllerError(
-            "the MPC controller needs DAQP: pip install 'equilibrist[mpc]'"
-        ) from exc
+        raise ControllerError(MISSING_SOLVER) from exc
     return daqp
 
 
@@ -622,5 +631,5 @@ def _build(request: ControllerRequest) -> MPCRuntime:
     return ctrl.runtime()
 
 
-__all__ = ["EPS", "HORIZON", "INF", "ITER_LIMIT", "MPC", "KalmanFront", "MPCProblem", "MPCRuntime", "mpc",
-           "soft_bounds"]
+__all__ = ["EPS", "HORIZON", "INF", "ITER_LIMIT", "MISSING_SOLVER", "MPC", "KalmanFront", "MPCProblem", "MPCRuntime", "mpc",
+           "soft_bounds", "solver_missing"]

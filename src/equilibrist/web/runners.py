@@ -35,7 +35,6 @@ meet every constraint. The runner keeps the last solve times for the page
 
 from __future__ import annotations
 
-import importlib.util
 import time
 from collections import deque
 from collections.abc import Mapping
@@ -60,6 +59,7 @@ _EMPTY = np.zeros(0)
 
 def unavailable(system: System) -> dict[str, str]:
     """``{controller: reason}`` of the controllers of :data:`KINDS` that do not apply to *system*."""
+    from equilibrist.control.mpc import solver_missing
     from equilibrist.control.swingup import LAWS
     from equilibrist.tasks import task_names
 
@@ -68,8 +68,9 @@ def unavailable(system: System) -> dict[str, str]:
         out["swingup"] = f"{system.key} has no hanging position to swing up from"
     elif system.name not in LAWS:
         out["swingup"] = f"{system.key} has no swing-up law: it exists for {', '.join(LAWS)}"
-    if importlib.util.find_spec("daqp") is None:
-        out["mpc"] = "the MPC needs DAQP: pip install 'equilibrist[mpc]'"
+    missing = solver_missing()
+    if missing:
+        out["mpc"] = missing
     return out
 
 
