@@ -428,6 +428,11 @@ def test_vector_runs_the_faster_way(monkeypatch: pytest.MonkeyPatch) -> None:
     for _ in range(200):
         vec.step(a)
     assert vec.threads_in_use > 1 and runs[0] < 10
+    runs.update({0: 0, 1: 0})
+    for _ in range(5000):  # probes that confirm the way come rarer and rarer
+        vec.step(a)
+    backoff = math.ceil(math.log2(vector_module.PROBE_EVERY_MAX / vector_module.PROBE_EVERY))
+    assert 0 < runs[0] <= vector_module.PROBE_STEPS * (backoff + 5000 // vector_module.PROBE_EVERY_MAX + 1)
     cost[1] = 40.0  # the other cores got busy: all threads now 40 times slower
     for _ in range(10):
         vec.step(a)

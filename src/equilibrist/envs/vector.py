@@ -48,9 +48,14 @@ PARALLEL_MIN = 256
 # (the first wakes threads that went to sleep). On a machine whose other
 # cores are taken, the parallel step waits for descheduled threads and can
 # run many times slower than one thread. Probes come every PROBE_EVERY
-# steps, or rarer when the other way is much slower, so that they take at
-# most about 1 / PROBE_SHARE of the time.
+# steps at first; each probe that finds the other way slower doubles the
+# interval, up to PROBE_EVERY_MAX steps, and a switch, or the way in use
+# growing RESLOWED times slower than at the last probe, starts again from
+# PROBE_EVERY. Probes come rarer still when the other way is much slower,
+# so that they take at most about 1 / PROBE_SHARE of the time.
 PROBE_EVERY = 50
+PROBE_EVERY_MAX = 1600
+RESLOWED = 1.5
 PROBE_STEPS = 2
 PROBE_SHARE = 20.0
 SMOOTHING = 0.25
@@ -115,6 +120,8 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._mode = int(self.parallel)
         self._cost = [math.inf, math.inf]  # seconds per step, moving averages
         self._countdown = 0  # steps before the next probe
+        self._interval = PROBE_EVERY  # steps between probes, doubled while they confirm the way
+        self._at_probe = math.inf  # the way in use's time per step at the last probe
         self._probe_left = 0  # steps left of the probe under way
         self._step_fn: Any = None
         self._ashape = (N, m)
@@ -220,33 +227,55 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         (see ``PROBE_EVERY``); both give the same numbers."""
         cost = self._cost
         mode = self._mode
-        if self._probe_left == 0 and (self._countdown <= 0 or cost[1 - mode] == math.inf):
-            self._probe_left = PROBE_STEPS
-        probing = self._probe_left > 0
-        if probing:
-            mode = 1 - mode
-            self._probe_left -= 1
-        else:
+        entry = self._entries[mode]
+        if self._probe_left == 0 and self._countdown > 0 and entry is not None \
+                and cost[1 - mode] != math.inf:
+            # Most steps: the way in use, timed into its moving average (the
+            # general path below, written out for its cost at few copies).
             self._countdown -= 1
+            start = time.perf_counter()
+            bad = entry(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
+            spent = time.perf_counter() - start
+            average = cost[mode]
+            average = SMOOTHING * min(spent, OUTLIER * average) + (1.0 - SMOOTHING) * average
+            cost[mode] = average
+            if average > RESLOWED * self._at_probe or average > cost[1 - mode]:
+                self._changed(mode)
+            return int(bad)
+        # A probe: the other way, for PROBE_STEPS steps, the last one timed (the
+        # first wakes threads that went to sleep). Also how each way gets its
+        # first time, the other way first.
+        if self._probe_left == 0:
+            self._probe_left = PROBE_STEPS
+        self._probe_left -= 1
+        mode = 1 - mode
         entry = self._entry(mode, (a, obs, rewards, flags))
         start = time.perf_counter()
         bad = entry(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
-        spent = time.perf_counter() - start
-        if probing and self._probe_left > 0:
-            return int(bad)  # a probe's first step wakes the threads: not timed
-        if probing or cost[mode] == math.inf:
-            cost[mode] = spent  # a rare sample: taken as it is
-        else:  # a spike of the way in use alone does not switch
-            spent = min(spent, OUTLIER * cost[mode])
-            cost[mode] = SMOOTHING * spent + (1.0 - SMOOTHING) * cost[mode]
-        if probing and math.inf not in cost:
-            ratio = cost[mode] / max(cost[1 - mode], 1e-12)
-            self._countdown = max(PROBE_EVERY, int(PROBE_STEPS * PROBE_SHARE * ratio))
-        if math.inf not in cost:
-            self._mode = 0 if cost[0] < cost[1] else 1
-        elif probing:
+        cost[mode] = time.perf_counter() - start  # a rare sample: taken as it is
+        if self._probe_left > 0:
+            return int(bad)
+        if math.inf in cost:
             self._mode = mode  # the only way timed so far
+            return int(bad)
+        before = self._mode
+        self._mode = 0 if cost[0] < cost[1] else 1
+        self._interval = min(2 * self._interval, PROBE_EVERY_MAX) \
+            if self._mode == before else PROBE_EVERY
+        self._at_probe = cost[self._mode]
+        ratio = cost[1 - self._mode] / max(cost[self._mode], 1e-12)
+        self._countdown = max(self._interval, int(PROBE_STEPS * PROBE_SHARE * ratio))
         return int(bad)
+
+    def _changed(self, mode: int) -> None:
+        """The way in use got slower than at the last probe, or than the other way
+        was then: switch if the other way was faster, and probe again soon."""
+        cost = self._cost
+        if cost[mode] > cost[1 - mode]:
+            self._mode = 1 - mode
+        self._interval = PROBE_EVERY
+        self._countdown = min(self._countdown, PROBE_EVERY)
+        self._at_probe = math.inf
 
     @property
     def threads_in_use(self) -> int:

@@ -70,6 +70,11 @@ _U0 = np.uint64(0)
 _U1 = np.uint64(1)
 
 _ENV_SCR = 9  # scratch rows: u, w, zbuf, k1, k2, k3, k4, xt, xprev
+# A parallel step gives each block of copies its scratch rows, this many
+# doubles apart at least (two cache lines of 64 bytes, the span the
+# adjacent-line prefetcher fetches): scratch written by two threads in one
+# cache line would bounce the line between the cores at every RK4 stage.
+_ENV_GAP = 16
 _env_energy = _bare(energy)
 
 
@@ -78,29 +83,78 @@ def _env_width(fs, ci):
     return max(_N, _M, ci[_CI_NY], ci[_CI_NW]) + 2
 
 
+# The settings a copy's step reads, taken from ``ci`` and ``cf`` once per call
+# (``_env_settings``) rather than once per copy: the compiler can not keep
+# them in registers across the copies' stores, which might alias them, and
+# a block of ``cf`` indexed through an offset read from ``ci`` pays a
+# negative-index check at every access; a view of the block does not.
+# Indices into the tuple:
+_S_N_SUB = 0
+_S_N_SAMPLES = 1
+_S_OBSERVE_STATE = 2
+_S_REWARD = 3
+_S_PHYSICAL = 4
+_S_AUTORESET = 5
+_S_NY = 6
+_S_NW = 7
+_S_NLV = 8
+_S_NP = 9
+_S_H = 10
+_S_DT = 11
+_S_BONUS = 12
+_S_LO = 13  # the region's lower bounds (a view of cf), then its upper ones
+_S_HI = 14
+_S_OP = 15  # operating point: state then input
+_S_ISCALE = 16  # 1 / scales: state then input
+_S_C_IDX = 17  # the measured states (a view of ci)
+_S_HANG = 18  # the swing-up's hanging coordinates (a view of ci)
+_S_LV = 19  # sensor noise's square root, ny x ny, row-major (a view of cf)
+_S_LW = 20  # process noise's gain, n x nw, row-major (a view of cf)
+
+
 @_inline
-def _env_observe(x, rng, orow, cf, ci, zbuf):
+def _env_settings(cf, ci):
+    ny = ci[_CI_NY]
+    nw = ci[_CI_NW]
+    nlv = ci[_CI_NLV]
+    o_r = ci[_CI_O_REGION]
+    o_op = ci[_CI_O_OP]
+    o_s = ci[_CI_O_ISCALE]
+    o_c = ci[_CI_O_C_IDX]
+    o_h = ci[_CI_O_HANG]
+    o_lv = ci[_CI_O_LV]
+    o_lw = ci[_CI_O_LW]
+    return (ci[_CI_N_SUB], ci[_CI_N_SAMPLES], ci[_CI_OBSERVE_STATE], ci[_CI_REWARD],
+            ci[_CI_PHYSICAL], ci[_CI_AUTORESET], ny, nw, nlv, ci[_CI_NP],
+            cf[_CF_H], cf[_CF_DT], cf[_CF_BONUS],
+            cf[o_r: o_r + _N], cf[o_r + _N: o_r + 2 * _N], cf[o_op: o_op + _N + _M],
+            cf[o_s: o_s + _N + _M], ci[o_c: o_c + ny], ci[o_h: o_h + ci[_CI_NHANG]],
+            cf[o_lv: o_lv + nlv * ny], cf[o_lw: o_lw + _N * nw])
+
+
+@_inline
+def _env_observe(x, rng, orow, S, zbuf):
     """*orow*: the state, or the measured outputs with sensor noise (as ``_measure``).
 
     The sensor noise is drawn either way, so that an environment observing
     the state follows the same run as one observing the outputs.
     """
-    ny = ci[_CI_NY]
-    nlv = ci[_CI_NLV]
+    ny = S[_S_NY]
+    nlv = S[_S_NLV]
     if nlv > 0:
         _normals(rng, zbuf, ny)
-    if ci[_CI_OBSERVE_STATE] != 0:
+    if S[_S_OBSERVE_STATE] != 0:
         for i in range(_N):
             orow[i] = x[i]
         return
-    o_c = ci[_CI_O_C_IDX]
-    o_lv = ci[_CI_O_LV]
+    c_idx = S[_S_C_IDX]
+    lv = S[_S_LV]
     for j in range(ny):
-        y = x[ci[o_c + j]]
+        y = x[c_idx[j]]
         if nlv > 0:
             v = 0.0
             for c in range(ny):
-                v += cf[o_lv + j * ny + c] * zbuf[c]
+                v += lv[j * ny + c] * zbuf[c]
             y += v
         orow[j] = y
 
@@ -117,69 +171,87 @@ def _env_input(a, p, physical, u):
 
 
 @_inline
-def _env_outside(x, cf, o_region):
+def _env_outside(x, lo, hi):
     """-1 inside; the first state outside its region; -2 if not finite (as ``_outside``)."""
     for i in range(_N):
         if not math.isfinite(x[i]):
             return -2
     for i in range(_N):
-        if x[i] <= cf[o_region + i] or x[i] >= cf[o_region + _N + i]:
+        if x[i] <= lo[i] or x[i] >= hi[i]:
             return i
     return -1
 
 
 @_inline
-def _env_physics(x, u, p, rng, cf, ci, w, zbuf, k1, k2, k3, k4, xt, xprev):
+def _env_physics(x, u, p, rng, S, w, zbuf, k1, k2, k3, k4, xt, xprev):
     """One control period; the region code at a fall (the last finite state kept), else -1.
 
-    *w* is zero on entry and stays so without process noise.
+    *w* is zero on entry and stays so without process noise. The noise-free
+    loop is written apart: it is what most training runs step, and the loop
+    without the noise's branches compiles to fewer instructions per copy.
     """
-    nw = ci[_CI_NW]
-    o_lw = ci[_CI_O_LW]
-    o_region = ci[_CI_O_REGION]
-    h = cf[_CF_H]
-    for _s in range(ci[_CI_N_SUB]):
-        if nw > 0:
-            _normals(rng, zbuf, nw)
+    nw = S[_S_NW]
+    lo = S[_S_LO]
+    hi = S[_S_HI]
+    h = S[_S_H]
+    n_sub = S[_S_N_SUB]
+    if nw == 0:
+        for _s in range(n_sub):
             for i in range(_N):
-                v = 0.0
-                for c in range(nw):
-                    v += cf[o_lw + i * nw + c] * zbuf[c]
-                w[i] = v
+                xprev[i] = x[i]
+            _rk4_step(x, u, p, w, 0, h, k1, k2, k3, k4, xt)
+            code = _env_outside(x, lo, hi)
+            if code != -1:
+                return _env_fell(code, x, xprev)
+        return -1
+    lw = S[_S_LW]
+    for _s in range(n_sub):
+        _normals(rng, zbuf, nw)
+        for i in range(_N):
+            v = 0.0
+            for c in range(nw):
+                v += lw[i * nw + c] * zbuf[c]
+            w[i] = v
         for i in range(_N):
             xprev[i] = x[i]
-        _rk4_step(x, u, p, w, nw, h, k1, k2, k3, k4, xt)
-        code = _env_outside(x, cf, o_region)
+        _rk4(x, u, p, w, h, k1, k2, k3, k4, xt)
+        code = _env_outside(x, lo, hi)
         if code != -1:
-            if code == -2:
-                for i in range(_N):
-                    x[i] = xprev[i]
-            return code
+            return _env_fell(code, x, xprev)
     return -1
 
 
 @_inline
-def _env_reward(x, u, p, eref0, eref1, cf, ci):
+def _env_fell(code, x, xprev):
+    """*code* of a fall; a state that is not finite is replaced by the last finite one."""
+    if code == -2:
+        for i in range(_N):
+            x[i] = xprev[i]
+    return code
+
+
+@_inline
+def _env_reward(x, u, p, eref0, eref1, S):
     """Reward of a period ending in *x* with *u* applied (see ``equilibrist.envs``)."""
-    dt = cf[_CF_DT]
-    o_op = ci[_CI_O_OP]
-    if ci[_CI_REWARD] == 0:
-        o_s = ci[_CI_O_ISCALE]
+    dt = S[_S_DT]
+    op = S[_S_OP]
+    if S[_S_REWARD] == 0:
+        isc = S[_S_ISCALE]
         c = 0.0
         for i in range(_N):
-            d = (x[i] - cf[o_op + i]) * cf[o_s + i]
+            d = (x[i] - op[i]) * isc[i]
             c += d * d
         for i in range(_M):
-            d = (u[i] - cf[o_op + _N + i]) * cf[o_s + _N + i]
+            d = (u[i] - op[_N + i]) * isc[_N + i]
             c += d * d
         # Never below zero: struggling must not earn less than falling at once.
-        return dt * max(0.0, cf[_CF_BONUS] - c)
-    nh = ci[_CI_NHANG]
-    o_h = ci[_CI_O_HANG]
+        return dt * max(0.0, S[_S_BONUS] - c)
+    hang = S[_S_HANG]
+    nh = hang.shape[0]
     up = 0.0
     for j in range(nh):
-        q = ci[o_h + j]
-        up += 0.5 * (1.0 + math.cos(x[q] - cf[o_op + q]))
+        q = hang[j]
+        up += 0.5 * (1.0 + math.cos(x[q] - op[q]))
     if nh > 0:
         up /= nh
     gap = eref0 - eref1
@@ -202,7 +274,7 @@ def _env_begin(r, fs, us, orow, cf, ci, zbuf):
         fs[r, _N + n_p + 1] = _env_energy(cf[o_st: o_st + _N], p)
     us[r, _US_K] = _U0
     us[r, _US_AUTO] = _U0
-    _env_observe(fs[r, :_N], us[r, :4], orow, cf, ci, zbuf)
+    _env_observe(fs[r, :_N], us[r, :4], orow, _env_settings(cf, ci), zbuf)
 
 
 @_inline
@@ -226,8 +298,9 @@ def _env_draw(r, fs, us, cf, ci):
 
 
 @_inline
-def _env_step_copy(r, a, fs, us, orow, cf, ci, u, w, zbuf, k1, k2, k3, k4, xt, xprev):
-    """One control period of copy *r* with action *a*: ``(reward, status)``.
+def _env_step_copy(r, a, fs, us, orow, cf, ci, S, u, w, zbuf, k1, k2, k3, k4, xt, xprev):
+    """One control period of copy *r* with action *a*: ``(reward, status)``; *S* is
+    ``_env_settings(cf, ci)``.
 
     A copy whose episode ended at its previous step (autoreset due) is reset
     instead: its action is ignored, its reward is 0.
@@ -236,18 +309,18 @@ def _env_step_copy(r, a, fs, us, orow, cf, ci, u, w, zbuf, k1, k2, k3, k4, xt, x
         _env_draw(r, fs, us, cf, ci)
         _env_begin(r, fs, us, orow, cf, ci, zbuf)
         return 0.0, 0
-    n_p = ci[_CI_NP]
+    n_p = S[_S_NP]
     x = fs[r, :_N]
     p = fs[r, _N: _N + n_p]
     rng = us[r, :4]
-    _env_input(a, p, ci[_CI_PHYSICAL], u)
-    code = _env_physics(x, u, p, rng, cf, ci, w, zbuf, k1, k2, k3, k4, xt, xprev)
+    _env_input(a, p, S[_S_PHYSICAL], u)
+    code = _env_physics(x, u, p, rng, S, w, zbuf, k1, k2, k3, k4, xt, xprev)
     k = np.int64(us[r, _US_K]) + 1
     us[r, _US_K] = np.uint64(k)
-    _env_observe(x, rng, orow, cf, ci, zbuf)
-    reward = _env_reward(x, u, p, fs[r, _N + n_p], fs[r, _N + n_p + 1], cf, ci)
-    status = 1 if code != -1 else 2 if k >= ci[_CI_N_SAMPLES] else 0
-    if status != 0 and ci[_CI_AUTORESET] != 0:
+    _env_observe(x, rng, orow, S, zbuf)
+    reward = _env_reward(x, u, p, fs[r, _N + n_p], fs[r, _N + n_p + 1], S)
+    status = 1 if code != -1 else 2 if k >= S[_S_N_SAMPLES] else 0
+    if status != 0 and S[_S_AUTORESET] != 0:
         us[r, _US_AUTO] = _U1
     return reward, status
 
@@ -280,12 +353,21 @@ def _env_step_range(lo, hi, actions, fs, us, obs, rewards, flags, cf, ci, scr):
     k4 = scr[6]
     xt = scr[7]
     xprev = scr[8]
+    S = _env_settings(cf, ci)
     for r in range(lo, hi):
-        reward, status = _env_step_copy(r, actions[r], fs, us, obs[r], cf, ci, u, w, zbuf,
+        reward, status = _env_step_copy(r, actions[r], fs, us, obs[r], cf, ci, S, u, w, zbuf,
                                         k1, k2, k3, k4, xt, xprev)
         rewards[r] = reward
         flags[0, r] = status == 1
         flags[1, r] = status == 2
+
+
+@_jit
+def _env_scratch(blocks, width):
+    """Zeroed scratch, a row per block of copies: each block's scratch rows followed
+    by _ENV_GAP unused doubles (see _ENV_GAP). Made outside the parallel function,
+    where ``np.zeros`` would be a parallel loop of its own, with a launch of its own."""
+    return np.zeros((blocks, width))
 
 
 @njit(cache=True, error_model="numpy", parallel=True)
@@ -301,10 +383,12 @@ def env_step_many(actions, fs, us, obs, rewards, flags, cf, ci):
         return bad
     n_copies = fs.shape[0]
     chunks = max(1, min(ci[_CI_CHUNKS], n_copies))
-    scrs = np.zeros((chunks, _ENV_SCR, _env_width(fs, ci)))
+    width = _env_width(fs, ci)
+    scrs = _env_scratch(chunks, _ENV_SCR * width + _ENV_GAP)
     for c in prange(chunks):
         _env_step_range(c * n_copies // chunks, (c + 1) * n_copies // chunks, actions, fs, us,
-                        obs, rewards, flags, cf, ci, scrs[c])
+                        obs, rewards, flags, cf, ci,
+                        scrs[c, :_ENV_SCR * width].reshape((_ENV_SCR, width)))
     return 0
 
 
@@ -321,8 +405,8 @@ def env_step_serial(actions, fs, us, obs, rewards, flags, cf, ci):
 
 @_bare
 def _env_one(a, fs, us, obs, cf, ci, scr):
-    return _env_step_copy(0, a, fs, us, obs, cf, ci, scr[0], scr[1], scr[2], scr[3], scr[4],
-                          scr[5], scr[6], scr[7], scr[8])
+    return _env_step_copy(0, a, fs, us, obs, cf, ci, _env_settings(cf, ci), scr[0], scr[1],
+                          scr[2], scr[3], scr[4], scr[5], scr[6], scr[7], scr[8])
 
 
 @_jit
