@@ -52,7 +52,9 @@ PARALLEL_MIN = 256
 # interval, up to PROBE_EVERY_MAX steps, and a switch, or the way in use
 # growing RESLOWED times slower than at the last probe, starts again from
 # PROBE_EVERY. Probes come rarer still when the other way is much slower,
-# so that they take at most about 1 / PROBE_SHARE of the time.
+# so that they take at most about 1 / PROBE_SHARE of the time. Of the steps
+# between probes, one in TIME_EVERY is timed.
+TIME_EVERY = 4
 PROBE_EVERY = 50
 PROBE_EVERY_MAX = 1600
 RESLOWED = 1.5
@@ -120,6 +122,7 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._mode = int(self.parallel)
         self._cost = [math.inf, math.inf]  # seconds per step, moving averages
         self._countdown = 0  # steps before the next probe
+        self._untimed = 0  # steps before the next timed one
         self._interval = PROBE_EVERY  # steps between probes, doubled while they confirm the way
         self._at_probe = math.inf  # the way in use's time per step at the last probe
         self._probe_left = 0  # steps left of the probe under way
@@ -202,7 +205,12 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         rewards = _empty(self.num_envs)
         flags = _empty(self._flags_shape, dtype=_BOOL)
         if self.parallel:
-            bad = self._timed_step(a, obs, rewards, flags)
+            if self._untimed > 0:  # most steps: the way in use, not timed
+                self._untimed -= 1
+                bad = self._entries[self._mode](a, self._fs, self._us, obs, rewards, flags,
+                                                self._cf, self._ci)
+            else:
+                bad = self._timed_step(a, obs, rewards, flags)
         else:
             bad = step(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
         if bad:
@@ -230,9 +238,11 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         entry = self._entries[mode]
         if self._probe_left == 0 and self._countdown > 0 and entry is not None \
                 and cost[1 - mode] != math.inf:
-            # Most steps: the way in use, timed into its moving average (the
-            # general path below, written out for its cost at few copies).
-            self._countdown -= 1
+            # A step of the way in use, timed into its moving average; the
+            # next TIME_EVERY - 1 are not (timing costs about a microsecond of
+            # Python, 5 % of a step of 256 copies).
+            self._countdown -= TIME_EVERY
+            self._untimed = TIME_EVERY - 1
             start = time.perf_counter()
             bad = entry(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
             spent = time.perf_counter() - start
