@@ -449,6 +449,33 @@ def test_vector_runs_the_faster_way(monkeypatch: pytest.MonkeyPatch) -> None:
     assert vec.threads_in_use > 1
 
 
+def test_vector_probe_outlasts_one_interrupted_step(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A probe of the parallel way whose first two steps are slow (threads waking,
+    then a moment's interruption) still finds it faster: the best timed step counts."""
+    monkeypatch.setattr(vector_module, "PARALLEL_MIN", 1)
+    vec = _vec(4, noise=False)
+    vec.reset(seed=0)
+    vec._mode = 0  # start on one thread
+    now = [0.0]
+    last = [0]  # the way of the previous step
+    streak = [0]  # parallel steps in a row
+
+    def way(mode: int):
+        def entry(*args: object) -> int:
+            streak[0] = streak[0] + 1 if mode == 1 and last[0] == 1 else int(mode == 1)
+            last[0] = mode
+            now[0] += 1.0 if mode == 0 else (5.0 if streak[0] <= 2 else 0.5)
+            return 0
+        return entry
+
+    vec._entries[:] = [way(0), way(1)]
+    monkeypatch.setattr(vector_module.time, "perf_counter", lambda: now[0])
+    a = np.zeros((4, 1))
+    for _ in range(400):
+        vec.step(a)
+    assert vec.threads_in_use > 1
+
+
 def test_vector_sensor_noise_has_the_rigs_spread() -> None:
     """Observation minus the true output: zero mean, the catalogue's sensor sigma."""
     vec = _vec(400)

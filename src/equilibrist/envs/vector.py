@@ -44,8 +44,9 @@ PARALLEL_MIN = 256
 # thread or all: a probe), and the faster of the two steps the others: the
 # way in use by the moving average of its times per step (weight SMOOTHING
 # for the newest, a time counted at most OUTLIER times the average), the
-# other by its last probe. A probe is PROBE_STEPS steps, the last one timed
-# (the first wakes threads that went to sleep). On a machine whose other
+# other by its last probe. A probe is PROBE_STEPS steps, the best of all but
+# the first counted (the first wakes threads that went to sleep; one step
+# can be slowed by a moment's interruption). On a machine whose other
 # cores are taken, the parallel step waits for descheduled threads and can
 # run many times slower than one thread. Probes come every PROBE_EVERY
 # steps at first; each probe that finds the other way slower doubles the
@@ -58,7 +59,7 @@ TIME_EVERY = 4
 PROBE_EVERY = 50
 PROBE_EVERY_MAX = 1600
 RESLOWED = 1.5
-PROBE_STEPS = 2
+PROBE_STEPS = 3
 PROBE_SHARE = 20.0
 SMOOTHING = 0.25
 OUTLIER = 3.0
@@ -123,6 +124,7 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._cost = [math.inf, math.inf]  # seconds per step, moving averages
         self._countdown = 0  # steps before the next probe
         self._untimed = 0  # steps before the next timed one
+        self._probe_best = math.inf  # the best time of the probe under way
         self._interval = PROBE_EVERY  # steps between probes, doubled while they confirm the way
         self._at_probe = math.inf  # the way in use's time per step at the last probe
         self._probe_left = 0  # steps left of the probe under way
@@ -252,19 +254,23 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             if average > RESLOWED * self._at_probe or average > cost[1 - mode]:
                 self._changed(mode)
             return int(bad)
-        # A probe: the other way, for PROBE_STEPS steps, the last one timed (the
-        # first wakes threads that went to sleep). Also how each way gets its
-        # first time, the other way first.
-        if self._probe_left == 0:
+        # A probe: the other way, for PROBE_STEPS steps, the best of all but the
+        # first counted. Also how each way gets its first time, the other way first.
+        first = self._probe_left == 0
+        if first:
             self._probe_left = PROBE_STEPS
+            self._probe_best = math.inf
         self._probe_left -= 1
         mode = 1 - mode
         entry = self._entry(mode, (a, obs, rewards, flags))
         start = time.perf_counter()
         bad = entry(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
-        cost[mode] = time.perf_counter() - start  # a rare sample: taken as it is
+        spent = time.perf_counter() - start
+        if not first:
+            self._probe_best = min(self._probe_best, spent)
         if self._probe_left > 0:
             return int(bad)
+        cost[mode] = self._probe_best  # the best of the probe's timed steps
         if math.inf in cost:
             self._mode = mode  # the only way timed so far
             return int(bad)
