@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -405,25 +407,37 @@ def test_vector_parallel_equals_serial(monkeypatch: pytest.MonkeyPatch) -> None:
             np.testing.assert_array_equal(p, q)
 
 
-def test_vector_runs_the_faster_way(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The switch between one thread and all, on a fake clock: it settles on the
-    faster way, follows a change, and probes a much slower way rarely."""
+def _on_fake_clock(monkeypatch: pytest.MonkeyPatch, seconds: Callable[[int], float]) -> Any:
+    """A vector environment of 4 copies that may run parallel, whose two ways
+    (0: one thread, 1: all) take ``seconds(way)`` of a fake clock per step and
+    do nothing else."""
     monkeypatch.setattr(vector_module, "PARALLEL_MIN", 1)
     vec = _vec(4, noise=False)
     vec.reset(seed=0)
     now = [0.0]
-    cost = {0: 1.0, 1: 0.5}  # seconds per step: one thread, all threads
-    runs = {0: 0, 1: 0}
 
-    def way(mode: int):
+    def way(mode: int) -> Callable[..., int]:
         def entry(*args: object) -> int:
-            now[0] += cost[mode]
-            runs[mode] += 1
+            now[0] += seconds(mode)
             return 0
         return entry
 
     vec._entries[:] = [way(0), way(1)]
     monkeypatch.setattr(vector_module.time, "perf_counter", lambda: now[0])
+    return vec
+
+
+def test_vector_runs_the_faster_way(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The switch between one thread and all, on a fake clock: it settles on the
+    faster way, follows a change, and probes a much slower way rarely."""
+    cost = {0: 1.0, 1: 0.5}  # seconds per step: one thread, all threads
+    runs = {0: 0, 1: 0}
+
+    def seconds(mode: int) -> float:
+        runs[mode] += 1
+        return cost[mode]
+
+    vec = _on_fake_clock(monkeypatch, seconds)
     a = np.zeros((4, 1))
     for _ in range(200):
         vec.step(a)
@@ -452,24 +466,16 @@ def test_vector_runs_the_faster_way(monkeypatch: pytest.MonkeyPatch) -> None:
 def test_vector_probe_outlasts_one_interrupted_step(monkeypatch: pytest.MonkeyPatch) -> None:
     """A probe of the parallel way whose first two steps are slow (threads waking,
     then a moment's interruption) still finds it faster: the best timed step counts."""
-    monkeypatch.setattr(vector_module, "PARALLEL_MIN", 1)
-    vec = _vec(4, noise=False)
-    vec.reset(seed=0)
-    vec._mode = 0  # start on one thread
-    now = [0.0]
     last = [0]  # the way of the previous step
     streak = [0]  # parallel steps in a row
 
-    def way(mode: int):
-        def entry(*args: object) -> int:
-            streak[0] = streak[0] + 1 if mode == 1 and last[0] == 1 else int(mode == 1)
-            last[0] = mode
-            now[0] += 1.0 if mode == 0 else (5.0 if streak[0] <= 2 else 0.5)
-            return 0
-        return entry
+    def seconds(mode: int) -> float:
+        streak[0] = streak[0] + 1 if mode == 1 and last[0] == 1 else int(mode == 1)
+        last[0] = mode
+        return 1.0 if mode == 0 else (5.0 if streak[0] <= 2 else 0.5)
 
-    vec._entries[:] = [way(0), way(1)]
-    monkeypatch.setattr(vector_module.time, "perf_counter", lambda: now[0])
+    vec = _on_fake_clock(monkeypatch, seconds)
+    vec._mode = 0  # start on one thread
     a = np.zeros((4, 1))
     for _ in range(400):
         vec.step(a)
