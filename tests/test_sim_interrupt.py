@@ -198,3 +198,40 @@ def test_an_interrupt_a_finalizer_swallowed_still_stops_the_core() -> None:
         assert time.monotonic() - start < 2.0
     finally:
         interrupt.clear()
+
+
+def test_the_command_line_prints_nothing_for_an_interrupt_a_finalizer_swallowed(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """The command line's unraisable hook drops a recorded interrupt that landed in a
+    finalizer (Python would print "Exception ignored" and a traceback before the
+    command's own "equilibrist: interrupted"); anything else still reaches the hook
+    before it."""
+    import signal as signals
+
+    from equilibrist import interrupt
+    from equilibrist.cli.main import _quiet_interrupts, _terminated
+
+    seen: list[type[BaseException]] = []
+    hook = _quiet_interrupts(lambda unraisable: seen.append(unraisable.exc_type))
+
+    class Finalized:
+        def __init__(self, fail: BaseException | None = None) -> None:
+            self.fail = fail
+
+        def __del__(self) -> None:
+            if self.fail is None:
+                _terminated(signals.SIGTERM, None)  # what a signal arriving here does
+            raise self.fail
+
+    previous = sys.unraisablehook
+    sys.unraisablehook = hook
+    try:
+        Finalized()
+        assert interrupt.requested()
+        Finalized(ValueError("a finalizer's own failure"))
+    finally:
+        sys.unraisablehook = previous
+        interrupt.clear()
+    assert seen == [ValueError]
+    assert capsys.readouterr().err == ""

@@ -7,7 +7,10 @@ the exception is printed as "ignored" and lost, and the command would run
 on. So the command line's handlers of Ctrl-C and SIGTERM also record the
 request here, and :func:`equilibrist.sim.run.call_interruptibly` (every
 call of the compiled core from the main thread) raises it before and while
-it waits: a signal that lands anywhere still stops the run.
+it waits: a signal that lands anywhere still stops the run. The command
+line's ``sys.unraisablehook`` also keeps Python from printing such a
+recorded interrupt as "Exception ignored" with a traceback, so the command
+ends with its one line, "equilibrist: interrupted".
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ import signal
 import sys
 import threading
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from equilibrist import __version__
@@ -79,6 +79,22 @@ def _terminated(signum: int, _frame: object) -> None:
     raise KeyboardInterrupt
 
 
+def _quiet_interrupts(previous: Callable[[Any], object]) -> Callable[[Any], object]:
+    """*previous* (a ``sys.unraisablehook``), except for a recorded interrupt that
+    landed in a finalizer: Python would print it as "Exception ignored" with a
+    traceback; recorded, it stops the work at its next check instead."""
+
+    def hook(unraisable: Any) -> object:
+        from equilibrist import interrupt
+
+        if issubclass(unraisable.exc_type, KeyboardInterrupt) and interrupt.requested():
+            return None
+        return previous(unraisable)
+
+    hook.quiet_interrupts = True  # type: ignore[attr-defined]
+    return hook
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     if argv is None and threading.current_thread() is threading.main_thread():
         # The command itself (not a caller's process): a kill or Ctrl-C ends it cleanly.
@@ -87,6 +103,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         interrupt.clear()
         signal.signal(signal.SIGTERM, _terminated)
         signal.signal(signal.SIGINT, _terminated)
+        if not getattr(sys.unraisablehook, "quiet_interrupts", False):
+            sys.unraisablehook = _quiet_interrupts(sys.unraisablehook)
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
