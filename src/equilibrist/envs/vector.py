@@ -237,14 +237,13 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         (see ``PROBE_EVERY``); both give the same numbers."""
         cost = self._cost
         mode = self._mode
-        entry = self._entries[mode]
-        if self._probe_left == 0 and self._countdown > 0 and entry is not None \
-                and cost[1 - mode] != math.inf:
+        if self._probe_left == 0 and self._countdown > 0 and cost[1 - mode] != math.inf:
             # A step of the way in use, timed into its moving average; the
             # next TIME_EVERY - 1 are not (timing costs about a microsecond of
             # Python, 5 % of a step of 256 copies).
             self._countdown -= TIME_EVERY
             self._untimed = TIME_EVERY - 1
+            entry = self._entries[mode]  # timed before: compiled
             start = time.perf_counter()
             bad = entry(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
             spent = time.perf_counter() - start

@@ -102,18 +102,18 @@ _S_NP = 9
 _S_H = 10
 _S_DT = 11
 _S_BONUS = 12
-_S_LO = 13  # the region's lower bounds (a view of cf), then its upper ones
-_S_HI = 14
-_S_OP = 15  # operating point: state then input
-_S_ISCALE = 16  # 1 / scales: state then input
-_S_C_IDX = 17  # the measured states (a view of ci)
-_S_HANG = 18  # the swing-up's hanging coordinates (a view of ci)
-_S_LV = 19  # sensor noise's square root, ny x ny, row-major (a view of cf)
-_S_LW = 20  # process noise's gain, n x nw, row-major (a view of cf)
+_S_REGION = 13  # the region: lower bounds, upper bounds (2 x n, a view of cf)
+_S_OP = 14  # operating point: state then input
+_S_ISCALE = 15  # 1 / scales: state then input
+_S_C_IDX = 16  # the measured states (a view of ci)
+_S_HANG = 17  # the swing-up's hanging coordinates (a view of ci)
+_S_LV = 18  # sensor noise's square root, ny x ny, row-major (a view of cf)
+_S_LW = 19  # process noise's gain, n x nw, row-major (a view of cf)
 
 
 @_inline
 def _env_settings(cf, ci):
+    """The tuple of settings indexed by ``_S_*``."""
     ny = ci[_CI_NY]
     nw = ci[_CI_NW]
     nlv = ci[_CI_NLV]
@@ -127,7 +127,7 @@ def _env_settings(cf, ci):
     return (ci[_CI_N_SUB], ci[_CI_N_SAMPLES], ci[_CI_OBSERVE_STATE], ci[_CI_REWARD],
             ci[_CI_PHYSICAL], ci[_CI_AUTORESET], ny, nw, nlv, ci[_CI_NP],
             cf[_CF_H], cf[_CF_DT], cf[_CF_BONUS],
-            cf[o_r: o_r + _N], cf[o_r + _N: o_r + 2 * _N], cf[o_op: o_op + _N + _M],
+            cf[o_r: o_r + 2 * _N].reshape((2, _N)), cf[o_op: o_op + _N + _M],
             cf[o_s: o_s + _N + _M], ci[o_c: o_c + ny], ci[o_h: o_h + ci[_CI_NHANG]],
             cf[o_lv: o_lv + nlv * ny], cf[o_lw: o_lw + _N * nw])
 
@@ -171,63 +171,33 @@ def _env_input(a, p, physical, u):
 
 
 @_inline
-def _env_outside(x, lo, hi):
-    """-1 inside; the first state outside its region; -2 if not finite (as ``_outside``)."""
-    for i in range(_N):
-        if not math.isfinite(x[i]):
-            return -2
-    for i in range(_N):
-        if x[i] <= lo[i] or x[i] >= hi[i]:
-            return i
-    return -1
-
-
-@_inline
 def _env_physics(x, u, p, rng, S, w, zbuf, k1, k2, k3, k4, xt, xprev):
     """One control period; the region code at a fall (the last finite state kept), else -1.
 
-    *w* is zero on entry and stays so without process noise. The noise-free
-    loop is written apart: it is what most training runs step, and the loop
-    without the noise's branches compiles to fewer instructions per copy.
+    *w* is zero on entry and stays so without process noise.
     """
     nw = S[_S_NW]
-    lo = S[_S_LO]
-    hi = S[_S_HI]
-    h = S[_S_H]
-    n_sub = S[_S_N_SUB]
-    if nw == 0:
-        for _s in range(n_sub):
-            for i in range(_N):
-                xprev[i] = x[i]
-            _rk4_step(x, u, p, w, 0, h, k1, k2, k3, k4, xt)
-            code = _env_outside(x, lo, hi)
-            if code != -1:
-                return _env_fell(code, x, xprev)
-        return -1
     lw = S[_S_LW]
-    for _s in range(n_sub):
-        _normals(rng, zbuf, nw)
-        for i in range(_N):
-            v = 0.0
-            for c in range(nw):
-                v += lw[i * nw + c] * zbuf[c]
-            w[i] = v
+    region = S[_S_REGION]
+    h = S[_S_H]
+    for _s in range(S[_S_N_SUB]):
+        if nw > 0:
+            _normals(rng, zbuf, nw)
+            for i in range(_N):
+                v = 0.0
+                for c in range(nw):
+                    v += lw[i * nw + c] * zbuf[c]
+                w[i] = v
         for i in range(_N):
             xprev[i] = x[i]
-        _rk4(x, u, p, w, h, k1, k2, k3, k4, xt)
-        code = _env_outside(x, lo, hi)
+        _rk4_step(x, u, p, w, nw, h, k1, k2, k3, k4, xt)
+        code = _outside(x, region)
         if code != -1:
-            return _env_fell(code, x, xprev)
+            if code == -2:
+                for i in range(_N):
+                    x[i] = xprev[i]
+            return code
     return -1
-
-
-@_inline
-def _env_fell(code, x, xprev):
-    """*code* of a fall; a state that is not finite is replaced by the last finite one."""
-    if code == -2:
-        for i in range(_N):
-            x[i] = xprev[i]
-    return code
 
 
 @_inline
