@@ -70,13 +70,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+# The signal that interrupted the command (None: none did). Ctrl-C ends it with
+# 130 (128 + SIGINT), SIGTERM with 143 (128 + SIGTERM), as a shell expects.
+_received: int | None = None
+
+
 def _terminated(signum: int, _frame: object) -> None:
     # Unwind like Ctrl-C, so that staging folders and temporary files are removed; and
     # record it, so that an exception swallowed by a finalizer still stops the work.
+    global _received
     from equilibrist import interrupt
 
+    if _received is None:
+        _received = signum
     interrupt.request()
     raise KeyboardInterrupt
+
+
+def interrupted_status() -> int:
+    """The exit status of an interrupted command: 143 after SIGTERM, 130 after Ctrl-C."""
+    return 128 + signal.SIGTERM if _received == signal.SIGTERM else 130
 
 
 def _quiet_interrupts(previous: Callable[[Any], object]) -> Callable[[Any], object]:
@@ -96,6 +109,8 @@ def _quiet_interrupts(previous: Callable[[Any], object]) -> Callable[[Any], obje
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    global _received
+    _received = None
     if argv is None and threading.current_thread() is threading.main_thread():
         # The command itself (not a caller's process): a kill or Ctrl-C ends it cleanly.
         from equilibrist import interrupt
@@ -105,8 +120,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         signal.signal(signal.SIGINT, _terminated)
         if not getattr(sys.unraisablehook, "quiet_interrupts", False):
             sys.unraisablehook = _quiet_interrupts(sys.unraisablehook)
-    parser = build_parser()
     try:
+        # Inside the try: a signal during the imports of the subcommands is an interrupt too.
+        parser = build_parser()
         args = parser.parse_args(argv)
         if not getattr(args, "func", None):
             parser.print_help()
@@ -118,7 +134,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         # the command line: what goes wrong is reported as an error.
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            return int(args.func(args) or 0)
+            code = int(args.func(args) or 0)
+        # A command that caught the interrupt itself (to say what it kept) returns 130.
+        return interrupted_status() if code == 130 else code
     except (EquilibristError, _UsageError) as exc:
         message = str(exc).replace("\n", " ")
         prefix = "" if message.startswith("equilibrist") else "equilibrist: error: "
@@ -133,7 +151,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         print("equilibrist: interrupted", file=sys.stderr)
-        return 130
+        return interrupted_status()
 
 
 if __name__ == "__main__":  # pragma: no cover
