@@ -3,9 +3,10 @@
 The independent truth is MuJoCo: the same file, compiled by MuJoCo and run
 through ``mj_forward`` with constraints off (contacts and limits are not
 modelled), gives ``qacc``; the derived ``f(x, u)`` must agree to round-off.
-URDF transmissions, which MuJoCo ignores, are applied to MuJoCo as the
-generalized force ``mechanicalReduction * u`` that the URDF standard
-defines (``qfrc_applied``).
+An input is the physical generalized force on its joint: MuJoCo's ctrl is
+that force over the motor's gear. URDF transmissions, which MuJoCo ignores,
+are applied to MuJoCo as that generalized force (``qfrc_applied``), the
+actuator's effort times ``mechanicalReduction``.
 """
 
 from __future__ import annotations
@@ -56,6 +57,10 @@ class MuJoCoTruth:
         self.urdf = path.suffix == ".urdf"
         self.reductions = _reductions(path) if self.urdf else {}
         self.joint_dof = dict(zip(system.spec.coordinates, self.dof, strict=True))
+        # The inputs are the motors' forces: MuJoCo's ctrl is the force over
+        # the gain (gear times the gain parameter).
+        self.gain = np.array([float(self.model.actuator_gear[a, 0]) * float(self.model.actuator_gainprm[a, 0])
+                              for a in range(self.model.nu)])
 
     def qacc(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         n = len(self.qpos)
@@ -64,10 +69,10 @@ class MuJoCoTruth:
         self.data.qfrc_applied[:] = 0.0
         if self.urdf:
             for name, value in zip(self.system.input_names, u, strict=True):
-                joint, reduction = self.reductions[name]
-                self.data.qfrc_applied[self.joint_dof[joint]] += reduction * value
+                joint, _reduction = self.reductions[name]
+                self.data.qfrc_applied[self.joint_dof[joint]] += value
         elif self.model.nu:
-            self.data.ctrl[:] = u
+            self.data.ctrl[:] = u / self.gain
         mujoco.mj_forward(self.model, self.data)
         return np.array(self.data.qacc[self.dof])
 

@@ -25,6 +25,24 @@ def _family(key: str) -> str:
     return key.partition("[")[0]
 
 
+def _same_file(a: str, b: str) -> bool:
+    """Whether *a* and *b* name the same system file, however each path is written.
+
+    A file system is the same system by its content: the same file reached
+    by another path (relative, through a link), or a copy with the same
+    bytes, is the same system.
+    """
+    pa, pb = Path(a), Path(b)
+    try:
+        if pa.resolve() == pb.resolve():
+            return True
+        if not (pa.is_file() and pb.is_file()):
+            return False
+        return pa.read_bytes() == pb.read_bytes()
+    except OSError:
+        return False
+
+
 def read_params(path: str | Path, system: str | None = None) -> dict[str, float]:
     """The parameter values in *path*; with *system*, checked to be that system's.
 
@@ -43,7 +61,7 @@ def read_params(path: str | Path, system: str | None = None) -> dict[str, float]
     if "params" in doc and isinstance(doc.get("params"), dict):
         key = doc.get("system")
         if system is not None and isinstance(key, str) and _family(key) != _family(system) \
-                and key != system:
+                and key != system and not _same_file(key, system):
             raise IdentificationError(f"{p} holds parameters of {key}, not of {system}")
         values = doc["params"]
     else:

@@ -89,6 +89,7 @@ def load_model_file(file: Path, *, origin: str, content: bytes) -> Entry:
         equilibrist does not model; the message is one line naming it.
     """
     suffix = file.suffix.lower()
+    _check_numbers(file, content)
     if suffix == ".urdf":
         from equilibrist.importers.urdf import read_urdf
 
@@ -123,6 +124,62 @@ def load_model_file(file: Path, *, origin: str, content: bytes) -> Entry:
         content=content + repr(tree).encode() + _importer_source(),
         origin=origin,
     )
+
+
+# Attributes that hold names or words, not numbers (a body may be called "nan").
+_NAMES = frozenset({
+    "name", "model", "class", "childclass", "file", "type", "prefix", "key", "plugin", "instance",
+    "link", "parent", "child", "filename", "content_type", "reftype", "objtype", "objname",
+    "refname", "target", "meshdir", "texturedir", "assetdir", "cranksite", "slidersite",
+    "mesh", "material", "texture", "hfield", "actuator",
+})
+_NAME_STEMS = ("joint", "body", "site", "tendon", "geom")
+
+
+def _check_numbers(file: Path, content: bytes, depth: int = 0) -> None:
+    """Refuse, before MuJoCo reads it, a number that is not finite (``nan``,
+    ``inf``) in any attribute, and an ``<include>`` that is not a regular file.
+
+    MuJoCo's compiler accepts NaN with a warning on stderr and a
+    ``MUJOCO_LOG.TXT`` in the working folder, and blocks forever on an
+    include that is a FIFO.
+    """
+    import stat
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.fromstring(content)
+    except ET.ParseError:
+        return  # MuJoCo's reader says where
+    for element in root.iter():
+        for attribute, value in element.attrib.items():
+            if attribute in _NAMES or any(attribute.startswith(n) for n in _NAME_STEMS):
+                continue
+            for token in value.split():
+                low = token.lower().lstrip("+-")
+                if low in ("nan", "inf", "infinity"):
+                    name = element.get("name")
+                    which = f"<{element.tag}{f' name={name!r}' if name else ''}>"
+                    raise DefinitionError(
+                        f"{file.name}: {which} {attribute}={value!r} is not a finite number: "
+                        "expected finite values"
+                    )
+        if element.tag == "include" and element.get("file") and depth < 20:
+            included = file.parent / str(element.get("file"))
+            try:
+                mode = included.stat().st_mode
+            except OSError:
+                continue  # MuJoCo says it is missing
+            if not stat.S_ISREG(mode):
+                raise DefinitionError(
+                    f"{file.name}: <include file={element.get('file')!r}> is not a regular file: "
+                    "expected a model file"
+                )
+            _check_numbers(included, included.read_bytes(), depth + 1)
+    for element in root.iter():
+        text = (element.text or "").strip()
+        if text and element.tag in ("mechanicalReduction",) and text.lower().lstrip("+-") in ("nan", "inf"):
+            raise DefinitionError(f"{file.name}: <{element.tag}> {text} is not a finite number")
 
 
 def _check_xml(file: Path, content: bytes) -> None:
@@ -165,12 +222,26 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
         unit = "N*m*s/rad" if j.kind == "hinge" else "N*s/m"
         parameters.append(nonnegative(f"{j.name}_damping", j.damping, unit, f"viscous damping of joint {j.name}"))
     inputs = []
+    taken = {*coords, *(f"{c}_dot" for c in coords), *(p.name for p in parameters)}
+    scales = []
     for a in tree.actuators:
         joint = joints[a.joint]
         unit = "N*m" if joint.kind == "hinge" else "N"
         what = "torque" if joint.kind == "hinge" else "force"
-        inputs.append(Input(a.name, unit, f"motor on joint {joint.name}: {what} {a.gain:g} * {a.name}",
-                            a.low, a.high))
+        # The input is the physical torque or force on the joint, gear times
+        # MuJoCo's ctrl (a URDF's reduction times the actuator's effort).
+        # An actuator named as its joint (MuJoCo's usual convention) names
+        # the input <actuator>_torque or <actuator>_force.
+        name = a.name if a.name not in taken else f"{a.name}_{what}"
+        low, high = sorted((a.gain * a.low, a.gain * a.high))
+        ctrl = "MuJoCo's ctrl" if kind == "MJCF" else "the actuator's effort"
+        scale = "" if a.gain == 1 else f"; {ctrl} = {name} / {a.gain:g}"
+        inputs.append(Input(name, unit, f"{what} of motor {a.name!r} on joint {joint.name}{scale}", low, high))
+        if a.gain != 1 or name != a.name:
+            scales.append(f"input {name} [{unit}] is the {what} of {'motor' if kind == 'MJCF' else 'actuator'} "
+                          f"{a.name!r} on joint {joint.name}" + (f", {a.gain:g} * its ctrl" if a.gain != 1 else "")
+                          + (f" (limits [{low:g}, {high:g}] {unit}, ctrlrange [{a.low:g}, {a.high:g}])"
+                             if a.gain != 1 else ""))
     names = [*coords, *(f"{c}_dot" for c in coords), *(i.name for i in inputs)]
     names += [p.name for p in parameters] + [p.name for i in inputs for p in i.limit_parameters()]
     seen: set[str] = set()
@@ -189,7 +260,7 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
     free = () if tree.key_is_equilibrium else tuple(i.name for i in inputs)
     operating_point = OperatingPoint(
         state=dict(state),
-        inputs={i.name: v for i, v in zip(inputs, tree.key_ctrl, strict=True)},
+        inputs={i.name: a.gain * v for i, a, v in zip(inputs, tree.actuators, tree.key_ctrl, strict=True)},
         free=free,
     )
     region = {
@@ -201,9 +272,13 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
     design_scales.update({f"{c}_dot": RATE_SCALE for c in coords})
     design_scales.update({i.name: (i.high - i.low) / 2 for i in inputs})
     where = f"the keyframe {tree.key_name!r}" if tree.key_name else "the zero configuration"
+    if tree.key_moved:
+        where += " moved to the nearest equilibrium (" + ", ".join(
+            f"{j} {v:+.3g} {units[j]}" for j, v in tree.key_moved) + ")"
     notes = [
         f"imported from the {kind} file {origin} through MuJoCo's compiler; derived by Kane's method",
         *tree.notes,
+        *scales,
         f"operating point: {where}"
         + ("" if tree.key_is_equilibrium or not inputs else " (its inputs solved so that it holds)"),
         "defaults of the import (docs/models.md): design scales 0.2 rad, 0.5 m, 1 /s and half of "

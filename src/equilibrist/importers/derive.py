@@ -173,9 +173,11 @@ def derive_tree(tree: Tree, d: Derivation) -> SymbolicModel:
         if joint.stiffness:
             generalized -= _float(joint.stiffness) * (q - _float(joint.spring_ref))
             potential += _float(joint.stiffness) * (q - _float(joint.spring_ref)) ** 2 / 2
-        for a in tree.actuators:
+        for k, a in enumerate(tree.actuators):
             if a.joint == j:
-                generalized += _float(a.gain) * d.u[a.name]
+                # The input is the motor's generalized force itself (gear
+                # times MuJoCo's ctrl): the spec names it input_names[k].
+                generalized += d.u[d.spec.input_names[k]]
         axis = _in_world(N, joint_axes[j])
         if joint.kind == "hinge":
             relative = me.ReferenceFrame(f"{joint.name}_relative")

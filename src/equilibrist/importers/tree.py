@@ -96,6 +96,9 @@ class Tree:
     vertical_hinges: tuple[str, ...]
     # Whether the operating point holds (qacc = 0) with the keyframe's controls.
     key_is_equilibrium: bool
+    # How far the operating point was moved from the file's pose to the
+    # nearest equilibrium: (joint, new - old) of each joint that moved.
+    key_moved: tuple[tuple[str, float], ...]
     notes: tuple[str, ...]
 
 
@@ -230,11 +233,9 @@ def read_tree(
                 refuse(f"joint {jname!r} has nonlinear damping (dampingpoly), which is not modelled")
             if np.any(model.jnt_stiffnesspoly[j] != 0):
                 refuse(f"joint {jname!r} has nonlinear stiffness (stiffnesspoly), which is not modelled")
+    problems.extend(_not_finite(model, mujoco))
     if problems:
-        raise DefinitionError(f"{where}: {problems[0]}" + (
-            f" (and {len(problems) - 1} more problem{'s' if len(problems) > 2 else ''})"
-            if len(problems) > 1 else ""
-        ))
+        raise DefinitionError(f"{where}: " + "; ".join(problems))
 
     # -- joints ----------------------------------------------------------------------
     compiled_names = []
@@ -359,12 +360,14 @@ def read_tree(
         qpos = np.zeros(model.nq)
         qvel = np.zeros(model.nv)
         ctrl = np.zeros(model.nu)
-    data.qpos[:], data.qvel[:] = qpos, qvel
-    if model.nu:
-        data.ctrl[:] = ctrl
     model.opt.disableflags |= int(D.mjDSBL_CONSTRAINT)
-    mujoco.mj_forward(model, data)
-    key_is_equilibrium = bool(np.all(np.abs(data.qacc) < 1e-9 * (1.0 + np.abs(data.qfrc_bias).max(initial=0.0))))
+    moved: list[tuple[str, float]] = []
+    key_is_equilibrium = _holds(model, data, qpos, qvel, ctrl)
+    if not key_is_equilibrium:
+        qpos, ctrl, moved = _nearest_equilibrium(model, data, qpos, qvel, ctrl, actuators, order, compiled_names)
+        key_is_equilibrium = _holds(model, data, qpos, qvel, ctrl)
+    data.qpos[:], data.qvel[:] = qpos, qvel
+    mujoco.mj_kinematics(model, data)
     gravity = np.asarray(model.opt.gravity, float)
     vertical: list[str] = []
     g_norm = float(np.linalg.norm(gravity))
@@ -393,11 +396,145 @@ def read_tree(
         key_name=key_name,
         key_qpos=qpos_by_joint,
         key_qvel=qvel_by_joint,
-        key_ctrl=tuple(float(c) for c in ctrl) if model.nu else tuple(0.0 for _ in actuators),
+        key_ctrl=tuple(float(c) for c in ctrl) if len(ctrl) == len(actuators) else tuple(0.0 for _ in actuators),
         vertical_hinges=tuple(vertical),
         key_is_equilibrium=key_is_equilibrium,
+        key_moved=tuple(moved),
         notes=tuple(notes),
     )
+
+
+# The nearest equilibrium may lie at most this far from the file's pose, in
+# each coordinate that moves (rad or m); farther, the file's pose is kept and
+# the operating point is refused where it is used, saying what was found.
+MAX_MOVE = 0.1
+
+
+def _holds(model: Any, data: Any, qpos: np.ndarray, qvel: np.ndarray, ctrl: np.ndarray) -> bool:
+    """Whether *qpos*, *qvel* with the controls *ctrl* is an equilibrium (qacc = 0)."""
+    mujoco = load_mujoco()
+    data.qpos[:], data.qvel[:] = qpos, qvel
+    if model.nu:
+        data.ctrl[:] = ctrl
+    mujoco.mj_forward(model, data)
+    return bool(np.all(np.abs(data.qacc) < 1e-9 * (1.0 + np.abs(data.qfrc_bias).max(initial=0.0))))
+
+
+def _nearest_equilibrium(
+    model: Any, data: Any, qpos: np.ndarray, qvel: np.ndarray, ctrl: np.ndarray,
+    actuators: tuple[ActuatorData, ...], order: list[int], names: list[str],
+) -> tuple[np.ndarray, np.ndarray, list[tuple[str, float]]]:
+    """The equilibrium nearest the file's pose, by MuJoCo's inverse dynamics.
+
+    The joints no actuator drives are free; at ``qacc = 0`` the generalized
+    force that MuJoCo's ``mj_inverse`` asks for must vanish on them (solved
+    from the file's pose, so the solution is the nearest one) and equal the
+    motors' force on the driven joints (their controls solved by least
+    squares). Returns the pose, the controls (in the actuators' order) and
+    the coordinates that moved; a solution farther than :data:`MAX_MOVE`,
+    or none, keeps the file's pose and controls.
+    """
+    from scipy.optimize import least_squares
+
+    mujoco = load_mujoco()
+    driven = {order[a.joint] for a in actuators}
+    free = [j for j in range(model.njnt) if j not in driven]
+    adr = [int(model.jnt_qposadr[j]) for j in free]
+    dofs = [int(model.jnt_dofadr[j]) for j in free]
+
+    def inverse(q: np.ndarray) -> np.ndarray:
+        data.qpos[:], data.qvel[:] = q, qvel
+        data.qacc[:] = 0.0
+        mujoco.mj_inverse(model, data)
+        return np.array(data.qfrc_inverse, float)
+
+    q = qpos.copy()
+    scale = 1.0 + float(np.abs(inverse(q)).max(initial=0.0))
+    if free:
+        def residual(z: np.ndarray) -> np.ndarray:
+            qq = qpos.copy()
+            qq[adr] = z
+            return inverse(qq)[dofs] / scale
+
+        with np.errstate(all="ignore"):
+            z = least_squares(residual, qpos[adr], xtol=1e-15, ftol=1e-15, gtol=1e-15).x
+        if not (np.all(np.isfinite(z)) and np.abs(z - qpos[adr]).max() <= MAX_MOVE
+                and np.abs(residual(z)).max() <= 1e-12):
+            return qpos, ctrl, []
+        q[adr] = z
+    force = inverse(q)
+    new_ctrl = ctrl.copy()
+    if actuators:
+        gains = np.zeros((model.nv, len(actuators)))
+        for k, a in enumerate(actuators):
+            gains[int(model.jnt_dofadr[order[a.joint]]), k] = a.gain
+        solved = np.linalg.lstsq(gains, force, rcond=None)[0]
+        if len(new_ctrl) == len(actuators):
+            new_ctrl = solved
+    moved = [(names[j], float(q[a] - qpos[a])) for j, a in zip(free, adr, strict=True) if q[a] != qpos[a]]
+    return q, new_ctrl, moved
+
+
+# What each compiled array holds, for a value that is not a finite number.
+_FINITE = (
+    ("jnt_axis", "joint", "mjOBJ_JOINT", "axis"),
+    ("jnt_pos", "joint", "mjOBJ_JOINT", "pos"),
+    ("qpos0", None, None, "joint reference (ref)"),
+    ("jnt_stiffness", "joint", "mjOBJ_JOINT", "stiffness"),
+    ("qpos_spring", None, None, "joint springref"),
+    ("dof_damping", "dof", "mjOBJ_JOINT", "damping"),
+    ("dof_armature", "dof", "mjOBJ_JOINT", "armature"),
+    ("body_pos", "body", "mjOBJ_BODY", "pos"),
+    ("body_quat", "body", "mjOBJ_BODY", "orientation"),
+    ("body_ipos", "body", "mjOBJ_BODY", "centre of mass (inertial pos)"),
+    ("body_iquat", "body", "mjOBJ_BODY", "inertial orientation"),
+    ("body_mass", "body", "mjOBJ_BODY", "mass"),
+    ("body_inertia", "body", "mjOBJ_BODY", "inertia"),
+    ("actuator_gear", "actuator", "mjOBJ_ACTUATOR", "gear"),
+    ("actuator_gainprm", "actuator", "mjOBJ_ACTUATOR", "gain"),
+    ("actuator_ctrlrange", "actuator", "mjOBJ_ACTUATOR", "ctrlrange"),
+    ("actuator_forcerange", "actuator", "mjOBJ_ACTUATOR", "forcerange"),
+    ("jnt_actfrcrange", "joint", "mjOBJ_JOINT", "actuatorfrcrange"),
+    ("key_qpos", "key", "mjOBJ_KEY", "qpos"),
+    ("key_qvel", "key", "mjOBJ_KEY", "qvel"),
+    ("key_ctrl", "key", "mjOBJ_KEY", "ctrl"),
+    ("sensor_noise", "sensor", "mjOBJ_SENSOR", "noise"),
+)
+
+
+def _not_finite(model: Any, mujoco: Any) -> list[str]:
+    """Values of the compiled model that are not finite numbers (NaN, inf), and
+    damping, stiffness or armature below zero: each one named."""
+    problems = []
+    T = mujoco.mjtObj
+    gravity = np.asarray(model.opt.gravity, float)
+    if not np.all(np.isfinite(gravity)):
+        problems.append(f"option gravity {' '.join(f'{v:g}' for v in gravity)} is not finite: "
+                        "expected three numbers")
+    for field, kind, obj, what in _FINITE:
+        values = np.asarray(getattr(model, field), float)
+        if values.size == 0:
+            continue
+        rows = values.reshape(values.shape[0], -1)
+        for i in np.flatnonzero(~np.all(np.isfinite(rows), axis=1)):
+            if kind is None:  # indexed by qpos address
+                j = int(np.flatnonzero(np.asarray(model.jnt_qposadr) <= i)[-1])
+                label = f"joint {_name(model, T.mjOBJ_JOINT, j) or j!r}"
+            elif kind == "dof":
+                j = int(model.dof_jntid[i])
+                label = f"joint {_name(model, T.mjOBJ_JOINT, j) or j!r}"
+            else:
+                label = f"{'keyframe' if kind == 'key' else kind} {_name(model, getattr(T, str(obj)), int(i)) or int(i)!r}"
+            problems.append(f"{label}: {what} is not a finite number "
+                            f"({' '.join(f'{v:g}' for v in rows[i])})")
+    for field, what in (("dof_damping", "damping"), ("dof_armature", "armature"),
+                        ("jnt_stiffness", "stiffness")):
+        values = np.asarray(getattr(model, field), float)
+        for i in np.flatnonzero(values < 0):
+            j = int(model.dof_jntid[i]) if field.startswith("dof") else int(i)
+            problems.append(f"joint {_name(model, T.mjOBJ_JOINT, j) or j!r} has {what} {values[i]:g}: "
+                            "expected >= 0")
+    return problems
 
 
 def _model_name(model: Any, file: Path) -> str:

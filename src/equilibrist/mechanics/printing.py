@@ -15,7 +15,48 @@ from equilibrist.mechanics.model import SymbolicModel
 from equilibrist.mechanics.spec import SystemSpec
 
 
+class _Literal(sp.Symbol):
+    """A symbol printed as its name, underscores and digits as written.
+
+    sympy reads ``_`` in a name as a subscript and ``__`` as a superscript,
+    so ``cart_to_pole`` would print as nested subscripts; names that are
+    words (a model file's joints and bodies) print literally, with the
+    accent of a rate over the name.
+    """
+
+    accent: str
+
+    def __new__(cls, name: str, accent: str = "") -> _Literal:
+        obj = super().__new__(cls, f"{name}\u2063{accent}")
+        obj.accent = accent
+        obj.shown = name
+        return obj
+
+    def _pretty(self, printer: object) -> object:
+        from sympy.printing.pretty.stringpict import prettyForm
+
+        mark = {"": "", "dot": "\u0307", "ddot": "\u0308"}[self.accent]
+        return prettyForm(self.shown + mark)
+
+    def _latex(self, printer: object) -> str:
+        text = "\\mathrm{" + self.shown.replace("_", "\\_") + "}"
+        return f"\\{self.accent}{{{text}}}" if self.accent else text
+
+
+# A name prints as a symbol with a subscript (``m_p``, ``I_body``,
+# ``theta1``) when it is a short symbol, one underscore at most after a
+# stem of one or two letters; anything else is a word and prints literally.
+_SYMBOL_LIKE = re.compile(r"^[A-Za-z]{1,2}(_[A-Za-z0-9]+)?$|^[A-Za-z]+\d*$")
+
+
+def literal(name: str) -> bool:
+    """Whether *name* prints as written rather than as a symbol with subscripts."""
+    return not _SYMBOL_LIKE.match(name)
+
+
 def _display(name: str, accent: str) -> sp.Symbol:
+    if literal(name):
+        return _Literal(name, accent)
     base, digits = re.match(r"^(.*?)(\d*)$", name).groups()  # type: ignore[union-attr]
     return sp.Symbol(base + accent + (f"_{digits}" if digits else ""))
 
@@ -35,6 +76,9 @@ def display_symbols(model: SymbolicModel, spec: SystemSpec) -> dict[sp.Symbol, s
         if state not in subs:
             subs[state] = _display(state.name, "")
             subs[sp.Symbol(f"{state.name}__rate")] = _display(state.name, "dot")
+    for s in (*model.params, *model.inputs):
+        if literal(s.name) and s.name not in spec.symbols_latex:
+            subs[s] = _Literal(s.name)
     return subs
 
 

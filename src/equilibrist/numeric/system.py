@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from equilibrist.errors import (
+    CodeInDataError,
+    DefinitionError,
     DimensionError,
     NoEquilibriumError,
     ParameterError,
@@ -84,6 +86,17 @@ class System:
     def key(self) -> str:
         """What names the system in results and designs (a model file's path for imports)."""
         return self.compiled.entry.key
+
+    @property
+    def digest(self) -> str | None:
+        """SHA-256 of the definition (a file's bytes); ``None`` for a catalogue system.
+
+        Saved results record it beside :attr:`key`, so that a reader handed a
+        system checks that it is the one the data came from.
+        """
+        from equilibrist.systems import files
+
+        return files.digest_of(self.compiled.entry)
 
     @classmethod
     def from_definition(cls, spec: SystemSpec, derive: registry.DeriveFunction, **params: object) -> System:
@@ -363,12 +376,19 @@ class System:
         z_best, res, scale = best
         xs, us = split(z_best)
         if res > 1e-8 * scale:
-            given = ", ".join(f"{k} = {v:g}" for k, v in fixed.items()) or "the canonical point"
+            given = ", ".join(f"{k} = {v:g}" for k, v in fixed.items()) or self._point_text(x, u, free)
             raise NoEquilibriumError(
                 f"{self.key} has no equilibrium at {given} with {', '.join(free)} free: "
                 f"the best found leaves |f| = {res:.3g}"
             )
         return xs, us
+
+    def _point_text(self, x: np.ndarray, u: np.ndarray, free: tuple[str, ...]) -> str:
+        """How a message names the operating point: its given components."""
+        parts = [f"{n} = {v:g}" for n, v in zip(self.state_names, x, strict=True) if v != 0 and n not in free]
+        parts += [f"{n} = {v:g}" for n, v in zip(self.input_names, u, strict=True) if v != 0 and n not in free]
+        where = f"({', '.join(parts)})" if parts else "(every state zero)"
+        return f"its operating point {where}"
 
     def operating_point(self) -> Equilibrium:
         """The canonical operating point, with its free components solved."""
@@ -488,25 +508,100 @@ def _bind(entry: registry.Entry, settings: Mapping[str, object]) -> System:
     return System(entry.spec, cache.load(entry), types.MappingProxyType(defaults))
 
 
-def system_from_key(key: str, params: Mapping[str, float] | None = None) -> System:
-    """The system of a key (``"gyroscope[euler=xyz]"``, a model file) with *params* bound.
+def system_from_key(key: str, params: Mapping[str, float] | None = None, *,
+                    digest: str | None = None, source: str = "the data") -> System:
+    """The system a saved result or a design names by *key*, with *params* bound.
 
-    The inverse of :attr:`System.key` plus :attr:`System.params`: what a saved
-    result or a design records is enough to rebuild its system.
+    The inverse of :attr:`System.key` plus :attr:`System.params`, for what a
+    file records. Data never chooses code: a key that is a Python system file
+    is taken only as this process already ran it, because the user named it
+    (:func:`get_system`, a command's ``SYSTEM`` or ``--system``); otherwise the
+    call is refused (:class:`~equilibrist.errors.CodeInDataError`) and the file
+    is not run. A catalogue key or a model file (MJCF, URDF: data read by
+    MuJoCo's compiler) is built as usual. *digest*, when the data records one,
+    must be the definition's (:attr:`System.digest`); *source* names the data
+    in messages.
+    """
+    from equilibrist.systems import files
+
+    if not isinstance(key, str) or not key:
+        raise UnknownNameError(f"{source} names no system (found {key!r})")
+    entry = files.defined(key)
+    if entry is None and files.is_python_path(key):
+        entry = files.already_run(key, digest)
+        if entry is None:
+            raise CodeInDataError(
+                f"{source} names the Python system file {key}: a data file never runs code; "
+                "name the system yourself if you trust that file (--system FILE.py on the "
+                "command line, system=get_system(FILE.py) in Python)"
+            )
+    if entry is not None:
+        system = _bind(entry, dict(params or {}))
+    elif files.looks_like_path(key):
+        system = get_system(key, **dict(params or {}))
+    else:
+        name, variant = key, None
+        if "[" in key and key.endswith("]"):
+            name, _, rest = key.partition("[")
+            variant = rest[:-1].partition("=")[2]
+        settings: dict[str, object] = dict(params or {})
+        option = registry.variant_option(name)
+        if option is not None and variant is not None:
+            settings[option] = variant
+        system = get_system(name, **settings)
+    _check_same(system, key, digest, source, named=False)
+    return system
+
+
+def system_for_data(key: str, params: Mapping[str, float] | None = None, *,
+                    digest: str | None = None, system: System | None = None,
+                    source: str = "the data") -> System:
+    """The system of a saved result: *system* if the user named one, else :func:`system_from_key`.
+
+    A system the user names must be the one the data came from: the same
+    definition by content (*digest*, recorded by the data) or, for data that
+    records none, the same key; a mismatch is refused in one line.
+    """
+    if system is None:
+        return system_from_key(key, params, digest=digest, source=source)
+    if not isinstance(system, System):
+        raise UnknownNameError(f"system: expected a System (equilibrist.get_system(name)), "
+                               f"got {type(system).__name__}")
+    _check_same(system, key, digest, source, named=True)
+    return _bind(system.compiled.entry, dict(params or {}))
+
+
+def rebuild_system(key: str, params: Mapping[str, float], digest: str | None) -> System:
+    """The system of *key* in a worker process of this run (a batch, a tour, a study).
+
+    *key* comes from a :class:`System` the user named in the process that
+    started the work, never from a file, so a Python file is run here as it
+    was there; *digest* makes sure it is still the same file.
     """
     from equilibrist.systems import files
 
     entry = files.defined(key)
-    if entry is not None:
-        return _bind(entry, dict(params or {}))
-    if files.looks_like_path(key):
-        return get_system(key, **dict(params or {}))
-    name, variant = key, None
-    if "[" in key and key.endswith("]"):
-        name, _, rest = key.partition("[")
-        variant = rest[:-1].partition("=")[2]
-    settings: dict[str, object] = dict(params or {})
-    option = registry.variant_option(name)
-    if option is not None and variant is not None:
-        settings[option] = variant
-    return get_system(name, **settings)
+    system = _bind(entry, dict(params)) if entry is not None else (
+        get_system(key, **dict(params)) if files.looks_like_path(key) else system_from_key(key, params))
+    _check_same(system, key, digest, f"the system {key}", named=False)
+    return system
+
+
+def _check_same(system: System, key: str, digest: str | None, source: str, *, named: bool) -> None:
+    """Refuse *system* for data recorded from another definition.
+
+    With a recorded *digest*, the definitions' contents must agree. Data that
+    records none (files of earlier versions) is matched by its key: the same
+    catalogue entry, or a file of the same name wherever it now lives.
+    """
+    if digest is not None:
+        if system.digest != digest:
+            raise DefinitionError(
+                f"{system.key} is not the system {source} came from: its content differs "
+                f"(sha256 {str(system.digest)[:12]}..., the data recorded {digest[:12]}...)"
+            )
+        return
+    if not named or key in (system.key, system.spec.key):
+        return
+    if os.path.basename(key) != os.path.basename(system.key):
+        raise DefinitionError(f"{system.key} is not the system {source} came from ({key})")
