@@ -56,7 +56,13 @@ HINGE_SCALE = 0.2  # rad
 SLIDE_SCALE = 0.5  # m
 RATE_SCALE = 1.0  # rad/s or m/s
 ENCODER_NOISE = 1e-3  # rad or m, per sample: an encoder's quantization
-PROCESS_NOISE = 0.05  # on each rate, per sqrt(s)
+# Process noise on each rate, per sqrt(s): this fraction of the acceleration
+# the motors give it at half their range (Tree.authority), as the catalogue's
+# rigs are scaled (the cart-pole's 0.05 m/s, the acrobot's 0.01 rad/s, about
+# a quarter percent of what their motors do); a model without motors gets
+# PROCESS_NOISE.
+NOISE_FRACTION = 0.0025
+PROCESS_NOISE = 0.05
 CONTROL_RATE = 200.0  # Hz
 # A hinge may turn this far from the operating point before a balancing run
 # counts as fallen (hinges about the vertical can not fall).
@@ -134,6 +140,15 @@ _NAMES = frozenset({
     "mesh", "material", "texture", "hfield", "actuator",
 })
 _NAME_STEMS = ("joint", "body", "site", "tendon", "geom")
+
+
+def _process_noise(tree: Tree) -> dict[str, float]:
+    """The default process noise of each rate, scaled to the model's motors."""
+    if not tree.actuators or not any(tree.authority):
+        return {f"{j.name}_dot": PROCESS_NOISE for j in tree.joints}
+    floor = min(a for a in tree.authority if a > 0)
+    return {f"{j.name}_dot": float(f"{NOISE_FRACTION * max(a, floor):.3g}")
+            for j, a in zip(tree.joints, tree.authority, strict=True)}
 
 
 def _check_numbers(file: Path, content: bytes, depth: int = 0) -> None:
@@ -282,7 +297,8 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
         f"operating point: {where}"
         + ("" if tree.key_is_equilibrium or not inputs else " (its inputs solved so that it holds)"),
         "defaults of the import (docs/models.md): design scales 0.2 rad, 0.5 m, 1 /s and half of "
-        "each input's range; sensor noise 1e-3 where the file gives none; 200 Hz",
+        "each input's range; sensor noise 1e-3 where the file gives none; 200 Hz; process noise "
+        + ", ".join(f"{k} {v:g}" for k, v in _process_noise(tree).items()) + " per sqrt(s)",
     ]
     return SystemSpec(
         name=name,
@@ -303,6 +319,6 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
         region=region,
         design_scales=design_scales,
         sensor_noise=sensor_noise,
-        process_noise={f"{c}_dot": PROCESS_NOISE for c in coords},
+        process_noise=_process_noise(tree),
         control_rate=CONTROL_RATE,
     )

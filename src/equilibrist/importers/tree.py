@@ -99,6 +99,10 @@ class Tree:
     # How far the operating point was moved from the file's pose to the
     # nearest equilibrium: (joint, new - old) of each joint that moved.
     key_moved: tuple[tuple[str, float], ...]
+    # The acceleration of each joint (in joint order) when every motor pushes
+    # with half its range at the operating point, each motor's share counted
+    # whatever its sign: the model's scale of process noise (docs/models.md).
+    authority: tuple[float, ...]
     notes: tuple[str, ...]
 
 
@@ -400,6 +404,7 @@ def read_tree(
         vertical_hinges=tuple(vertical),
         key_is_equilibrium=key_is_equilibrium,
         key_moved=tuple(moved),
+        authority=_authority(model, data, qpos, actuators, order),
         notes=tuple(notes),
     )
 
@@ -473,6 +478,22 @@ def _nearest_equilibrium(
             new_ctrl = solved
     moved = [(names[j], float(q[a] - qpos[a])) for j, a in zip(free, adr, strict=True) if q[a] != qpos[a]]
     return q, new_ctrl, moved
+
+
+def _authority(model: Any, data: Any, qpos: np.ndarray, actuators: tuple[ActuatorData, ...],
+               order: list[int]) -> tuple[float, ...]:
+    """Per joint (in *order*), ``sum_a |M^-1[j, a]| * |gain_a| * (high_a - low_a) / 2``."""
+    mujoco = load_mujoco()
+    data.qpos[:] = qpos
+    mujoco.mj_forward(model, data)
+    mass = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, mass)
+    inverse = np.linalg.inv(mass)
+    reach = np.zeros(model.nv)
+    for a in actuators:
+        dof = int(model.jnt_dofadr[order[a.joint]])
+        reach += np.abs(inverse[:, dof]) * abs(a.gain) * (a.high - a.low) / 2
+    return tuple(float(reach[int(model.jnt_dofadr[j])]) for j in order)
 
 
 # What each compiled array holds, for a value that is not a finite number.
