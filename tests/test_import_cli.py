@@ -60,17 +60,23 @@ def test_export_builds_and_replays_in_c(capsys, tmp_path: Path) -> None:
     assert "steps match the vectors" in proc.stdout
 
 
-def test_pendubot_export_says_what_to_change_and_exports_with_it(capsys, tmp_path: Path) -> None:
+def test_pendubot_export_starts_where_the_design_holds_and_takes_x0(capsys, tmp_path: Path) -> None:
     # The imported model's default design (the whole torque range as its Bryson scale)
-    # saturates and loses the recorded run's start; the message names the remedy, and the
-    # remedy (the catalogue pendubot's torque scale, R = 1 / 0.5^2) exports.
+    # loses a start a quarter of the design scales off; the default start is then the
+    # largest smaller one it holds, and said. A start it does not hold, given with --x0,
+    # is refused in one line that names a start nearer the operating point.
     folder = tmp_path / "pendubot_c"
-    assert main(["export", PENDUBOT, "--out", str(folder), "--duration", "2"]) == 2
-    err = capsys.readouterr().err
-    assert "fell at" in err and "a larger --r" in err and "Traceback" not in err
-    assert not folder.exists()
-    assert main(["export", PENDUBOT, "--out", str(folder), "--duration", "2", "--r", "4"]) == 0
+    assert main(["export", PENDUBOT, "--out", str(folder), "--duration", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "test vectors recorded from shoulder = 0.025, elbow = 0.025" in out
     assert (folder / "Makefile").exists()
+    other = tmp_path / "pendubot_far"
+    assert main(["export", PENDUBOT, "--out", str(other), "--duration", "2", "--x0", "shoulder=0.5"]) == 2
+    err = capsys.readouterr().err
+    assert "fell at" in err and "give an --x0 nearer the operating point" in err and "Traceback" not in err
+    assert not other.exists()
+    assert main(["export", PENDUBOT, "--out", str(other), "--duration", "2", "--x0", "shoulder=0.01,elbow=-0.01"]) == 0
+    assert "recorded from shoulder = 0.01, elbow = -0.01" in capsys.readouterr().out
 
 
 def test_demo_report_of_a_model_file(capsys, tmp_path: Path) -> None:

@@ -9,6 +9,9 @@ from typing import TYPE_CHECKING
 from equilibrist.cli import common
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
+    from equilibrist.export.vectors import RecordedStart
     from equilibrist.export.writer import ExportReport
     from equilibrist.numeric.system import System
 
@@ -62,6 +65,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--duration", metavar="S", default=None,
                    help="length of the recorded test-vector run [s]")
     p.add_argument("--seed", type=int, default=0, help="noise seed of the test-vector run")
+    p.add_argument("--x0", metavar="NAME=VALUE,...", default=None,
+                   help="start of the test-vector run (states not named at the operating point; "
+                   "default: a quarter of each coordinate's design scale off, less if that falls)")
     common.add_set(p)
     common.add_params(p)
     common.add_json(p)
@@ -73,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
 
     from equilibrist.errors import ExportError
     from equilibrist.export.data import c_identifier
-    from equilibrist.export.writer import check_folder, check_rate, export_c
+    from equilibrist.export.writer import check_folder, check_rate
 
     # Everything that can be checked without designing is checked first.
     rate = None if args.rate is None else check_rate(common.parse_number(args.rate, "--rate"))
@@ -86,6 +92,21 @@ def run(args: argparse.Namespace) -> int:
         raise ExportError("--controller none is the open loop: there is no controller to export")
     out = Path(args.out) if args.out else Path(f"{c_identifier(args.system)}_{args.controller}")
     check_folder(out, force=args.force)
+    from equilibrist.export.vectors import RecordedStart, recorded_start
+
+    start = RecordedStart(None if args.x0 is None else {
+        k: common.parse_number(v, f"--x0 {k}")
+        for k, v in common.parse_assignments([t for t in args.x0.split(",") if t.strip()] or [args.x0],
+                                             "--x0").items()})
+    with recorded_start(start):
+        return _export(args, out, rate, duration, start)
+
+
+def _export(args: argparse.Namespace, out: Path, rate: float | None, duration: float | None,
+            start: RecordedStart) -> int:
+    from equilibrist.errors import ExportError
+    from equilibrist.export.writer import check_rate, export_c
+
     system = common.load_system(args)
     if system.n_inputs == 0:
         raise ExportError(f"{system.key} has no input: there is no controller to export")
@@ -106,17 +127,19 @@ def run(args: argparse.Namespace) -> int:
                               "exporter in this installation")
         done = exporter(built, out, system=system, precision=args.precision,
                         duration=duration, seed=args.seed, force=args.force)
-        return _report(args, done, system)
+        return _report(args, done, system, start)
 
     from equilibrist.control.design import design
 
     result = design(system, rate=rate, **common.design_options(args))
     done = export_c(result, out, controller=args.controller, precision=args.precision,
                     duration=duration, seed=args.seed, system=system, force=args.force)
-    return _report(args, done, system)
+    return _report(args, done, system, start)
 
 
-def _report(args: argparse.Namespace, done: ExportReport, system: System) -> int:
+def _report(args: argparse.Namespace, done: ExportReport, system: System,
+            start: RecordedStart | None = None) -> int:
+    used = start.used if start is not None else {}
     if args.json:
         common.print_json({
             "folder": str(done.folder),
@@ -127,6 +150,7 @@ def _report(args: argparse.Namespace, done: ExportReport, system: System) -> int
             "rate": done.data.rate,
             "files": dict(done.files),
             "vector_steps": done.vectors.n_steps,
+            "vector_start": used,
         })
         return 0
     print(f"{done.name}: {done.data.controller.upper()} controller of {system.key} at "
@@ -135,5 +159,7 @@ def _report(args: argparse.Namespace, done: ExportReport, system: System) -> int
     width = max(len(f) for f in done.files)
     for fname, what in done.files.items():
         print(f"  {fname:<{width}}  {what}")
+    if used:
+        print("test vectors recorded from " + ", ".join(f"{k} = {v:.6g}" for k, v in used.items()))
     print(f"build and check it: make -C {done.folder} check")
     return 0

@@ -16,6 +16,10 @@ millionths of the activity over a noisy run).
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+from contextvars import ContextVar
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -38,6 +42,36 @@ RELATIVE_TOLERANCE = {"double": 1e-9, "float": 1e-4}
 DEFAULT_DURATION = 4.0
 START_FRACTION = 0.25
 STEP_FRACTION = 0.5
+# Without a given start, the run starts START_FRACTION of each design scale
+# off; when the design does not hold that, each of these smaller fractions in
+# turn, and the first the design holds is recorded.
+FALLBACK_FRACTIONS = (0.125, 0.0625)
+
+
+@dataclass
+class RecordedStart:
+    """The start of the recorded run: given (``export --x0``) and as used.
+
+    ``given`` holds absolute state values by name (the others at the
+    operating point), or None for the default start; ``used`` is filled
+    by :func:`record` with the start of the run it recorded.
+    """
+
+    given: Mapping[str, float] | None = None
+    used: dict[str, float] = field(default_factory=dict)
+
+
+_START: ContextVar[RecordedStart | None] = ContextVar("recorded_start", default=None)
+
+
+@contextmanager
+def recorded_start(start: RecordedStart) -> Iterator[RecordedStart]:
+    """Record the test vectors of exports inside the block from *start*."""
+    token = _START.set(start)
+    try:
+        yield start
+    finally:
+        _START.reset(token)
 
 
 def tolerance(data: ControllerData, u: np.ndarray, precision: str) -> np.ndarray:
@@ -133,7 +167,8 @@ def c_controller(design: Design, *, controller: str = "lqg", precision: str = "d
                        x_estimate)
 
 
-def scenario(design: Design, system: System, *, duration: float | None = None) -> dict[str, Any]:
+def scenario(design: Design, system: System, *, duration: float | None = None,
+             start: Mapping[str, float] | None = None, fraction: float = START_FRACTION) -> dict[str, Any]:
     """The settings of the recorded run: start, reference step, noise, rate.
 
     The run starts with each coordinate that has a design scale displaced by
@@ -150,9 +185,18 @@ def scenario(design: Design, system: System, *, duration: float | None = None) -
     length = DEFAULT_DURATION if duration is None else float(duration)
     x0 = np.array(plant.x0, dtype=float)
     coordinates = system.spec.coordinates
-    for i, name in enumerate(plant.state_names):
-        if name in coordinates and scales.get(name):
-            x0[i] += START_FRACTION * float(scales[name])
+    if start is not None:
+        from equilibrist.errors import nearest
+
+        for name, value in start.items():
+            if name not in plant.state_names:
+                raise ExportError(f"--x0 {name}: {design.system_key} has no state {name!r}: "
+                                  f"{nearest(name, plant.state_names)}")
+            x0[plant.state_names.index(name)] = float(value)
+    else:
+        for i, name in enumerate(plant.state_names):
+            if name in coordinates and scales.get(name):
+                x0[i] += fraction * float(scales[name])
     reference = None
     if design.Kc is not None:
         r0 = np.asarray(design.r0, dtype=float)
@@ -165,6 +209,11 @@ def scenario(design: Design, system: System, *, duration: float | None = None) -
         "noise": Noise.from_design(design),
         "reference": reference,
     }
+
+
+def _start_text(x: npt.ArrayLike, design: Design) -> str:
+    return ",".join(f"{n}={float(v):.6g}" for n, v in zip(design.plant.state_names, np.asarray(x, float),
+                                                          strict=True))
 
 
 def record(design: Design, system: System, *, controller: str = "lqg", precision: str = "double",
@@ -190,16 +239,34 @@ def record(design: Design, system: System, *, controller: str = "lqg", precision
     data = controller_data(design, controller=controller)
     tracking = design.Kc is not None
     linear = data.form_controller
-    run = scenario(design, system, duration=duration)
-    result = simulate(system, linear, seed=seed, **run)
-    if result.fell:
-        raise ExportError(
-            f"the recorded run of the {controller} controller of {data.system} fell at "
-            f"t = {result.fell_at:.3g} s ({result.fell_state} left its region): "
-            "the design does not hold the plant, so there are no test vectors to ship (the run "
-            f"starts {START_FRACTION:g} of each coordinate's design scale off the operating point; a "
-            "gentler design, a larger --r, may hold it)"
-        )
+    given = _START.get()
+    if given is not None and given.given is not None:
+        run = scenario(design, system, duration=duration, start=given.given)
+        result = simulate(system, linear, seed=seed, **run)
+        if result.fell:
+            raise ExportError(
+                f"the recorded run of the {controller} controller of {data.system} from --x0 "
+                f"{_start_text(run['x0'], design)} fell at t = {result.fell_at:.3g} s "
+                f"({result.fell_state} left its region): give an --x0 nearer the operating point "
+                f"({_start_text(design.plant.x0, design)})"
+            )
+    else:
+        for fraction in (START_FRACTION, *FALLBACK_FRACTIONS):
+            run = scenario(design, system, duration=duration, fraction=fraction)
+            result = simulate(system, linear, seed=seed, **run)
+            if not result.fell:
+                break
+        if result.fell:
+            raise ExportError(
+                f"the recorded run of the {controller} controller of {data.system} fell at "
+                f"t = {result.fell_at:.3g} s ({result.fell_state} left its region) from every "
+                f"default start ({', '.join(f'{f:g}' for f in (START_FRACTION, *FALLBACK_FRACTIONS))} "
+                "of each coordinate's design scale off the operating point): the design does not "
+                "hold the plant; a larger --r (a gentler design) or --x0 NAME=VALUE,... nearer "
+                f"the operating point ({_start_text(design.plant.x0, design)}) may hold it"
+            )
+    if given is not None:
+        given.used = {n: float(v) for n, v in zip(design.plant.state_names, run["x0"], strict=True)}
     r = result.reference if tracking else np.zeros((result.n_rows, 0))
     estimate0 = linear.z0 if linear.n_z else None
     x_init = data.x0 + (0.0 if estimate0 is None else estimate0)
