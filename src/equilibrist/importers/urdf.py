@@ -157,4 +157,34 @@ def read_urdf(file: Path, data: bytes) -> UrdfFacts:
             raise DefinitionError(f"{where}: joint {jname!r}: effort limit {effort_text} must be > 0")
         bound = effort / abs(reduction)
         transmissions.append(Transmission(aname, jname, reduction, -bound, bound))
+    if not root.findall("transmission"):
+        transmissions = _effort_motors(where, root)
     return UrdfFacts(joint_order=order, transmissions=tuple(transmissions))
+
+
+def _effort_motors(where: str, root: ET.Element) -> list[Transmission]:
+    """A URDF without ``<transmission>``: a motor on each moving joint whose
+    ``<limit effort>`` is above zero, limited by that effort (what pybullet's
+    joint motors apply); a joint without an effort limit is passive.
+
+    The motor is named by its joint; the system names its input
+    ``<joint>_force`` or ``<joint>_torque`` (docs/models.md).
+    """
+    out = []
+    for j in root.findall("joint"):
+        if j.get("type") not in _MOVING or j.get("type") == "planar":
+            continue
+        limit = j.find("limit")
+        text = None if limit is None else limit.get("effort")
+        if text is None:
+            continue
+        try:
+            effort = float(text)
+        except ValueError:
+            raise DefinitionError(f"{where}: joint {j.get('name')!r}: effort {text!r} is not a number") from None
+        if not math.isfinite(effort) or effort < 0:
+            raise DefinitionError(f"{where}: joint {j.get('name')!r}: effort limit {text} must be >= 0")
+        if effort > 0:
+            name = j.get("name", "")
+            out.append(Transmission(name, name, 1.0, -effort, effort))
+    return out
