@@ -82,18 +82,25 @@ def render(system: System, lm: LinearModel) -> str:
         lines.append("  u0: " + ", ".join(f"{n} = {v:.6g}" for n, v in zip(lm.input_names, lm.u0, strict=True)))
     status = "an equilibrium" if lm.residual < 1e-9 else "NOT an equilibrium"
     lines.append(f"  residual |f(x0, u0)| = {lm.residual:.3g} ({status})")
+    # Where a model file's operating point came from, when it was moved from the file's pose.
+    lines += [f"  {n}" for n in system.spec.notes if n.startswith("operating point:") and "moved" in n]
     lines.append("A =")
-    lines.append(common.format_matrix(lm.A, lm.state_names, lm.state_names))
+    lines.append(_matrix(lm.A, lm.state_names, lm.state_names))
     if lm.n_inputs:
         lines.append("B =")
-        lines.append(common.format_matrix(lm.B, lm.state_names, lm.input_names))
+        lines.append(_matrix(lm.B, lm.state_names, lm.input_names))
     lines.append("C =")
-    lines.append(common.format_matrix(lm.C, lm.output_names, lm.state_names))
+    lines.append(_matrix(lm.C, lm.output_names, lm.state_names))
     poles = lm.poles
     lines.append("open-loop poles: " + ", ".join(_fmt_pole(p) for p in poles))
     unstable = int(np.sum(poles.real > 1e-9))
     lines.append(f"  {unstable} unstable" if unstable else "  none unstable")
     return "\n".join(lines)
+
+
+def _matrix(mat: np.ndarray, rows: tuple[str, ...], cols: tuple[str, ...]) -> str:
+    """A labelled matrix whose columns stay apart however long their names are."""
+    return common.format_matrix(mat, rows, cols, width=max([11, *(len(c) + 2 for c in cols)]))
 
 
 def _fmt_pole(p: complex) -> str:
