@@ -8,8 +8,10 @@ between the points, each centre of mass as a disc whose area grows with the
 body's share of the mass, each joint anchor as a pivot.
 
 The picture is a projection onto one of the planes xz, yz or xy of the
-model's world: the one in which the points move most (a vertical one,
-xz or yz, when it shows at least 80 % of the most). The motion is
+model's world: the plane the motion is in when the points move in one
+(nothing moves along the third axis, however the rig was drawn: z up, or
+y up), else the one in which the points move most (a vertical one, xz or
+yz, when it shows at least 80 % of the most). The motion is
 sampled at fixed, seeded states around the operating point (each
 coordinate up to its fall region, or 0.5 rad or 0.25 m either side), so the
 view does not depend on the run being shown and stays the same from frame
@@ -27,6 +29,9 @@ from equilibrist.viz.scenes import COLORS, Scene, Shape, bar, circle
 # The three candidate views: the two world axes shown (right, up) and the
 # name of the plane.
 _PLANES = (("xz", 0, 2), ("yz", 1, 2), ("xy", 0, 1))
+# Motion counts as planar when the least-moving world axis holds at most
+# this share of it.
+PLANAR = 1e-6
 _LINK_COLORS = (COLORS["body"], COLORS["link"], COLORS["link2"], COLORS["mark"], COLORS["wheel"])
 
 
@@ -90,6 +95,14 @@ class GenericScene(Scene):
     def _choose_plane(self, world: np.ndarray) -> tuple[str, int, int]:
         motion = world - world.mean(axis=0, keepdims=True)
         variance = (motion**2).sum(axis=(0, 1))  # per world axis
+        # Motion in one plane (a world axis along which nothing moves): that
+        # plane, whichever way the rig was drawn (z up, or y up as a
+        # planar rig written by hand often is).
+        still = int(np.argmin(variance))
+        if variance[still] <= PLANAR * float(variance.sum()):
+            for name, a, b in _PLANES:
+                if still not in (a, b):
+                    return name, a, b
         scores = [(variance[a] + variance[b], name, a, b) for name, a, b in _PLANES]
         best = max(s[0] for s in scores)
         # The vertical planes first when they show nearly as much.
