@@ -23,6 +23,15 @@ class DefinitionError(EquilibristError, ValueError):
     """A system definition (a user's file, a model file, a spec) that cannot be used."""
 
 
+class CodeInDataError(DefinitionError):
+    """A data file (a result, a study) names a Python system file: data never chooses code.
+
+    A Python system file runs when it is loaded, as any import does; only the
+    user decides that, by naming it (on the command line or to
+    :func:`equilibrist.get_system`), never a file's own word.
+    """
+
+
 class ParameterError(EquilibristError, ValueError):
     """A parameter value that is out of range, not finite or malformed."""
 

@@ -11,7 +11,9 @@ _EPILOG = """\
 The animation is written beside the result with the suffix .gif unless --out
 names another file (.gif, or .mp4 where ffmpeg is installed). It plays in
 real time (--speed 0.25 for slow motion); a long run gets fewer frames per
-second rather than more than --max-frames.
+second rather than more than --max-frames. A run of your own Python system
+file is animated with --system FILE.py: a data file never runs the Python
+file it names.
 """
 
 
@@ -33,6 +35,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="playback speed relative to real time (default 1; 0.25 is slow motion)")
     p.add_argument("--estimates", action="store_true",
                    help="draw what the controller believed (its estimates) instead of the truth")
+    common.add_system_option(p)
     p.set_defaults(func=run)
 
 
@@ -56,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
         raise VizError(f"{str(src)!r} is a batch: animate one run (save it with 'equilibrist "
                        "simulate --out'), or plot the batch with 'equilibrist plot'")
     width, height = args.size
-    animate_result(result, out, fps=args.fps, max_frames=args.max_frames, width=width,
+    animate_result(result, out, system=common.named_system(args.system), fps=args.fps, max_frames=args.max_frames, width=width,
                    height=height, speed=speed, estimates=args.estimates,
                    progress=sys.stderr.isatty())
     print(f"wrote {out}")

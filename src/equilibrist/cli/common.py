@@ -171,6 +171,24 @@ def load_system(args: argparse.Namespace) -> System:
     return get_system(args.system, **settings)
 
 
+def add_system_option(parser: argparse.ArgumentParser) -> None:
+    """``--system SYSTEM``: the system a data file came from, named by the user."""
+    parser.add_argument(
+        "--system", metavar="SYSTEM",
+        help="the system the file came from (a name, or your own system file): needed when the "
+        "file names a Python system file, which a data file never runs by itself; checked to be "
+        "the same definition as the file's")
+
+
+def named_system(name: str | None) -> System | None:
+    """The system given by ``--system`` (run now: the user named it), or ``None``."""
+    if name is None:
+        return None
+    from equilibrist.numeric.system import get_system
+
+    return get_system(name)
+
+
 def to_jsonable(obj: Any) -> Any:
     """numpy arrays and scalars to lists and floats; NaN and infinities to None."""
     if isinstance(obj, dict):

@@ -22,6 +22,9 @@ _EPILOG = """\
 The picture is written beside the first file with the suffix .png unless
 --out names another file (.png or .svg). Angles are shown in degrees
 (--radians keeps radians). --states picks the coordinates shown.
+
+A result of your own Python system file is plotted with --system FILE.py:
+a data file never runs the Python file it names (docs/models.md).
 """
 
 
@@ -41,6 +44,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--states", metavar="NAME,...", help="coordinates to show (default: all)")
     p.add_argument("--labels", metavar="TEXT,...", help="legend labels of a comparison")
     p.add_argument("--radians", action="store_true", help="show angles in radians")
+    common.add_system_option(p)
     add_study_options(p)
     p.set_defaults(func=run)
 
@@ -114,13 +118,14 @@ def run(args: argparse.Namespace) -> int:
     labels = common.parse_names(args.labels, "--labels")
     degrees = not args.radians
     results = [load_result(f) for f in args.files]
+    system = common.named_system(args.system)
     batches = [r for r in results if isinstance(r, BatchResult)]
     if batches:
         if len(results) > 1:
             raise VizError("plot one batch at a time (a batch file cannot be compared with others)")
-        plots.plot_batch(results[0], out, degrees=degrees)
+        plots.plot_batch(results[0], out, degrees=degrees, system=system)
     elif len(results) == 1:
-        plots.plot_response(results[0], out, states=states, degrees=degrees)
+        plots.plot_response(results[0], out, states=states, degrees=degrees, system=system)
     else:
         names = labels or [Path(f).stem for f in args.files]
         if len(names) != len(results):
@@ -128,6 +133,6 @@ def run(args: argparse.Namespace) -> int:
         if len(set(names)) != len(names):
             raise common.UsageError("the comparison needs distinct labels: give --labels")
         plots.plot_comparison(dict(zip(names, results, strict=True)), out, states=states,
-                              degrees=degrees)
+                              degrees=degrees, system=system)
     print(f"wrote {out}")
     return 0

@@ -118,13 +118,14 @@ def build_study(args: argparse.Namespace) -> Study:
     from equilibrist.study import load_study_file, make_study
 
     if args.study is not None:
-        given = [o for o in _STUDY_OPTIONS if getattr(args, o) not in (None, [], False)]
+        # SYSTEM beside --study names the study's system (a Python file is the user's to run).
+        given = [o for o in _STUDY_OPTIONS if o != "system" and getattr(args, o) not in (None, [], False)]
         if given:
             flags = ", ".join("SYSTEM" if o == "system" else "--" + o.replace("_", "-")
                               .replace("settings", "set") for o in given)
             raise common.UsageError(f"--study describes the whole study: drop {flags} "
                                     "(or leave out --study)")
-        return load_study_file(args.study)
+        return load_study_file(args.study, system=args.system)
     if args.system is None:
         raise common.UsageError("give a SYSTEM (with --vary ...) or --study FILE.toml")
     vary = []

@@ -45,7 +45,7 @@ from equilibrist.sim.noise import (
     seed_from_description,
     seed_sequence,
 )
-from equilibrist.sim.result import SimResult, check_result_path, read_npz
+from equilibrist.sim.result import SimResult, check_result_path, digest_field, read_npz
 from equilibrist.sim.run import (
     _progress_bar,
     _result,
@@ -144,6 +144,7 @@ class BatchResult:
     elapsed: float = 0.0
     steps: int = 0
     trajectories: np.ndarray | None = None
+    system_digest: str | None = None
     _setup: Any = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
@@ -238,7 +239,8 @@ class BatchResult:
             return self.to_csv(p)
         check_result_path(p, "a batch")
         meta = {
-            "format": FORMAT, "system": self.system, "state_names": list(self.state_names),
+            "format": FORMAT, "system": self.system, "system_digest": self.system_digest,
+            "state_names": list(self.state_names),
             "input_names": list(self.input_names), "parameter_names": list(self.parameter_names),
             "seeds": list(self.seeds), "settings": dict(self.settings), "elapsed": self.elapsed,
             "steps": self.steps,
@@ -291,7 +293,8 @@ class BatchResult:
             parameter_names=tuple(meta["parameter_names"]),
             estimation_error_rms=arrays.pop("estimation_error_rms", None),
             seeds=tuple(meta["seeds"]), settings=meta["settings"], elapsed=meta["elapsed"],
-            steps=meta["steps"], **arrays,
+            steps=meta["steps"], system_digest=digest_field(meta, f"{p} is not a valid saved batch"),
+            **arrays,
         )
 
 
@@ -580,8 +583,8 @@ def _batch_result(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
     settings["x0"] = None
     count = np.maximum(rows, 1)[:, None]
     return BatchResult(
-        system=sysm.key, state_names=sysm.state_names, input_names=sysm.input_names,
-        parameter_names=sysm.spec.parameter_names, x0=x0s, params=pmat, fell=fell,
+        system=sysm.key, system_digest=sysm.digest, state_names=sysm.state_names,
+        input_names=sysm.input_names, parameter_names=sysm.spec.parameter_names, x0=x0s, params=pmat, fell=fell,
         fell_at=fell_at, fell_code=code, fell_x=fell_xs, final_state=x_ends,
         peak_input=accs[:, acc["peak_u_app"]], peak_command=accs[:, acc["peak_u"]],
         rms_input=np.sqrt(accs[:, acc["sum_u2"]] / count),
@@ -637,7 +640,8 @@ def _portable(setup: _setup.Setup) -> bytes:
     """*setup* pickled for a worker process (the system as its key and parameters)."""
     fields = {k: v for k, v in setup.__dict__.items() if k != "system"}
     try:
-        return pickle.dumps((setup.system.key, dict(setup.system.params), fields))
+        return pickle.dumps((setup.system.key, dict(setup.system.params), setup.system.digest,
+                             fields))
     except (pickle.PicklingError, TypeError, AttributeError) as exc:
         name = (python_controller_name(setup.controller)
                 if isinstance(setup.controller, PythonController) else type(setup.controller).__name__)
@@ -651,10 +655,10 @@ def _portable(setup: _setup.Setup) -> bytes:
 def _python_worker(payload: bytes, x0s: np.ndarray, pmat: np.ndarray,
                    seqs: list[np.random.SeedSequence | None], record: bool
                    ) -> tuple[np.ndarray, ...]:
-    from equilibrist.numeric.system import system_from_key
+    from equilibrist.numeric.system import rebuild_system
 
-    key, params, fields = pickle.loads(payload)
-    setup = _setup.Setup(system=system_from_key(key, params), **fields)
+    key, params, digest, fields = pickle.loads(payload)
+    setup = _setup.Setup(system=rebuild_system(key, params, digest), **fields)
     return _python_runs(setup, x0s, pmat, seqs, record)
 
 

@@ -75,6 +75,10 @@ class SimResult:
         (``"not finite"`` when the state diverged), and the state then.
     settings : mapping
         Everything that produced the run (JSON-able), including the seed.
+    system_digest : str or None
+        SHA-256 of the system's definition when it came from a file
+        (:attr:`~equilibrist.numeric.system.System.digest`): a reader handed a
+        system checks it is this one.
     """
 
     system: str
@@ -101,6 +105,7 @@ class SimResult:
     fell_x: np.ndarray | None
     final_state: np.ndarray
     settings: Mapping[str, Any] = field(default_factory=dict)
+    system_digest: str | None = None
 
     def __post_init__(self) -> None:
         for name in (*_ARRAYS, "x_op", "u_op", "fell_x", "final_state"):
@@ -283,6 +288,7 @@ class SimResult:
         return {
             "format": FORMAT,
             "system": self.system,
+            "system_digest": self.system_digest,
             "params": dict(self.params),
             "state_names": list(self.state_names),
             "state_units": list(self.state_units),
@@ -526,4 +532,15 @@ def _checked(cls: type[SimResult], meta: object, arrays: dict[str, np.ndarray], 
         fell_x=maybe("fell_x", (n,), finite=False),
         final_state=array("final_state", (n,), finite=False),
         settings=settings,
+        system_digest=digest_field(meta, bad),
     )
+
+
+def digest_field(meta: Mapping[str, Any], bad: str) -> str | None:
+    """The recorded ``system_digest`` of a file's metadata (a SHA-256 in hex), or ``None``."""
+    v = meta.get("system_digest")
+    if v is None:
+        return None
+    if not isinstance(v, str) or len(v) != 64 or any(c not in "0123456789abcdef" for c in v):
+        raise SimulationError(f"{bad}: system_digest should be a SHA-256 in hex, found {str(v)[:80]!r}")
+    return v

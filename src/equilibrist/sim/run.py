@@ -390,6 +390,7 @@ def _result(setup: _setup.Setup, rec: np.ndarray, rows: int, status: np.ndarray,
     settings["seed"] = None if seq is None else describe_seed(seq)
     return SimResult(
         system=sysm.key,
+        system_digest=sysm.digest,
         params=dict(sysm.params),
         state_names=sysm.state_names,
         state_units=sysm.state_units,

@@ -591,8 +591,14 @@ _FILE_KEYS = ("system", "set", "vary", "sample", "runs", "duration", "x0", "spre
               "batch_size")
 
 
-def load_study_file(path: str | Path) -> Study:
+def load_study_file(path: str | Path, *, system: str | None = None) -> Study:
     """A study from a TOML file (the keys of :func:`make_study`, ``system`` first).
+
+    A study file that names a Python system file never runs it: the user
+    names that file as *system* (``equilibrist sweep FILE.py --study
+    study.toml``), and its content must be the content of the file the study
+    names where that one can still be read. *system* given with a study of a
+    catalogue system must be that system.
 
     Example::
 
@@ -634,4 +640,32 @@ def load_study_file(path: str | Path) -> Study:
             raise StudyError(f"study file {p}: [sample] takes random = N")
         sample = sample["random"]
     kwargs = {k: v for k, v in data.items() if k not in ("system", "sample")}
-    return make_study(str(data["system"]), sample=sample, **kwargs)
+    return make_study(_named_system(p, str(data["system"]), system), sample=sample, **kwargs)
+
+
+def _named_system(study_file: Path, recorded: str, named: str | None) -> str:
+    """The system a study file's *recorded* name stands for, given the user's *named* one."""
+    from equilibrist.systems import files
+
+    if not files.is_python_path(recorded):
+        if named is not None and named != recorded:
+            raise StudyError(f"study file {study_file} is a study of {recorded}, not of {named}")
+        return recorded
+    if named is None:
+        raise StudyError(
+            f"study file {study_file} names the Python system file {recorded}: a data file never "
+            f"runs code; name the system yourself if you trust that file "
+            f"(equilibrist sweep {recorded} --study {study_file})"
+        )
+    there = Path(recorded).expanduser()
+    if not there.is_absolute():
+        there = study_file.parent / there
+    try:
+        theirs = there.read_bytes() if there.is_file() else None
+        mine = Path(named).expanduser().read_bytes()
+    except OSError:
+        return named  # a file that cannot be read is refused, in one line, by the study itself
+    if theirs is not None and theirs != mine:
+        raise StudyError(f"{named} is not the system file the study {study_file} names "
+                         f"({recorded}): their contents differ")
+    return named

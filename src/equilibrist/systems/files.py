@@ -153,3 +153,33 @@ def from_definition(spec: SystemSpec, derive: DeriveFunction) -> Entry:
 def defined(key: str) -> Entry | None:
     """The definition handed over in this process under *key*, if any."""
     return _DEFINED.get(key)
+
+
+def is_python_path(name: str) -> bool:
+    """Whether *name* would be loaded as a Python system file (and so run)."""
+    return looks_like_path(name) and Path(name).suffix.lower() not in MODEL_SUFFIXES
+
+
+def already_run(path: str, digest: str | None) -> Entry | None:
+    """The Python file *path* as this process already ran it, by the user's own naming.
+
+    With *digest*, only the content with that SHA-256; without, the latest
+    content read from that path. ``None`` when this process has not run it:
+    a reader of data never runs it then (:func:`~equilibrist.numeric.system.system_from_key`).
+    """
+    resolved = str(Path(path).expanduser().resolve())
+    found = [entry for (origin, d), entry in _FROM_FILES.items()
+             if origin == resolved and (digest is None or d == digest)]
+    return found[-1] if found else None
+
+
+def digest_of(entry: Entry) -> str | None:
+    """SHA-256 of what defines *entry*: a file's bytes, a script's definition; ``None`` for the catalogue.
+
+    Saved results record it, so that a reader can check that the system it is
+    handed is the one the data came from, wherever its file now lives.
+    """
+    for (_, digest), known in _FROM_FILES.items():
+        if known is entry:
+            return digest
+    return None if entry.content is None else hashlib.sha256(entry.content).hexdigest()

@@ -19,11 +19,17 @@ _EVENT_NAMES = {"kick": "push", "pulse": "push", "impulse": "push",
                 "parameter_change": "parameters change"}
 
 
-def system_of(key: str, params: Mapping[str, float] | None = None) -> System:
-    """The bound system of a registry *key* (``"gyroscope[euler=xyz]"``) with *params*."""
-    from equilibrist.numeric.system import system_from_key
+def system_of(key: str, params: Mapping[str, float] | None = None, *, digest: str | None = None,
+              system: System | None = None, source: str = "the result") -> System:
+    """The bound system of a saved result's *key* (``"gyroscope[euler=xyz]"``) with *params*.
 
-    return system_from_key(key, params)
+    *system*, when the user names one, is checked to be the result's; without
+    it a Python system file named by the result is refused, never run
+    (:func:`~equilibrist.numeric.system.system_for_data`).
+    """
+    from equilibrist.numeric.system import system_for_data
+
+    return system_for_data(key, params, digest=digest, system=system, source=source)
 
 
 def _label(settings: Any) -> str:
@@ -49,8 +55,7 @@ def run_from_result(result: SimResult, *, system: System | None = None, label: s
             f"cannot show a {type(result).__name__}: it is not a simulation result "
             "(equilibrist.sim.simulate returns one; SimResult.load reads a saved one)"
         )
-    if system is None:
-        system = system_of(result.system, result.params)
+    system = system_of(result.system, result.params, digest=result.system_digest, system=system)
     settings = dict(result.settings)
     events = []
     for e in settings.get("events") or ():

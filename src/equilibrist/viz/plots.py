@@ -25,6 +25,8 @@ from equilibrist.viz.runs import Run, as_run
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
+    from equilibrist.numeric.system import System
+
 # Line styles shared by the plots.
 TRUE = {"color": "#1f5fa8", "lw": 1.5}
 ESTIMATE = {"color": "#e8871e", "lw": 1.2, "ls": "--"}
@@ -132,6 +134,7 @@ def plot_response(
     width: float = 9.0,
     row_height: float = 1.7,
     dpi: float = 100.0,
+    system: System | None = None,
 ) -> Any:
     """Time response of one run: states, estimates vs truth, inputs.
 
@@ -158,12 +161,15 @@ def plot_response(
         Figure title (default: the system's title and the run's label).
     width, row_height, dpi : float
         Size of the figure in inches (per row) and its resolution.
+    system : equilibrist.numeric.system.System, optional
+        The simulated system (default: rebuilt from the result's key, which
+        never runs a Python system file: name such a system here).
 
     Returns
     -------
     matplotlib.figure.Figure
     """
-    run = as_run(result)
+    run = as_run(result, system=system)
     pairs = _state_pairs(run.state_names)
     if states is not None:
         for s in states:
@@ -263,6 +269,7 @@ def plot_comparison(
     width: float = 8.0,
     row_height: float = 1.7,
     dpi: float = 100.0,
+    system: System | None = None,
 ) -> Any:
     """Several runs of the same system overlaid, one colour per run.
 
@@ -286,13 +293,15 @@ def plot_comparison(
         Figure title.
     width, row_height, dpi : float
         Figure size and resolution.
+    system : equilibrist.numeric.system.System, optional
+        The simulated system, as for :func:`plot_response`.
 
     Returns
     -------
     matplotlib.figure.Figure
     """
     items = results.items() if isinstance(results, Mapping) else [(None, r) for r in results]
-    runs = [as_run(r, label=lab) for lab, r in items]
+    runs = [as_run(r, label=lab, system=system) for lab, r in items]
     if not runs:
         raise VizError("nothing to compare: no runs given")
     first = runs[0]
@@ -689,7 +698,7 @@ def plot_poles(
 
 
 def plot_batch(batch: Any, path: str | Path | None = None, *, degrees: bool = True,
-               title: str | None = None, dpi: float = 100.0) -> Any:
+               title: str | None = None, dpi: float = 100.0, system: System | None = None) -> Any:
     """The picture of a batch of runs (``equilibrist.sim.BatchResult``).
 
     With the runs' trajectories (a batch run with ``record=True``): the
@@ -727,7 +736,7 @@ def plot_batch(batch: Any, path: str | Path | None = None, *, degrees: bool = Tr
     if batch.trajectories is not None:
         return plot_fan([batch.run(i) for i in range(batch.runs)], path, degrees=degrees,
                         title=title, dpi=dpi)
-    system = system_of(batch.system)
+    system = system_of(batch.system, digest=batch.system_digest, system=system, source="the batch")
     units = {p.name: p.unit for p in system.spec.all_parameters}
     units.update(zip(system.state_names, system.state_units, strict=True))
     varied: list[tuple[str, np.ndarray]] = []

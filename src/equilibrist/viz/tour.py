@@ -565,11 +565,12 @@ def _label(system: Any) -> str:
     return f"{system.name} ({Path(key).name})"
 
 
-def _tour_in_worker(key: str, params: dict[str, float], folder: str, options: dict[str, Any]) -> Outcome:
-    """:func:`tour_one` in a worker process (a system is rebuilt from its key and parameters)."""
-    from equilibrist.viz._adapt import system_of
+def _tour_in_worker(key: str, params: dict[str, float], digest: str | None, folder: str,
+                    options: dict[str, Any]) -> Outcome:
+    """:func:`tour_one` in a worker process (the system the user named, rebuilt from its key)."""
+    from equilibrist.numeric.system import rebuild_system
 
-    return tour_one(system_of(key, params), Path(folder), progress=False, **options)
+    return tour_one(rebuild_system(key, params, digest), Path(folder), progress=False, **options)
 
 
 def run_tour(
@@ -707,8 +708,8 @@ def _tour_into(
             context = multiprocessing.get_context("spawn")
             with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
                 futures = {
-                    pool.submit(_tour_in_worker, system.key, dict(system.params), str(folder),
-                                options): k
+                    pool.submit(_tour_in_worker, system.key, dict(system.params), system.digest,
+                                str(folder), options): k
                     for k, system in enumerate(systems)
                 }
                 for future in as_completed(futures):

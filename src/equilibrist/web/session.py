@@ -887,6 +887,7 @@ class Session:
         m = system.n_inputs
         return SimResult(
             system=system.key,
+            system_digest=system.digest,
             params=dict(system.params),
             state_names=system.state_names,
             state_units=system.state_units,
