@@ -11,6 +11,10 @@ from equilibrist.cli import common
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("systems", help="list every system with its states, inputs and parameters")
     common.add_json(p)
+    p.add_argument("--markdown", action="store_true",
+                   help="every system's specification page in Markdown (as docs/systems/ holds)")
+    p.add_argument("--out", metavar="DIR",
+                   help="with --markdown: write one page per system and an index into DIR")
     p.set_defaults(func=run)
 
 
@@ -66,6 +70,23 @@ def catalogue() -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.out is not None and not args.markdown:
+        raise common.UsageError("--out writes the Markdown pages: give --markdown too")
+    if args.markdown:
+        if args.json:
+            raise common.UsageError("--markdown and --json are two formats: give one")
+        from equilibrist import pages
+
+        if args.out is not None:
+            if not args.out.strip():
+                raise common.UsageError("--out '': expected the folder to write the pages into")
+            written = pages.write_pages(args.out)
+            print(f"wrote {len(written)} pages to {args.out}")
+            return 0
+        texts = pages.pages()
+        index = texts.pop(pages.INDEX)
+        print("\n".join([index, *texts.values()]), end="")
+        return 0
     data = catalogue()
     if args.json:
         common.print_json(data)

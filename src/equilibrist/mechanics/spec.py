@@ -9,7 +9,14 @@ combines both.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
+
+from equilibrist.errors import DefinitionError
+
+
+def _real(value: object) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
 
 
 @dataclass(frozen=True)
@@ -29,6 +36,25 @@ class Parameter:
     low_open: bool = False
     high_open: bool = False
     note: str = ""
+
+    def __post_init__(self) -> None:
+        # A spec is refused where it is written: a default outside its own
+        # range would be taken as valid until a check of the bound values.
+        where = f"parameter {self.name!r}"
+        for what in ("default", "low", "high"):
+            value = getattr(self, what)
+            if not _real(value):
+                raise DefinitionError(f"{where}: {what} = {value!r} is not a number: expected a real number")
+        if math.isnan(self.low) or math.isnan(self.high) or self.low > self.high:
+            raise DefinitionError(
+                f"{where}: its range [{self.low}, {self.high}] is empty: expected low <= high"
+            )
+        problem = self.check(self.default)
+        if problem is not None:
+            raise DefinitionError(
+                f"{where}: its default {self.default!r} is outside its own range: expected a finite "
+                f"value in {self.range_text}"
+            )
 
     def check(self, value: float) -> str | None:
         """Return a problem description, or None when *value* is valid."""
@@ -74,6 +100,17 @@ class Input:
     meaning: str
     low: float
     high: float
+
+    def __post_init__(self) -> None:
+        where = f"input {self.name!r}"
+        if not (_real(self.low) and _real(self.high)):
+            raise DefinitionError(
+                f"{where}: limits {self.low!r}, {self.high!r}: expected two finite numbers, low < high"
+            )
+        if not (math.isfinite(self.low) and math.isfinite(self.high) and self.low < self.high):
+            raise DefinitionError(
+                f"{where}: limits [{self.low:g}, {self.high:g}]: expected two finite numbers, low < high"
+            )
 
     def limit_parameters(self) -> tuple[Parameter, Parameter]:
         """The ``<input>_min`` / ``<input>_max`` parameters of this input."""
