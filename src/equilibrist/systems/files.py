@@ -80,7 +80,23 @@ def from_file(path: str | os.PathLike[str]) -> Entry:
 
 
 def _from_python(data: bytes, origin: str, digest: str) -> Entry:
-    """Run a user's system file and take the one system it declares."""
+    """Run a user's system file and take the one system it declares.
+
+    The user's code (the module, and later its derivation) runs with its
+    ``print`` output sent to stderr: stdout is the command's own (``--json``).
+    Whatever it raises, ``sys.exit`` included, becomes one
+    :class:`DefinitionError` naming the file and the line; a Ctrl-C still
+    interrupts.
+    """
+    import contextlib
+    import functools
+
+    def said(exc: BaseException, when: str) -> str:  # what the user's code raised, in words
+        if isinstance(exc, SystemExit):
+            return (f"the file called sys.exit({exc.code!r}) {when}: a system file declares SPEC "
+                    "and its derivation, it does not exit")
+        return f"{type(exc).__name__}: {exc} ({when})"
+
     module_name = f"equilibrist_user_{digest[:16]}"
     module = sys.modules.get(module_name)
     if module is None:
@@ -90,10 +106,11 @@ def _from_python(data: bytes, origin: str, digest: str) -> Entry:
         module = importlib.util.module_from_spec(loader_spec)
         sys.modules[module_name] = module
         try:
-            loader_spec.loader.exec_module(module)
-        except Exception as exc:  # the user's own code: one line that says where
+            with contextlib.redirect_stdout(sys.stderr):
+                loader_spec.loader.exec_module(module)
+        except (Exception, SystemExit) as exc:  # the user's own code: one line that says where
             del sys.modules[module_name]
-            raise DefinitionError(f"{origin}: {_where(exc, origin)}{type(exc).__name__}: {exc}") from None
+            raise DefinitionError(f"{origin}: {_where(exc, origin)}{said(exc, 'while it was loaded')}") from None
     found = [
         obj for obj in vars(module).values()
         if callable(obj) and isinstance(getattr(obj, SPEC_ATTRIBUTE, None), SystemSpec)
@@ -104,14 +121,38 @@ def _from_python(data: bytes, origin: str, digest: str) -> Entry:
             f"{len(found)} systems ({', '.join(getattr(f, SPEC_ATTRIBUTE).name for f in found)})"
         )
         raise DefinitionError(f"{origin}: expected one system, found {what}")
-    derive = found[0]
-    spec: SystemSpec = getattr(derive, SPEC_ATTRIBUTE)
+    user_derive = found[0]
+    spec: SystemSpec = getattr(user_derive, SPEC_ATTRIBUTE)
+    name = getattr(user_derive, "__name__", "derive")
+
+    @functools.wraps(user_derive)
+    def derive(d):
+        from equilibrist.errors import EquilibristError
+        from equilibrist.mechanics.model import SymbolicModel
+
+        try:
+            with contextlib.redirect_stdout(sys.stderr):
+                model = user_derive(d)
+        except EquilibristError as exc:  # the mechanics layer's own refusal, said as it is
+            raise DefinitionError(f"{origin}: {_where(exc, origin)}{exc}") from None
+        except (Exception, SystemExit) as exc:
+            raise DefinitionError(
+                f"{origin}: {_where(exc, origin)}{said(exc, f'in {name}(d)')}, expected {name}(d) "
+                "to return the model of d.kane(...), d.lagrange(...) or d.first_order(...)"
+            ) from None
+        if not isinstance(model, SymbolicModel):
+            raise DefinitionError(
+                f"{origin}: {name}(d) returned {type(model).__name__}: expected the model that "
+                "d.kane(...), d.lagrange(...) or d.first_order(...) returns"
+            )
+        return model
+
     return Entry(spec, derive, module_name, content=data, origin=origin)
 
 
 def _where(exc: BaseException, origin: str) -> str:
+    line = exc.lineno if isinstance(exc, SyntaxError) and exc.filename == origin else None
     tb = exc.__traceback__
-    line = None
     while tb is not None:
         if tb.tb_frame.f_code.co_filename == origin:
             line = tb.tb_lineno
