@@ -149,3 +149,41 @@ def test_file_with_a_default_out_of_range_is_one_line(capsys, tmp_path: Path) ->
     path.write_text(SOURCE.replace('positive("m_c", 2.0,', 'positive("m_c", -2.0,'))
     line = _one_line(capsys, "linearize", str(path))
     assert str(path.resolve()) in line and "m_c" in line and "(0, inf)" in line
+
+
+# -- the control layer: complex matrices are refused, not cut to their real part ----------
+def _design_args(which: str, imaginary: float) -> tuple[str, tuple[object, ...]]:
+    """A regulator or estimator problem with one matrix made complex (1 + imaginary j times it)."""
+    import numpy as np
+
+    A = np.array([[0.0, 1.0], [2.0, 0.0]])
+    B = np.array([[0.0], [1.0]])
+    C = np.array([[1.0, 0.0]])
+    values = {"A": A, "B": B, "C": C, "G": np.eye(2), "Q": np.eye(2), "R": np.eye(1),
+              "QN": np.eye(2), "RN": np.eye(1)}
+    values[which] = values[which] * (1.0 + 1j * imaginary)
+    if which in ("A", "B", "Q", "R"):
+        return "lqr", (values["A"], values["B"], values["Q"], values["R"])
+    return "lqe", (values["A"], values["G"], values["C"], values["QN"], values["RN"])
+
+
+@settings(max_examples=60, deadline=None)
+@given(which=st.sampled_from(["A", "B", "Q", "R", "G", "C", "QN", "RN"]),
+       imaginary=st.one_of(st.just(0.0), st.floats(-1e3, 1e3, allow_nan=False)),
+       discrete=st.booleans(), as_list=st.booleans())
+def test_complex_matrices_are_refused_as_complex(which: str, imaginary: float, discrete: bool,
+                                                 as_list: bool) -> None:
+    from equilibrist.control import riccati
+    from equilibrist.errors import EquilibristError
+
+    kind, args = _design_args(which, imaginary)
+    order = ("A", "B", "Q", "R") if kind == "lqr" else ("A", "G", "C", "QN", "RN")
+    position = order.index(which)
+    if as_list:  # Python complex numbers in nested lists, not an array
+        args = tuple(a.tolist() if i == position else a for i, a in enumerate(args))  # type: ignore[union-attr]
+    solve = getattr(riccati, ("d" if discrete else "") + kind)
+    with pytest.raises(EquilibristError) as info:
+        solve(*args)
+    message = str(info.value)
+    assert "must be real" in message and which in message, message
+    assert "stabilizable" not in message and "detectable" not in message

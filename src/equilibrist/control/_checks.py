@@ -8,6 +8,7 @@ raised once, naming the matrix, what was found and what was expected.
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Sequence
 
 import numpy as np
@@ -20,12 +21,54 @@ SYMMETRY_TOL = 1e-9
 DEFINITE_TOL = 1e-12
 
 
+def real_array(value: object) -> tuple[np.ndarray | None, str]:
+    """*value* as a float array, or None and what it holds instead of real numbers.
+
+    Complex numbers (whose imaginary part a float conversion would drop),
+    text, and objects that are not real numbers are refused, as are nested
+    lists of unequal lengths.
+    """
+    try:
+        raw = np.asarray(value)
+    except (TypeError, ValueError):
+        if isinstance(value, list | tuple):
+            return None, "nested lists of unequal lengths"
+        return None, f"a {type(value).__name__}"
+    kind = raw.dtype.kind
+    if kind in "iuf":
+        return raw.astype(float, copy=False), ""
+    if kind == "c":
+        return None, f"complex numbers ({raw.dtype})"
+    if kind in "USa":
+        return None, "text"
+    if kind == "O":
+        wrong = next((v for v in raw.flat if not isinstance(v, numbers.Real) or isinstance(v, bool)),
+                     None)
+        if wrong is None and raw.size:
+            return raw.astype(float), ""
+        return None, "no numbers" if wrong is None else f"a {type(wrong).__name__} ({wrong!r:.40})"
+    return None, f"values of type {raw.dtype}"
+
+
+def _floats(value: object, name: str) -> np.ndarray:
+    """*value* as a float array: a complex one is refused, not cut to its real part."""
+    try:
+        complex_values = np.iscomplexobj(value)  # type: ignore[arg-type]  # any value
+    except (TypeError, ValueError):
+        complex_values = False
+    if complex_values:
+        raise DesignError(
+            f"{name} has complex entries: the matrices must be real (got {np.asarray(value).dtype})"
+        )
+    try:
+        return np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise DimensionError(f"{name} must be a matrix of real numbers, got {value!r:.200}") from None
+
+
 def matrix(value: object, name: str, shape: tuple[int, int], meaning: str = "") -> np.ndarray:
     """*value* as a finite float array of *shape* (a scalar is accepted for 1 x 1)."""
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise DimensionError(f"{name} must be a matrix of numbers, got {value!r}") from None
+    arr = _floats(value, name)
     if arr.ndim == 0 and shape == (1, 1):
         arr = arr.reshape(1, 1)
     if arr.ndim == 1 and 0 in shape and arr.size == 0:
@@ -40,10 +83,7 @@ def matrix(value: object, name: str, shape: tuple[int, int], meaning: str = "") 
 
 def square(value: object, name: str) -> np.ndarray:
     """A finite square float matrix (its size is taken from *value*)."""
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise DimensionError(f"{name} must be a matrix of numbers, got {value!r}") from None
+    arr = _floats(value, name)
     if arr.ndim == 0:
         arr = arr.reshape(1, 1)
     if arr.ndim != 2 or arr.shape[0] != arr.shape[1]:
@@ -55,10 +95,7 @@ def square(value: object, name: str) -> np.ndarray:
 
 def with_rows(value: object, name: str, n_rows: int, meaning: str) -> np.ndarray:
     """A finite ``n_rows x k`` float matrix, any ``k`` (a 1-D value is one column)."""
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise DimensionError(f"{name} must be a matrix of numbers, got {value!r}") from None
+    arr = _floats(value, name)
     if arr.ndim == 1 and arr.size == n_rows:
         arr = arr.reshape(n_rows, 1)
     if arr.ndim != 2 or arr.shape[0] != n_rows:
@@ -68,10 +105,7 @@ def with_rows(value: object, name: str, n_rows: int, meaning: str) -> np.ndarray
 
 def with_columns(value: object, name: str, n_cols: int, meaning: str) -> np.ndarray:
     """A finite ``k x n_cols`` float matrix, any ``k`` (a 1-D value is one row)."""
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise DimensionError(f"{name} must be a matrix of numbers, got {value!r}") from None
+    arr = _floats(value, name)
     if arr.ndim == 1 and arr.size == n_cols:
         arr = arr.reshape(1, n_cols)
     if arr.ndim != 2 or arr.shape[1] != n_cols:
