@@ -2,7 +2,9 @@
 
 Serves the page of :mod:`equilibrist.web` on a local port, prints its
 address, opens it in the default browser where one exists, and runs until
-Ctrl-C (the sessions' sockets are closed and the port freed). It binds the
+Ctrl-C (the sessions' sockets are closed, the port freed, and the command
+ends as every command does when interrupted: ``equilibrist: interrupted``,
+exit status 130). It binds the
 loopback interface by default: the playground has no login, so binding
 another address (``--host 0.0.0.0``) lets anyone on that network drive it,
 and the command says so.
@@ -12,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import ipaddress
 import socket
 import sys
@@ -73,10 +76,23 @@ def bind(host: str, port: int) -> socket.socket:
         sock.bind(address)
     except OSError as exc:
         sock.close()
-        why = "is in use (another playground?): pick another with --port" if exc.errno in (98, 48) \
-            else f"cannot be bound: {exc.strerror}"
+        if exc.errno == errno.EADDRINUSE:
+            why = "is in use (another playground?): pick another with --port"
+        elif exc.errno == errno.EACCES and 0 < port < 1024:
+            why = ("is privileged and this user may not bind it: pick one from 1024 to 65535 "
+                   "with --port (or 0 for any free one)")
+        elif exc.errno == errno.EADDRNOTAVAIL:
+            raise common.UsageError(f"--host {host!r} is not an address of this machine: "
+                                    f"{exc.strerror}") from None
+        else:
+            why = f"cannot be bound: {exc.strerror or exc}"
         raise common.UsageError(f"port {port} on {host} {why}") from None
-    sock.listen(128)
+    try:
+        sock.listen(128)
+    except OSError as exc:
+        sock.close()
+        raise common.UsageError(f"port {port} on {host} cannot be listened on: "
+                                f"{exc.strerror or exc}") from None
     sock.set_inheritable(True)
     return sock
 
@@ -96,13 +112,14 @@ def run(args: argparse.Namespace) -> int:
     first = args.system
     if first is not None:
         catalogue.check(first)  # a system that cannot be played is one line, before the port
-    sock = bind(args.host, port)  # a port in use is said at once, before the warm-up
+    sock = bind(args.host, port)  # a port that cannot be had is said at once, before the warm-up
+    bound_port = sock.getsockname()[1]
     try:
-        app = create_app(catalogue, system=first)
+        # Requests must name this server (its loopback names, or --host): no DNS rebinding.
+        app = create_app(catalogue, system=first, host=args.host, port=bound_port)
     except BaseException:
         sock.close()
         raise
-    bound_port = sock.getsockname()[1]
     shown = f"[{args.host}]" if ":" in args.host else args.host
     url = f"http://{shown}:{bound_port}/"
     if not is_loopback(args.host):
@@ -114,12 +131,12 @@ def run(args: argparse.Namespace) -> int:
     server = uvicorn.Server(config)
     if not args.no_browser:
         threading.Thread(target=_open_browser, args=(url, server), daemon=True).start()
-    # uvicorn shuts down on Ctrl-C (closing every socket), then raises the signal again.
-    with contextlib.suppress(KeyboardInterrupt):
-        try:
-            server.run(sockets=[sock])
-        finally:
-            sock.close()
+    # uvicorn shuts down on Ctrl-C (closing every socket and the port), then raises the
+    # signal again: the command line's own handler ends it with its one line (exit 130).
+    try:
+        server.run(sockets=[sock])
+    finally:
+        sock.close()
     print("equilibrist: playground stopped", file=sys.stderr)
     return 0
 

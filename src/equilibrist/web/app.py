@@ -13,8 +13,13 @@ Routes:
     force), ``run.csv``, ``run.npz`` (the last run) of the session whose
     token the ``system`` frame gave; no client value names a file.
 
-Safety: the page's origin only (a socket opened by another site's page is
-refused), at most ``max_sessions`` sessions, at most ``MESSAGE_RATE``
+Safety: every request must name this server in its ``Host`` header (the
+loopback names and the address it was bound to, with its port: a page of
+another site whose name resolves to this machine, DNS rebinding, is refused
+with a 400), a socket's ``Origin`` must be one of those addresses too (a
+socket opened by another site's page is refused before its session starts;
+a client that sends no ``Origin``, which browsers always send, is let in),
+at most ``max_sessions`` sessions, at most ``MESSAGE_RATE``
 messages per second per session (a burst of ``MESSAGE_BURST``; beyond it
 messages are dropped with one error frame per second), every message
 checked by :mod:`equilibrist.web.protocol`, and a session's resources freed
@@ -24,10 +29,11 @@ when its socket closes.
 from __future__ import annotations
 
 import asyncio
-import contextlib
+import ipaddress
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -84,12 +90,157 @@ class _Bucket:
         return False
 
 
+#: The names of this machine a playground always answers to.
+LOOPBACK_NAMES = ("127.0.0.1", "localhost", "[::1]")
+#: Addresses that bind every interface.
+WILDCARDS = ("0.0.0.0", "::", "[::]", "")
+
+
+def _host_name(host: str) -> str:
+    """*host* as a ``Host`` header names it: lower case, an IPv6 address in brackets."""
+    name = host.strip().lower()
+    if ":" in name and not name.startswith("["):
+        name = f"[{name}]"
+    return name
+
+
+def _split_host(value: str) -> tuple[str, int | None] | None:
+    """``(name, port or None)`` of a ``Host`` value (``name``, ``name:port``, ``[v6]:port``);
+    None when it is not of that form."""
+    value = value.strip().lower()
+    if value.startswith("["):
+        end = value.find("]")
+        if end < 0:
+            return None
+        name, rest = value[:end + 1], value[end + 1:]
+    else:
+        name, colon, tail = value.partition(":")
+        rest = colon + tail
+    if not name:
+        return None
+    if not rest:
+        return name, None
+    digits = rest[1:]
+    if rest[0] != ":" or not digits.isascii() or not digits.isdigit() or len(digits) > 5:
+        return None
+    return name, int(digits)
+
+
+def _is_address(name: str) -> bool:
+    try:
+        ipaddress.ip_address(name[1:-1] if name.startswith("[") else name)
+    except ValueError:
+        return False
+    return True
+
+
+@dataclass(frozen=True)
+class HostCheck:
+    """The ``Host`` and ``Origin`` a request to the playground may carry.
+
+    A page of another site can be served from a name that its DNS points at
+    this machine (DNS rebinding): the browser then sends that name as the
+    ``Host`` and the ``Origin``. Only the names of this server are accepted:
+    the loopback names (:data:`LOOPBACK_NAMES`) and the address it was bound
+    to, each with the port it serves (``port`` None: any port, for an app
+    served by another runner). A server bound to every interface (``0.0.0.0``,
+    ``::``) also answers to any IP address with its port: a page reaching it
+    by address has no name that DNS could turn to this machine.
+    """
+
+    names: frozenset[str]
+    port: int | None = None
+    any_address: bool = False
+
+    @classmethod
+    def serving(cls, host: str = "127.0.0.1", port: int | None = None) -> HostCheck:
+        """The check of a server bound to *host*:*port*."""
+        names = set(LOOPBACK_NAMES)
+        wildcard = host.strip() in WILDCARDS
+        if not wildcard:
+            names.add(_host_name(host))
+        return cls(frozenset(names), port, wildcard)
+
+    def expected(self) -> str:
+        port = "" if self.port is None else f":{self.port}"
+        names = [f"{n}{port}" for n in sorted(self.names)]
+        if self.any_address:
+            names.append(f"an address of this machine{port}")
+        return ", ".join(names[:-1]) + f" or {names[-1]}" if len(names) > 1 else names[0]
+
+    def accepts(self, value: str) -> bool:
+        """Whether the ``Host`` value *value* names this server."""
+        parts = _split_host(value)
+        if parts is None:
+            return False
+        name, port = parts
+        if self.port is not None and port != self.port and not (port is None and self.port == 80):
+            return False
+        return name in self.names or (self.any_address and _is_address(name))
+
+    def host_refusal(self, value: str | None) -> str | None:
+        """Why a request with ``Host`` *value* is refused (None: it is not)."""
+        if value is None:
+            return f"the request has no Host header: expected {self.expected()}"
+        if not self.accepts(value):
+            return f"Host {value[:80]!r} is not this playground's address: expected {self.expected()}"
+        return None
+
+    def origin_refusal(self, value: str | None) -> str | None:
+        """Why a socket opened with ``Origin`` *value* is refused (None: it is not).
+
+        No ``Origin`` is accepted: browsers always send one with a socket, so
+        a request without one comes from a program, not from a page.
+        """
+        if value is None:
+            return None
+        scheme, sep, rest = value.strip().lower().partition("://")
+        if scheme != "http" or not sep or "/" in rest or not self.accepts(rest):
+            return (f"Origin {value[:80]!r} is not this playground's page: expected "
+                    f"http:// and {self.expected()}")
+        return None
+
+
+class _Guard:
+    """ASGI middleware: refuses a request whose ``Host`` (or a socket whose ``Origin``)
+    is not one of the :class:`HostCheck`'s, before any route sees it."""
+
+    def __init__(self, app: Callable[..., Any], check: HostCheck) -> None:
+        self.app, self.check = app, check
+
+    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
+        kind = scope["type"]
+        if kind not in ("http", "websocket"):
+            await self.app(scope, receive, send)
+            return
+        headers: dict[str, str] = {}
+        for key, value in scope.get("headers", ()):
+            headers.setdefault(key.decode("latin-1").lower(), value.decode("latin-1"))
+        why = self.check.host_refusal(headers.get("host"))
+        status = 400
+        if why is None and kind == "websocket":
+            why, status = self.check.origin_refusal(headers.get("origin")), 403
+        if why is None:
+            await self.app(scope, receive, send)
+            return
+        if kind == "websocket":
+            # Closed before it is accepted: the handshake is answered with a 403, no session starts.
+            await send({"type": "websocket.close", "code": 1008, "reason": why[:120]})
+            return
+        from starlette.responses import PlainTextResponse
+
+        await PlainTextResponse(f"equilibrist playground: {why}\n", status_code=status,
+                                headers=_HEADERS)(scope, receive, send)
+
+
 def create_app(
     catalogue: Catalogue | None = None,
     *,
     system: str | None = None,
     max_sessions: int = MAX_SESSIONS,
     seed: int | None = None,
+    host: str = "127.0.0.1",
+    port: int | None = None,
 ) -> Any:
     """The playground application (a Starlette app).
 
@@ -104,11 +255,16 @@ def create_app(
         Sessions served at once; one more gets an error frame and is closed.
     seed:
         Seed of the first session's noise (tests); each later one gets the next.
+    host, port:
+        The address the server is bound to and its port: requests must name
+        one of its addresses in their ``Host`` (:class:`HostCheck`); *port*
+        None accepts any port (an app served by a runner that picks it).
     """
     from equilibrist.web import require
 
     require()
     from starlette.applications import Starlette
+    from starlette.middleware import Middleware
     from starlette.requests import Request
     from starlette.responses import FileResponse, JSONResponse, Response
     from starlette.routing import Mount, Route, WebSocketRoute
@@ -149,11 +305,7 @@ def create_app(
         return Response(body, media_type=DOWNLOADS[kind], headers=headers)
 
     async def socket(ws: WebSocket) -> None:
-        origin = ws.headers.get("origin")
-        host = ws.headers.get("host", "")
-        if origin is not None and origin.split("://", 1)[-1] != host:
-            await ws.close(code=1008)
-            return
+        # (Its Host and Origin were checked by the guard, before it got here.)
         await ws.accept()
         if len(state.sessions) >= state.max_sessions:
             await _send(ws, {"type": "error", "message":
@@ -182,8 +334,11 @@ def create_app(
             state.sessions.pop(session.token, None)
             if streamer is not None:
                 streamer.cancel()
-                with contextlib.suppress(asyncio.CancelledError, Exception):
-                    await streamer
+                # Waited for, not awaited: its end (cancelled, or a closed socket) is no error
+                # here, while a cancellation of this handler itself still goes through.
+                await asyncio.wait({streamer})
+                if not streamer.cancelled():
+                    streamer.exception()
 
     async def favicon(request: Request) -> Response:
         return Response(status_code=204, headers=_HEADERS)
@@ -195,8 +350,10 @@ def create_app(
         WebSocketRoute("/ws", socket),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ]
-    app = Starlette(routes=routes)
+    check = HostCheck.serving(host, port)
+    app = Starlette(routes=routes, middleware=[Middleware(_Guard, check=check)])
     app.state.playground = state
+    app.state.host_check = check
     return app
 
 
@@ -256,10 +413,37 @@ async def _stream(ws: Any, session: Session) -> None:
 
 
 async def _receive(ws: Any, session: Session) -> None:
+    """Take the session's messages until its socket closes.
+
+    A reader takes every message as it arrives (the rate limit counts them
+    there) and a worker acts on them one at a time, in order. The socket's
+    close ends both at once, also while the worker waits for a redesign (that
+    thread runs out on its own and its result is dropped): a closed tab, or a
+    server stopping on Ctrl-C, does not wait for the designs its messages asked
+    for.
+    """
+    from starlette.websockets import WebSocketDisconnect
+
+    inbox: asyncio.Queue[str | bytes] = asyncio.Queue()
+    reader = asyncio.create_task(_read(ws, inbox))
+    worker = asyncio.create_task(_work(ws, session, inbox))
+    try:
+        await asyncio.wait({reader, worker}, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        reader.cancel()
+        worker.cancel()
+        results = await asyncio.gather(reader, worker, return_exceptions=True)
+    for result in results:
+        if isinstance(result, BaseException) and not isinstance(
+                result, WebSocketDisconnect | asyncio.CancelledError):
+            raise result
+
+
+async def _read(ws: Any, inbox: asyncio.Queue[str | bytes]) -> None:
+    """Queue the socket's messages for the worker, within the message rate."""
     from starlette.websockets import WebSocketDisconnect
 
     bucket = _Bucket(MESSAGE_RATE, MESSAGE_BURST)
-    designing = 0
     while True:
         raw = await ws.receive()
         if raw["type"] == "websocket.disconnect":
@@ -274,6 +458,18 @@ async def _receive(ws: Any, session: Session) -> None:
                                  f"too many messages: at most {MESSAGE_RATE:g} a second; "
                                  "messages are dropped until the rate falls"})
             continue
+        inbox.put_nowait(payload)
+
+
+async def _work(ws: Any, session: Session, inbox: asyncio.Queue[str | bytes]) -> None:
+    """Check and carry out the queued messages, one at a time.
+
+    Each is checked against the limits in force when its turn comes (a
+    ``select`` changes them for the messages after it).
+    """
+    designing = 0
+    while True:
+        payload = await inbox.get()
         try:
             message = parse(payload, session.limits)
         except ProtocolError as exc:
@@ -309,4 +505,4 @@ async def _receive(ws: Any, session: Session) -> None:
         session.install(settings, system, d, seconds, error, runner, built)
 
 
-__all__ = ["FPS", "MAX_SESSIONS", "create_app"]
+__all__ = ["FPS", "LOOPBACK_NAMES", "MAX_SESSIONS", "HostCheck", "create_app"]

@@ -613,7 +613,11 @@ class Session:
             self.paused = f["paused"]
             self._anchor(None)
         elif message.type == "seen":
-            self.seen = min(int(f["frame"]), self.frame_no)
+            frame = int(f["frame"])
+            if frame > self.frame_no:
+                raise SessionError(f"seen frame {frame} has not been sent: expected a frame "
+                                   f"number from 0 to {self.frame_no}, the last frame sent")
+            self.seen = frame
         elif message.type == "full":
             self.sent_shapes = {}
             self.messages.append(self.describe())
