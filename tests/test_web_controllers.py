@@ -9,17 +9,11 @@ import math
 import shutil
 import subprocess
 import time
-import warnings
 import zipfile
 
 import numpy as np
 import pytest
-
-with warnings.catch_warnings():
-    warnings.simplefilter("ignore")
-    from starlette.testclient import TestClient
-
-from tests.support.web import opening, receive_until
+from tests.support.web import LocalClient, opening, receive_until
 
 from equilibrist.web.app import create_app
 from equilibrist.web.protocol import CONTROLLERS, Limits, ProtocolError, parse
@@ -38,7 +32,7 @@ def app():
 
 @pytest.fixture(scope="module")
 def client(app):
-    with TestClient(app) as c:
+    with LocalClient(app) as c:
         yield c
 
 
@@ -96,9 +90,9 @@ def test_picker_disables_what_does_not_apply_and_a_refusal_keeps_the_session(cli
         ws.send_text(json.dumps({"type": "hang", "seq": 22}))
         err = receive_until(ws, lambda m: m["type"] == "error")
         assert "hang is refused" in err["message"]
-        # The session goes on with its controller.
-        time.sleep(0.3)
-        frame = receive_until(ws, lambda m: m["type"] == "frame")
+        # The session goes on with its controller (0.3 s of its time later).
+        t0 = receive_until(ws, lambda m: m["type"] == "frame")["t"]
+        frame = receive_until(ws, lambda m: m["type"] == "frame" and (m["fell"] or m["t"] > t0 + 0.3))
         assert frame["controller"] == "lqg" and frame["fell"] is None
 
 
@@ -115,9 +109,12 @@ def test_swingup_from_hanging_comes_up_and_balances(client):
         ws.send_text(json.dumps({"type": "tune", "controller": "swingup"}))
         d = receive_until(ws, lambda m: m["type"] == "design")
         assert d["controller"] == "swingup" and d["controller_info"]["kind"] == "swingup"
-        ws.send_text(json.dumps({"type": "hang"}))
-        start = receive_until(ws, lambda m: m["type"] == "frame" and m["hanging"] and m["t"] < 0.1)
-        assert abs(abs(start["x"][i_th]) - math.pi) < 0.06
+        ws.send_text(json.dumps({"type": "hang", "seq": 8}))
+        receive_until(ws, lambda m: m["type"] == "ack" and m["seq"] == 8)
+        # Every frame after the ack is of the hanging run; its first sample is the start.
+        start = receive_until(ws, lambda m: m["type"] == "frame" and len(m["samples"]["t"]) > 0)
+        assert start["hanging"] and start["samples"]["t"][0] == 0.0
+        assert abs(abs(start["samples"]["x"][0][i_th]) - math.pi) < 0.06
         modes, xs, t_up = [], [], None
         while True:
             f = receive_until(ws, lambda m: m["type"] == "frame")
@@ -132,15 +129,14 @@ def test_swingup_from_hanging_comes_up_and_balances(client):
         assert modes[0] == "pumping" and modes[-1] == "balancing"
         assert 0.5 < t_up < 8.0
         # It stays up.
-        time.sleep(1.0)
         f = receive_until(ws, lambda m: m["type"] == "frame" and m["t"] > t_up + 1.0)
         assert f["mode"] == "balancing" and abs(wrapped(f["x"][i_th])) < 0.1
         assert max(abs(x[i_x]) for x in xs) < 1.0
         # Back to LQG: the angle is taken within half a turn of upright and it keeps balancing.
         ws.send_text(json.dumps({"type": "tune", "controller": "lqg"}))
         receive_until(ws, lambda m: m["type"] == "design")
-        time.sleep(0.5)
-        f = receive_until(ws, lambda m: m["type"] == "frame" and m["controller"] == "lqg")
+        t0 = receive_until(ws, lambda m: m["type"] == "frame" and m["controller"] == "lqg")["t"]
+        f = receive_until(ws, lambda m: m["type"] == "frame" and (m["fell"] or m["t"] > t0 + 0.5))
         assert f["fell"] is None and abs(f["x"][i_th]) < 0.2
 
 
@@ -155,7 +151,8 @@ def test_swingup_chosen_upright_just_balances_and_survives_a_retune(client):
         ws.send_text(json.dumps({"type": "tune", "scales": {"theta": 0.05}}))
         d = receive_until(ws, lambda m: m["type"] == "design")
         assert d["controller"] == "swingup"
-        time.sleep(0.5)
+        t0 = receive_until(ws, lambda m: m["type"] == "frame")["t"]
+        receive_until(ws, lambda m: m["type"] == "frame" and (m["fell"] or m["t"] > t0 + 0.5))
         frames = [receive_until(ws, lambda m: m["type"] == "frame") for _ in range(20)]
         assert all(fr["mode"] == "balancing" and fr["fell"] is None for fr in frames)
         assert all(abs(fr["x"][i_th]) < 0.2 for fr in frames)
@@ -164,8 +161,8 @@ def test_swingup_chosen_upright_just_balances_and_survives_a_retune(client):
         d = receive_until(ws, lambda m: m["type"] == "design")
         assert d["controller"] == "swingup" and d["rate"] == 100.0
         assert d["controller_info"]["c_in"] > 0
-        time.sleep(0.5)
-        f = receive_until(ws, lambda m: m["type"] == "frame" and m["t"] > 0.3)
+        t0 = receive_until(ws, lambda m: m["type"] == "frame")["t"]
+        f = receive_until(ws, lambda m: m["type"] == "frame" and (m["fell"] or m["t"] > t0 + 0.5))
         assert f["mode"] == "balancing" and f["fell"] is None
         assert f["u_limits"][1][0] == pytest.approx(0.8 * sysm["input_limits"][0][1])
 
@@ -181,13 +178,15 @@ def test_mpc_holds_a_push_within_its_limits(client):
         assert d["controller"] == "mpc" and info["kind"] == "mpc" and info["horizon"] >= 1
         assert d["controller_milliseconds"] > 0
         ws.send_text(json.dumps({"type": "push", "size": 0.5, "seq": 40}))
+        receive_until(ws, lambda m: m["type"] == "ack" and m["seq"] == 40)
         lo, hi = sysm["input_limits"][0]
-        frames = []
-        while len(frames) < 120:  # 3 s
+        frames = [receive_until(ws, lambda m: m["type"] == "frame")]
+        while frames[-1]["t"] < frames[0]["t"] + 3.0:  # 3 s of simulated time after the push
             f = receive_until(ws, lambda m: m["type"] == "frame")
             assert f["fell"] is None and f["controller"] == "mpc"
             frames.append(f)
-        assert any(f["push"] != 0 for f in frames)
+        # Every frame after the ack is stamped with the push (taken: it acts for 0.1 s).
+        assert all(f["push_seq"] == 40 and f["pushes"] == 1 for f in frames)
         for f in frames:
             assert lo - 1e-9 <= f["u_cmd"][0] <= hi + 1e-9
         assert abs(frames[-1]["x"][i_th]) < 0.1
@@ -236,8 +235,8 @@ def test_a_failed_mpc_design_keeps_the_mpc(client):
         ws.send_text(json.dumps({"type": "tune", "rate": 5}))
         err = receive_until(ws, lambda m: m["type"] in ("design_error", "design"))
         assert err["type"] == "design_error" and err["controller"] == "mpc"
-        time.sleep(0.5)
-        f = receive_until(ws, lambda m: m["type"] == "frame")
+        t0 = receive_until(ws, lambda m: m["type"] == "frame")["t"]
+        f = receive_until(ws, lambda m: m["type"] == "frame" and (m["fell"] or m["t"] > t0 + 0.5))
         assert f["controller"] == "mpc" and f["fell"] is None and f["solve"] is not None
 
 
