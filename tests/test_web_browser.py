@@ -40,8 +40,7 @@ def server():
     proc.communicate(timeout=20)
 
 
-@pytest.fixture(scope="module")
-def browser():
+def chromium(*extra):
     for path, what in ((CHROMIUM, "chromium"), (CHROMEDRIVER, "chromedriver")):
         if not os.path.exists(path):
             pytest.fail(f"{what} is missing ({path}): install Debian's chromium and "
@@ -52,11 +51,52 @@ def browser():
     opts = webdriver.ChromeOptions()
     opts.binary_location = CHROMIUM
     for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                "--window-size=1400,1400"):
+                "--window-size=1400,1400", *extra):
         opts.add_argument(arg)
-    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
+    return webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    driver = chromium()
     yield driver
     driver.quit()
+
+
+def open_socket(driver, url):
+    """What a script of the page open in *driver* gets from a socket to *url*: ``"refused"``
+    when it closes before it opens, else the first message's type."""
+    driver.set_script_timeout(60)
+    return driver.execute_async_script("""
+        const done = arguments[arguments.length - 1];
+        const ws = new WebSocket(arguments[0]);
+        let opened = false;
+        ws.onopen = () => { opened = true; };
+        ws.onmessage = (e) => { done(JSON.parse(e.data).type); ws.close(); };
+        ws.onclose = () => { if (!opened) done("refused"); };
+        """, url)
+
+
+def test_a_page_from_a_foreign_name_is_refused(server):
+    """DNS rebinding: another site's name made to resolve to this machine (here by the
+    browser's own resolver rules) gets no page, and its page's socket gets no session."""
+    port = server.rstrip("/").rsplit(":", 1)[1]
+    driver = chromium("--host-resolver-rules=MAP attacker.example 127.0.0.1")
+    try:
+        driver.get(f"http://attacker.example:{port}/")
+        text = driver.execute_script("return document.body ? document.body.innerText : ''")
+        assert "not this playground's address" in text, text
+        assert driver.execute_script("return typeof window.playground") == "undefined"
+        # That page's script, to the same server under its own name and under the real one.
+        assert open_socket(driver, f"ws://attacker.example:{port}/ws") == "refused"
+        assert open_socket(driver, f"ws://127.0.0.1:{port}/ws") == "refused"
+        # The same browser, at the playground's own address: the page and a session.
+        driver.get(server)
+        wait_for(lambda: driver.execute_script(
+            "return window.playground && window.playground.frames > 0"), 60, "the page's frames")
+        assert open_socket(driver, f"ws://127.0.0.1:{port}/ws") == "hello"
+    finally:
+        driver.quit()
 
 
 def wait_for(predicate, timeout=15.0, what="the condition"):
@@ -172,7 +212,8 @@ def test_controller_off_falls(page):
             " p.frame.controller, p.ws.readyState]")) from None
     assert frame(page)["fell"]["state"] == "theta"
     Select(page.find_element(By.ID, "controller")).select_by_value("lqg")
-    time.sleep(0.3)
+    wait_for(lambda: page.execute_script(
+        "const d = window.playground.design; return d && d.controller === 'lqg'"), 60, "LQG back")
     button(page, "Reset").click()
     wait_for(lambda: "Running" in page.find_element(By.ID, "status").text, 60, "the restart")
 
@@ -186,41 +227,42 @@ def test_swingup_from_hanging(page):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import Select
 
-    began = time.monotonic()
     states = page.execute_script("return window.playground.sys.states")
     i_th, i_x = states.index("theta"), states.index("x")
     Select(page.find_element(By.ID, "controller")).select_by_value("swingup")
     wait_for(lambda: page.execute_script(
         "const d = window.playground.design; return d && d.controller === 'swingup'"), 30,
         "the swing-up's design")
+    run = frame(page)["run"]
     button(page, "Hang").click()
-    wait_for(lambda: (f := frame(page))["hanging"] and f["t"] < 1.0
-             and abs(abs(f["x"][i_th]) - math.pi) < 0.3, 30, "the pole hanging")
-    # (The frames from here on are the hanging run's.)
+    wait_for(lambda: (f := frame(page))["run"] > run and f["hanging"], 30, "the hanging run")
+    # (The frames from here on are the hanging run's; the charts start again with its start.)
+    t0, theta0 = page.execute_script(
+        f"const d = window.playground.data; return [d.t[0], d.x[{i_th}][0]]")
+    assert t0 == 0 and abs(abs(theta0) - math.pi) < 0.06
     up = wait_for(lambda: (f := frame(page))["mode"] == "balancing"
                   and abs(wrapped(f["x"][i_th])) < 0.1 and f, 40, "the pole up and balanced")
     assert up["fell"] is None and 0.5 < up["t"] < 10.0
     assert "mode: balancing" in page.find_element(By.ID, "mode").text
     history = page.execute_script("return window.playground.history")
-    run = [h for h in history if h["t"] <= up["t"]]
-    assert any(h["mode"] == "pumping" for h in run)  # it pumped before it caught
-    assert max(abs(h["x"][i_x]) for h in run) < 1.0  # on its track
-    assert time.monotonic() - began < 60
+    hanging_run = [h for h in history if h["run"] == up["run"] and h["t"] <= up["t"]]
+    assert any(h["mode"] == "pumping" for h in hanging_run)  # it pumped before it caught
+    assert max(abs(h["x"][i_x]) for h in hanging_run) < 1.0  # on its track
 
 
 def test_mpc_rejects_a_push_within_its_limits(page):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import Select
 
-    began = time.monotonic()
     states = page.execute_script("return window.playground.sys.states")
     i_th = states.index("theta")
     Select(page.find_element(By.ID, "controller")).select_by_value("mpc")
     wait_for(lambda: page.execute_script(
         "const d = window.playground.design; return d && d.controller === 'mpc'"), 30,
         "the MPC's design")
+    run = frame(page)["run"]
     button(page, "Reset").click()
-    wait_for(lambda: (f := frame(page))["solve"] is not None and f["t"] < 1.0, 30, "the MPC running")
+    wait_for(lambda: (f := frame(page))["run"] > run and f["solve"] is not None, 30, "the MPC running")
     assert "MPC solve per sample: median" in page.find_element(By.ID, "solve").text
     pushes = frame(page)["pushes"]
     button(page, "Push right").click()
@@ -230,10 +272,8 @@ def test_mpc_rejects_a_push_within_its_limits(page):
     assert settled["fell"] is None and abs(settled["x"][i_th]) < 0.1
     lo, hi = page.execute_script("return window.playground.sys.input_limits[0]")
     history = page.execute_script("return window.playground.history")
-    after = [h for h in history if h["t"] >= t_push - 0.2]
+    after = [h for h in history if h["run"] == settled["run"] and h["t"] >= t_push - 0.2]
     assert after and all(lo - 1e-9 <= h["u_cmd"][0] <= hi + 1e-9 for h in after)
-    assert any(h["push"] != 0 for h in history)
-    assert time.monotonic() - began < 60
 
 
 def test_picker_disables_swingup_where_there_is_none(page):

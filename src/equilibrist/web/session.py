@@ -391,6 +391,7 @@ class Session:
         self.paused = False
         self.busy = False  # True while another thread rebuilds the session
         self.frame_no = 0  # frames made
+        self.run = 0  # runs started (each reset, hang or new system starts one)
         self.seen: int | None = None  # the last frame the page said it drew
         self.pending_design = 0  # id of the latest design asked for
         self.messages: list[dict[str, Any]] = []  # frames to send besides the next frame
@@ -516,6 +517,7 @@ class Session:
         if hang != self.hanging:
             self.hanging = hang
             self._apply_region()
+        self.run += 1
         self.mode: str | None = None
         self.mode_since = 0.0
         self.t = 0.0
@@ -851,6 +853,7 @@ class Session:
         out = {
             "type": "frame",
             "n": self.frame_no,
+            "run": self.run,
             "t": round(self.t, 6),
             "x": self.x.tolist(),
             "xhat": self.xhat.tolist(),

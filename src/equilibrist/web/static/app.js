@@ -347,8 +347,8 @@
     // Say what has been drawn, so that the server never runs ahead of a slow page.
     if (f.n % 4 === 0) send({ type: "seen", frame: f.n }, false);
     // The last frames' states, for the page's tests.
-    state.history.push({ t: f.t, x: f.x, u: f.u, u_cmd: f.u_cmd, push: f.push, pushes: f.pushes, mode: f.mode,
-      controller: f.controller });
+    state.history.push({ n: f.n, run: f.run, t: f.t, x: f.x, u: f.u, u_cmd: f.u_cmd, push: f.push,
+      pushes: f.pushes, mode: f.mode, controller: f.controller, hanging: f.hanging });
     if (state.history.length > 240) state.history.shift();
     for (const s of f.shapes) state.shapes.set(s.key, s);
     appendSamples(f.samples);
