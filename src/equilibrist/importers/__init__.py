@@ -68,6 +68,11 @@ CONTROL_RATE = 200.0  # Hz
 # counts as fallen (hinges about the vertical can not fall).
 FALL_ANGLE = math.pi / 2
 
+# The symbolic derivation grows steeply with the number of joints (three
+# take about a minute, four several): a larger tree is refused up front
+# rather than left deriving for hours (docs/models.md).
+MAX_COORDINATES = 4
+
 _SOURCES = ("__init__.py", "tree.py", "derive.py", "urdf.py")
 
 
@@ -221,6 +226,12 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
     joints = tree.joints
     if not joints:
         raise DefinitionError(f"{name}: the model has no hinge or slide joint: nothing moves")
+    if len(joints) > MAX_COORDINATES:
+        raise DefinitionError(
+            f"{name}: {len(joints)} joints: equilibrist derives the equations of motion of at most "
+            f"{MAX_COORDINATES} joints symbolically (the derivation grows steeply with each joint); "
+            "a larger tree needs a numeric engine such as MuJoCo itself"
+        )
     coords = tuple(j.name for j in joints)
     units = {j.name: "rad" if j.kind == "hinge" else "m" for j in joints}
     g_norm = math.sqrt(sum(v * v for v in tree.gravity))
