@@ -7,9 +7,20 @@ And a command that is signalled ends as a shell expects: 130 after Ctrl-C,
 from __future__ import annotations
 
 import signal
+from pathlib import Path
 
 import pytest
 from tests.support.signals import after_cpu, signal_while_working, start
+
+from equilibrist.cli.main import main
+
+
+def _one_line(code: int, err: str, *words: str) -> None:
+    assert code == 2, err
+    assert "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1, err
+    for word in words:
+        assert word in err, err
 
 # -- signals ---------------------------------------------------------------------------
 
@@ -35,3 +46,118 @@ def test_a_signalled_command_exits_130_or_143(tmp_path, command, signum) -> None
     assert err.decode().strip().splitlines()[-1].startswith("equilibrist: interrupted")
     assert took < 10.0, f"took {took:.1f} s to stop"
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+# -- sweep: the user's files stay, damaged parts folders are named -----------------------
+
+SWEEP = ["sweep", "cartpole", "--vary", "m_p=0.1:0.3:2", "--runs", "3", "--duration", "0.5",
+         "--seed", "3", "--no-progress", "--chunk-size", "1"]
+
+
+def _foreign_parquet(path: Path) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    pq.write_table(pa.table({"x": [1.0, 2.0]}), path)
+
+
+def _interrupted_study(out: Path, m_p: str = "0.1:0.3:2") -> Path:
+    """A study of two chunks interrupted after its first: its parts folder."""
+    from equilibrist.study import make_study, run_study
+
+    study = make_study("cartpole", vary={"m_p": m_p}, runs=3, duration=0.5, seed=3)
+
+    def stop(chunk: int, done: int) -> None:
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_study(study, out, chunk_size=1, on_chunk=stop)
+    parts = out.with_name(out.name + ".parts")
+    assert sorted(p.name for p in parts.iterdir()) == ["chunk-000000.parquet", "study.json"]
+    return parts
+
+
+@pytest.mark.parametrize("kind", ["text", "foreign parquet"])
+def test_sweep_never_overwrites_a_users_file(tmp_path, capsys, kind) -> None:
+    out = tmp_path / "table.parquet"
+    if kind == "text":
+        out.write_text("the user's own file")
+    else:
+        _foreign_parquet(out)
+    before = out.read_bytes()
+    for extra in ([], ["--resume"], ["--resume", "--force"]):
+        code = main([*SWEEP, "--out", str(out), *extra])
+        _one_line(code, capsys.readouterr().err, str(out))
+        assert out.read_bytes() == before
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["table.parquet"]
+    assert main([*SWEEP, "--out", str(out), "--force"]) == 0
+    assert out.read_bytes() != before
+    # A study table is equilibrist's own: written again without --force.
+    assert main([*SWEEP, "--out", str(out)]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["table.parquet"]
+
+
+def test_resume_keeps_the_users_files_in_the_parts_folder(tmp_path, capsys) -> None:
+    out = tmp_path / "table.parquet"
+    parts = _interrupted_study(out)
+    (parts / "notes.txt").write_text("the user's notes")
+    (parts / "chunk-9.parquet").write_text("not a part's name")
+    assert main([*SWEEP, "--out", str(out), "--resume"]) == 0, capsys.readouterr().err
+    assert out.exists()
+    assert sorted(p.name for p in parts.iterdir()) == ["chunk-9.parquet", "notes.txt"]
+    assert (parts / "notes.txt").read_text() == "the user's notes"
+
+
+@pytest.mark.parametrize("manifest", ["[1, 2]", '"a string"', "3", "null", '{"study": 3}',
+                                      "{not json", ""])
+def test_resume_names_a_damaged_manifest(tmp_path, capsys, manifest) -> None:
+    out = tmp_path / "table.parquet"
+    parts = _interrupted_study(out)
+    (parts / "study.json").write_text(manifest)
+    code = main([*SWEEP, "--out", str(out), "--resume"])
+    _one_line(code, capsys.readouterr().err, "study.json")
+    assert sorted(p.name for p in parts.iterdir()) == ["chunk-000000.parquet", "study.json"]
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("chunk", ["chunk-000000.parquet", "chunk-000001.parquet"])
+@pytest.mark.parametrize("kind", ["text", "foreign parquet", "another study's part"])
+def test_resume_names_a_foreign_part_and_keeps_it(tmp_path, capsys, chunk, kind) -> None:
+    out = tmp_path / "table.parquet"
+    parts = _interrupted_study(out)
+    foreign = parts / chunk
+    if kind == "text":
+        foreign.write_text("the user's own file")
+    elif kind == "foreign parquet":
+        _foreign_parquet(foreign)
+    else:
+        (tmp_path / "other").mkdir()
+        other = _interrupted_study(tmp_path / "other" / "t.parquet", m_p="0.1:0.4:2")
+        foreign.write_bytes((other / "chunk-000000.parquet").read_bytes())
+    before = foreign.read_bytes()
+    code = main([*SWEEP, "--out", str(out), "--resume"])
+    _one_line(code, capsys.readouterr().err, chunk)
+    assert foreign.read_bytes() == before
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("address", ["not a url", "http://localhost:8786", "tcp://", "ftp://a:1",
+                                     "tcp://has space:8786"])
+def test_a_scheduler_address_that_is_not_one_is_refused(tmp_path, capsys, address) -> None:
+    out = tmp_path / "table.parquet"
+    code = main([*SWEEP, "--out", str(out), "--scheduler", address])
+    _one_line(code, capsys.readouterr().err, "--scheduler", "tcp://HOST:PORT")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_more_workers_than_cores_are_refused(tmp_path, capsys, monkeypatch) -> None:
+    from equilibrist.study import runner
+
+    def never(self):
+        raise AssertionError("a local cluster was started")
+
+    monkeypatch.setattr(runner._local_cluster, "__enter__", never)
+    out = tmp_path / "table.parquet"
+    code = main([*SWEEP, "--out", str(out), "--workers", "1000"])
+    _one_line(code, capsys.readouterr().err, "--workers 1000", "cores")
+    assert list(tmp_path.iterdir()) == []

@@ -77,6 +77,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     common.add_set(p)
     p.add_argument("--out", required=True, metavar="FILE.parquet", help="the table")
     p.add_argument("--resume", action="store_true", help="continue an interrupted study")
+    p.add_argument("--force", action="store_true",
+                   help="replace an --out file that is not a study table (a study table is "
+                   "replaced without it)")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", metavar="N", help="start a local Dask cluster of N processes")
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="use a running Dask cluster")
@@ -165,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         done = run_study(study, args.out, resume=args.resume, workers=workers,
                          scheduler=args.scheduler, threads=threads, chunk_size=chunk,
-                         progress=show_progress(args))
+                         progress=show_progress(args), force=args.force)
     except KeyboardInterrupt:
         from pathlib import Path
 

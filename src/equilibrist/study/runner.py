@@ -23,7 +23,6 @@ compiles it first, so a local cluster's workers never compile).
 from __future__ import annotations
 
 import os
-import shutil
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -32,7 +31,7 @@ from typing import Any
 
 from equilibrist.study.compute import chunk_task, evaluate_chunk
 from equilibrist.study.spec import Study, StudyError
-from equilibrist.study.store import Store, require_pyarrow
+from equilibrist.study.store import Store, check_out, require_pyarrow
 
 ChunkCallback = Callable[[int, int], None]
 
@@ -98,6 +97,7 @@ def run_study(
     progress: bool = False,
     on_chunk: ChunkCallback | None = None,
     client: Any = None,
+    force: bool = False,
 ) -> StudyRun:
     """Run *study* and write its table to *out* (Parquet).
 
@@ -120,6 +120,9 @@ def run_study(
         Called after each chunk is written, with the number of chunks written so far.
     client : distributed.Client, optional
         Use this client (an existing cluster) instead of *scheduler*.
+    force : bool
+        Replace an existing *out* that is not a study table (without it,
+        such a file is refused: it is the user's, not equilibrist's).
 
     A ``KeyboardInterrupt`` stops the study at once; the chunks already
     written stay in ``<out>.parts`` for ``resume=True``.
@@ -132,6 +135,12 @@ def run_study(
         raise StudyError("give --workers (a local cluster) or --scheduler (an existing one), not both")
     if workers is not None and workers < 1:
         raise StudyError(f"--workers {workers}: expected a whole number >= 1")
+    if workers is not None and workers > _cores():
+        raise StudyError(f"--workers {workers}: this machine has {_cores()} cores, so a local "
+                         f"cluster takes at most {_cores()} workers (more would only compete "
+                         "for them; use --scheduler for a larger cluster)")
+    if scheduler is not None:
+        _check_address(scheduler)
     if threads is not None and threads < 1:
         raise StudyError(f"--threads {threads}: expected a whole number >= 1")
     if not out.parent.is_dir():
@@ -139,6 +148,7 @@ def run_study(
     size = chunk_size or default_chunk_size(study)
     if size < 1:
         raise StudyError(f"--chunk-size {size}: expected a whole number >= 1")
+    check_out(out, force=force, resume=resume)
     store = Store(study, out, size)
     if resume and not store.dir.exists() and out.exists():
         from equilibrist.study.store import read_study
@@ -187,7 +197,7 @@ def run_study(
     except BaseException:
         if fresh and written[0] == 0:
             # Nothing finished: leave nothing behind.
-            shutil.rmtree(store.dir, ignore_errors=True)
+            store.remove()
         raise
     finally:
         if bar is not None:
@@ -195,6 +205,24 @@ def run_study(
     path = store.assemble()
     return StudyRun(path, study.n_points, study.total_runs, store.n_chunks, len(todo),
                     store.n_chunks - len(todo), _failed(path), time.perf_counter() - began, where)
+
+
+def _check_address(address: str) -> None:
+    """Refuse a scheduler address Dask cannot connect to, before any work."""
+    _distributed()  # installed, or one line saying how to install it
+    from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.comm.registry import get_backend
+
+    try:
+        scheme, location = parse_address(address)
+        get_backend(scheme)
+        if scheme in ("tcp", "tls"):
+            host, _ = parse_host_port(location, 8786)
+            if not host or any(c.isspace() for c in host):
+                raise ValueError(f"no host name in {address!r}")
+    except (ValueError, TypeError) as exc:
+        raise StudyError(f"--scheduler {address}: not the address of a Dask scheduler, "
+                         f"expected tcp://HOST:PORT ({exc})") from None
 
 
 def _chunk_points(study: Study, size: int, chunk: int) -> int:
@@ -257,7 +285,7 @@ class _connect:
         distributed = _distributed()
         try:
             self.client = distributed.Client(self.address, timeout="20s")
-        except (OSError, TimeoutError) as exc:
+        except (OSError, TimeoutError, ValueError) as exc:
             raise StudyError(f"--scheduler {self.address}: cannot connect ({exc})") from None
         return self.client
 

@@ -19,10 +19,11 @@ workers) is written, so the file is the same bytes however it was made.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import platform
-import shutil
+import re
 import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -34,6 +35,7 @@ if TYPE_CHECKING:
     import pyarrow as pa
 
 _MANIFEST = "study.json"
+_PART = re.compile(r"chunk-\d{6,}\.parquet")
 
 
 def require_pyarrow() -> Any:
@@ -130,19 +132,25 @@ class Store:
         """Create (or, resuming, check) the parts folder; the chunks still to compute."""
         manifest = {"study": self.study.to_dict(), "chunk_size": self.chunk_size}
         if self.dir.exists():
+            if not self.dir.is_dir() or not (self.dir / _MANIFEST).is_file():
+                raise StudyError(f"{self.dir} is in the way and is not the parts folder of a "
+                                 "study: move it away (or name another --out)")
             if not resume:
                 raise StudyError(f"{self.dir} holds an unfinished study: add --resume to "
                                  "continue it, or remove that folder to start again")
             try:
                 found = json.loads((self.dir / _MANIFEST).read_text())
             except (OSError, ValueError):
-                raise StudyError(f"{self.dir} is not the parts folder of a study: remove it") from None
+                found = None
+            if not isinstance(found, dict) or not isinstance(found.get("study"), dict):
+                raise StudyError(f"{self.dir / _MANIFEST} is damaged (expected the JSON object "
+                                 "'equilibrist sweep' writes): remove the folder to start again")
             if found.get("study") != manifest["study"]:
                 raise StudyError(f"{self.dir} belongs to another study: --resume continues "
                                  "the same study only (remove the folder to start this one)")
             if found.get("chunk_size") != self.chunk_size:
                 raise StudyError(f"{self.dir} was written with --chunk-size "
-                                 f"{found.get('chunk_size')}: resume with the same chunk size")
+                                 f"{found.get('chunk_size')!r}: resume with the same chunk size")
             return [c for c in range(self.n_chunks) if not self._complete(c)]
         self.dir.mkdir(parents=True)
         text = json.dumps(manifest, sort_keys=True, indent=1)
@@ -153,18 +161,27 @@ class Store:
         return list(range(self.n_chunks))
 
     def _complete(self, chunk: int) -> bool:
+        """Whether the part of *chunk* is there; a file of its name that is not a part of
+        this study (another study's, or not Parquet) is refused: it is not ours to delete."""
         import pyarrow.parquet as pq
 
         path = self.part(chunk)
         if not path.exists():
             return False
+        first = chunk * self.chunk_size
+        expected = min(self.chunk_size, self.study.n_points - first)
         try:
-            meta = pq.read_metadata(path)
-        except Exception:  # a damaged part is computed again
-            path.unlink(missing_ok=True)
-            return False
-        expected = min(self.chunk_size, self.study.n_points - chunk * self.chunk_size)
-        return bool(meta.num_rows == expected)
+            found = pq.read_schema(path)
+            same = (found.remove_metadata().equals(self.schema.remove_metadata())
+                    and (found.metadata or {}).get(b"equilibrist.study")
+                    == self.schema.metadata[b"equilibrist.study"])
+            points = pq.read_table(path, columns=["point"]).column("point").to_pylist() if same else []
+        except Exception:  # any unreadable file is refused below
+            same, points = False, []
+        if not same or points != list(range(first, first + expected)):
+            raise StudyError(f"{path} is not a part of this study (not written by this "
+                             "'equilibrist sweep'): move it out of the parts folder, then resume")
+        return True
 
     def write(self, chunk: int, rows: list[dict[str, Any]]) -> None:
         _atomic_parquet(rows_to_table(rows, self.schema), self.part(chunk))
@@ -180,8 +197,55 @@ class Store:
         if points != list(range(self.study.n_points)):
             raise StudyError(f"{self.dir}: the parts do not cover the study's points: remove it")
         _atomic_parquet(table.replace_schema_metadata(self.schema.metadata), self.out)
-        shutil.rmtree(self.dir)
+        self.remove()
         return self.out
+
+    def remove(self) -> None:
+        """Remove the parts folder's own files, and the folder when nothing else is in it.
+
+        Only the names the store writes (the manifest, the parts, their
+        temporary files) are removed: a file the user put there stays.
+        """
+        if not self.dir.is_dir():
+            return
+        for path in self.dir.iterdir():
+            name = path.name
+            ours = (name == _MANIFEST or _PART.fullmatch(name) is not None
+                    or (name.startswith((".study.", ".chunk-")) and name.endswith(".tmp")))
+            if ours and path.is_file() and not path.is_symlink():
+                path.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):  # not empty: the user's files stay, with their folder
+            self.dir.rmdir()
+
+
+def check_out(out: Path, *, force: bool = False, resume: bool = False) -> None:
+    """Refuse to replace a file at *out* that is not a study table, unless *force*.
+
+    A study table ('equilibrist sweep' wrote it) is replaced by the new one;
+    any other file is the user's. With *resume*, a table is what the study
+    continues from, so anything else is refused even with *force*.
+    """
+    if not out.exists() and not out.is_symlink():
+        return
+    if out.is_dir():
+        raise StudyError(f"--out {out} is a folder: name the table's file")
+    if _is_study_table(out) or (force and not resume):
+        return
+    if resume:
+        raise StudyError(f"--out {out} exists and is not a study table written by 'equilibrist "
+                         "sweep': there is nothing to resume from it (name the study's table)")
+    raise StudyError(f"--out {out} exists and is not a study table written by 'equilibrist "
+                     "sweep': name a new file, or add --force to replace it")
+
+
+def _is_study_table(path: Path) -> bool:
+    import pyarrow.parquet as pq
+
+    try:
+        meta = pq.read_schema(path).metadata or {}
+    except Exception:  # whatever it is, it is not a table
+        return False
+    return bool(meta.get(b"equilibrist.format", b"") == FORMAT.encode())
 
 
 def read_study(path: str | Path) -> tuple[pa.Table, Study]:
