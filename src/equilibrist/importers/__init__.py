@@ -258,13 +258,13 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
         # MuJoCo's ctrl (a URDF's reduction times the actuator's effort).
         # An actuator named as its joint (MuJoCo's usual convention) names
         # the input <actuator>_torque or <actuator>_force.
-        name = a.name if a.name not in taken else f"{a.name}_{what}"
+        iname = a.name if a.name not in taken else f"{a.name}_{what}"
         low, high = sorted((a.gain * a.low, a.gain * a.high))
         ctrl = "MuJoCo's ctrl" if kind == "MJCF" else "the actuator's effort"
-        scale = "" if a.gain == 1 else f"; {ctrl} = {name} / {a.gain:g}"
-        inputs.append(Input(name, unit, f"{what} of motor {a.name!r} on joint {joint.name}{scale}", low, high))
-        if a.gain != 1 or name != a.name:
-            scales.append(f"input {name} [{unit}] is the {what} of {'motor' if kind == 'MJCF' else 'actuator'} "
+        scale = "" if a.gain == 1 else f"; {ctrl} = {iname} / {a.gain:g}"
+        inputs.append(Input(iname, unit, f"{what} of motor {a.name!r} on joint {joint.name}{scale}", low, high))
+        if a.gain != 1 or iname != a.name:
+            scales.append(f"input {iname} [{unit}] is the {what} of {'motor' if kind == 'MJCF' else 'actuator'} "
                           f"{a.name!r} on joint {joint.name}" + (f", {a.gain:g} * its ctrl" if a.gain != 1 else "")
                           + (f" (limits [{low:g}, {high:g}] {unit}, ctrlrange [{a.low:g}, {a.high:g}])"
                              if a.gain != 1 else ""))

@@ -44,21 +44,30 @@ class _Literal(sp.Symbol):
 
 
 # A name prints as a symbol with a subscript (``m_p``, ``I_body``,
-# ``theta1``) when it is a short symbol, one underscore at most after a
-# stem of one or two letters; anything else is a word and prints literally.
-_SYMBOL_LIKE = re.compile(r"^[A-Za-z]{1,2}(_[A-Za-z0-9]+)?$|^[A-Za-z]+\d*$")
+# ``theta1``, ``phi``) when it is a short symbol: a stem of one or two
+# letters or a Greek letter's name, then digits or one subscript; anything
+# else is a word (``elbow``, ``cart_to_pole``) and prints literally.
+_SYMBOL_LIKE = re.compile(r"^([A-Za-z]{1,2}|(?P<greek>[A-Za-z]+))(\d*|_[A-Za-z0-9]+)$")
 
 
 def literal(name: str) -> bool:
     """Whether *name* prints as written rather than as a symbol with subscripts."""
-    return not _SYMBOL_LIKE.match(name)
+    from sympy.printing.pretty.pretty_symbology import greek_unicode
+
+    found = _SYMBOL_LIKE.match(name)
+    if not found:
+        return True
+    greek = found.group("greek")
+    return greek is not None and greek not in greek_unicode
 
 
 def _display(name: str, accent: str) -> sp.Symbol:
     if literal(name):
         return _Literal(name, accent)
     base, digits = re.match(r"^(.*?)(\d*)$", name).groups()  # type: ignore[union-attr]
-    return sp.Symbol(base + accent + (f"_{digits}" if digits else ""))
+    # theta_1 as theta1: the digits are the subscript (a "_" left on the
+    # stem would make sympy read "__1" as a superscript).
+    return sp.Symbol(base.rstrip("_") + accent + (f"_{digits}" if digits else ""))
 
 
 def display_symbols(model: SymbolicModel, spec: SystemSpec) -> dict[sp.Symbol, sp.Symbol]:
