@@ -6,10 +6,13 @@ And a command that is signalled ends as a shell expects: 130 after Ctrl-C,
 
 from __future__ import annotations
 
+import math
 import signal
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from tests.support.signals import after_cpu, signal_while_working, start
 
 from equilibrist.cli.main import main
@@ -161,3 +164,27 @@ def test_more_workers_than_cores_are_refused(tmp_path, capsys, monkeypatch) -> N
     code = main([*SWEEP, "--out", str(out), "--workers", "1000"])
     _one_line(code, capsys.readouterr().err, "--workers 1000", "cores")
     assert list(tmp_path.iterdir()) == []
+
+
+# -- sizes are checked before anything is allocated ------------------------------------
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(n=st.integers(10_000_001, 10**30), log=st.booleans())
+def test_a_grid_too_large_is_refused_before_it_is_allocated(tmp_path, capsys, n, log) -> None:
+    out = tmp_path / "table.parquet"
+    vary = f"m_p=0.5:2:{n}" + (":log" if log else "")
+    code = main(["sweep", "cartpole", "--vary", vary, "--out", str(out), "--no-progress"])
+    _one_line(code, capsys.readouterr().err, "--vary m_p", "at most 10000000")
+    assert not out.exists()
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(counts=st.lists(st.integers(1, 10**20), min_size=1, max_size=3).filter(
+    lambda c: math.prod(c) > 100_000))
+def test_a_region_of_attraction_grid_too_large_is_refused(tmp_path, capsys, counts) -> None:
+    out = tmp_path / "table.parquet"
+    roa = [f"{s}=-0.1:0.1:{n}" for s, n in zip(("theta", "x", "theta_dot"), counts, strict=False)]
+    code = main(["sweep", "cartpole", "--vary", "m_p=0.5:2:2", "--roa", *roa, "--out", str(out),
+                 "--no-progress"])
+    _one_line(code, capsys.readouterr().err, "--roa", "at most 100000")
+    assert not out.exists()

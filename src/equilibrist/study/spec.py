@@ -59,6 +59,9 @@ METRICS = ("full", "basic")
 # trajectory metrics: about 32 MB of doubles.
 BATCH_CELLS = 4_000_000
 MAX_POINTS = 10_000_000
+# Initial states of a point's region-of-attraction grid (the product of its N's): each
+# is a run of every point, and the grid is allocated whole.
+MAX_ROA_STATES = 100_000
 
 
 class StudyError(EquilibristError, ValueError):
@@ -317,6 +320,9 @@ def _parse_values(name: str, value: object, sampled: bool, problems: list[str]
     if sampled:
         return (), lo, hi, log
     assert count is not None
+    if count > MAX_POINTS:  # refused before the grid is allocated
+        problems.append(f"{what}={text}: N = {count} values, at most {MAX_POINTS} per study")
+        return None
     grid = np.geomspace(lo, hi, count) if log else np.linspace(lo, hi, count)
     return tuple(float(v) for v in grid), lo, hi, log
 
@@ -581,6 +587,12 @@ def _ranges(system: Any, given: Mapping[str, object], option: str, problems: lis
             problems.append(f"{option} {name}={value}: reversed range, LOW {lo:g} is above HIGH {hi:g}")
             continue
         out[name] = (lo, hi, n) if counted else (lo, hi)
+    if counted and out:
+        cells = math.prod(int(v[2]) for v in out.values())
+        if cells > MAX_ROA_STATES:
+            grid = " x ".join(str(int(v[2])) for v in out.values())
+            problems.append(f"{option}: a grid of {grid} = {cells} initial states per point; at "
+                            f"most {MAX_ROA_STATES} (each is a run of every point)")
     return out
 
 
