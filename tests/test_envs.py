@@ -14,11 +14,13 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import equilibrist.envs.vector as vector_module
 from equilibrist import envs, get_system
 from equilibrist.envs import EnvError, EquilibristEnv, EquilibristVectorEnv
-from equilibrist.errors import UnknownNameError
+from equilibrist.errors import EquilibristError, UnknownNameError
 from equilibrist.sim.run import simulate
 from equilibrist.systems import registry
 from equilibrist.tasks import get_task, task_names
@@ -545,3 +547,73 @@ def test_task_start_is_used() -> None:
     for seed in range(5):
         _, info = env.reset(seed=seed)
         assert np.all(np.abs(info["state"] - task.start) <= task.spread + 1e-15)
+
+
+# -- actions and starts that are not real numbers -------------------------------------------
+# What an agent or a user may hand over where numbers belong: one of these, or a
+# container of them.
+NOT_REAL = st.one_of(
+    st.text(max_size=8), st.just({"F": 1.0}), st.builds(object), st.none(), st.booleans(),
+    st.complex_numbers(allow_nan=False, allow_infinity=False), st.just(b"1"),
+)
+NOT_ACTIONS = st.one_of(
+    NOT_REAL,
+    NOT_REAL.map(lambda v: [v]),
+    NOT_REAL.map(lambda v: np.array([v], dtype=object)),
+    st.complex_numbers(allow_nan=False, allow_infinity=False).map(lambda c: np.array([c])),
+    st.just([[0.1, 0.2], [0.3]]),
+)
+
+
+def _refused(call: Callable[[], object], *words: str) -> str:
+    with pytest.raises(EquilibristError) as info:
+        call()
+    assert isinstance(info.value, ValueError)
+    text = str(info.value)
+    assert "\n" not in text
+    for word in words:
+        assert word in text, text
+    return text
+
+
+@pytest.fixture(scope="module")
+def stepped() -> tuple[EquilibristEnv, EquilibristVectorEnv]:
+    env = EquilibristEnv("cartpole", "balance")
+    env.reset(seed=0)
+    vec = EquilibristVectorEnv(3, "cartpole", "balance")
+    vec.reset(seed=0)
+    return env, vec
+
+
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(action=NOT_ACTIONS)
+def test_an_action_that_is_not_real_numbers_is_named(stepped, action: object) -> None:
+    env, vec = stepped
+    before = env.state
+    _refused(lambda: env.step(action), "action", "expected 1 real number", "[-1, 1]", "shape (1,)")
+    np.testing.assert_array_equal(env.state, before)  # nothing was stepped
+    states = vec.states
+    batch = action if isinstance(action, np.ndarray | list) else [action] * 3
+    _refused(lambda: vec.step(batch), "actions", "expected shape (3, 1)", "real number")
+    np.testing.assert_array_equal(vec.states, states)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(state=st.one_of(NOT_REAL, NOT_REAL.filter(lambda v: not isinstance(v, bool))
+                       .map(lambda v: [0.0, 0.0, 0.0, v])))
+def test_a_start_that_is_not_real_numbers_is_named(stepped, state: object) -> None:
+    env, _ = stepped
+    _refused(lambda: env.reset(options={"state": state}), "reset options", "state must be 4",
+             "x, theta, x_dot, theta_dot")
+
+
+def test_real_actions_in_any_form_still_step(stepped) -> None:
+    env, vec = stepped
+    for action in (0.1, [0.1], (0.1,), np.array([0.1], dtype=np.float32), np.array([[0.1]]), [1],
+                   np.array([0.1], dtype=object)):
+        env.reset(seed=1)
+        obs, *_ = env.step(action)
+        assert obs.shape == (env.core.n_obs,)
+    for actions in ([0.1, 0.2, 0.3], np.zeros((3, 1), dtype=np.float32), [[0], [1], [2]]):
+        obs, *_ = vec.step(actions)
+        assert obs.shape == (3, vec.core.n_obs)

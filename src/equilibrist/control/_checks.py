@@ -25,15 +25,13 @@ def real_array(value: object) -> tuple[np.ndarray | None, str]:
     """*value* as a float array, or None and what it holds instead of real numbers.
 
     Complex numbers (whose imaginary part a float conversion would drop),
-    text, and objects that are not real numbers are refused, as are nested
-    lists of unequal lengths.
+    text, booleans and objects that are not real numbers are refused, as are
+    nested lists of unequal lengths.
     """
     try:
         raw = np.asarray(value)
     except (TypeError, ValueError):
-        if isinstance(value, list | tuple):
-            return None, "nested lists of unequal lengths"
-        return None, f"a {type(value).__name__}"
+        return None, "nested lists of unequal lengths" if isinstance(value, list | tuple) else _a(value)
     kind = raw.dtype.kind
     if kind in "iuf":
         return raw.astype(float, copy=False), ""
@@ -41,13 +39,27 @@ def real_array(value: object) -> tuple[np.ndarray | None, str]:
         return None, f"complex numbers ({raw.dtype})"
     if kind in "USa":
         return None, "text"
+    if kind == "b":
+        return None, "booleans"
     if kind == "O":
-        wrong = next((v for v in raw.flat if not isinstance(v, numbers.Real) or isinstance(v, bool)),
-                     None)
-        if wrong is None and raw.size:
+        wrong = [v for v in raw.flat if not isinstance(v, numbers.Real) or isinstance(v, bool)][:1]
+        if not wrong:
             return raw.astype(float), ""
-        return None, "no numbers" if wrong is None else f"a {type(wrong).__name__} ({wrong!r:.40})"
+        return None, _a(wrong[0])
     return None, f"values of type {raw.dtype}"
+
+
+def _a(value: object) -> str:
+    name = type(value).__name__
+    return f"{'an' if name[:1].lower() in 'aeiou' else 'a'} {name}"
+
+
+def given_text(value: object) -> str:
+    """*value* in a few words on one line: an array by its dtype and shape, else its repr."""
+    if isinstance(value, np.ndarray):
+        return f"an array of {value.dtype}, shape {value.shape}"
+    text = " ".join(repr(value).split())
+    return f"{text[:77]}..." if len(text) > 80 else text
 
 
 def _floats(value: object, name: str) -> np.ndarray:

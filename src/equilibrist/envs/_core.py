@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from equilibrist.control._checks import given_text, real_array
 from equilibrist.errors import EquilibristError, UnknownNameError, nearest
 from equilibrist.numeric.system import System, get_system
 from equilibrist.sim.kernel import load_kernel
@@ -154,6 +155,18 @@ class Core:
     @property
     def limits(self) -> tuple[np.ndarray, np.ndarray]:
         return self.system.input_limits
+
+    def action_text(self) -> str:
+        """What one action is: its size, dtype, the inputs and their range."""
+        names = ", ".join(self.system.input_names)
+        m = self.system.n_inputs
+        if self.action_units == "physical":
+            lo, hi = self.limits
+            span = ", ".join(f"{n} in [{a:g}, {b:g}]" for n, a, b in
+                             zip(self.system.input_names, lo, hi, strict=True))
+        else:
+            span = f"{names} in [-1, 1] onto their limits"
+        return f"{m} real number(s) ({span}; beyond the range, saturated), float64"
 
     def physical_input(self, action: np.ndarray) -> np.ndarray:
         """The saturated input an action applies (as the core computes it)."""
@@ -347,6 +360,30 @@ def build_core(
         op=op, sc=sc, hang=hang, p_nom=p_nom, rnd_idx=rnd_idx, rnd_spread=rnd_spread,
         ci=ci, cf=cf,
     )
+
+
+def as_actions(value: object, shape: tuple[int, int] | tuple[int], core: Core, what: str) -> np.ndarray:
+    """*value* as the C-contiguous float64 array of *shape* a step takes, or an :class:`EnvError`.
+
+    An array of float64 of the shape passes as it is (the common case, kept
+    fast); anything else is converted if it holds real numbers only: text,
+    mappings, objects and complex numbers (whose imaginary part a float
+    conversion would drop) are refused with what was given and what is expected.
+    """
+    if type(value) is np.ndarray and value.dtype == np.float64 and value.shape == shape \
+            and value.flags.c_contiguous:
+        return value
+    per = core.action_text()
+    expected = (f"expected {per}, shape {shape}" if len(shape) == 1
+                else f"expected shape {shape} (num_envs, inputs), each row {per}")
+    arr, held = real_array(value)
+    if arr is None:
+        raise EnvError(f"{what} {given_text(value)} holds {held}, not real numbers: {expected}")
+    if arr.shape != shape:
+        if arr.size != math.prod(shape):
+            raise EnvError(f"{what}: {arr.size} value(s) of shape {arr.shape}, {expected}")
+        arr = arr.reshape(shape)
+    return np.ascontiguousarray(arr, dtype=np.float64)
 
 
 def _pack(ints: Mapping[str, int], index_blocks: Mapping[str, np.ndarray],

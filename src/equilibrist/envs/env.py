@@ -15,7 +15,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from equilibrist.envs._core import FINITE, OPTION_DEFAULTS, Core, EnvError, build_core
+from equilibrist.control._checks import given_text, real_array
+from equilibrist.envs._core import FINITE, OPTION_DEFAULTS, Core, EnvError, as_actions, build_core
 from equilibrist.errors import DimensionError, nearest
 from equilibrist.sim.noise import generator_state
 
@@ -261,13 +262,14 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
             if key != "state":
                 raise EnvError(f"reset options: unknown option {key!r} (expected 'state')")
         if options and "state" in options:
-            given = np.asarray(options["state"], dtype=float).reshape(-1)
-            if given.size != self._n or not np.all(np.isfinite(given)):
+            given, held = real_array(options["state"])
+            if given is None or given.size != self._n or not np.all(np.isfinite(given)):
                 raise DimensionError(
-                    f"reset options: state must be {self._n} finite numbers "
-                    f"({', '.join(core.system.state_names)}), got {options['state']!r}"
+                    f"reset options: state must be {self._n} finite real numbers "
+                    f"({', '.join(core.system.state_names)}), got {given_text(options['state'])}"
+                    + (f", which holds {held}" if given is None else "")
                 )
-            x0 = given
+            x0 = given.reshape(-1)
         self._x[:] = x0
         self._p[:] = p
         self._us[0, :4] = generator_state(np.random.SeedSequence(noise_seed))
@@ -292,14 +294,7 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         """One control period with *action* held; see :mod:`equilibrist.envs`."""
         if not self._ready:
             raise EnvError("call reset() before step()")
-        a = np.ascontiguousarray(action, dtype=np.float64)
-        if a.shape != self._ashape:
-            if a.size != self._ashape[0]:
-                raise DimensionError(
-                    f"action has {a.size} values, expected {self._ashape[0]} "
-                    f"({', '.join(self.core.system.input_names)})"
-                )
-            a = a.reshape(self._ashape)
+        a = as_actions(action, self._ashape, self.core, "action")
         obs = np.empty(self.core.n_obs)
         reward, status = self._step_fn(a, self._fs, self._us, obs, self._cf, self._ci)
         if status == 3:

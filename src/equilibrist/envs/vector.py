@@ -33,9 +33,8 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from equilibrist.envs._core import EnvError
+from equilibrist.envs._core import EnvError, as_actions
 from equilibrist.envs.env import Renderer, _spaces, compiled_entry, open_core
-from equilibrist.errors import DimensionError
 
 # Fewer copies than this step on one thread: starting a parallel region
 # (waking the other threads and waiting for them) costs more than it saves.
@@ -64,10 +63,8 @@ PROBE_SHARE = 20.0
 SMOOTHING = 0.25
 OUTLIER = 3.0
 # Looked up once: a step of few copies takes a few microseconds in all.
-_F64 = np.float64
 _BOOL = np.bool_
 _empty = np.empty
-_contiguous = np.ascontiguousarray
 
 
 def _chunks() -> int:
@@ -195,13 +192,7 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         step = self._step_fn
         if step is None:
             raise EnvError("call reset() before step()")
-        a = _contiguous(actions, dtype=_F64)
-        if a.shape != self._ashape:
-            if a.size != self._ashape[0] * self._ashape[1]:
-                raise DimensionError(
-                    f"actions have shape {a.shape}, expected {self._ashape} (num_envs, inputs)"
-                )
-            a = a.reshape(self._ashape)
+        a = as_actions(actions, self._ashape, self.core, "actions")
         # Fresh arrays every step, as Gymnasium's own vector environments return.
         obs = _empty(self._obs_shape)
         rewards = _empty(self.num_envs)
