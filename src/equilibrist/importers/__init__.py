@@ -57,11 +57,13 @@ SLIDE_SCALE = 0.5  # m
 RATE_SCALE = 1.0  # rad/s or m/s
 ENCODER_NOISE = 1e-3  # rad or m, per sample: an encoder's quantization
 # Process noise on each rate, per sqrt(s): this fraction of the acceleration
-# the motors give it at half their range (Tree.authority), as the catalogue's
-# rigs are scaled (the cart-pole's 0.05 m/s, the acrobot's 0.01 rad/s, about
-# a quarter percent of what their motors do); a model without motors gets
-# PROCESS_NOISE.
-NOISE_FRACTION = 0.0025
+# the motors give it at half their range (Tree.authority), a disturbance
+# torque or force of a tenth of a percent of the motors' as the catalogue's
+# rigs have (the cart-pole's 0.05 m/s is a quarter percent of its 200 N, the
+# acrobot's 0.01 rad/s a quarter percent of its 20 N m); a tenth, so that a
+# weak motor that barely holds its rig (dm_control's acrobot, +-2 N m) is
+# not toppled by the default. A model without motors gets PROCESS_NOISE.
+NOISE_FRACTION = 0.001
 PROCESS_NOISE = 0.05
 CONTROL_RATE = 200.0  # Hz
 # A hinge may turn this far from the operating point before a balancing run
@@ -283,7 +285,7 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
     sensor_noise = {s: noise if noise is not None else ENCODER_NOISE for s, noise in sensors}
     state = {c: v for c, v in zip(coords, tree.key_qpos, strict=True) if v != 0}
     state.update({f"{c}_dot": v for c, v in zip(coords, tree.key_qvel, strict=True) if v != 0})
-    free = () if tree.key_is_equilibrium else tuple(i.name for i in inputs)
+    free = tuple(i.name for i in inputs)  # solved, from the keyframe's controls, so that the point holds
     operating_point = OperatingPoint(
         state=dict(state),
         inputs={i.name: a.gain * v for i, a, v in zip(inputs, tree.actuators, tree.key_ctrl, strict=True)},
