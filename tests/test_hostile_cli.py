@@ -188,3 +188,51 @@ def test_a_region_of_attraction_grid_too_large_is_refused(tmp_path, capsys, coun
                  "--no-progress"])
     _one_line(code, capsys.readouterr().err, "--roa", "at most 100000")
     assert not out.exists()
+
+
+# -- export: sizes, durations and options it cannot use --------------------------------
+
+@pytest.mark.parametrize(("extra", "words"), [
+    (["--controller", "mpc", "--horizon", "10000"], ["--horizon 10000", "at most"]),
+    (["--controller", "mpc", "--horizon", "1000000"], ["--horizon 1000000", "at most"]),
+    (["--controller", "mpc", "--duration", "1e5"], ["--duration", "at most 10000 samples"]),
+    (["--controller", "swingup", "--duration", "1e5"], ["--duration", "at most 10000 samples"]),
+    (["--duration", "1e5"], ["--duration", "at most 10000 samples"]),
+    (["--controller", "lqr", "--duration", "50.1"], ["--duration", "50 s at 200 Hz"]),
+    (["--seed", "-1"], ["--seed -1", ">= 0"]),
+    (["--horizon", "0"], ["--horizon", "lqg controller takes none"]),
+    (["--controller", "lqr", "--horizon", "30"], ["--horizon", "lqr controller takes none"]),
+    (["--controller", "swingup", "--horizon", "30"], ["--horizon", "swingup"]),
+    (["--controller", "lqr", "--balance", "lqg"], ["--balance", "lqr controller takes none"]),
+])
+def test_export_refuses_what_it_cannot_use_before_any_work(tmp_path, capsys, monkeypatch,
+                                                           extra, words) -> None:
+    from equilibrist.control import controller
+
+    def never(*args, **kwargs):
+        raise AssertionError("a controller was built")
+
+    monkeypatch.setattr(controller, "build_controller", never)
+    code = main(["export", "cartpole", "--out", str(tmp_path / "lib"), *extra])
+    _one_line(code, capsys.readouterr().err, *words)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("out", ["", " "])
+def test_export_refuses_an_empty_out(tmp_path, capsys, monkeypatch, out) -> None:
+    monkeypatch.chdir(tmp_path)
+    code = main(["export", "cartpole", "--out", out])
+    _one_line(code, capsys.readouterr().err, "--out")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_api_bounds_the_recorded_run_too(tmp_path) -> None:
+    from equilibrist.control.design import design
+    from equilibrist.errors import ExportError
+    from equilibrist.export import export_c
+    from equilibrist.numeric.system import get_system
+
+    result = design(get_system("cartpole"), rate=200.0)
+    with pytest.raises(ExportError, match="at most 10000 samples"):
+        export_c(result, tmp_path / "lib", duration=1e5)
+    assert list(tmp_path.iterdir()) == []

@@ -90,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
             raise ExportError(f"--duration must be a positive number of seconds, got {duration:g}")
     if args.controller == "none":
         raise ExportError("--controller none is the open loop: there is no controller to export")
+    _check_options(args)
     out = Path(args.out) if args.out else Path(f"{c_identifier(args.system)}_{args.controller}")
     check_folder(out, force=args.force)
     from equilibrist.export.vectors import RecordedStart, recorded_start
@@ -112,14 +113,23 @@ def _export(args: argparse.Namespace, out: Path, rate: float | None, duration: f
         raise ExportError(f"{system.key} has no input: there is no controller to export")
     if rate is None:
         rate = check_rate(system.spec.control_rate)
+    from equilibrist.export.vectors import check_duration
+
+    check_duration(duration, rate, "--duration")  # bounded before the recorded run
 
     if args.controller not in ("lqg", "lqr"):
         from equilibrist.control.controller import ControllerRequest, build_controller
         from equilibrist.export.writer import EXPORTERS, load_exporter
 
+        options = common.controller_options(args)
+        if args.controller == "mpc":
+            from equilibrist.control.mpc import HORIZON
+            from equilibrist.export.mpc_c import check_horizon
+
+            check_horizon(system, options.get("horizon", HORIZON))  # before the QP is built
         request = ControllerRequest(system=system, rate=rate,
                                     design_options=common.design_options(args),
-                                    options=common.controller_options(args))
+                                    options=options)
         built = build_controller(args.controller, request)
         exporter = EXPORTERS.get(args.controller) or load_exporter(args.controller)
         if exporter is None:
@@ -135,6 +145,23 @@ def _export(args: argparse.Namespace, out: Path, rate: float | None, duration: f
     done = export_c(result, out, controller=args.controller, precision=args.precision,
                     duration=duration, seed=args.seed, system=system, force=args.force)
     return _report(args, done, system, start)
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """Refuse what the export cannot use: an empty --out, a negative --seed, the options of
+    another controller."""
+    from equilibrist.errors import ExportError
+
+    if args.out is not None and not args.out.strip():
+        raise ExportError(f"--out {args.out!r}: expected the name of the output folder")
+    if args.seed < 0:
+        raise ExportError(f"--seed {args.seed}: expected a whole number >= 0")
+    if args.horizon is not None and args.controller != "mpc":
+        raise ExportError(f"--horizon is the prediction horizon of --controller mpc: the "
+                          f"{args.controller} controller takes none")
+    if args.balance is not None and args.controller != "swingup":
+        raise ExportError(f"--balance chooses what balances after --controller swingup's catch: "
+                          f"the {args.controller} controller takes none")
 
 
 def _report(args: argparse.Namespace, done: ExportReport, system: System,

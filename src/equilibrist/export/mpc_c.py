@@ -57,6 +57,7 @@ and the heap that ``<name>_setup`` allocates by wrapping ``malloc``.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -159,6 +160,30 @@ def record(ctrl: MPC, *, x0: Mapping[str, float] | None = None, duration: float 
 #: filter takes its products in another order than numpy; the reaction-wheel pendulum's
 #: fast wheel reaches 1.1e-12 over a second.
 Z_TOLERANCE = 1e-10
+#: Entries of the condensed QP's dense matrices (``H`` and ``A``) at most: the library
+#: holds them as text, and the controller builds them whole (8 MB of doubles).
+MAX_QP_ENTRIES = 1_000_000
+
+
+def qp_entries(horizon: int, n_inputs: int, n_soft: int) -> int:
+    """Entries of ``H`` and ``A`` of the condensed QP of a horizon (see ``MPCProblem.condensed``)."""
+    nz = horizon * (n_inputs + n_soft)
+    rows = horizon * (n_inputs + 2 * n_soft)
+    return nz * nz + rows * nz
+
+
+def check_horizon(system: System, horizon: int, option: str = "--horizon") -> None:
+    """Refuse, before anything is built, a horizon whose QP exceeds :data:`MAX_QP_ENTRIES`."""
+    from equilibrist.control.mpc import soft_bounds
+
+    m = system.n_inputs
+    ns = len(soft_bounds(system, np.zeros(system.n_states)))
+    if qp_entries(horizon, m, ns) <= MAX_QP_ENTRIES:
+        return
+    longest = math.isqrt(MAX_QP_ENTRIES // qp_entries(1, m, ns))  # the entries grow as N^2
+    raise ExportError(f"{option} {horizon}: the MPC's QP would hold {qp_entries(horizon, m, ns):,} "
+                      f"matrix entries; at most {MAX_QP_ENTRIES:,}, a horizon of at most "
+                      f"{longest} samples for {system.key}")
 
 
 def export_mpc(ctrl: MPC, folder: str | Path, *, name: str = "mpc",
@@ -602,7 +627,10 @@ def export_files(built: MPCRuntime, out: str | Path, *, system: System, precisio
 
     if precision != "double":
         raise ExportError(f"the MPC is exported in double precision only, not {precision!r}")
+    from equilibrist.export.vectors import check_duration
+
     ctrl = built.ctrl
+    check_duration(duration, ctrl.rate)
     folder = check_folder(out, force=force)
     texts = mpc_files(ctrl, duration=duration or 1.0, seed=seed)
     texts[EXPORT_MARKER] = f"written by {generator_version()}\n"

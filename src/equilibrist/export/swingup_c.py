@@ -432,6 +432,9 @@ def export_files(ctrl: NonlinearController, out: str | Path, *, system: System,
             f"the swing-up is exported in double precision only (its test is bit for bit "
             f"against the Python controller), not {precision!r}"
         )
+    from equilibrist.export.vectors import check_duration
+
+    check_duration(duration, ctrl.rate)
     folder = check_folder(out, force=force)
     name = "swingup"
     vec = recorded_vectors(ctrl, system, duration=duration or 4.0, seed=seed)

@@ -42,6 +42,28 @@ RELATIVE_TOLERANCE = {"double": 1e-9, "float": 1e-4}
 DEFAULT_DURATION = 4.0
 START_FRACTION = 0.25
 STEP_FRACTION = 0.5
+# Samples of a recorded run at most: the test program holds them as text (10,000 samples
+# are 50 s at 200 Hz, a header of a few MB); more only makes the run and the build slow.
+MAX_SAMPLES = 10_000
+
+
+def check_duration(duration: object, rate: float, option: str = "duration") -> float | None:
+    """*duration* [s] of a recorded run at *rate* [Hz], if positive, finite and within
+    :data:`MAX_SAMPLES` samples (None stays None: the exporter's default), else
+    :class:`ExportError` naming the longest accepted."""
+    if duration is None:
+        return None
+    try:
+        value = float(duration)  # type: ignore[arg-type]
+    except (TypeError, ValueError, OverflowError):
+        raise ExportError(f"{option} must be a positive number of seconds, got {duration!r}") from None
+    if not (np.isfinite(value) and value > 0):
+        raise ExportError(f"{option} must be a positive number of seconds, got {value:g}")
+    longest = MAX_SAMPLES / float(rate)
+    if value > longest:
+        raise ExportError(f"{option} {value:g} s: the recorded test vectors take at most "
+                          f"{MAX_SAMPLES} samples, {longest:g} s at {float(rate):g} Hz")
+    return value
 # Without a given start, the run starts START_FRACTION of each design scale
 # off; when the design does not hold that, each of these smaller fractions in
 # turn, and the first the design holds is recorded.
@@ -182,7 +204,8 @@ def scenario(design: Design, system: System, *, duration: float | None = None,
         raise ExportError(f"the design of {design.system_key} is continuous: test vectors need a rate")
     plant = design.plant
     scales = system.spec.design_scales
-    length = DEFAULT_DURATION if duration is None else float(duration)
+    given = check_duration(duration, design.rate)
+    length = DEFAULT_DURATION if given is None else given
     x0 = np.array(plant.x0, dtype=float)
     coordinates = system.spec.coordinates
     if start is not None:
