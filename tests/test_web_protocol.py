@@ -433,6 +433,35 @@ def test_downloads(client, app, tmp_path):
     assert client.get("/download/x/..%2F..%2Fetc%2Fpasswd").status_code == 404
 
 
+def test_a_run_is_copied_where_its_samples_are_added(client, monkeypatch):
+    """The download's copy of the record is taken on the server's loop, which adds the
+    samples; taken in the writing thread, a sample added between the record's time and its
+    states made them disagree (a 500, 'run.csv could not be made: ValueError')."""
+    import threading
+
+    from equilibrist.web.session import Session
+
+    threads: dict[str, set[int]] = {"advance": set(), "copy": set()}
+    advance, last_run = Session.advance_to, Session.last_run
+
+    def advancing(self, now):
+        threads["advance"].add(threading.get_ident())
+        return advance(self, now)
+
+    def copying(self):
+        threads["copy"].add(threading.get_ident())
+        return last_run(self)
+
+    monkeypatch.setattr(Session, "advance_to", advancing)
+    monkeypatch.setattr(Session, "last_run", copying)
+    with client.websocket_connect("/ws") as ws:
+        token = opening(ws)["system"]["token"]
+        receive_until(ws, lambda m: m["type"] == "frame" and m["t"] > 0)
+        for kind in ("run.csv", "run.npz"):
+            assert client.get(f"/download/{token}/{kind}").status_code == 200
+    assert threads["copy"] and threads["copy"] == threads["advance"], threads
+
+
 def test_user_model_path_is_offered_as_given():
     path = str(Path(__file__).parents[1] / "examples" / "my_cartpole.py")
     cat = Catalogue.default([path])
@@ -489,9 +518,11 @@ def test_ctrl_c_while_redesigning_ends_with_one_line_and_frees_the_port():
         async with websockets.connect(url.replace("http://", "ws://") + "ws") as ws:
             while json.loads(await ws.recv())["type"] != "design":
                 pass  # the opening's design
-            for i in range(70):  # within the burst of 80
+            # Within the burst of 80; without seq, so that no acknowledgement is due: the
+            # server has nothing to send them but designs.
+            for i in range(70):
                 await ws.send(json.dumps({"type": "tune", "controller": ("mpc", "swingup")[i % 2],
-                                          "rate": 100 + i, "seq": i}))
+                                          "rate": 100 + i}))
             # The first redesign is done (its ack and design came), the others are queued.
             while (msg := json.loads(await ws.recv()))["type"] != "design":
                 assert msg["type"] != "error", msg

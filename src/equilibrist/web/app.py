@@ -293,7 +293,8 @@ def create_app(
                 name = f"{session.system.name}_{session.settings.controller}_c.zip"
             else:
                 ext = kind.split(".")[1]
-                body = await asyncio.to_thread(session.run_file, ext)
+                # The copy of the record here, on the loop that adds to it; the file in a thread.
+                body = await asyncio.to_thread(session.run_file, ext, session.last_run())
                 name = f"{session.system.name}_run.{ext}"
         except EquilibristError as exc:
             return JSONResponse({"error": str(exc)}, status_code=409, headers=_HEADERS)

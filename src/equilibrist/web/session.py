@@ -922,12 +922,18 @@ class Session:
                       "playground": self.settings.to_dict(), "inputs": m},
         )
 
-    def run_file(self, kind: str) -> bytes:
-        """The last run as ``"csv"`` or ``"npz"`` bytes."""
+    def run_file(self, kind: str, result: SimResult | None = None) -> bytes:
+        """The last run (or *result*, the copy :meth:`last_run` made) as ``"csv"`` or ``"npz"`` bytes.
+
+        The server takes the copy on its event loop, where the samples are
+        added, and writes it in another thread: read from there, the record
+        could gain a row between its time and its states.
+        """
         import tempfile
         from pathlib import Path
 
-        result = self.last_run()
+        if result is None:
+            result = self.last_run()
         with tempfile.TemporaryDirectory(prefix="equilibrist-play-") as tmp:
             path = Path(tmp) / f"run.{kind}"
             written = result.to_csv(path) if kind == "csv" else result.save(path)
