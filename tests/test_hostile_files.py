@@ -187,3 +187,80 @@ def test_complex_matrices_are_refused_as_complex(which: str, imaginary: float, d
     message = str(info.value)
     assert "must be real" in message and which in message, message
     assert "stabilizable" not in message and "detectable" not in message
+
+
+# -- a Python controller that returns something other than numbers -------------------------
+NOT_NUMBERS = st.one_of(
+    st.text(max_size=8), st.text(alphabet="0123456789.", min_size=1, max_size=4).map(lambda v: [v]),
+    st.just({"F": 1.0}), st.builds(object).map(lambda v: [v]),
+    st.complex_numbers(allow_nan=False, allow_infinity=False).map(lambda c: [c]),
+    st.just([[1.0], [2.0, 3.0]]), st.just([True]),
+)
+
+
+class _Returns:
+    """A PythonController that returns *value* as its command."""
+
+    rate = 100.0
+    outputs = None
+    estimate = None
+
+    def __init__(self, value: object) -> None:
+        self.value = value
+
+    def reset(self) -> None:
+        pass
+
+    def output(self, t: float, y: object, r: object) -> object:
+        return self.value
+
+    def update(self, t: float, y: object, r: object, u_applied: object) -> None:
+        pass
+
+
+class _Steps:
+    """An object of the older step interface that returns *value*."""
+
+    def __init__(self, value: object) -> None:
+        self.value = value
+
+    def step(self, t: float, y: object, r: object) -> object:
+        return self.value
+
+
+@settings(max_examples=40, deadline=None)
+@given(value=NOT_NUMBERS, kind=st.sampled_from(["function", "step", "protocol"]))
+def test_a_controller_returning_no_numbers_is_named(value: object, kind: str) -> None:
+    from equilibrist.errors import SimulationError
+    from equilibrist.sim.run import simulate
+
+    def my_function(t, y, r):  # type: ignore[no-untyped-def]
+        return value
+
+    controller = {"function": my_function, "step": _Steps(value), "protocol": _Returns(value)}[kind]
+    name = {"function": "my_function", "step": "_Steps", "protocol": "_Returns"}[kind]
+    with pytest.raises(SimulationError) as info:
+        simulate(get_system("cartpole"), controller, duration=0.05, rate=100.0)
+    message = str(info.value)
+    assert "\n" not in message
+    assert f"the controller {name} returned" in message and "expected its inputs as real numbers" in message
+
+
+def test_a_checked_controller_still_runs_and_keeps_its_own_state() -> None:
+    import numpy as np
+
+    from equilibrist.sim.run import simulate
+
+    class Counting(_Returns):
+        calls = 0
+
+        def output(self, t: float, y: object, r: object) -> object:
+            self.calls += 1
+            return [np.float32(0.5)]
+
+    mine = Counting(None)
+    result = simulate(get_system("cartpole"), mine, duration=0.1, rate=100.0)
+    assert mine.calls >= 10 and float(result.command("F")[0]) == 0.5
+    steps = _Steps((0.25,))
+    for _ in range(3):  # the same adapter, checked once however often it runs
+        simulate(get_system("cartpole"), steps, duration=0.05, rate=100.0)

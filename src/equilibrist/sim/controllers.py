@@ -30,12 +30,14 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from equilibrist.control._checks import given_text, real_array
 from equilibrist.control.controller import (
     ControllerError,
     LinearController,
     LinearRuntime,
     NonlinearController,
     PythonController,
+    StepAdapter,
     as_python_controller,
     python_controller_name,
 )
@@ -329,4 +331,60 @@ def as_controller(obj: object, system: System | None = None,
             hint = (" (for a design: LinearController.from_design(design), LQG.from_design(design) "
                     "or StateFeedback.from_design(design))")
         raise SimulationError(f"{exc}{hint}") from exc
-    return Resolved(py, None, {"kind": "python", "name": python_controller_name(py)})
+    name = python_controller_name(py)
+    if isinstance(py, StepAdapter):
+        if not isinstance(py._step, _CheckedCommand):  # checked before the adapter converts it
+            py._step = _CheckedCommand(py._step, name)
+        return Resolved(py, None, {"kind": "python", "name": name})
+    return Resolved(_CheckedOutput(py, name), None, {"kind": "python", "name": name})
+
+
+def _command(raw: object, name: str, t: float) -> np.ndarray:
+    """What a Python controller returned, as real numbers, or one line naming it."""
+    u, held = real_array(raw)
+    if u is None:
+        raise SimulationError(
+            f"the controller {name} returned {given_text(raw)} at t = {t:g} s, which holds {held}: "
+            "expected its inputs as real numbers (a float array, one value per input)"
+        )
+    return u
+
+
+class _CheckedCommand:
+    """A user's ``step(t, y, r)`` (or function) whose command is checked to be real numbers."""
+
+    def __init__(self, call: Callable[..., Any], name: str) -> None:
+        self.call = call
+        self.name = name
+
+    def __call__(self, t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray:
+        return _command(self.call(t, y, r), self.name, t)
+
+
+class _CheckedOutput(StepAdapter):
+    """A :class:`PythonController` whose command is checked to be real numbers.
+
+    Everything else is the user's controller's own (``target``, which the
+    run's state, such as an MPC's solve times, stays on); a step adapter only
+    in type, so that the controller is named as the user's.
+    """
+
+    def __init__(self, py: PythonController, name: str) -> None:  # no adapter of a step
+        self.target = py
+        self.name = name
+        self.rate = py.rate
+        self.outputs = py.outputs
+        self.estimate = py.estimate
+
+    def reset(self) -> None:
+        self.target.reset()
+        self.estimate = self.target.estimate
+
+    def output(self, t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray:
+        u = _command(self.target.output(t, y, r), self.name, t)
+        self.estimate = self.target.estimate
+        return u
+
+    def update(self, t: float, y: np.ndarray, r: np.ndarray, u_applied: np.ndarray) -> None:
+        self.target.update(t, y, r, u_applied)
+        self.estimate = self.target.estimate
