@@ -259,6 +259,7 @@ def test_the_accepted_hosts_are_the_loopback_names_and_the_bound_address():
     wild = HostCheck.serving("0.0.0.0", 9000)
     assert wild.host_refusal("192.168.1.5:9000") is None and wild.host_refusal("[fe80::2]:9000") is None
     assert wild.host_refusal("attacker.example:9000") and wild.host_refusal("192.168.1.5:9001")
+    assert wild.host_refusal("0.0.0.0:9000") is None  # the address the command prints
     # Port 80: a browser leaves it out.
     assert HostCheck.serving("127.0.0.1", 80).host_refusal("localhost") is None
 
