@@ -236,3 +236,101 @@ def test_the_api_bounds_the_recorded_run_too(tmp_path) -> None:
     with pytest.raises(ExportError, match="at most 10000 samples"):
         export_c(result, tmp_path / "lib", duration=1e5)
     assert list(tmp_path.iterdir()) == []
+
+
+# -- identify: the user's files, bounded work, logs that say nothing ---------------------
+
+@pytest.fixture(scope="module")
+def cart_log(tmp_path_factory) -> Path:
+    """A 3 s closed-loop log of the cart-pole (200 Hz), written by the command line."""
+    path = tmp_path_factory.mktemp("ident") / "run.csv"
+    assert main(["simulate", "cartpole", "--duration", "3", "--excite", "prbs:20:0.2",
+                 "--seed", "3", "--out", str(path), "--json"]) == 0
+    return path
+
+
+@pytest.fixture
+def no_fit(monkeypatch):
+    """identify's fit replaced by a failure: what is refused is refused before it."""
+    from equilibrist import ident
+
+    def never(*args, **kwargs):
+        raise AssertionError("the fit ran")
+
+    monkeypatch.setattr(ident, "identify", never)
+
+
+@pytest.mark.parametrize("content", ["the user's notes", '{"m_p": 1.0}', "[]"])
+def test_identify_never_overwrites_a_users_file(tmp_path, capsys, cart_log, no_fit,
+                                                content) -> None:
+    out = tmp_path / "params.json"
+    out.write_text(content)
+    code = main(["identify", "cartpole", str(cart_log), "--free", "m_p", "--out", str(out)])
+    _one_line(code, capsys.readouterr().err, str(out), "--force")
+    assert out.read_text() == content
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["params.json"]
+    # --force goes on to the fit.
+    with pytest.raises(AssertionError, match="the fit ran"):
+        main(["identify", "cartpole", str(cart_log), "--free", "m_p", "--out", str(out), "--force"])
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(step=st.floats(min_value=1e-300, max_value=4.9e-6))
+def test_an_integration_step_too_fine_is_refused_before_the_fit(capsys, cart_log, step) -> None:
+    # The log's samples are 5 ms: at most 1000 RK4 steps each, a step >= 5e-6 s.
+    code = main(["identify", "cartpole", str(cart_log), "--free", "m_p", "--max-step", repr(step)])
+    _one_line(code, capsys.readouterr().err, "--max-step", "at most 1000 RK4 steps")
+
+
+@pytest.mark.parametrize("level", ["0", "-0", "0.0"])
+def test_a_sensor_without_noise_is_refused(capsys, cart_log, no_fit, level) -> None:
+    code = main(["identify", "cartpole", str(cart_log), "--free", "m_p", "--sensor-noise",
+                 f"theta={level}"])
+    _one_line(code, capsys.readouterr().err, "--sensor-noise theta", "> 0")
+
+
+def test_the_api_refuses_a_sensor_without_noise(cart_log) -> None:
+    from equilibrist.ident import identify, read_log
+    from equilibrist.ident.log import IdentificationError
+    from equilibrist.numeric.system import get_system
+
+    system = get_system("cartpole")
+    with pytest.raises(IdentificationError, match="> 0"):
+        identify(system, read_log(system, cart_log), ["m_p"], sensor_noise={"theta": 0.0})
+
+
+@pytest.mark.parametrize("column", ["all", "theta"])
+def test_a_log_whose_output_never_moves_is_one_line(tmp_path, capsys, cart_log, column) -> None:
+    lines = cart_log.read_text().splitlines()
+    comments = [line for line in lines if line.startswith("#")]
+    rows = [line for line in lines if not line.startswith("#")]
+    header = rows[0].split(",")
+    flat = [k for k, name in enumerate(header) if k > 0 and (column == "all" or
+                                                           name.split(" ")[0] == column)]
+    body = []
+    for row in rows[1:]:
+        cells = row.split(",")
+        body.append(",".join("0" if k in flat else c for k, c in enumerate(cells)))
+    log = tmp_path / "flat.csv"
+    log.write_text("\n".join([*comments, rows[0], *body]) + "\n")
+    code = main(["identify", "cartpole", str(log), "--free", "m_p"])
+    _one_line(code, capsys.readouterr().err, "throughout")
+
+
+@pytest.mark.parametrize("extra", [[], ["--max-step", "6e-6"]], ids=["default", "finest-step"])
+def test_ctrl_c_stops_identify_at_once(tmp_path, extra) -> None:
+    # A 30 s log: its fit takes minutes of CPU, signalled after 6 s (past the imports);
+    # at the finest step accepted (1000 RK4 steps a sample) too.
+    folder = tmp_path / "work"
+    folder.mkdir()
+    assert main(["simulate", "cartpole", "--duration", "30", "--excite", "prbs:20:0.2",
+                 "--seed", "4", "--out", str(folder / "run.csv"), "--json"]) == 0
+    for signum, status in ((signal.SIGINT, 130), (signal.SIGTERM, 143)):
+        code, _, err, took = signal_while_working(
+            start(["identify", "cartpole", "run.csv", "--free", "m_p,l", "--out", "p.json", *extra],
+                  folder),
+            signum, after_cpu(6.0))
+        assert code == status, err.decode()
+        assert err.decode().strip() == "equilibrist: interrupted"
+        assert took < 3.0, f"took {took:.1f} s to stop"
+        assert sorted(p.name for p in folder.iterdir()) == ["run.csv"]

@@ -69,6 +69,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "(.png or .svg)")
     p.add_argument("--out", metavar="FILE.json",
                    help="write the parameters (for --params of design, simulate, export)")
+    p.add_argument("--force", action="store_true",
+                   help="replace an --out file that is not a parameter file equilibrist wrote")
     common.add_json(p)
     p.set_defaults(func=run)
 
@@ -82,15 +84,39 @@ def _positive(text: str | None, option: str) -> float | None:
     return v
 
 
-def _levels(items: list[str], option: str) -> dict[str, float]:
+def _levels(items: list[str], option: str, *, positive: bool = False) -> dict[str, float]:
     raw = common.parse_assignments(items, option)
     out = {}
     for k, v in raw.items():
         value = common.parse_number(v, f"{option} {k}")
-        if value < 0:
-            raise common.UsageError(f"{option} {k}: expected a value >= 0, got {v}")
+        if value < 0 or (positive and value == 0):
+            # A sensor without noise would have infinite weight: the fit would never end.
+            raise common.UsageError(f"{option} {k}: expected a value {'>' if positive else '>='} 0, "
+                                    f"got {v}")
         out[k] = value
     return out
+
+
+def _check_out(path: str, force: bool) -> None:
+    """Refuse to replace a file that is not a parameter file equilibrist wrote, unless *force*."""
+    import json
+
+    from equilibrist.ident.log import IdentificationError
+    from equilibrist.ident.params import FORMAT
+
+    target = Path(path)
+    if target.is_dir():
+        raise IdentificationError(f"--out {path} is a folder: name the parameter file")
+    if force or not (target.exists() or target.is_symlink()):
+        return
+    try:
+        doc = json.loads(target.read_text())
+    except (OSError, ValueError):
+        doc = None
+    if not (isinstance(doc, dict) and doc.get("format") == FORMAT):
+        raise IdentificationError(f"--out {path} exists and is not a parameter file written by "
+                                  "'equilibrist identify': name a new file, or add --force to "
+                                  "replace it")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -102,10 +128,12 @@ def run(args: argparse.Namespace) -> int:
     free = common.parse_names(args.free, "--free") or ()
     segment = _positive(args.segment, "--segment")
     max_step = _positive(args.max_step, "--max-step")
-    sensor = _levels(args.sensor_noise or [], "--sensor-noise")
+    sensor = _levels(args.sensor_noise or [], "--sensor-noise", positive=True)
     process = _levels(args.process_noise or [], "--process-noise")
     if args.out is not None and Path(args.out).suffix != ".json":
         raise IdentificationError(f"--out {args.out}: the parameters are written as .json")
+    if args.out is not None:
+        _check_out(args.out, args.force)
     if args.plot is not None:
         from equilibrist.viz.output import FIGURE_FORMATS, check_suffix
 
@@ -130,6 +158,7 @@ def run(args: argparse.Namespace) -> int:
 
         written.append(plot_fit(result, args.plot))
     if args.out is not None:
+        _check_out(args.out, args.force)  # again: the fit took a while
         written.append(write_params(result.params_document(), args.out))
     if args.json:
         out = result.to_dict()

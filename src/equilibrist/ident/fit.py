@@ -97,6 +97,12 @@ SEGMENT_NOISE_RATIO = 0.25
 # the process noise.
 MIN_SEGMENT_SAMPLES = 5
 MAX_SEGMENT_SECONDS = 1.0
+# RK4 steps per sample of the log at most (the --max-step it accepts is the longest sample
+# over this): the replay's work grows with them, and no rig's log needs more.
+MAX_SUBSTEPS = 1000
+# RK4 steps of one call of the compiled integrator at most (a few tens of ms): Ctrl-C
+# is answered between calls.
+CALL_STEPS = 1_000_000
 # A log-parameter direction whose information is below this fraction of the
 # largest is not determined at all; one whose standard deviation exceeds
 # WEAK_LOG_STD (50 % relative) is not determined by this log.
@@ -445,12 +451,41 @@ class _Problem(_Unknowns):
         return theta, off, rest.reshape(self.n_seg, self.n)
 
     def run(self, P: np.ndarray, XS: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every segment for each case, in calls of at most :data:`CALL_STEPS` RK4 steps.
+
+        Ctrl-C reaches Python only between calls of the compiled loop: so
+        the cases go one by one and their segments in runs of bounded work,
+        in order (a run's last row is its next run's first, written again
+        there). Each segment's arithmetic is the same however they are grouped.
+        """
+        from equilibrist import interrupt
+
         K = P.shape[0]
         yhat = np.empty((K, self.log.n_rows, self.ny))
         xend = np.empty((K, self.n_seg, self.n))
-        self.shoot(np.ascontiguousarray(P), np.ascontiguousarray(XS), self.bounds, self.log.time,
-                   self.log.inputs, self.n_sub, self.c_idx, yhat, xend)
+        P = np.ascontiguousarray(P)
+        for c in range(K):
+            for a, b in self.runs_of_segments():
+                ends = np.empty((1, b - a, self.n))
+                self.shoot(P[c:c + 1], np.ascontiguousarray(XS[c:c + 1, a:b]),
+                           np.ascontiguousarray(self.bounds[a:b + 1]), self.log.time,
+                           self.log.inputs, self.n_sub, self.c_idx, yhat[c:c + 1], ends)
+                xend[c, a:b] = ends[0]
+                interrupt.raise_if_requested()  # one a finalizer swallowed
         return yhat, xend
+
+    def runs_of_segments(self) -> list[tuple[int, int]]:
+        """Consecutive segments ``[a, b)`` of at most :data:`CALL_STEPS` RK4 steps (one at least)."""
+        per_row = np.concatenate([[0], np.cumsum(self.n_sub)])
+        seg_steps = per_row[self.bounds[1:]] - per_row[self.bounds[:-1]]
+        out, a, total = [], 0, 0
+        for s, steps in enumerate(seg_steps):
+            if s > a and total + steps > CALL_STEPS:
+                out.append((a, s))
+                a, total = s, 0
+            total += int(steps)
+        out.append((a, self.n_seg))
+        return out
 
     def residual_parts(self, yhat: np.ndarray, xend: np.ndarray, off: np.ndarray,
                        xs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -594,6 +629,10 @@ def _sensor_prior(system: System, log: Log, given: Mapping[str, float] | None) -
     for j, name in enumerate(log.output_names):
         if name in given:
             v = float(given[name])
+            if not (math.isfinite(v) and v > 0):
+                # A perfect sensor has infinite weight: the fit would chase it without end.
+                raise IdentificationError(f"--sensor-noise {name}={v:g}: a sensor's standard "
+                                          "deviation must be a finite number > 0")
         elif name in system.spec.sensor_noise:
             v = float(system.spec.sensor_noise[name])
         else:  # white sensor noise dominates second differences at a rig's rate
@@ -731,7 +770,20 @@ def identify(
     c_idx = np.array([system.state_index(o) for o in log.output_names], dtype=np.int64)
     dts = np.diff(log.time)
     dt = float(np.median(dts))
+    # Bounded before the division: a step of 1e-300 s would be billions of steps a sample.
+    shortest = float(np.max(dts)) / MAX_SUBSTEPS
+    if max_step < shortest:
+        raise IdentificationError(
+            f"--max-step {max_step:g} s: at most {MAX_SUBSTEPS} RK4 steps per sample of the log "
+            f"(its longest sample is {float(np.max(dts)):g} s): expected a step >= {shortest:.3g} s")
     n_sub = np.maximum(1, np.ceil(dts / max_step - 1e-9)).astype(np.int64)
+    for j, name in enumerate(log.output_names):
+        column = log.outputs[:, j]
+        if not np.ptp(column) > 0:
+            raise IdentificationError(
+                f"the log's output {name} is {float(column[0]):g} throughout: a constant output "
+                "says nothing about the parameters and its noise cannot be estimated (log a run "
+                "that moves, or leave that column out)")
 
     sigma_y = _sensor_prior(system, log, sensor_noise)
     q = _process_prior(system, process_noise)
