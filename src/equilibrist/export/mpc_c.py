@@ -70,6 +70,7 @@ from equilibrist.export.writer import register_exporter
 
 if TYPE_CHECKING:
     from equilibrist.control.mpc import MPC, MPCRuntime
+    from equilibrist.hil.firmware import Adapter
     from equilibrist.numeric.system import System
 
 #: DAQP's C sources, shipped with the package.
@@ -491,7 +492,8 @@ def footprint(folder: str | Path, *, name: str = "mpc", n: int = 4, m: int = 1) 
     with tempfile.TemporaryDirectory() as tmp:
         for i, f in enumerate(files):
             obj = Path(tmp) / f"{i}.o"
-            subprocess.run([*compiler(), "-O2", "-std=c99", *inc, "-c", str(f), "-o", str(obj)],
+            subprocess.run([*compiler(), "-O2", "-std=c99", "-ffp-contract=off", *inc, "-c", str(f),
+                            "-o", str(obj)],
                            check=True, capture_output=True)
             out = subprocess.run(["size", str(obj)], check=True, capture_output=True, text=True)
             text, data, bss = (int(v) for v in out.stdout.splitlines()[1].split()[:3])
@@ -501,7 +503,8 @@ def footprint(folder: str | Path, *, name: str = "mpc", n: int = 4, m: int = 1) 
         prog = Path(tmp) / "heap.c"
         prog.write_text(_HEAP_PROGRAM.format(name=name, n=n, m=m))
         exe = Path(tmp) / "heap"
-        subprocess.run([*compiler(), "-O2", "-std=c99", *inc, str(prog), *map(str, files),
+        subprocess.run([*compiler(), "-O2", "-std=c99", "-ffp-contract=off", *inc, str(prog),
+                        *map(str, files),
                         "-Wl,--wrap=malloc,--wrap=calloc", "-o", str(exe), "-lm"],
                        check=True, capture_output=True)
         run = subprocess.run([str(exe)], check=True, capture_output=True, text=True)
@@ -616,14 +619,13 @@ def export_files(built: MPCRuntime, out: str | Path, *, system: System, precisio
     The controller exported is the one simulated: with the Kalman filter in
     front when the design's measured outputs are not the full state.
     """
-    import hashlib
-
     from equilibrist.export.writer import (
         EXPORT_MARKER,
         check_folder,
         generator_version,
         write_files,
     )
+    from equilibrist.hil.firmware import WHAT, with_hil
 
     if precision != "double":
         raise ExportError(f"the MPC is exported in double precision only, not {precision!r}")
@@ -632,22 +634,60 @@ def export_files(built: MPCRuntime, out: str | Path, *, system: System, precisio
     ctrl = built.ctrl
     check_duration(duration, ctrl.rate)
     folder = check_folder(out, force=force)
-    texts = mpc_files(ctrl, duration=duration or 1.0, seed=seed)
+    texts = with_hil(mpc_files(ctrl, duration=duration or 1.0, seed=seed),
+                     hil_adapter(built, system), sketch_copies=("mpc.h", "mpc.c"))
     texts[EXPORT_MARKER] = f"written by {generator_version()}\n"
     write_files(folder, texts)
-    digest = hashlib.sha256(np.asarray(ctrl.problem.K).tobytes()
-                            + (b"" if ctrl.Kf is None else np.asarray(ctrl.Kf).tobytes())
-                            ).hexdigest()[:12]
+    digest = design_id(built)
     kalman = ctrl.estimator == "kalman"
     files = {"daqp/": "DAQP's C sources (the QP solver, MIT licence)",
              "mpc.h": "the interface" + (" (Kalman filter in front)" if kalman else ""),
              "mpc.c": ("the Kalman filter and " if kalman else "")
              + "the QP's data and the step: bounds at the state, DAQP, the move",
              "mpc_vectors.h": "recorded measurements and the Python controller's commands",
-             "test_mpc.c": "test program", "Makefile": "make check"}
+             "test_mpc.c": "test program", "Makefile": "make check, make hil-host",
+             **{rel: what for rel, what in WHAT.items()}}
     steps = round((duration or 1.0) * ctrl.rate) + 1
     return MPCExport(folder=folder, name="mpc", files=files, precision="double",
                      data=Described(digest, "mpc", ctrl.rate), vectors=Steps(steps))
+
+
+def hil_adapter(built: MPCRuntime, system: System) -> Adapter:
+    """The MPC (with its filter, if any) behind the hardware-in-the-loop interface."""
+    from equilibrist.hil.firmware import Adapter
+
+    ctrl = built.ctrl
+    n, m = int(ctrl.problem.n), int(ctrl.problem.m)
+    names = system.input_names
+    u_min = tuple(float(system.params[f"{i}_min"]) for i in names)
+    u_max = tuple(float(system.params[f"{i}_max"]) for i in names)
+    outputs = built.outputs or system.state_names
+    if ctrl.estimator == "kalman":
+        step = """    mpc_estimate(&hil_f, y, est);
+    (void)mpc_output(&hil_f, y, u);
+    hil_saturate(u, applied);
+    mpc_update(&hil_f, y, applied);"""
+        init, globals_ = "    (void)mpc_setup();\n    mpc_init(&hil_f);", "static mpc_filter hil_f;"
+    else:
+        step = f"""    int i;
+    (void)mpc_step(y, u);
+    for (i = 0; i < {n}; ++i) est[i] = y[i];"""
+        init, globals_ = "    (void)mpc_setup();", ""
+    return Adapter(controller_id=design_id(built), n=n, m=m, p=len(outputs), references=0,
+                   estimate=n, rate=float(ctrl.rate), u_min=u_min, u_max=u_max,
+                   includes=("mpc.h",), sources=("$(wildcard daqp/src/*.c)", "mpc.c"),
+                   globals=globals_, init=init, step=step,
+                   cflags="-std=c99 -O2 -ffp-contract=off -Idaqp/include -I.")
+
+
+def design_id(built: MPCRuntime) -> str:
+    """12 hex digits naming the exported MPC: its gains and its filter's."""
+    import hashlib
+
+    ctrl = built.ctrl
+    return hashlib.sha256(np.asarray(ctrl.problem.K).tobytes()
+                          + (b"" if ctrl.Kf is None else np.asarray(ctrl.Kf).tobytes())
+                          ).hexdigest()[:12]
 
 
 __all__ = ["DAQP_SOURCES", "OVERDRIVE", "Z_TOLERANCE", "CompiledMPC", "MPCExport", "default_start",

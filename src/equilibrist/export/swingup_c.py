@@ -43,6 +43,7 @@ from equilibrist.export.writer import register_exporter
 
 if TYPE_CHECKING:
     from equilibrist.control.controller import NonlinearController
+    from equilibrist.hil.firmware import Adapter
     from equilibrist.numeric.system import System
 
 #: The C library functions the exported code calls.
@@ -438,16 +439,44 @@ def export_files(ctrl: NonlinearController, out: str | Path, *, system: System,
     folder = check_folder(out, force=force)
     name = "swingup"
     vec = recorded_vectors(ctrl, system, duration=duration or 4.0, seed=seed)
-    files = {**swingup_files(ctrl, name=name), **check_files(name, vec)}
+    from equilibrist.hil.firmware import WHAT, with_hil
+
+    files = with_hil({**swingup_files(ctrl, name=name), **check_files(name, vec)},
+                     hil_adapter(ctrl, system, name=name),
+                     sketch_copies=(f"{name}.h", f"{name}.c"))
     write_files(folder, files)
     what = {
         f"{name}.h": "the library's interface", f"{name}.c": "the swing-up and its supervisor",
         f"{name}_vectors.h": "recorded test vectors", f"test_{name}.c": "test program",
-        "Makefile": "make check",
+        "Makefile": "make check, make hil-host", **WHAT,
     }
-    digest = hashlib.sha256(ctrl.params.tobytes() + ctrl.source.encode()).hexdigest()[:12]
     return SwingUpExport(folder=folder, name=name, files=what, precision="double",
-                         data=Described(digest, "swingup", ctrl.rate), vectors=Steps(len(vec["y"])))
+                         data=Described(design_id(ctrl), "swingup", ctrl.rate),
+                         vectors=Steps(len(vec["y"])))
+
+
+def hil_adapter(ctrl: NonlinearController, system: System, *, name: str = "swingup") -> Adapter:
+    """The swing-up behind the hardware-in-the-loop interface."""
+    from equilibrist.hil.firmware import Adapter
+
+    names = system.input_names
+    step = f"""    {name}_estimate(&hil_s, y, est);
+    {name}_output(&hil_s, y, u);
+    hil_saturate(u, applied);
+    {name}_update(&hil_s, y, applied);"""
+    return Adapter(
+        controller_id=design_id(ctrl), n=N_STATES, m=len(names), p=len(ctrl.output_names),
+        references=0, estimate=N_STATES, rate=float(ctrl.rate),
+        u_min=tuple(float(system.params[f"{i}_min"]) for i in names),
+        u_max=tuple(float(system.params[f"{i}_max"]) for i in names),
+        includes=(f"{name}.h",), sources=(f"{name}.c",), globals=f"static {name}_state hil_s;",
+        init=f"    {name}_init(&hil_s);", step=step,
+    )
+
+
+def design_id(ctrl: NonlinearController) -> str:
+    """12 hex digits naming the exported swing-up: its law's source and its numbers."""
+    return hashlib.sha256(ctrl.params.tobytes() + ctrl.source.encode()).hexdigest()[:12]
 
 
 class CompiledSwingUp:

@@ -22,6 +22,7 @@ from equilibrist.export.data import ControllerData, check_controller, check_prec
 
 if TYPE_CHECKING:
     from equilibrist.control.design import Design
+    from equilibrist.hil.firmware import Adapter
     from equilibrist.numeric.system import System
 
 ARDUINO_FOLDER = "example_arduino"
@@ -171,6 +172,7 @@ def render(
         f"{ARDUINO_FOLDER}/{name}.h": (head, "copy of the header for the sketch"),
         f"{ARDUINO_FOLDER}/{name}.c": (src, "copy of the library for the sketch"),
     }
+    files = _with_hil(files, data)
     listing = {path: what for path, (_, what) in files.items()}
     listing["README.txt"] = "this list"
     files["README.txt"] = (
@@ -178,6 +180,41 @@ def render(
         "this list",
     )
     return files
+
+
+def hil_adapter(data: ControllerData) -> Adapter:
+    """The linear controller behind the hardware-in-the-loop interface (:mod:`equilibrist.hil`)."""
+    from equilibrist.hil.firmware import Adapter
+
+    name, n = data.name, len(data.state_names)
+    p, m, nr = len(data.measured_names), len(data.input_names), len(data.tracked_names)
+    real = f"{name}_real"
+    step = f"""    {real} yy[{max(p, 1)}], rr[{max(nr, 1)}], uu[{m}], xx[{n}];
+    int i;
+    for (i = 0; i < {p}; ++i) yy[i] = ({real})y[i];
+    for (i = 0; r != NULL && i < {nr}; ++i) rr[i] = ({real})r[i];
+    {name}_step(&hil_s, yy, r != NULL ? rr : NULL, uu);
+    for (i = 0; i < {m}; ++i) u[i] = (double)uu[i];
+    {name}_estimate(&hil_s, xx);
+    for (i = 0; i < {n}; ++i) est[i] = (double)xx[i];"""
+    return Adapter(
+        controller_id=data.fingerprint, n=n, m=m, p=p, references=nr, estimate=n,
+        rate=1.0 / data.dt, u_min=tuple(float(v) for v in data.u_min),
+        u_max=tuple(float(v) for v in data.u_max), includes=(f"{name}.h",),
+        sources=(f"{name}.c",), globals=f"static {name}_state hil_s;",
+        init=f"    {name}_init(&hil_s);", step=step,
+    )
+
+
+def _with_hil(files: dict[str, tuple[str, str]], data: ControllerData) -> dict[str, tuple[str, str]]:
+    from equilibrist.hil.firmware import WHAT, with_hil
+
+    name = data.name
+    texts = with_hil({rel: text for rel, (text, _) in files.items()}, hil_adapter(data),
+                     sketch_copies=(f"{name}.h", f"{name}.c"))
+    whats = {rel: what for rel, (_, what) in files.items()}
+    return {rel: (text, whats.get(rel) or WHAT.get(rel) or "hardware in the loop: copy for the "
+                  "sketch") for rel, text in texts.items()}
 
 
 def write_files(folder: Path, files: Mapping[str, str]) -> None:

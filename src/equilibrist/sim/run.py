@@ -279,6 +279,14 @@ def _run_compiled(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
                    estimates=setup.estimates)
 
 
+class StopRun(Exception):
+    """Raised by a Python controller's ``output`` or ``update`` to end the run there.
+
+    The result holds the samples before the one being computed (a device in
+    the loop that stopped answering; the controller says why itself).
+    """
+
+
 def _run_python(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
                 seq: np.random.SeedSequence | None, progress: bool) -> SimResult:
     """A run of a :class:`~equilibrist.control.controller.PythonController`: the core
@@ -309,7 +317,10 @@ def _run_python(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
             kernel.measure_one(x=x, c_idx=setup.c_idx, lv=setup.lv, rng=rng, y=y)
             t = float(setup.times[k])
             r = setup.ref[k].copy()
-            raw = ctrl.output(t, y.copy(), r)
+            try:
+                raw = ctrl.output(t, y.copy(), r)
+            except StopRun:  # the controller ended the run: the samples before this one stay
+                break
             u_cmd = np.asarray(raw, dtype=float).reshape(-1)
             if u_cmd.size != m or not np.all(np.isfinite(u_cmd)):
                 raise SimulationError(
@@ -324,7 +335,10 @@ def _run_python(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
                 u_prev = np.minimum(np.maximum(setup.u_op, lo), hi)
             u_app = u_prev if setup.delay else u_sat
             u_prev = u_sat
-            ctrl.update(t, y.copy(), r, u_app.copy())
+            try:
+                ctrl.update(t, y.copy(), r, u_app.copy())
+            except StopRun:
+                break
             est = ctrl.estimate
             rec[k, cols["x"]] = x
             if est is not None:

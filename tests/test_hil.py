@@ -1,0 +1,199 @@
+"""Hardware in the loop over a pseudo-terminal: the exported C as a host program, and faults.
+
+The truth for a lockstep run is ``equilibrist simulate`` of the same
+controller: the device (the export's own C, built by ``make hil-host``)
+must give the same run to the payload's rounding. Faults come from a device
+written in Python that misbehaves as asked (tests/support/hil.py).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from equilibrist.cli.main import main
+from equilibrist.hil import protocol as proto
+from equilibrist.sim import SimResult
+from support import require
+from support.hil import FakeDevice, pty_link
+
+CLI = [sys.executable, "-m", "equilibrist.cli.main"]
+
+
+def _cli(*argv: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([*CLI, *argv], capture_output=True, text=True, timeout=timeout, check=False)
+
+
+# -- the protocol -------------------------------------------------------------------------
+def test_crc_is_crc16_xmodem() -> None:
+    assert proto.crc16(b"123456789") == 0x31C3  # the catalogue check value of CRC-16/XMODEM
+    assert proto.crc16(b"") == 0
+
+
+def test_frames_survive_noise_splits_and_a_broken_frame() -> None:
+    a = proto.frame(proto.STEP, 7, b"\x01\x02\x03")
+    b = proto.frame(proto.RESET, 8)
+    broken = bytearray(proto.frame(proto.STEP, 9, b"xyz"))
+    broken[-2] ^= 0x55
+    reader = proto.FrameReader()
+    stream = b"\x00\xeb\xffjunk" + a + b
+    got = []
+    for i in range(0, len(stream), 3):  # fed in small pieces
+        got += reader.feed(stream[i : i + 3])
+    assert [(f.kind, f.seq, f.payload) for f in got] == [(proto.STEP, 7, b"\x01\x02\x03"),
+                                                          (proto.RESET, 8, b"")]
+    with pytest.raises(proto.ProtocolError, match="bad CRC"):
+        reader.feed(bytes(broken))
+    assert [f.seq for f in reader.feed(a)] == [7]  # reading goes on after it
+
+
+def test_hello_names_what_differs() -> None:
+    host = proto.Hello(4, 4, 1, 2, 0, 0, 200.0, "418b195560fb")
+    assert host.mismatch(proto.Hello.unpack(host.pack())) is None
+    other = proto.Hello(4, 4, 1, 3, 0, 0, 200.0, "418b195560fb")
+    assert host.mismatch(other) == "3 measured outputs, expected 2"
+    assert "controller '0123'" in str(host.mismatch(proto.Hello(4, 4, 1, 2, 0, 0, 200.0, "0123")))
+    assert "float64 payloads" in str(host.mismatch(proto.Hello(8, 4, 1, 2, 0, 0, 200.0, "x")))
+
+
+# -- lockstep against simulate, for every controller kind -------------------------------------
+KINDS = {
+    "lqr": ("--duration", "2", "--x0", "theta=0.1"),
+    "lqg": ("--duration", "2", "--x0", "theta=0.1", "--push", "1:40"),
+    "swingup": ("--duration", "4", "--x0", "theta=3.1"),
+    "mpc": ("--duration", "1", "--x0", "x=0.5"),
+}
+
+
+@pytest.fixture(scope="module")
+def exports(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    require("cc")
+    require("make")
+    root = tmp_path_factory.mktemp("hil_exports")
+    out = {}
+    for kind in KINDS:
+        folder = root / kind
+        done = _cli("export", "cartpole", "--controller", kind, "--out", str(folder), "--duration", "0.5")
+        assert done.returncode == 0, done.stderr
+        made = subprocess.run(["make", "-s", "-C", str(folder), "hil-host"], capture_output=True, text=True, check=False)
+        assert made.returncode == 0, made.stderr
+        out[kind] = folder
+    return out
+
+
+def _hil(folder: Path, *argv: str) -> tuple[subprocess.CompletedProcess[str], list[str]]:
+    with pty_link() as link:
+        device = subprocess.Popen([str(folder / "hil_host"), link.paths[0]])
+        try:
+            done = _cli("hil", "cartpole", "--port", link.paths[1], *argv)
+        finally:
+            device.terminate()
+            device.wait(timeout=5)
+    return done, link.paths
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", list(KINDS))
+@pytest.mark.parametrize(("payload", "tolerance"), [("float32", 1e-4), ("float64", 1e-9)])
+def test_lockstep_equals_simulate(kind: str, payload: str, tolerance: float,
+                                  exports: dict[str, Path], tmp_path: Path) -> None:
+    args = KINDS[kind]
+    done, _ = _hil(exports[kind], "--controller", kind, "--payload", payload,
+                   "--out", str(tmp_path / "hil.npz"), "--json", *args)
+    assert done.returncode == 0, done.stderr
+    figures = json.loads(done.stdout)
+    sim = _cli("simulate", "cartpole", "--controller", kind, "--out", str(tmp_path / "sim.npz"), *args)
+    assert sim.returncode == 0, sim.stderr
+    a, b = SimResult.load(tmp_path / "hil.npz"), SimResult.load(tmp_path / "sim.npz")
+    assert a.states.shape == b.states.shape
+    for name in ("states", "applied"):
+        x, y = getattr(a, name), getattr(b, name)
+        scale = np.max(np.abs(y), axis=0)
+        assert np.all(np.abs(x - y) <= tolerance * scale + 1e-300), (name, np.max(np.abs(x - y) / scale))
+    assert figures["late"] == 0 and figures["lost"] == 0 and figures["fault"] is None
+    assert figures["steps"] == b.n_rows
+    assert figures["payload"] == payload
+    assert figures["round_trip_ms"]["p50"] > 0 and figures["device_step_us"]["max"] is not None
+    # The saved run records both sides: the device's answers beside the plant.
+    assert a.settings["hil"]["controller_id"] == figures["controller_id"]
+
+
+@pytest.mark.slow
+def test_realtime_at_200_hz_reports_its_figures(exports: dict[str, Path], tmp_path: Path) -> None:
+    done, _ = _hil(exports["lqg"], "--mode", "realtime", "--duration", "2", "--x0", "theta=0.05",
+                   "--json", "--out", str(tmp_path / "rt.csv"))
+    assert done.returncode == 0, done.stderr
+    fig = json.loads(done.stdout)
+    assert fig["mode"] == "realtime" and fig["steps"] == 401 and fig["fault"] is None
+    # Every sample either got its answer in time or was held and counted late.
+    assert fig["steps"] >= fig["late"] >= fig["lost"] >= 0
+    assert fig["round_trip_ms"]["p99"] >= fig["round_trip_ms"]["p50"] > 0
+    # The log is the one identify reads.
+    from equilibrist import get_system
+    from equilibrist.ident.log import read_log
+
+    log = read_log(get_system("cartpole"), tmp_path / "rt.csv")
+    assert log.n_rows == 401 and log.output_names == ("x", "theta")
+
+
+# -- faults: one line, the right status, the run so far saved, the port released ---------------
+FAULTS = {
+    "silent": "did not answer",
+    "crc": "bad CRC",
+    "length": "a step answer of 3 bytes",
+    "reset": "reset during the run",
+    "cut": "disappeared",
+}
+
+
+@pytest.mark.parametrize("fault", list(FAULTS))
+def test_a_fault_ends_the_run_in_one_line_and_keeps_it(fault: str, tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    import serial
+
+    with pty_link() as link:
+        device = FakeDevice(link.paths[0], good=20, fault=fault, link=link)
+        device.start()
+        try:
+            status = main(["hil", "cartpole", "--port", link.paths[1], "--controller", "lqr",
+                           "--duration", "2", "--timeout", "0.3", "--out", str(tmp_path / "run.npz")])
+        finally:
+            device.stop()
+        err = capsys.readouterr().err.strip()
+        assert status == 1, err
+        assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+        assert FAULTS[fault] in err and "run.npz" in err
+        run = SimResult.load(tmp_path / "run.npz")
+        assert run.n_rows == 20  # the samples answered before the fault
+        assert not list(tmp_path.glob(".*"))  # written atomically: no temporary left
+        if fault != "cut":  # the port is free again at once
+            serial.Serial(link.paths[1], exclusive=True).close()
+
+
+def test_a_start_that_cannot_be_made_is_refused_with_status_2(tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    with pty_link() as link:
+        device = FakeDevice(link.paths[0], fault="other")
+        device.start()
+        try:
+            status = main(["hil", "cartpole", "--port", link.paths[1], "--controller", "lqr",
+                           "--out", str(tmp_path / "run.npz")])
+        finally:
+            device.stop()
+    err = capsys.readouterr().err.strip()
+    assert status == 2 and len(err.splitlines()) == 1
+    assert "runs another controller" in err and "'0123456789ab'" in err
+    assert not (tmp_path / "run.npz").exists()
+    fifo = tmp_path / "fifo"
+    import os
+
+    os.mkfifo(fifo)
+    for port, words in ((str(tmp_path / "nothing"), "no such device"), (str(fifo), "not a serial device")):
+        assert main(["hil", "cartpole", "--port", port]) == 2
+        err = capsys.readouterr().err.strip()
+        assert words in err and len(err.splitlines()) == 1
