@@ -115,3 +115,72 @@ def test_cache_folder_problems_name_the_variable(tmp_path, monkeypatch) -> None:
         with pytest.raises(cache.CacheError, match="EQUILIBRIST_CACHE") as info:
             cache.cache_dir()
         assert expected in str(info.value)
+
+
+# -- damaged files of the compiled core: rebuilt, not a traceback ---------------------------
+# A fresh process loads the core from the cache folder and steps it: RK4 steps
+# of the cart-pole (the smallest entry to compile again).
+_STEP_SCRIPT = """
+import numpy as np
+from equilibrist import get_system
+from equilibrist.sim.kernel import load_kernel
+system = get_system("cartpole")
+x = np.array([0.0, 0.1, 0.0, 0.0])
+load_kernel(system).rk4_steps(x, np.array([0.5]), np.array(system.p, dtype=float), 0.001, 100)
+print(repr(x.tolist()))
+"""
+
+
+def _step_in_a_process(folder) -> tuple[list[float], str]:
+    import ast
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "EQUILIBRIST_CACHE": str(folder)}
+    proc = subprocess.run([sys.executable, "-c", _STEP_SCRIPT], capture_output=True, text=True,
+                          env=env, timeout=600, check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert "Traceback" not in proc.stderr
+    return ast.literal_eval(proc.stdout.strip()), proc.stderr
+
+
+@pytest.fixture(scope="module")
+def compiled_cache(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("pristine")
+    folder.chmod(0o700)
+    numbers, _ = _step_in_a_process(folder)
+    return folder, numbers
+
+
+def _truncate(path) -> None:
+    path.write_bytes(path.read_bytes()[: len(path.read_bytes()) // 2])
+
+
+_CORE_DAMAGE = {
+    # the generated core module (numba's source)
+    "core-module-truncated": ("*_sim_*.py", _truncate),
+    # numba's index of a function's machine code, and the code itself
+    "index-garbage": ("__pycache__/*.nbi", lambda p: p.write_bytes(b"garbage\n")),
+    "index-truncated": ("__pycache__/*.nbi", _truncate),
+    "code-truncated": ("__pycache__/*.nbc", _truncate),
+    "code-garbage": ("__pycache__/*.nbc", lambda p: p.write_bytes(b"\x80\x05garbage.")),
+}
+
+
+@pytest.mark.parametrize("damage", sorted(_CORE_DAMAGE))
+def test_damaged_compiled_core_is_rebuilt(compiled_cache, tmp_path, damage) -> None:
+    import shutil
+
+    pristine, expected = compiled_cache
+    folder = tmp_path / "cache"
+    shutil.copytree(pristine, folder)  # time stamps kept: numba's cache stays valid
+    pattern, harm = _CORE_DAMAGE[damage]
+    damaged = sorted(folder.glob(pattern))
+    assert damaged, pattern
+    for path in damaged:
+        harm(path)
+    numbers, _ = _step_in_a_process(folder)
+    assert numbers == expected  # the same numbers, to the bit
+    for path in folder.glob("__pycache__/*.nb?"):  # rebuilt whole
+        assert cache._readable_compiled(path), path.name

@@ -165,10 +165,10 @@ def kernel_path(system: System, controller: NonlinearController | None = None,
     body = _template_body()
     digest = hashlib.sha256((section + body).encode()).hexdigest()[:12]
     path = module_path.with_name(f"{module_path.stem}_sim_{digest}.py")
+    source = module_path.read_text() + _HEADER + section + "\n" + body
     if not path.exists():
-        source = module_path.read_text() + _HEADER + section + "\n" + body
         ast.parse(source)  # a broken controller source fails here, not inside numba
-        write_generated(path, source)
+    write_generated(path, source)  # kept if whole, rewritten if damaged
     _PATHS[key] = path
     return path
 
