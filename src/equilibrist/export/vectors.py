@@ -66,8 +66,10 @@ def check_duration(duration: object, rate: float, option: str = "duration") -> f
     return value
 # Without a given start, the run starts START_FRACTION of each design scale
 # off; when the design does not hold that, each of these smaller fractions in
-# turn, and the first the design holds is recorded.
-FALLBACK_FRACTIONS = (0.125, 0.0625)
+# turn (down to a 128th: a weak motor, dm_control's acrobot's, holds a few
+# thousandths of a radian), and the first the design holds is recorded. The
+# reference step shrinks with the start.
+FALLBACK_FRACTIONS = (0.125, 0.0625, 0.03125, 0.015625, 0.0078125)
 
 
 @dataclass
@@ -223,7 +225,8 @@ def scenario(design: Design, system: System, *, duration: float | None = None,
     reference = None
     if design.Kc is not None:
         r0 = np.asarray(design.r0, dtype=float)
-        step = np.array([STEP_FRACTION * float(scales.get(t, 0.0)) for t in design.tracked])
+        share = STEP_FRACTION * (1.0 if start is not None else fraction / START_FRACTION)
+        step = np.array([share * float(scales.get(t, 0.0)) for t in design.tracked])
         reference = Step(value=r0 + step, at=0.5 * length)
     return {
         "duration": length,
