@@ -58,7 +58,7 @@ def check_files(
     program: str,
     what: str,
     sources: Sequence[str] = (),
-    cflags: str = "-std=c99 -O2",
+    cflags: str = "-std=c99 -O2 -ffp-contract=off",
     include: Sequence[str] = (),
     defines: Mapping[str, object] | None = None,
 ) -> dict[str, str]:
@@ -80,7 +80,8 @@ def check_files(
     sources:
         C sources besides ``<name>.c`` (Makefile syntax, e.g. ``$(wildcard daqp/src/*.c)``).
     cflags:
-        The default ``CFLAGS``.
+        The default ``CFLAGS`` (keep ``-ffp-contract=off``: no fused multiply-add, the
+        simulation's bits on every host).
     include:
         Include folders (``-I``) beyond the export's own.
     defines:

@@ -34,11 +34,23 @@ def f(x, u, p, out):
     raise NotImplementedError
 
 
+# Placeholders of the generated module's copy of equilibrist.numeric.libm.
+from equilibrist.numeric.libm import eq_cos, eq_kcos, eq_ksin, eq_log, eq_rem_pio2, eq_sin  # noqa: E402
+
 # ---8<--- shooting body: everything below is copied into each system's module
 
 _sjit = njit(cache=True, error_model="numpy")
 # The names the RK4 step (equilibrist.sim._rk4_template, appended below) uses.
 _inline = njit(cache=True, error_model="numpy", inline="always")
+# The project's sin and cos (equilibrist.numeric.libm, copied into the
+# system's module with f), compiled: the same bits on every CPU, those of
+# the simulation core.
+eq_ksin = _sjit(eq_ksin)
+eq_kcos = _sjit(eq_kcos)
+eq_rem_pio2 = _sjit(eq_rem_pio2)
+eq_sin = _sjit(eq_sin)
+eq_cos = _sjit(eq_cos)
+eq_log = _sjit(eq_log)
 _fjit = _inline(f)
 _N = N_STATES
 

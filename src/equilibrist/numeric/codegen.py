@@ -5,6 +5,12 @@ source runs as ordinary Python (microseconds per call, no compilation) and,
 unchanged, under ``numba.njit`` for the simulation core. Common
 subexpressions are eliminated once, across each function's outputs.
 
+Sines and cosines are the project's own (:mod:`equilibrist.numeric.libm`,
+whose functions are copied into the module as ``eq_sin`` and ``eq_cos``),
+not the C library's, whose result depends on the CPU it runs on: the
+generated dynamics give the same bits on every machine, in Python and
+compiled (the cores rebind the ``eq_`` functions to compiled ones).
+
 Functions in the generated module (``x``, ``u``, ``p`` are 1-D float arrays
 in the order of the spec's states, inputs and parameters):
 
@@ -29,11 +35,22 @@ import sympy as sp
 from sympy.printing.pycode import PythonCodePrinter
 
 from equilibrist.mechanics.model import SymbolicModel
+from equilibrist.numeric import libm
+
+#: Revision of the copied :mod:`equilibrist.numeric.libm` section: the cache of derived
+#: models is keyed by this module's source, so a change there must bump it.
+LIBM_REVISION = 1
 
 
 class _Printer(PythonCodePrinter):
     def __init__(self) -> None:
         super().__init__({"fully_qualified_modules": True, "standard": "python3"})
+
+    def _print_sin(self, expr: sp.Expr) -> str:
+        return f"eq_sin({self._print(expr.args[0])})"
+
+    def _print_cos(self, expr: sp.Expr) -> str:
+        return f"eq_cos({self._print(expr.args[0])})"
 
 
 def _safe_names(model: SymbolicModel) -> dict[sp.Symbol, sp.Symbol]:
@@ -93,6 +110,9 @@ def generate_source(model: SymbolicModel) -> str:
         f"POINTS = {tuple(model.points)!r}",
         f"LINKS = {_link_indices(model)!r}",
         "",
+        f"# sin, cos, log of equilibrist.numeric.libm (revision {LIBM_REVISION}): the same bits on",
+        "# every CPU, unlike the C library's.",
+        libm.source(),
         "",
         "def f(x, u, p, out):",
     ]

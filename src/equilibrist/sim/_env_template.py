@@ -14,6 +14,7 @@ import math
 import numpy as np
 from numba import prange
 
+from equilibrist.numeric.libm import eq_cos  # stands in for the core's compiled one
 from equilibrist.sim.layout import *  # noqa: F403
 
 # ---8<--- kernel body: everything below is appended to the simulation core's body
@@ -221,7 +222,7 @@ def _env_reward(x, u, p, eref0, eref1, S):
     up = 0.0
     for j in range(nh):
         q = hang[j]
-        up += 0.5 * (1.0 + math.cos(x[q] - op[q]))
+        up += 0.5 * (1.0 + eq_cos(x[q] - op[q]))
     if nh > 0:
         up /= nh
     gap = eref0 - eref1

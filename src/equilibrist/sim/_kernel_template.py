@@ -28,7 +28,10 @@ Conventions of the core (all arrays float64 unless said otherwise):
   a nonlinear one. One loop runs them all.
 - Randomness: xoshiro256** on a 4-word ``uint64`` state per run, normal
   deviates by Marsaglia's polar method, drawn in a fixed order (the measurement noise of a
-  sample, then the process noise of each of its physics steps).
+  sample, then the process noise of each of its physics steps). Its logarithm is
+  the project's (``eq_log``), so the deviates are the same bits on every CPU;
+  nothing of ``numpy.random`` runs in the core (the seed only fixes the four
+  words, through ``SeedSequence``, which is integer arithmetic).
 - Work is done only when asked: the trajectory is written with
   ``iopts[_IO_RECORD]``, the accumulators (peaks, sums) with
   ``iopts[_IO_ACCUMULATE]``, and the controller's estimate is computed only
@@ -64,6 +67,10 @@ def f(x, u, p, out):
     raise NotImplementedError
 
 
+# Placeholders of the generated module's copy of equilibrist.numeric.libm.
+from equilibrist.numeric.libm import eq_cos, eq_kcos, eq_ksin, eq_log, eq_rem_pio2, eq_sin  # noqa: E402
+
+
 def controller_output(t, z, y, r, params, u_out):
     """Placeholder of the controller's compiled ``output``."""
     raise NotImplementedError
@@ -91,6 +98,18 @@ def controller_estimate(t, z, y, r, params, x_out):
 _jit = njit(cache=True, error_model="numpy")
 _bare = njit(cache=True, error_model="numpy", _nrt=False)  # type: ignore[call-overload]  # private numba option
 _inline = njit(cache=True, error_model="numpy", inline="always")
+# The generated module defines the project's own sin, cos and log (copied from
+# equilibrist.numeric.libm) as plain Python; compiled here, the dynamics and
+# the noise call no C library function whose bits depend on the CPU (glibc
+# picks sin, cos, log by the CPU's features). numba compiles without
+# fastmath, so LLVM neither contracts a*b+c into a fused multiply-add nor
+# reorders a sum: the bits are those of the source's operations.
+eq_ksin = _bare(eq_ksin)
+eq_kcos = _bare(eq_kcos)
+eq_rem_pio2 = _bare(eq_rem_pio2)
+eq_sin = _bare(eq_sin)
+eq_cos = _bare(eq_cos)
+eq_log = _bare(eq_log)
 _fjit = _bare(f)
 _N = N_STATES
 _M = N_INPUTS
@@ -153,7 +172,7 @@ def _normals(s, out, count):
         r2 = v1 * v1 + v2 * v2
         if r2 >= 1.0 or r2 == 0.0:
             continue
-        scale = math.sqrt(-2.0 * math.log(r2) / r2)
+        scale = math.sqrt(-2.0 * eq_log(r2) / r2)  # sqrt is IEEE's, correctly rounded
         out[i] = v1 * scale
         if i + 1 < count:
             out[i + 1] = v2 * scale

@@ -19,6 +19,7 @@ the compiled core's xoshiro256** generator.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -40,6 +41,29 @@ def _matrix(value: object, shape: tuple[int, int], what: str) -> np.ndarray:
     return arr
 
 
+def _cholesky(a: np.ndarray) -> np.ndarray | None:
+    """The lower Cholesky factor of *a*, or None when *a* is not positive definite.
+
+    Written out (row by row, each sum in index order, IEEE ``sqrt``) rather
+    than LAPACK's, whose BLAS kernel (and so its rounding) depends on the
+    CPU: the noise the core draws is the same on every machine.
+    """
+    n = a.shape[0]
+    low = np.zeros((n, n))
+    for i in range(n):
+        for j in range(i + 1):
+            s = float(a[i, j])
+            for k in range(j):
+                s -= float(low[i, k]) * float(low[j, k])
+            if i == j:
+                if not s > 0.0:
+                    return None
+                low[i, i] = math.sqrt(s)
+            else:
+                low[i, j] = s / float(low[j, j])
+    return low
+
+
 def square_root(cov: np.ndarray, what: str) -> np.ndarray:
     """``L`` with ``L L' = cov`` for a symmetric positive semi-definite *cov*."""
     cov = np.asarray(cov, dtype=float)
@@ -49,15 +73,17 @@ def square_root(cov: np.ndarray, what: str) -> np.ndarray:
     if float(np.abs(cov - cov.T).max()) > 1e-9 * scale:
         raise SimulationError(f"{what} is not symmetric")
     sym = (cov + cov.T) / 2
-    try:
-        return np.linalg.cholesky(sym)
-    except np.linalg.LinAlgError:
-        vals, vecs = np.linalg.eigh(sym)
-        if vals.min() < -1e-10 * max(1.0, float(abs(vals).max())):
-            raise SimulationError(
-                f"{what} is not positive semi-definite (eigenvalue {vals.min():.3g})"
-            ) from None
-        return vecs * np.sqrt(np.clip(vals, 0.0, None))
+    root = _cholesky(sym)
+    if root is not None:
+        return root
+    # Semi-definite (or not at all): LAPACK's eigenvectors, whose last bits depend on
+    # the BLAS kernel the CPU selects (docs/reproducibility.md).
+    vals, vecs = np.linalg.eigh(sym)
+    if vals.min() < -1e-10 * max(1.0, float(abs(vals).max())):
+        raise SimulationError(
+            f"{what} is not positive semi-definite (eigenvalue {vals.min():.3g})"
+        ) from None
+    return vecs * np.sqrt(np.clip(vals, 0.0, None))
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,0 +1,382 @@
+"""The project's own ``sin``, ``cos`` and ``log``: the same bits on every CPU.
+
+The C library's ``sin``, ``cos``, ``log`` (and ``exp``, ``pow``, ``atan2``,
+``tan``) are chosen at load time by the CPU's features: glibc on x86-64
+picks ``__sin_fma`` on a CPU with FMA and AVX2, ``__sin_avx`` or
+``__sin_sse2`` elsewhere (and ``GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA``
+picks another on the same CPU). Those variants round differently for a few
+inputs in ten thousand, so a trajectory that calls them is not the same to
+the bit on two machines. The functions here are written with plain IEEE
+double operations (``+ - * /``, comparisons, the exact ``math.frexp``), in
+an order the code fixes, so Python and numba (which contracts nothing
+without ``fastmath``) give the same bits on every CPU.
+
+They are the kernels of fdlibm (Sun Microsystems, 1993), as kept in musl:
+``__sin``, ``__cos`` and ``__rem_pio2``'s Cody-Waite reduction (three
+steps, 118 bits of pi/2), and ``log``. Within 1 ulp of the exact value
+(checked against mpmath in tests/test_bits_cpu.py) for every finite
+argument of ``sin`` and ``cos`` with ``|x| < 2**20 * pi / 2`` (about
+1.6e6 rad); beyond that the reduction is still deterministic but loses
+accuracy (fdlibm's Payne-Hanek path is not ported: no angle of a
+balancing rig comes near).
+
+The section below the marker is copied verbatim into every generated
+numeric module (:mod:`equilibrist.numeric.codegen`), so the generated
+``f`` calls these functions under the names ``eq_sin`` and ``eq_cos`` as
+plain Python, and the compiled cores (the templates of
+:mod:`equilibrist.sim` and :mod:`equilibrist.ident`) rebind each name in
+:data:`FUNCTIONS` to its numba-compiled self. Edit the section only
+together with ``REVISION`` in :mod:`equilibrist.numeric.codegen`: the
+cache of derived models is keyed by that module's source.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+#: The functions of the copied section, in the order they must be compiled.
+FUNCTIONS = ("eq_ksin", "eq_kcos", "eq_rem_pio2", "eq_sin", "eq_cos", "eq_log")
+
+_MARKER = "# ---8<--- libm body"
+
+# ---8<--- libm body: everything below is copied into each generated module
+
+# fdlibm's kernels (musl src/math/__sin.c, __cos.c, __rem_pio2.c, sin.c, cos.c, log.c).
+EQ_S1 = -1.66666666666666324348e-01
+EQ_S2 = 8.33333333332248946124e-03
+EQ_S3 = -1.98412698298579493134e-04
+EQ_S4 = 2.75573137070700676789e-06
+EQ_S5 = -2.50507602534068634195e-08
+EQ_S6 = 1.58969099521155010221e-10
+EQ_C1 = 4.16666666666666019037e-02
+EQ_C2 = -1.38888888888741095749e-03
+EQ_C3 = 2.48015872894767294178e-05
+EQ_C4 = -2.75573143513906633035e-07
+EQ_C5 = 2.08757232129817482790e-09
+EQ_C6 = -1.13596475577881948265e-11
+EQ_TOINT = 6755399441055744.0  # 1.5 * 2**52
+EQ_INVPIO2 = 6.36619772367581382433e-01
+EQ_PIO2_1 = 1.57079632673412561417e00
+EQ_PIO2_1T = 6.07710050650619224932e-11
+EQ_PIO2_2 = 6.07710050630396597660e-11
+EQ_PIO2_2T = 2.02226624879595063154e-21
+EQ_PIO2_3 = 2.02226624871116645580e-21
+EQ_PIO2_3T = 8.47842766036889956997e-32
+EQ_TWO_M16 = 1.52587890625e-05
+EQ_TWO_M49 = 1.7763568394002505e-15
+EQ_TWO_52 = 4503599627370496.0
+EQ_PIO4 = 0.7853981633974483  # 0x1.921fb54442d18p-1
+EQ_PIO4_HI = 0.7853984832763672  # high word 0x3fe921fc: |x| < this is fdlibm's |x| ~<= pi/4
+EQ_SIN_TINY = 1.4901161193847656e-08  # 2**-26
+EQ_COS_TINY = 1.0536709282860102e-08  # high word 0x3e46a09e: 2**-27 * sqrt(2)
+EQ_LN2_HI = 6.93147180369123816490e-01
+EQ_LN2_LO = 1.90821492927058770002e-10
+EQ_LG1 = 6.666666666666735130e-01
+EQ_LG2 = 3.999999999940941908e-01
+EQ_LG3 = 2.857142874366239149e-01
+EQ_LG4 = 2.222219843214978396e-01
+EQ_LG5 = 1.818357216161805012e-01
+EQ_LG6 = 1.531383769920937332e-01
+EQ_LG7 = 1.479819860511658591e-01
+EQ_SQRT2_HALF_HI = 0.7071065902709961  # high word 0x3fe6a09e: fdlibm's split of the mantissa
+
+
+def eq_ksin(x, y, iy):
+    """sin(x + y) for |x + y| <= pi/4 (y the tail of x; iy 0 when y is zero)."""
+    z = x * x
+    w = z * z
+    r = EQ_S2 + z * (EQ_S3 + z * EQ_S4) + z * w * (EQ_S5 + z * EQ_S6)
+    v = z * x
+    if iy == 0:
+        return x + v * (EQ_S1 + z * r)
+    return x - ((z * (0.5 * y - v * r) - y) - v * EQ_S1)
+
+
+def eq_kcos(x, y):
+    """cos(x + y) for |x + y| <= pi/4."""
+    z = x * x
+    w = z * z
+    r = z * (EQ_C1 + z * (EQ_C2 + z * EQ_C3)) + w * w * (EQ_C4 + z * (EQ_C5 + z * EQ_C6))
+    hz = 0.5 * z
+    w = 1.0 - hz
+    return w + (((1.0 - w) - hz) + (z * r - x * y))
+
+
+def eq_rem_pio2(x):
+    """``(q, y0, y1)`` with ``x = n pi/2 + y0 + y1``, ``|y0 + y1| <= pi/4``, ``q = n mod 4`` (x finite)."""
+    fn = x * EQ_INVPIO2 + EQ_TOINT - EQ_TOINT
+    r = x - fn * EQ_PIO2_1
+    w = fn * EQ_PIO2_1T
+    if r - w < -EQ_PIO4:
+        fn = fn - 1.0
+        r = x - fn * EQ_PIO2_1
+        w = fn * EQ_PIO2_1T
+    elif r - w > EQ_PIO4:
+        fn = fn + 1.0
+        r = x - fn * EQ_PIO2_1
+        w = fn * EQ_PIO2_1T
+    y0 = r - w
+    # fdlibm compares exponents (16 and 49 bits lost); these tests take the
+    # extra steps whenever it does (and a little more often), no bit access.
+    ax = abs(x)
+    if abs(y0) < ax * EQ_TWO_M16:  # cancellation: a second step, good to 118 bits
+        t = r
+        w = fn * EQ_PIO2_2
+        r = t - w
+        w = fn * EQ_PIO2_2T - ((t - r) - w)
+        y0 = r - w
+        if abs(y0) < ax * EQ_TWO_M49:  # a third, good to 151 bits
+            t = r
+            w = fn * EQ_PIO2_3
+            r = t - w
+            w = fn * EQ_PIO2_3T - ((t - r) - w)
+            y0 = r - w
+    y1 = (r - y0) - w
+    if abs(fn) < EQ_TWO_52:
+        return int(fn) & 3, y0, y1
+    return 0, y0, y1  # |x| > 7e15: deterministic, not accurate
+
+
+def eq_sin(x):
+    """sin(x), the same bits on every CPU."""
+    a = abs(x)
+    if a < EQ_PIO4_HI:
+        if a < EQ_SIN_TINY:
+            return x
+        return eq_ksin(x, 0.0, 0)
+    if not (a < math.inf):  # inf or nan
+        return x - x
+    q, y0, y1 = eq_rem_pio2(x)
+    if q == 0:
+        return eq_ksin(y0, y1, 1)
+    if q == 1:
+        return eq_kcos(y0, y1)
+    if q == 2:
+        return -eq_ksin(y0, y1, 1)
+    return -eq_kcos(y0, y1)
+
+
+def eq_cos(x):
+    """cos(x), the same bits on every CPU."""
+    a = abs(x)
+    if a < EQ_PIO4_HI:
+        if a < EQ_COS_TINY:
+            return 1.0
+        return eq_kcos(x, 0.0)
+    if not (a < math.inf):
+        return x - x
+    q, y0, y1 = eq_rem_pio2(x)
+    if q == 0:
+        return eq_kcos(y0, y1)
+    if q == 1:
+        return -eq_ksin(y0, y1, 1)
+    if q == 2:
+        return -eq_kcos(y0, y1)
+    return eq_ksin(y0, y1, 1)
+
+
+def eq_log(x):
+    """The natural logarithm, the same bits on every CPU."""
+    if not (x > 0.0):
+        if x == 0.0:
+            return -math.inf
+        return math.nan  # negative or nan
+    if x == math.inf:
+        return x
+    m, k = math.frexp(x)  # x = m 2**k, 0.5 <= m < 1 (exact, subnormals too)
+    if m < EQ_SQRT2_HALF_HI:
+        m = m * 2.0
+        k = k - 1
+    f = m - 1.0
+    hfsq = 0.5 * f * f
+    s = f / (2.0 + f)
+    z = s * s
+    w = z * z
+    t1 = w * (EQ_LG2 + w * (EQ_LG4 + w * EQ_LG6))
+    t2 = z * (EQ_LG1 + w * (EQ_LG3 + w * (EQ_LG5 + w * EQ_LG7)))
+    r = t2 + t1
+    dk = float(k)
+    return s * (hfsq + r) + dk * EQ_LN2_LO - hfsq + f + dk * EQ_LN2_HI
+
+
+# ---8<--- end of libm body
+
+
+def source() -> str:
+    """The section above, as copied into each generated module."""
+    text = Path(__file__).read_text()
+    start = text.index("\n" + _MARKER)
+    start = text.index("\n", start + 1) + 1
+    end = text.index("\n# ---8<--- end of libm body")
+    return text[start:end].strip() + "\n"
+
+
+sin = eq_sin
+cos = eq_cos
+log = eq_log
+
+
+def _c_constants() -> str:
+    g = globals()
+    names = [n for n in g if n.startswith("EQ_")]
+    return "\n".join(f"#define {n} ({float(g[n])!r})" for n in names)
+
+
+def c_source(prefix: str = "", *, log: bool = False) -> str:
+    """The same functions in C99, operation for operation (``static``; needs ``<math.h>``
+    for ``fabs`` and ``frexp``, both exact).
+
+    Compiled with ``-ffp-contract=off`` (no fused multiply-add; GCC's default in
+    ISO C mode, not clang's) and without ``-ffast-math``, they give the bits of
+    the Python and numba versions. *prefix* goes before each function's name;
+    ``eq_log`` only with *log* (an unused static function is a warning).
+    """
+    p = prefix
+    body = f"""
+static double {p}eq_ksin(double x, double y, int iy)
+{{
+    double z = x * x;
+    double w = z * z;
+    double r = EQ_S2 + z * (EQ_S3 + z * EQ_S4) + z * w * (EQ_S5 + z * EQ_S6);
+    double v = z * x;
+    if (iy == 0) {{
+        return x + v * (EQ_S1 + z * r);
+    }}
+    return x - ((z * (0.5 * y - v * r) - y) - v * EQ_S1);
+}}
+
+static double {p}eq_kcos(double x, double y)
+{{
+    double z = x * x;
+    double w = z * z;
+    double r = z * (EQ_C1 + z * (EQ_C2 + z * EQ_C3)) + w * w * (EQ_C4 + z * (EQ_C5 + z * EQ_C6));
+    double hz = 0.5 * z;
+    w = 1.0 - hz;
+    return w + (((1.0 - w) - hz) + (z * r - x * y));
+}}
+
+static int {p}eq_rem_pio2(double x, double *y)
+{{
+    double fn = x * EQ_INVPIO2 + EQ_TOINT - EQ_TOINT;
+    double r = x - fn * EQ_PIO2_1;
+    double w = fn * EQ_PIO2_1T;
+    double ax, t, y0;
+    if (r - w < -EQ_PIO4) {{
+        fn = fn - 1.0;
+        r = x - fn * EQ_PIO2_1;
+        w = fn * EQ_PIO2_1T;
+    }} else if (r - w > EQ_PIO4) {{
+        fn = fn + 1.0;
+        r = x - fn * EQ_PIO2_1;
+        w = fn * EQ_PIO2_1T;
+    }}
+    y0 = r - w;
+    ax = fabs(x);
+    if (fabs(y0) < ax * EQ_TWO_M16) {{
+        t = r;
+        w = fn * EQ_PIO2_2;
+        r = t - w;
+        w = fn * EQ_PIO2_2T - ((t - r) - w);
+        y0 = r - w;
+        if (fabs(y0) < ax * EQ_TWO_M49) {{
+            t = r;
+            w = fn * EQ_PIO2_3;
+            r = t - w;
+            w = fn * EQ_PIO2_3T - ((t - r) - w);
+            y0 = r - w;
+        }}
+    }}
+    y[0] = y0;
+    y[1] = (r - y0) - w;
+    if (fabs(fn) < EQ_TWO_52) {{
+        return (int)((unsigned long long)(long long)fn & 3u);
+    }}
+    return 0;
+}}
+
+static double {p}eq_sin(double x)
+{{
+    double a = fabs(x);
+    double y[2];
+    int q;
+    if (a < EQ_PIO4_HI) {{
+        if (a < EQ_SIN_TINY) {{
+            return x;
+        }}
+        return {p}eq_ksin(x, 0.0, 0);
+    }}
+    if (!(a < HUGE_VAL)) {{
+        return x - x;
+    }}
+    q = {p}eq_rem_pio2(x, y);
+    if (q == 0) {{
+        return {p}eq_ksin(y[0], y[1], 1);
+    }}
+    if (q == 1) {{
+        return {p}eq_kcos(y[0], y[1]);
+    }}
+    if (q == 2) {{
+        return -{p}eq_ksin(y[0], y[1], 1);
+    }}
+    return -{p}eq_kcos(y[0], y[1]);
+}}
+
+static double {p}eq_cos(double x)
+{{
+    double a = fabs(x);
+    double y[2];
+    int q;
+    if (a < EQ_PIO4_HI) {{
+        if (a < EQ_COS_TINY) {{
+            return 1.0;
+        }}
+        return {p}eq_kcos(x, 0.0);
+    }}
+    if (!(a < HUGE_VAL)) {{
+        return x - x;
+    }}
+    q = {p}eq_rem_pio2(x, y);
+    if (q == 0) {{
+        return {p}eq_kcos(y[0], y[1]);
+    }}
+    if (q == 1) {{
+        return -{p}eq_ksin(y[0], y[1], 1);
+    }}
+    if (q == 2) {{
+        return -{p}eq_kcos(y[0], y[1]);
+    }}
+    return {p}eq_ksin(y[0], y[1], 1);
+}}
+"""
+    log_body = f"""
+static double {p}eq_log(double x)
+{{
+    double m, f, hfsq, s, z, w, t1, t2, r, dk;
+    int k;
+    if (!(x > 0.0)) {{
+        return x == 0.0 ? -HUGE_VAL : NAN;
+    }}
+    if (x == HUGE_VAL) {{
+        return x;
+    }}
+    m = frexp(x, &k);
+    if (m < EQ_SQRT2_HALF_HI) {{
+        m = m * 2.0;
+        k = k - 1;
+    }}
+    f = m - 1.0;
+    hfsq = 0.5 * f * f;
+    s = f / (2.0 + f);
+    z = s * s;
+    w = z * z;
+    t1 = w * (EQ_LG2 + w * (EQ_LG4 + w * EQ_LG6));
+    t2 = z * (EQ_LG1 + w * (EQ_LG3 + w * (EQ_LG5 + w * EQ_LG7)));
+    r = t2 + t1;
+    dk = (double)k;
+    return s * (hfsq + r) + dk * EQ_LN2_LO - hfsq + f + dk * EQ_LN2_HI;
+}}
+"""
+    head = ("/* sin, cos, log of equilibrist.numeric.libm (fdlibm's kernels, as in musl): the\n"
+            " * simulation's bits on every CPU. Compile with -ffp-contract=off, never -ffast-math. */\n")
+    return head + _c_constants() + "\n" + body + (log_body if log else "")
