@@ -98,7 +98,14 @@ def test_ctrl_c_in_a_system_file_still_interrupts(tmp_path: Path) -> None:
         get_system(str(path))
 
 
-def test_printing_file_leaves_json_output_whole(capsys, tmp_path: Path) -> None:
+def test_printing_file_leaves_json_output_whole(capsys, tmp_path: Path,
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    from equilibrist.numeric import cache
+
+    folder = tmp_path / "cache"  # a fresh cache: the derivation runs (and prints)
+    folder.mkdir(mode=0o700)
+    monkeypatch.setenv("EQUILIBRIST_CACHE", str(folder))
+    monkeypatch.setattr(cache, "_MEMO", {})
     path = _file(tmp_path, "chatty.py", at_import="print('loading my rig')\n",
                  in_derive="    print('deriving', d.q)\n")
     assert main(["linearize", str(path), "--json"]) == 0

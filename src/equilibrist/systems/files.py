@@ -91,10 +91,14 @@ def _from_python(data: bytes, origin: str, digest: str) -> Entry:
     import contextlib
     import functools
 
+    from equilibrist.errors import EquilibristError
+
     def said(exc: BaseException, when: str) -> str:  # what the user's code raised, in words
         if isinstance(exc, SystemExit):
             return (f"the file called sys.exit({exc.code!r}) {when}: a system file declares SPEC "
                     "and its derivation, it does not exit")
+        if isinstance(exc, EquilibristError):  # a refusal of ours (a spec's): it says what is wrong
+            return str(exc)
         return f"{type(exc).__name__}: {exc} ({when})"
 
     module_name = f"equilibrist_user_{digest[:16]}"
@@ -127,7 +131,6 @@ def _from_python(data: bytes, origin: str, digest: str) -> Entry:
 
     @functools.wraps(user_derive)
     def derive(d):
-        from equilibrist.errors import EquilibristError
         from equilibrist.mechanics.model import SymbolicModel
 
         try:
