@@ -334,3 +334,45 @@ def test_ctrl_c_stops_identify_at_once(tmp_path, extra) -> None:
         assert err.decode().strip() == "equilibrist: interrupted"
         assert took < 3.0, f"took {took:.1f} s to stop"
         assert sorted(p.name for p in folder.iterdir()) == ["run.csv"]
+
+
+# -- odd values anywhere on a sweep's command line ---------------------------------------
+
+ODD = ["nan", "inf", "-inf", "1e400", "-1e400", "", " ", "abc", "0", "-0", "-1", "1e-300",
+       "1e308", "=", ":::", "1,2", ",", "0x10", "1_0", "1e9", "-1e9", "1000000000",
+       "10000000000000000000000", "0.1:0.3:2", "0.1:0.3:1000000000", "0.1:0.3:2:log",
+       "-1:1:100000000", "not a url", "http://h:1", "tcp://"]
+SWEEP_OPTIONS = {"--vary": "m_p={}", "--roa": "theta={}", "--x0": "theta={}", "--spread": "l={}",
+                 "--runs": "{}", "--duration": "{}", "--seed": "{}", "--workers": "{}",
+                 "--scheduler": "{}", "--chunk-size": "{}", "--sample": "random:{}",
+                 "--rate": "{}", "--noise": "{}", "--threads": "{}"}
+
+
+class _Reached(Exception):
+    """The sweep got past every check to its parts folder."""
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(picks=st.lists(st.tuples(st.sampled_from(sorted(SWEEP_OPTIONS)), st.sampled_from(ODD)),
+                      min_size=1, max_size=3))
+def test_odd_sweep_command_lines_are_one_line(tmp_path_factory, capsys, monkeypatch, picks) -> None:
+    from equilibrist.study import runner
+
+    def reached(self, *, resume):
+        raise _Reached
+
+    monkeypatch.setattr(runner.Store, "open", reached)
+    folder = tmp_path_factory.mktemp("sweep")
+    argv = ["sweep", "cartpole", "--vary", "l=0.4,0.5", "--no-progress",
+            "--out", str(folder / "t.parquet")]
+    for option, value in picks:
+        argv += [option, SWEEP_OPTIONS[option].format(value)]
+    try:
+        code = main(argv)
+    except _Reached:
+        return
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1, err
+    assert list(folder.iterdir()) == []
