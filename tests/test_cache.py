@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy as sp
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from equilibrist.numeric import cache
 from equilibrist.systems import registry
@@ -184,3 +186,31 @@ def test_damaged_compiled_core_is_rebuilt(compiled_cache, tmp_path, damage) -> N
     assert numbers == expected  # the same numbers, to the bit
     for path in folder.glob("__pycache__/*.nb?"):  # rebuilt whole
         assert cache._readable_compiled(path), path.name
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(cut=st.floats(0.0, 1.0, exclude_max=True), kind=st.sampled_from(["nbi", "nbc"]))
+def test_every_cut_of_a_compiled_file_is_seen_as_damaged(compiled_cache, tmp_path, cut, kind) -> None:
+    pristine, _ = compiled_cache
+    whole = sorted(pristine.glob(f"__pycache__/*.{kind}"))[0]
+    assert cache._readable_compiled(whole)
+    data = whole.read_bytes()
+    damaged = tmp_path / whole.name
+    damaged.write_bytes(data[: int(cut * len(data))])
+    assert not cache._readable_compiled(damaged)
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(source=st.text(min_size=1, max_size=200), damage=st.binary(max_size=200))
+def test_a_generated_module_with_other_text_is_written_again(tmp_path, source, damage) -> None:
+    path = tmp_path / "system_0123_sim_abcd.py"
+    path.unlink(missing_ok=True)
+    cache.write_generated(path, source)
+    assert path.read_bytes() == source.encode()
+    stamp = path.stat().st_mtime_ns
+    cache.write_generated(path, source)  # whole: left as it is (numba's cache keeps its stamp)
+    assert path.stat().st_mtime_ns == stamp
+    if damage != source.encode():
+        path.write_bytes(damage)
+        cache.write_generated(path, source)
+        assert path.read_bytes() == source.encode()
