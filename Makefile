@@ -38,6 +38,7 @@ bench: $(STAMP)
 	$(PY) bench/bench_swingup.py
 	$(PY) bench/bench_mpc.py
 	$(PY) bench/bench_import.py
+	$(PY) bench/bench_hil.py
 
 clean:
 	rm -rf $(VENV) report build

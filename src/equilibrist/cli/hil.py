@@ -24,7 +24,8 @@ input is held. --payload float64 where the device has doubles (a host
 program does; an 8-bit board does not). The device's controller must be the
 one these options design: the hello compares the shapes, the rate and the
 design id ('equilibrist export' with the same options, then flash or
-'make hil-host'). --out run.csv writes the log 'equilibrist identify' reads.
+'make hil-host'). --out run.csv writes the log 'equilibrist identify' reads;
+--excite adds simulate's identification experiment to the device's command.
 The protocol, the wiring and the loop back to identification: docs/hil.md.
 """
 
@@ -50,6 +51,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--timeout", default="1", metavar="S",
                    help="how long to wait for an answer before the run ends on a fault (default 1 s)")
     p.add_argument("--baud", default="115200", metavar="N", help="the link's baud rate (default 115200)")
+    p.add_argument("--excite", metavar="SIGNAL", help="add an identification experiment to the "
+                   "device's command: chirp:AMP:F0:F1[:SWEEP] or prbs:AMP:PERIOD (as simulate's)")
     add_run_options(p)
     add_output_options(p)
     p.set_defaults(func=run)
@@ -73,7 +76,13 @@ def design_id(kind: str, controller: Any) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from equilibrist.cli.simulate import build_run, check_out, parse_x0, run_metrics
+    from equilibrist.cli.simulate import (
+        build_run,
+        check_out,
+        parse_excitation,
+        parse_x0,
+        run_metrics,
+    )
     from equilibrist.control.controller import measured_outputs
     from equilibrist.hil.link import SerialLink
     from equilibrist.hil.protocol import Hello
@@ -102,7 +111,8 @@ def run(args: argparse.Namespace) -> int:
     options["outputs"] = None
     with SerialLink(args.port, baudrate=baud) as link:
         device = DeviceController(link, host, outputs=tuple(outputs),
-                                  u_op=system.operating_point().u, mode=args.mode, timeout=timeout)
+                                  u_op=system.operating_point().u, mode=args.mode, timeout=timeout,
+                                  excitation=parse_excitation(args))
         device.connect()
         done = run_hil(system, device, x0=parse_x0(args.x0), **options)
     result = done.result

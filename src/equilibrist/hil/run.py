@@ -28,6 +28,7 @@ from equilibrist.hil import protocol as proto
 from equilibrist.hil.link import DeviceGone, SerialLink
 from equilibrist.hil.protocol import Hello, HILError, ProtocolError
 from equilibrist.sim.run import StopRun
+from equilibrist.sim.signals import as_signal
 
 MODES = ("lockstep", "realtime")
 #: How long the host waits for the device's hello answer [s].
@@ -47,6 +48,8 @@ class LinkStats:
     late: int = 0
     lost: int = 0
     steps: int = 0
+    started: float | None = None  # time.perf_counter() at the first step
+    ended: float | None = None  # ... at the last answer
 
     def summary(self) -> dict[str, Any]:
         rt = np.asarray(self.round_trip_s) * 1e3
@@ -55,8 +58,10 @@ class LinkStats:
         def q(a: np.ndarray, p: float) -> float | None:
             return float(np.percentile(a, p)) if a.size else None
 
+        wall = (self.ended - self.started) if self.started is not None and self.ended is not None else 0.0
         return {
             "round_trip_ms": {"p50": q(rt, 50), "p99": q(rt, 99), "max": q(rt, 100)},
+            "round_trips_per_s": self.steps / wall if wall > 0 else None,
             "device_step_us": {"p50": q(us, 50), "max": q(us, 100)},
             "late": self.late, "lost": self.lost, "steps": self.steps,
         }
@@ -72,7 +77,8 @@ class DeviceController(PythonControllerBase):
     """
 
     def __init__(self, link: SerialLink, host: Hello, *, outputs: tuple[str, ...],
-                 u_op: np.ndarray, mode: str = "lockstep", timeout: float = 1.0) -> None:
+                 u_op: np.ndarray, mode: str = "lockstep", timeout: float = 1.0,
+                 excitation: Any = None) -> None:
         if mode not in MODES:
             raise HILError(f"--mode {mode!r}: expected one of {', '.join(MODES)}")
         self.link = link
@@ -86,6 +92,9 @@ class DeviceController(PythonControllerBase):
         self.stats = LinkStats()
         self.fault: str | None = None
         self._u_op = np.asarray(u_op, dtype=float)
+        # An identification experiment: added by the simulator to the device's command, before
+        # the actuator's limits (what the log records as the input that acted).
+        self._excitation = None if excitation is None else as_signal(excitation)
         self._held = self._u_op.copy()
         self._seq = 0
         self._t0: float | None = None
@@ -159,6 +168,8 @@ class DeviceController(PythonControllerBase):
             deadline = time.perf_counter() + self.timeout
         refs = np.asarray(r, dtype=float).reshape(-1)[: self.host.references]
         sent = time.perf_counter()
+        if self.stats.started is None:
+            self.stats.started = sent
         self._seq = (self._seq + 1) & 0xFFFF
         seq = self._seq
         self.stats.steps += 1
@@ -175,10 +186,11 @@ class DeviceController(PythonControllerBase):
                 if time.perf_counter() - self._last_answer > self.timeout:
                     self._stop(f"the device did not answer for {self.timeout:g} s "
                                f"(sample at t = {t:.4g} s)")
-                return self._held.copy()
+                return self._excite(t, self._held)
             if f.kind == proto.STEP_REPLY and f.seq == seq:
                 reply = self._guard(partial(proto.parse_step_reply, f.payload, device), t)
-                self.stats.round_trip_s.append(time.perf_counter() - sent)
+                self.stats.ended = time.perf_counter()
+                self.stats.round_trip_s.append(self.stats.ended - sent)
                 self.stats.device_step_us.append(reply.device_step_us)
                 self._last_answer = time.perf_counter()
                 self.estimate = reply.estimate
@@ -186,12 +198,17 @@ class DeviceController(PythonControllerBase):
                     self._stop(f"the device answered a command that is not finite "
                                f"({reply.u.tolist()}) at t = {t:.4g} s")
                 self._held = reply.u.copy()
-                return reply.u
+                return self._excite(t, reply.u)
             if f.kind == proto.STEP_REPLY and f.seq in self._missing:
                 self._missing.discard(f.seq)  # a late answer, come at last: already counted
                 self._last_answer = time.perf_counter()
                 continue
             self._unexpected(f, t)
+
+    def _excite(self, t: float, u: np.ndarray) -> np.ndarray:
+        if self._excitation is None:
+            return u.copy()
+        return u + self._excitation.evaluate(np.array([t]), np.zeros(u.size))[0]
 
     # -- faults -----------------------------------------------------------------------------
     def finish(self) -> None:

@@ -42,8 +42,7 @@ def shooting_path(system: System) -> Path:
     digest = hashlib.sha256(body.encode()).hexdigest()[:12]
     module_path = system.compiled.module_path
     path = module_path.with_name(f"{module_path.stem}_shoot_{digest}.py")
-    if not path.exists():
-        write_generated(path, module_path.read_text() + _HEADER + body)
+    write_generated(path, module_path.read_text() + _HEADER + body)  # kept if whole, rewritten if damaged
     return path
 
 

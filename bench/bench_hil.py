@@ -1,0 +1,107 @@
+"""Hardware in the loop over a pseudo-terminal: round trips per second in lockstep, and realtime at 200 Hz.
+
+The device is the export's own C as a host program (``make hil-host``) on
+one end of a pseudo-terminal pair; ``equilibrist hil`` on the other. The two
+pseudo-terminals are joined by ``socat`` where it is installed (as a rig's
+USB serial link joins two programs), else by a relay thread in this process.
+
+    .venv/bin/python bench/bench_hil.py [--duration 10]
+
+Goals (docs/hil.md): lockstep >= 2,000 round trips per second on the
+cart-pole's LQG, equal to ``simulate``; realtime at 200 Hz for 10 s with no
+late answer on an idle machine and a p99 round trip under 1 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "tests"))
+CLI = [sys.executable, "-m", "equilibrist.cli.main"]
+
+
+@contextmanager
+def linked_ptys():
+    """Two pseudo-terminal paths joined as by a cable (socat, else a relay thread)."""
+    socat = shutil.which("socat")
+    if socat is None:
+        from support.hil import pty_link
+
+        with pty_link() as link:
+            yield link.paths, "relay thread"
+        return
+    proc = subprocess.Popen([socat, "-d", "-d", "pty,raw,echo=0", "pty,raw,echo=0"],
+                            stderr=subprocess.PIPE, text=True)
+    paths: list[str] = []
+    while len(paths) < 2:
+        line = proc.stderr.readline()
+        m = re.search(r"PTY is (\S+)", line)
+        if m:
+            paths.append(m.group(1))
+    try:
+        yield paths, "socat"
+    finally:
+        proc.terminate()
+        proc.wait()
+
+
+def run_hil(host_program: Path, *argv: str) -> tuple[dict, float, str]:
+    with linked_ptys() as (paths, how):
+        device = subprocess.Popen([str(host_program), paths[0]])
+        try:
+            t0 = time.perf_counter()
+            done = subprocess.run([*CLI, "hil", "cartpole", "--port", paths[1], "--json", *argv],
+                                  capture_output=True, text=True, check=False)
+            wall = time.perf_counter() - t0
+        finally:
+            device.terminate()
+            device.wait()
+    if done.returncode != 0:
+        sys.exit(f"hil failed: {done.stderr.strip()}")
+    return json.loads(done.stdout), wall, how
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--duration", type=float, default=10.0)
+    args = ap.parse_args()
+    print(f"load average of the machine: {os.getloadavg()[0]:.1f} (2 cores)")
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "cart_lqg"
+        subprocess.run([*CLI, "export", "cartpole", "--out", str(folder), "--duration", "0.5"],
+                       check=True, capture_output=True)
+        subprocess.run(["make", "-s", "-C", str(folder), "hil-host"], check=True)
+        host = folder / "hil_host"
+        duration = f"{args.duration:g}"
+        fig, wall, how = run_hil(host, "--duration", duration, "--x0", "theta=0.1")
+        rt = fig["round_trip_ms"]
+        # Round trips per second: the samples over the loop's own time, from the first step to
+        # the last answer (the process start and the design are not the link's).
+        steps = fig["steps"]
+        print(f"link: two pseudo-terminals joined by {how}")
+        print(f"lockstep  {steps} samples of the cart-pole's LQG: {fig['round_trips_per_s']:.0f} round "
+              f"trips/s, simulation included (goal >= 2000); round trip p50 {rt['p50']:.3f} ms, "
+              f"p99 {rt['p99']:.3f} ms, max {rt['max']:.3f} ms; whole command {wall:.1f} s")
+        fig, wall, how = run_hil(host, "--mode", "realtime", "--duration", duration,
+                                 "--x0", "theta=0.1")
+        rt = fig["round_trip_ms"]
+        print(f"realtime  200 Hz for {duration} s: late {fig['late']}, lost {fig['lost']} of "
+              f"{fig['steps']} (goal 0 late); round trip p50 {rt['p50']:.3f} ms, p99 "
+              f"{rt['p99']:.3f} ms (goal < 1), max {rt['max']:.3f} ms; device step p50 "
+              f"{fig['device_step_us']['p50']:.0f} us")
+    print(f"load average of the machine after: {os.getloadavg()[0]:.1f}")
+
+
+if __name__ == "__main__":
+    main()
