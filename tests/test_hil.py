@@ -99,28 +99,39 @@ def _hil(folder: Path, *argv: str) -> tuple[subprocess.CompletedProcess[str], li
 
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", list(KINDS))
-@pytest.mark.parametrize(("payload", "tolerance"), [("float32", 1e-4), ("float64", 1e-9)])
-def test_lockstep_equals_simulate(kind: str, payload: str, tolerance: float,
-                                  exports: dict[str, Path], tmp_path: Path) -> None:
+def test_lockstep_equals_simulate(kind: str, exports: dict[str, Path], tmp_path: Path,
+                                  capsys: pytest.CaptureFixture[str]) -> None:
     args = KINDS[kind]
-    done, _ = _hil(exports[kind], "--controller", kind, "--payload", payload,
-                   "--out", str(tmp_path / "hil.npz"), "--json", *args)
-    assert done.returncode == 0, done.stderr
-    figures = json.loads(done.stdout)
-    sim = _cli("simulate", "cartpole", "--controller", kind, "--out", str(tmp_path / "sim.npz"), *args)
-    assert sim.returncode == 0, sim.stderr
-    a, b = SimResult.load(tmp_path / "hil.npz"), SimResult.load(tmp_path / "sim.npz")
-    assert a.states.shape == b.states.shape
-    for name in ("states", "applied"):
-        x, y = getattr(a, name), getattr(b, name)
-        scale = np.max(np.abs(y), axis=0)
-        assert np.all(np.abs(x - y) <= tolerance * scale + 1e-300), (name, np.max(np.abs(x - y) / scale))
-    assert figures["late"] == 0 and figures["lost"] == 0 and figures["fault"] is None
-    assert figures["steps"] == b.n_rows
-    assert figures["payload"] == payload
-    assert figures["round_trip_ms"]["p50"] > 0 and figures["device_step_us"]["max"] is not None
-    # The saved run records both sides: the device's answers beside the plant.
-    assert a.settings["hil"]["controller_id"] == figures["controller_id"]
+    assert main(["simulate", "cartpole", "--controller", kind, "--out", str(tmp_path / "sim.npz"),
+                 *args]) == 0
+    b = SimResult.load(tmp_path / "sim.npz")
+    for payload, tolerance in (("float32", 1e-4), ("float64", 1e-9)):
+        capsys.readouterr()
+        with pty_link() as link:
+            device = subprocess.Popen([str(exports[kind] / "hil_host"), link.paths[0]])
+            try:
+                status = main(["hil", "cartpole", "--port", link.paths[1], "--controller", kind,
+                               "--payload", payload, "--out", str(tmp_path / "hil.npz"), "--json",
+                               *args])
+            finally:
+                device.terminate()
+                device.wait(timeout=5)
+        out = capsys.readouterr()
+        assert status == 0, out.err
+        figures = json.loads(out.out)
+        a = SimResult.load(tmp_path / "hil.npz")
+        assert a.states.shape == b.states.shape
+        for name in ("states", "applied"):
+            x, y = getattr(a, name), getattr(b, name)
+            scale = np.max(np.abs(y), axis=0)
+            assert np.all(np.abs(x - y) <= tolerance * scale + 1e-300), (
+                payload, name, np.max(np.abs(x - y) / scale))
+        assert figures["late"] == 0 and figures["lost"] == 0 and figures["fault"] is None
+        assert figures["steps"] == b.n_rows
+        assert figures["payload"] == payload
+        assert figures["round_trip_ms"]["p50"] > 0 and figures["device_step_us"]["max"] is not None
+        # The saved run records both sides: the device's answers beside the plant.
+        assert a.settings["hil"]["controller_id"] == figures["controller_id"]
 
 
 @pytest.mark.slow
