@@ -77,8 +77,15 @@ def test_linearize_says_how_far_the_point_moved(capsys) -> None:
     assert "the keyframe 'up' moved to the nearest equilibrium" in out
 
 
-def test_no_equilibrium_names_the_point_not_a_canonical_one(capsys) -> None:
-    # Held at 0.5 rad by the cart alone: nothing holds it; the message names the point.
+def test_no_equilibrium_names_the_point_not_a_canonical_one(capsys, tmp_path: Path) -> None:
+    # A keyframe with the pole 1 rad from upright: no equilibrium within reach, and the
+    # cart alone can not hold it; the message names the keyframe's point.
+    far = tmp_path / "far.xml"
+    far.write_text(LEANING.read_text().replace('qpos="0 3.14159"', 'qpos="0 1"'))
+    assert main(["linearize", str(far)]) == 2
+    err = capsys.readouterr().err
+    assert "at its operating point (hinge = 1)" in err, err
+    assert "canonical" not in err and len(err.strip().splitlines()) == 1
     assert main(["linearize", str(LEANING), "--at", "hinge=2.5"]) == 2
     err = capsys.readouterr().err
     assert "hinge = 2.5" in err and "canonical" not in err and len(err.strip().splitlines()) == 1
