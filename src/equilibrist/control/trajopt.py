@@ -1,0 +1,328 @@
+"""Trajectory optimization: a motion planned under the rig's real limits, by direct collocation.
+
+The plan is a Hermite-Simpson collocation (separated form) of the system's
+derived dynamics ``M(q) q_ddot = F(q, q_dot, u)``: states at ``N + 1`` knots,
+inputs at the knots and the midpoints, the defects
+
+    x_mid   = (x_k + x_k+1) / 2 + h / 8 (f_k - f_k+1)
+    x_k+1   = x_k + h / 6 (f_k + 4 f_mid + f_k+1)
+
+as equality constraints, with ``f`` the system's own equations translated
+exactly into CasADi (``q_ddot`` solved from ``M`` at each point), so the NLP
+solver (IPOPT) gets exact first and second derivatives and their sparsity.
+Hard input limits, the task's state bounds (the cart-pole's track), a fixed
+or free final time, and a cost of effort (``integral of (u / scale)^2``) or
+of time. Needs CasADi: ``pip install 'equilibrist[trajopt]'``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from equilibrist.errors import DesignError
+from equilibrist.numeric.system import System
+
+GUESSES = ("random", "straight")
+MINIMIZE = ("effort", "time")
+FORMAT = "equilibrist-trajectory-1"
+
+
+def require_casadi() -> Any:
+    try:
+        import casadi
+    except ImportError:
+        raise DesignError("trajectory optimization needs CasADi with IPOPT: "
+                          "pip install 'equilibrist[trajopt]'") from None
+    return casadi
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """A planned motion: states at the knots, inputs at the knots and midpoints.
+
+    Between knots the states are the cubic Hermite interpolant of the knots'
+    states and rates, the inputs the quadratic through the knot, midpoint
+    and knot (:meth:`input_at`).
+    """
+
+    system: str
+    params: Mapping[str, float]
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    times: np.ndarray  # (N + 1,)
+    states: np.ndarray  # (N + 1, n)
+    inputs: np.ndarray  # (N + 1, m)
+    mid_inputs: np.ndarray  # (N, m)
+    converged: bool
+    cost: float
+    max_defect: float
+    solve_time: float
+    iterations: int
+    solver: str
+    settings: Mapping[str, Any] = field(default_factory=dict)
+    system_digest: str | None = None
+
+    @property
+    def duration(self) -> float:
+        return float(self.times[-1] - self.times[0])
+
+    @property
+    def knots(self) -> int:
+        return int(self.times.size - 1)
+
+    @property
+    def peak_input(self) -> dict[str, float]:
+        both = np.vstack([self.inputs, self.mid_inputs])
+        return {n: float(np.max(np.abs(both[:, i]))) for i, n in enumerate(self.input_names)}
+
+    def input_at(self, t: float | np.ndarray) -> np.ndarray:
+        """The planned input at time(s) *t* (held at the ends outside the plan)."""
+        tt = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), self.times[0], self.times[-1])
+        k = np.clip(np.searchsorted(self.times, tt, side="right") - 1, 0, self.knots - 1)
+        h = self.times[k + 1] - self.times[k]
+        s = ((tt - self.times[k]) / h)[:, None]
+        u0, um, u1 = self.inputs[k], self.mid_inputs[k], self.inputs[k + 1]
+        out = (2 * (s - 0.5) * (s - 1)) * u0 + (-4 * s * (s - 1)) * um + (2 * s * (s - 0.5)) * u1
+        return out if np.ndim(t) else out[0]
+
+    def summary(self) -> dict[str, Any]:
+        return {"converged": self.converged, "duration": self.duration, "cost": self.cost,
+                "peak_input": self.peak_input, "max_defect": self.max_defect,
+                "solve_time": self.solve_time, "iterations": self.iterations,
+                "solver": self.solver, "knots": self.knots}
+
+    def save(self, path: str | Path) -> Path:
+        """Write the trajectory (``.npz``: the arrays, the system, its parameters, the settings)."""
+        import json
+
+        from equilibrist.atomic import atomic_path
+
+        p = Path(path)
+        if p.suffix.lower() != ".npz":
+            raise DesignError(f"{p}: a trajectory is written as .npz")
+        meta = {"format": FORMAT, "system": self.system, "system_digest": self.system_digest,
+                "params": dict(self.params), "state_names": list(self.state_names),
+                "input_names": list(self.input_names), "settings": dict(self.settings),
+                **{k: v for k, v in self.summary().items() if k != "peak_input"}}
+        with atomic_path(p) as tmp, open(tmp, "wb") as fh:
+            np.savez(fh, meta=json.dumps(meta), times=self.times, states=self.states,
+                     inputs=self.inputs, mid_inputs=self.mid_inputs)
+        return p
+
+
+def casadi_dynamics(system: System) -> Any:
+    """``f(x, u)`` of *system* as a CasADi function: its derived ``M`` and ``F``, parameters bound."""
+    import sympy as sp
+
+    ca = require_casadi()
+    sym = system.symbolic
+    n, m = system.n_states, system.n_inputs
+    nq = sym.n_q
+    x = ca.SX.sym("x", n)
+    u = ca.SX.sym("u", m)
+    values = {s: float(system.params[str(s)]) for s in sym.params if str(s) in system.params}
+    subs = {**{s: x[i] for i, s in enumerate(sym.states)}, **{s: u[i] for i, s in enumerate(sym.inputs)}}
+    printer = {"sin": ca.sin, "cos": ca.cos, "tan": ca.tan, "exp": ca.exp, "log": ca.log,
+               "sqrt": ca.sqrt, "Abs": ca.fabs, "atan2": ca.atan2, "atan": ca.atan,
+               "asin": ca.asin, "acos": ca.acos, "tanh": ca.tanh, "sign": ca.sign,
+               "sinh": ca.sinh, "cosh": ca.cosh}
+    args = [*sym.states, *sym.inputs]
+    if sym.M is None or sym.F is None or nq * 2 != n:
+        expr = sym.f.subs(values)
+        fn = sp.lambdify(args, list(expr), modules=[printer, "math"])
+        return ca.Function("f", [x, u], [ca.vertcat(*fn(*[subs[a] for a in args]))])
+    M = sp.lambdify(args, sym.M.subs(values).tolist(), modules=[printer, "math"])
+    F = sp.lambdify(args, list(sym.F.subs(values)), modules=[printer, "math"])
+    vals = [subs[a] for a in args]
+    Mx = ca.SX(nq, nq)
+    for i, row in enumerate(M(*vals)):
+        for j, v in enumerate(row):
+            Mx[i, j] = v
+    qdd = ca.solve(Mx, ca.vertcat(*F(*vals)))
+    return ca.Function("f", [x, u], [ca.vertcat(x[nq:], qdd)])
+
+
+def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60,
+         duration: float | None = None, duration_max: float | None = None,
+         minimize: str = "effort", guess: str | Trajectory = "straight", seed: int = 0,
+         bounds: Mapping[str, tuple[float, float]] | None = None,
+         max_iterations: int = 3000) -> Trajectory:
+    """Plan a motion of *system* from *start* to *goal* (absolute states).
+
+    Parameters
+    ----------
+    knots : int
+        Collocation intervals ``N``.
+    duration, duration_max : float
+        A fixed final time, or a free one in ``(0, duration_max]`` (one of the two).
+    minimize : ``"effort"`` or ``"time"``
+        ``integral of sum (u_i / scale_i)^2 dt`` (scales: the Bryson scales of the
+        inputs) or the final time.
+    guess : ``"straight"``, ``"random"`` or a :class:`Trajectory`
+        The initial guess: the straight line from start to goal with zero
+        input; a seeded random one (*seed*); or a trajectory (interpolated).
+    bounds : mapping
+        ``{state: (low, high)}`` the motion must keep (the task's region).
+    """
+    ca = require_casadi()
+    if minimize not in MINIMIZE:
+        raise DesignError(f"minimize = {minimize!r}: expected one of {', '.join(MINIMIZE)}")
+    if not isinstance(knots, int) or not 4 <= knots <= 2000:
+        raise DesignError(f"knots = {knots!r}: expected a whole number from 4 to 2000")
+    if (duration is None) == (duration_max is None):
+        raise DesignError("give a fixed duration or a duration_max (a free final time), one of the two")
+    for name, v in (("duration", duration), ("duration_max", duration_max)):
+        if v is not None and not (math.isfinite(v) and 0 < v <= 1e4):
+            raise DesignError(f"{name} = {v!r}: expected seconds in (0, 10000]")
+    if minimize == "time" and duration is not None:
+        raise DesignError("minimize time needs a free final time: give duration_max, not duration")
+    n, m = system.n_states, system.n_inputs
+    if m == 0:
+        raise DesignError(f"{system.key} has no input: there is no motion to plan")
+    start = np.asarray(start, dtype=float).reshape(n)
+    goal = np.asarray(goal, dtype=float).reshape(n)
+    f = casadi_dynamics(system)
+    N = knots
+    opti = ca.Opti()
+    X = opti.variable(n, N + 1)
+    U = opti.variable(m, N + 1)
+    Um = opti.variable(m, N)
+    T = opti.variable() if duration is None else duration
+    t_max = duration if duration is not None else duration_max  # one of the two is given
+    assert t_max is not None
+    h = T / N
+    lo = np.array([float(system.params[f"{i}_min"]) for i in system.input_names])
+    hi = np.array([float(system.params[f"{i}_max"]) for i in system.input_names])
+    scales = np.array([float(system.spec.design_scales.get(i, 1.0)) or 1.0 for i in system.input_names])
+    F = f.map(N + 1)
+    Fk = F(X, U)
+    Xm = 0.5 * (X[:, :-1] + X[:, 1:]) + (h / 8) * (Fk[:, :-1] - Fk[:, 1:])
+    Fm = f.map(N)(Xm, Um)
+    opti.subject_to(X[:, 1:] - X[:, :-1] == (h / 6) * (Fk[:, :-1] + 4 * Fm + Fk[:, 1:]))
+    opti.subject_to(X[:, 0] == start)
+    opti.subject_to(X[:, N] == goal)
+    for i in range(m):
+        opti.subject_to(opti.bounded(lo[i], U[i, :], hi[i]))
+        opti.subject_to(opti.bounded(lo[i], Um[i, :], hi[i]))
+    for name, (a, b) in (bounds or {}).items():
+        k = system.state_index(name)
+        opti.subject_to(opti.bounded(a, X[k, :], b))
+        opti.subject_to(opti.bounded(a, Xm[k, :], b))
+    if duration is None:
+        opti.subject_to(opti.bounded(0.05 * t_max, T, t_max))
+    w = 1.0 / scales**2
+    effort = 0
+    for i in range(m):
+        effort = effort + w[i] * (h / 6) * (ca.sumsqr(U[i, :-1]) + 4 * ca.sumsqr(Um[i, :])
+                                            + ca.sumsqr(U[i, 1:]))
+    opti.minimize(effort if minimize == "effort" else T + 1e-6 * effort)
+    # The initial guess.
+    t_guess = t_max if duration is not None else 0.5 * t_max
+    s = np.linspace(0.0, 1.0, N + 1)
+    if isinstance(guess, Trajectory):
+        tt = s * guess.duration
+        xg = np.column_stack([np.interp(tt, guess.times - guess.times[0], guess.states[:, i])
+                              for i in range(n)])
+        ug = guess.input_at(tt + guess.times[0]).reshape(N + 1, m)
+        t_guess = guess.duration if duration is None else duration
+    elif guess == "straight":
+        xg = start + s[:, None] * (goal - start)
+        ug = np.zeros((N + 1, m))
+    elif guess == "random":
+        rng = np.random.default_rng(seed)
+        xg = start + s[:, None] * (goal - start)
+        spread = np.array([float(system.spec.design_scales.get(nm, 1.0)) for nm in system.state_names])
+        xg = xg + rng.normal(0.0, 1.0, xg.shape) * spread
+        xg[0], xg[-1] = start, goal
+        ug = rng.uniform(lo, hi, (N + 1, m))
+    else:
+        raise DesignError(f"guess = {guess!r}: expected random, straight or a trajectory file")
+    opti.set_initial(X, xg.T)
+    opti.set_initial(U, ug.T)
+    opti.set_initial(Um, 0.5 * (ug[:-1] + ug[1:]).T)
+    if duration is None:
+        opti.set_initial(T, t_guess)
+    opti.solver("ipopt", {"print_time": False},
+                {"print_level": 0, "max_iter": int(max_iterations), "sb": "yes",
+                 "tol": 1e-8, "constr_viol_tol": 1e-8})
+    t0 = time.process_time()
+    try:
+        sol = opti.solve()
+        stats = sol.stats()
+        value = sol.value
+        converged = bool(stats.get("success"))
+    except RuntimeError:  # not converged: the debug values are the last iterate
+        stats = opti.stats()
+        value = opti.debug.value
+        converged = False
+    solve_time = time.process_time() - t0
+    Tv = float(value(T)) if duration is None else float(duration)
+    xs = np.asarray(value(X), dtype=float).T.reshape(N + 1, n)
+    us = np.asarray(value(U), dtype=float).T.reshape(N + 1, m)
+    ums = np.asarray(value(Um), dtype=float).T.reshape(N, m)
+    defect = _max_defect(f, xs, us, ums, Tv / N, start, goal)
+    return Trajectory(
+        system=system.key, params=dict(system.params), state_names=system.state_names,
+        input_names=system.input_names, times=np.linspace(0.0, Tv, N + 1), states=xs,
+        inputs=us, mid_inputs=ums, converged=converged and defect < 1e-6,
+        cost=float(value(opti.f)), max_defect=defect, solve_time=solve_time,
+        iterations=int(stats.get("iter_count", 0)), solver="ipopt (CasADi, exact Hessian)",
+        settings={"knots": N, "minimize": minimize,
+                  "guess": guess if isinstance(guess, str) else "file", "seed": seed,
+                  "duration": duration, "duration_max": duration_max,
+                  "bounds": {k: list(v) for k, v in (bounds or {}).items()},
+                  "start": start.tolist(), "goal": goal.tolist()},
+        system_digest=system.digest,
+    )
+
+
+def _max_defect(f: Any, xs: np.ndarray, us: np.ndarray, ums: np.ndarray, h: float,
+                start: np.ndarray, goal: np.ndarray) -> float:
+    """The largest collocation defect (absolute), and the boundary conditions'."""
+    fk = np.array([np.asarray(f(xs[k], us[k])).reshape(-1) for k in range(len(xs))])
+    xm = 0.5 * (xs[:-1] + xs[1:]) + (h / 8) * (fk[:-1] - fk[1:])
+    fm = np.array([np.asarray(f(xm[k], ums[k])).reshape(-1) for k in range(len(xm))])
+    d = xs[1:] - xs[:-1] - (h / 6) * (fk[:-1] + 4 * fm + fk[1:])
+    return float(max(np.max(np.abs(d)), np.max(np.abs(xs[0] - start)), np.max(np.abs(xs[-1] - goal))))
+
+
+def load_trajectory(path: str | Path) -> Trajectory:
+    """A trajectory written by :meth:`Trajectory.save` (its system is named, never run)."""
+    import json
+    import zipfile
+
+    p = Path(path)
+    try:
+        with np.load(p, allow_pickle=False) as data:
+            meta = json.loads(str(data["meta"]))
+            arrays = {k: np.asarray(data[k], dtype=float) for k in ("times", "states", "inputs",
+                                                                     "mid_inputs")}
+    except FileNotFoundError:
+        raise DesignError(f"no trajectory file {p}") from None
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+        raise DesignError(f"{p} is not a trajectory file: {exc}") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise DesignError(f"{p} is not a trajectory file (written by 'equilibrist trajopt --out')")
+    times, states, inputs, mids = (arrays[k] for k in ("times", "states", "inputs", "mid_inputs"))
+    n, m = len(meta.get("state_names", [])), len(meta.get("input_names", []))
+    N = times.size - 1
+    if (N < 1 or states.shape != (N + 1, n) or inputs.shape != (N + 1, m) or mids.shape != (N, m)
+            or not all(np.all(np.isfinite(a)) for a in arrays.values()) or np.any(np.diff(times) <= 0)):
+        raise DesignError(f"{p} is not a valid trajectory file: its arrays do not fit together")
+    return Trajectory(
+        system=str(meta["system"]), params=dict(meta.get("params", {})),
+        state_names=tuple(meta["state_names"]), input_names=tuple(meta["input_names"]),
+        times=times, states=states, inputs=inputs, mid_inputs=mids,
+        converged=bool(meta.get("converged")), cost=float(meta.get("cost", math.nan)),
+        max_defect=float(meta.get("max_defect", math.nan)),
+        solve_time=float(meta.get("solve_time", math.nan)),
+        iterations=int(meta.get("iterations", 0)), solver=str(meta.get("solver", "")),
+        settings=dict(meta.get("settings", {})), system_digest=meta.get("system_digest"),
+    )
