@@ -28,9 +28,10 @@ components changed (from --from, by default the operating point).
 --duration-max S frees the final time (up to S); --minimize time needs it.
 --guess random (seeded by --seed) | straight | FILE.npz (an earlier plan).
 A plan that does not converge is one line on stderr and exit status 1
-(nothing written). --out FILE.npz is the trajectory file that
-'simulate --controller tvlqr --trajectory FILE' reads; it names its system
-and never runs a Python system file it names.
+(nothing written). --out FILE.npz writes the trajectory (times, states,
+inputs at the knots and midpoints, the system, its parameters and the
+settings); a reader names its system and never runs a Python system file it
+names (docs/trajopt.md).
 """
 
 
