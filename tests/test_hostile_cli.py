@@ -28,14 +28,15 @@ def _one_line(code: int, err: str, *words: str) -> None:
 # -- signals ---------------------------------------------------------------------------
 
 SIGNALLED = {
-    # show: about 2 s of CPU (the imports and the symbolic printing); signalled after 0.8 s.
+    # Each is signalled past the start (the handlers are set before 0.3 s of CPU) and
+    # well before its end. show: about 2 s of CPU (the imports and the printing).
     "show": (["show", "double_cartpole", "--latex"], 0.8),
     # sweep: 400 points of 2000 runs each, minutes of work.
     "sweep": (["sweep", "cartpole", "--vary", "m_p=0.2:2:400", "--runs", "2000",
                "--no-progress", "--out", "s.parquet"], 4.0),
-    # export: a 40 s recorded run of the MPC, many seconds of solves.
+    # export: a 40 s recorded run of the MPC, about 5 s of CPU in all.
     "export": (["export", "cartpole", "--controller", "mpc", "--duration", "40", "--out", "lib"],
-               4.0),
+               1.5),
 }
 
 
@@ -334,6 +335,19 @@ def test_ctrl_c_stops_identify_at_once(tmp_path, extra) -> None:
         assert err.decode().strip() == "equilibrist: interrupted"
         assert took < 3.0, f"took {took:.1f} s to stop"
         assert sorted(p.name for p in folder.iterdir()) == ["run.csv"]
+
+
+@pytest.mark.parametrize(("extra", "words"), [
+    (["--duration", "1e308"], ["--duration 1e+308 s at 200 Hz", "at most 10000000"]),
+    (["--duration", "50001"], ["--duration 50001 s", "at most 10000000"]),
+    (["--vary", "rate=100:1e300:3", "--duration", "1"], ["--duration 1 s at 1e+300 Hz"]),
+])
+def test_a_run_too_long_is_refused(tmp_path, capsys, extra, words) -> None:
+    out = tmp_path / "table.parquet"
+    code = main(["sweep", "cartpole", "--vary", "m_p=0.5:2:2", *extra, "--out", str(out),
+                 "--no-progress"])
+    _one_line(code, capsys.readouterr().err, *words)
+    assert not out.exists()
 
 
 # -- odd values anywhere on a sweep's command line ---------------------------------------

@@ -62,6 +62,9 @@ MAX_POINTS = 10_000_000
 # Initial states of a point's region-of-attraction grid (the product of its N's): each
 # is a run of every point, and the grid is allocated whole.
 MAX_ROA_STATES = 100_000
+# Samples of one run at most (a day at 100 Hz): a longer run is no study's, and its
+# length would overflow the batch's sizing.
+MAX_RUN_SAMPLES = 10_000_000
 
 
 class StudyError(EquilibristError, ValueError):
@@ -525,6 +528,13 @@ def make_study(
             problems.append(f"--spread {name}: expected a relative spread in [0, 1), got {v:g}")
         elif v is not None:
             spread_v[name] = v
+    if dur is not None and rate_v is not None and dur > 0:
+        fastest = max([rate_v] + [float(v) for a in axes if a.kind == "rate"
+                                  for v in (a.values or (a.high,)) if v is not None])
+        if dur * fastest > MAX_RUN_SAMPLES:
+            problems.append(f"--duration {dur:g} s at {fastest:g} Hz is {dur * fastest:.3g} samples "
+                            f"a run: at most {MAX_RUN_SAMPLES} ({MAX_RUN_SAMPLES / fastest:g} s at "
+                            "that rate)")
     if problems:
         raise StudyError("; ".join(problems))
     assert n_runs is not None and dur is not None and seed_v is not None
