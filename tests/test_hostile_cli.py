@@ -390,3 +390,35 @@ def test_odd_sweep_command_lines_are_one_line(tmp_path_factory, capsys, monkeypa
     assert "Traceback" not in err
     assert len(err.strip().splitlines()) == 1, err
     assert list(folder.iterdir()) == []
+
+
+EXPORT_OPTIONS = {"--rate": "{}", "--duration": "{}", "--seed": "{}", "--horizon": "{}",
+                  "--controller": "{}", "--q": "{},1,1,1", "--r": "{}", "--set": "m_p={}"}
+EXPORT_ODD = [*ODD, "mpc", "swingup", "lqr", "none", "50", "50.01", "204", "205"]
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(picks=st.lists(st.tuples(st.sampled_from(sorted(EXPORT_OPTIONS)), st.sampled_from(EXPORT_ODD)),
+                      min_size=1, max_size=3))
+def test_odd_export_command_lines_are_one_line(tmp_path_factory, capsys, monkeypatch, picks) -> None:
+    import importlib
+
+    def reached(*args, **kwargs):
+        raise _Reached
+
+    monkeypatch.setattr(importlib.import_module("equilibrist.control.controller"),
+                        "build_controller", reached)
+    monkeypatch.setattr(importlib.import_module("equilibrist.control.design"), "design", reached)
+    folder = tmp_path_factory.mktemp("export")
+    argv = ["export", "cartpole", "--out", str(folder / "lib")]
+    for option, value in picks:
+        argv += [option, EXPORT_OPTIONS[option].format(value)]
+    try:
+        code = main(argv)
+    except _Reached:
+        return
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1, err
+    assert list(folder.iterdir()) == []
