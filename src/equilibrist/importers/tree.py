@@ -476,7 +476,9 @@ def _nearest_equilibrium(
         solved = np.linalg.lstsq(gains, force, rcond=None)[0]
         if len(new_ctrl) == len(actuators):
             new_ctrl = solved
-    moved = [(names[j], float(q[a] - qpos[a])) for j, a in zip(free, adr, strict=True) if q[a] != qpos[a]]
+    # Moves of round-off size (a joint the solver only grazed) are not reported.
+    moved = [(names[j], float(q[a] - qpos[a])) for j, a in zip(free, adr, strict=True)
+             if abs(q[a] - qpos[a]) > 1e-12]
     return q, new_ctrl, moved
 
 
