@@ -246,6 +246,45 @@ def test_the_other_cpu_setting_changes_numbas_machine_code() -> None:
     assert here[2] == there[2] == "False"  # and never a fused multiply-add
 
 
+_DYNAMICS = """
+import json, sys, types
+import numba, numpy as np
+from equilibrist.numeric.system import get_system
+try:
+    from equilibrist.numeric.libm import FUNCTIONS
+except ImportError:  # a release before the project's own sin and cos
+    FUNCTIONS = ()
+system = get_system("cartpole")
+mod = types.ModuleType("dynamics")
+exec(compile(open(system.functions.__file__).read(), "dynamics", "exec"), mod.__dict__)
+for name in FUNCTIONS:  # as the cores do: the copied functions compiled
+    setattr(mod, name, numba.njit(getattr(mod, name)))
+compiled = numba.njit(mod.f)
+out = []
+for h in json.loads(sys.argv[1]):
+    x = np.array([0.0, float.fromhex(h), 0.3, -0.2])
+    a, b = np.empty(4), np.empty(4)
+    system.functions.f(x, np.array([0.5]), system.p, a)
+    compiled(x, np.array([0.5]), system.p, b)
+    out.append([v.hex() for v in (*a, *b)])
+print(json.dumps(out))
+"""
+
+
+@needs_dispatch
+def test_the_dynamics_give_the_same_bits_where_the_c_library_does_not() -> None:
+    """The cart-pole's f, in Python and compiled, at angles where glibc's variants differ."""
+    angles = LIBM_DIFFERS["sin"] + LIBM_DIFFERS["cos"]
+
+    def run(extra: dict[str, str]) -> list[list[str]]:
+        proc = subprocess.run([sys.executable, "-c", _DYNAMICS, json.dumps(angles)], env=_env(extra),
+                              capture_output=True, text=True, check=False, cwd=HERE)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        return json.loads(proc.stdout)
+
+    assert run({}) == run(OTHER_CPU)
+
+
 # -- the recorded numbers under another feature set ---------------------------------------------
 _DIGESTS = """
 import json, sys
