@@ -278,6 +278,9 @@ def controller_options(args: argparse.Namespace) -> dict[str, Any]:
     """Options of the registry's controller builders (``--horizon`` for MPC, ``--balance``
     for the swing-up)."""
     out: dict[str, Any] = {}
+    trajectory = getattr(args, "trajectory", None)
+    if trajectory is not None:
+        out["trajectory"] = trajectory
     balance = getattr(args, "balance", None)
     if balance is not None:
         out["balance"] = balance

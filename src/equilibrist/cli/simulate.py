@@ -23,7 +23,7 @@ if TYPE_CHECKING:
     from equilibrist.sim.signals import PRBS, Chirp
 
 # The registry's names (equilibrist.control.controller.CONTROLLER_KINDS).
-CONTROLLERS = ("lqr", "lqg", "swingup", "mpc", "none")
+CONTROLLERS = ("lqr", "lqg", "swingup", "mpc", "tvlqr", "none")
 
 _EPILOG = """\
 The run: the nonlinear plant integrated with RK4 (or --integrator adaptive)
@@ -70,9 +70,11 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     """The options shared by ``simulate`` and ``batch``."""
     common.add_system(p)
     p.add_argument("--controller", choices=CONTROLLERS,
-                   help="lqr (full state), lqg (Kalman filter + LQR), swingup, mpc, or none "
-                   "(open loop); default lqg, none for a system without input; one that does "
-                   "not apply to the system is refused")
+                   help="lqr (full state), lqg (Kalman filter + LQR), swingup, mpc, tvlqr (track "
+                   "--trajectory, then balance), or none (open loop); default lqg, none for a "
+                   "system without input; one that does not apply to the system is refused")
+    p.add_argument("--trajectory", metavar="FILE.npz",
+                   help="with --controller tvlqr: the plan to track ('equilibrist trajopt --out')")
     p.add_argument("--duration", default="5", metavar="S", help="seconds to simulate (default 5)")
     p.add_argument("--rate", metavar="HZ",
                    help="controller sample rate [Hz] (default: the system's control rate)")
@@ -302,12 +304,30 @@ def build_run(args: argparse.Namespace) -> tuple[System, dict[str, Any]]:
         "outputs": outputs,
         "max_steps": parse_max_steps(args.max_steps),
     }
-    if kind == "swingup":
+    if kind in ("swingup", "tvlqr") and "swingup" in _tasks(system):
         # A swing-up starts hanging: only the task's region (the cart's track) ends it.
         from equilibrist.tasks import get_task
 
         options["region"] = dict(get_task(system, "swingup").region)
+    if getattr(args, "trajectory", None) is not None and kind != "tvlqr":
+        raise common.UsageError("--trajectory is the plan --controller tvlqr tracks: give "
+                                "--controller tvlqr, or leave out --trajectory")
     return system, options
+
+
+def _tasks(system: System) -> tuple[str, ...]:
+    from equilibrist.tasks import task_names
+
+    return task_names(system)
+
+
+def start_of(options: dict[str, Any], x0: dict[str, float]) -> dict[str, float]:
+    """The run's start: --x0, else where the controller's plan starts (a tracked trajectory)."""
+    if x0:
+        return x0
+    ctrl = options.get("controller")
+    start = getattr(ctrl, "settings", {}).get("start") if ctrl is not None else None
+    return dict(start) if isinstance(start, dict) else x0
 
 
 def _fmt(v: Any) -> str:
@@ -331,7 +351,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_out(args, "the run")
     system, options = build_run(args)
-    result = simulate(system, x0=parse_x0(args.x0), progress=show_progress(args),
+    result = simulate(system, x0=start_of(options, parse_x0(args.x0)), progress=show_progress(args),
                       excitation=parse_excitation(args), **options)
     saved = result.save(args.out) if args.out is not None else None
     from equilibrist.viz.cli_hooks import handle_outputs

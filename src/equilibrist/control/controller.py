@@ -1186,7 +1186,7 @@ def as_python_controller(obj: object) -> PythonController:
 
 # -- the registry of controller builders (--controller) -------------------------------------
 #: The controllers the command line names, in its order.
-CONTROLLER_KINDS = ("lqr", "lqg", "swingup", "mpc", "none")
+CONTROLLER_KINDS = ("lqr", "lqg", "swingup", "mpc", "tvlqr", "none")
 
 
 @dataclass(frozen=True, eq=False)
@@ -1243,7 +1243,8 @@ def register_controller(name: str) -> Callable[[ControllerBuilder], ControllerBu
 
 
 #: Modules that register further builders when first asked (name -> module).
-CONTROLLER_MODULES = {"swingup": "equilibrist.control.swingup", "mpc": "equilibrist.control.mpc"}
+CONTROLLER_MODULES = {"swingup": "equilibrist.control.swingup", "mpc": "equilibrist.control.mpc",
+                      "tvlqr": "equilibrist.control.tvlqr"}
 
 
 def registered_controllers() -> tuple[str, ...]:

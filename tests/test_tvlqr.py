@@ -1,0 +1,84 @@
+"""Time-varying LQR: a planned swing-up tracked on the nonlinear plant, handed over to the balancing LQR."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from equilibrist import get_system
+from equilibrist.cli.main import main
+from equilibrist.control.controller import ControllerRequest, build_controller
+from equilibrist.control.trajopt import plan
+from equilibrist.sim.run import simulate
+from equilibrist.tasks import get_task
+
+
+@pytest.fixture(scope="module")
+def cart_plan(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    cart = get_system("cartpole")
+    task = get_task(cart, "swingup")
+    traj = plan(cart, start=task.start, goal=task.x_op, knots=60, duration=4.0,
+                bounds={"x": (-0.9, 0.9)})  # a margin inside the track for the tracking error
+    assert traj.converged
+    return traj.save(tmp_path_factory.mktemp("plan") / "up.npz")
+
+
+def _controller(system, path: Path):
+    return build_controller("tvlqr", ControllerRequest(system=system, rate=200.0,
+                                                       options={"trajectory": str(path)}))
+
+
+def test_the_gains_hand_over_to_the_balancing_lqr(cart_plan: Path) -> None:
+    cart = get_system("cartpole")
+    ctrl = _controller(cart, cart_plan)
+    steps, n, m = int(ctrl.params[0]), cart.n_states, cart.n_inputs
+    assert steps == 800
+    off = 4 + (steps + 1) * n + (steps + 1) * m
+    gains = ctrl.params[off : off + steps * m * n].reshape(steps, m, n)
+    k_end = ctrl.params[-m * n :].reshape(m, n)
+    # The last sample is linearized at the operating point and the recursion starts from the
+    # balancing LQR's Riccati solution: its gain is the balancing gain.
+    np.testing.assert_allclose(gains[-1], k_end, rtol=1e-6, atol=1e-9)
+    assert not np.allclose(gains[0], k_end, rtol=0.1)  # along the swing the gains differ
+
+
+def test_the_plan_is_tracked_and_balanced_without_noise(cart_plan: Path) -> None:
+    from equilibrist.control.trajopt import load_trajectory
+
+    cart = get_system("cartpole")
+    traj = load_trajectory(cart_plan)
+    run = simulate(cart, _controller(cart, cart_plan), duration=6.0, x0=traj.states[0],
+                   region={"x": (-1.0, 1.0)})
+    assert not run.fell
+    # While the plan runs, the state follows it closely (the plan's own knots are the truth).
+    k = np.searchsorted(run.time, traj.times[:-1])
+    err = np.abs(run.states[k] - traj.states[:-1])
+    assert np.max(err[:, 1]) < 0.05, np.max(err[:, 1])
+    assert np.max(np.abs(run.states[:, 0])) < 1.0
+    np.testing.assert_allclose(run.final_state, np.zeros(4), atol=1e-3)
+
+
+@pytest.mark.slow
+def test_the_command_line_tracks_a_plan_with_noise_and_refuses_what_does_not_fit(
+        cart_plan: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["simulate", "cartpole", "--controller", "tvlqr", "--trajectory", str(cart_plan),
+                 "--duration", "6", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["stayed_up"] is True  # started where the plan starts: hanging
+    assert abs(out["final_error"]["theta"]) < 0.02
+    assert main(["batch", "cartpole", "--controller", "tvlqr", "--trajectory", str(cart_plan),
+                 "--runs", "16", "--x0", "theta=3.09:3.19", "--duration", "6", "--json"]) == 0
+    batch = json.loads(capsys.readouterr().out)
+    assert batch["fraction_up"] == 1.0
+    for argv, words in ((["--controller", "tvlqr"], "--trajectory"),
+                        (["--controller", "lqr", "--trajectory", str(cart_plan)], "tvlqr"),
+                        (["--controller", "tvlqr", "--trajectory", str(tmp_path / "none.npz")],
+                         "no trajectory file")):
+        assert main(["simulate", "cartpole", *argv]) == 2
+        err = capsys.readouterr().err.strip()
+        assert words in err and len(err.splitlines()) == 1, err
+    assert main(["simulate", "furuta", "--controller", "tvlqr", "--trajectory", str(cart_plan)]) == 2
+    assert "not of furuta" in capsys.readouterr().err
