@@ -68,9 +68,14 @@ def read_params(path: str | Path, system: str | None = None) -> dict[str, float]
         values = doc
     out: dict[str, float] = {}
     for name, v in values.items():
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(float(v)):
-            raise IdentificationError(f"{p}: parameter {name} = {v!r} is not a finite number")
-        out[str(name)] = float(v)
+        try:
+            value = float(v) if isinstance(v, int | float) and not isinstance(v, bool) else math.nan
+        except OverflowError:  # an integer too large for a double
+            value = math.inf
+        if not math.isfinite(value):
+            shown = repr(v) if len(repr(v)) <= 40 else f"{repr(v)[:20]}... ({len(repr(v))} digits)"
+            raise IdentificationError(f"{p}: parameter {name} = {shown} is not a finite number")
+        out[str(name)] = value
     return out
 
 
