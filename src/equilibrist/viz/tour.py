@@ -706,7 +706,8 @@ def _tour_into(
             # Fresh interpreters (not forks): numba's threads and matplotlib's
             # state are not safe to fork.
             context = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+            pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context)
+            try:
                 futures = {
                     pool.submit(_tour_in_worker, system.key, dict(system.params), system.digest,
                                 str(folder), options): k
@@ -714,9 +715,26 @@ def _tour_into(
                 }
                 for future in as_completed(futures):
                     finished(futures[future], future.result())
+            except BaseException:
+                # Ctrl-C (or a failure) stops the workers now: waiting for the systems they
+                # are compiling would keep the command alive for tens of seconds.
+                _stop_workers(pool)
+                raise
+            pool.shutdown()
     outcomes = [done[k] for k in range(len(systems))]
     write_report(folder, outcomes)
     return outcomes
+
+
+def _stop_workers(pool: Any) -> None:
+    """End a process pool's workers at once, their queued work dropped."""
+    workers = list((getattr(pool, "_processes", None) or {}).values())  # the pool's own map
+    for proc in workers:
+        if proc.is_alive():
+            proc.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in workers:
+        proc.join(timeout=2)
 
 
 def write_report(folder: Path, outcomes: Sequence[Outcome]) -> Path:
