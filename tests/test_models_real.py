@@ -289,6 +289,28 @@ def test_an_include_that_is_a_fifo_is_refused(tmp_path: Path, capsys) -> None:
     assert "<include file='part.xml'> is not a regular file" in err
 
 
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs here")
+@pytest.mark.parametrize("name", ["model.xml", "robot.urdf", "rig.py"])
+def test_a_system_path_that_is_a_fifo_is_refused_at_once(tmp_path: Path, capsys, name: str) -> None:
+    fifo = tmp_path / name
+    os.mkfifo(fifo)
+    assert main(["show", str(fifo)]) == 2  # reading it would block: nobody writes to it
+    err = capsys.readouterr().err.strip()
+    assert "is not a regular file" in err and len(err.splitlines()) == 1
+
+
+def test_matrix_columns_stay_apart_with_long_names() -> None:
+    import numpy as np
+
+    from equilibrist.cli.common import format_matrix
+
+    names = ("cart_to_pole_angle_rate", "slide_position_in_metres")
+    text = format_matrix(np.array([[1.5e-3, -2.25e4]]), ("row",), names)
+    head, row = text.splitlines()
+    assert all(n in head.split() for n in names)  # every name a word of its own
+    assert row.split()[1:] == ["0.0015", "-22500"]
+
+
 def test_a_long_chain_is_refused_before_deriving(tmp_path: Path, capsys) -> None:
     body, close = "", ""
     for k in range(50):

@@ -219,6 +219,7 @@ def print_json(obj: Any) -> None:
 def format_matrix(mat: np.ndarray, rows: Sequence[str], cols: Sequence[str], *, width: int = 11) -> str:
     """A labelled matrix as aligned text."""
     label = max([len(r) for r in rows] + [1])
+    width = max([width] + [len(c) + 2 for c in cols])  # long names keep their columns apart
     head = " " * (label + 2) + "".join(f"{c:>{width}}" for c in cols)
     lines = [head]
     for r, row in zip(rows, np.atleast_2d(mat), strict=False):

@@ -90,6 +90,7 @@ def model_key(entry: Entry) -> str:
     # over, a catalogue module's source.
     h.update(entry.content if entry.content is not None else _source_of(entry.module))
     h.update(_source_of("equilibrist.numeric.codegen"))
+    h.update(_source_of("equilibrist.numeric.libm"))  # copied into every generated module
     # Everything a derivation may lean on: the mechanics layer and the
     # systems' private helper modules (a leading underscore).
     for folder in ("mechanics", "systems"):

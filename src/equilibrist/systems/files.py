@@ -57,6 +57,10 @@ def from_file(path: str | os.PathLike[str]) -> Entry:
             f"system file {given!r}: expected a .py file, an MJCF model (.xml) or a URDF (.urdf)"
         )
     try:
+        if file.exists() and not file.is_dir() and not file.is_file():
+            # A FIFO, a device or a socket: reading it could block for ever.
+            raise UnknownNameError(f"system file {given!r} is not a regular file (a pipe or a "
+                                   "device): expected a file")
         data = file.read_bytes()
     except FileNotFoundError:
         raise UnknownNameError(f"system file {given!r} does not exist") from None

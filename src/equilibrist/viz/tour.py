@@ -562,7 +562,9 @@ def _label(system: Any) -> str:
     key = str(system.key)
     if key == system.spec.key:
         return key
-    return f"{system.name} ({Path(key).name})"
+    file = Path(key).name
+    # A model file's system is named after the file: say it once.
+    return file if system.name in (file, Path(key).stem) else f"{system.name} ({file})"
 
 
 def _tour_in_worker(key: str, params: dict[str, float], digest: str | None, folder: str,
