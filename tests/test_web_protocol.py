@@ -679,3 +679,29 @@ def test_a_page_that_lags_is_not_flooded(tmp_path):
     finally:
         proc.send_signal(signal.SIGINT)
         proc.communicate(timeout=60)
+
+
+def test_no_browser_is_started_without_a_display(monkeypatch) -> None:
+    """Without a display only a console browser could start, and it would take the terminal."""
+    import webbrowser
+
+    from equilibrist.cli import play
+
+    opened: list[str] = []
+
+    class Recorder:
+        def open(self, url: str) -> None:
+            opened.append(url)
+
+    class Started:
+        started = True
+
+    monkeypatch.setattr(webbrowser, "get", lambda *a: Recorder())
+    monkeypatch.setattr(play.sys, "platform", "linux")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    play._open_browser("http://127.0.0.1:1/", Started())
+    assert opened == []
+    monkeypatch.setenv("DISPLAY", ":0")
+    play._open_browser("http://127.0.0.1:1/", Started())
+    assert opened == ["http://127.0.0.1:1/"]

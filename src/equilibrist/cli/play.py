@@ -150,6 +150,17 @@ def _open_browser(url: str, server: object) -> None:
         if getattr(server, "started", False):
             break
         time.sleep(0.05)
+    if not graphical():
+        return  # a console browser would take the terminal over: the printed address is enough
     # No browser on this machine: the printed address is enough.
     with contextlib.suppress(webbrowser.Error):
         webbrowser.get().open(url)
+
+
+def graphical() -> bool:
+    """Whether a browser window can open here (Linux without a display has none)."""
+    import os
+
+    if not sys.platform.startswith("linux"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
