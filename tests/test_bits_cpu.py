@@ -389,5 +389,6 @@ def test_a_study_on_workers_with_different_cpu_settings_gives_the_local_table(tm
         for p in procs:
             try:
                 p.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:  # pragma: no cover
+            except subprocess.TimeoutExpired:  # a worker that does not leave on SIGTERM
                 p.kill()
+                p.wait(timeout=10)  # reaped, so no process is left running

@@ -155,20 +155,6 @@ def test_parameter_file_of_the_same_model_through_a_relative_path(tmp_path: Path
         read_params("params.json", system="other.xml")
 
 
-# -- 6. process noise scaled to the model -----------------------------------------------------
-
-def test_default_noise_is_scaled_to_the_motor_and_the_weak_acrobot_balances(capsys) -> None:
-    system = get_system(str(ACROBOT))
-    noise = system.spec.process_noise
-    # A tenth of a percent of what the +-2 N m motor does to each rate, not 0.05 on each.
-    assert noise["shoulder_dot"] < 0.01 and noise["elbow_dot"] < 0.05
-    # The motor barely holds it (the default design asks for 2 N m at 0.004 rad): from
-    # upright, and from a small tilt, with the default noise, it stays up.
-    for start in ("shoulder=0", "shoulder=0.002"):
-        assert main(["simulate", str(ACROBOT), "--x0", start, "--duration", "4", "--no-progress"]) == 0
-        assert "stayed_up             True" in capsys.readouterr().out
-
-
 # -- 7. the drawing's plane ---------------------------------------------------------------------
 
 def test_a_rig_drawn_with_y_up_is_drawn_in_its_plane() -> None:
