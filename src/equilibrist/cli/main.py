@@ -150,6 +150,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"equilibrist: error: cannot use{where}: {exc.strerror or exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        if argv is None and threading.current_thread() is threading.main_thread():
+            # Unwound once: a second delivery while the interpreter exits must not turn the
+            # exit status into death by signal (-2) after the line was printed.
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+            signal.signal(signal.SIGTERM, signal.SIG_IGN)
         print("equilibrist: interrupted", file=sys.stderr)
         return interrupted_status()
 
