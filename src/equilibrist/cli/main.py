@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import re
 import signal
@@ -150,12 +151,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"equilibrist: error: cannot use{where}: {exc.strerror or exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        if argv is None and threading.current_thread() is threading.main_thread():
-            # Unwound once: a second delivery while the interpreter exits must not turn the
-            # exit status into death by signal (-2) after the line was printed.
-            signal.signal(signal.SIGINT, signal.SIG_IGN)
-            signal.signal(signal.SIGTERM, signal.SIG_IGN)
         print("equilibrist: interrupted", file=sys.stderr)
+        if argv is None and threading.current_thread() is threading.main_thread():
+            # The command's own process, unwound (its files written or removed): end it
+            # here. The interpreter's finalization, with the core's helper thread and
+            # numba's still running, could end it by the signal (-2) after this line.
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(interrupted_status())
         return interrupted_status()
 
 
