@@ -19,6 +19,7 @@ import math
 import multiprocessing
 import os
 import pickle
+import sys
 import time
 import zipfile
 from collections.abc import Mapping, Sequence
@@ -535,19 +536,20 @@ def simulate_batch(
     timing: list[float] = []
 
     def work() -> None:
-        # Numba's thread count and chunk size belong to the thread that calls the core.
-        import numba
-
+        # The thread count belongs to the thread that calls the core.
         threads = set_workers(workers)
+        numba = sys.modules.get("numba") if setup.nonlinear is not None else None
         # A few runs at a time per thread (dynamic scheduling): runs that fall early
         # leave no thread idle, and the hand-out costs nothing next to a run.
-        before = numba.set_parallel_chunksize(max(1, min(16, runs // (8 * threads))))
+        before = (numba.set_parallel_chunksize(max(1, min(16, runs // (8 * threads))))
+                  if numba is not None else None)
         t0 = time.perf_counter()
         try:
             kernel.run_many(**shared, **run_arrays(slice(0, runs)))
         finally:
             timing.append(time.perf_counter() - t0)
-            numba.set_parallel_chunksize(before)
+            if numba is not None:
+                numba.set_parallel_chunksize(before)
 
     bar = _progress_bar(runs, progress, "runs")
     st = layout.STATUS

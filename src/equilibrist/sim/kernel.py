@@ -50,6 +50,8 @@ from __future__ import annotations
 
 import ast
 import hashlib
+import os
+import sys
 import types
 from pathlib import Path
 from typing import Any
@@ -235,28 +237,43 @@ class Kernel:
     def __init__(self, system: System, controller: NonlinearController | None = None) -> None:
         self.system = system
         self.controller = controller
-        self.module = load_kernel(system, controller)
-        self._cores: dict[Linear, types.ModuleType] = {}
-        self._last: types.ModuleType | None = None
+        self._module: types.ModuleType | None = None
+        self._cores: dict[Linear | None, Any] = {}
 
-    def core(self, cp: Any) -> types.ModuleType:
-        """The module whose ``run_one``/``run_many`` run controller parameters *cp*."""
+    @property
+    def module(self) -> types.ModuleType:
+        """The numba module that runs a nonlinear controller (loaded on first use)."""
+        if self._module is None:
+            self._module = load_kernel(self.system, self.controller)
+        return self._module
+
+    def _native(self, key: Linear | None) -> Any:
+        core = self._cores.get(key)
+        if core is None:
+            from equilibrist.native.simcore import load_core
+
+            core = self._cores[key] = load_core(self.system, key)
+        return core
+
+    @property
+    def generic(self) -> Any:
+        """The C core with the generic linear library (the entries that run no controller)."""
+        return self._native(None)
+
+    def core(self, cp: Any) -> Any:
+        """The core whose ``run_one``/``run_many`` run controller parameters *cp*: the C core
+        made for a linear controller's pattern, or the numba module of a nonlinear one."""
         if self.controller is not None:
             return self.module
-        key = _linear_key(cp)
-        if key is None:
-            return self.module
-        module = self._cores.get(key)
-        if module is None:
-            module = self._cores[key] = load_kernel(self.system, None, key)
-        self._last = module
-        return module
+        return self._native(_linear_key(cp))
 
     def compiled(self, cp: Any) -> bool:
         """Whether ``run_one`` and ``run_many`` for controller parameters *cp* are compiled
         (or loaded from the cache) in this process already."""
-        module = self.core(cp)
-        return bool(module.run_one.overloads) and bool(module.run_many.overloads)
+        if self.controller is not None:
+            module = self.module
+            return bool(module.run_one.overloads) and bool(module.run_many.overloads)
+        return (self.system.compiled.module_path, _linear_key(cp)) in _native_loaded()
 
     def run_one(self, *, k_start: int, k_end: int, iopts: Any, fopts: Any, x: Any, z: Any,
                 u_prev: Any, rng: Any, op: Any, c_idx: Any, cp: Any, ref: Any, uff: Any,
@@ -278,38 +295,52 @@ class Kernel:
                  pulses: Any, pulse_value: Any, rec_cols: Any, acc_cols: Any, recs: Any,
                  accs: Any, statuses: Any, fell_xs: Any, x_ends: Any, stop: Any,
                  core: Any = None) -> None:
-        (core or self.core(cp)).run_many(
+        target = core or self.core(cp)
+        extra = {} if isinstance(target, types.ModuleType) else {"threads": _THREADS[0]}
+        target.run_many(
             iopts, fopts, x0s, z0, rngs, op, c_idx, cp, ref, uff, lv, lw, p_sets_r, p_switch,
             lin_r, region, kicks, kick_value, pulses, pulse_value, rec_cols, acc_cols, recs,
-            accs, statuses, fell_xs, x_ends, stop,
+            accs, statuses, fell_xs, x_ends, stop, **extra,
         )
 
     def measure_one(self, *, x: Any, c_idx: Any, lv: Any, rng: Any, y: Any) -> None:
-        self.module.measure_one(x, c_idx, lv, rng, y)
+        self.generic.measure_one(x, c_idx, lv, rng, y)
 
     def scratch(self, *, p_len: int, ny: int, nw: int) -> Any:
-        return self.module.scratch(p_len, ny, nw)
+        return self.generic.scratch(p_len, ny, nw)
 
     def advance_one(self, *, k: int, x: Any, u_app: Any, op: Any, p_sets: Any, p_switch: Any,
                     lin_s: Any, region: Any, kicks: Any, kick_value: Any, pulses: Any,
                     pulse_value: Any, lw: Any, rng: Any, iopts: Any, fopts: Any, status: Any,
                     scr: Any) -> bool:
-        return bool(self.module.advance_one(
+        return bool(self.generic.advance_one(
             k, x, u_app, op, p_sets, p_switch, lin_s, region, kicks, kick_value, pulses,
             pulse_value, lw, rng, iopts, fopts, status, scr,
         ))
 
     def rk4_steps(self, *, x: Any, u: Any, p: Any, h: float, n_steps: int) -> None:
-        self.module.rk4_steps(x, u, p, h, n_steps)
+        self.generic.rk4_steps(x, u, p, h, n_steps)
+
+
+def _native_loaded() -> Any:
+    from equilibrist.native.simcore import _CORES
+
+    return _CORES
+
+
+# The batch's thread count (set_workers): OpenMP threads of the C core's run_many.
+_THREADS = [1]
 
 
 def set_workers(workers: int | None) -> int:
-    """Set numba's thread count for parallel entries; returns the count in force."""
-    import numba
-
-    available = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]  # set at import by numba.config
+    """Set the thread count of parallel entries (the C core's OpenMP threads, numba's for a
+    nonlinear controller's core); returns the count in force."""
+    available = os.cpu_count() or 1
     count = available if workers is None else max(1, min(int(workers), available))
-    numba.set_num_threads(count)
+    _THREADS[0] = count
+    numba = sys.modules.get("numba")
+    if numba is not None:
+        numba.set_num_threads(min(count, numba.config.NUMBA_NUM_THREADS))
     return count
 
 

@@ -248,7 +248,7 @@ def _run_compiled(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
         kernel.run_one(k_start=0, k_end=total, **arrays)
         return _result(setup, rec, int(status[rows]), status, fell_x, x, seq,
                        estimates=setup.estimates)
-    if not core.run_one.overloads:  # compiled (or loaded) here: Ctrl-C can stop that
+    if not kernel.compiled(setup.cp):  # compiled (or loaded) here: Ctrl-C can stop that
         kernel.run_one(k_start=0, k_end=0, **arrays)
 
     def pieces() -> None:

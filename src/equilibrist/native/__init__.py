@@ -1,0 +1,1 @@
+"""The generated C core: Python definitions translated to C, compiled once, cached by content."""

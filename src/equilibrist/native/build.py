@@ -1,0 +1,165 @@
+"""Compile a generated C unit into a shared library, cached by content, and load it.
+
+The library's name is the hash of everything that shapes it: the unit's
+source, the compiler's identity (its command and ``--version``), the flags
+and this module's :data:`REVISION`. So a change in any of them makes a new
+library, and an unchanged one is loaded from the cache folder
+(:func:`equilibrist.numeric.cache.cache_dir`, ``native/``) in milliseconds.
+
+- **Atomic**: each build compiles into a file of its own and renames it
+  into place; two processes that build the same library at once both end
+  with a whole one (the last rename wins, with identical bytes).
+- **Checked**: beside each library a ``.sha256`` file holds its digest; a
+  library whose bytes no longer match (a damaged cache), or that the loader
+  refuses, is built again.
+- **Compiler**: ``$CC``, else ``cc``; where neither exists, the C compiler
+  of the ``ziglang`` package (``pip install ziglang``) if it is installed.
+  OpenMP (``-fopenmp``) where the compiler has it, else the batch entry
+  runs its runs one after another.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import shlex
+import shutil
+import subprocess
+import sys
+import tempfile
+from functools import lru_cache
+from pathlib import Path
+
+from equilibrist.errors import EquilibristError
+
+#: Bumped when the way a library is built changes (flags, layout of the folder).
+REVISION = 1
+#: Flags of every build: optimized, no fused multiply-add and no reassociation (the bits
+#: of the Python definitions), position-independent, entries visible by EQ_EXPORT only.
+FLAGS = ("-std=gnu99", "-O2", "-ffp-contract=off", "-fno-math-errno", "-fPIC", "-shared",
+         "-fvisibility=hidden", "-Wall", "-Wno-unused-function", "-Wno-unused-variable")
+_OPENMP = ("-fopenmp",)
+
+
+class BuildError(EquilibristError, RuntimeError):
+    """The C compiler is missing or refused a generated unit."""
+
+
+@lru_cache(maxsize=1)
+def compiler() -> tuple[str, ...]:
+    """The C compiler command: ``$CC``, else ``cc``, else ziglang's ``zig cc``."""
+    words = shlex.split(os.environ.get("CC", "") or "cc")
+    if words and shutil.which(words[0]) is not None:
+        return tuple(words)
+    try:
+        import ziglang  # noqa: F401
+    except ImportError:
+        raise BuildError(
+            f"no C compiler found ({' '.join(words) or 'cc'}): install gcc (Debian: apt-get "
+            "install gcc), set CC, or pip install ziglang"
+        ) from None
+    return (sys.executable, "-m", "ziglang", "cc")
+
+
+@lru_cache(maxsize=1)
+def compiler_identity() -> str:
+    """The compiler's command and the first line of its ``--version``."""
+    cmd = compiler()
+    try:
+        out = subprocess.run([*cmd, "--version"], capture_output=True, text=True, timeout=60,
+                             check=False).stdout
+    except (OSError, subprocess.SubprocessError) as exc:
+        raise BuildError(f"the C compiler {' '.join(cmd)} does not run: {exc}") from None
+    first = out.strip().splitlines()[0] if out.strip() else "unknown"
+    return " ".join(cmd) + " | " + first
+
+
+def _folder() -> Path:
+    from equilibrist.numeric.cache import cache_dir
+
+    path = cache_dir() / "native"
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def library_key(source: str) -> str:
+    """The hash that names the library built from *source*."""
+    h = hashlib.sha256()
+    for part in (source, compiler_identity(), " ".join(FLAGS), str(REVISION)):
+        h.update(part.encode())
+        h.update(b"\0")
+    return h.hexdigest()[:20]
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _compile(source: str, out: Path) -> None:
+    folder = out.parent
+    fd, tmp_c = tempfile.mkstemp(prefix=out.stem + ".", suffix=".c", dir=folder)
+    tmp_so = Path(tmp_c).with_suffix(".so")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            fh.write(source)
+        errors = ""
+        for extra in (_OPENMP, ()):
+            cmd = [*compiler(), *FLAGS, *extra, tmp_c, "-o", str(tmp_so), "-lm"]
+            proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+            if proc.returncode == 0:
+                break
+            errors = (proc.stderr or proc.stdout).strip()
+            if extra and "openmp" not in errors.lower() and "omp" not in errors.lower():
+                break  # an error of the unit, not of OpenMP: no second try
+        else:
+            proc = None
+        if proc is None or proc.returncode != 0:
+            lines = errors.splitlines()
+            raise BuildError("the generated core does not compile: "
+                             + " | ".join(lines[:8]) + f" (unit kept at {tmp_c})")
+        digest = _digest(tmp_so)
+        sidecar = out.with_suffix(out.suffix + ".sha256")
+        tmp_sum = Path(str(tmp_so) + ".sha256")
+        tmp_sum.write_text(digest + "\n")
+        os.replace(tmp_so, out)
+        os.replace(tmp_sum, sidecar)
+        keep = out.with_suffix(".c")
+        os.replace(tmp_c, keep)  # the unit beside its library, to read
+    except BaseException:
+        for leftover in (tmp_so, Path(str(tmp_so) + ".sha256")):
+            leftover.unlink(missing_ok=True)
+        raise
+
+
+_LOADED: dict[Path, ctypes.CDLL] = {}
+
+
+def load(source: str, stem: str) -> tuple[ctypes.CDLL, Path]:
+    """The library built from *source* (built now if the cache has no whole one)."""
+    path = _folder() / f"{stem}_{library_key(source)}.so"
+    lib = _LOADED.get(path)
+    if lib is not None:
+        return lib, path
+    sidecar = path.with_suffix(path.suffix + ".sha256")
+    whole = False
+    if path.exists() and sidecar.exists():
+        try:
+            whole = sidecar.read_text().strip() == _digest(path)
+        except OSError:
+            whole = False
+    if not whole:
+        _compile(source, path)
+    try:
+        lib = ctypes.CDLL(str(path))
+    except OSError:
+        if not whole:
+            raise BuildError(f"the compiled core {path} does not load") from None
+        _compile(source, path)  # matched its digest yet does not load: build it again
+        lib = ctypes.CDLL(str(path))
+    _LOADED[path] = lib
+    return lib, path
+
+
+__all__ = ["FLAGS", "REVISION", "BuildError", "compiler", "compiler_identity", "library_key",
+           "load"]

@@ -1,0 +1,650 @@
+/* The simulation core of equilibrist, in C: written once, compiled per system and controller.
+ *
+ * This file is a template. equilibrist.native.simcore writes one translation
+ * unit per system and controller: the calling convention's constants
+ * (EQ_IO_*, EQ_REC_*... from equilibrist.sim.layout), the project's libm
+ * (equilibrist.numeric.libm), the system's dynamics and the controller
+ * translated from their one Python definition (equilibrist.native.pyc), the
+ * glue below the marker "the generated part ends here", then this body. The
+ * unit defines:
+ *
+ *   EQ_N, EQ_M        states and inputs of the system
+ *   eq_f(x, u, p, out)                       out = f(x, u, p)
+ *   eq_ctrl_output(t, z, nz, y, ny, r, nr, cp, ncp, u_out)
+ *   eq_ctrl_update(t, z, nz, y, ny, r, nr, u_app, cp, ncp, z_out)
+ *   eq_ctrl_estimate(t, z, nz, y, ny, r, nr, cp, ncp, x_out)
+ *
+ * The arithmetic is the numba core's (equilibrist/sim/_kernel_template.py,
+ * _rk4_template.py), operation for operation: the same sums in the same
+ * order, Python's min and max, numba's unrolled integer powers, the
+ * project's log for the normal deviates; compiled with -ffp-contract=off
+ * and without -ffast-math, so a run gives the same bits as before, on
+ * every CPU. See that template for the conventions (absolute state and
+ * input, samples and physics steps, events by physics step, fell codes,
+ * the random generator, the stop flag).
+ */
+
+/* ---- the run's arrays: one struct, mirrored by equilibrist.native.simcore.RunArgs ---- */
+typedef struct {
+    int64_t k_start, k_end;
+    const int64_t *iopts;
+    const double *fopts;
+    double *x;
+    double *z;
+    int64_t nz;
+    double *u_prev;
+    uint64_t *rng;
+    const double *op;
+    const int64_t *c_idx;
+    int64_t ny;
+    const double *cp;
+    int64_t ncp;
+    const double *ref;
+    int64_t nr;
+    const double *uff;
+    const double *lv;
+    int64_t nlv;
+    const double *lw;
+    int64_t nw;
+    const double *p_sets;
+    int64_t n_sets;
+    int64_t p_len;
+    const int64_t *p_switch;
+    const double *lin_s;
+    const double *region;
+    const int64_t *kicks;
+    int64_t n_kicks;
+    const double *kick_value;
+    const int64_t *pulses;
+    int64_t n_pulses;
+    const double *pulse_value;
+    const int64_t *rec_cols;
+    const int64_t *acc_cols;
+    double *rec;
+    int64_t rec_w;
+    double *acc;
+    int64_t *status;
+    double *fell_x;
+    volatile int64_t *stop;
+    /* run_many only: the per-run arrays, stacked */
+    int64_t n_runs;
+    int64_t n_threads;
+    const double *x0s;
+    const uint64_t *rngs;
+    int64_t acc_w;
+    double *x_ends;
+} eq_args;
+
+/* Dormand-Prince 5(4) tableau. */
+#define EQ_A21 (1.0 / 5.0)
+#define EQ_A31 (3.0 / 40.0)
+#define EQ_A32 (9.0 / 40.0)
+#define EQ_A41 (44.0 / 45.0)
+#define EQ_A42 (-56.0 / 15.0)
+#define EQ_A43 (32.0 / 9.0)
+#define EQ_A51 (19372.0 / 6561.0)
+#define EQ_A52 (-25360.0 / 2187.0)
+#define EQ_A53 (64448.0 / 6561.0)
+#define EQ_A54 (-212.0 / 729.0)
+#define EQ_A61 (9017.0 / 3168.0)
+#define EQ_A62 (-355.0 / 33.0)
+#define EQ_A63 (46732.0 / 5247.0)
+#define EQ_A64 (49.0 / 176.0)
+#define EQ_A65 (-5103.0 / 18656.0)
+#define EQ_B1 (35.0 / 384.0)
+#define EQ_B3 (500.0 / 1113.0)
+#define EQ_B4 (125.0 / 192.0)
+#define EQ_B5 (-2187.0 / 6784.0)
+#define EQ_B6 (11.0 / 84.0)
+#define EQ_E1 (71.0 / 57600.0)
+#define EQ_E3 (-71.0 / 16695.0)
+#define EQ_E4 (71.0 / 1920.0)
+#define EQ_E5 (-17253.0 / 339200.0)
+#define EQ_E6 (22.0 / 525.0)
+#define EQ_E7 (-1.0 / 40.0)
+#define EQ_DOPRI_MAX_STEPS 100000
+#define EQ_TWO_M53 (1.0 / 9007199254740992.0)
+
+/* ---- xoshiro256** and Marsaglia's polar method ---- */
+static inline uint64_t eq_rotl(uint64_t v, int k) { return (v << k) | (v >> (64 - k)); }
+
+static inline uint64_t eq_next_u64(uint64_t *s)
+{
+    uint64_t result = eq_rotl(s[1] * 5u, 7) * 9u;
+    uint64_t t = s[1] << 17;
+    s[2] ^= s[0];
+    s[3] ^= s[1];
+    s[1] ^= s[2];
+    s[0] ^= s[3];
+    s[2] ^= t;
+    s[3] = eq_rotl(s[3], 45);
+    return result;
+}
+
+static inline double eq_uniform(uint64_t *s)
+{
+    return ((double)(eq_next_u64(s) >> 11) + 1.0) * EQ_TWO_M53;
+}
+
+static void eq_normals(uint64_t *s, double *out, int64_t count)
+{
+    int64_t i = 0;
+    while (i < count) {
+        double v1 = 2.0 * eq_uniform(s) - 1.0;
+        double v2 = 2.0 * eq_uniform(s) - 1.0;
+        double r2 = v1 * v1 + v2 * v2;
+        double scale;
+        if (r2 >= 1.0 || r2 == 0.0) {
+            continue;
+        }
+        scale = sqrt(-2.0 * eq_log(r2) / r2);
+        out[i] = v1 * scale;
+        if (i + 1 < count) {
+            out[i + 1] = v2 * scale;
+        }
+        i += 2;
+    }
+}
+
+/* ---- integrators ---- */
+static inline void eq_deriv(const double *x, const double *u, const double *p, const double *w,
+                            double *out)
+{
+    int i;
+    eq_f(x, u, p, out);
+    for (i = 0; i < EQ_N; i++) {
+        out[i] += w[i];
+    }
+}
+
+static void eq_rk4(double *x, const double *u, const double *p, const double *w, double h,
+                   double *k1, double *k2, double *k3, double *k4, double *xt)
+{
+    int i;
+    eq_f(x, u, p, k1);
+    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * (k1[i] + w[i]);
+    eq_f(xt, u, p, k2);
+    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * (k2[i] + w[i]);
+    eq_f(xt, u, p, k3);
+    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + h * (k3[i] + w[i]);
+    eq_f(xt, u, p, k4);
+    for (i = 0; i < EQ_N; i++) {
+        x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i] + 6.0 * w[i]);
+    }
+}
+
+static void eq_rk4_free(double *x, const double *u, const double *p, double h,
+                        double *k1, double *k2, double *k3, double *k4, double *xt)
+{
+    int i;
+    eq_f(x, u, p, k1);
+    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * k1[i];
+    eq_f(xt, u, p, k2);
+    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * k2[i];
+    eq_f(xt, u, p, k3);
+    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + h * k3[i];
+    eq_f(xt, u, p, k4);
+    for (i = 0; i < EQ_N; i++) {
+        x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    }
+}
+
+static inline int eq_no_negative_zero(const double *x)
+{
+    int i, clean = 1;
+    for (i = 0; i < EQ_N; i++) {
+        if (x[i] == 0.0 && copysign(1.0, x[i]) < 0.0) clean = 0;
+    }
+    return clean;
+}
+
+static inline void eq_rk4_step(double *x, const double *u, const double *p, const double *w,
+                               int64_t nw, double h, double *k1, double *k2, double *k3,
+                               double *k4, double *xt)
+{
+    if (nw == 0 && eq_no_negative_zero(x)) {
+        eq_rk4_free(x, u, p, h, k1, k2, k3, k4, xt);
+    } else {
+        eq_rk4(x, u, p, w, h, k1, k2, k3, k4, xt);
+    }
+}
+
+/* Integrate over [0, h] with adaptive Dormand-Prince steps; 0 if it gives up.
+ * wk: rows of width `width` (k1..k7, yt, yn, ..., row 12 carries the step size). */
+static int eq_dopri(double *x, const double *u, const double *p, const double *w, double h,
+                    double rtol, double atol, double *wk, int64_t width)
+{
+    const int n = EQ_N;
+    double *k1 = wk, *k2 = wk + width, *k3 = wk + 2 * width, *k4 = wk + 3 * width;
+    double *k5 = wk + 4 * width, *k6 = wk + 5 * width, *k7 = wk + 6 * width;
+    double *yt = wk + 7 * width, *yn = wk + 8 * width, *hstate = wk + 12 * width;
+    double t = 0.0;
+    double dt = eq_minf(hstate[0], h);
+    long steps = 0;
+    int i;
+    eq_deriv(x, u, p, w, k1);
+    while (t < h) {
+        int last = 0;
+        double err = 0.0;
+        steps += 1;
+        if (steps > EQ_DOPRI_MAX_STEPS) return 0;
+        if (t + dt >= h * (1.0 - 1e-12)) {
+            dt = h - t;
+            last = 1;
+        }
+        for (i = 0; i < n; i++) yt[i] = x[i] + dt * EQ_A21 * k1[i];
+        eq_deriv(yt, u, p, w, k2);
+        for (i = 0; i < n; i++) yt[i] = x[i] + dt * (EQ_A31 * k1[i] + EQ_A32 * k2[i]);
+        eq_deriv(yt, u, p, w, k3);
+        for (i = 0; i < n; i++) {
+            yt[i] = x[i] + dt * (EQ_A41 * k1[i] + EQ_A42 * k2[i] + EQ_A43 * k3[i]);
+        }
+        eq_deriv(yt, u, p, w, k4);
+        for (i = 0; i < n; i++) {
+            yt[i] = x[i] + dt * (EQ_A51 * k1[i] + EQ_A52 * k2[i] + EQ_A53 * k3[i]
+                                 + EQ_A54 * k4[i]);
+        }
+        eq_deriv(yt, u, p, w, k5);
+        for (i = 0; i < n; i++) {
+            yt[i] = x[i] + dt * (EQ_A61 * k1[i] + EQ_A62 * k2[i] + EQ_A63 * k3[i]
+                                 + EQ_A64 * k4[i] + EQ_A65 * k5[i]);
+        }
+        eq_deriv(yt, u, p, w, k6);
+        for (i = 0; i < n; i++) {
+            yn[i] = x[i] + dt * (EQ_B1 * k1[i] + EQ_B3 * k3[i] + EQ_B4 * k4[i]
+                                 + EQ_B5 * k5[i] + EQ_B6 * k6[i]);
+        }
+        eq_deriv(yn, u, p, w, k7);
+        for (i = 0; i < n; i++) {
+            double e = dt * (EQ_E1 * k1[i] + EQ_E3 * k3[i] + EQ_E4 * k4[i] + EQ_E5 * k5[i]
+                             + EQ_E6 * k6[i] + EQ_E7 * k7[i]);
+            double sc = atol + rtol * eq_maxf(fabs(x[i]), fabs(yn[i]));
+            double q = e / sc;
+            err += q * q;
+        }
+        err = sqrt(err / (double)n);
+        if (!isfinite(err)) {
+            dt *= 0.2;
+            if (dt < h * 1e-14) return 0;
+            continue;
+        }
+        if (err <= 1.0) {
+            double fac;
+            t = last ? h : t + dt;
+            for (i = 0; i < n; i++) {
+                x[i] = yn[i];
+                k1[i] = k7[i];
+            }
+            fac = err == 0.0 ? 5.0 : eq_minf(5.0, eq_maxf(0.2, 0.9 * pow(err, -0.2)));
+            if (!last) hstate[0] = dt * fac;
+            dt = dt * fac;
+        } else {
+            dt *= eq_maxf(0.2, 0.9 * pow(err, -0.2));
+            if (dt < h * 1e-14) return 0;
+        }
+    }
+    return 1;
+}
+
+/* Exact step of the affine model dx' = A dx + B du + f0 + w (held u, w); lin is
+ * [Phi | E | Gamma | f0], n rows of 2n + m + 1. */
+static inline void eq_linear(double *x, const double *u, const double *op, const double *w,
+                             const double *lin, double *dx)
+{
+    const int n = EQ_N, m = EQ_M, cols = 2 * EQ_N + EQ_M + 1;
+    int i, j;
+    for (i = 0; i < n; i++) dx[i] = x[i] - op[i];
+    for (i = 0; i < n; i++) {
+        double v = 0.0;
+        for (j = 0; j < n; j++) {
+            v += lin[i * cols + j] * dx[j] + lin[i * cols + n + j] * (lin[j * cols + 2 * n + m] + w[j]);
+        }
+        for (j = 0; j < m; j++) {
+            v += lin[i * cols + 2 * n + j] * (u[j] - op[n + j]);
+        }
+        x[i] = op[i] + v;
+    }
+}
+
+/* -1 inside; the index of the first state outside its region; -2 if not finite. */
+static inline int64_t eq_outside(const double *x, const double *region)
+{
+    int i;
+    for (i = 0; i < EQ_N; i++) {
+        if (!isfinite(x[i])) return -2;
+    }
+    for (i = 0; i < EQ_N; i++) {
+        if (x[i] <= region[i] || x[i] >= region[EQ_N + i]) return i;
+    }
+    return -1;
+}
+
+static inline int64_t eq_pset(const int64_t *p_switch, int64_t n_sets, int64_t s)
+{
+    int64_t j = n_sets - 1;
+    while (j > 0 && p_switch[j] > s) j -= 1;
+    return j;
+}
+
+static inline void eq_switch(const eq_args *a, const double *p_sets, int64_t s, double *pcur)
+{
+    int64_t j, i;
+    for (j = 1; j < a->n_sets; j++) {
+        if (a->p_switch[j] == s) {
+            for (i = 0; i < a->p_len; i++) pcur[i] = p_sets[j * a->p_len + i];
+        }
+    }
+}
+
+static inline void eq_measure(const double *x, const int64_t *c_idx, int64_t ny,
+                              const double *lv, int64_t nlv, uint64_t *rng, double *y,
+                              double *zbuf)
+{
+    int64_t j, k;
+    for (j = 0; j < ny; j++) y[j] = x[c_idx[j]];
+    if (nlv > 0) {
+        eq_normals(rng, zbuf, ny);
+        for (j = 0; j < ny; j++) {
+            double v = 0.0;
+            for (k = 0; k < ny; k++) v += lv[j * ny + k] * zbuf[k];
+            y[j] += v;
+        }
+    }
+}
+
+/* The scratch of one run: EQ_SCR_ROWS rows of `width`. */
+static int64_t eq_width(int64_t p_len, int64_t ny, int64_t nw, int64_t nz)
+{
+    int64_t w = EQ_N;
+    w = w > EQ_M ? w : EQ_M;
+    w = w > p_len ? w : p_len;
+    w = w > ny + 2 ? w : ny + 2;
+    w = w > nw + 2 ? w : nw + 2;
+    w = w > nz ? w : nz;
+    return w > 1 ? w : 1;
+}
+
+#define EQ_ROW(scr, width, r) ((scr) + (int64_t)(r) * (width))
+
+/* The physics steps between samples k and k + 1; 1 when the run fell or was stopped. */
+static int eq_advance(const eq_args *a, int64_t k, double *x, const double *u_app,
+                      const double *p_sets, const double *lin_s, uint64_t *rng, int64_t *status,
+                      double *scr, int64_t width, volatile int64_t *stop)
+{
+    const int n = EQ_N, m = EQ_M;
+    const int64_t nw = a->nw;
+    const int64_t n_sub = a->iopts[EQ_IO_N_SUB];
+    const int64_t integrator = a->iopts[EQ_IO_INTEGRATOR];
+    const double h = a->fopts[EQ_FO_H];
+    const int64_t lin_size = (int64_t)EQ_N * (2 * EQ_N + EQ_M + 1);
+    double *k1 = EQ_ROW(scr, width, EQ_S_K1), *k2 = EQ_ROW(scr, width, EQ_S_K2);
+    double *k3 = EQ_ROW(scr, width, EQ_S_K3), *k4 = EQ_ROW(scr, width, EQ_S_K4);
+    double *xt = EQ_ROW(scr, width, EQ_S_XT), *xprev = EQ_ROW(scr, width, EQ_S_XPREV);
+    double *ubuf = EQ_ROW(scr, width, EQ_S_UBUF), *wvec = EQ_ROW(scr, width, EQ_S_WVEC);
+    double *zbuf = EQ_ROW(scr, width, EQ_S_ZBUF), *pcur = EQ_ROW(scr, width, EQ_S_PCUR);
+    double *fell_x = EQ_ROW(scr, width, EQ_S_FELL_X), *wk = EQ_ROW(scr, width, EQ_S_WK);
+    int ok = 1;
+    int64_t j, e, i, c;
+    wk[12 * width] = h;
+    for (j = 0; j < n_sub; j++) {
+        int64_t s = k * n_sub + j;
+        int64_t code;
+        if ((j & 4095) == 4095 && *stop != 0) return 1;
+        eq_switch(a, p_sets, s, pcur);
+        for (e = 0; e < a->n_kicks; e++) {
+            if (a->kicks[2 * e] == s) x[a->kicks[2 * e + 1]] += a->kick_value[e];
+        }
+        for (i = 0; i < m; i++) ubuf[i] = u_app[i];
+        for (e = 0; e < a->n_pulses; e++) {
+            if (a->pulses[3 * e] <= s && s < a->pulses[3 * e + 1]) {
+                ubuf[a->pulses[3 * e + 2]] += a->pulse_value[e];
+            }
+        }
+        if (nw > 0) {
+            eq_normals(rng, zbuf, nw);
+            for (i = 0; i < n; i++) {
+                double v = 0.0;
+                for (c = 0; c < nw; c++) v += a->lw[i * nw + c] * zbuf[c];
+                wvec[i] = v;
+            }
+        }
+        for (i = 0; i < n; i++) xprev[i] = x[i];
+        if (integrator == EQ_INT_RK4) {
+            eq_rk4_step(x, ubuf, pcur, wvec, nw, h, k1, k2, k3, k4, xt);
+        } else if (integrator == EQ_INT_ADAPTIVE) {
+            ok = eq_dopri(x, ubuf, pcur, wvec, h, a->fopts[EQ_FO_RTOL], a->fopts[EQ_FO_ATOL],
+                          wk, width);
+        } else {
+            eq_linear(x, ubuf, a->op, wvec,
+                      lin_s + eq_pset(a->p_switch, a->n_sets, s) * lin_size, xt);
+        }
+        code = eq_outside(x, a->region);
+        if (!ok) code = -3;
+        if (code != -1) {
+            int finite = code >= 0;
+            status[EQ_ST_FELL] = 1;
+            status[EQ_ST_FELL_CODE] = code;
+            status[EQ_ST_FELL_STEP] = s + 1;
+            for (i = 0; i < n; i++) fell_x[i] = finite ? x[i] : xprev[i];
+            return 1;
+        }
+    }
+    return 0;
+}
+
+/* Samples k_start .. k_end - 1 of one closed-loop run (resumable); see _kernel_template._run. */
+static void eq_run(const eq_args *a, int64_t k_start, int64_t k_end, double *x, double *z,
+                   double *u_prev, uint64_t *rng, const double *p_sets, const double *lin_s,
+                   double *rec, double *acc, int64_t *status, double *scr, int64_t width)
+{
+    const int n = EQ_N, m = EQ_M;
+    const int64_t n_samples = a->iopts[EQ_IO_N_SAMPLES];
+    const int record = a->iopts[EQ_IO_RECORD] != 0;
+    const int accumulate = a->iopts[EQ_IO_ACCUMULATE] != 0;
+    const int delay = a->iopts[EQ_IO_DELAY] != 0;
+    const int64_t n_sub = a->iopts[EQ_IO_N_SUB];
+    const int estimates = a->iopts[EQ_IO_ESTIMATES] != 0 && (record || accumulate);
+    const double rate = a->fopts[EQ_FO_RATE];
+    const int64_t ny = a->ny, nz = a->nz, nr = a->nr, ncp = a->ncp;
+    double *y = EQ_ROW(scr, width, EQ_S_Y), *xhat = EQ_ROW(scr, width, EQ_S_X_HAT);
+    double *u_cmd = EQ_ROW(scr, width, EQ_S_U_CMD), *u_sat = EQ_ROW(scr, width, EQ_S_U_SAT);
+    double *u_app = EQ_ROW(scr, width, EQ_S_U_APP), *znew = EQ_ROW(scr, width, EQ_S_Z_NEW);
+    double *zbuf = EQ_ROW(scr, width, EQ_S_ZBUF), *pcur = EQ_ROW(scr, width, EQ_S_PCUR);
+    double *fell_x = EQ_ROW(scr, width, EQ_S_FELL_X);
+    const int64_t base = a->p_len - 2 * m;
+    const int64_t c_x = a->rec_cols[EQ_REC_X], c_xhat = a->rec_cols[EQ_REC_X_HAT];
+    const int64_t c_y = a->rec_cols[EQ_REC_Y], c_cmd = a->rec_cols[EQ_REC_U_CMD];
+    const int64_t c_sat = a->rec_cols[EQ_REC_U_SAT], c_app = a->rec_cols[EQ_REC_U_APP];
+    const int64_t a_peak = a->acc_cols[EQ_ACC_PEAK_U], a_u2 = a->acc_cols[EQ_ACC_SUM_U2];
+    const int64_t a_sat = a->acc_cols[EQ_ACC_N_SAT], a_dx = a->acc_cols[EQ_ACC_PEAK_DX];
+    const int64_t a_est = a->acc_cols[EQ_ACC_SUM_EST2];
+    const int64_t a_peak_app = a->acc_cols[EQ_ACC_PEAK_U_APP];
+    int64_t ps0 = eq_pset(a->p_switch, a->n_sets, k_start * n_sub);
+    int64_t k, i, j;
+    for (i = 0; i < a->p_len; i++) pcur[i] = p_sets[ps0 * a->p_len + i];
+    for (k = k_start; k < k_end; k++) {
+        double t;
+        const double *r = a->ref + k * nr;
+        int saturated = 0;
+        if (*a->stop != 0) return;
+        eq_switch(a, p_sets, k * n_sub, pcur);
+        if (k == 0) {
+            for (i = 0; i < m; i++) {
+                u_prev[i] = eq_minf(eq_maxf(a->op[n + i], pcur[base + 2 * i]),
+                                    pcur[base + 2 * i + 1]);
+            }
+        }
+        eq_measure(x, a->c_idx, ny, a->lv, a->nlv, rng, y, zbuf);
+        t = (double)k / rate;
+        eq_ctrl_output(t, z, nz, y, ny, r, nr, a->cp, ncp, u_cmd);
+        if (estimates) eq_ctrl_estimate(t, z, nz, y, ny, r, nr, a->cp, ncp, xhat);
+        for (i = 0; i < m; i++) {
+            u_cmd[i] = u_cmd[i] + a->uff[k * m + i];
+            u_sat[i] = eq_minf(eq_maxf(u_cmd[i], pcur[base + 2 * i]), pcur[base + 2 * i + 1]);
+            if (u_sat[i] != u_cmd[i]) saturated = 1;
+            u_app[i] = delay ? u_prev[i] : u_sat[i];
+            u_prev[i] = u_sat[i];
+        }
+        if (record) {
+            double *row = rec + k * a->rec_w;
+            for (i = 0; i < n; i++) {
+                row[c_x + i] = x[i];
+                row[c_xhat + i] = estimates ? xhat[i] : NAN;
+            }
+            for (j = 0; j < ny; j++) row[c_y + j] = y[j];
+            for (i = 0; i < m; i++) {
+                row[c_cmd + i] = u_cmd[i];
+                row[c_sat + i] = u_sat[i];
+                row[c_app + i] = u_app[i];
+            }
+        }
+        if (accumulate) {
+            for (i = 0; i < m; i++) {
+                acc[a_peak + i] = eq_maxf(acc[a_peak + i], fabs(u_cmd[i]));
+                acc[a_peak_app + i] = eq_maxf(acc[a_peak_app + i], fabs(u_app[i]));
+                acc[a_u2 + i] += u_app[i] * u_app[i];
+            }
+            if (saturated) acc[a_sat] += 1.0;
+            for (i = 0; i < n; i++) {
+                acc[a_dx + i] = eq_maxf(acc[a_dx + i], fabs(x[i] - a->op[i]));
+                if (estimates) {
+                    double e = xhat[i] - x[i];
+                    acc[a_est + i] += e * e;
+                }
+            }
+        }
+        status[EQ_ST_ROWS] = k + 1;
+        if (nz > 0) {
+            eq_ctrl_update(t, z, nz, y, ny, r, nr, u_app, a->cp, ncp, znew);
+            for (i = 0; i < nz; i++) z[i] = znew[i];
+        }
+        if (k == 0) {
+            int64_t code = eq_outside(x, a->region);
+            if (code != -1) {
+                status[EQ_ST_FELL] = 1;
+                status[EQ_ST_FELL_CODE] = code;
+                status[EQ_ST_FELL_STEP] = 0;
+                for (i = 0; i < n; i++) fell_x[i] = x[i];
+                return;
+            }
+        }
+        if (k >= n_samples) return;
+        if (eq_advance(a, k, x, u_app, p_sets, lin_s, rng, status, scr, width, a->stop)) return;
+    }
+}
+
+static double *eq_scratch(const eq_args *a, int64_t *width)
+{
+    *width = eq_width(a->p_len, a->ny, a->nw, a->nz);
+    return (double *)calloc((size_t)(EQ_SCR_ROWS * *width), sizeof(double));
+}
+
+/* ---- entries (called through ctypes; they release Python's lock) ---- */
+
+/* One run, or samples k_start .. k_end - 1 of one; 0, or -1 when out of memory. */
+EQ_EXPORT int eq_run_one(const eq_args *a)
+{
+    int64_t width, i;
+    double *scr = eq_scratch(a, &width);
+    if (scr == NULL) return -1;
+    eq_run(a, a->k_start, a->k_end, a->x, a->z, a->u_prev, a->rng, a->p_sets, a->lin_s,
+           a->rec, a->acc, a->status, scr, width);
+    for (i = 0; i < EQ_N; i++) a->fell_x[i] = EQ_ROW(scr, width, EQ_S_FELL_X)[i];
+    free(scr);
+    return 0;
+}
+
+/* Independent runs over the per-run arrays, in parallel: x0s, rngs, p_sets (n_runs stacked
+ * sets), lin_s, rec, acc, status, fell_x and x_ends hold one block per run. */
+EQ_EXPORT int eq_run_many(const eq_args *a)
+{
+    const int64_t n_rows = a->iopts[EQ_IO_N_SAMPLES] + 1;
+    const int64_t lin_size = a->lin_s == NULL ? 0
+        : a->n_sets * (int64_t)EQ_N * (2 * EQ_N + EQ_M + 1);
+    int failed = 0;
+    int64_t r;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(dynamic, 1) num_threads((int)a->n_threads) reduction(|:failed)
+#endif
+    for (r = 0; r < a->n_runs; r++) {
+        int64_t width, i;
+        double *scr = eq_scratch(a, &width);
+        double *x = (double *)malloc(sizeof(double) * (EQ_N + EQ_M + (a->nz > 0 ? a->nz : 1)));
+        uint64_t rng[4];
+        if (scr == NULL || x == NULL) {
+            free(scr);
+            free(x);
+            failed = 1;
+            continue;
+        }
+        {
+            double *u_prev = x + EQ_N;
+            double *z = u_prev + EQ_M;
+            for (i = 0; i < EQ_N; i++) x[i] = a->x0s[r * EQ_N + i];
+            for (i = 0; i < a->nz; i++) z[i] = a->z[i];
+            for (i = 0; i < EQ_M; i++) u_prev[i] = 0.0;
+            for (i = 0; i < 4; i++) rng[i] = a->rngs[r * 4 + i];
+            eq_run(a, 0, n_rows, x, z, u_prev, rng, a->p_sets + r * a->n_sets * a->p_len,
+                   a->lin_s == NULL ? NULL : a->lin_s + r * lin_size,
+                   a->rec == NULL ? NULL : a->rec + r * n_rows * a->rec_w,
+                   a->acc + r * a->acc_w, a->status + r * 4, scr, width);
+            for (i = 0; i < EQ_N; i++) {
+                a->x_ends[r * EQ_N + i] = x[i];
+                a->fell_x[r * EQ_N + i] = EQ_ROW(scr, width, EQ_S_FELL_X)[i];
+            }
+        }
+        free(scr);
+        free(x);
+    }
+    return failed ? -1 : 0;
+}
+
+/* Measured outputs of x with noise (the Python-controller path). */
+EQ_EXPORT void eq_measure_one(const double *x, const int64_t *c_idx, int64_t ny,
+                              const double *lv, int64_t nlv, uint64_t *rng, double *y)
+{
+    double zbuf[ny + 2];
+    eq_measure(x, c_idx, ny, lv, nlv, rng, y, zbuf);
+}
+
+/* The width of advance_one's scratch (EQ_SCR_ROWS rows). */
+EQ_EXPORT int64_t eq_scratch_width(int64_t p_len, int64_t ny, int64_t nw)
+{
+    return eq_width(p_len, ny, nw, 0);
+}
+
+/* The physics steps after sample k (the Python-controller path); 1 if it fell. */
+EQ_EXPORT int eq_advance_one(const eq_args *a, int64_t k, const double *u_app, double *scr)
+{
+    const int64_t width = eq_width(a->p_len, a->ny, a->nw, 0);
+    double *pcur = EQ_ROW(scr, width, EQ_S_PCUR);
+    int64_t ps = eq_pset(a->p_switch, a->n_sets, k * a->iopts[EQ_IO_N_SUB]);
+    int64_t i;
+    static volatile int64_t no_stop = 0;
+    for (i = 0; i < a->p_len; i++) pcur[i] = a->p_sets[ps * a->p_len + i];
+    return eq_advance(a, k, a->x, u_app, a->p_sets, a->lin_s, a->rng, a->status, scr, width,
+                      &no_stop);
+}
+
+/* n_steps RK4 steps of length h from x (in place) with u held. */
+EQ_EXPORT void eq_rk4_steps(double *x, const double *u, const double *p, double h,
+                            int64_t n_steps)
+{
+    double w[EQ_N], k1[EQ_N], k2[EQ_N], k3[EQ_N], k4[EQ_N], xt[EQ_N];
+    int64_t s;
+    int i;
+    for (i = 0; i < EQ_N; i++) w[i] = 0.0;
+    for (s = 0; s < n_steps; s++) eq_rk4(x, u, p, w, h, k1, k2, k3, k4, xt);
+}
+
+/* Standard normal deviates from the core's generator (for tests). */
+EQ_EXPORT void eq_normals_into(uint64_t *rng, double *out, int64_t count)
+{
+    eq_normals(rng, out, count);
+}
+
+/* The system's derivative (for tests and for Python callers that want the core's bits). */
+EQ_EXPORT void eq_f_one(const double *x, const double *u, const double *p, double *out)
+{
+    eq_f(x, u, p, out);
+}

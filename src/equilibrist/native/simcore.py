@@ -1,0 +1,372 @@
+"""The simulation core in C: one unit per system and controller, generated and compiled.
+
+:func:`unit_source` writes the translation unit: the calling convention's
+constants (:mod:`equilibrist.sim.layout`), the run's argument struct
+(:data:`FIELDS`, mirrored by :class:`RunArgs`), the project's libm
+(:mod:`equilibrist.numeric.libm`), the system's dynamics ``f`` and the
+controller's functions, both translated from their one Python definition
+by :mod:`equilibrist.native.pyc`, and the core's body (``core.c``, the
+numba template's loops written once in C). :func:`load_core` compiles it
+(:mod:`equilibrist.native.build`: cached by content, atomic, checked) and
+:class:`NativeCore` calls its entries.
+
+A linear controller's core is made for its *pattern*
+(:func:`~equilibrist.control.controller.linear_pattern`: sizes, and where
+its coefficients are exact zeros and ones), with the linear library
+written out term by term; a pattern too large for that gets the library
+with literal sizes, and any packed linear controller can run in the
+generic core (``key=None``), which reads its sizes from the vector.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from equilibrist.control.controller import (
+    LINEAR_SOURCE,
+    linear_constants,
+    linear_layout_source,
+    linear_unrolled_source,
+)
+from equilibrist.native import build, pyc
+from equilibrist.numeric import libm
+from equilibrist.numeric.system import System
+from equilibrist.sim import layout
+
+#: Bumped when the generated unit changes in a way its source text does not show.
+GENERATOR = 1
+
+# The run's arguments: (name, kind). Kinds: "i" an int64 scalar, "pi"/"pf"/"pu" a pointer to
+# int64 / double / uint64 data, "vi" a volatile int64 pointer (the stop flag).
+FIELDS: tuple[tuple[str, str], ...] = (
+    ("k_start", "i"), ("k_end", "i"), ("iopts", "pi"), ("fopts", "pf"), ("x", "pf"),
+    ("z", "pf"), ("nz", "i"), ("u_prev", "pf"), ("rng", "pu"), ("op", "pf"), ("c_idx", "pi"),
+    ("ny", "i"), ("cp", "pf"), ("ncp", "i"), ("ref", "pf"), ("nr", "i"), ("uff", "pf"),
+    ("lv", "pf"), ("nlv", "i"), ("lw", "pf"), ("nw", "i"), ("p_sets", "pf"), ("n_sets", "i"),
+    ("p_len", "i"), ("p_switch", "pi"), ("lin_s", "pf"), ("region", "pf"), ("kicks", "pi"),
+    ("n_kicks", "i"), ("kick_value", "pf"), ("pulses", "pi"), ("n_pulses", "i"),
+    ("pulse_value", "pf"), ("rec_cols", "pi"), ("acc_cols", "pi"), ("rec", "pf"),
+    ("rec_w", "i"), ("acc", "pf"), ("status", "pi"), ("fell_x", "pf"), ("stop", "vi"),
+    ("n_runs", "i"), ("n_threads", "i"), ("x0s", "pf"), ("rngs", "pu"), ("acc_w", "i"),
+    ("x_ends", "pf"),
+)
+_C_TYPES = {"i": "int64_t", "pi": "int64_t *", "pf": "double *", "pu": "uint64_t *",
+            "vi": "volatile int64_t *"}
+_CTYPES: dict[str, Any] = {"i": ctypes.c_int64, "pi": ctypes.c_void_p, "pf": ctypes.c_void_p,
+           "pu": ctypes.c_void_p, "vi": ctypes.c_void_p}
+
+
+class RunArgs(ctypes.Structure):
+    """The C core's ``eq_args``, field for field (from :data:`FIELDS`)."""
+
+    _fields_ = [(name, _CTYPES[kind]) for name, kind in FIELDS]
+
+
+def _struct_source() -> str:
+    lines = ["typedef struct {"]
+    lines += [f"    {_C_TYPES[kind]}{'' if kind != 'i' else ' '}{name};".replace("* ", "*")
+              for name, kind in FIELDS]
+    return "\n".join(lines) + "\n} eq_args;\n"
+
+
+def _body() -> str:
+    text = (Path(__file__).parent / "core.c").read_text()
+    start = text.index("/* ---- the run's arrays")
+    end = text.index("/* Dormand-Prince")
+    return text[:start] + text[end:]  # the struct comes from FIELDS
+
+
+_LINEAR_TYPES = {
+    "linear_output": ("f", "F1", "F1", "F1", "F1", "F1"),
+    "linear_update": ("f", "F1", "F1", "F1", "F1", "F1", "F1"),
+    "linear_estimate": ("f", "F1", "F1", "F1", "F1", "F1"),
+}
+
+_GLUE = """
+static inline void eq_f(const double *x, const double *u, const double *p, double *out)
+{{
+    {f}((double *)x, EQ_N, (double *)u, EQ_M, (double *)p, EQ_NP, out, EQ_N);
+}}
+
+static inline void eq_ctrl_output(double t, double *z, int64_t nz, const double *y, int64_t ny,
+                                  const double *r, int64_t nr, const double *cp, int64_t ncp,
+                                  double *u_out)
+{{
+    {output}(t, z, nz, (double *)y, ny, (double *)r, nr, (double *)cp, ncp, u_out, EQ_M);
+}}
+
+static inline void eq_ctrl_update(double t, double *z, int64_t nz, const double *y, int64_t ny,
+                                  const double *r, int64_t nr, const double *u_app,
+                                  const double *cp, int64_t ncp, double *z_out)
+{{
+    {update}(t, z, nz, (double *)y, ny, (double *)r, nr, (double *)u_app, EQ_M, (double *)cp,
+             ncp, z_out, nz);
+}}
+
+static inline void eq_ctrl_estimate(double t, double *z, int64_t nz, const double *y,
+                                    int64_t ny, const double *r, int64_t nr, const double *cp,
+                                    int64_t ncp, double *x_out)
+{{
+    {estimate}(t, z, nz, (double *)y, ny, (double *)r, nr, (double *)cp, ncp, x_out, EQ_N);
+}}
+"""
+
+
+def _constants(values: Mapping[str, int]) -> str:
+    return "".join(f"#define EQ{name} {value}\n" for name, value in values.items())
+
+
+def linear_library(key: bytes | tuple[int, ...] | None) -> str:
+    """The linear library's Python source for a core made for *key* (a pattern, sizes or
+    None: the generic library)."""
+    if isinstance(key, bytes):
+        return linear_unrolled_source(key)
+    fixed = None if key is None else dict(zip(("nz", "ny", "nr", "m", "n"), key, strict=True))
+    return linear_layout_source(fixed) + LINEAR_SOURCE
+
+
+def unit_source(system: System, key: bytes | tuple[int, ...] | None = None) -> str:
+    """The C translation unit of *system*'s core with a linear controller made for *key*."""
+    system.compiled.functions  # noqa: B018  # a damaged generated module is rebuilt first
+    dynamics = pyc.Module(system.compiled.module_path.read_text(), prefix="sys_")
+    f = dynamics.function("f", ("F1", "F1", "F1", "F1"))
+    ctrl = pyc.Module(linear_library(key), constants=linear_constants(), prefix="ctrl_")
+    names = {short: ctrl.function(name, types).name
+             for short, (name, types) in {
+                 "output": ("linear_output", _LINEAR_TYPES["linear_output"]),
+                 "update": ("linear_update", _LINEAR_TYPES["linear_update"]),
+                 "estimate": ("linear_estimate", _LINEAR_TYPES["linear_estimate"]),
+             }.items()}
+    parts = [
+        f"/* The simulation core of {system.key}, generated by equilibrist (generator "
+        f"{GENERATOR}). Do not edit. */\n",
+        "#include <math.h>\n#include <stdint.h>\n#include <stdlib.h>\n#include <string.h>\n",
+        '#define EQ_EXPORT __attribute__((visibility("default")))\n',
+        f"#define EQ_N {system.n_states}\n#define EQ_M {system.n_inputs}\n"
+        f"#define EQ_NP {len(system.p)}\n",
+        _constants(layout.constants()),
+        _struct_source(),
+        libm.c_source(log=True),
+        pyc.PRELUDE,
+        "\n/* ---- the system's dynamics, from its generated Python module ---- */\n",
+        dynamics.c_source(),
+        "\n/* ---- the controller, from its Python definition ---- */\n",
+        ctrl.c_source(),
+        _GLUE.format(f=f.name, **names),
+        "/* ---- the generated part ends here; the core's body follows ---- */\n",
+        _body(),
+    ]
+    return "".join(parts)
+
+
+def _ptr(a: np.ndarray | None) -> int | None:
+    return None if a is None or a.size == 0 else int(a.ctypes.data)
+
+
+class NativeCore:
+    """One compiled core: its entries, called with numpy arrays.
+
+    Arrays that the core writes must be C-contiguous and of the core's
+    dtype (float64, int64 or uint64); the others are converted if needed.
+    """
+
+    def __init__(self, system: System, key: bytes | tuple[int, ...] | None) -> None:
+        self.system = system
+        self.key = key
+        stem = f"{system.compiled.module_path.stem}_core"
+        self.lib, self.path = build.load(unit_source(system, key), stem)
+        lib = self.lib
+        args_p = ctypes.POINTER(RunArgs)
+        lib.eq_run_one.argtypes = [args_p]
+        lib.eq_run_one.restype = ctypes.c_int
+        lib.eq_run_many.argtypes = [args_p]
+        lib.eq_run_many.restype = ctypes.c_int
+        vp, i64 = ctypes.c_void_p, ctypes.c_int64
+        lib.eq_measure_one.argtypes = [vp, vp, i64, vp, i64, vp, vp]
+        lib.eq_measure_one.restype = None
+        lib.eq_scratch_width.argtypes = [i64, i64, i64]
+        lib.eq_scratch_width.restype = i64
+        lib.eq_advance_one.argtypes = [args_p, i64, vp, vp]
+        lib.eq_advance_one.restype = ctypes.c_int
+        lib.eq_rk4_steps.argtypes = [vp, vp, vp, ctypes.c_double, i64]
+        lib.eq_rk4_steps.restype = None
+        lib.eq_normals_into.argtypes = [vp, vp, i64]
+        lib.eq_normals_into.restype = None
+        lib.eq_f_one.argtypes = [vp, vp, vp, vp]
+        lib.eq_f_one.restype = None
+
+    # -- the shared argument struct ------------------------------------------------------------
+    @staticmethod
+    def _arrays(values: dict[str, Any]) -> tuple[RunArgs, list[np.ndarray]]:
+        keep: list[np.ndarray] = []
+        args = RunArgs()
+        for name, kind in FIELDS:
+            if name not in values:
+                continue
+            v = values[name]
+            if kind == "i":
+                setattr(args, name, int(v))
+                continue
+            if v is None:
+                continue
+            dtype = {"pf": np.float64, "pi": np.int64, "vi": np.int64, "pu": np.uint64}[kind]
+            arr = np.asarray(v)
+            if arr.dtype != dtype or not arr.flags.c_contiguous:
+                arr = np.ascontiguousarray(arr, dtype=dtype)
+            keep.append(arr)
+            setattr(args, name, _ptr(arr))
+        return args, keep
+
+    @staticmethod
+    def _out(arr: np.ndarray, dtype: Any, what: str) -> np.ndarray:
+        if arr.dtype != dtype or not arr.flags.c_contiguous or not arr.flags.writeable:
+            raise TypeError(f"the core writes {what}: it must be a writable C-contiguous "
+                            f"{np.dtype(dtype).name} array")
+        return arr
+
+    def _common(self, *, op: Any, c_idx: Any, cp: Any, ref: Any, uff: Any, lv: Any, lw: Any,
+                p_switch: Any, region: Any, kicks: Any, kick_value: Any, pulses: Any,
+                pulse_value: Any, rec_cols: Any, acc_cols: Any, iopts: Any,
+                fopts: Any) -> dict[str, Any]:
+        ref = np.asarray(ref, dtype=float)
+        lv = np.asarray(lv, dtype=float)
+        lw = np.asarray(lw, dtype=float)
+        return dict(
+            iopts=iopts, fopts=fopts, op=op, c_idx=c_idx, ny=len(c_idx), cp=cp, ncp=len(cp),
+            ref=ref, nr=(ref.shape[1] if ref.ndim == 2 else 0), uff=uff, lv=lv,
+            nlv=lv.shape[0], lw=lw, nw=(lw.shape[1] if lw.ndim == 2 else 0),
+            p_switch=p_switch, n_sets=len(p_switch), region=region, kicks=kicks,
+            n_kicks=len(kicks), kick_value=kick_value, pulses=pulses, n_pulses=len(pulses),
+            pulse_value=pulse_value, rec_cols=rec_cols, acc_cols=acc_cols,
+        )
+
+    def run_one(self, k_start: int, k_end: int, iopts: Any, fopts: Any, x: Any, z: Any,
+                u_prev: Any, rng: Any, op: Any, c_idx: Any, cp: Any, ref: Any, uff: Any,
+                lv: Any, lw: Any, p_sets: Any, p_switch: Any, lin_s: Any, region: Any,
+                kicks: Any, kick_value: Any, pulses: Any, pulse_value: Any, rec_cols: Any,
+                acc_cols: Any, rec: Any, acc: Any, status: Any, fell_x: Any,
+                stop: Any) -> None:
+        """The numba core's ``run_one``, argument for argument."""
+        values = self._common(op=op, c_idx=c_idx, cp=cp, ref=ref, uff=uff, lv=lv, lw=lw,
+                              p_switch=p_switch, region=region, kicks=kicks,
+                              kick_value=kick_value, pulses=pulses, pulse_value=pulse_value,
+                              rec_cols=rec_cols, acc_cols=acc_cols, iopts=iopts, fopts=fopts)
+        for arr, dtype, what in ((x, np.float64, "x"), (z, np.float64, "z"),
+                                 (u_prev, np.float64, "u_prev"), (rng, np.uint64, "rng"),
+                                 (rec, np.float64, "rec"), (acc, np.float64, "acc"),
+                                 (status, np.int64, "status"), (fell_x, np.float64, "fell_x"),
+                                 (stop, np.int64, "stop")):
+            self._out(arr, dtype, what)
+        p_sets = np.asarray(p_sets, dtype=float)
+        values.update(k_start=k_start, k_end=k_end, x=x, z=z, nz=len(z), u_prev=u_prev, rng=rng,
+                      p_sets=p_sets, p_len=p_sets.shape[1], lin_s=lin_s, rec=rec,
+                      rec_w=rec.shape[1] if rec.ndim == 2 else 0, acc=acc, status=status,
+                      fell_x=fell_x, stop=stop)
+        args, keep = self._arrays(values)
+        if self.lib.eq_run_one(ctypes.byref(args)) != 0:
+            raise MemoryError("the simulation core ran out of memory")
+        del keep
+
+    def run_many(self, iopts: Any, fopts: Any, x0s: Any, z0: Any, rngs: Any, op: Any,
+                 c_idx: Any, cp: Any, ref: Any, uff: Any, lv: Any, lw: Any, p_sets_r: Any,
+                 p_switch: Any, lin_r: Any, region: Any, kicks: Any, kick_value: Any,
+                 pulses: Any, pulse_value: Any, rec_cols: Any, acc_cols: Any, recs: Any,
+                 accs: Any, statuses: Any, fell_xs: Any, x_ends: Any, stop: Any,
+                 threads: int = 1) -> None:
+        """The numba core's ``run_many``, argument for argument (plus the thread count)."""
+        values = self._common(op=op, c_idx=c_idx, cp=cp, ref=ref, uff=uff, lv=lv, lw=lw,
+                              p_switch=p_switch, region=region, kicks=kicks,
+                              kick_value=kick_value, pulses=pulses, pulse_value=pulse_value,
+                              rec_cols=rec_cols, acc_cols=acc_cols, iopts=iopts, fopts=fopts)
+        for arr, dtype, what in ((recs, np.float64, "recs"), (accs, np.float64, "accs"),
+                                 (statuses, np.int64, "statuses"),
+                                 (fell_xs, np.float64, "fell_xs"),
+                                 (x_ends, np.float64, "x_ends"), (stop, np.int64, "stop")):
+            self._out(arr, dtype, what)
+        runs = len(x0s)
+        if runs == 0:
+            return
+        p_sets_r = np.asarray(p_sets_r, dtype=float)
+        lin_r = np.asarray(lin_r, dtype=float)
+        values.update(n_runs=runs, n_threads=max(1, int(threads)), x0s=x0s, rngs=rngs,
+                      z=np.asarray(z0, dtype=float), nz=len(z0), p_sets=p_sets_r,
+                      p_len=p_sets_r.shape[2], lin_s=(lin_r if lin_r.size else None),
+                      rec=(recs if recs.size else None), rec_w=recs.shape[2], acc=accs,
+                      acc_w=accs.shape[1], status=statuses, fell_x=fell_xs, x_ends=x_ends,
+                      stop=stop)
+        args, keep = self._arrays(values)
+        if self.lib.eq_run_many(ctypes.byref(args)) != 0:
+            raise MemoryError("the simulation core ran out of memory")
+        del keep
+
+    def measure_one(self, x: Any, c_idx: Any, lv: Any, rng: Any, y: Any) -> None:
+        x = np.ascontiguousarray(x, dtype=float)
+        c_idx = np.ascontiguousarray(c_idx, dtype=np.int64)
+        lv = np.ascontiguousarray(lv, dtype=float)
+        self._out(rng, np.uint64, "rng")
+        self._out(y, np.float64, "y")
+        self.lib.eq_measure_one(_ptr(x), _ptr(c_idx), len(c_idx), _ptr(lv), lv.shape[0],
+                                _ptr(rng), _ptr(y))
+
+    def scratch(self, p_len: int, ny: int, nw: int) -> np.ndarray:
+        width = int(self.lib.eq_scratch_width(p_len, ny, nw))
+        return np.zeros((layout.constants()["_SCR_ROWS"], width))
+
+    def advance_one(self, k: int, x: Any, u_app: Any, op: Any, p_sets: Any, p_switch: Any,
+                    lin_s: Any, region: Any, kicks: Any, kick_value: Any, pulses: Any,
+                    pulse_value: Any, lw: Any, rng: Any, iopts: Any, fopts: Any, status: Any,
+                    scr: Any) -> bool:
+        self._out(x, np.float64, "x")
+        self._out(rng, np.uint64, "rng")
+        self._out(status, np.int64, "status")
+        self._out(scr, np.float64, "the scratch")
+        lw = np.asarray(lw, dtype=float)
+        p_sets = np.asarray(p_sets, dtype=float)
+        values = dict(iopts=iopts, fopts=fopts, x=x, op=op, lw=lw,
+                      nw=(lw.shape[1] if lw.ndim == 2 else 0), p_sets=p_sets,
+                      n_sets=p_sets.shape[0], p_len=p_sets.shape[1], p_switch=p_switch,
+                      lin_s=lin_s, region=region, kicks=kicks, n_kicks=len(kicks),
+                      kick_value=kick_value, pulses=pulses, n_pulses=len(pulses),
+                      pulse_value=pulse_value, rng=rng, status=status, ny=0, nz=0)
+        args, keep = self._arrays(values)
+        u = np.ascontiguousarray(u_app, dtype=float)
+        fell = self.lib.eq_advance_one(ctypes.byref(args), int(k), _ptr(u), _ptr(scr))
+        del keep
+        return bool(fell)
+
+    def rk4_steps(self, x: Any, u: Any, p: Any, h: float, n_steps: int) -> None:
+        self._out(x, np.float64, "x")
+        u = np.ascontiguousarray(u, dtype=float)
+        p = np.ascontiguousarray(p, dtype=float)
+        self.lib.eq_rk4_steps(_ptr(x), _ptr(u), _ptr(p), float(h), int(n_steps))
+
+    def normals(self, rng: Any, out: Any) -> None:
+        self._out(rng, np.uint64, "rng")
+        self._out(out, np.float64, "out")
+        self.lib.eq_normals_into(_ptr(rng), _ptr(out), len(out))
+
+    def f(self, x: Any, u: Any, p: Any, out: Any) -> None:
+        self._out(out, np.float64, "out")
+        x, u, p = (np.ascontiguousarray(a, dtype=float) for a in (x, u, p))
+        self.lib.eq_f_one(_ptr(x), _ptr(u), _ptr(p), _ptr(out))
+
+
+_CORES: dict[tuple[Path, Any], NativeCore] = {}
+
+
+def load_core(system: System, key: bytes | tuple[int, ...] | None = None) -> NativeCore:
+    """The compiled core of *system* for a linear controller made for *key* (built once)."""
+    cache_key = (system.compiled.module_path, key)
+    core = _CORES.get(cache_key)
+    if core is None:
+        core = _CORES[cache_key] = NativeCore(system, key)
+    return core
+
+
+__all__ = ["FIELDS", "GENERATOR", "NativeCore", "RunArgs", "linear_library", "load_core",
+           "unit_source"]
