@@ -278,15 +278,15 @@ def test_unknown_options_name_the_nearest() -> None:
 
 
 def test_compiled_slots_agree_with_the_packing() -> None:
-    """The template's slot constants are the ones the settings are packed by."""
+    """The compiled core's slot constants are the ones the settings are packed by."""
     from equilibrist.envs import _core
 
     core = _make("equilibrist/cartpole-swingup-v0", randomize={"m_p": 0.1}).core
-    kernel = core.kernel
-    for prefix, names, first in (("_CI_", _core.CI_SLOTS, 0), ("_CF_", _core.CF_SLOTS, 0),
-                                 ("_US_", _core.US_SLOTS, 4)):
+    unit = core.kernel.path.with_suffix(".c").read_text()
+    for prefix, names, first in (("EQ_CI_", _core.CI_SLOTS, 0), ("EQ_CF_", _core.CF_SLOTS, 0),
+                                 ("EQ_US_", _core.US_SLOTS, 4)):
         for i, name in enumerate(names):
-            assert getattr(kernel, prefix + name.upper()) == first + i, name
+            assert f"#define {prefix}{name.upper()} {first + i}\n" in unit, name
     ci, cf = core.ci, core.cf
     slot = {name: ci[i] for i, name in enumerate(_core.CI_SLOTS)}
     n = core.system.n_states
@@ -402,7 +402,7 @@ def test_vector_parallel_equals_serial(monkeypatch: pytest.MonkeyPatch) -> None:
         rng = np.random.default_rng(1)
         trace = [vec.step(rng.uniform(-1, 1, (64, 1)))[:4] for _ in range(50)]
         runs.append(trace)
-        both = all(entry is not None for entry in vec._entries)
+        both = all(math.isfinite(cost) for cost in vec._cost)
         assert both == (minimum == 1)
     for one, two in zip(*runs, strict=True):
         for p, q in zip(one, two, strict=True):
@@ -424,7 +424,7 @@ def _on_fake_clock(monkeypatch: pytest.MonkeyPatch, seconds: Callable[[int], flo
             return 0
         return entry
 
-    vec._entries[:] = [way(0), way(1)]
+    vec._ways[:] = [way(0), way(1)]
     monkeypatch.setattr(vector_module.time, "perf_counter", lambda: now[0])
     return vec
 

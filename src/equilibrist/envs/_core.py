@@ -23,8 +23,9 @@ import numpy as np
 
 from equilibrist.control._checks import given_text, real_array
 from equilibrist.errors import EquilibristError, UnknownNameError, nearest
+from equilibrist.native.simcore import load_core
 from equilibrist.numeric.system import System, get_system
-from equilibrist.sim.kernel import load_kernel
+from equilibrist.sim import layout
 from equilibrist.sim.noise import Noise, square_root
 from equilibrist.tasks import Task, get_task
 
@@ -37,18 +38,12 @@ ALIVE_BONUS = 1.0
 FINITE = float(np.finfo(np.float64).max) / 2
 REWARD_KINDS = {"balance": 0, "swingup": 1}
 #: The slots of ``ci``'s head: sizes, switches, and the offsets of ``cf``'s
-#: blocks and of ``ci``'s own index blocks (the template's ``_CI_*``).
-CI_SLOTS = (
-    "n_sub", "n_samples", "observe_state", "reward", "physical", "chunks", "autoreset",
-    "ny", "nw", "nlv", "nhang", "nrnd", "np",
-    "o_c_idx", "o_hang", "o_rnd_idx",
-    "o_region", "o_op", "o_iscale", "o_start", "o_spread", "o_p_nom", "o_rnd_spread", "o_lv",
-    "o_lw",
-)
-#: The slots of ``cf``'s head (the template's ``_CF_*``); its blocks follow.
-CF_SLOTS = ("h", "dt", "bonus")
-#: A copy's ``us`` row: four generator words, then these (the template's ``_US_*``).
-US_SLOTS = ("k", "auto")
+#: blocks and of ``ci``'s own index blocks (:data:`equilibrist.sim.layout.ENV_CI`).
+CI_SLOTS = layout.ENV_CI.names
+#: The slots of ``cf``'s head; its blocks follow.
+CF_SLOTS = layout.ENV_CF.names
+#: A copy's ``us`` row: four generator words, then these.
+US_SLOTS = layout.ENV_US
 US_WIDTH = 4 + len(US_SLOTS)
 #: The environments' options and their defaults (the single and the vector
 #: environment take the same ones).
@@ -355,7 +350,7 @@ def build_core(
         n_samples=int(n_samples), observe=observe,
         observation_names=tuple(names) if observe == "state" else outputs,
         action_units=action_units, noise=spec_noise, randomize=dict(rnd), alive_bonus=bonus,
-        kernel=load_kernel(sysm), c_idx=c_idx, lv=np.ascontiguousarray(lv),
+        kernel=load_core(sysm), c_idx=c_idx, lv=np.ascontiguousarray(lv),
         lw=np.ascontiguousarray(lw), region=region,
         op=op, sc=sc, hang=hang, p_nom=p_nom, rnd_idx=rnd_idx, rnd_spread=rnd_spread,
         ci=ci, cf=cf,

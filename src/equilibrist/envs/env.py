@@ -18,6 +18,7 @@ from gymnasium import spaces
 from equilibrist.control._checks import given_text, real_array
 from equilibrist.envs._core import FINITE, OPTION_DEFAULTS, Core, EnvError, as_actions, build_core
 from equilibrist.errors import DimensionError, nearest
+from equilibrist.native.simcore import EnvSteps
 from equilibrist.sim.noise import generator_state
 
 # Backends of matplotlib that draw to files only.
@@ -90,18 +91,6 @@ def open_core(system: object, task: str, options: Mapping[str, Any], render_mode
         )
     offered = [] if no_drawing else [m for m in modes if m != "human" or no_window is None]
     return core, offered
-
-
-def compiled_entry(dispatcher: Any, sample_args: tuple[object, ...]) -> Any:
-    """The compiled function *dispatcher* runs for arguments typed as *sample_args*.
-
-    Calling it skips numba's look-up of the argument types (a few hundred
-    nanoseconds for these calls); the caller passes arrays of exactly these
-    types (its own, and actions made float64 and C-contiguous).
-    """
-    from numba import typeof
-
-    return dispatcher.compile(tuple(typeof(a) for a in sample_args))
 
 
 class Renderer:
@@ -210,6 +199,7 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         self._fs, self._us = core.rows(1)
         self._ci = core.settings()
         self._cf = core.cf
+        self._steps = EnvSteps(core.kernel, self._fs, self._us, self._cf, self._ci, core.n_obs)
         n, m = core.system.n_states, core.system.n_inputs
         self._x = self._fs[0, :n]  # views of the row
         self._p = self._fs[0, n:n + core.n_params]
@@ -274,13 +264,7 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         self._p[:] = p
         self._us[0, :4] = generator_state(np.random.SeedSequence(noise_seed))
         self._u[:] = core.task.u_op
-        obs = np.empty(core.n_obs)
-        core.kernel.env_begin(self._fs, self._us, obs, self._cf, self._ci)
-        if self._step_fn is None:
-            self._step_fn = compiled_entry(
-                core.kernel.env_step_one,
-                (np.zeros(self._ashape), self._fs, self._us, obs, self._cf, self._ci),
-            )
+        obs = self._steps.begin_one()
         self._ready = True
         info: dict[str, Any] = {"state": self._x.copy(), "noise_seed": noise_seed}
         if core.randomize:
@@ -295,8 +279,10 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         if not self._ready:
             raise EnvError("call reset() before step()")
         a = as_actions(action, self._ashape, self.core, "action")
-        obs = np.empty(self.core.n_obs)
-        reward, status = self._step_fn(a, self._fs, self._us, obs, self._cf, self._ci)
+        steps = self._steps
+        steps.a[0] = a
+        reward, status = steps.step_one()
+        obs = steps.obs[0].copy()
         if status == 3:
             raise EnvError(f"action {a.tolist()} is not a finite number")
         if self._renderer is not None:

@@ -34,7 +34,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from equilibrist.envs._core import EnvError, as_actions
-from equilibrist.envs.env import Renderer, _spaces, compiled_entry, open_core
+from equilibrist.envs.env import Renderer, _spaces, open_core
+from equilibrist.native.simcore import EnvSteps
 
 # Fewer copies than this step on one thread: starting a parallel region
 # (waking the other threads and waiting for them) costs more than it saves.
@@ -63,14 +64,15 @@ PROBE_SHARE = 20.0
 SMOOTHING = 0.25
 OUTLIER = 3.0
 # Looked up once: a step of few copies takes a few microseconds in all.
-_BOOL = np.bool_
-_empty = np.empty
+_copyto = np.copyto
 
 
 def _chunks() -> int:
-    import numba
+    """Blocks of copies a parallel step runs: the thread count (``set_workers``, else the
+    CPU count)."""
+    from equilibrist.sim.kernel import thread_count
 
-    return int(numba.get_num_threads())
+    return thread_count()
 
 
 class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
@@ -114,9 +116,11 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self.parallel = N >= PARALLEL_MIN and chunks > 1
         self._ci = core.settings(chunks=chunks, autoreset=True)
         self._cf = core.cf
-        # The entries, one thread then parallel, resolved at the first step.
-        self._dispatchers = (core.kernel.env_step_serial, core.kernel.env_step_many)
-        self._entries: list[Any] = [None, None]
+        # The compiled steps bound to the copies' rows: one thread, then parallel.
+        self._steps = EnvSteps(core.kernel, self._fs, self._us, self._cf, self._ci, core.n_obs)
+        steps = self._steps
+        #: The two ways of a step: one thread, all (each returns the count of bad actions).
+        self._ways: list[Any] = [lambda: steps.step_many(1), lambda: steps.step_many(chunks)]
         self._mode = int(self.parallel)
         self._cost = [math.inf, math.inf]  # seconds per step, moving averages
         self._countdown = 0  # steps before the next probe
@@ -177,12 +181,8 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
                 None if first is None else int(first)
             )
             self._seed(seed)
-        obs = np.empty(self._obs_shape)
-        self.core.kernel.env_reset_many(self._fs, self._us, obs, self._cf, self._ci)
-        if self._step_fn is None:  # resolved once; set, it also says reset was called
-            N = self.num_envs
-            self._step_fn = self._entry(self._mode, (np.zeros(self._ashape), obs, np.empty(N),
-                                                     np.empty(self._flags_shape, dtype=_BOOL)))
+        obs = self._steps.reset_many()
+        self._step_fn = self._ways  # set, it also says reset was called
         return obs, {"state": self.states}
 
     def step(
@@ -193,37 +193,25 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         if step is None:
             raise EnvError("call reset() before step()")
         a = as_actions(actions, self._ashape, self.core, "actions")
-        # Fresh arrays every step, as Gymnasium's own vector environments return.
-        obs = _empty(self._obs_shape)
-        rewards = _empty(self.num_envs)
-        flags = _empty(self._flags_shape, dtype=_BOOL)
+        steps = self._steps
+        _copyto(steps.a, a)
         if self.parallel:
             if self._untimed > 0:  # most steps: the way in use, not timed
                 self._untimed -= 1
-                bad = self._entries[self._mode](a, self._fs, self._us, obs, rewards, flags,
-                                                self._cf, self._ci)
+                bad = self._ways[self._mode]()
             else:
-                bad = self._timed_step(a, obs, rewards, flags)
+                bad = self._timed_step()
         else:
-            bad = step(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
+            bad = self._ways[0]()
         if bad:
             raise EnvError("an action is not a finite number (no copy was stepped)")
         if self._renderer is not None:
             self._actions = a.copy()
-        return obs, rewards, flags[0], flags[1], {}
+        # Fresh arrays every step, as Gymnasium's own vector environments return.
+        flags = steps.flags.copy()
+        return steps.obs.copy(), steps.rewards.copy(), flags[0], flags[1], {}
 
-    def _entry(self, mode: int, outputs: tuple[np.ndarray, ...]) -> Any:
-        entry = self._entries[mode]
-        if entry is None:
-            a, obs, rewards, flags = outputs
-            entry = self._entries[mode] = compiled_entry(
-                self._dispatchers[mode],
-                (a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci),
-            )
-        return entry
-
-    def _timed_step(self, a: np.ndarray, obs: np.ndarray, rewards: np.ndarray,
-                    flags: np.ndarray) -> int:
+    def _timed_step(self) -> int:
         """A step on one thread or on all, whichever has been faster lately
         (see ``PROBE_EVERY``); both give the same numbers."""
         cost = self._cost
@@ -234,9 +222,8 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             # Python, 5 % of a step of 256 copies).
             self._countdown -= TIME_EVERY
             self._untimed = TIME_EVERY - 1
-            entry = self._entries[mode]  # timed before: compiled
             start = time.perf_counter()
-            bad = entry(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
+            bad = self._ways[mode]()
             spent = time.perf_counter() - start
             average = cost[mode]
             average = SMOOTHING * min(spent, OUTLIER * average) + (1.0 - SMOOTHING) * average
@@ -252,9 +239,8 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             self._probe_best = math.inf
         self._probe_left -= 1
         mode = 1 - mode
-        entry = self._entry(mode, (a, obs, rewards, flags))
         start = time.perf_counter()
-        bad = entry(a, self._fs, self._us, obs, rewards, flags, self._cf, self._ci)
+        bad = self._ways[mode]()
         spent = time.perf_counter() - start
         if not first:
             self._probe_best = min(self._probe_best, spent)

@@ -159,6 +159,7 @@ class Module:
     defs: dict[str, ast.FunctionDef] = field(default_factory=dict)
     done: dict[tuple[str, tuple[str, ...]], Function] = field(default_factory=dict)
     order: list[Function] = field(default_factory=list)
+    busy: set[tuple[str, tuple[str, ...]]] = field(default_factory=set)
 
     def __post_init__(self) -> None:
         try:
@@ -185,9 +186,15 @@ class Module:
         fdef = self.defs.get(name)
         if fdef is None:
             raise TranslationError(f"no function {name!r} in the source")
+        if key in self.busy:
+            raise TranslationError(f"{name} calls itself: recursion is not supported")
         cname = self.prefix + name + ("" if not self._overloaded(name, types)
                                       else "_" + "".join(t.lower() for t in types))
-        fn = _Translator(self, fdef, types, cname).run()
+        self.busy.add(key)
+        try:
+            fn = _Translator(self, fdef, types, cname).run()
+        finally:
+            self.busy.discard(key)
         self.done[key] = fn
         self.order.append(fn)
         return fn
@@ -293,46 +300,85 @@ class _Translator:
             old = self.locals.get(target.id)
             self.locals[target.id] = t if old is None else _unify(old, t)
         elif isinstance(target, ast.Tuple):
-            values = self.tuple_values(value)
-            if values is None:
+            types = self.tuple_types(value)
+            if types is None:
                 return
-            if len(values) != len(target.elts):
+            if len(types) != len(target.elts):
                 self.fail(target, "unpacking a tuple of another length")
-            for t_el, v_el in zip(target.elts, values, strict=True):
-                self.bind(t_el, v_el)
+            for el, t in zip(target.elts, types, strict=True):
+                if not isinstance(el, ast.Name):
+                    self.fail(el, "only names may be unpacked into")
+                assert isinstance(el, ast.Name)
+                if el.id in self.params:
+                    self.fail(el, f"argument {el.id!r} is assigned to (use another name)")
+                old = self.locals.get(el.id)
+                self.locals[el.id] = t if old is None else _unify(old, t)
 
-    def tuple_values(self, value: ast.expr) -> list[ast.expr] | None:
+    def tuple_types(self, value: ast.expr) -> list[str] | None:
+        """The element types of a tuple literal or of a call of a function returning one."""
         if isinstance(value, ast.Tuple):
-            return list(value.elts)
+            out = []
+            for el in value.elts:
+                t = self.safe_type(el)
+                if t is None:
+                    return None
+                out.append(t)
+            return out
         if isinstance(value, ast.Call) and isinstance(value.func, ast.Name) \
                 and value.func.id in self.m.defs:
-            inlined = self.inline_tuple(value)
-            return inlined
-        return None
+            try:
+                fn = self.callee(value)[0]
+            except TranslationError:
+                return None
+            if fn.returns is None or not fn.returns.startswith("tuple:"):
+                self.fail(value, f"{value.func.id} returns no tuple")
+            assert fn.returns is not None
+            return fn.returns[6:].split(",")
+        self.fail(value, "a tuple is unpacked from something that is not one")
+        raise AssertionError
 
-    def inline_tuple(self, call: ast.Call) -> list[ast.expr] | None:
-        """``return (a, b, ...)`` of a one-statement function, its arguments substituted."""
-        assert isinstance(call.func, ast.Name)
-        fdef = self.m.defs[call.func.id]
-        body = [s for s in fdef.body
-                if not (isinstance(s, ast.Expr) and isinstance(s.value, ast.Constant))]
-        if len(body) != 1 or not isinstance(body[0], ast.Return) \
-                or not isinstance(body[0].value, ast.Tuple):
-            self.fail(call, f"{call.func.id} returns no tuple literal (only such a function "
-                            "may be unpacked)")
-        names = [a.arg for a in fdef.args.args]
-        if len(names) != len(call.args):
-            self.fail(call, f"{call.func.id} called with {len(call.args)} arguments")
-        mapping = dict(zip(names, call.args, strict=True))
+    def callee(self, node: ast.Call) -> tuple[Function, list[str]]:
+        """The translated function a call of a function of the source reaches, and the C
+        arguments (an array passes its pointer and lengths; a slice ``a[lo:hi]`` of a 1-D
+        array passes a pointer into it)."""
+        assert isinstance(node.func, ast.Name)
+        types: list[str] = []
+        codes: list[str] = []
+        for a in node.args:
+            if isinstance(a, ast.Subscript) and isinstance(a.slice, ast.Slice):
+                ptr, length, t = self.slice_arg(a)
+                types.append(t)
+                codes += [ptr, length]
+                continue
+            code, t = self.expr(a)
+            types.append(t)
+            codes.append(code)
+            if t in ARRAYS:
+                codes += [f"{code}_n{k}" for k in range(int(t[1]))]
+        fn = self.m.function(node.func.id, tuple(types))
+        return fn, codes
 
-        class Sub(ast.NodeTransformer):
-            def visit_Name(self, node: ast.Name) -> ast.expr:
-                return mapping.get(node.id, node)
-
-        assert isinstance(body[0], ast.Return) and isinstance(body[0].value, ast.Tuple)
-        import copy
-
-        return [Sub().visit(copy.deepcopy(e)) for e in body[0].value.elts]
+    def slice_arg(self, node: ast.Subscript) -> tuple[str, str, str]:
+        if not isinstance(node.value, ast.Name) or self.params.get(node.value.id) not in ("F1", "I1"):
+            self.fail(node, "only a 1-D array argument may be sliced")
+        assert isinstance(node.value, ast.Name) and isinstance(node.slice, ast.Slice)
+        arr = self.var(node.value.id)
+        sl = node.slice
+        if sl.step is not None:
+            self.fail(node, "a slice with a step is not supported")
+        lo = "INT64_C(0)"
+        if sl.lower is not None:
+            lo, tl = self.scalar(sl.lower)
+            if tl != "i" or (isinstance(_literal(sl.lower, {}), int) and _literal(sl.lower, {}) < 0):  # type: ignore[operator]
+                self.fail(node, "a slice's start must be a non-negative integer")
+        hi = f"{arr}_n0"
+        if sl.upper is not None:
+            hi, th = self.scalar(sl.upper)
+            if th != "i" or (isinstance(_literal(sl.upper, {}), int) and _literal(sl.upper, {}) < 0):  # type: ignore[operator]
+                self.fail(node, "a slice's end must be a non-negative integer")
+            hi = f"eq_mini({hi}, {arr}_n0)"
+        length = f"eq_maxi(INT64_C(0), {hi} - eq_mini({lo}, {arr}_n0))"
+        return f"({arr} + eq_mini({lo}, {arr}_n0))", length, self.params[node.value.id]
 
     def safe_type(self, node: ast.expr) -> str | None:
         try:
@@ -352,7 +398,8 @@ class _Translator:
     def scalar(self, node: ast.expr) -> tuple[str, str]:
         code, t = self.expr(node)
         if t not in SCALARS:
-            self.fail(node, "an array where a number is expected")
+            what = "nothing (a function without a value)" if t == "void" else "an array"
+            self.fail(node, f"{what} where a number is expected")
         return code, t
 
     def as_float(self, node: ast.expr) -> str:
@@ -556,17 +603,13 @@ class _Translator:
         if name in ("abs", "min", "max", "int", "float", "bool", "round"):
             return self.builtin(name, node)
         if name in self.m.defs:
-            types = tuple(self.expr(a)[1] for a in args)
-            fn = self.m.function(name, types)
-            codes = []
-            for a, t in zip(args, types, strict=True):
-                code = self.expr(a)[0]
-                codes.append(code)
-                if t in ARRAYS:
-                    codes += [f"{code}_n{k}" for k in range(int(t[1]))]
+            fn, codes = self.callee(node)
+            call = f"{fn.name}(" + ", ".join(codes) + ")"
             if fn.returns is None:
-                return f"{fn.name}(" + ", ".join(codes) + ")", "void"
-            return f"{fn.name}(" + ", ".join(codes) + ")", fn.returns
+                return call, "void"
+            if fn.returns.startswith("tuple:"):
+                self.fail(node, f"{name} returns a tuple: unpack it into names")
+            return call, fn.returns
         self.fail(node, f"function {name!r} is not known to the C translation")
         raise AssertionError
 
@@ -610,9 +653,13 @@ class _Translator:
                 args.append(f"{_ctype(t)} {self.var(pname)}")
         decls = [f"    {_ctype(t)} {self.var(n)} = 0;" for n, t in self.locals.items()
                  if n not in self.params]
-        ret = "void" if self.returns is None else _ctype(self.returns)
+        if self.returns is not None and self.returns.startswith("tuple:"):
+            args += [f"{_ctype(t)} *ret_{k}" for k, t in enumerate(self.returns[6:].split(","))]
+            ret = "void"
+        else:
+            ret = "void" if self.returns is None else _ctype(self.returns)
         # Arguments a function never uses are fine: mark them so -Wunused stays quiet.
-        unused = [f"    (void){a.split()[-1]};" for a in args]
+        unused = [f"    (void){a.split()[-1].lstrip('*')};" for a in args]
         head = f"static {ret} {self.cname}({', '.join(args) or 'void'})"
         source = head + "\n{\n" + "\n".join(decls + unused + body) + "\n}\n"
         return Function(self.cname, tuple(self.params.items()), self.returns, source)
@@ -674,11 +721,21 @@ class _Translator:
         if isinstance(s, ast.Return):
             if s.value is None or (isinstance(s.value, ast.Constant) and s.value.value is None):
                 if self.returns is not None:
-                    self.fail(s, "returns a number on one path and nothing on another")
+                    self.fail(s, "returns a value on one path and nothing on another")
                 return [f"{ind}return;"]
+            if isinstance(s.value, ast.Tuple):
+                vals = [self.scalar(e) for e in s.value.elts]
+                kinds = "tuple:" + ",".join(t for _, t in vals)
+                if self.returns is not None and self.returns != kinds:
+                    self.fail(s, "returns tuples of different types")
+                self.returns = kinds
+                return [*(f"{ind}*ret_{k} = {code};" for k, (code, _) in enumerate(vals)),
+                        f"{ind}return;"]
             code, t = self.scalar(s.value)
             if self.returns is None:
                 self.returns = t
+            elif self.returns.startswith("tuple:"):
+                self.fail(s, "returns a tuple on one path and a number on another")
             elif self.returns != t:
                 self.returns = "f"
                 code = code if t == "f" else f"((double){code})"
@@ -691,22 +748,42 @@ class _Translator:
 
     def assign(self, target: ast.expr, value: ast.expr, ind: str) -> list[str]:
         if isinstance(target, ast.Tuple):
-            values = self.tuple_values(value)
-            if values is None or len(values) != len(target.elts):
-                self.fail(target, "a tuple is unpacked from something that is not one")
-            assert values is not None
-            temps = []
-            out = []
-            for v in values:
-                code, t = self.scalar(v)
-                name = self.fresh()
-                temps.append(name)
-                out.append(f"{ind}const {_ctype(t)} {name} = {code};")
-            for el, name in zip(target.elts, temps, strict=True):
+            names = []
+            for el in target.elts:
                 if not isinstance(el, ast.Name):
                     self.fail(el, "only names may be unpacked into")
                 assert isinstance(el, ast.Name)
-                out.append(f"{ind}{self.var(el.id)} = {name};")
+                names.append(el.id)
+            out = []
+            temps = []
+            if isinstance(value, ast.Tuple):
+                if len(value.elts) != len(names):
+                    self.fail(target, "unpacking a tuple of another length")
+                for v in value.elts:
+                    code, t = self.scalar(v)
+                    name = self.fresh()
+                    temps.append((name, t))
+                    out.append(f"{ind}const {_ctype(t)} {name} = {code};")
+            elif isinstance(value, ast.Call) and isinstance(value.func, ast.Name) \
+                    and value.func.id in self.m.defs:
+                fn, codes = self.callee(value)
+                if fn.returns is None or not fn.returns.startswith("tuple:"):
+                    self.fail(value, f"{value.func.id} returns no tuple")
+                assert fn.returns is not None
+                kinds = fn.returns[6:].split(",")
+                if len(kinds) != len(names):
+                    self.fail(target, "unpacking a tuple of another length")
+                for t in kinds:
+                    name = self.fresh()
+                    temps.append((name, t))
+                    out.append(f"{ind}{_ctype(t)} {name};")
+                out.append(f"{ind}{fn.name}(" + ", ".join([*codes, *(f"&{n}" for n, _ in temps)])
+                           + ");")
+            else:
+                self.fail(value, "a tuple is unpacked from something that is not one")
+            for var, (name, t) in zip(names, temps, strict=True):
+                cast = name if not (self.locals[var] == "f" and t == "i") else f"((double){name})"
+                out.append(f"{ind}{self.var(var)} = {cast};")
             return out
         code, t = self.scalar(value)
         if isinstance(target, ast.Name):

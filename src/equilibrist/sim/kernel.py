@@ -239,6 +239,7 @@ class Kernel:
         self.controller = controller
         self._module: types.ModuleType | None = None
         self._cores: dict[Linear | None, Any] = {}
+        self._nl: Any = None
 
     @property
     def module(self) -> types.ModuleType:
@@ -255,6 +256,19 @@ class Kernel:
             core = self._cores[key] = load_core(self.system, key)
         return core
 
+    def _nonlinear(self) -> Any:
+        """The C core of the nonlinear controller, or its numba module when its source uses
+        what the C translation does not know."""
+        if self._nl is None:
+            from equilibrist.native.pyc import TranslationError
+            from equilibrist.native.simcore import load_core
+
+            try:
+                self._nl = load_core(self.system, None, self.controller)
+            except TranslationError:
+                self._nl = self.module
+        return self._nl
+
     @property
     def generic(self) -> Any:
         """The C core with the generic linear library (the entries that run no controller)."""
@@ -264,16 +278,19 @@ class Kernel:
         """The core whose ``run_one``/``run_many`` run controller parameters *cp*: the C core
         made for a linear controller's pattern, or the numba module of a nonlinear one."""
         if self.controller is not None:
-            return self.module
+            return self._nonlinear()
         return self._native(_linear_key(cp))
 
     def compiled(self, cp: Any) -> bool:
         """Whether ``run_one`` and ``run_many`` for controller parameters *cp* are compiled
         (or loaded from the cache) in this process already."""
         if self.controller is not None:
-            module = self.module
-            return bool(module.run_one.overloads) and bool(module.run_many.overloads)
-        return (self.system.compiled.module_path, _linear_key(cp)) in _native_loaded()
+            if self._nl is None:
+                return False
+            if isinstance(self._nl, types.ModuleType):
+                return bool(self._nl.run_one.overloads) and bool(self._nl.run_many.overloads)
+            return True
+        return (self.system.compiled.module_path, _linear_key(cp), None) in _native_loaded()
 
     def run_one(self, *, k_start: int, k_end: int, iopts: Any, fopts: Any, x: Any, z: Any,
                 u_prev: Any, rng: Any, op: Any, c_idx: Any, cp: Any, ref: Any, uff: Any,
@@ -329,7 +346,12 @@ def _native_loaded() -> Any:
 
 
 # The batch's thread count (set_workers): OpenMP threads of the C core's run_many.
-_THREADS = [1]
+_THREADS = [os.cpu_count() or 1]
+
+
+def thread_count() -> int:
+    """The thread count of parallel entries in force (:func:`set_workers`)."""
+    return _THREADS[0]
 
 
 def set_workers(workers: int | None) -> int:

@@ -109,13 +109,27 @@ SCRATCH = Slots("S", ("y", "x_hat", "u_cmd", "u_sat", "u_app", "z_new", "k1", "k
                       "xt", "xprev", "ubuf", "wvec", "zbuf", "pcur", "fell_x", "wk"))
 #: Rows of the adaptive integrator's work space at the end of the scratch array.
 SCRATCH_WORK_ROWS = 16
+#: The environments' settings (:mod:`equilibrist.envs._core` writes them): the slots of
+#: ``ci``'s head (sizes, switches, and the offsets of ``cf``'s blocks and of ``ci``'s own
+#: index blocks), of ``cf``'s head, and of a copy's ``us`` row after its four generator words.
+ENV_CI = Slots("CI", (
+    "n_sub", "n_samples", "observe_state", "reward", "physical", "chunks", "autoreset",
+    "ny", "nw", "nlv", "nhang", "nrnd", "np",
+    "o_c_idx", "o_hang", "o_rnd_idx",
+    "o_region", "o_op", "o_iscale", "o_start", "o_spread", "o_p_nom", "o_rnd_spread", "o_lv",
+    "o_lw",
+))
+ENV_CF = Slots("CF", ("h", "dt", "bonus"))
+ENV_US = ("k", "auto")
 
 
 def constants() -> dict[str, int]:
     """Every slot, column block and scratch row as a source constant (``_IO_DELAY = 2``...)."""
     out: dict[str, int] = {}
-    for part in (IOPTS, FOPTS, STATUS, RECORD, ACC, SCRATCH):
+    for part in (IOPTS, FOPTS, STATUS, RECORD, ACC, SCRATCH, ENV_CI, ENV_CF):
         out.update(part.constants())
+    out.update({f"_US_{name.upper()}": 4 + i for i, name in enumerate(ENV_US)})
+    out["_US_WIDTH"] = 4 + len(ENV_US)
     out["_SCR_ROWS"] = len(SCRATCH) - 1 + SCRATCH_WORK_ROWS
     out.update({f"_INT_{k.upper()}": v for k, v in INTEGRATORS.items()})
     out.update(linear_constants())

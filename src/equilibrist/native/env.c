@@ -1,0 +1,346 @@
+/* The environments' steps (equilibrist.envs), appended to the simulation core's body.
+ *
+ * A control period of an environment is, number for number, a sample of
+ * `simulate` with a Python controller: zero-order hold of the saturated
+ * input, RK4 physics steps with process noise held over each, the region
+ * checked after each physics step, the sensors read with noise at the next
+ * sample. Every entry takes the same few arrays:
+ *
+ *   fs (copies, n + n_p + 2) double: per copy [x | p | energy upright, energy hanging]
+ *   us (copies, 6) uint64: per copy [xoshiro256** words (4) | periods taken | autoreset due]
+ *   cf double and ci int64: the settings written by equilibrist.envs._core; ci's head
+ *     holds the sizes and the offsets of cf's blocks and of ci's own index blocks
+ *     (slots EQ_CI_*, EQ_CF_*, EQ_US_* from equilibrist.sim.layout).
+ *
+ * A copy's step status: 0 running, 1 fell (terminated), 2 out of time (truncated).
+ * The unit defines eq_energy(x, p) (the system's energy) before this body.
+ */
+
+#define EQ_ENV_SCR 9 /* scratch rows: u, w, zbuf, k1, k2, k3, k4, xt, xprev */
+/* A parallel step gives each block of copies scratch at least this many doubles apart
+ * (two cache lines): scratch written by two threads in one line would bounce it. */
+#define EQ_ENV_GAP 16
+
+typedef struct {
+    int64_t n_sub, n_samples, observe_state, reward, physical, autoreset, ny, nw, nlv, np;
+    int64_t nhang;
+    double h, dt, bonus;
+    const double *region; /* 2 x n: lower bounds, upper bounds */
+    const double *op;     /* state then input */
+    const double *iscale; /* 1 / scales: state then input */
+    const int64_t *c_idx;
+    const int64_t *hang;
+    const double *lv; /* ny x ny */
+    const double *lw; /* n x nw */
+} eq_env;
+
+static void eq_env_settings(const double *cf, const int64_t *ci, eq_env *S)
+{
+    S->n_sub = ci[EQ_CI_N_SUB];
+    S->n_samples = ci[EQ_CI_N_SAMPLES];
+    S->observe_state = ci[EQ_CI_OBSERVE_STATE];
+    S->reward = ci[EQ_CI_REWARD];
+    S->physical = ci[EQ_CI_PHYSICAL];
+    S->autoreset = ci[EQ_CI_AUTORESET];
+    S->ny = ci[EQ_CI_NY];
+    S->nw = ci[EQ_CI_NW];
+    S->nlv = ci[EQ_CI_NLV];
+    S->np = ci[EQ_CI_NP];
+    S->nhang = ci[EQ_CI_NHANG];
+    S->h = cf[EQ_CF_H];
+    S->dt = cf[EQ_CF_DT];
+    S->bonus = cf[EQ_CF_BONUS];
+    S->region = cf + ci[EQ_CI_O_REGION];
+    S->op = cf + ci[EQ_CI_O_OP];
+    S->iscale = cf + ci[EQ_CI_O_ISCALE];
+    S->c_idx = ci + ci[EQ_CI_O_C_IDX];
+    S->hang = ci + ci[EQ_CI_O_HANG];
+    S->lv = cf + ci[EQ_CI_O_LV];
+    S->lw = cf + ci[EQ_CI_O_LW];
+}
+
+static int64_t eq_env_width(const int64_t *ci)
+{
+    int64_t w = EQ_N;
+    w = w > EQ_M ? w : EQ_M;
+    w = w > ci[EQ_CI_NY] ? w : ci[EQ_CI_NY];
+    w = w > ci[EQ_CI_NW] ? w : ci[EQ_CI_NW];
+    return w + 2;
+}
+
+static inline int64_t eq_env_fs_width(const int64_t *ci) { return EQ_N + ci[EQ_CI_NP] + 2; }
+
+/* orow: the state, or the measured outputs with sensor noise (as eq_measure). The sensor
+ * noise is drawn either way, so an environment observing the state follows the same run. */
+static void eq_env_observe(const double *x, uint64_t *rng, double *orow, const eq_env *S,
+                           double *zbuf)
+{
+    int64_t i, j, c;
+    if (S->nlv > 0) eq_normals(rng, zbuf, S->ny);
+    if (S->observe_state != 0) {
+        for (i = 0; i < EQ_N; i++) orow[i] = x[i];
+        return;
+    }
+    for (j = 0; j < S->ny; j++) {
+        double y = x[S->c_idx[j]];
+        if (S->nlv > 0) {
+            double v = 0.0;
+            for (c = 0; c < S->ny; c++) v += S->lv[j * S->ny + c] * zbuf[c];
+            y += v;
+        }
+        orow[j] = y;
+    }
+}
+
+/* The saturated input of action a (limits from p, as the core saturates). */
+static void eq_env_input(const double *a, const double *p, int64_t np_, int64_t physical,
+                         double *u)
+{
+    const int64_t base = np_ - 2 * EQ_M;
+    int i;
+    for (i = 0; i < EQ_M; i++) {
+        double lo = p[base + 2 * i];
+        double hi = p[base + 2 * i + 1];
+        double v = physical != 0 ? a[i] : lo + 0.5 * (a[i] + 1.0) * (hi - lo);
+        u[i] = eq_minf(eq_maxf(v, lo), hi);
+    }
+}
+
+/* One control period; the region code at a fall (the last finite state kept), else -1.
+ * w is zero on entry and stays so without process noise. */
+static int64_t eq_env_physics(double *x, const double *u, const double *p, uint64_t *rng,
+                              const eq_env *S, double *w, double *zbuf, double *k1, double *k2,
+                              double *k3, double *k4, double *xt, double *xprev)
+{
+    int64_t s, i, c;
+    for (s = 0; s < S->n_sub; s++) {
+        int64_t code;
+        if (S->nw > 0) {
+            eq_normals(rng, zbuf, S->nw);
+            for (i = 0; i < EQ_N; i++) {
+                double v = 0.0;
+                for (c = 0; c < S->nw; c++) v += S->lw[i * S->nw + c] * zbuf[c];
+                w[i] = v;
+            }
+        }
+        for (i = 0; i < EQ_N; i++) xprev[i] = x[i];
+        eq_rk4_step(x, u, p, w, S->nw, S->h, k1, k2, k3, k4, xt);
+        code = eq_outside(x, S->region);
+        if (code != -1) {
+            if (code == -2) {
+                for (i = 0; i < EQ_N; i++) x[i] = xprev[i];
+            }
+            return code;
+        }
+    }
+    return -1;
+}
+
+/* Reward of a period ending in x with u applied (see equilibrist.envs). */
+static double eq_env_reward(const double *x, const double *u, const double *p, double eref0,
+                            double eref1, const eq_env *S)
+{
+    const double *op = S->op;
+    double up = 0.0, gap, e;
+    int64_t i, j;
+    if (S->reward == 0) {
+        double c = 0.0;
+        for (i = 0; i < EQ_N; i++) {
+            double d = (x[i] - op[i]) * S->iscale[i];
+            c += d * d;
+        }
+        for (i = 0; i < EQ_M; i++) {
+            double d = (u[i] - op[EQ_N + i]) * S->iscale[EQ_N + i];
+            c += d * d;
+        }
+        /* Never below zero: struggling must not earn less than falling at once. */
+        return S->dt * eq_maxf(0.0, S->bonus - c);
+    }
+    for (j = 0; j < S->nhang; j++) {
+        int64_t q = S->hang[j];
+        up += 0.5 * (1.0 + eq_cos(x[q] - op[q]));
+    }
+    if (S->nhang > 0) up /= (double)S->nhang;
+    gap = eref0 - eref1;
+    if (gap == 0.0) gap = 1.0;
+    e = (eq_energy(x, p) - eref0) / gap;
+    return S->dt * 0.5 * (up + eq_maxf(0.0, 1.0 - e * e));
+}
+
+/* Start copy r's episode from the state and parameters in its row: the shaping's reference
+ * energies, the step count, the first observation. */
+static void eq_env_begin(int64_t r, double *fs, uint64_t *us, double *orow, const double *cf,
+                         const int64_t *ci, double *zbuf)
+{
+    const int64_t np_ = ci[EQ_CI_NP], fw = eq_env_fs_width(ci);
+    double *row = fs + r * fw;
+    uint64_t *urow = us + r * EQ_US_WIDTH;
+    eq_env S;
+    if (ci[EQ_CI_REWARD] == 1) {
+        row[EQ_N + np_] = eq_energy(cf + ci[EQ_CI_O_OP], row + EQ_N);
+        row[EQ_N + np_ + 1] = eq_energy(cf + ci[EQ_CI_O_START], row + EQ_N);
+    }
+    urow[EQ_US_K] = 0;
+    urow[EQ_US_AUTO] = 0;
+    eq_env_settings(cf, ci, &S);
+    eq_env_observe(row, urow, orow, &S, zbuf);
+}
+
+/* Copy r's start from the task's distribution and its randomized parameters, drawn from
+ * its own generator. */
+static void eq_env_draw(int64_t r, double *fs, uint64_t *us, const double *cf,
+                        const int64_t *ci)
+{
+    const int64_t fw = eq_env_fs_width(ci);
+    double *row = fs + r * fw;
+    uint64_t *rng = us + r * EQ_US_WIDTH;
+    const int64_t o_st = ci[EQ_CI_O_START], o_sp = ci[EQ_CI_O_SPREAD];
+    const int64_t o_pn = ci[EQ_CI_O_P_NOM], np_ = ci[EQ_CI_NP];
+    const int64_t o_ri = ci[EQ_CI_O_RND_IDX], o_rs = ci[EQ_CI_O_RND_SPREAD];
+    int64_t i, j;
+    for (i = 0; i < EQ_N; i++) {
+        row[i] = cf[o_st + i] + (2.0 * eq_uniform(rng) - 1.0) * cf[o_sp + i];
+    }
+    for (i = 0; i < np_; i++) row[EQ_N + i] = cf[o_pn + i];
+    for (j = 0; j < ci[EQ_CI_NRND]; j++) {
+        int64_t q = ci[o_ri + j];
+        row[EQ_N + q] = cf[o_pn + q] * (1.0 + (2.0 * eq_uniform(rng) - 1.0) * cf[o_rs + j]);
+    }
+}
+
+/* One control period of copy r with action a: the reward, and *status. A copy whose
+ * episode ended at its previous step (autoreset due) is reset instead: its action is
+ * ignored, its reward is 0. scr: EQ_ENV_SCR rows of `width`. */
+static double eq_env_step_copy(int64_t r, const double *a, double *fs, uint64_t *us,
+                               double *orow, const double *cf, const int64_t *ci,
+                               const eq_env *S, double *scr, int64_t width, int *status)
+{
+    const int64_t fw = eq_env_fs_width(ci);
+    double *u = scr, *w = scr + width, *zbuf = scr + 2 * width, *k1 = scr + 3 * width;
+    double *k2 = scr + 4 * width, *k3 = scr + 5 * width, *k4 = scr + 6 * width;
+    double *xt = scr + 7 * width, *xprev = scr + 8 * width;
+    double *row = fs + r * fw;
+    uint64_t *urow = us + r * EQ_US_WIDTH;
+    double *x = row, *p = row + EQ_N;
+    int64_t code, k;
+    double reward;
+    if (urow[EQ_US_AUTO] != 0) {
+        eq_env_draw(r, fs, us, cf, ci);
+        eq_env_begin(r, fs, us, orow, cf, ci, zbuf);
+        *status = 0;
+        return 0.0;
+    }
+    eq_env_input(a, p, S->np, S->physical, u);
+    code = eq_env_physics(x, u, p, urow, S, w, zbuf, k1, k2, k3, k4, xt, xprev);
+    k = (int64_t)urow[EQ_US_K] + 1;
+    urow[EQ_US_K] = (uint64_t)k;
+    eq_env_observe(x, urow, orow, S, zbuf);
+    reward = eq_env_reward(x, u, p, row[EQ_N + S->np], row[EQ_N + S->np + 1], S);
+    *status = code != -1 ? 1 : (k >= S->n_samples ? 2 : 0);
+    if (*status != 0 && S->autoreset != 0) urow[EQ_US_AUTO] = 1;
+    return reward;
+}
+
+/* How many actions are not finite numbers (then no copy is stepped). */
+static int64_t eq_env_bad_actions(const double *actions, int64_t count)
+{
+    int64_t i, bad = 0;
+    for (i = 0; i < count; i++) {
+        if (!isfinite(actions[i])) bad += 1;
+    }
+    return bad;
+}
+
+static void eq_env_step_range(int64_t lo, int64_t hi, const double *actions, double *fs,
+                              uint64_t *us, double *obs, int64_t n_obs, double *rewards,
+                              uint8_t *flags, int64_t n_copies, const double *cf,
+                              const int64_t *ci, double *scr, int64_t width)
+{
+    eq_env S;
+    int64_t r;
+    eq_env_settings(cf, ci, &S);
+    for (r = lo; r < hi; r++) {
+        int status;
+        rewards[r] = eq_env_step_copy(r, actions + r * EQ_M, fs, us, obs + r * n_obs, cf, ci,
+                                      &S, scr, width, &status);
+        flags[r] = status == 1;
+        flags[n_copies + r] = status == 2;
+    }
+}
+
+/* One control period of every copy, in `chunks` contiguous blocks of copies run in
+ * parallel; Gymnasium's next-step autoreset. flags: (2, copies) bytes, terminated then
+ * truncated. Returns the number of actions that are not finite numbers (then nothing is
+ * done), or -1 when out of memory. */
+EQ_EXPORT int64_t eq_env_step_many(const double *actions, double *fs, uint64_t *us, double *obs,
+                                   int64_t n_obs, double *rewards, uint8_t *flags,
+                                   int64_t n_copies, const double *cf, const int64_t *ci,
+                                   int64_t chunks)
+{
+    const int64_t width = eq_env_width(ci);
+    const int64_t stride = EQ_ENV_SCR * width + EQ_ENV_GAP;
+    int64_t bad = eq_env_bad_actions(actions, n_copies * EQ_M), c;
+    double *scrs;
+    if (bad > 0) return bad;
+    if (chunks > n_copies) chunks = n_copies;
+    if (chunks < 1) chunks = 1;
+    scrs = (double *)calloc((size_t)(chunks * stride), sizeof(double));
+    if (scrs == NULL) return -1;
+#ifdef _OPENMP
+#pragma omp parallel for schedule(static, 1) num_threads((int)chunks) if (chunks > 1)
+#endif
+    for (c = 0; c < chunks; c++) {
+        eq_env_step_range(c * n_copies / chunks, (c + 1) * n_copies / chunks, actions, fs, us,
+                          obs, n_obs, rewards, flags, n_copies, cf, ci, scrs + c * stride,
+                          width);
+    }
+    free(scrs);
+    return 0;
+}
+
+/* One control period of the single environment in row 0: the reward, and *status (3 when
+ * the action is not a finite number: nothing done). */
+EQ_EXPORT double eq_env_step_one(const double *a, double *fs, uint64_t *us, double *obs,
+                                 const double *cf, const int64_t *ci, int64_t *status)
+{
+    const int64_t width = eq_env_width(ci);
+    double scr[EQ_ENV_SCR * width];
+    eq_env S;
+    int st, i;
+    double reward;
+    for (i = 0; i < EQ_M; i++) {
+        if (!isfinite(a[i])) {
+            *status = 3;
+            return 0.0;
+        }
+    }
+    memset(scr, 0, sizeof(scr));
+    eq_env_settings(cf, ci, &S);
+    reward = eq_env_step_copy(0, a, fs, us, obs, cf, ci, &S, scr, width, &st);
+    *status = st;
+    return reward;
+}
+
+/* Start row 0's episode from the state and parameters written in it (the single
+ * environment's reset); obs receives the first observation. */
+EQ_EXPORT void eq_env_begin_one(double *fs, uint64_t *us, double *obs, const double *cf,
+                                const int64_t *ci)
+{
+    double zbuf[eq_env_width(ci)];
+    memset(zbuf, 0, sizeof(zbuf));
+    eq_env_begin(0, fs, us, obs, cf, ci, zbuf);
+}
+
+/* Reset every copy: draw each one's start and parameters from its own generator and
+ * observe it into its row of obs. */
+EQ_EXPORT void eq_env_reset_many(double *fs, uint64_t *us, double *obs, int64_t n_obs,
+                                 int64_t n_copies, const double *cf, const int64_t *ci)
+{
+    double zbuf[eq_env_width(ci)];
+    int64_t r;
+    memset(zbuf, 0, sizeof(zbuf));
+    for (r = 0; r < n_copies; r++) {
+        eq_env_draw(r, fs, us, cf, ci);
+        eq_env_begin(r, fs, us, obs + r * n_obs, cf, ci, zbuf);
+    }
+}
