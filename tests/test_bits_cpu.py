@@ -8,10 +8,11 @@ dynamics and its noise use :mod:`equilibrist.numeric.libm` (plain IEEE
 operations, compiled without fused multiply-adds). These tests
 
 * check that function against mpmath (within 1 ulp) and check that the
-  Python, numba and C versions give the same bits;
-* show that the settings used below really change what runs: glibc's own
-  ``sin`` gives other bits under ``GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA``,
-  and numba told ``NUMBA_CPU_NAME=generic`` writes other machine code;
+  Python and C versions give the same bits, and that the compiled core holds
+  no fused multiply-add (it is compiled for the x86-64 baseline, so its
+  machine code is the same whatever CPU builds or runs it);
+* show that the setting used below really changes what runs: glibc's own
+  ``sin`` gives other bits under ``GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA``;
 * run recorded scenarios of ``test_sim_bits`` in processes under those
   settings and a study on two Dask workers started with different ones.
 
@@ -35,7 +36,6 @@ import subprocess
 import sys
 import textwrap
 import time
-import types
 from pathlib import Path
 
 import numpy as np
@@ -61,15 +61,15 @@ def _cpu_flags() -> set[str]:
 HAS_FMA = {"fma", "avx2"} <= _cpu_flags()
 # glibc >= 2.33 names the features without the old "_Usable" suffix.
 TUNED_DOWN = "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F,-AVX512VL,-AVX512DQ,-AVX512BW"
-#: A second feature set for the same machine: glibc's SSE2 paths, numba's generic x86-64.
-OTHER_CPU = {"GLIBC_TUNABLES": TUNED_DOWN, "NUMBA_CPU_NAME": "generic", "NUMBA_CPU_FEATURES": ""}
+#: A second feature set for the same machine: glibc's SSE2 paths.
+OTHER_CPU = {"GLIBC_TUNABLES": TUNED_DOWN}
 needs_dispatch = pytest.mark.skipif(not (ON_X86_LINUX and HAS_FMA),
                                     reason="needs x86-64 Linux with FMA and AVX2 (glibc's dispatch)")
 
 
 def _env(extra: dict[str, str]) -> dict[str, str]:
     env = dict(os.environ)
-    for k in ("GLIBC_TUNABLES", "NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES", "OPENBLAS_CORETYPE"):
+    for k in ("GLIBC_TUNABLES", "OPENBLAS_CORETYPE"):
         env.pop(k, None)
     env.update(extra)
     return env
@@ -126,38 +126,28 @@ def test_special_values() -> None:
     assert math.isnan(libm.log(-1.0)) and math.isnan(libm.log(math.nan))
 
 
-def _compiled() -> types.ModuleType:
-    from numba import njit
+def test_the_core_gives_the_python_bits_without_fused_multiply_add() -> None:
+    """The core's sin, cos and log (through its normal deviates and dynamics) are the
+    Python ones, and its machine code holds no fused multiply-add."""
+    require("objdump")
+    from equilibrist.native.simcore import load_core
+    from equilibrist.numeric.system import get_system
 
-    mod = types.ModuleType("libm_compiled")
-    exec(compile("import math\n" + libm.source(), "libm_compiled", "exec"), mod.__dict__)
-    jit = njit(error_model="numpy")
-    for name in libm.FUNCTIONS:
-        setattr(mod, name, jit(getattr(mod, name)))
-    return mod
-
-
-def test_numba_gives_the_python_bits_without_fused_multiply_add() -> None:
-    from numba import njit
-
-    mod = _compiled()
-
-    @njit
-    def apply(xs, out):  # pragma: no cover - compiled
-        for i in range(xs.size):
-            out[i, 0] = mod.eq_sin(xs[i])
-            out[i, 1] = mod.eq_cos(xs[i])
-            out[i, 2] = mod.eq_log(abs(xs[i]))
-
-    xs = _inputs(5000)
-    out = np.empty((xs.size, 3))
-    apply(xs, out)
-    want = np.array([[libm.sin(float(x)), libm.cos(float(x)), libm.log(abs(float(x)))] for x in xs])
-    assert out.tobytes() == want.tobytes()
-    # numba compiles without fastmath: the host has FMA, and LLVM still fuses nothing.
-    asm = "".join("".join(getattr(mod, n).inspect_asm().values()) for n in libm.FUNCTIONS)
-    asm += "".join(apply.inspect_asm().values())
-    assert "fmadd" not in asm and "fmsub" not in asm and "fnmadd" not in asm
+    system = get_system("cartpole")
+    core = load_core(system)
+    xs = _inputs(2000)
+    u, p = np.array([0.5]), np.array(system.p, dtype=float)
+    for x in xs[:3000]:
+        state = np.array([0.0, float(x), 0.3, -0.2])
+        a, b = np.empty(4), np.empty(4)
+        system.functions.f(state, u, p, a)
+        core.f(state, u, p, b)
+        # The same operations: Python's x**2 rounds as the core's x*x.
+        assert a.tobytes() == b.tobytes(), x
+    asm = subprocess.run(["objdump", "-d", str(core.path)], capture_output=True, text=True,
+                         check=True).stdout
+    assert "mulsd" in asm  # it was read
+    assert not any(op in asm for op in ("vfmadd", "vfmsub", "vfnmadd", "vfnmsub"))
 
 
 def test_the_c_version_gives_the_python_bits(tmp_path: Path) -> None:
@@ -228,38 +218,13 @@ def test_the_other_cpu_setting_changes_the_c_librarys_results() -> None:
             assert f(float.fromhex(x)) in (float.fromhex(a), float.fromhex(b))
 
 
-def test_the_other_cpu_setting_changes_numbas_machine_code() -> None:
-    probe = """
-    import numba, numpy as np
-    @numba.njit
-    def g(a, b, c):
-        return a * b + c
-    g(1.0, 2.0, 3.0)
-    asm = "".join(g.inspect_asm().values())
-    print(numba.config.CPU_NAME, "vmulsd" in asm, "fmadd" in asm)
-    """
-    here = _python(probe, {}).split()
-    there = _python(probe, OTHER_CPU).split()
-    assert there[0] == "generic" and there[1] == "False"  # SSE2 only: no VEX encoding
-    if HAS_FMA:
-        assert here[1] == "True"  # the host's AVX encoding
-    assert here[2] == there[2] == "False"  # and never a fused multiply-add
-
-
 _DYNAMICS = """
 import json, sys, types
-import numba, numpy as np
+import numpy as np
+from equilibrist.native.simcore import load_core
 from equilibrist.numeric.system import get_system
-try:
-    from equilibrist.numeric.libm import FUNCTIONS
-except ImportError:  # a release before the project's own sin and cos
-    FUNCTIONS = ()
 system = get_system("cartpole")
-mod = types.ModuleType("dynamics")
-exec(compile(open(system.functions.__file__).read(), "dynamics", "exec"), mod.__dict__)
-for name in FUNCTIONS:  # as the cores do: the copied functions compiled
-    setattr(mod, name, numba.njit(getattr(mod, name)))
-compiled = numba.njit(mod.f)
+compiled = load_core(system).f
 out = []
 for h in json.loads(sys.argv[1]):
     x = np.array([0.0, float.fromhex(h), 0.3, -0.2])
@@ -299,14 +264,14 @@ print(json.dumps(out))
 """
 
 # Noise (the generator's logarithm), LQG, events, both integrators, batches, large angles:
-# all on the cart-pole, whose cores the other CPU setting compiles anew (minutes each system).
+# all on the cart-pole.
 SCENARIOS = ["open-loop-falls", "lqg-noise-events", "lqr-adaptive", "batch-lqr-noise"]
 
 
 @needs_dispatch
 @pytest.mark.slow
 def test_the_recorded_numbers_under_another_cpu_feature_set() -> None:
-    """glibc's SSE2 paths and numba's generic x86-64 (it compiles the cores anew)."""
+    """glibc's SSE2 paths (the core's machine code is the x86-64 baseline's either way)."""
     got = json.loads(_python(_DIGESTS.format(here=str(HERE), names=SCENARIOS), OTHER_CPU))
     assert got == {name: [] for name in SCENARIOS}, f"differ from the recorded numbers: {got}"
 
@@ -375,8 +340,8 @@ def test_a_study_on_workers_with_different_cpu_settings_gives_the_local_table(tm
                 env=_env(extra), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         with Client(address, timeout="60s") as client:
             client.wait_for_workers(2, timeout=120)
-            cpus = client.run(lambda: os.environ.get("NUMBA_CPU_NAME", "host"))
-            assert sorted(cpus.values()) == ["generic", "host"]
+            cpus = client.run(lambda: os.environ.get("GLIBC_TUNABLES", "host"))
+            assert sorted(cpus.values()) == sorted(["host", TUNED_DOWN])
             out = tmp_path / "cluster.parquet"
             run_study(study(), out, client=client, chunk_size=1)
             done = client.run(lambda dask_worker: dask_worker.state.executed_count)

@@ -5,8 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy as sp
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
 
 from equilibrist.numeric import cache
 from equilibrist.systems import registry
@@ -160,23 +158,24 @@ def _truncate(path) -> None:
 
 
 _CORE_DAMAGE = {
-    # the generated core module (numba's source)
-    "core-module-truncated": ("*_sim_*.py", _truncate),
-    # numba's index of a function's machine code, and the code itself
-    "index-garbage": ("__pycache__/*.nbi", lambda p: p.write_bytes(b"garbage\n")),
-    "index-truncated": ("__pycache__/*.nbi", _truncate),
-    "code-truncated": ("__pycache__/*.nbc", _truncate),
-    "code-garbage": ("__pycache__/*.nbc", lambda p: p.write_bytes(b"\x80\x05garbage.")),
+    # the compiled library: cut short, garbage, another library in its place
+    "library-truncated": ("native/*.so", _truncate),
+    "library-garbage": ("native/*.so", lambda p: p.write_bytes(b"garbage\n")),
+    "library-emptied": ("native/*.so", lambda p: p.write_bytes(b"")),
+    # its digest: garbage, or gone
+    "digest-garbage": ("native/*.so.sha256", lambda p: p.write_text("0" * 64)),
+    "digest-missing": ("native/*.so.sha256", lambda p: p.unlink()),
 }
 
 
 @pytest.mark.parametrize("damage", sorted(_CORE_DAMAGE))
 def test_damaged_compiled_core_is_rebuilt(compiled_cache, tmp_path, damage) -> None:
+    import hashlib
     import shutil
 
     pristine, expected = compiled_cache
     folder = tmp_path / "cache"
-    shutil.copytree(pristine, folder)  # time stamps kept: numba's cache stays valid
+    shutil.copytree(pristine, folder)
     pattern, harm = _CORE_DAMAGE[damage]
     damaged = sorted(folder.glob(pattern))
     assert damaged, pattern
@@ -184,33 +183,29 @@ def test_damaged_compiled_core_is_rebuilt(compiled_cache, tmp_path, damage) -> N
         harm(path)
     numbers, _ = _step_in_a_process(folder)
     assert numbers == expected  # the same numbers, to the bit
-    for path in folder.glob("__pycache__/*.nb?"):  # rebuilt whole
-        assert cache._readable_compiled(path), path.name
+    for lib in folder.glob("native/*.so"):  # rebuilt whole, its digest beside it
+        digest = lib.with_suffix(".so.sha256").read_text().strip()
+        assert digest == hashlib.sha256(lib.read_bytes()).hexdigest(), lib.name
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(cut=st.floats(0.0, 1.0, exclude_max=True), kind=st.sampled_from(["nbi", "nbc"]))
-def test_every_cut_of_a_compiled_file_is_seen_as_damaged(compiled_cache, tmp_path, cut, kind) -> None:
-    pristine, _ = compiled_cache
-    whole = sorted(pristine.glob(f"__pycache__/*.{kind}"))[0]
-    assert cache._readable_compiled(whole)
-    data = whole.read_bytes()
-    damaged = tmp_path / whole.name
-    damaged.write_bytes(data[: int(cut * len(data))])
-    assert not cache._readable_compiled(damaged)
+def test_two_processes_build_the_same_core_at_once(tmp_path) -> None:
+    """Two fresh processes that build the same core into one empty cache: neither fails,
+    both get the same numbers, and the library left behind is whole."""
+    import hashlib
+    import os
+    import subprocess
+    import sys
 
-
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(source=st.text(min_size=1, max_size=200), damage=st.binary(max_size=200))
-def test_a_generated_module_with_other_text_is_written_again(tmp_path, source, damage) -> None:
-    path = tmp_path / "system_0123_sim_abcd.py"
-    path.unlink(missing_ok=True)
-    cache.write_generated(path, source)
-    assert path.read_bytes() == source.encode()
-    stamp = path.stat().st_mtime_ns
-    cache.write_generated(path, source)  # whole: left as it is (numba's cache keeps its stamp)
-    assert path.stat().st_mtime_ns == stamp
-    if damage != source.encode():
-        path.write_bytes(damage)
-        cache.write_generated(path, source)
-        assert path.read_bytes() == source.encode()
+    folder = tmp_path / "cache"
+    folder.mkdir(mode=0o700)
+    env = {**os.environ, "EQUILIBRIST_CACHE": str(folder)}
+    procs = [subprocess.Popen([sys.executable, "-c", _STEP_SCRIPT], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True, env=env) for _ in range(2)]
+    outs = [p.communicate(timeout=600) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], [e for _o, e in outs]
+    assert outs[0][0] == outs[1][0]
+    libs = sorted(folder.glob("native/*.so"))
+    assert len(libs) == 1
+    digest = libs[0].with_suffix(".so.sha256").read_text().strip()
+    assert digest == hashlib.sha256(libs[0].read_bytes()).hexdigest()
+    assert not [p.name for p in folder.glob("native/*") if p.suffix not in (".so", ".c", ".sha256")]

@@ -165,7 +165,7 @@ def test_table_is_tidy_with_the_study_and_versions_in_its_metadata(tmp_path, cap
     assert table.column("rate").to_pylist() == [100.0, 200.0, 100.0, 200.0]
     meta = pq.read_schema(out).metadata
     versions = json.loads(meta[b"equilibrist.versions"])
-    assert set(versions) >= {"equilibrist", "numpy", "numba", "pyarrow"}
+    assert set(versions) >= {"equilibrist", "numpy", "cc", "pyarrow"}
     assert study.seed == 7 and study.runs == 6
     assert not (tmp_path / "s.parquet.parts").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.parquet"]

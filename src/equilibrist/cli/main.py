@@ -154,8 +154,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("equilibrist: interrupted", file=sys.stderr)
         if argv is None and threading.current_thread() is threading.main_thread():
             # The command's own process, unwound (its files written or removed): end it
-            # here. The interpreter's finalization, with the core's helper thread and
-            # numba's still running, could end it by the signal (-2) after this line.
+            # here. The interpreter's finalization, with the core's helper thread still
+            # running, could end it by the signal (-2) after this line.
             sys.stdout.flush()
             sys.stderr.flush()
             os._exit(interrupted_status())

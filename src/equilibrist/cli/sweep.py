@@ -83,7 +83,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", metavar="N", help="start a local Dask cluster of N processes")
     where.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="use a running Dask cluster")
-    p.add_argument("--threads", metavar="T", help="numba threads per batch (default: cores / workers)")
+    p.add_argument("--threads", metavar="T", help="threads per batch (default: cores / workers)")
     p.add_argument("--chunk-size", metavar="K", help="points per task (default: about 20,000 runs)")
     p.add_argument("--no-progress", action="store_true", help="never show a progress bar")
     common.add_json(p)

@@ -917,7 +917,38 @@ def check_source(source: str, *, has_estimate: bool) -> tuple[str, ...]:
         problems.append(f"function name(s) {', '.join(clash)} are reserved by the simulation core")
     if problems:
         raise ControllerError("the controller's source: " + "; ".join(problems))
+    _translate(source, wanted)
     return tuple(names)
+
+
+#: The argument types of a controller's functions in the C translation (``t`` a float,
+#: the rest 1-D float arrays).
+_FUNCTION_TYPES = {
+    "output": ("f", "F1", "F1", "F1", "F1", "F1"),
+    "update": ("f", "F1", "F1", "F1", "F1", "F1", "F1"),
+    "estimate": ("f", "F1", "F1", "F1", "F1", "F1"),
+}
+_TRANSLATED: dict[str, None] = {}
+
+
+def _translate(source: str, wanted: Sequence[str]) -> None:
+    """Translate the controller's functions to C once, so that what the simulation core
+    cannot run is refused here, with its line."""
+    key = source + repr(tuple(wanted))
+    if key in _TRANSLATED:
+        return
+    from equilibrist.native.pyc import Module, TranslationError
+
+    try:
+        mod = Module(source, constants=linear_constants(),
+                     library=linear_layout_source() + LINEAR_SOURCE)
+        for name in wanted:
+            mod.function(name, _FUNCTION_TYPES[name])
+    except TranslationError as exc:
+        raise ControllerError(f"the controller's source: {exc}") from None
+    if len(_TRANSLATED) > 256:
+        _TRANSLATED.clear()
+    _TRANSLATED[key] = None
 
 
 # Names of the simulation core's module that a controller's source must not redefine.

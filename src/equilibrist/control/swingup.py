@@ -85,8 +85,9 @@ Kalata's tracking index with the sensor's noise and an acceleration of
 where a filter linearized at upright is not.
 
 All of it is written as plain functions of flat ``float64`` arrays
-(:func:`swingup_output`, :func:`swingup_update`), which numba compiles
-into the simulation core, and which the C export writes line for line.
+(:func:`swingup_output`, :func:`swingup_update`), which are translated to C
+into the simulation core (:mod:`equilibrist.native.pyc`), and which the C
+export writes line for line.
 """
 
 from __future__ import annotations
@@ -151,7 +152,7 @@ def layout_constants() -> dict[str, int]:
     return out
 
 
-#: The law, numba-compatible Python: compiled into the simulation core as a
+#: The law, in the Python the C translation knows: compiled into the simulation core as a
 #: :class:`~equilibrist.control.controller.NonlinearController` and run as is
 #: in Python. Written with scalars for the four states (no allocation).
 LAW_SOURCE = """
@@ -399,20 +400,17 @@ def controller_source() -> str:
     return head + "\n" + LAW_SOURCE
 
 
-def python_namespace(*, compiled: bool = False) -> dict[str, Any]:
-    """The source's functions, as plain Python (or compiled by numba when *compiled*)."""
-    key = "numba" if compiled else "python"
+def python_namespace(*, compiled: bool = False) -> Any:
+    """The source's functions, as plain Python (or compiled to C, as the simulation core
+    runs them, when *compiled*: then only ``output``, ``update`` and ``estimate``)."""
+    if compiled:
+        from equilibrist.native.ctrl import controller_functions
+
+        return controller_functions(controller_source(), ("output", "update", "estimate"))
+    key = "python"
     if key not in _NAMESPACES:
         ns: dict[str, Any] = {"math": math, "np": np}
         exec(compile(controller_source(), "<equilibrist swing-up>", "exec"), ns)
-        if compiled:
-            from numba import njit
-
-            for name, value in list(ns.items()):
-                if callable(value) and getattr(value, "__module__", None) is None and name.startswith(
-                    ("su_", "output", "update", "estimate")
-                ):
-                    ns[name] = njit(error_model="numpy")(value)
         _NAMESPACES[key] = ns
     return _NAMESPACES[key]
 
@@ -488,7 +486,7 @@ TUNING: Mapping[str, SwingUpTuning] = {
 
 
 class SwingUpRuntime:
-    """A swing-up controller run sample by sample in Python, its functions compiled by numba.
+    """A swing-up controller run sample by sample from Python, its functions compiled to C.
 
     The :class:`~equilibrist.control.controller.PythonController` protocol
     (``reset``, ``output``, ``update``, ``rate``, ``outputs``,

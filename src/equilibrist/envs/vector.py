@@ -2,7 +2,7 @@
 
 :class:`EquilibristVectorEnv` is what ``gymnasium.make_vec(id, num_envs=N,
 vectorization_mode="vector_entry_point")`` builds. One call of the core
-steps every copy (``numba.prange`` over as many blocks of copies as
+steps every copy (OpenMP threads over as many blocks of copies as
 threads, or one thread: see ``PROBE_EVERY``); Python does the same fixed
 amount of work whatever the number of copies. Every step returns fresh
 arrays, as Gymnasium's own vector environments do.
@@ -271,7 +271,7 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
 
     @property
     def threads_in_use(self) -> int:
-        """How many threads the next step runs on (1, or numba's thread count)."""
+        """How many threads the next step runs on (1, or the core's thread count)."""
         return _chunks() if self.parallel and self._mode == 1 else 1
 
     def render(self) -> tuple[np.ndarray, ...] | None:

@@ -1,59 +1,69 @@
-"""The compiled multiple-shooting integrator: one numba module per system, cached on disk.
+"""The compiled multiple-shooting integrator: entries of the system's C core.
 
-The integrator's source is written once, in ``_shoot_template.py`` (its RK4
-step is the simulation core's, ``equilibrist/sim/_rk4_template.py``). For each
-system it is appended to a copy of the system's generated dynamics (the
-numeric layer's ``f``, which compiles unchanged with numba) and written to
-the numeric cache folder as ``<system>_<hash>_shoot_<hash>.py``; its
-functions are ``njit(cache=True)``, so a process compiles a system's
-integrator once and later processes load the machine code.
+The loops are written once in C (``equilibrist/native/shoot.c``), in the
+same translation unit as the simulation core, and call its RK4 step: the
+identification predicts with the very arithmetic that the simulation and
+the environments integrate with. :func:`load_shooting` gives them numpy
+signatures.
 
-Importing this module does no work; numba is imported when an integrator is
-first loaded.
+Importing this module does no work; the core is built (or loaded from the
+cache) when an integrator is first asked for.
 """
 
 from __future__ import annotations
 
-import hashlib
-import types
-from pathlib import Path
+from typing import Any
 
-from equilibrist.numeric.cache import import_generated, template_body, write_generated
+import numpy as np
+
 from equilibrist.numeric.system import System
 
-_HEADER = (
-    "\n\n# --- multiple-shooting integrator (equilibrist.ident._shoot_template) ---\n"
-    "import math  # noqa: E402\n"
-    "import numpy as np  # noqa: E402\n"
-    "from numba import njit  # noqa: E402\n\n"
-)
-_LOADED: dict[Path, types.ModuleType] = {}
+
+def _f64(a: Any) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.float64)
 
 
-def _body() -> str:
-    """The integrator's loops, then the simulation core's RK4 step (the same arithmetic)."""
-    return template_body(Path(__file__).parent / "_shoot_template.py",
-                         Path(__file__).parents[1] / "sim" / "_rk4_template.py")
+def _i64(a: Any) -> np.ndarray:
+    return np.ascontiguousarray(a, dtype=np.int64)
 
 
-def shooting_path(system: System) -> Path:
-    """Where the integrator module of *system* lives in the cache (written if missing)."""
-    body = _body()
-    digest = hashlib.sha256(body.encode()).hexdigest()[:12]
-    module_path = system.compiled.module_path
-    path = module_path.with_name(f"{module_path.stem}_shoot_{digest}.py")
-    write_generated(path, module_path.read_text() + _HEADER + body)  # kept if whole, rewritten if damaged
-    return path
+class Shooting:
+    """``shoot_many`` and ``innovations`` of one system's core."""
+
+    def __init__(self, system: System) -> None:
+        from equilibrist.native.simcore import load_core
+
+        self.system = system
+        self.core = load_core(system)
+
+    def shoot_many(self, P: Any, XS: Any, bounds: Any, t: Any, u: Any, n_sub: Any, c_idx: Any,
+                   yhat: np.ndarray, xend: np.ndarray) -> None:
+        """Run every segment for each of ``K`` cases: ``P`` (K, n_p) parameter vectors,
+        ``XS`` (K, n_seg, n) segment initial states; writes ``yhat`` (K, n_rows, ny) and
+        ``xend`` (K, n_seg, n)."""
+        self.core._out(yhat, np.float64, "yhat")
+        self.core._out(xend, np.float64, "xend")
+        P, XS, t, u = _f64(P), _f64(XS), _f64(t), _f64(u)
+        bounds, n_sub, c_idx = _i64(bounds), _i64(n_sub), _i64(c_idx)
+        self.core.shoot_many(P, XS, bounds, t, u, n_sub, c_idx, yhat, xend)
+
+    def innovations(self, p: Any, x0: Any, t: Any, u: Any, n_sub: Any, c_idx: Any, gain: Any,
+                    y: Any, off: Any, e: np.ndarray) -> None:
+        """One-step prediction errors of a Kalman filter with the fixed *gain* (n, ny)."""
+        self.core._out(e, np.float64, "e")
+        self.core.innovations(_f64(p), _f64(x0), _f64(t), _f64(u), _i64(n_sub), _i64(c_idx),
+                              _f64(gain), _f64(y), _f64(off), e)
 
 
-def load_shooting(system: System) -> types.ModuleType:
-    """The compiled integrator of *system* (its entry compiles on first call)."""
-    path = shooting_path(system)
-    if path in _LOADED:
-        return _LOADED[path]
-    module = import_generated(f"equilibrist_shoot_{path.stem}", path)
-    _LOADED[path] = module
-    return module
+_LOADED: dict[Any, Shooting] = {}
 
 
-__all__ = ["load_shooting", "shooting_path"]
+def load_shooting(system: System) -> Shooting:
+    """The compiled integrator of *system*."""
+    key = system.compiled.module_path
+    if key not in _LOADED:
+        _LOADED[key] = Shooting(system)
+    return _LOADED[key]
+
+
+__all__ = ["Shooting", "load_shooting"]

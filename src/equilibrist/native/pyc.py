@@ -156,6 +156,8 @@ class Module:
     source: str
     constants: Mapping[str, int | float] = field(default_factory=dict)
     prefix: str = "py_"
+    #: Source of functions in scope beside the source's own (its line numbers are its own).
+    library: str = ""
     defs: dict[str, ast.FunctionDef] = field(default_factory=dict)
     done: dict[tuple[str, tuple[str, ...]], Function] = field(default_factory=dict)
     order: list[Function] = field(default_factory=list)
@@ -164,10 +166,11 @@ class Module:
     def __post_init__(self) -> None:
         try:
             tree = ast.parse(self.source)
+            lib = ast.parse(self.library)
         except SyntaxError as exc:
             raise TranslationError(f"line {exc.lineno}: {exc.msg}") from None
         consts = dict(self.constants)
-        for node in tree.body:
+        for node in [*lib.body, *tree.body]:
             if isinstance(node, ast.FunctionDef):
                 self.defs[node.name] = node
             elif (isinstance(node, ast.Assign) and len(node.targets) == 1

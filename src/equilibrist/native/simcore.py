@@ -148,8 +148,8 @@ def controller_module(key: bytes | tuple[int, ...] | None = None,
                   "estimate": "linear_estimate"}
     else:
         check_source(controller.source, has_estimate=controller.has_estimate)
-        ctrl = pyc.Module(linear_library(None) + "\n" + controller.source,
-                          constants=linear_constants(), prefix="ctrl_")
+        ctrl = pyc.Module(controller.source, constants=linear_constants(), prefix="ctrl_",
+                          library=linear_library(None))
         wanted = {"output": "output", "update": "update",
                   "estimate": "estimate" if controller.has_estimate else "linear_estimate"}
     names = {short: ctrl.function(name, _LINEAR_TYPES["linear_" + short]).name
@@ -185,6 +185,7 @@ def unit_source(system: System, key: bytes | tuple[int, ...] | None = None,
         "/* ---- the generated part ends here; the core's body follows ---- */\n",
         _body(),
         (Path(__file__).parent / "env.c").read_text(),
+        (Path(__file__).parent / "shoot.c").read_text(),
     ]
     return "".join(parts)
 
@@ -233,6 +234,10 @@ class NativeCore:
         lib.eq_env_begin_one.restype = None
         lib.eq_env_reset_many.argtypes = [vp, vp, vp, i64, i64, vp, vp]
         lib.eq_env_reset_many.restype = None
+        lib.eq_shoot_many.argtypes = [vp, i64, i64, vp, vp, i64, vp, i64, vp, vp, vp, i64, vp, vp]
+        lib.eq_shoot_many.restype = None
+        lib.eq_innovations.argtypes = [vp, vp, vp, i64, vp, vp, vp, i64, vp, vp, vp, vp]
+        lib.eq_innovations.restype = None
 
     # -- the shared argument struct ------------------------------------------------------------
     @staticmethod
@@ -390,6 +395,25 @@ class NativeCore:
         self.lib.eq_f_one(_ptr(x), _ptr(u), _ptr(p), _ptr(out))
 
 
+    # -- the identification's integrator (equilibrist.ident.kernel) ---------------------------
+    def shoot_many(self, P: np.ndarray, XS: np.ndarray, bounds: np.ndarray, t: np.ndarray,
+                   u: np.ndarray, n_sub: np.ndarray, c_idx: np.ndarray, yhat: np.ndarray,
+                   xend: np.ndarray) -> None:
+        """C-contiguous arrays of the right dtypes (see ``shoot.c``)."""
+        if P.shape[0] == 0:
+            return
+        self.lib.eq_shoot_many(_ptr(P), P.shape[0], P.shape[1], _ptr(XS), _ptr(bounds),
+                               len(bounds) - 1, _ptr(t), len(t), _ptr(u), _ptr(n_sub),
+                               _ptr(c_idx), len(c_idx), _ptr(yhat), _ptr(xend))
+
+    def innovations(self, p: np.ndarray, x0: np.ndarray, t: np.ndarray, u: np.ndarray,
+                    n_sub: np.ndarray, c_idx: np.ndarray, gain: np.ndarray, y: np.ndarray,
+                    off: np.ndarray, e: np.ndarray) -> None:
+        """C-contiguous arrays of the right dtypes (see ``shoot.c``)."""
+        self.lib.eq_innovations(_ptr(p), _ptr(x0), _ptr(t), len(t), _ptr(u), _ptr(n_sub),
+                                _ptr(c_idx), len(c_idx), _ptr(gain), _ptr(y), _ptr(off),
+                                _ptr(e))
+
     # -- the environments' steps (equilibrist.envs) -----------------------------------------
     def env_step_many(self, actions: Any, fs: Any, us: Any, obs: Any, rewards: Any, flags: Any,
                       cf: Any, ci: Any, chunks: int) -> int:
@@ -484,6 +508,13 @@ class EnvSteps:
 _CORES: dict[tuple[Path, Any, str | None], NativeCore] = {}
 
 
+def loaded(system: System, key: bytes | tuple[int, ...] | None = None,
+           controller: NonlinearController | None = None) -> bool:
+    """Whether :func:`load_core` of these has been called in this process."""
+    source = None if controller is None else controller.source + repr(controller.has_estimate)
+    return (system.compiled.module_path, key if controller is None else None, source) in _CORES
+
+
 def load_core(system: System, key: bytes | tuple[int, ...] | None = None,
               controller: NonlinearController | None = None) -> NativeCore:
     """The compiled core of *system* for a linear controller made for *key*, or for the
@@ -497,5 +528,5 @@ def load_core(system: System, key: bytes | tuple[int, ...] | None = None,
     return core
 
 
-__all__ = ["FIELDS", "GENERATOR", "EnvSteps", "NativeCore", "RunArgs", "linear_library", "load_core",
+__all__ = ["FIELDS", "GENERATOR", "EnvSteps", "NativeCore", "RunArgs", "linear_library", "load_core", "loaded",
            "unit_source"]

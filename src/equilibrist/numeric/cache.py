@@ -176,128 +176,12 @@ def _check_module(module: types.ModuleType, entry: Entry) -> None:
         raise ImportError("generated model has the wrong size")
 
 
-#: The line of a template file below which its text is copied into generated modules.
-TEMPLATE_MARKER = "# ---8<---"
-
-
-def template_body(*paths: Path) -> str:
-    """The text below the marker line (:data:`TEMPLATE_MARKER`) of each template file, joined.
-
-    The compiled cores' templates (``sim/_kernel_template.py``,
-    ``sim/_rk4_template.py``, ``sim/_env_template.py``,
-    ``ident/_shoot_template.py``) are Python files that lint and read as
-    such above that line; below it is what each system's generated module
-    gets, after the system's ``f``.
-    """
-    bodies = []
-    for path in paths:
-        _head, sep, body = path.read_text().partition(TEMPLATE_MARKER)
-        if not sep:  # pragma: no cover - a broken install
-            raise RuntimeError(f"the template {path.name} has lost its marker line")
-        bodies.append(body.split("\n", 1)[1])
-    return "\n\n".join(bodies)
-
-
-def write_generated(path: Path, source: str) -> None:
-    """Write a generated module to *path*, whole; keep one that holds *source* already.
-
-    Compiled cores built on generated modules (the simulation's, the
-    identification's) are cached by numba keyed on the source file's time
-    stamp: a module another process already wrote is left as it is. A file
-    there with other text (the name is the hash of the text, so it is
-    damaged: truncated, emptied, edited) is replaced, and numba's cache
-    files of it are removed.
-    """
-    try:
-        if path.read_bytes() == source.encode():
-            return
-        damaged = True
-    except FileNotFoundError:
-        damaged = False
-    except OSError:
-        damaged = True
-    if damaged:
-        discard_compiled(path, only_damaged=False)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(source.encode())  # the bytes compared above, whatever the locale
-        if not damaged and path.exists():  # another process wrote it meanwhile
-            Path(tmp).unlink()
-        else:
-            os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def import_generated(name: str, path: Path) -> types.ModuleType:
-    """The generated module at *path*, imported once per process under *name*.
-
-    numba's cache files of the module that cannot be read are removed before
-    any of its functions is called (:func:`discard_compiled`): those compile
-    again instead of failing.
-    """
-    module = sys.modules.get(name)
-    if module is None:
-        module = _import(name, path)
-        discard_compiled(path)
-    return module
-
-
-def discard_compiled(path: Path, *, only_damaged: bool = True) -> None:
-    """Remove numba's cache files of the generated module *path* (those damaged, or all).
-
-    numba keeps the machine code of a module's ``cache=True`` functions
-    beside it, in ``__pycache__/<stem>.<function>-<line>.py<version>.nbi``
-    (an index) and ``...<n>.nbc`` (the code), reads them with pickle when a
-    function is first called, and lets any damage escape as a traceback. A
-    function whose index or code file does not read whole loses all of its
-    files, so numba compiles it again and writes them anew.
-    """
-    folder = path.parent / "__pycache__"
-    prefix = path.stem + "."
-    try:
-        names = [n for n in os.listdir(folder) if n.startswith(prefix) and n.endswith((".nbi", ".nbc"))]
-    except OSError:
-        return
-
-    def function_of(name: str) -> str:  # "<stem>.<function>-<line>.py311"
-        base = name[:-4]
-        return base if name.endswith(".nbi") else base.rsplit(".", 1)[0]
-
-    damaged = {function_of(n) for n in names
-               if not only_damaged or not _readable_compiled(folder / n)}
-    for n in names:
-        if function_of(n) in damaged:
-            (folder / n).unlink(missing_ok=True)
-
-
-def _readable_compiled(file: Path) -> bool:
-    """Whether numba's index (``.nbi``) or code (``.nbc``) file *file* reads whole."""
-    import pickletools
-
-    try:
-        if file.suffix == ".nbi":
-            with file.open("rb") as fh:
-                pickle.load(fh)  # numba's version, then (stamp, overloads)
-                _stamp, overloads = pickle.loads(fh.read())  # our own folder, only we can write
-            return isinstance(overloads, dict)
-        data = file.read_bytes()  # the code: checked to be one whole pickle, not loaded
-        last = ""
-        for op, _arg, _pos in pickletools.genops(data):
-            last = op.name
-        return last == "STOP" and data.endswith(b".")
-    except Exception:  # any damage: unreadable, truncated, not a pickle
-        return False
-
-
 def _import(name: str, path: Path) -> types.ModuleType:
     spec = importlib.util.spec_from_file_location(name, path)
     if spec is None or spec.loader is None:
         raise ImportError(f"cannot load {path}")
     module = importlib.util.module_from_spec(spec)
-    # In sys.modules while it runs: numba's cache finds a module's functions there.
+    # In sys.modules while it runs (a module that imports itself by name finds itself).
     sys.modules[name] = module
     try:
         spec.loader.exec_module(module)

@@ -2,14 +2,15 @@
 
 The generated module uses only ``math`` and array indexing, so the same
 source runs as ordinary Python (microseconds per call, no compilation) and,
-unchanged, under ``numba.njit`` for the simulation core. Common
+translated operation for operation to C (:mod:`equilibrist.native.pyc`), in
+the simulation core. Common
 subexpressions are eliminated once, across each function's outputs.
 
 Sines and cosines are the project's own (:mod:`equilibrist.numeric.libm`,
 whose functions are copied into the module as ``eq_sin`` and ``eq_cos``),
 not the C library's, whose result depends on the CPU it runs on: the
 generated dynamics give the same bits on every machine, in Python and
-compiled (the cores rebind the ``eq_`` functions to compiled ones).
+compiled (the C core calls the C versions of the same ``eq_`` functions).
 
 Functions in the generated module (``x``, ``u``, ``p`` are 1-D float arrays
 in the order of the spec's states, inputs and parameters):

@@ -180,7 +180,7 @@ class System:
     # -- models -----------------------------------------------------------------
     @property
     def functions(self) -> types.ModuleType:
-        """The generated numeric module (pure Python, numba-compatible)."""
+        """The generated numeric module (pure Python, translated to C for the core)."""
         return self.compiled.functions
 
     @property

@@ -1,8 +1,8 @@
 """Closed-loop simulation: digital controllers, noise, saturation, events, batches.
 
 Layer ``sim`` (it imports from ``numeric`` and ``control``). The core is
-compiled per system with numba and cached on disk
-(:mod:`equilibrist.sim.kernel`); everything here shares it:
+C generated per system and controller, compiled by the machine's C compiler and
+cached on disk by content (:mod:`equilibrist.sim.kernel`, :mod:`equilibrist.native`); everything here shares it:
 
 * :func:`simulate` -- one run (:class:`SimResult`);
 * :func:`simulate_batch` -- many runs at once on all cores (:class:`BatchResult`),
@@ -17,7 +17,7 @@ compiled per system with numba and cached on disk
   :class:`Square`, :class:`Samples`;
 * :class:`Stepper` -- the plant alone, stepped with a held input.
 
-Importing this package does no work; numba is loaded with the first kernel.
+Importing this package does no work; a core is built or loaded on first use.
 """
 
 from equilibrist.control.controller import (

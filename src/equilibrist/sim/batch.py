@@ -2,7 +2,7 @@
 
 A batch runs the same controller and settings from many initial states,
 parameter sets and noise seeds, in parallel on all cores by default (the
-compiled core's ``run_many``, a ``numba.prange`` over runs). Run ``i`` is
+compiled core's ``run_many``, OpenMP threads over runs). Run ``i`` is
 exactly the run :func:`~equilibrist.sim.run.simulate` makes with the same
 initial state, parameters and ``seed=result.seed(i)``.
 
@@ -19,7 +19,6 @@ import math
 import multiprocessing
 import os
 import pickle
-import sys
 import time
 import zipfile
 from collections.abc import Mapping, Sequence
@@ -537,19 +536,14 @@ def simulate_batch(
 
     def work() -> None:
         # The thread count belongs to the thread that calls the core.
-        threads = set_workers(workers)
-        numba = sys.modules.get("numba") if setup.nonlinear is not None else None
-        # A few runs at a time per thread (dynamic scheduling): runs that fall early
-        # leave no thread idle, and the hand-out costs nothing next to a run.
-        before = (numba.set_parallel_chunksize(max(1, min(16, runs // (8 * threads))))
-                  if numba is not None else None)
+        # The core hands the runs out one at a time (dynamic scheduling): runs that fall
+        # early leave no thread idle, and the hand-out costs nothing next to a run.
+        set_workers(workers)
         t0 = time.perf_counter()
         try:
             kernel.run_many(**shared, **run_arrays(slice(0, runs)))
         finally:
             timing.append(time.perf_counter() - t0)
-            if numba is not None:
-                numba.set_parallel_chunksize(before)
 
     bar = _progress_bar(runs, progress, "runs")
     st = layout.STATUS

@@ -1,14 +1,14 @@
 """Running a study: on the local cores, on a local Dask cluster, or on a cluster.
 
 * Local (no ``workers``, no ``scheduler``): chunks run one after the other
-  in this process, each point's batch on all cores (numba threads). Dask is
+  in this process, each point's batch on all cores (the core's threads). Dask is
   not imported.
 * ``workers=N``: a ``distributed.LocalCluster`` of N worker processes with
   one Dask thread each, started and stopped here; each task's batch runs on
-  ``threads`` numba threads (default ``cores // N``, at least 1) so that
+  ``threads`` threads (default ``cores // N``, at least 1) so that
   workers times threads never exceeds the cores.
 * ``scheduler="tcp://host:8786"``: an existing cluster. Each task runs on
-  ``threads`` numba threads (default 1: start the workers with as many Dask
+  ``threads`` threads (default 1: start the workers with as many Dask
   threads as the node has cores, ``dask worker --nthreads``).
 
 A chunk is one task (``equilibrist.study.compute.chunk_task``): the study's
@@ -16,8 +16,8 @@ description and the chunk's number in, the chunk's rows out. The driver
 writes each finished chunk to the parts folder as it arrives. A worker that
 dies has its tasks run again elsewhere by the scheduler; since every random
 draw comes from the study's seed and the point's index, the rows are the
-same. Workers load the compiled core from numba's on-disk cache (the driver
-compiles it first, so a local cluster's workers never compile).
+same. Workers load the compiled core from the on-disk cache (the driver
+builds it first, so a local cluster's workers never compile).
 """
 
 from __future__ import annotations
@@ -111,7 +111,7 @@ def run_study(
     scheduler : str, optional
         Address of an existing Dask scheduler (``tcp://host:8786``).
     threads : int, optional
-        numba threads per batch (see the module docstring for the defaults).
+        threads per batch (see the module docstring for the defaults).
     chunk_size : int, optional
         Points per chunk (task); default :func:`default_chunk_size`.
     progress : bool

@@ -49,16 +49,16 @@ def require_pyarrow() -> Any:
 
 def versions() -> dict[str, str]:
     """The versions that shape the numbers (recorded in the file)."""
-    import numba
     import numpy
     import scipy
 
     from equilibrist import __version__
+    from equilibrist.native.build import compiler_identity
 
     pa = require_pyarrow()
     return {"equilibrist": __version__, "python": platform.python_version(),
-            "numpy": numpy.__version__, "scipy": scipy.__version__, "numba": numba.__version__,
-            "pyarrow": pa.__version__}
+            "numpy": numpy.__version__, "scipy": scipy.__version__,
+            "cc": compiler_identity(), "pyarrow": pa.__version__}
 
 
 def schema(study: Study) -> pa.Schema:

@@ -705,8 +705,8 @@ def _tour_into(
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
-            # Fresh interpreters (not forks): numba's threads and matplotlib's
-            # state are not safe to fork.
+            # Fresh interpreters (not forks): the core's OpenMP threads and
+            # matplotlib's state are not safe to fork.
             context = multiprocessing.get_context("spawn")
             pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context)
             try:

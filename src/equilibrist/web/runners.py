@@ -19,8 +19,8 @@ calling convention for the session's loop:
 :class:`~equilibrist.control.controller.NonlinearController`'s source run
 by its plain-Python runtime
 (:class:`~equilibrist.control.controller.NonlinearRuntime`). The same
-functions compiled by numba cost a quarter of the time per sample but take
-seconds to compile on first use, and a compilation holds the interpreter
+functions compiled to C (:mod:`equilibrist.native.ctrl`) cost less per
+sample but take a compiler run on first use, which would hold the interpreter
 that streams every other session's frames; the plain-Python sample (some
 40 microseconds on the cart-pole, 200 Hz) is under 1 % of a core.
 The supervisor's mode (pumping or balancing) is the controller state's
