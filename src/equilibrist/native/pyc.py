@@ -650,7 +650,7 @@ class _Translator:
         for pname, t in self.params.items():
             if t in ARRAYS:
                 const = ""
-                args.append(f"{const}{_ctype(t[0].lower())} *restrict {self.var(pname)}")
+                args.append(f"{const}{_ctype(t[0].lower())} *{self.var(pname)}")
                 args += [f"int64_t {self.var(pname)}_n{k}" for k in range(int(t[1]))]
             else:
                 args.append(f"{_ctype(t)} {self.var(pname)}")
@@ -663,7 +663,7 @@ class _Translator:
             ret = "void" if self.returns is None else _ctype(self.returns)
         # Arguments a function never uses are fine: mark them so -Wunused stays quiet.
         unused = [f"    (void){a.split()[-1].lstrip('*')};" for a in args]
-        head = f"static {ret} {self.cname}({', '.join(args) or 'void'})"
+        head = f"static inline {ret} {self.cname}({', '.join(args) or 'void'})"
         source = head + "\n{\n" + "\n".join(decls + unused + body) + "\n}\n"
         return Function(self.cname, tuple(self.params.items()), self.returns, source)
 
