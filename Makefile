@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed-stamp
 # Workers for the test suite: both cores of a CI machine.
 JOBS ?= 2
 
-.PHONY: demo test lint bench clean
+.PHONY: demo test lint bench clean derived
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "equilibrist needs Python 3.11 or newer")'
@@ -29,6 +29,7 @@ lint: $(STAMP)
 	$(VENV)/bin/mypy src/equilibrist
 
 bench: $(STAMP)
+	$(PY) bench/bench_cold.py
 	$(PY) bench/bench_load.py
 	$(PY) bench/bench_sim.py
 	$(PY) bench/bench_playground.py
@@ -39,6 +40,11 @@ bench: $(STAMP)
 	$(PY) bench/bench_mpc.py
 	$(PY) bench/bench_import.py
 	$(PY) bench/bench_hil.py
+
+# The catalogue's derived models shipped in the package (after changing a system,
+# the mechanics layer or the code generation; a test says when it is due).
+derived: $(STAMP)
+	$(PY) -m equilibrist.numeric.package
 
 clean:
 	rm -rf $(VENV) report build

@@ -661,8 +661,10 @@ class _Translator:
             ret = "void"
         else:
             ret = "void" if self.returns is None else _ctype(self.returns)
-        # Arguments a function never uses are fine: mark them so -Wunused stays quiet.
+        # Arguments a function never uses are fine: mark them so -Wunused stays quiet; so are
+        # locals it only sets (a tuple's element it ignores), for -Wunused-but-set-variable.
         unused = [f"    (void){a.split()[-1].lstrip('*')};" for a in args]
+        unused += [f"    (void){self.var(n)};" for n in self.locals if n not in self.params]
         head = f"static inline {ret} {self.cname}({', '.join(args) or 'void'})"
         source = head + "\n{\n" + "\n".join(decls + unused + body) + "\n}\n"
         return Function(self.cname, tuple(self.params.items()), self.returns, source)

@@ -83,8 +83,9 @@ def _source_of(module_name: str) -> bytes:
     return Path(spec.origin).read_bytes()
 
 
-def model_key(entry: Entry) -> str:
-    """Hash of everything the derived model depends on."""
+def model_key(entry: Entry, *, with_sympy: bool = True) -> str:
+    """Hash of everything the derived model depends on (without *with_sympy*: all but the
+    installed sympy's version, the key of a derivation shipped with the package)."""
     h = hashlib.sha256()
     # The definition's own content: a user's file or function as handed
     # over, a catalogue module's source.
@@ -100,9 +101,24 @@ def model_key(entry: Entry) -> str:
                 h.update(path.name.encode())
                 h.update(path.read_bytes())
     h.update(entry.spec.key.encode())
-    h.update(importlib.metadata.version("sympy").encode())
+    if with_sympy:
+        h.update(importlib.metadata.version("sympy").encode())
     h.update(SCHEMA.encode())
     return h.hexdigest()[:16]
+
+
+#: Where the catalogue's derived models ship with the package (written by
+#: ``python -m equilibrist.numeric.package``, checked by a test to be what deriving them
+#: again gives): a first use of a catalogue system copies its module from here instead of
+#: importing sympy and deriving it. A user's system or an imported model is derived.
+PACKAGED = Path(__file__).resolve().parent / "derived"
+
+
+def packaged_path(entry: Entry) -> Path | None:
+    """The shipped derivation of a catalogue *entry* (None for a user's system)."""
+    if entry.content is not None:
+        return None
+    return PACKAGED / f"{_stem(entry, model_key(entry, with_sympy=False))}.py.txt"
 
 
 def _atomic_write(path: Path, data: bytes) -> None:
@@ -142,7 +158,7 @@ class CompiledModel:
             return module
         except Exception:  # any damage (truncated, emptied, edited) is rebuilt
             sys.modules.pop(name, None)
-            _build(self.entry, self.module_path, self.pickle_path)
+            _write_module(self.entry, self.module_path, self.pickle_path)
             module = _import(name, self.module_path)
             _check_module(module, self.entry)
             return module
@@ -158,7 +174,9 @@ class CompiledModel:
         except Exception:  # any damage is rebuilt
             model = None
         if not isinstance(model, SymbolicModel) or model.spec_key != self.entry.spec.key:
-            model = _build(self.entry, self.module_path, self.pickle_path)
+            # Derived now; the generated module already in use (perhaps the shipped one)
+            # stays as it is.
+            model = _build(self.entry, self.module_path, self.pickle_path, module=False)
         return model
 
 
@@ -191,16 +209,28 @@ def _import(name: str, path: Path) -> types.ModuleType:
     return module
 
 
-def _build(entry: Entry, module_path: Path, pickle_path: Path) -> SymbolicModel:
-    """Derive *entry* and write its cache files; returns the symbolic model."""
-    from equilibrist.numeric.codegen import generate_source
-
+def _build(entry: Entry, module_path: Path, pickle_path: Path, *,
+           module: bool = True) -> SymbolicModel:
+    """Derive *entry* and write its cache files (the pickle only, without *module*);
+    returns the symbolic model."""
     model = derive(entry)
     _ = model.A, model.B  # computed once, stored with the model
-    source = generate_source(model)
     _atomic_write(pickle_path, pickle.dumps(model, protocol=pickle.HIGHEST_PROTOCOL))
-    _atomic_write(module_path, source.encode())
+    if module:
+        from equilibrist.numeric.codegen import generate_source
+
+        _atomic_write(module_path, generate_source(model).encode())
     return model
+
+
+def _write_module(entry: Entry, module_path: Path, pickle_path: Path) -> None:
+    """The generated module of *entry* into the cache: the shipped derivation of a catalogue
+    system (the symbolic model is derived when first asked for), else derived now."""
+    shipped = packaged_path(entry)
+    if shipped is not None and shipped.is_file():
+        _atomic_write(module_path, shipped.read_bytes())
+    else:
+        _build(entry, module_path, pickle_path)
 
 
 _MEMO: dict[str, CompiledModel] = {}
@@ -223,8 +253,8 @@ def load(entry: Entry) -> CompiledModel:
     stem = _stem(entry, key)
     module_path = folder / f"{stem}.py"
     pickle_path = folder / f"{stem}.pkl"
-    if not (module_path.exists() and pickle_path.exists()):
-        _build(entry, module_path, pickle_path)
+    if not module_path.exists():
+        _write_module(entry, module_path, pickle_path)
     compiled = CompiledModel(entry, key, module_path, pickle_path)
     _MEMO[memo_key] = compiled
     return compiled
