@@ -453,16 +453,20 @@ class _Translator:
                 a = a if ta == "f" else f"((double){a})"
                 b = b if tb == "f" else f"((double){b})"
             return f"({a} {sym} {b})", t
+        # The operands as floats, from the codes above: translating them again would write
+        # the statements they need (a power's temporaries) twice, the first copy unused.
+        fa = a if ta == "f" else f"((double){a})"
+        fb = b if tb == "f" else f"((double){b})"
         if isinstance(op, ast.Div):
-            return f"({self.as_float(node.left)} / {self.as_float(node.right)})", "f"
+            return f"({fa} / {fb})", "f"
         if isinstance(op, ast.FloorDiv):
             if t == "i":
                 return f"eq_floordivi({a}, {b})", "i"
-            return f"eq_floordivf({self.as_float(node.left)}, {self.as_float(node.right)})", "f"
+            return f"eq_floordivf({fa}, {fb})", "f"
         if isinstance(op, ast.Mod):
             if t == "i":
                 return f"eq_modi({a}, {b})", "i"
-            return f"eq_modf({self.as_float(node.left)}, {self.as_float(node.right)})", "f"
+            return f"eq_modf({fa}, {fb})", "f"
         bits = {ast.BitAnd: "&", ast.BitOr: "|", ast.BitXor: "^", ast.LShift: "<<",
                 ast.RShift: ">>"}
         if type(op) in bits and t == "i":
@@ -500,7 +504,7 @@ class _Translator:
                     self.fail(node, "an integer to a negative power")
                 return f"(1.0 / {res})", "f"
             return res, tb
-        return f"pow({self.as_float(node.left)}, {self.as_float(node.right)})", "f"
+        return f"pow({base if tb == 'f' else f'((double){base})'}, {self.as_float(node.right)})", "f"
 
     def fresh(self) -> str:
         self.tmp += 1
