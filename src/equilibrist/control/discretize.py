@@ -20,7 +20,6 @@ over a period becomes ``Rd = RN / T``.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 from equilibrist.control import _checks
 from equilibrist.errors import DesignError
@@ -41,6 +40,8 @@ def discrete_matrices(
     A: np.ndarray, B: np.ndarray, dt: float, *, method: str = "zoh"
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(Ad, Bd)`` of ``x_dot = A x + B u`` sampled every *dt* seconds."""
+    import scipy.linalg  # here: a design needs it, a command that runs one does not
+
     _method(method)
     T = _checks.positive_period(dt)
     Am = _checks.square(A, "A")
@@ -117,6 +118,8 @@ def van_loan(A: object, W: object, dt: float) -> np.ndarray:
     dt:
         Period ``T`` [s].
     """
+    import scipy.linalg  # here: a design needs it, a command that runs one does not
+
     T = _checks.positive_period(dt)
     Am = _checks.square(A, "A")
     n = Am.shape[0]

@@ -29,7 +29,6 @@ from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
-import scipy.linalg
 
 from equilibrist.control import _checks
 from equilibrist.control.analysis import (
@@ -94,6 +93,8 @@ def _solve(
 
     For the estimator, the caller passes the dual ``(A', C', G QN G', RN)``.
     """
+    import scipy.linalg  # here: a design needs it, a command that runs one does not
+
     Am = _checks.square(A, "A")
     n = Am.shape[0]
     bname, qname, rname = ("C'", "G QN G'", "RN") if estimator else ("B", "Q", "R")

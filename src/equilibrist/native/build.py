@@ -28,6 +28,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+from collections.abc import Callable
 from functools import lru_cache
 from pathlib import Path
 
@@ -84,7 +85,8 @@ def _folder() -> Path:
 
 
 def library_key(source: str) -> str:
-    """The hash that names the library built from *source*."""
+    """The hash that names the library built from *source* (or from the text that
+    determines it)."""
     h = hashlib.sha256()
     for part in (source, compiler_identity(), " ".join(FLAGS), str(REVISION)):
         h.update(part.encode())
@@ -135,9 +137,18 @@ def _compile(source: str, out: Path) -> None:
 _LOADED: dict[Path, ctypes.CDLL] = {}
 
 
-def load(source: str, stem: str) -> tuple[ctypes.CDLL, Path]:
-    """The library built from *source* (built now if the cache has no whole one)."""
-    path = _folder() / f"{stem}_{library_key(source)}.so"
+def load(source: str | Callable[[], str], stem: str,
+         inputs: str | None = None) -> tuple[ctypes.CDLL, Path]:
+    """The library built from *source* (built now if the cache has no whole one).
+
+    *source* may be a function that writes the unit, called only when the library must be
+    built; then *inputs* is a text that determines the unit entirely (the hashes of what
+    the generator reads), and names the library in its place.
+    """
+    if inputs is None:
+        assert isinstance(source, str)
+        inputs = source
+    path = _folder() / f"{stem}_{library_key(inputs)}.so"
     lib = _LOADED.get(path)
     if lib is not None:
         return lib, path
@@ -148,14 +159,17 @@ def load(source: str, stem: str) -> tuple[ctypes.CDLL, Path]:
             whole = sidecar.read_text().strip() == _digest(path)
         except OSError:
             whole = False
+    def text() -> str:
+        return source if isinstance(source, str) else source()
+
     if not whole:
-        _compile(source, path)
+        _compile(text(), path)
     try:
         lib = ctypes.CDLL(str(path))
     except OSError:
         if not whole:
             raise BuildError(f"the compiled core {path} does not load") from None
-        _compile(source, path)  # matched its digest yet does not load: build it again
+        _compile(text(), path)  # matched its digest yet does not load: build it again
         lib = ctypes.CDLL(str(path))
     _LOADED[path] = lib
     return lib, path

@@ -196,6 +196,49 @@ def unit_source(system: System, key: bytes | tuple[int, ...] | None = None,
     return "".join(parts)
 
 
+# What the generator reads besides the system's module and the controller: a change in
+# any of them makes a new unit (and so a new library name).
+_GENERATOR_FILES = ("core.c", "env.c", "shoot.c", "pyc.py", "simcore.py")
+_GENERATOR_MODULES = ("equilibrist.numeric.libm", "equilibrist.sim.layout",
+                      "equilibrist.control.controller")
+_GENERATOR: list[str] = []
+
+
+def _generator_digest() -> str:
+    if not _GENERATOR:
+        import hashlib
+        import importlib.util
+
+        h = hashlib.sha256(str(GENERATOR).encode())
+        here = Path(__file__).parent
+        for name in _GENERATOR_FILES:
+            h.update((here / name).read_bytes())
+        for module in _GENERATOR_MODULES:
+            spec = importlib.util.find_spec(module)
+            assert spec is not None and spec.origin is not None
+            h.update(Path(spec.origin).read_bytes())
+        _GENERATOR.append(h.hexdigest())
+    return _GENERATOR[0]
+
+
+def unit_inputs(system: System, key: bytes | tuple[int, ...] | None = None,
+                controller: NonlinearController | None = None) -> str:
+    """A text that determines :func:`unit_source` of the same arguments entirely, cheap to
+    make: the digests of the system's generated module and of the generator's sources, and
+    what the controller is (its pattern, sizes or source)."""
+    import hashlib
+
+    module = hashlib.sha256(system.compiled.module_path.read_bytes()).hexdigest()
+    if controller is not None:
+        what = "nonlinear:" + hashlib.sha256(
+            (controller.source + repr(controller.has_estimate)).encode()).hexdigest()
+    elif isinstance(key, bytes):
+        what = "pattern:" + key.hex()
+    else:
+        what = "sizes:" + repr(key)
+    return "\n".join((module, _generator_digest(), what))
+
+
 def _ptr(a: np.ndarray | None) -> int | None:
     return None if a is None or a.size == 0 else int(a.ctypes.data)
 
@@ -212,7 +255,9 @@ class NativeCore:
         self.system = system
         self.key = key
         stem = f"{system.compiled.module_path.stem}_core"
-        self.lib, self.path = build.load(unit_source(system, key, controller), stem)
+        system.compiled.functions  # noqa: B018  # a damaged generated module is rebuilt first
+        self.lib, self.path = build.load(lambda: unit_source(system, key, controller), stem,
+                                         inputs=unit_inputs(system, key, controller))
         lib = self.lib
         args_p = ctypes.POINTER(RunArgs)
         lib.eq_run_one.argtypes = [args_p]
