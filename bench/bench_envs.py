@@ -132,9 +132,9 @@ def main() -> None:
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
 
-    import numba
+    from equilibrist.sim.kernel import thread_count
 
-    threads = numba.get_num_threads()
+    threads = thread_count()
     results: dict[str, object] = {"threads": threads, "load_before": os.getloadavg()[0]}
     rows = []
     for n in SIZES:
@@ -147,7 +147,7 @@ def main() -> None:
     if args.json:
         print(json.dumps(results, indent=2))
         return
-    print(f"cart-pole balance, 50 Hz, one RK4 step per period, no noise; {threads} numba threads; "
+    print(f"cart-pole balance, 50 Hz, one RK4 step per period, no noise; {threads} threads; "
           f"load average {results['load_before']:.1f} -> {results['load_after']:.1f}")
     print("env-steps per second (M/s); ratios are equilibrist's vector env over the peer")
     print(f"{'N':>5s} {'ours':>8s} {'thr':>4s} {'1 thread':>9s} {'gym vec':>8s} {'x gym vec':>10s} "

@@ -11,7 +11,7 @@ prediction errors of the model's Kalman filter; scipy ``least_squares``,
 central-difference Jacobians) run with the two integrators of the segments
 and of the filter's predictions:
 
-* ``compiled``: RK4 at 1 ms with the logged input held, numba-compiled over
+* ``compiled``: RK4 at 1 ms with the logged input held, compiled (the C core) over
   the system's generated ``f`` (``equilibrist.ident.kernel``);
 * ``solve_ivp``: ``scipy.integrate.solve_ivp`` (RK45, rtol 1e-8, atol 1e-10)
   over each sample interval (the held input jumps at every sample), on the
@@ -105,7 +105,7 @@ def main() -> None:
     for e in full.estimates:
         print(f"    {e.name:4} = {e.value:.5g} +- {e.std_error:.2g}   (truth {TRUTH[e.name]:g})")
     print(f"  same loops, {args.evaluations} evaluations per stage:")
-    print(f"    compiled RK4 (numba)     {t_c:8.2f} s")
+    print(f"    compiled RK4 (C core)    {t_c:8.2f} s")
     print(f"    scipy solve_ivp (RK45)   {t_s:8.2f} s   compiled is {ratio:.0f}x faster (goal >= 20)")
     print(f"  same work: |estimates compiled - solve_ivp| = {out['max_estimate_difference']:.2e}")
 

@@ -3,7 +3,7 @@
 For each shipped model file: the first load with an empty cache (MuJoCo's
 compiler, the derivation with sympy, code generation), and one evaluation
 of the accelerations, ``f(x, u)`` of the generated code (plain Python and
-numba-compiled) against MuJoCo's ``mj_forward`` on the same file (the
+the C core's, through ctypes) against MuJoCo's ``mj_forward`` on the same file (the
 peer a user of the file would otherwise call). Ratios are MuJoCo's time
 over equilibrist's (> 1: equilibrist faster).
 
@@ -50,12 +50,12 @@ def _per_call(fn, repeat: int = 20000) -> float:
 
 def main() -> None:
     import mujoco
-    from numba import njit
 
+    from equilibrist.native.simcore import load_core
     from equilibrist.numeric.system import get_system
 
-    print(f"{'model':16s} {'cold s':>7s} {'f py us':>8s} {'f numba us':>10s} {'mj_forward us':>13s} "
-          f"{'mj/py':>6s} {'mj/numba':>8s}")
+    print(f"{'model':16s} {'cold s':>7s} {'f py us':>8s} {'f core us':>10s} {'mj_forward us':>13s} "
+          f"{'mj/py':>6s} {'mj/core':>8s}")
     for path in FILES:
         cold = _cold(path)
         system = get_system(str(path))
@@ -65,10 +65,10 @@ def main() -> None:
         out = np.empty(n)
         p = np.asarray(system.p)
         f = system.functions.f
-        f_numba = njit(f)
+        f_core = load_core(system).f  # the C core's f, called through ctypes
         args = (x, u, p, out)
         py = _per_call(lambda f=f, a=args: f(*a))
-        nb = _per_call(lambda f=f_numba, a=args: f(*a))
+        nb = _per_call(lambda f=f_core, a=args: f(*a))
         model = mujoco.MjModel.from_xml_path(str(path))
         data = mujoco.MjData(model)
         data.qpos[:] = x[: n // 2]

@@ -26,7 +26,7 @@ frame rates and real-time ratios are reported apart from the N sessions'.
 ``--costs`` measures in this process, without a server, what one sample
 costs under each controller (the session's whole sample: sensors,
 controller, actuator, the plant's RK4 steps, the recording), the swing-up
-also with its functions compiled by numba (the peer of the plain-Python
+also with its functions compiled to C (the peer of the plain-Python
 runtime the playground runs), and the redesign time of each controller
 (the design, plus the swing-up's or the MPC's construction with DAQP's
 setup).
@@ -202,7 +202,7 @@ def costs(seconds: float = 10.0) -> dict:
             "design_median": statistics.median(p[0] for p in parts),
             "controller_median": statistics.median(p[1] for p in parts),
             "controller_max": max(p[1] for p in parts)}
-    # The peer of the swing-up's plain-Python runtime: the same functions compiled by numba.
+    # The peer of the swing-up's plain-Python runtime: the same functions compiled to C.
     session = Session(cat, "cartpole", seed=1)
     settings = session.settings.changed({"controller": "swingup"})
     system = session.prepare(settings)
@@ -211,7 +211,7 @@ def costs(seconds: float = 10.0) -> dict:
 
     ctrl = swingup(system, design=d)
     y, r = np.array([0.0, 3.1]), np.zeros(0)
-    for label, rt in (("python", ctrl.runtime()), ("numba", SwingUpRuntime(ctrl))):
+    for label, rt in (("python", ctrl.runtime()), ("compiled", SwingUpRuntime(ctrl))):
         t0 = time.perf_counter()
         u = rt.output(0.0, y, r)
         rt.update(0.0, y, r, u)
@@ -235,9 +235,9 @@ def print_costs(c: dict) -> None:
         print(f"    {kind:8s} {us:8.1f} us  ({us / lqg:.2f} x LQG; {us * 200 / 1e4:.2f} % of a core "
               "in real time)")
     print(f"  swing-up controller alone: plain Python {c['swingup_controller_python_us']:.1f} us a sample "
-          f"(first call {c['swingup_controller_python_first_call_s'] * 1e3:.1f} ms), numba "
-          f"{c['swingup_controller_numba_us']:.1f} us "
-          f"(first call, compiling: {c['swingup_controller_numba_first_call_s']:.2f} s)")
+          f"(first call {c['swingup_controller_python_first_call_s'] * 1e3:.1f} ms), compiled C "
+          f"{c['swingup_controller_compiled_us']:.1f} us "
+          f"(first call, compiling: {c['swingup_controller_compiled_first_call_s']:.2f} s)")
     if c.get("swingup_caught_at_s") is not None:
         print(f"  swing-up from hanging caught at t = {c['swingup_caught_at_s']:.2f} s (simulated)")
     if c.get("mpc_solve"):

@@ -5,11 +5,11 @@ Two measurements, in one run on one machine:
 1. Scaling: one study (cart-pole, digital LQG at 200 Hz with noise, 16
    points of m_p x 2,500 runs of 1 s, full metrics) on a
    ``distributed.LocalCluster`` of 1 worker and of 2 workers (one process
-   each, one Dask thread and one numba thread per worker). Efficiency =
+   each, one Dask thread and one core thread per worker). Efficiency =
    T(1) / (2 T(2)); goal >= 0.8.
 2. Overhead: 10^5 runs (10 points x 10^4 runs, basic metrics, the nominal
    design at every point) through the Dask path on 2 workers, against the
-   plain compiled batch (``simulate_batch``, 10^5 runs on 2 numba threads,
+   plain compiled batch (``simulate_batch``, 10^5 runs on 2 threads,
    the same plants, controller, seeds and duration); goal <= 10 %. The
    local study path (no Dask) is timed beside them.
 

@@ -32,31 +32,12 @@ import numpy as np
 from equilibrist import get_system
 from equilibrist.control.controller import LinearController
 from equilibrist.control.design import design
-from equilibrist.control.swingup import LAWS, python_namespace, swingup
+from equilibrist.control.swingup import LAWS, Z, python_namespace, swingup
 from equilibrist.sim.batch import simulate_batch
 from equilibrist.sim.noise import Noise
 from equilibrist.tasks import get_task
 
 CHUNK = 200  # runs per recorded batch (memory)
-
-
-_REPLAY = """
-def replay(ys, uas, rows, p, z0, out_last_pump, out_mode):
-    for i in range(ys.shape[0]):
-        z = z0.copy()
-        zn = z0.copy()
-        u = np.zeros(1)
-        r = np.zeros(0)
-        last = -1
-        for k in range(rows[i]):
-            output(0.0, z, ys[i, k], r, p, u)
-            update(0.0, z, ys[i, k], r, uas[i, k], p, zn)
-            z[:] = zn
-            if z[SU_Z_MODE] != 1.0:
-                last = k
-        out_last_pump[i] = last
-        out_mode[i] = z[SU_Z_MODE]
-"""
 
 
 def swing_times(ctrl: object, batch: object, n_out: int, m: int) -> np.ndarray:
@@ -65,12 +46,8 @@ def swing_times(ctrl: object, batch: object, n_out: int, m: int) -> np.ndarray:
     The controller's own compiled functions replay each run's recorded
     measurements and applied inputs, so the mode is the one the batch had.
     """
-    from numba import njit
-
-    ns = dict(python_namespace(compiled=True))
-    ns["np"] = np
-    exec(_REPLAY, ns)
-    replay = njit(ns["replay"])
+    fns = python_namespace(compiled=True)  # the law compiled to C, as the core runs it
+    output, update = fns["output"], fns["update"]
     traj = batch.trajectories  # type: ignore[attr-defined]
     n = len(batch.state_names)  # type: ignore[attr-defined]
     c_y = 2 * n
@@ -80,8 +57,24 @@ def swing_times(ctrl: object, batch: object, n_out: int, m: int) -> np.ndarray:
     runs = ys.shape[0]
     last = np.zeros(runs, dtype=np.int64)
     mode = np.zeros(runs)
-    replay(ys, uas, np.asarray(batch.rows, dtype=np.int64), np.array(ctrl.params),  # type: ignore[attr-defined]
-           np.array(ctrl.z0), last, mode)  # type: ignore[attr-defined]
+    p = np.array(ctrl.params)  # type: ignore[attr-defined]
+    z0 = np.array(ctrl.z0)  # type: ignore[attr-defined]
+    mode_slot = Z["mode"]
+    for i in range(runs):
+        z = z0.copy()
+        zn = z0.copy()
+        u = np.zeros(1)
+        r = np.zeros(0)
+        last_pump = -1
+        for k in range(int(batch.rows[i])):  # type: ignore[attr-defined]
+            y = np.ascontiguousarray(ys[i, k])
+            output(0.0, z, y, r, p, u)
+            update(0.0, z, y, r, np.ascontiguousarray(uas[i, k]), p, zn)
+            z[:] = zn
+            if z[mode_slot] != 1.0:
+                last_pump = k
+        last[i] = last_pump
+        mode[i] = z[mode_slot]
     return np.where(mode == 1.0, (last + 1) / ctrl.rate, np.nan)  # type: ignore[attr-defined]
 
 
