@@ -50,7 +50,21 @@ class _UsageError(Exception):
     pass
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The command line's parser: every command's, or with *command* only that one's when a
+    module of that name defines it (a command imports only what it needs; its own
+    ``--help`` and errors are the same). Otherwise, and for the top-level help, all."""
+    if command is not None and re.fullmatch(r"[a-z][a-z_]*", command) \
+            and command not in ("main", "common"):
+        one = _parser_with(command)
+        if one is not None:
+            return one
+    every = _parser_with(None)
+    assert every is not None
+    return every
+
+
+def _parser_with(only: str | None) -> argparse.ArgumentParser | None:
     parser = _Parser(
         prog="equilibrist",
         description="Underactuated balancing systems: derive, linearize, control, simulate, "
@@ -61,6 +75,14 @@ def build_parser() -> argparse.ArgumentParser:
     import equilibrist.cli as pkg
 
     names = [m.name for m in pkgutil.iter_modules(pkg.__path__)]
+    if only is not None:
+        if only not in names:
+            return None
+        module = importlib.import_module(f"{pkg.__name__}.{only}")
+        if not hasattr(module, "add_parser"):
+            return None
+        module.add_parser(sub)
+        return parser if only in sub.choices else None
     ordered = [n for n in _ORDER if n in names] + sorted(n for n in names if n not in _ORDER)
     for name in ordered:
         if name in ("main", "common"):
@@ -123,7 +145,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             sys.unraisablehook = _quiet_interrupts(sys.unraisablehook)
     try:
         # Inside the try: a signal during the imports of the subcommands is an interrupt too.
-        parser = build_parser()
+        words = list(sys.argv[1:] if argv is None else argv)
+        parser = build_parser(words[0] if words and not words[0].startswith("-") else None)
         args = parser.parse_args(argv)
         if not getattr(args, "func", None):
             parser.print_help()
