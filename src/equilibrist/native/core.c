@@ -24,56 +24,9 @@
  * the random generator, the stop flag).
  */
 
-/* ---- the run's arrays: one struct, mirrored by equilibrist.native.simcore.RunArgs ---- */
-typedef struct {
-    int64_t k_start, k_end;
-    const int64_t *iopts;
-    const double *fopts;
-    double *x;
-    double *z;
-    int64_t nz;
-    double *u_prev;
-    uint64_t *rng;
-    const double *op;
-    const int64_t *c_idx;
-    int64_t ny;
-    const double *cp;
-    int64_t ncp;
-    const double *ref;
-    int64_t nr;
-    const double *uff;
-    const double *lv;
-    int64_t nlv;
-    const double *lw;
-    int64_t nw;
-    const double *p_sets;
-    int64_t n_sets;
-    int64_t p_len;
-    const int64_t *p_switch;
-    const double *lin_s;
-    const double *region;
-    const int64_t *kicks;
-    int64_t n_kicks;
-    const double *kick_value;
-    const int64_t *pulses;
-    int64_t n_pulses;
-    const double *pulse_value;
-    const int64_t *rec_cols;
-    const int64_t *acc_cols;
-    double *rec;
-    int64_t rec_w;
-    double *acc;
-    int64_t *status;
-    double *fell_x;
-    volatile int64_t *stop;
-    /* run_many only: the per-run arrays, stacked */
-    int64_t n_runs;
-    int64_t n_threads;
-    const double *x0s;
-    const uint64_t *rngs;
-    int64_t acc_w;
-    double *x_ends;
-} eq_args;
+/* ---- the run's arrays: the struct eq_args, written before this body from
+ * equilibrist.native.simcore.FIELDS (which ctypes' RunArgs mirrors): the sample range,
+ * options, state, controller, noise, parameter sets, events, and the outputs. ---- */
 
 /* Dormand-Prince 5(4) tableau. */
 #define EQ_A21 (1.0 / 5.0)

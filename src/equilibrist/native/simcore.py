@@ -77,10 +77,7 @@ def _struct_source() -> str:
 
 
 def _body() -> str:
-    text = (Path(__file__).parent / "core.c").read_text()
-    start = text.index("/* ---- the run's arrays")
-    end = text.index("/* Dormand-Prince")
-    return text[:start] + text[end:]  # the struct comes from FIELDS
+    return (Path(__file__).parent / "core.c").read_text()
 
 
 _LINEAR_TYPES = {
