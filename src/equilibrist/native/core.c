@@ -110,8 +110,10 @@ static inline void eq_deriv(const double *x, const double *u, const double *p, c
     }
 }
 
-static void eq_rk4(double *x, const double *u, const double *p, const double *w, double h,
-                   double *k1, double *k2, double *k3, double *k4, double *xt)
+static void eq_rk4(double *restrict x, const double *restrict u, const double *restrict p,
+                   const double *restrict w, double h, double *restrict k1,
+                   double *restrict k2, double *restrict k3, double *restrict k4,
+                   double *restrict xt)
 {
     int i;
     eq_f(x, u, p, k1);
@@ -126,8 +128,10 @@ static void eq_rk4(double *x, const double *u, const double *p, const double *w,
     }
 }
 
-static void eq_rk4_free(double *x, const double *u, const double *p, double h,
-                        double *k1, double *k2, double *k3, double *k4, double *xt)
+static void eq_rk4_free(double *restrict x, const double *restrict u,
+                        const double *restrict p, double h, double *restrict k1,
+                        double *restrict k2, double *restrict k3, double *restrict k4,
+                        double *restrict xt)
 {
     int i;
     eq_f(x, u, p, k1);
