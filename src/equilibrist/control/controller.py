@@ -14,13 +14,13 @@ A controller is one of three kinds of value:
     LQR (:meth:`LinearController.state_feedback`), both discrete LQG forms
     (:meth:`LinearController.lqg`), a design (:meth:`LinearController.from_design`)
     and the open loop (:meth:`LinearController.open_loop`) are constructors
-    of it. The compiled simulation core runs it through the numba source
+    of it. The compiled simulation core runs it through the source
     :data:`LINEAR_SOURCE` (one generic loop), the C export writes the same
     loop once in C plus the matrices, and :meth:`LinearController.output`
     and :meth:`LinearController.update` run that very source in Python.
 
 :class:`NonlinearController`
-    Python source that numba compiles into the system's simulation core
+    Python source translated to C into the system's simulation core
     (as the system's own ``f`` is), defining::
 
         def output(t, z, y, r, params, u_out): ...            # u_out[:] = command
@@ -80,7 +80,7 @@ class ControllerError(EquilibristError, ValueError):
     """A controller that does not exist, does not apply, or is not well formed."""
 
 
-# -- the packed linear controller: one layout, read by numba, Python and C ---------------------
+# -- the packed linear controller: one layout, read by the core, Python and C -------------------
 #: Header slots of a packed :class:`LinearController` (name -> index): the sizes, then
 #: the offset of each block in the vector.
 LINEAR_HEADER: tuple[str, ...] = (
@@ -116,7 +116,7 @@ def linear_layout_source(sizes: Mapping[str, int] | None = None) -> str:
     controller); with *sizes* (``nz, ny, nr, m, n``) the function returns
     them, and the offsets they imply, as literals, so that the compiled
     loops of the linear library have fixed trip counts and constant
-    indices (numba's compiler unrolls them). Such a source serves only
+    indices (the C compiler unrolls them). Such a source serves only
     vectors of exactly those sizes; the sums and their order are the same
     either way, so the results are too, bit for bit.
     """
@@ -250,7 +250,7 @@ def linear_unrolled_source(pattern: bytes) -> str:
     return "\n".join(lines) + "\n"
 
 
-#: The compiled linear controller: plain Python that numba compiles into every
+#: The compiled linear controller: plain Python translated to C into every
 #: simulation core, and that :class:`LinearController` runs as is in Python.
 #: Every sum runs in one fixed order (z, then y, then r, then u), the order the
 #: exported C code repeats. It reads its sizes and block offsets through
@@ -788,7 +788,7 @@ NONLINEAR_FUNCTIONS = ("output", "update", "estimate")
 
 @dataclass(frozen=True, eq=False)
 class NonlinearController:
-    """A controller given as numba-compatible Python source (see the module docstring).
+    """A controller given as Python source that the C translation knows (see the module docstring).
 
     Attributes
     ----------
@@ -970,7 +970,7 @@ def supervisor_source(*, catch: str, leave: str) -> str:
     first controller, 1: the linear one). The caller supplies the first
     controller's functions as ``first_output``/``first_update`` (same
     signatures as ``output``/``update``) in the same source, and two
-    boolean expressions over ``y`` and ``params`` (numba code):
+    boolean expressions over ``y`` and ``params`` (code the C translation knows):
 
     *catch*
         True when the linear controller should take over (entering the

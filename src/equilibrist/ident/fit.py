@@ -50,7 +50,7 @@ filter's errors most likely (their Gaussian likelihood, Nelder-Mead) and the
 fit is repeated until they settle.
 
 Integration: RK4 with the input held, at most ``max_step`` per step (1 ms by
-default, as the simulator), compiled with numba over the system's generated
+default, as the simulator), compiled in the system's C core over its generated
 ``f`` (:mod:`equilibrist.ident.kernel`); ``backend="solve_ivp"`` runs the same
 loops with :func:`scipy.integrate.solve_ivp` (for comparison). The Jacobians
 are by central differences: for the shooting residuals all segments at once

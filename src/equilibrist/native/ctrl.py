@@ -6,8 +6,7 @@ without a system: a small library with ``eq_output``, ``eq_update`` and
 (:mod:`equilibrist.native.build`). :class:`ControllerFunctions` calls them
 with the signatures of the Python source (``output(t, z, y, r, params,
 u_out)``...), so a Python runtime of a controller (the swing-up's, for
-studies of single runs and the playground) runs the compiled arithmetic of
-the simulation core.
+studies of single runs) runs the compiled arithmetic of the simulation core.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ picks another on the same CPU). Those variants round differently for a few
 inputs in ten thousand, so a trajectory that calls them is not the same to
 the bit on two machines. The functions here are written with plain IEEE
 double operations (``+ - * /``, comparisons, the exact ``math.frexp``), in
-an order the code fixes, so Python and numba (which contracts nothing
+an order the code fixes, so Python and the C core (which contracts nothing
 without ``fastmath``) give the same bits on every CPU.
 
 They are the kernels of fdlibm (Sun Microsystems, 1993), as kept in musl:
@@ -23,11 +23,11 @@ balancing rig comes near).
 The section below the marker is copied verbatim into every generated
 numeric module (:mod:`equilibrist.numeric.codegen`), so the generated
 ``f`` calls these functions under the names ``eq_sin`` and ``eq_cos`` as
-plain Python, and the compiled cores (the templates of
-:mod:`equilibrist.sim` and :mod:`equilibrist.ident`) rebind each name in
-:data:`FUNCTIONS` to its numba-compiled self. Edit the section only
-together with ``REVISION`` in :mod:`equilibrist.numeric.codegen`: the
-cache of derived models is keyed by that module's source.
+plain Python; the C core (:mod:`equilibrist.native`) translates ``f`` with
+the calls kept and links :func:`c_source`, the same functions in C. Edit
+the section only together with ``REVISION`` in
+:mod:`equilibrist.numeric.codegen` and :func:`c_source`: the cache of
+derived models is keyed by both modules' sources.
 """
 
 from __future__ import annotations
@@ -229,7 +229,7 @@ def c_source(prefix: str = "", *, log: bool = False) -> str:
 
     Compiled with ``-ffp-contract=off`` (no fused multiply-add; GCC's default in
     ISO C mode, not clang's) and without ``-ffast-math``, they give the bits of
-    the Python and numba versions. *prefix* goes before each function's name;
+    the Python version. *prefix* goes before each function's name;
     ``eq_log`` only with *log* (an unused static function is a warning).
     """
     p = prefix
