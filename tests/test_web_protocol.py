@@ -715,3 +715,37 @@ def test_no_browser_is_started_without_a_display(monkeypatch) -> None:
     monkeypatch.setenv("DISPLAY", ":0")
     play._open_browser("http://127.0.0.1:1/", Started())
     assert opened == ["http://127.0.0.1:1/"]
+
+
+def test_the_playground_is_simulate_in_real_time():
+    """A session's plant and sensors are simulate's: with the controller off and the same
+    seed, its states and measurements are those of ``simulate`` with the spec's noise,
+    to the bit (the core's generator, sensor noise at each sample, process noise held
+    over each physics step)."""
+    import dataclasses
+
+    from equilibrist.sim import simulate
+    from equilibrist.sim.noise import Noise
+    from equilibrist.web.session import Session
+
+    session = Session(Catalogue.default(), "cartpole", seed=11)
+    session.settings = dataclasses.replace(session.settings, controller="off")
+    session.plant = None
+    x0 = session.x.copy()
+    states, measured = [], []
+    for _ in range(200):
+        states.append(session.x.copy())
+        session._sample()
+        measured.append(session.y.copy())
+    rate = session.settings.rate
+    noise = Noise.from_spec(session.system, outputs=session.loop.outputs, rate=rate)
+    res = simulate(session.system, None, duration=199 / rate, rate=rate,
+                   physics_step=session.h, x0=x0, noise=noise, seed=11,
+                   outputs=session.loop.outputs, region={})
+    assert res.states.shape[0] == 200
+    np.testing.assert_array_equal(np.array(states), res.states)
+    np.testing.assert_array_equal(np.array(measured), res.measurements)
+    # And the noise is there: the run is not the noise-free one.
+    quiet = simulate(session.system, None, duration=199 / rate, rate=rate,
+                     physics_step=session.h, x0=x0, outputs=session.loop.outputs, region={})
+    assert not np.array_equal(quiet.states, res.states)

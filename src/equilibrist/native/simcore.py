@@ -428,6 +428,14 @@ class NativeCore:
         del keep
         return bool(fell)
 
+    def plant(self, *, x: np.ndarray, p: np.ndarray, rate: float, n_sub: int,
+              lw: np.ndarray, outputs: np.ndarray, lv: np.ndarray,
+              rng: np.ndarray) -> PlantSteps:
+        """The plant alone, sample by sample, as ``simulate`` advances it around a controller
+        written in Python: see :class:`PlantSteps`."""
+        return PlantSteps(self, x=x, p=p, rate=rate, n_sub=n_sub, lw=lw, outputs=outputs, lv=lv,
+                          rng=rng)
+
     def rk4_steps(self, x: Any, u: Any, p: Any, h: float, n_steps: int) -> None:
         self._out(x, np.float64, "x")
         u = np.ascontiguousarray(u, dtype=float)
@@ -495,6 +503,70 @@ class NativeCore:
     def env_reset_many(self, fs: Any, us: Any, obs: Any, cf: Any, ci: Any) -> None:
         self.lib.eq_env_reset_many(_ptr(fs), _ptr(us), _ptr(obs), obs.shape[1], fs.shape[0],
                                    _ptr(cf), _ptr(ci))
+
+
+class PlantSteps:
+    """The plant of a closed loop whose controller runs in Python, one sample at a time.
+
+    The same two halves of a sample as ``simulate`` with a Python controller
+    (:func:`equilibrist.sim.run.simulate`): :meth:`measure` reads the
+    sensors with their noise (``y = x[outputs] + lv z``), :meth:`advance`
+    holds the applied input over the period's *n_sub* RK4 steps, each with
+    its process noise ``lw z`` (``lw``: ``n x nw``, the noise gain over the
+    root of the step), drawn from the generator state *rng* in the same
+    order. Same seed, same inputs: the same bits as ``simulate``. *x*, *p*
+    and *rng* are the caller's arrays (updated in place, kept by reference);
+    the arrays' addresses are taken once, a call costs one ctypes call.
+    """
+
+    def __init__(self, core: NativeCore, *, x: np.ndarray, p: np.ndarray, rate: float,
+                 n_sub: int, lw: np.ndarray, outputs: np.ndarray, lv: np.ndarray,
+                 rng: np.ndarray) -> None:
+        n, m = core.system.n_states, core.system.n_inputs
+        core._out(x, np.float64, "x")
+        core._out(rng, np.uint64, "rng")
+        h = 1.0 / (rate * n_sub)
+        self.core = core
+        self.x, self.rng = x, rng
+        self.status = np.zeros(len(layout.STATUS), dtype=np.int64)
+        p_sets = np.concatenate([np.asarray(p, dtype=float), np.zeros(2 * m)])[None, :]
+        self.lw = np.ascontiguousarray(lw, dtype=float).reshape(n, -1)
+        self.c_idx = np.ascontiguousarray(outputs, dtype=np.int64)
+        self.lv = np.ascontiguousarray(lv, dtype=float)
+        self.y = np.zeros(len(self.c_idx))
+        self.u = np.zeros(m)
+        region = np.array([[-np.inf] * n, [np.inf] * n])
+        values = dict(
+            iopts=layout.IOPTS.pack(int, n_samples=0, record=0, delay=0, n_sub=int(n_sub),
+                                    integrator=layout.INTEGRATORS["rk4"], estimates=0,
+                                    accumulate=0),
+            fopts=layout.FOPTS.pack(h=h, rtol=0.0, atol=0.0, rate=float(rate)),
+            x=x, op=np.zeros(n + m), lw=self.lw, nw=self.lw.shape[1], p_sets=p_sets,
+            n_sets=1, p_len=p_sets.shape[1], p_switch=np.zeros(1, dtype=np.int64),
+            lin_s=None, region=region, kicks=np.zeros((0, 2), dtype=np.int64), n_kicks=0,
+            kick_value=np.zeros(0), pulses=np.zeros((0, 3), dtype=np.int64), n_pulses=0,
+            pulse_value=np.zeros(0), rng=rng, status=self.status, ny=0, nz=0)
+        self._args, self._keep = core._arrays(values)
+        self._scr = core.scratch(p_sets.shape[1], 0, self.lw.shape[1])
+        self._advance = core.lib.eq_advance_one
+        self._measure = core.lib.eq_measure_one
+        self._pargs = ctypes.byref(self._args)
+        self._ptrs = (int(self.u.ctypes.data), int(self._scr.ctypes.data),
+                      int(x.ctypes.data), int(self.c_idx.ctypes.data), len(self.c_idx),
+                      _ptr(self.lv), self.lv.shape[0] if self.lv.ndim == 2 else 0,
+                      int(rng.ctypes.data), _ptr(self.y))
+
+    def measure(self) -> np.ndarray:
+        """The sensors now, with their noise (a new array)."""
+        _u, _scr, x, c_idx, ny, lv, nlv, rng, y = self._ptrs
+        self._measure(x, c_idx, ny, lv, nlv, rng, y)
+        return self.y.copy()
+
+    def advance(self, k: int, u_app: np.ndarray) -> None:
+        """The period after sample *k* with *u_app* held (x updated in place)."""
+        self.u[:] = u_app
+        u, scr, *_ = self._ptrs
+        self._advance(self._pargs, k, u, scr)
 
 
 class EnvSteps:
@@ -578,5 +650,5 @@ def load_core(system: System, key: bytes | tuple[int, ...] | None = None,
     return core
 
 
-__all__ = ["FIELDS", "GENERATOR", "EnvSteps", "NativeCore", "RunArgs", "linear_library", "load_core", "loaded",
+__all__ = ["FIELDS", "GENERATOR", "EnvSteps", "NativeCore", "PlantSteps", "RunArgs", "linear_library", "load_core", "loaded",
            "unit_source"]

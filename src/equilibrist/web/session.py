@@ -22,9 +22,13 @@ How a sample runs (the rig as the simulator runs it, :mod:`equilibrist.sim.run`)
 4. a push adds to the first input for its duration, beyond the limits (as
    ``--push`` of ``equilibrist simulate``);
 5. the plant advances one control period in RK4 steps of at most 1 ms on the
-   compiled core (:class:`~equilibrist.sim.stepper.Stepper`'s entry
-   ``rk4_steps``); the process noise the spec gives on the state rates is
-   added once per period as its integral over the period;
+   compiled core, as ``simulate`` advances it around a Python controller
+   (:class:`~equilibrist.native.simcore.PlantSteps`): the process noise the
+   spec gives on the state rates is white noise of ``simulate``'s model
+   (:meth:`~equilibrist.sim.noise.Noise.from_spec`), held over each physics
+   step, and the sensors' noise is drawn from the same generator: with the
+   controller off and the same seed, a session's run is ``simulate``'s, bit
+   for bit;
 6. a state outside the system's region ends the run ("fell"); the page
    offers Reset.
 
@@ -388,6 +392,12 @@ class Session:
         self.catalogue = catalogue
         self.token = secrets.token_urlsafe(18)
         self.rng = np.random.default_rng(seed)
+        # The core's generator: the sensors' and the plant's noise, drawn as simulate draws
+        # them (same seed, same inputs: the same run).
+        from equilibrist.sim.noise import generator_state, seed_sequence
+
+        self.core_rng = generator_state(seed_sequence(seed))
+        self.plant: Any = None  # the core's plant steps, rebuilt after any change
         self.paused = False
         self.busy = False  # True while another thread rebuilds the session
         self.frame_no = 0  # frames made
@@ -426,11 +436,6 @@ class Session:
         self.state_names = system.state_names
         coords = [s for s in system.state_names if not s.endswith("_dot")] or list(system.state_names)
         self.angle_index = system.state_index(next((c for c in coords if c.startswith("theta")), coords[0]))
-        self.rate_index = np.array(
-            [system.state_index(s) for s in system.state_names if s in spec.process_noise],
-            dtype=np.int64)
-        self.process_sigma = np.array([float(spec.process_noise[system.state_names[i]])
-                                       for i in self.rate_index])
         self.hanging = False
         self.last_lag_warning = -math.inf
         self._apply_region()
@@ -497,6 +502,7 @@ class Session:
         self.record = _Record(int(RECORD_SECONDS * rate) + 1, n, m, ny)
         self.sigma_y = np.array([float(self.system.spec.sensor_noise.get(o, 0.0))
                                  for o in self.loop.outputs])
+        self.plant = None
         self._anchor(None)
 
     def _anchor(self, now: float | None) -> None:
@@ -528,6 +534,7 @@ class Session:
         self.u_sat = np.clip(self.u_cmd, self.u_low, self.u_high)
         self.u_app = self.u_sat.copy()
         self.y = self.x[self.loop.out_idx].copy()
+        self.plant = None
         self.fell: dict[str, Any] | None = None
         self.push_value = 0.0
         self.push_left = 0
@@ -648,6 +655,7 @@ class Session:
         self.system = system
         self.settings = settings
         self.p = np.array(system.p, dtype=float)
+        self.plant = None
         low, high = system.input_limits
         self.u_low, self.u_high = np.asarray(low, float), np.asarray(high, float)
         if d is not None:
@@ -738,11 +746,27 @@ class Session:
                         + ": lower the control rate"),
         })
 
+    def _plant_steps(self) -> Any:
+        """The core's plant for the settings in force: the sensor noise of ``simulate``
+        (the rig's standard deviations times the ``noise`` setting) and its process
+        noise (the spec's, white over the period, held over each physics step)."""
+        from equilibrist.sim.noise import Noise, square_root
+
+        system, loop = self.system, self.loop
+        noise = Noise.from_spec(system, outputs=loop.outputs, rate=self.settings.rate)
+        lw = noise.process_gain @ noise.process_root / math.sqrt(self.h)
+        lw = lw[:, np.any(lw != 0.0, axis=0)]
+        lv = np.zeros((0, 0))
+        if self.settings.noise > 0 and np.any(self.sigma_y > 0):
+            lv = square_root(noise.measurement_covariance, "the sensor noise") * self.settings.noise
+        return self.kernel.plant(x=self.x, p=self.p, rate=self.settings.rate, n_sub=self.n_sub,
+                                 lw=lw, outputs=loop.out_idx, lv=lv, rng=self.core_rng)
+
     def _sample(self) -> None:
         loop, x = self.loop, self.x
-        y = x[loop.out_idx]
-        if self.settings.noise > 0 and self.sigma_y.size:
-            y = y + self.settings.noise * self.sigma_y * self.rng.standard_normal(self.sigma_y.size)
+        if self.plant is None or self.plant.x is not x:
+            self.plant = self._plant_steps()
+        y = self.plant.measure()
         kind = self.settings.controller
         # The filter runs whichever controller is in charge, so that switching is bumpless.
         u_lqg = loop.lqg.output(y)
@@ -792,10 +816,7 @@ class Session:
             self.chart_xhat.append(np.asarray(xhat).tolist())
             self.chart_u.append(u_app.tolist())
         self.y, self.xhat, self.u_cmd, self.u_sat, self.u_app = y, xhat, u_cmd, u_sat, u_app
-        self.kernel.rk4_steps(x, np.ascontiguousarray(u_app, dtype=float), self.p, self.h, self.n_sub)
-        if self.rate_index.size:
-            x[self.rate_index] += (self.process_sigma * math.sqrt(self.period)
-                                   * self.rng.standard_normal(self.rate_index.size))
+        self.plant.advance(self.k, u_app)
         self.k += 1
         self.t += self.period
         if not np.all(np.isfinite(x)):
