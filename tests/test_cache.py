@@ -211,3 +211,26 @@ def test_two_processes_build_the_same_core_at_once(tmp_path) -> None:
     digest = libs[0].with_suffix(".so.sha256").read_text().strip()
     assert digest == hashlib.sha256(libs[0].read_bytes()).hexdigest()
     assert not [p.name for p in folder.glob("native/*") if p.suffix not in (".so", ".c", ".sha256")]
+
+
+def test_without_a_c_compiler_the_command_says_what_to_install(tmp_path) -> None:
+    """No C compiler (and no ziglang package): one line naming what to install, no traceback."""
+    import os
+    import subprocess
+    import sys
+
+    folder = tmp_path / "cache"
+    folder.mkdir(mode=0o700)
+    stub = tmp_path / "stub"
+    stub.mkdir()
+    (stub / "ziglang.py").write_text("raise ImportError('not installed here')\n")
+    env = {**os.environ, "EQUILIBRIST_CACHE": str(folder), "CC": str(tmp_path / "no-cc"),
+           "PYTHONPATH": os.pathsep.join([str(stub), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.run([sys.executable, "-m", "equilibrist.cli.main", "simulate", "cartpole",
+                           "--duration", "1"], capture_output=True, text=True, env=env,
+                          timeout=300, check=False)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "no C compiler" in lines[0]
+    assert "gcc" in lines[0] and "ziglang" in lines[0]

@@ -109,6 +109,11 @@ def _compile(source: str, out: Path) -> None:
         for extra in (_OPENMP, ()):
             cmd = [*compiler(), *FLAGS, *extra, tmp_c, "-o", str(tmp_so), "-lm"]
             proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+            if proc.returncode == 0 and extra and not _loads(tmp_so):
+                # Compiled with OpenMP but its runtime is not there to load (zig cc, a
+                # clang without libomp): built again without.
+                errors = f"{' '.join(cmd)} built a library that does not load"
+                continue
             if proc.returncode == 0:
                 break
             errors = (proc.stderr or proc.stdout).strip()
@@ -132,6 +137,15 @@ def _compile(source: str, out: Path) -> None:
         for leftover in (tmp_so, Path(str(tmp_so) + ".sha256")):
             leftover.unlink(missing_ok=True)
         raise
+
+
+def _loads(path: Path) -> bool:
+    """Whether the shared library at *path* loads (its symbols resolve)."""
+    try:
+        ctypes.CDLL(str(path))
+    except OSError:
+        return False
+    return True
 
 
 _LOADED: dict[Path, ctypes.CDLL] = {}
