@@ -21,7 +21,7 @@ generic core (``key=None``), which reads its sizes from the vector.
 from __future__ import annotations
 
 import ctypes
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -394,13 +394,27 @@ class NativeCore:
         del keep
 
     def measure_one(self, x: Any, c_idx: Any, lv: Any, rng: Any, y: Any) -> None:
-        x = np.ascontiguousarray(x, dtype=float)
-        c_idx = np.ascontiguousarray(c_idx, dtype=np.int64)
-        lv = np.ascontiguousarray(lv, dtype=float)
+        self.measurer(x=np.ascontiguousarray(x, dtype=float), c_idx=c_idx, lv=lv, rng=rng,
+                      y=y)()
+
+    def measurer(self, *, x: np.ndarray, c_idx: Any, lv: Any, rng: np.ndarray,
+                 y: np.ndarray) -> Callable[[], None]:
+        """``measure()``: the sensors of *x* into *y*, with the noise ``lv z`` drawn from
+        *rng* (the arrays kept by reference, their addresses taken once)."""
+        self._out(x, np.float64, "x")
         self._out(rng, np.uint64, "rng")
         self._out(y, np.float64, "y")
-        self.lib.eq_measure_one(_ptr(x), _ptr(c_idx), len(c_idx), _ptr(lv), lv.shape[0],
-                                _ptr(rng), _ptr(y))
+        c_idx = np.ascontiguousarray(c_idx, dtype=np.int64)
+        lv = np.ascontiguousarray(lv, dtype=float)
+        fn = self.lib.eq_measure_one
+        args = (_ptr(x), _ptr(c_idx), len(c_idx), _ptr(lv), lv.shape[0] if lv.ndim == 2 else 0,
+                _ptr(rng), _ptr(y))
+        held = (x, c_idx, lv, rng, y)
+
+        def measure(_held: tuple[Any, ...] = held) -> None:  # the arrays live as long as it
+            fn(*args)
+
+        return measure
 
     def scratch(self, p_len: int, ny: int, nw: int) -> np.ndarray:
         width = int(self.lib.eq_scratch_width(p_len, ny, nw))
@@ -410,10 +424,23 @@ class NativeCore:
                     lin_s: Any, region: Any, kicks: Any, kick_value: Any, pulses: Any,
                     pulse_value: Any, lw: Any, rng: Any, iopts: Any, fopts: Any, status: Any,
                     scr: Any) -> bool:
-        self._out(x, np.float64, "x")
-        self._out(rng, np.uint64, "rng")
-        self._out(status, np.int64, "status")
-        self._out(scr, np.float64, "the scratch")
+        return self.advancer(
+            x=x, u_app=np.ascontiguousarray(u_app, dtype=float), op=op, p_sets=p_sets,
+            p_switch=p_switch, lin_s=lin_s, region=region, kicks=kicks, kick_value=kick_value,
+            pulses=pulses, pulse_value=pulse_value, lw=lw, rng=rng, iopts=iopts, fopts=fopts,
+            status=status, scr=scr)(int(k))
+
+    def advancer(self, *, x: np.ndarray, u_app: np.ndarray, op: Any, p_sets: Any,
+                 p_switch: Any, lin_s: Any, region: Any, kicks: Any, kick_value: Any,
+                 pulses: Any, pulse_value: Any, lw: Any, rng: np.ndarray, iopts: Any,
+                 fopts: Any, status: np.ndarray, scr: np.ndarray) -> Callable[[int], bool]:
+        """``advance(k)``: the physics steps after sample *k* with the input in *u_app* held
+        (True if the state left its region). The arrays are kept by reference and their
+        addresses taken once: write the input into *u_app* before each call."""
+        for arr, dtype, what in ((x, np.float64, "x"), (u_app, np.float64, "u_app"),
+                                 (rng, np.uint64, "rng"), (status, np.int64, "status"),
+                                 (scr, np.float64, "the scratch")):
+            self._out(arr, dtype, what)
         lw = np.asarray(lw, dtype=float)
         p_sets = np.asarray(p_sets, dtype=float)
         values = dict(iopts=iopts, fopts=fopts, x=x, op=op, lw=lw,
@@ -423,10 +450,14 @@ class NativeCore:
                       kick_value=kick_value, pulses=pulses, n_pulses=len(pulses),
                       pulse_value=pulse_value, rng=rng, status=status, ny=0, nz=0)
         args, keep = self._arrays(values)
-        u = np.ascontiguousarray(u_app, dtype=float)
-        fell = self.lib.eq_advance_one(ctypes.byref(args), int(k), _ptr(u), _ptr(scr))
-        del keep
-        return bool(fell)
+        fn = self.lib.eq_advance_one
+        pargs, u, sc = ctypes.byref(args), _ptr(u_app), _ptr(scr)
+        held = (args, keep, u_app, scr)
+
+        def advance(k: int, _held: tuple[Any, ...] = held) -> bool:  # the arrays live as long as it
+            return bool(fn(pargs, k, u, sc))
+
+        return advance
 
     def plant(self, *, x: np.ndarray, p: np.ndarray, rate: float, n_sub: int,
               lw: np.ndarray, outputs: np.ndarray, lv: np.ndarray,
@@ -536,37 +567,28 @@ class PlantSteps:
         self.y = np.zeros(len(self.c_idx))
         self.u = np.zeros(m)
         region = np.array([[-np.inf] * n, [np.inf] * n])
-        values = dict(
+        self._advance = core.advancer(
+            x=x, u_app=self.u, op=np.zeros(n + m), p_sets=p_sets,
+            p_switch=np.zeros(1, dtype=np.int64), lin_s=None, region=region,
+            kicks=np.zeros((0, 2), dtype=np.int64), kick_value=np.zeros(0),
+            pulses=np.zeros((0, 3), dtype=np.int64), pulse_value=np.zeros(0), lw=self.lw,
+            rng=rng,
             iopts=layout.IOPTS.pack(int, n_samples=0, record=0, delay=0, n_sub=int(n_sub),
                                     integrator=layout.INTEGRATORS["rk4"], estimates=0,
                                     accumulate=0),
             fopts=layout.FOPTS.pack(h=h, rtol=0.0, atol=0.0, rate=float(rate)),
-            x=x, op=np.zeros(n + m), lw=self.lw, nw=self.lw.shape[1], p_sets=p_sets,
-            n_sets=1, p_len=p_sets.shape[1], p_switch=np.zeros(1, dtype=np.int64),
-            lin_s=None, region=region, kicks=np.zeros((0, 2), dtype=np.int64), n_kicks=0,
-            kick_value=np.zeros(0), pulses=np.zeros((0, 3), dtype=np.int64), n_pulses=0,
-            pulse_value=np.zeros(0), rng=rng, status=self.status, ny=0, nz=0)
-        self._args, self._keep = core._arrays(values)
-        self._scr = core.scratch(p_sets.shape[1], 0, self.lw.shape[1])
-        self._advance = core.lib.eq_advance_one
-        self._measure = core.lib.eq_measure_one
-        self._pargs = ctypes.byref(self._args)
-        self._ptrs = (int(self.u.ctypes.data), int(self._scr.ctypes.data),
-                      int(x.ctypes.data), int(self.c_idx.ctypes.data), len(self.c_idx),
-                      _ptr(self.lv), self.lv.shape[0] if self.lv.ndim == 2 else 0,
-                      int(rng.ctypes.data), _ptr(self.y))
+            status=self.status, scr=core.scratch(p_sets.shape[1], 0, self.lw.shape[1]))
+        self._measure = core.measurer(x=x, c_idx=self.c_idx, lv=self.lv, rng=rng, y=self.y)
 
     def measure(self) -> np.ndarray:
         """The sensors now, with their noise (a new array)."""
-        _u, _scr, x, c_idx, ny, lv, nlv, rng, y = self._ptrs
-        self._measure(x, c_idx, ny, lv, nlv, rng, y)
+        self._measure()
         return self.y.copy()
 
     def advance(self, k: int, u_app: np.ndarray) -> None:
         """The period after sample *k* with *u_app* held (x updated in place)."""
         self.u[:] = u_app
-        u, scr, *_ = self._ptrs
-        self._advance(self._pargs, k, u, scr)
+        self._advance(k)
 
 
 class EnvSteps:

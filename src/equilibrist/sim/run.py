@@ -308,13 +308,21 @@ def _run_python(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
     names = sysm.spec.parameter_names
     base = len(names) - 2 * m
     y = np.empty(ny)
+    u_buf = np.zeros(m)  # the input held over a period, as the core reads it
+    core = kernel.generic
+    measure = core.measurer(x=x, c_idx=setup.c_idx, lv=setup.lv, rng=rng, y=y)
+    advance = core.advancer(
+        x=x, u_app=u_buf, op=setup.op, p_sets=p_sets, p_switch=setup.p_switch, lin_s=lin,
+        region=setup.region, kicks=setup.kicks, kick_value=setup.kick_value, pulses=setup.pulses,
+        pulse_value=setup.pulse_value, lw=setup.lw, rng=rng, iopts=iopts, fopts=fopts,
+        status=status, scr=scr)
     u_prev = None
     has_estimate = False
     bar = _progress_bar(setup.n_rows, progress, "samples")
     rows = 0
     try:
         for k in range(setup.n_rows):
-            kernel.measure_one(x=x, c_idx=setup.c_idx, lv=setup.lv, rng=rng, y=y)
+            measure()
             t = float(setup.times[k])
             r = setup.ref[k].copy()
             try:
@@ -362,13 +370,8 @@ def _run_python(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
                     break
             if k >= setup.n_samples:
                 break
-            if kernel.advance_one(
-                k=k, x=x, u_app=np.ascontiguousarray(u_app, dtype=float), op=setup.op,
-                p_sets=p_sets, p_switch=setup.p_switch, lin_s=lin, region=setup.region,
-                kicks=setup.kicks, kick_value=setup.kick_value, pulses=setup.pulses,
-                pulse_value=setup.pulse_value, lw=setup.lw, rng=rng, iopts=iopts, fopts=fopts,
-                status=status, scr=scr,
-            ):
+            u_buf[:] = u_app
+            if advance(k):
                 break
     finally:
         if bar is not None:
