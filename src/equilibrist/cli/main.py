@@ -160,7 +160,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             warnings.simplefilter("ignore", RuntimeWarning)
             code = int(args.func(args) or 0)
         # A command that caught the interrupt itself (to say what it kept) returns 130.
-        return interrupted_status() if code == 130 else code
+        if code == 130:
+            _end_interrupted(argv)
+            return interrupted_status()
+        return code
     except (EquilibristError, _UsageError) as exc:
         message = str(exc).replace("\n", " ")
         prefix = "" if message.startswith("equilibrist") else "equilibrist: error: "
@@ -175,14 +178,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         print("equilibrist: interrupted", file=sys.stderr)
-        if argv is None and threading.current_thread() is threading.main_thread():
-            # The command's own process, unwound (its files written or removed): end it
-            # here. The interpreter's finalization, with the core's helper thread still
-            # running, could end it by the signal (-2) after this line.
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(interrupted_status())
+        _end_interrupted(argv)
         return interrupted_status()
+
+
+def _end_interrupted(argv: Sequence[str] | None) -> None:
+    """End the command's own process after an interrupt, once it has unwound (its files
+    written or removed) and said so: the interpreter's finalization, with the core's helper
+    thread still running, could otherwise end it by the signal (-2) after that line.
+    A caller's process (``main(argv)``) is left alone."""
+    if argv is None and threading.current_thread() is threading.main_thread():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(interrupted_status())
 
 
 if __name__ == "__main__":  # pragma: no cover
