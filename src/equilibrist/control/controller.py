@@ -921,14 +921,33 @@ def check_source(source: str, *, has_estimate: bool) -> tuple[str, ...]:
     return tuple(names)
 
 
-#: The argument types of a controller's functions in the C translation (``t`` a float,
-#: the rest 1-D float arrays).
-_FUNCTION_TYPES = {
+#: The argument types of the contract's functions in the C translation (``t`` a float,
+#: the rest 1-D float arrays), by role.
+CONTRACT_TYPES = {
     "output": ("f", "F1", "F1", "F1", "F1", "F1"),
     "update": ("f", "F1", "F1", "F1", "F1", "F1", "F1"),
     "estimate": ("f", "F1", "F1", "F1", "F1", "F1"),
 }
 _TRANSLATED: dict[str, None] = {}
+
+
+def translate_controller(source: str, roles: Mapping[str, str], *, prefix: str = "ctrl_",
+                         library: str | None = None) -> tuple[Any, dict[str, Any]]:
+    """A controller's functions translated to C (:mod:`equilibrist.native.pyc`).
+
+    *roles* maps each role of the contract (``output``, ``update``,
+    ``estimate``) to the function of *source* that plays it; the C names
+    start with *prefix*. The linear library (``linear_output``...) is in
+    scope, unless *library* gives other functions (``""``: none). Returns the
+    translated module (its :meth:`~equilibrist.native.pyc.Module.c_source`)
+    and the translated function of each role. Raises
+    :class:`~equilibrist.native.pyc.TranslationError`.
+    """
+    from equilibrist.native.pyc import Module
+
+    mod = Module(source, constants=linear_constants(), prefix=prefix,
+                 library=linear_layout_source() + LINEAR_SOURCE if library is None else library)
+    return mod, {role: mod.function(name, CONTRACT_TYPES[role]) for role, name in roles.items()}
 
 
 def _translate(source: str, wanted: Sequence[str]) -> None:
@@ -937,13 +956,10 @@ def _translate(source: str, wanted: Sequence[str]) -> None:
     key = source + repr(tuple(wanted))
     if key in _TRANSLATED:
         return
-    from equilibrist.native.pyc import Module, TranslationError
+    from equilibrist.native.pyc import TranslationError
 
     try:
-        mod = Module(source, constants=linear_constants(),
-                     library=linear_layout_source() + LINEAR_SOURCE)
-        for name in wanted:
-            mod.function(name, _FUNCTION_TYPES[name])
+        translate_controller(source, {name: name for name in wanted})
     except TranslationError as exc:
         raise ControllerError(f"the controller's source: {exc}") from None
     if len(_TRANSLATED) > 256:
@@ -1328,6 +1344,7 @@ def _build_none(request: ControllerRequest) -> None:
 
 
 __all__ = [
+    "CONTRACT_TYPES",
     "CONTROLLER_KINDS",
     "LINEAR_BLOCKS",
     "LINEAR_HEADER",
@@ -1351,4 +1368,5 @@ __all__ = [
     "register_controller",
     "registered_controllers",
     "supervisor_source",
+    "translate_controller",
 ]

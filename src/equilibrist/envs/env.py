@@ -18,7 +18,7 @@ from gymnasium import spaces
 from equilibrist.control._checks import given_text, real_array
 from equilibrist.envs._core import FINITE, OPTION_DEFAULTS, Core, EnvError, as_actions, build_core
 from equilibrist.errors import DimensionError, nearest
-from equilibrist.native.simcore import EnvSteps
+from equilibrist.native.steps import EnvSteps
 from equilibrist.sim.noise import generator_state
 
 # Backends of matplotlib that draw to files only.

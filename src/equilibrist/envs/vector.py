@@ -35,7 +35,7 @@ from gymnasium.vector.utils import batch_space
 
 from equilibrist.envs._core import EnvError, as_actions
 from equilibrist.envs.env import Renderer, _spaces, open_core
-from equilibrist.native.simcore import EnvSteps
+from equilibrist.native.steps import EnvSteps
 
 # Fewer copies than this step on one thread: starting a parallel region
 # (waking the other threads and waiting for them) costs more than it saves.

@@ -59,13 +59,6 @@ if TYPE_CHECKING:
     from equilibrist.hil.firmware import Adapter
     from equilibrist.numeric.system import System
 
-#: The translation's argument types of the contract's functions (``t`` a float, the rest
-#: 1-D float arrays).
-FUNCTION_TYPES = {
-    "output": ("f", "F1", "F1", "F1", "F1", "F1"),
-    "update": ("f", "F1", "F1", "F1", "F1", "F1", "F1"),
-    "estimate": ("f", "F1", "F1", "F1", "F1", "F1"),
-}
 
 #: The ``<math.h>`` functions a translated library may call (what its header names).
 C_MATH = ("acos", "asin", "atan", "atan2", "ceil", "copysign", "cos", "cosh", "exp", "expm1",
@@ -130,19 +123,14 @@ class Translation:
 def translate(ctrl: NonlinearController, prefix: str) -> Translation:
     """*ctrl*'s ``output``, ``update`` (and ``estimate``) in C, every function ``static``
     and named with *prefix*, with the helpers they call."""
-    from equilibrist.control.controller import (
-        LINEAR_SOURCE,
-        linear_constants,
-        linear_layout_source,
-    )
+    from equilibrist.control.controller import translate_controller
     from equilibrist.native import pyc
     from equilibrist.numeric import libm
 
     wanted = ("output", "update", "estimate") if ctrl.has_estimate else ("output", "update")
-    mod = pyc.Module(ctrl.source, constants=linear_constants(), prefix=prefix,
-                     library=linear_layout_source() + LINEAR_SOURCE)
     try:
-        names = {w: mod.function(w, FUNCTION_TYPES[w]).name for w in wanted}
+        mod, fns = translate_controller(ctrl.source, {w: w for w in wanted}, prefix=prefix)
+        names = {w: fn.name for w, fn in fns.items()}
     except pyc.TranslationError as exc:
         raise ExportError(f"the {ctrl.name} controller's source: {exc}") from None
     code = mod.c_source()
@@ -573,7 +561,7 @@ class CompiledNonlinear:
         self._dir.cleanup()
 
 
-__all__ = ["C_MATH", "FUNCTION_TYPES", "CompiledNonlinear", "Interface", "Translation",
+__all__ = ["C_MATH", "CompiledNonlinear", "Interface", "Translation",
            "check_files", "default_start", "design_id", "export_files", "hil_adapter",
            "interface_of", "library_files", "math_functions", "nonlinear_files",
            "recorded_vectors", "register_nonlinear_exporter", "translate"]

@@ -28,12 +28,13 @@ from typing import Any
 import numpy as np
 
 from equilibrist.control.controller import (
+    CONTRACT_TYPES,
     LINEAR_SOURCE,
     NonlinearController,
     check_source,
-    linear_constants,
     linear_layout_source,
     linear_unrolled_source,
+    translate_controller,
 )
 from equilibrist.native import build, pyc
 from equilibrist.numeric import libm
@@ -80,11 +81,6 @@ def _body() -> str:
     return (Path(__file__).parent / "core.c").read_text()
 
 
-_LINEAR_TYPES = {
-    "linear_output": ("f", "F1", "F1", "F1", "F1", "F1"),
-    "linear_update": ("f", "F1", "F1", "F1", "F1", "F1", "F1"),
-    "linear_estimate": ("f", "F1", "F1", "F1", "F1", "F1"),
-}
 
 _GLUE = """
 static inline void eq_f(const double *x, const double *u, const double *p, double *out)
@@ -140,18 +136,14 @@ def controller_module(key: bytes | tuple[int, ...] | None = None,
     ``update`` and ``estimate`` (a linear controller's made for *key*, or *controller*'s
     beside the generic linear library it may call)."""
     if controller is None:
-        ctrl = pyc.Module(linear_library(key), constants=linear_constants(), prefix="ctrl_")
-        wanted = {"output": "linear_output", "update": "linear_update",
-                  "estimate": "linear_estimate"}
+        ctrl, fns = translate_controller(
+            linear_library(key), {role: f"linear_{role}" for role in CONTRACT_TYPES}, library="")
     else:
         check_source(controller.source, has_estimate=controller.has_estimate)
-        ctrl = pyc.Module(controller.source, constants=linear_constants(), prefix="ctrl_",
-                          library=linear_library(None))
-        wanted = {"output": "output", "update": "update",
-                  "estimate": "estimate" if controller.has_estimate else "linear_estimate"}
-    names = {short: ctrl.function(name, _LINEAR_TYPES["linear_" + short]).name
-             for short, name in wanted.items()}
-    return ctrl, names
+        ctrl, fns = translate_controller(controller.source, {
+            "output": "output", "update": "update",
+            "estimate": "estimate" if controller.has_estimate else "linear_estimate"})
+    return ctrl, {role: fn.name for role, fn in fns.items()}
 
 
 def unit_source(system: System, key: bytes | tuple[int, ...] | None = None,
@@ -393,10 +385,6 @@ class NativeCore:
             raise MemoryError("the simulation core ran out of memory")
         del keep
 
-    def measure_one(self, x: Any, c_idx: Any, lv: Any, rng: Any, y: Any) -> None:
-        self.measurer(x=np.ascontiguousarray(x, dtype=float), c_idx=c_idx, lv=lv, rng=rng,
-                      y=y)()
-
     def measurer(self, *, x: np.ndarray, c_idx: Any, lv: Any, rng: np.ndarray,
                  y: np.ndarray) -> Callable[[], None]:
         """``measure()``: the sensors of *x* into *y*, with the noise ``lv z`` drawn from
@@ -419,16 +407,6 @@ class NativeCore:
     def scratch(self, p_len: int, ny: int, nw: int) -> np.ndarray:
         width = int(self.lib.eq_scratch_width(p_len, ny, nw))
         return np.zeros((layout.constants()["_SCR_ROWS"], width))
-
-    def advance_one(self, k: int, x: Any, u_app: Any, op: Any, p_sets: Any, p_switch: Any,
-                    lin_s: Any, region: Any, kicks: Any, kick_value: Any, pulses: Any,
-                    pulse_value: Any, lw: Any, rng: Any, iopts: Any, fopts: Any, status: Any,
-                    scr: Any) -> bool:
-        return self.advancer(
-            x=x, u_app=np.ascontiguousarray(u_app, dtype=float), op=op, p_sets=p_sets,
-            p_switch=p_switch, lin_s=lin_s, region=region, kicks=kicks, kick_value=kick_value,
-            pulses=pulses, pulse_value=pulse_value, lw=lw, rng=rng, iopts=iopts, fopts=fopts,
-            status=status, scr=scr)(int(k))
 
     def advancer(self, *, x: np.ndarray, u_app: np.ndarray, op: Any, p_sets: Any,
                  p_switch: Any, lin_s: Any, region: Any, kicks: Any, kick_value: Any,
@@ -461,9 +439,11 @@ class NativeCore:
 
     def plant(self, *, x: np.ndarray, p: np.ndarray, rate: float, n_sub: int,
               lw: np.ndarray, outputs: np.ndarray, lv: np.ndarray,
-              rng: np.ndarray) -> PlantSteps:
+              rng: np.ndarray) -> Any:
         """The plant alone, sample by sample, as ``simulate`` advances it around a controller
         written in Python: see :class:`PlantSteps`."""
+        from equilibrist.native.steps import PlantSteps
+
         return PlantSteps(self, x=x, p=p, rate=rate, n_sub=n_sub, lw=lw, outputs=outputs, lv=lv,
                           rng=rng)
 
@@ -503,151 +483,6 @@ class NativeCore:
                                 _ptr(c_idx), len(c_idx), _ptr(gain), _ptr(y), _ptr(off),
                                 _ptr(e))
 
-    # -- the environments' steps (equilibrist.envs) -----------------------------------------
-    def env_step_many(self, actions: Any, fs: Any, us: Any, obs: Any, rewards: Any, flags: Any,
-                      cf: Any, ci: Any, chunks: int) -> int:
-        """One control period of every copy (*chunks* blocks in parallel): the count of
-        actions that are not finite numbers (then nothing is done)."""
-        for arr, dtype, what in ((fs, np.float64, "fs"), (us, np.uint64, "us"),
-                                 (obs, np.float64, "obs"), (rewards, np.float64, "rewards"),
-                                 (flags, np.bool_, "flags")):
-            self._out(arr, dtype, what)
-        actions = np.ascontiguousarray(actions, dtype=float)
-        bad = int(self.lib.eq_env_step_many(
-            _ptr(actions), _ptr(fs), _ptr(us), _ptr(obs), obs.shape[1], _ptr(rewards),
-            _ptr(flags), fs.shape[0], _ptr(cf), _ptr(ci), int(chunks)))
-        if bad < 0:
-            raise MemoryError("the environments' step ran out of memory")
-        return bad
-
-    def env_step_one(self, a: Any, fs: Any, us: Any, obs: Any, cf: Any, ci: Any) -> tuple[float, int]:
-        """One control period of row 0: ``(reward, status)`` (status 3: *a* not finite)."""
-        status = np.zeros(1, dtype=np.int64)
-        a = np.ascontiguousarray(a, dtype=float)
-        reward = self.lib.eq_env_step_one(_ptr(a), _ptr(fs), _ptr(us), _ptr(obs), _ptr(cf),
-                                          _ptr(ci), _ptr(status))
-        return float(reward), int(status[0])
-
-    def env_begin(self, fs: Any, us: Any, obs: Any, cf: Any, ci: Any) -> None:
-        self.lib.eq_env_begin_one(_ptr(fs), _ptr(us), _ptr(obs), _ptr(cf), _ptr(ci))
-
-    def env_reset_many(self, fs: Any, us: Any, obs: Any, cf: Any, ci: Any) -> None:
-        self.lib.eq_env_reset_many(_ptr(fs), _ptr(us), _ptr(obs), obs.shape[1], fs.shape[0],
-                                   _ptr(cf), _ptr(ci))
-
-
-class PlantSteps:
-    """The plant of a closed loop whose controller runs in Python, one sample at a time.
-
-    The same two halves of a sample as ``simulate`` with a Python controller
-    (:func:`equilibrist.sim.run.simulate`): :meth:`measure` reads the
-    sensors with their noise (``y = x[outputs] + lv z``), :meth:`advance`
-    holds the applied input over the period's *n_sub* RK4 steps, each with
-    its process noise ``lw z`` (``lw``: ``n x nw``, the noise gain over the
-    root of the step), drawn from the generator state *rng* in the same
-    order. Same seed, same inputs: the same bits as ``simulate``. *x*, *p*
-    and *rng* are the caller's arrays (updated in place, kept by reference);
-    the arrays' addresses are taken once, a call costs one ctypes call.
-    """
-
-    def __init__(self, core: NativeCore, *, x: np.ndarray, p: np.ndarray, rate: float,
-                 n_sub: int, lw: np.ndarray, outputs: np.ndarray, lv: np.ndarray,
-                 rng: np.ndarray) -> None:
-        n, m = core.system.n_states, core.system.n_inputs
-        core._out(x, np.float64, "x")
-        core._out(rng, np.uint64, "rng")
-        h = 1.0 / (rate * n_sub)
-        self.core = core
-        self.x, self.rng = x, rng
-        self.status = np.zeros(len(layout.STATUS), dtype=np.int64)
-        p_sets = np.concatenate([np.asarray(p, dtype=float), np.zeros(2 * m)])[None, :]
-        self.lw = np.ascontiguousarray(lw, dtype=float).reshape(n, -1)
-        self.c_idx = np.ascontiguousarray(outputs, dtype=np.int64)
-        self.lv = np.ascontiguousarray(lv, dtype=float)
-        self.y = np.zeros(len(self.c_idx))
-        self.u = np.zeros(m)
-        region = np.array([[-np.inf] * n, [np.inf] * n])
-        self._advance = core.advancer(
-            x=x, u_app=self.u, op=np.zeros(n + m), p_sets=p_sets,
-            p_switch=np.zeros(1, dtype=np.int64), lin_s=None, region=region,
-            kicks=np.zeros((0, 2), dtype=np.int64), kick_value=np.zeros(0),
-            pulses=np.zeros((0, 3), dtype=np.int64), pulse_value=np.zeros(0), lw=self.lw,
-            rng=rng,
-            iopts=layout.IOPTS.pack(int, n_samples=0, record=0, delay=0, n_sub=int(n_sub),
-                                    integrator=layout.INTEGRATORS["rk4"], estimates=0,
-                                    accumulate=0),
-            fopts=layout.FOPTS.pack(h=h, rtol=0.0, atol=0.0, rate=float(rate)),
-            status=self.status, scr=core.scratch(p_sets.shape[1], 0, self.lw.shape[1]))
-        self._measure = core.measurer(x=x, c_idx=self.c_idx, lv=self.lv, rng=rng, y=self.y)
-
-    def measure(self) -> np.ndarray:
-        """The sensors now, with their noise (a new array)."""
-        self._measure()
-        return self.y.copy()
-
-    def advance(self, k: int, u_app: np.ndarray) -> None:
-        """The period after sample *k* with *u_app* held (x updated in place)."""
-        self.u[:] = u_app
-        self._advance(k)
-
-
-class EnvSteps:
-    """The environments' compiled steps bound to one environment's arrays.
-
-    The pointers of the environment's rows (*fs*, *us*) and settings (*cf*,
-    *ci*) are taken once; an action is copied into :attr:`a`, and the step
-    writes :attr:`obs`, :attr:`rewards` and :attr:`flags` (terminated, then
-    truncated), which the caller copies out (a call through ctypes costs
-    about a microsecond, taking an array's address as much again).
-    """
-
-    def __init__(self, core: NativeCore, fs: np.ndarray, us: np.ndarray, cf: np.ndarray,
-                 ci: np.ndarray, n_obs: int) -> None:
-        for arr, dtype, what in ((fs, np.float64, "fs"), (us, np.uint64, "us"),
-                                 (cf, np.float64, "cf"), (ci, np.int64, "ci")):
-            core._out(arr, dtype, what)
-        self.core = core
-        self.fs, self.us, self.cf, self.ci = fs, us, cf, ci
-        copies = fs.shape[0]
-        self.copies = copies
-        self.n_obs = n_obs
-        self.a = np.zeros((copies, core.system.n_inputs))
-        self.obs = np.zeros((copies, n_obs))
-        self.rewards = np.zeros(copies)
-        self.flags = np.zeros((2, copies), dtype=np.bool_)
-        self.status = np.zeros(1, dtype=np.int64)
-        self._p = [int(arr.ctypes.data) for arr in (self.a, fs, us, self.obs, self.rewards,
-                                                     self.flags, cf, ci, self.status)]
-        self._many = core.lib.eq_env_step_many
-        self._one = core.lib.eq_env_step_one
-
-    def step_many(self, chunks: int) -> int:
-        """Every copy, action :attr:`a`, in *chunks* parallel blocks: the count of actions
-        that are not finite numbers (then nothing is done)."""
-        a, fs, us, obs, rewards, flags, cf, ci, _st = self._p
-        bad = self._many(a, fs, us, obs, self.n_obs, rewards, flags, self.copies, cf, ci, chunks)
-        if bad < 0:
-            raise MemoryError("the environments' step ran out of memory")
-        return int(bad)
-
-    def step_one(self) -> tuple[float, int]:
-        """Row 0 with action ``a[0]``: ``(reward, status)``, observation in ``obs[0]``."""
-        a, fs, us, obs, _r, _f, cf, ci, st = self._p
-        reward = self._one(a, fs, us, obs, cf, ci, st)
-        return reward, int(self.status[0])
-
-    def begin_one(self) -> np.ndarray:
-        """Row 0's episode started from its row: its first observation (a new array)."""
-        _a, fs, us, obs, _r, _f, cf, ci, _st = self._p
-        self.core.lib.eq_env_begin_one(fs, us, obs, cf, ci)
-        return self.obs[0].copy()
-
-    def reset_many(self) -> np.ndarray:
-        """Every copy drawn and started: the first observations (a new array)."""
-        _a, fs, us, obs, _r, _f, cf, ci, _st = self._p
-        self.core.lib.eq_env_reset_many(fs, us, obs, self.n_obs, self.copies, cf, ci)
-        return self.obs.copy()
-
 
 _CORES: dict[tuple[Path, Any, str | None], NativeCore] = {}
 
@@ -672,5 +507,5 @@ def load_core(system: System, key: bytes | tuple[int, ...] | None = None,
     return core
 
 
-__all__ = ["FIELDS", "GENERATOR", "EnvSteps", "NativeCore", "PlantSteps", "RunArgs", "linear_library", "load_core", "loaded",
+__all__ = ["FIELDS", "GENERATOR", "NativeCore", "RunArgs", "linear_library", "load_core", "loaded",
            "unit_source"]

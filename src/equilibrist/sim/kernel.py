@@ -14,7 +14,7 @@ The entries (see ``core.c`` for the array conventions):
     One closed-loop run with a compiled controller (resumable by sample range).
 ``run_many``
     Many independent runs in parallel (OpenMP threads over runs).
-``measure_one``, ``advance_one``
+``measurer``, ``advancer`` (of :attr:`Kernel.generic`)
     The two halves of a sample, for controllers written in Python.
 ``rk4_steps``
     Plain RK4 steps with the input held (playground, stepper).
@@ -131,20 +131,8 @@ class Kernel:
             accs, statuses, fell_xs, x_ends, stop, threads=_THREADS[0],
         )
 
-    def measure_one(self, *, x: Any, c_idx: Any, lv: Any, rng: Any, y: Any) -> None:
-        self.generic.measure_one(x, c_idx, lv, rng, y)
-
     def scratch(self, *, p_len: int, ny: int, nw: int) -> Any:
         return self.generic.scratch(p_len, ny, nw)
-
-    def advance_one(self, *, k: int, x: Any, u_app: Any, op: Any, p_sets: Any, p_switch: Any,
-                    lin_s: Any, region: Any, kicks: Any, kick_value: Any, pulses: Any,
-                    pulse_value: Any, lw: Any, rng: Any, iopts: Any, fopts: Any, status: Any,
-                    scr: Any) -> bool:
-        return bool(self.generic.advance_one(
-            k, x, u_app, op, p_sets, p_switch, lin_s, region, kicks, kick_value, pulses,
-            pulse_value, lw, rng, iopts, fopts, status, scr,
-        ))
 
     def rk4_steps(self, *, x: Any, u: Any, p: Any, h: float, n_steps: int) -> None:
         self.generic.rk4_steps(x, u, p, h, n_steps)

@@ -23,7 +23,7 @@ How a sample runs (the rig as the simulator runs it, :mod:`equilibrist.sim.run`)
    ``--push`` of ``equilibrist simulate``);
 5. the plant advances one control period in RK4 steps of at most 1 ms on the
    compiled core, as ``simulate`` advances it around a Python controller
-   (:class:`~equilibrist.native.simcore.PlantSteps`): the process noise the
+   (:class:`~equilibrist.native.steps.PlantSteps`): the process noise the
    spec gives on the state rates is white noise of ``simulate``'s model
    (:meth:`~equilibrist.sim.noise.Noise.from_spec`), held over each physics
    step, and the sensors' noise is drawn from the same generator: with the
@@ -444,10 +444,9 @@ class Session:
         self.messages.append(self.describe())
         self.messages.append(self.design_message)
         self.reset(kick=0.5 * float(spec.design_scales.get(system.state_names[self.angle_index], 0.1)))
-        # Compile (or load) the core's entry now, in the thread that builds the session,
-        # not at the first sample on the server's event loop.
-        self.kernel.rk4_steps(self.x.copy(), np.ascontiguousarray(self.u_app, dtype=float),
-                              self.p, self.h, 0)
+        # The core was built (or loaded) above, in the thread that builds the session, not
+        # at the first sample on the server's event loop; the plant's steps bind to it now.
+        self.plant = self._plant_steps()
 
     @staticmethod
     def _param_specs(base: System) -> list[Any]:
