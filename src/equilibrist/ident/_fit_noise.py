@@ -1,0 +1,142 @@
+"""The linear-Gaussian pieces of the fit: the noise levels to start from, the
+sampled model (Van Loan's method), the steady-state Kalman gain, and the
+inverse of an information matrix on its determined directions."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+
+from equilibrist.errors import EquilibristError
+from equilibrist.ident.log import IdentificationError, Log
+from equilibrist.numeric.system import System
+
+# A log-parameter direction whose information is below this fraction of the
+# largest is not determined at all.
+STRUCTURAL_RATIO = 1e-9
+
+
+def _van_loan(A: np.ndarray, GQG: np.ndarray, T: float) -> np.ndarray:
+    """``int_0^T e^(A s) GQG e^(A' s) ds``."""
+    return _discretize(A, GQG, T)[1]
+
+
+def _discretize(A: np.ndarray, GQG: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
+    """``e^(A T)`` and ``int_0^T e^(A s) GQG e^(A' s) ds`` (Van Loan: one exponential)."""
+    from scipy.linalg import expm
+
+    n = A.shape[0]
+    M = np.zeros((2 * n, 2 * n))
+    M[:n, :n] = -A
+    M[:n, n:] = GQG
+    M[n:, n:] = A.T
+    E = expm(M * T)
+    Ad = E[n:, n:].T
+    Q = Ad @ E[:n, n:]
+    return Ad, (Q + Q.T) / 2
+
+
+def _steady_gain(Ad: np.ndarray, C: np.ndarray, Qd: np.ndarray,
+                 R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The steady-state Kalman gain ``K`` and innovation covariance ``S`` of the sampled
+    model (the filter Riccati equation by iteration, else scipy's DARE, else ``P = Qd``)."""
+    from scipy.linalg import solve_discrete_are
+
+    P = _filter_riccati(Ad, C, Qd, R)
+    if P is None:
+        try:
+            P = solve_discrete_are(Ad.T, C.T, Qd, R)
+        except (ValueError, np.linalg.LinAlgError):
+            P = Qd.copy()
+    S = C @ P @ C.T + R
+    return P @ C.T @ np.linalg.inv(S), (S + S.T) / 2
+
+
+def _filter_riccati(Ad: np.ndarray, C: np.ndarray, Qd: np.ndarray, R: np.ndarray) -> np.ndarray | None:
+    """The Kalman predictor's steady covariance ``P = Ad P (I + C'R^-1 C P)^-1 Ad' + Qd`` by
+    the structure-preserving doubling algorithm (quadratic convergence; None if it does not)."""
+    n = Ad.shape[0]
+    A = Ad.T.copy()
+    G = C.T @ np.linalg.solve(R, C)
+    H = Qd.copy()
+    eye = np.eye(n)
+    for _ in range(60):
+        W = eye + G @ H
+        try:
+            WA = np.linalg.solve(W, A)
+            WG = np.linalg.solve(W, G)
+        except np.linalg.LinAlgError:
+            return None
+        H_next = H + A.T @ H @ WA
+        G = G + A @ WG @ A.T
+        A = A @ WA
+        if not np.all(np.isfinite(H_next)):
+            return None
+        if np.max(np.abs(H_next - H)) <= 1e-13 * max(1.0, float(np.max(np.abs(H_next)))):
+            return (H_next + H_next.T) / 2
+        H = H_next
+    return None
+
+
+def _information_inverse(H: np.ndarray) -> np.ndarray:
+    """``H^-1`` by Cholesky, or the pseudo-inverse on the determined directions."""
+    from scipy.linalg import LinAlgError, cho_factor, cho_solve
+
+    H = (H + H.T) / 2
+    try:
+        return cho_solve(cho_factor(H), np.eye(H.shape[0]))
+    except LinAlgError:
+        lam, V = np.linalg.eigh(H)
+        keep = lam > STRUCTURAL_RATIO * max(float(lam.max()), 1e-300)
+        return (V[:, keep] / lam[keep]) @ V[:, keep].T
+
+
+def _sensor_prior(system: System, log: Log, given: Mapping[str, float] | None) -> np.ndarray:
+    given = dict(given or {})
+    sigma = []
+    for j, name in enumerate(log.output_names):
+        if name in given:
+            v = float(given[name])
+            if not (math.isfinite(v) and v > 0):
+                # A perfect sensor has infinite weight: the fit would chase it without end.
+                raise IdentificationError(f"--sensor-noise {name}={v:g}: a sensor's standard "
+                                          "deviation must be a finite number > 0")
+        elif name in system.spec.sensor_noise:
+            v = float(system.spec.sensor_noise[name])
+        else:  # white sensor noise dominates second differences at a rig's rate
+            d2 = np.diff(log.outputs[:, j], 2)
+            v = float(np.std(d2) / math.sqrt(6.0)) if d2.size else 0.0
+        if not (math.isfinite(v) and v > 0):
+            scale = float(np.std(log.outputs[:, j]))
+            v = max(1e-6 * scale, 1e-9)
+        sigma.append(v)
+    return np.array(sigma)
+
+
+def _process_prior(system: System, given: Mapping[str, float] | None) -> np.ndarray:
+    given = dict(given or {})
+    spec = system.spec
+    q = np.zeros(system.n_states)
+    for i, s in enumerate(system.state_names):
+        if s in given:
+            q[i] = float(given[s]) ** 2
+        elif s in spec.process_noise:
+            q[i] = float(spec.process_noise[s]) ** 2
+    return q
+
+
+def _state_floor(system: System) -> np.ndarray:
+    """A tiny variance per state, so that a state without process noise stays weighted finitely."""
+    scales = system.spec.design_scales
+    return np.array([(1e-4 * float(scales.get(s, 1.0))) ** 2 for s in system.state_names])
+
+
+def _linearization(system: System, xs: np.ndarray, u_mean: np.ndarray) -> np.ndarray:
+    x_mid = np.median(xs, axis=0)
+    try:
+        A, _B = system.jacobians(x_mid, u_mean)
+    except EquilibristError:  # a singular point: the segments' covariance without drift
+        A = np.zeros((system.n_states, system.n_states))
+    return A
