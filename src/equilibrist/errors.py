@@ -56,6 +56,10 @@ class SimulationError(EquilibristError, ValueError):
     """A simulation that cannot be run as asked."""
 
 
+class ControllerError(EquilibristError, ValueError):
+    """A controller that does not exist, does not apply, or is not well formed."""
+
+
 class ExportError(EquilibristError, ValueError):
     """An export that cannot be written as asked."""
 

@@ -269,32 +269,43 @@ def add_design_options(parser: argparse.ArgumentParser) -> None:
     add_items(parser, "--at", marker="=", metavar="STATE=VALUE",
               help="design at the equilibrium with these states (the others solved); "
               "default the canonical operating point")
-    parser.add_argument("--horizon", metavar="N", default=None,
-                        help="prediction horizon of --controller mpc [samples] (default 30)")
-    parser.add_argument("--balance", choices=("lqr", "lqg"), default=None,
-                        help="what balances after --controller swingup's catch (default lqr)")
 
 
-def controller_options(args: argparse.Namespace) -> dict[str, Any]:
-    """Options of the registry's controller builders (``--horizon`` for MPC, ``--balance``
-    for the swing-up)."""
+def add_controller(parser: argparse.ArgumentParser, surface: str, *, default: str | None,
+                   help: str) -> None:
+    """``--controller`` with the registry's kinds offered on *surface* as its choices (their
+    one-line helps in the help), and each of those kinds' own options
+    (:mod:`equilibrist.control.kinds`)."""
+    from equilibrist.control import kinds
+
+    offered = kinds.all_kinds(surface)
+    listed = "; ".join(f"{k.name}: {k.help}" for k in offered)
+    parser.add_argument("--controller", choices=[k.name for k in offered], default=default,
+                        help=f"{help} ({listed})")
+    for opt in kinds.options(surface):
+        parser.add_argument(opt.flag, metavar=opt.metavar, choices=opt.choices, default=None,
+                            dest=opt.key, help=opt.help)
+
+
+def controller_options(args: argparse.Namespace, kind: str, surface: str) -> dict[str, Any]:
+    """The options of the kind *kind* given on the command line (parsed); an option of
+    another kind is refused in one line."""
+    from equilibrist.control import kinds
+
+    record = kinds.get(kind, surface)
+    own = {o.flag for o in record.options}
     out: dict[str, Any] = {}
-    trajectory = getattr(args, "trajectory", None)
-    if trajectory is not None:
-        out["trajectory"] = trajectory
-    balance = getattr(args, "balance", None)
-    if balance is not None:
-        out["balance"] = balance
-    value = getattr(args, "horizon", None)
-    if value is None:
-        return out
-    try:
-        horizon = int(value)
-    except ValueError:
-        horizon = 0
-    if horizon < 1 or str(horizon) != str(value).strip():
-        raise UsageError(f"--horizon must be a whole number of samples >= 1, got {value!r}")
-    out["horizon"] = horizon
+    for opt in kinds.options(surface):
+        text = getattr(args, opt.key, None)
+        if text is None:
+            continue
+        if opt.flag not in own:
+            owners = " or ".join(f"--controller {k}" for k in kinds.owners(opt.flag, surface))
+            raise UsageError(f"{opt.flag} is an option of {owners}: the {kind} controller "
+                             "takes none")
+        for o in record.options:
+            if o.flag == opt.flag:
+                out[o.key] = o.value(str(text))
     return out
 
 

@@ -29,6 +29,7 @@ shows; swingup and mpc are designed by their own modules when installed; a
 controller that does not apply to the system is refused in one line.
 """
 
+# The project's own kinds (the choices come from equilibrist.control.kinds, which may have more).
 CONTROLLERS = ("lqr", "lqg", "swingup", "mpc", "none")
 
 
@@ -43,9 +44,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     common.add_system(p)
     p.add_argument("--rate", metavar="HZ", help="sample rate of a discrete design [Hz]")
-    p.add_argument("--controller", choices=CONTROLLERS, default="lqg",
-                   help="the controller to design (default lqg: the LQR and the Kalman filter)")
     common.add_design_options(p)
+    common.add_controller(p, "design", default="lqg",
+                          help="the controller to design (default lqg: the LQR and the Kalman "
+                          "filter)")
     common.add_set(p)
     common.add_params(p)
     common.add_json(p)
@@ -57,20 +59,21 @@ def run(args: argparse.Namespace) -> int:
 
     system = common.load_system(args)
     rate = None if args.rate is None else common.parse_number(args.rate, "--rate")
-    kind = args.controller
-    if kind == "none":
-        raise common.UsageError("--controller none is the open loop: there is nothing to design")
-    if kind not in ("lqr", "lqg"):
-        from equilibrist.control.controller import (
-            ControllerRequest,
-            build_controller,
-            describe_controller,
-        )
+    from equilibrist.control import kinds
 
-        request = ControllerRequest(system=system, rate=rate,
-                                    design_options=common.design_options(args),
-                                    options=common.controller_options(args))
-        built = build_controller(kind, request)
+    kind = args.controller
+    record = kinds.get(kind, "design")
+    if record.open_loop:
+        raise common.UsageError(f"--controller {kind} is the open loop: there is nothing to "
+                                "design")
+    options = common.controller_options(args, kind, "design")
+    if not record.linear:
+        from equilibrist.control.controller import describe_controller
+
+        request = kinds.ControllerRequest(system=system, rate=rate,
+                                          design_options=common.design_options(args),
+                                          options=options)
+        built = record.make(request)
         info = {"kind": kind} if built is None else describe_controller(built, kind)
         if args.json:
             common.print_json(info)

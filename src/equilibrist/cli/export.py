@@ -15,7 +15,7 @@ if TYPE_CHECKING:
     from equilibrist.export.writer import ExportReport
     from equilibrist.numeric.system import System
 
-# The registry's names (equilibrist.control.controller.CONTROLLER_KINDS).
+# The project's own kinds (the choices come from equilibrist.control.kinds, which may have more).
 CONTROLLERS = ("lqg", "lqr", "swingup", "mpc", "none")
 PRECISIONS = ("double", "float")
 
@@ -49,9 +49,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     common.add_system(p)
-    p.add_argument("--controller", choices=CONTROLLERS, default="lqg",
-                   help="lqg: Kalman filter on the measured outputs; lqr: full state measured "
-                   "(default lqg)")
     p.add_argument("--rate", metavar="HZ", default=None,
                    help="sample rate [Hz] (default: the system's control rate)")
     p.add_argument("--precision", choices=PRECISIONS, default="double",
@@ -62,6 +59,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", metavar="DIR", default=None,
                    help="output folder (default ./<system>_<controller>)")
     common.add_design_options(p)
+    common.add_controller(p, "export", default="lqg", help="the controller to export (default lqg)")
     p.add_argument("--duration", metavar="S", default=None,
                    help="length of the recorded test-vector run [s]")
     p.add_argument("--seed", type=int, default=0, help="noise seed of the test-vector run")
@@ -88,8 +86,12 @@ def run(args: argparse.Namespace) -> int:
         duration = common.parse_number(args.duration, "--duration")
         if not (math.isfinite(duration) and duration > 0):
             raise ExportError(f"--duration must be a positive number of seconds, got {duration:g}")
-    if args.controller == "none":
-        raise ExportError("--controller none is the open loop: there is no controller to export")
+    from equilibrist.control import kinds
+
+    record = kinds.get(args.controller, "export")
+    if record.open_loop:
+        raise ExportError(f"--controller {args.controller} is the open loop: there is no "
+                          "controller to export")
     _check_options(args)
     out = Path(args.out) if args.out else Path(f"{c_identifier(args.system)}_{args.controller}")
     check_folder(out, force=args.force)
@@ -106,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
 def _export(args: argparse.Namespace, out: Path, rate: float | None, duration: float | None,
             start: RecordedStart) -> int:
     from equilibrist.errors import ExportError
-    from equilibrist.export.writer import check_rate, export_c
+    from equilibrist.export.writer import check_rate
 
     system = common.load_system(args)
     if system.n_inputs == 0:
@@ -117,33 +119,14 @@ def _export(args: argparse.Namespace, out: Path, rate: float | None, duration: f
 
     check_duration(duration, rate, "--duration")  # bounded before the recorded run
 
-    if args.controller not in ("lqg", "lqr"):
-        from equilibrist.control.controller import ControllerRequest, build_controller
-        from equilibrist.export.writer import EXPORTERS, load_exporter
+    from equilibrist.control import kinds
 
-        options = common.controller_options(args)
-        if args.controller == "mpc":
-            from equilibrist.control.mpc import HORIZON
-            from equilibrist.export.mpc_c import check_horizon
-
-            check_horizon(system, options.get("horizon", HORIZON))  # before the QP is built
-        request = ControllerRequest(system=system, rate=rate,
-                                    design_options=common.design_options(args),
-                                    options=options)
-        built = build_controller(args.controller, request)
-        exporter = EXPORTERS.get(args.controller) or load_exporter(args.controller)
-        if exporter is None:
-            raise ExportError(f"the {args.controller} controller of {system.key} has no C "
-                              "exporter in this installation")
-        done = exporter(built, out, system=system, precision=args.precision,
-                        duration=duration, seed=args.seed, force=args.force)
-        return _report(args, done, system, start)
-
-    from equilibrist.control.design import design
-
-    result = design(system, rate=rate, **common.design_options(args))
-    done = export_c(result, out, controller=args.controller, precision=args.precision,
-                    duration=duration, seed=args.seed, system=system, force=args.force)
+    request = kinds.ControllerRequest(
+        system=system, rate=rate, design_options=common.design_options(args),
+        options=common.controller_options(args, args.controller, "export"))
+    done = kinds.get(args.controller, "export").write_export(
+        request, out, precision=args.precision, duration=duration, seed=args.seed,
+        force=args.force)
     return _report(args, done, system, start)
 
 
@@ -156,12 +139,7 @@ def _check_options(args: argparse.Namespace) -> None:
         raise ExportError(f"--out {args.out!r}: expected the name of the output folder")
     if args.seed < 0:
         raise ExportError(f"--seed {args.seed}: expected a whole number >= 0")
-    if args.horizon is not None and args.controller != "mpc":
-        raise ExportError(f"--horizon is the prediction horizon of --controller mpc: the "
-                          f"{args.controller} controller takes none")
-    if args.balance is not None and args.controller != "swingup":
-        raise ExportError(f"--balance chooses what balances after --controller swingup's catch: "
-                          f"the {args.controller} controller takes none")
+    common.controller_options(args, args.controller, "export")  # another kind's options
 
 
 def _report(args: argparse.Namespace, done: ExportReport, system: System,

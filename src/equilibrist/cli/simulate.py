@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from equilibrist.sim.events import Event
     from equilibrist.sim.signals import PRBS, Chirp
 
-# The registry's names (equilibrist.control.controller.CONTROLLER_KINDS).
+# The project's own kinds (the choices come from equilibrist.control.kinds, which may have more).
 CONTROLLERS = ("lqr", "lqg", "swingup", "mpc", "tvlqr", "none")
 
 _EPILOG = """\
@@ -69,12 +69,9 @@ without the progress bar.
 def add_run_options(p: argparse.ArgumentParser) -> None:
     """The options shared by ``simulate`` and ``batch``."""
     common.add_system(p)
-    p.add_argument("--controller", choices=CONTROLLERS,
-                   help="lqr (full state), lqg (Kalman filter + LQR), swingup, mpc, tvlqr (track "
-                   "--trajectory, then balance), or none (open loop); default lqg, none for a "
-                   "system without input; one that does not apply to the system is refused")
-    p.add_argument("--trajectory", metavar="FILE.npz",
-                   help="with --controller tvlqr: the plan to track ('equilibrist trajopt --out')")
+    common.add_controller(p, "simulate", default=None,
+                          help="the controller (default lqg, none for a system without input); "
+                          "one that does not apply to the system is refused")
     p.add_argument("--duration", default="5", metavar="S", help="seconds to simulate (default 5)")
     p.add_argument("--rate", metavar="HZ",
                    help="controller sample rate [Hz] (default: the system's control rate)")
@@ -251,43 +248,36 @@ def build_run(args: argparse.Namespace) -> tuple[System, dict[str, Any]]:
     rate = (_positive(args.rate, "--rate") if args.rate is not None
             else float(system.spec.control_rate))
     step = None if args.physics_step is None else _positive(args.physics_step, "--physics-step")
-    kind = args.controller or ("lqg" if system.n_inputs else "none")
+    name = args.controller or ("lqg" if system.n_inputs else "none")
+    from equilibrist.control import kinds
+
+    kind = kinds.get(name, "simulate")
     reference = None if args.reference is None else parse_signal(args.reference)
     noise_on = args.noise == "on"
     design_kwargs = common.design_options(args)
     outputs = design_kwargs.pop("outputs")
+    request = kinds.ControllerRequest(
+        system=system, rate=rate, design_options={"outputs": outputs, **design_kwargs},
+        tracking=reference is not None, options=common.controller_options(args, name, "simulate"),
+    )
     controller: AnyController | None = None
     noise = None
-    if kind == "none":
+    if kind.open_loop:
         for flag in ("q", "r", "qn", "rn"):
             if getattr(args, flag) is not None:
                 raise common.UsageError(f"--{flag} needs a controller (--controller lqr or lqg)")
         if noise_on:
             noise = Noise.from_spec(system, outputs=outputs, rate=rate)
-    elif kind in ("lqr", "lqg"):
-        from equilibrist.control.controller import LinearController
-        from equilibrist.control.design import design
-
-        d = design(system, outputs=outputs, rate=rate, **design_kwargs)
-        controller = LinearController.from_design(d, kind=kind, tracking=reference is not None)
-        if noise_on:
-            noise = Noise.from_design(d)
-        outputs = None
     else:
-        from equilibrist.control.controller import (
-            ControllerRequest,
-            build_controller,
-            measured_outputs,
-        )
+        from equilibrist.control.controller import measured_outputs
 
-        request = ControllerRequest(
-            system=system, rate=rate, design_options={"outputs": outputs, **design_kwargs},
-            tracking=reference is not None, options=common.controller_options(args),
-        )
-        controller = build_controller(kind, request)
-        measured = measured_outputs(controller) or outputs
+        controller = kind.make(request)
         if noise_on:
-            noise = Noise.from_spec(system, outputs=measured, rate=rate)
+            if kind.noise == "design":
+                noise = Noise.from_design(request.design())
+            else:
+                noise = Noise.from_spec(system, outputs=measured_outputs(controller) or outputs,
+                                        rate=rate)
         outputs = None
     options: dict[str, Any] = {
         "controller": controller,
@@ -304,14 +294,11 @@ def build_run(args: argparse.Namespace) -> tuple[System, dict[str, Any]]:
         "outputs": outputs,
         "max_steps": parse_max_steps(args.max_steps),
     }
-    if kind in ("swingup", "tvlqr") and "swingup" in _tasks(system):
+    if kind.task is not None and kind.task in _tasks(system):
         # A swing-up starts hanging: only the task's region (the cart's track) ends it.
         from equilibrist.tasks import get_task
 
-        options["region"] = dict(get_task(system, "swingup").region)
-    if getattr(args, "trajectory", None) is not None and kind != "tvlqr":
-        raise common.UsageError("--trajectory is the plan --controller tvlqr tracks: give "
-                                "--controller tvlqr, or leave out --trajectory")
+        options["region"] = dict(get_task(system, kind.task).region)
     return system, options
 
 

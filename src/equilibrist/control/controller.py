@@ -69,15 +69,10 @@ from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from equilibrist.errors import DesignError, DimensionError, EquilibristError
+from equilibrist.errors import ControllerError, DesignError, DimensionError
 
 if TYPE_CHECKING:
     from equilibrist.control.design import Design
-    from equilibrist.numeric.system import System
-
-
-class ControllerError(EquilibristError, ValueError):
-    """A controller that does not exist, does not apply, or is not well formed."""
 
 
 # -- the packed linear controller: one layout, read by the core, Python and C -------------------
@@ -1231,116 +1226,59 @@ def as_python_controller(obj: object) -> PythonController:
     )
 
 
-# -- the registry of controller builders (--controller) -------------------------------------
-#: The controllers the command line names, in its order.
+# -- the registry of controller kinds lives in equilibrist.control.kinds ---------------------
+#: The project's own kinds, in the command line's order (the registry lists every kind:
+#: :func:`equilibrist.control.kinds.names`).
 CONTROLLER_KINDS = ("lqr", "lqg", "swingup", "mpc", "tvlqr", "none")
 
 
-@dataclass(frozen=True, eq=False)
-class ControllerRequest:
-    """What a controller builder is asked for.
+def __getattr__(name: str) -> Any:
+    if name == "ControllerRequest":  # moved to equilibrist.control.kinds
+        from equilibrist.control.kinds import ControllerRequest
 
-    Attributes
-    ----------
-    system:
-        The plant (with its parameters).
-    rate:
-        Sample rate [Hz] of the run (None: the system's control rate).
-    design_options:
-        Keyword arguments of :func:`equilibrist.control.design.design`
-        (``q``, ``r``, ``qn``, ``rn``, ``outputs``, ``kalman_form``,
-        ``discretization``, ``at``).
-    tracking:
-        Whether the controller should follow a reference.
-    options:
-        Builder-specific options (``horizon`` for MPC, ...).
-    """
-
-    system: System
-    rate: float | None
-    design_options: Mapping[str, Any] = field(default_factory=dict)
-    tracking: bool = False
-    options: Mapping[str, Any] = field(default_factory=dict)
-
-    def design(self) -> Design:
-        """The discrete LQG design of the request (at its ``at`` operating point)."""
-        from equilibrist.control.design import design
-
-        rate = self.rate if self.rate is not None else float(self.system.spec.control_rate)
-        return design(self.system, rate=rate, **dict(self.design_options))
+        return ControllerRequest
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-ControllerBuilder = Callable[[ControllerRequest], "LinearController | NonlinearController | PythonController | None"]
-_BUILDERS: dict[str, ControllerBuilder] = {}
+def register_controller(name: str) -> Callable[[Callable[[Any], Any]], Callable[[Any], Any]]:
+    """Decorator: *builder* (request -> controller) as the kind *name* in this process; a
+    kind of its own module (:class:`equilibrist.control.kinds.ControllerKind`) says more."""
 
+    def add(builder: Callable[[Any], Any]) -> Callable[[Any], Any]:
+        from equilibrist.control.kinds import ControllerKind, register
 
-def register_controller(name: str) -> Callable[[ControllerBuilder], ControllerBuilder]:
-    """Decorator: register *builder* as ``--controller name``.
-
-    A builder takes a :class:`ControllerRequest` and returns a controller
-    (or None for the open loop); it raises :class:`ControllerError` with one
-    line when the controller does not apply to the request's system.
-    """
-
-    def add(builder: ControllerBuilder) -> ControllerBuilder:
-        _BUILDERS[name] = builder
+        register(ControllerKind(name=name, label=name, help=name, build=builder))
         return builder
 
     return add
 
 
-#: Modules that register further builders when first asked (name -> module).
-CONTROLLER_MODULES = {"swingup": "equilibrist.control.swingup", "mpc": "equilibrist.control.mpc",
-                      "tvlqr": "equilibrist.control.tvlqr"}
-
-
 def registered_controllers() -> tuple[str, ...]:
-    return tuple(_BUILDERS)
+    """The names of every controller kind (:func:`equilibrist.control.kinds.names`)."""
+    from equilibrist.control.kinds import names
+
+    return names()
 
 
-def build_controller(name: str, request: ControllerRequest) -> LinearController | NonlinearController | PythonController | None:
-    """The controller *name* (``lqr``, ``lqg``, ``none``, or a registered one) for *request*.
+def build_controller(name: str, request: Any) -> LinearController | NonlinearController | PythonController | None:
+    """The controller of kind *name* for *request* (:func:`equilibrist.control.kinds.build`).
 
     Raises
     ------
     ControllerError
-        An unknown name, a controller whose module is not installed, or
-        one that does not apply to the system.
+        An unknown name or one that does not apply to the system (one line).
     """
-    if name not in _BUILDERS and name in CONTROLLER_MODULES:
-        import importlib
+    from equilibrist.control.kinds import KindError, get
 
-        try:
-            importlib.import_module(CONTROLLER_MODULES[name])
-        except ModuleNotFoundError as exc:
-            if exc.name != CONTROLLER_MODULES[name]:
-                raise
-    builder = _BUILDERS.get(name)
-    if builder is None:
-        known = ", ".join(k for k in CONTROLLER_KINDS if k in _BUILDERS) + (
-            ", " + ", ".join(k for k in _BUILDERS if k not in CONTROLLER_KINDS)
-            if any(k not in CONTROLLER_KINDS for k in _BUILDERS) else ""
-        )
-        what = "is not available in this installation" if name in CONTROLLER_KINDS else "is unknown"
-        raise ControllerError(
-            f"controller {name!r} {what} for {request.system.key}: expected one of {known}"
-        )
-    return builder(request)
+    try:
+        kind = get(name)
+    except KindError:
+        from equilibrist.control.kinds import names
 
-
-@register_controller("lqr")
-def _build_lqr(request: ControllerRequest) -> LinearController:
-    return LinearController.from_design(request.design(), kind="lqr", tracking=request.tracking)
-
-
-@register_controller("lqg")
-def _build_lqg(request: ControllerRequest) -> LinearController:
-    return LinearController.from_design(request.design(), kind="lqg", tracking=request.tracking)
-
-
-@register_controller("none")
-def _build_none(request: ControllerRequest) -> None:
-    return None
+        raise ControllerError(f"controller {name!r} is unknown for {request.system.key}: "
+                              f"expected one of {', '.join(names())}") from None
+    result: LinearController | NonlinearController | PythonController | None = kind.make(request)
+    return result
 
 
 __all__ = [
@@ -1351,7 +1289,6 @@ __all__ = [
     "LINEAR_SOURCE",
     "AnyController",
     "ControllerError",
-    "ControllerRequest",
     "LinearController",
     "LinearRuntime",
     "NonlinearController",

@@ -85,7 +85,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from equilibrist.control.controller import ControllerError, ControllerRequest, register_controller
+from equilibrist.control.controller import ControllerError
 
 if TYPE_CHECKING:
     from equilibrist.control.design import Design
@@ -619,16 +619,6 @@ def mpc(
         form=design.kalman_form, K=np.asarray(design.K, dtype=float).reshape(m, n),
         design=design,
     )
-
-
-@register_controller("mpc")
-def _build(request: ControllerRequest) -> MPCRuntime:
-    opts = dict(request.options)
-    horizon = opts.get("horizon")
-    ctrl = mpc(request.system, design=request.design(),
-               horizon=HORIZON if horizon is None else int(horizon),
-               estimator=opts.get("estimator"))
-    return ctrl.runtime()
 
 
 __all__ = ["EPS", "HORIZON", "INF", "ITER_LIMIT", "MISSING_SOLVER", "MPC", "KalmanFront", "MPCProblem", "MPCRuntime", "mpc",

@@ -101,9 +101,7 @@ import numpy as np
 
 from equilibrist.control.controller import (
     ControllerError,
-    ControllerRequest,
     NonlinearController,
-    register_controller,
 )
 
 if TYPE_CHECKING:
@@ -678,13 +676,3 @@ def balance_design(system: System, rate: float | None = None) -> Design:
     from equilibrist.control.design import design as make_design
 
     return make_design(system, rate=float(rate if rate is not None else system.spec.control_rate))
-
-
-@register_controller("swingup")
-def _build(request: ControllerRequest) -> NonlinearController:
-    system = request.system
-    if system.name not in LAWS:
-        raise ControllerError(
-            f"{system.name} has no swing-up: it exists for {', '.join(LAWS)}"
-        )
-    return swingup(system, design=request.design(), balance=str(request.options.get("balance", "lqr")))

@@ -28,13 +28,12 @@ import numpy as np
 
 from equilibrist.control.controller import (
     ControllerError,
-    ControllerRequest,
     NonlinearController,
-    register_controller,
 )
 from equilibrist.control.discretize import discrete_matrices
 
 if TYPE_CHECKING:
+    from equilibrist.control.kinds import ControllerRequest
     from equilibrist.control.trajopt import Trajectory
     from equilibrist.numeric.system import System
 
@@ -130,8 +129,7 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     )
 
 
-@register_controller("tvlqr")
-def _build(request: ControllerRequest) -> NonlinearController:
+def build_request(request: ControllerRequest) -> NonlinearController:
     from equilibrist.control.trajopt import load_trajectory
 
     path = request.options.get("trajectory")

@@ -328,6 +328,34 @@ def register_exporter(name: str) -> Callable[[Callable[..., ExportReport]], Call
     return add
 
 
+def export_controller(ctrl: object, out: str | os.PathLike[str], *, system: System,
+                      precision: str = "double", duration: float | None = None, seed: int = 0,
+                      force: bool = False) -> ExportReport:
+    """Write the C export of the controller value *ctrl*, whatever made it.
+
+    A :class:`~equilibrist.control.controller.LinearController` of an LQR or
+    LQG design is the design's library (:func:`export_c`); any
+    :class:`~equilibrist.control.controller.NonlinearController` (a kind of
+    one's own, the time-varying LQR...) is its source translated to C
+    (:mod:`equilibrist.export.nonlinear_c`), tested bit for bit against the
+    Python controller. Other values are refused in one line.
+    """
+    from equilibrist.control.controller import LinearController, NonlinearController
+
+    if isinstance(ctrl, LinearController) and ctrl.kind in ("lqr", "lqg") and ctrl.design is not None:
+        return export_c(ctrl.design, out, controller=ctrl.kind, precision=precision,
+                        duration=duration, seed=seed, system=system, force=force)
+    if isinstance(ctrl, NonlinearController):
+        from equilibrist.export.nonlinear_c import export_files
+
+        return export_files(ctrl, Path(out), system=system, precision=precision, duration=duration,
+                            seed=seed, force=force)
+    if ctrl is None:
+        raise ExportError("the open loop has no controller to export")
+    raise ExportError(f"a {type(ctrl).__name__} has no C export: the export takes an LQR or LQG "
+                      "LinearController or a NonlinearController")
+
+
 def export_c(
     design: Design,
     out: str | os.PathLike[str],

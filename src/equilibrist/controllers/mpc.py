@@ -1,0 +1,56 @@
+"""``--controller mpc``: constrained MPC solved by DAQP (Kalman filter in front where needed)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from equilibrist.control.kinds import ControllerKind, ControllerRequest, Option
+
+if TYPE_CHECKING:
+    from equilibrist.control.mpc import MPCRuntime
+    from equilibrist.numeric.system import System
+
+
+def _horizon(text: str) -> int:
+    value = int(text)
+    if value < 1 or str(value) != text.strip():
+        raise ValueError(text)
+    return value
+
+
+def applies(system: System) -> str | None:
+    from equilibrist.control.mpc import solver_missing
+
+    return solver_missing()
+
+
+def build(request: ControllerRequest) -> MPCRuntime:
+    from equilibrist.control.mpc import HORIZON, mpc
+
+    opts = dict(request.options)
+    horizon = opts.get("horizon")
+    ctrl = mpc(request.system, design=request.design(),
+               horizon=HORIZON if horizon is None else int(horizon),
+               estimator=opts.get("estimator"))
+    return ctrl.runtime()
+
+
+def export(request: ControllerRequest, out: Any, **options: Any) -> Any:
+    from equilibrist.control.mpc import HORIZON
+    from equilibrist.export.mpc_c import check_horizon
+    from equilibrist.export.writer import load_exporter
+
+    check_horizon(request.system, request.options.get("horizon", HORIZON))  # before the QP
+    exporter = load_exporter("mpc")
+    assert exporter is not None
+    return exporter(KIND.make(request), out, system=request.system, **options)
+
+
+KIND = ControllerKind(
+    name="mpc", label="MPC",
+    help="constrained MPC (DAQP), the LQR's move where no constraint binds",
+    build=build,
+    options=(Option("--horizon", "prediction horizon of --controller mpc [samples] (default 30)",
+                    parse=_horizon, expected="a whole number of samples >= 1", metavar="N"),),
+    applies=applies, export=export, order=40,
+)

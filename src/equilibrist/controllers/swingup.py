@@ -1,0 +1,53 @@
+"""``--controller swingup``: energy pumping from hanging, then the catch and a balancing LQR."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from equilibrist.control.kinds import ControllerKind, ControllerRequest, Option
+
+if TYPE_CHECKING:
+    from equilibrist.control.controller import NonlinearController
+    from equilibrist.numeric.system import System
+
+BALANCES = ("lqr", "lqg")
+
+
+def applies(system: System) -> str | None:
+    from equilibrist.control.swingup import LAWS
+    from equilibrist.tasks import task_names
+
+    if "swingup" not in task_names(system):
+        return f"{system.key} has no swing-up: it has no hanging position to swing up from"
+    if system.name not in LAWS:
+        return f"{system.key} has no swing-up law: it exists for {', '.join(LAWS)}"
+    return None
+
+
+def build(request: ControllerRequest) -> NonlinearController:
+    from equilibrist.control.controller import ControllerError
+    from equilibrist.control.swingup import LAWS, swingup
+
+    system = request.system
+    if system.name not in LAWS:
+        raise ControllerError(f"{system.name} has no swing-up: it exists for {', '.join(LAWS)}")
+    return swingup(system, design=request.design(),
+                   balance=str(request.options.get("balance", "lqr")))
+
+
+def export(request: ControllerRequest, out: Any, **options: Any) -> Any:
+    from equilibrist.export.writer import load_exporter
+
+    exporter = load_exporter("swingup")
+    assert exporter is not None
+    return exporter(KIND.make(request), out, system=request.system, **options)
+
+
+KIND = ControllerKind(
+    name="swingup", label="swing-up",
+    help="pump energy from hanging, catch near upright and balance (--balance lqr|lqg)",
+    build=build,
+    options=(Option("--balance", "what balances after --controller swingup's catch (default lqr)",
+                    choices=BALANCES),),
+    applies=applies, task="swingup", export=export, order=30,
+)
