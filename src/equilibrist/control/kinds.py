@@ -156,7 +156,7 @@ class ControllerKind:
     name:
         What ``--controller`` takes (a lower-case word).
     label:
-        How a page or a table names it (``"LQG"``, ``"swing-up"``).
+        How the playground's picker names it (``"LQG (Kalman filter + LQR)"``).
     help:
         One line: what it does (the command line's help lists them).
     build:

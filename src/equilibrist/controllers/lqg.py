@@ -17,6 +17,6 @@ def build(request: ControllerRequest) -> LinearController:
 
 
 KIND = ControllerKind(
-    name="lqg", label="LQG", help="Kalman filter on the measured outputs + LQR", build=build,
+    name="lqg", label="LQG (Kalman filter + LQR)", help="Kalman filter on the measured outputs + LQR", build=build,
     noise="design", linear=True, order=20,
 )

@@ -17,6 +17,6 @@ def build(request: ControllerRequest) -> LinearController:
 
 
 KIND = ControllerKind(
-    name="lqr", label="LQR", help="LQR on the full state (every state measured)", build=build,
+    name="lqr", label="LQR (true state)", help="LQR on the full state (every state measured)", build=build,
     noise="design", linear=True, order=10,
 )

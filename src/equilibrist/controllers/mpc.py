@@ -47,7 +47,7 @@ def export(request: ControllerRequest, out: Any, **options: Any) -> Any:
 
 
 KIND = ControllerKind(
-    name="mpc", label="MPC",
+    name="mpc", label="MPC (constrained, DAQP)",
     help="constrained MPC (DAQP), the LQR's move where no constraint binds",
     build=build,
     options=(Option("--horizon", "prediction horizon of --controller mpc [samples] (default 30)",

@@ -10,6 +10,6 @@ def build(request: ControllerRequest) -> None:
 
 
 KIND = ControllerKind(
-    name="none", label="controller off", help="the open loop", build=build, open_loop=True,
+    name="none", label="Off", help="the open loop", build=build, open_loop=True,
     surfaces=frozenset({"simulate", "design", "export", "playground"}), order=90,
 )

@@ -44,7 +44,7 @@ def export(request: ControllerRequest, out: Any, **options: Any) -> Any:
 
 
 KIND = ControllerKind(
-    name="swingup", label="swing-up",
+    name="swingup", label="Swing-up (energy pumping, then LQR)",
     help="pump energy from hanging, catch near upright and balance (--balance lqr|lqg)",
     build=build,
     options=(Option("--balance", "what balances after --controller swingup's catch (default lqr)",

@@ -17,7 +17,7 @@ def build(request: ControllerRequest) -> NonlinearController:
 
 
 KIND = ControllerKind(
-    name="tvlqr", label="time-varying LQR",
+    name="tvlqr", label="Time-varying LQR (tracks a plan)",
     help="track --trajectory (a plan of 'equilibrist trajopt'), then balance",
     build=build,
     options=(Option("--trajectory", "with --controller tvlqr: the plan to track "

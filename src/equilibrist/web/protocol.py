@@ -24,9 +24,35 @@ from equilibrist.errors import EquilibristError
 #: Largest text frame accepted from a client, in bytes.
 MAX_MESSAGE_BYTES = 16 * 1024
 
-#: Controllers a client may pick (the registered ones, in picker order). A session
-#: refuses those that do not apply to its system (:attr:`Limits.unavailable`).
-CONTROLLERS = ("lqg", "lqr", "swingup", "mpc", "off")
+
+def controllers() -> tuple[str, ...]:
+    """The controllers a client may pick, in the picker's order: the registry's kinds offered
+    on the playground (:mod:`equilibrist.control.kinds`), the default (LQG) first and the
+    open loop, named ``off``, last. A session refuses those that do not apply to its system
+    (:attr:`Limits.unavailable`)."""
+    from equilibrist.control import kinds
+
+    offered = kinds.all_kinds("playground")
+    names = [k.name for k in offered if not k.open_loop]
+    names.sort(key=lambda n: n != "lqg")
+    return (*names, OFF) if any(k.open_loop for k in offered) else tuple(names)
+
+
+#: What the picker calls the open loop.
+OFF = "off"
+
+
+def kind_name(controller: str) -> str:
+    """The registry's name of a picked controller (``off`` is the open loop, ``none``)."""
+    if controller == OFF:
+        from equilibrist.control import kinds
+
+        return next(k.name for k in kinds.all_kinds("playground") if k.open_loop)
+    return controller
+
+
+#: The controllers of :func:`controllers` when the server started.
+CONTROLLERS = controllers()
 
 # Ranges of the session-independent settings.
 RATE_RANGE = (5.0, 2000.0)  # control rate [Hz]
@@ -196,9 +222,10 @@ def _tune(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
         )
     if "controller" in data:
         c = data["controller"]
-        if not isinstance(c, str) or c not in CONTROLLERS:
+        known = controllers()
+        if not isinstance(c, str) or c not in known:
             raise ProtocolError(
-                f"controller {_short(c)} is unknown: expected one of {', '.join(CONTROLLERS)}"
+                f"controller {_short(c)} is unknown: expected one of {', '.join(known)}"
             )
         if c in limits.unavailable:
             raise ProtocolError(f"controller {c!r} does not apply: {limits.unavailable[c]}")
@@ -269,4 +296,4 @@ _FIELD_CHECKS = {
     "seen": _seen,
 }
 
-__all__ = ["CONTROLLERS", "FIELDS", "MAX_MESSAGE_BYTES", "Limits", "Message", "ProtocolError", "parse"]
+__all__ = ["CONTROLLERS", "FIELDS", "MAX_MESSAGE_BYTES", "OFF", "Limits", "Message", "ProtocolError", "controllers", "kind_name", "parse"]

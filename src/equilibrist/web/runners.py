@@ -50,27 +50,33 @@ if TYPE_CHECKING:
     from equilibrist.control.mpc import MPCRuntime
     from equilibrist.numeric.system import System
 
-#: Controllers built here (the others run in the session itself).
-KINDS = ("swingup", "mpc")
+
+def runner_kinds() -> tuple[str, ...]:
+    """The playground's kinds built here: every kind of the registry offered on the
+    playground that is not LQR/LQG (``linear``, run by the session's own filter) or the open
+    loop."""
+    from equilibrist.control import kinds
+
+    return tuple(k.name for k in kinds.all_kinds("playground") if not (k.linear or k.open_loop))
+
+
+#: :func:`runner_kinds` when the server started.
+KINDS = runner_kinds()
 #: Solve times kept for the page's median and worst (samples).
 SOLVE_WINDOW = 400
 _EMPTY = np.zeros(0)
 
 
 def unavailable(system: System) -> dict[str, str]:
-    """``{controller: reason}`` of the controllers of :data:`KINDS` that do not apply to *system*."""
-    from equilibrist.control.mpc import solver_missing
-    from equilibrist.control.swingup import LAWS
-    from equilibrist.tasks import task_names
+    """``{controller: reason}`` of the playground's controllers that do not apply to *system*
+    (each kind's own :attr:`~equilibrist.control.kinds.ControllerKind.applies`)."""
+    from equilibrist.control import kinds
 
     out: dict[str, str] = {}
-    if "swingup" not in task_names(system):
-        out["swingup"] = f"{system.key} has no hanging position to swing up from"
-    elif system.name not in LAWS:
-        out["swingup"] = f"{system.key} has no swing-up law: it exists for {', '.join(LAWS)}"
-    missing = solver_missing()
-    if missing:
-        out["mpc"] = missing
+    for kind in kinds.all_kinds("playground"):
+        why = kind.applies(system)
+        if why is not None:
+            out["off" if kind.open_loop else kind.name] = why
     return out
 
 
@@ -83,33 +89,29 @@ def hanging_refusal(system: System) -> str | None:
     return f"{system.key} has no hanging position (the swing-up task exists for the rigs that state one)"
 
 
-class SwingUpRunner:
-    """The swing-up controller in the session's loop (see the module docstring)."""
+class NonlinearRunner:
+    """Any :class:`~equilibrist.control.controller.NonlinearController` in the session's loop
+    (a kind of one's own, the swing-up), run by its plain-Python runtime."""
 
-    kind = "swingup"
-
-    def __init__(self, ctrl: NonlinearController, system: System) -> None:
-        from equilibrist.control.swingup import MODE_BALANCE, Z
-
+    def __init__(self, ctrl: NonlinearController, system: System, kind: str) -> None:
+        self.kind = kind
         self.ctrl = ctrl
         self.outputs = tuple(ctrl.output_names)
         self.idx = np.array([system.state_index(o) for o in self.outputs], dtype=np.int64)
         self.runtime: NonlinearRuntime = ctrl.runtime()
-        self._mode_slot = int(Z["mode"])
-        self._balance = float(MODE_BALANCE)
         self.estimate: np.ndarray | None = None
 
     @property
     def mode(self) -> str:
-        """``"balancing"`` or ``"pumping"``: the supervisor's choice for the next sample."""
-        return "balancing" if self.runtime.z[self._mode_slot] == self._balance else "pumping"
+        return "running"
 
     def reset(self) -> None:
         self.runtime.reset()
         self.estimate = None
 
     def adopt(self, previous: Runner | None) -> None:
-        if isinstance(previous, SwingUpRunner) and previous.runtime.z.shape == self.runtime.z.shape:
+        if (isinstance(previous, NonlinearRunner) and previous.kind == self.kind
+                and previous.runtime.z.shape == self.runtime.z.shape):
             self.runtime.z = previous.runtime.z.copy()
 
     def start_at(self, x_estimate: np.ndarray) -> None:
@@ -127,6 +129,25 @@ class SwingUpRunner:
         return None
 
     def describe(self) -> dict[str, Any]:
+        return {"kind": self.kind, **dict(self.ctrl.settings)}
+
+
+class SwingUpRunner(NonlinearRunner):
+    """The swing-up: a nonlinear controller whose state holds the supervisor's mode."""
+
+    def __init__(self, ctrl: NonlinearController, system: System, kind: str = "swingup") -> None:
+        from equilibrist.control.swingup import MODE_BALANCE, Z
+
+        super().__init__(ctrl, system, kind)
+        self._mode_slot = int(Z["mode"])
+        self._balance = float(MODE_BALANCE)
+
+    @property
+    def mode(self) -> str:
+        """``"balancing"`` or ``"pumping"``: the supervisor's choice for the next sample."""
+        return "balancing" if self.runtime.z[self._mode_slot] == self._balance else "pumping"
+
+    def describe(self) -> dict[str, Any]:
         s = self.ctrl.settings
         return {"kind": "swingup", "law": s.get("law"), "c_in": s.get("c_in"), "c_out": s.get("c_out"),
                 "tuning": dict(s.get("tuning", {}))}
@@ -135,9 +156,9 @@ class SwingUpRunner:
 class MPCRunner:
     """The constrained MPC in the session's loop (see the module docstring)."""
 
-    kind = "mpc"
-
-    def __init__(self, runtime: MPCRuntime, system: System, setup_seconds: float) -> None:
+    def __init__(self, runtime: MPCRuntime, system: System, setup_seconds: float,
+                 kind: str = "mpc") -> None:
+        self.kind = kind
         self.runtime = runtime
         self.ctrl = runtime.ctrl
         self.outputs = tuple(runtime.ctrl.output_names)
@@ -200,39 +221,63 @@ class MPCRunner:
         return d
 
 
-Runner = SwingUpRunner | MPCRunner
+Runner = NonlinearRunner | MPCRunner
 
 
 def build_runner(kind: str, system: System, design: Design) -> Runner:
-    """The runner of controller *kind* (``"swingup"``, ``"mpc"``) for *design* on *system*.
+    """The runner of the registry's controller *kind* built on *design* for *system*.
 
+    The kind is built as ``simulate`` builds it, with the page's design
+    (:class:`~equilibrist.control.kinds.ControllerRequest`); a
+    ``NonlinearController`` runs by its Python runtime, the MPC by its own.
     Raises an ``EquilibristError`` (one line) when the controller does not
-    apply or cannot be built.
+    apply or cannot be built, or is of a form the page cannot run.
     """
-    if kind == "swingup":
-        from equilibrist.control.swingup import swingup
+    from equilibrist.control import kinds
+    from equilibrist.control.controller import NonlinearController
+    from equilibrist.control.mpc import MPCRuntime
 
-        return SwingUpRunner(swingup(system, design=design), system)
-    if kind == "mpc":
-        from equilibrist.control.mpc import mpc
-
-        began = time.perf_counter()
-        runtime = mpc(system, design=design).runtime()
-        return MPCRunner(runtime, system, time.perf_counter() - began)
-    raise EquilibristError(f"controller {kind!r} is not one of {', '.join(KINDS)}")
+    record = kinds.get(kind, "playground")
+    request = kinds.ControllerRequest(system=system, rate=design.rate)
+    request._designs["d"] = design  # the page's own design, tuned there
+    began = time.perf_counter()
+    built = record.make(request)
+    if isinstance(built, MPCRuntime):
+        return MPCRunner(built, system, time.perf_counter() - began, kind)
+    if isinstance(built, NonlinearController):
+        if built.name == "swingup":
+            return SwingUpRunner(built, system, kind)
+        return NonlinearRunner(built, system, kind)
+    raise EquilibristError(f"the {kind} controller is a {type(built).__name__}: the playground "
+                           "runs a NonlinearController or the MPC")
 
 
 def export_folder(runner: Runner, system: System, folder: str) -> Mapping[str, str]:
     """Write the C export of *runner*'s controller into *folder* (as ``equilibrist export`` does)."""
-    from equilibrist.export.writer import load_exporter
+    from equilibrist.export.writer import export_controller, load_exporter
 
     exporter = load_exporter(runner.kind)
-    if exporter is None:
-        raise EquilibristError(f"the {runner.kind} controller has no C export in this installation")
-    built: Any = runner.ctrl if runner.kind == "swingup" else runner.runtime
-    done = exporter(built, folder, system=system, precision="double")
+    if isinstance(runner, MPCRunner):
+        if exporter is None:
+            raise EquilibristError(f"the {runner.kind} controller has no C export in this "
+                                   "installation")
+        done = exporter(runner.runtime, folder, system=system, precision="double")
+    elif exporter is not None:
+        done = exporter(runner.ctrl, folder, system=system, precision="double")
+    else:
+        done = export_controller(runner.ctrl, folder, system=system, precision="double")
     return dict(done.files)
 
 
-__all__ = ["KINDS", "MPCRunner", "Runner", "SwingUpRunner", "build_runner", "export_folder",
-           "hanging_refusal", "unavailable"]
+__all__ = [
+    "KINDS",
+    "MPCRunner",
+    "NonlinearRunner",
+    "Runner",
+    "SwingUpRunner",
+    "build_runner",
+    "export_folder",
+    "hanging_refusal",
+    "runner_kinds",
+    "unavailable",
+]

@@ -60,8 +60,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from equilibrist.errors import DesignError, EquilibristError
-from equilibrist.web.protocol import CONTROLLERS, Limits, Message
-from equilibrist.web.runners import KINDS, Runner, build_runner, hanging_refusal, unavailable
+from equilibrist.web.protocol import Limits, Message, controllers, kind_name
+from equilibrist.web.runners import Runner, build_runner, hanging_refusal, runner_kinds, unavailable
 
 if TYPE_CHECKING:
     from equilibrist.control.controller import LinearController
@@ -97,10 +97,13 @@ MAX_CHART_SAMPLES = 2000
 LAG_SHARE = 0.8
 #: Seconds between two lag warnings of one session.
 LAG_WARN_EVERY = 5.0
-#: The picker's labels of the controllers.
-LABELS = {"lqg": "LQG (Kalman filter + LQR)", "lqr": "LQR (true state)",
-          "swingup": "Swing-up (energy pumping, then LQR)", "mpc": "MPC (constrained, DAQP)",
-          "off": "Off"}
+
+
+def label(controller: str) -> str:
+    """The picker's label of a controller: its kind's (:mod:`equilibrist.control.kinds`)."""
+    from equilibrist.control import kinds
+
+    return kinds.get(kind_name(controller)).label
 
 
 class SessionError(EquilibristError, ValueError):
@@ -583,10 +586,10 @@ class Session:
             "u_op": self.loop.u_op.tolist(),
             "main_state": system.state_names[self.angle_index],
             "view": list(view),
-            "controllers": list(CONTROLLERS),
+            "controllers": list(controllers()),
             "controller_options": [
-                {"name": c, "label": LABELS[c], "available": c not in self.unavailable,
-                 "reason": self.unavailable.get(c)} for c in CONTROLLERS],
+                {"name": c, "label": label(c), "available": c not in self.unavailable,
+                 "reason": self.unavailable.get(c)} for c in controllers()],
             "hang": {"available": self.hang_refusal is None, "reason": self.hang_refusal},
             "settings": self.settings.to_dict(),
             "scales": scales,
@@ -769,7 +772,7 @@ class Session:
         kind = self.settings.controller
         # The filter runs whichever controller is in charge, so that switching is bumpless.
         u_lqg = loop.lqg.output(y)
-        runner = loop.runner if kind in KINDS else None
+        runner = loop.runner if loop.runner is not None and loop.runner.kind == kind else None
         y_r = y
         if kind == "lqg":
             u_cmd = u_lqg
@@ -1030,7 +1033,7 @@ def redesign(system: System, settings: Settings) -> tuple[Design | None, float, 
     like a failed design (the previous controller keeps running).
     """
     d, seconds, error = design_for(system, settings)
-    if d is None or settings.controller not in KINDS:
+    if d is None or settings.controller not in runner_kinds():
         return d, seconds, error, None, 0.0
     began = time.perf_counter()
     try:
