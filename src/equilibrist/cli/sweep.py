@@ -20,7 +20,7 @@ _EPILOG = """\
 Varied quantities (--vary, repeatable): any physical parameter of the system
 (m_p=0.5:2:16), rate (the controller's sample rate, Hz), q.STATE and r.INPUT
 (Bryson scales: the largest acceptable deviation of a state or input, in its
-unit; the LQR weight is 1/scale^2), controller (lqr,lqg), noise (scale of the
+unit; the LQR weight is 1/scale^2), controller (lqr,lqg,mpc,swingup...), noise (scale of the
 noise's standard deviations; 0 = none) and delay (0,1: commands one sample
 late). Values: LOW:HIGH:N (evenly spaced, both ends), LOW:HIGH:N:log
 (geometric), V1,V2,... or V. The grid is every combination; --sample random:N
@@ -65,7 +65,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      help="relative spread of a parameter around the point's value")
     common.add_items(p, "--roa", marker="=", metavar="STATE=LOW:HIGH:N",
                      help="estimate the region of attraction on this grid of initial states")
-    p.add_argument("--controller", choices=("lqr", "lqg"), help="when not varied (default lqg)")
+    from equilibrist.control import kinds
+
+    p.add_argument("--controller", choices=kinds.names("study"),
+                   help="when not varied (default lqg): " + ", ".join(kinds.names("study")))
     p.add_argument("--rate", metavar="HZ", help="when not varied (default: the rig's control rate)")
     p.add_argument("--noise", metavar="on|off|SCALE", help="when not varied (default on)")
     p.add_argument("--delay", action="store_true", help="commands one sample late (when not varied)")

@@ -639,6 +639,12 @@ def _register_pickling() -> None:
     copyreg.pickle(types.MappingProxyType, lambda m: (read_only, (dict(m),)))
 
 
+# A design's parameters are a read-only mapping: pickled as a dict whichever way the design
+# came (made here or read from the cache folder), so a controller holding one goes to a
+# batch's worker processes.
+_register_pickling()
+
+
 def _cached(key: str, system: System) -> Design | None:
     import pickle
 

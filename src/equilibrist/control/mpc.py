@@ -376,6 +376,14 @@ class MPCRuntime:
         self.solve_times: list[float] = []
         self.reset()
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        # DAQP's workspace does not pickle: a copy sent to a batch's worker is a new runtime
+        # of the same MPC, fresh as a run starts (the batch resets each run's controller).
+        return (MPCRuntime, (self.ctrl,), {"exact_unconstrained": self.exact_unconstrained})
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.exact_unconstrained = bool(state["exact_unconstrained"])
+
     @property
     def z(self) -> np.ndarray:
         """The filter's state: the predicted deviation ``xhat_{k|k-1} - x_op``."""

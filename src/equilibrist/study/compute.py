@@ -100,11 +100,12 @@ def _bryson_weights(system: Any, names: Sequence[str]) -> np.ndarray | None:
 
 def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> dict[str, Any]:
     """The table row of point *index* (a mapping column -> value)."""
+    from equilibrist.control import kinds as registry
+    from equilibrist.control.controller import measured_outputs
     from equilibrist.control.design import design
     from equilibrist.numeric.system import get_system
     from equilibrist.sim._setup import operating_point
     from equilibrist.sim.batch import region_of_attraction, sample_uniform, simulate_batch
-    from equilibrist.sim.controllers import LQG, StateFeedback
     from equilibrist.sim.noise import Noise
 
     values = study.point(index)
@@ -142,10 +143,19 @@ def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> d
         d = design(base, q=q, r=r, rate=rate)
     except EquilibristError as exc:
         return failed("design failed", exc)
-    controller = LQG.from_design(d) if kind == "lqg" else StateFeedback.from_design(d)
+    record = registry.get(kind, "study")
+    request = registry.ControllerRequest(system=base, rate=rate)
+    request._designs["d"] = d  # the point's design, as made above
+    try:
+        controller = record.make(request)
+    except EquilibristError as exc:
+        return failed("design failed", exc)
     noise = None
     if noise_scale > 0:
-        nd = Noise.from_design(d)
+        if record.noise == "design":
+            nd = Noise.from_design(d)
+        else:
+            nd = Noise.from_spec(base, outputs=measured_outputs(controller), rate=rate)
         s2 = noise_scale**2
         noise = Noise(nd.process_gain, nd.process_intensity * s2,
                       nd.measurement_covariance * s2, nd.outputs)

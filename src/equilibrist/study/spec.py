@@ -12,7 +12,8 @@ a parameter (``m_p``)  the plant's physical parameter (validated against its ran
 ``q.<state>``          Bryson scale of a state: its largest acceptable deviation, in
                        the state's unit; the LQR weight is ``1 / scale**2``
 ``r.<input>``          Bryson scale of an input, in the input's unit
-``controller``         ``lqr`` (full state) or ``lqg`` (Kalman filter on the sensors)
+``controller``         a controller kind offered to studies (``lqr``, ``lqg``, ``mpc``,
+                       ``swingup``, a kind of one's own: :mod:`equilibrist.control.kinds`)
 ``noise``              scale of the noise's standard deviations (0 = no noise; the
                        design keeps the spec's covariances)
 ``delay``              0 or 1: each command applied one sample late
@@ -51,7 +52,21 @@ import numpy as np
 from equilibrist.errors import EquilibristError, nearest
 
 FORMAT = "equilibrist-study-1"
-CONTROLLERS = ("lqr", "lqg")
+#: The project's own kinds a study takes (the registry may offer more: :func:`controllers`).
+CONTROLLERS = ("lqr", "lqg", "swingup", "mpc")
+
+
+def _does_not_apply(kind: str, system: Any) -> str | None:
+    from equilibrist.control import kinds
+
+    return kinds.get(kind).applies(system)
+
+
+def controllers() -> tuple[str, ...]:
+    """The controller kinds a study takes (:mod:`equilibrist.control.kinds`, surface ``study``)."""
+    from equilibrist.control import kinds
+
+    return kinds.names("study")
 SPECIAL = ("rate", "controller", "noise", "delay")
 DESIGN_FOR = ("point", "nominal")
 METRICS = ("full", "basic")
@@ -360,8 +375,13 @@ def _axis(system: Any, name: str, value: object, sampled: bool, problems: list[s
     if kind == "controller":
         for v in raw:
             text = str(v).strip().lower()
-            if text not in CONTROLLERS:
-                problems.append(f"--vary controller: {v!r} is not a controller (expected lqr or lqg)")
+            if text not in controllers():
+                problems.append(f"--vary controller: {v!r} is not a controller (expected one "
+                                f"of {', '.join(controllers())})")
+            else:
+                why = _does_not_apply(text, system)
+                if why is not None:
+                    problems.append(f"--vary controller: {why}")
             values.append(text)
         if low is not None:
             problems.append("--vary controller: expected a list of controllers (lqr,lqg)")
@@ -498,8 +518,10 @@ def make_study(
     if dur is not None and dur <= 0:
         problems.append(f"--duration must be positive, got {dur:g}")
     seed_v = _whole(seed, "--seed", problems, minimum=0)
-    if controller not in CONTROLLERS:
-        problems.append(f"--controller {controller!r}: expected lqr or lqg")
+    if controller not in controllers():
+        problems.append(f"--controller {controller!r}: expected one of {', '.join(controllers())}")
+    elif _does_not_apply(controller, sysm) is not None:
+        problems.append(f"--controller {controller}: {_does_not_apply(controller, sysm)}")
     if isinstance(noise, str):
         noise_v = {"on": 1.0, "off": 0.0}.get(noise.strip().lower())
         if noise_v is None:
