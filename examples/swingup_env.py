@@ -1,7 +1,10 @@
 """Solve the cart-pole's swing-up environment with equilibrist's own swing-up controller.
 
-The controller (energy pumping, then the LQR catching the pole near
-upright: :mod:`equilibrist.control.swingup`) sees only what an agent sees,
+The controller kind ``swingup`` (energy pumping, then the LQR catching the
+pole near upright: :mod:`equilibrist.control.swingup`), made the
+environment's expert by :func:`equilibrist.envs.expert.expert` (any kind of
+the registry can be: ``lqg`` for the balance task, a kind of one's own),
+sees only what an agent sees,
 the environment's observations (the cart's position and the pole's angle,
 with the rig's sensor noise), and acts through ``step`` in the input's own
 units. The episode's return is the swing-up reward documented in
@@ -13,37 +16,30 @@ from __future__ import annotations
 import math
 
 import gymnasium as gym
-import numpy as np
 
 import equilibrist.envs  # noqa: F401  (registers the environments)
-from equilibrist.control.swingup import SwingUpRuntime, swingup
+from equilibrist.control.swingup import MODE_BALANCE, Z
+from equilibrist.envs.expert import expert
 
 ENV_ID = "equilibrist/cartpole-swingup-v0"
 
 
 def main() -> None:
-    env = gym.make(ENV_ID, action_units="physical")
+    env = gym.make(ENV_ID)
     core = env.unwrapped.core  # type: ignore[attr-defined]
-    controller = SwingUpRuntime(swingup(core.system, rate=core.rate))
-    if tuple(controller.outputs or ()) != core.observation_names:
-        raise SystemExit(f"the controller reads {controller.outputs}, the env observes "
-                         f"{core.observation_names}")
-    no_reference = np.zeros(0)
+    policy = expert(env, "swingup")  # refused if it read other signals than the env observes
     print(f"{ENV_ID}: {core.rate:g} Hz, {core.task.duration:g} s, observing "
           f"{', '.join(core.observation_names)} with sensor noise")
     for seed in range(3):
         obs, info = env.reset(seed=seed)
-        controller.reset()
+        policy.reset()
         total, caught_at, k = 0.0, None, 0
         terminated = truncated = False
         while not (terminated or truncated):
-            t = k / core.rate
-            u = controller.output(t, obs, no_reference)
-            controller.update(t, obs, no_reference, core.physical_input(u))
-            obs, reward, terminated, truncated, _ = env.step(u)
+            obs, reward, terminated, truncated, _ = env.step(policy(obs))
             total += float(reward)
-            if caught_at is None and controller.mode == "balance":
-                caught_at = t
+            if caught_at is None and policy.runtime.z[Z["mode"]] == MODE_BALANCE:
+                caught_at = k / core.rate
             k += 1
         x = env.unwrapped.state  # type: ignore[attr-defined]
         theta = x[core.system.state_index("theta")]
