@@ -1,0 +1,183 @@
+"""A new controller kind is one file: a throwaway kind in a temporary folder, found through
+its entry point, runs through simulate, batch, a study, the environment and the export.
+
+The kind (``softlqr``): the design's LQR gain through a ``tanh`` of width ``--softness``
+(a saturation that bends instead of clipping). Its independent check: as the width grows,
+``s tanh(v / s)`` tends to ``v``, so a wide one must run as ``--controller lqr`` does.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+KIND_MODULE = '''
+"""A controller kind of one's own: the LQR through a tanh of width --softness."""
+
+from equilibrist.control.kinds import ControllerKind, Option
+
+SOURCE = """
+import math
+
+
+def output(t, z, y, r, params, u_out):
+    n = int(params[0])
+    v = 0.0
+    for i in range(n):
+        v = v - params[1 + i] * (y[i] - params[1 + n + i])
+    s = params[1 + 2 * n]
+    u_out[0] = params[2 + 2 * n] + s * math.tanh(v / s)
+
+
+def update(t, z, y, r, u_applied, params, z_out):
+    return
+"""
+
+
+def _width(text):
+    value = float(text)
+    if not value > 0:
+        raise ValueError(text)
+    return value
+
+
+def build(request):
+    import numpy as np
+
+    from equilibrist.control.controller import NonlinearController
+
+    d = request.design()
+    plant, system = d.plant, request.system
+    n = system.n_states
+    s = float(request.options.get("softness", 10.0))
+    params = np.concatenate([[n], np.asarray(d.K, float)[0], plant.x0, [s], plant.u0])
+    return NonlinearController(
+        name="softlqr", source=SOURCE, params=params, z0=np.zeros(0),
+        rate=float(d.rate), x_op=plant.x0, u_op=plant.u0, state_names=system.state_names,
+        input_names=system.input_names, output_names=system.state_names,
+        settings={"softness": s})
+
+
+def applies(system):
+    if system.n_inputs != 1 or system.n_states != 4:
+        return (f"{system.key} has {system.n_states} states and {system.n_inputs} inputs: "
+                "softlqr drives one input of a four-state rig")
+    return None
+
+
+KIND = ControllerKind(
+    name="softlqr", label="Soft LQR (tanh)", help="the LQR through a tanh of width --softness",
+    build=build, applies=applies, noise="spec",
+    options=(Option("--softness", "width of softlqr's tanh, in the input's unit (default 10)",
+                    parse=_width, expected="a positive number", metavar="U"),),
+)
+'''
+
+
+@pytest.fixture(scope="module")
+def plugin(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+    folder = tmp_path_factory.mktemp("kind")
+    (folder / "softlqr_kind.py").write_text(KIND_MODULE)
+    info = folder / "softlqr_kind-1.0.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: softlqr-kind\nVersion: 1.0\n")
+    (info / "entry_points.txt").write_text("[equilibrist.controllers]\nsoftlqr = softlqr_kind:KIND\n")
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(folder), env.get("PYTHONPATH")]))
+    return env
+
+
+def _cli(env: dict[str, str], *args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "equilibrist.cli.main", *args], env=env, cwd=cwd,
+                          capture_output=True, text=True, timeout=600, check=False)
+
+
+def test_simulate_offers_it_takes_its_option_and_a_wide_one_runs_as_the_lqr(plugin) -> None:
+    helped = _cli(plugin, "simulate", "--help")
+    assert "softlqr" in helped.stdout and "--softness" in helped.stdout
+    common = ["--duration", "2", "--x0", "theta=0.15", "--noise", "off", "--json"]
+    soft = _cli(plugin, "simulate", "cartpole", "--controller", "softlqr", "--softness", "1e9",
+                *common)
+    assert soft.returncode == 0, soft.stderr
+    lqr = _cli(plugin, "simulate", "cartpole", "--controller", "lqr", *common)
+    a, b = json.loads(soft.stdout), json.loads(lqr.stdout)
+    assert a["fell"] is False
+    assert a["rms_input"] == pytest.approx(b["rms_input"], rel=1e-9)
+    assert a["peak_command"] == pytest.approx(b["peak_command"], rel=1e-9)
+    # A narrow tanh bends the command: the peak is bounded by the width.
+    narrow = json.loads(_cli(plugin, "simulate", "cartpole", "--controller", "softlqr",
+                             "--softness", "5", *common).stdout)
+    assert narrow["peak_command"]["F"] <= 5.0 + 1e-9 < b["peak_command"]["F"]
+
+
+def test_its_options_and_where_it_applies_are_refused_in_one_line(plugin) -> None:
+    bad = _cli(plugin, "simulate", "cartpole", "--controller", "softlqr", "--softness", "abc")
+    assert bad.returncode == 2
+    assert bad.stderr.strip().splitlines() == [
+        "equilibrist: error: --softness 'abc': expected a positive number"]
+    other = _cli(plugin, "simulate", "cartpole", "--controller", "lqr", "--softness", "3")
+    assert other.returncode == 2 and "the lqr controller takes none" in other.stderr
+    two = _cli(plugin, "simulate", "double_cartpole", "--controller", "softlqr")
+    assert two.returncode == 2 and "softlqr drives one input of a four-state" in two.stderr
+    assert "Traceback" not in bad.stderr + other.stderr + two.stderr
+
+
+def test_batch_and_a_study_run_it_in_worker_processes(plugin, tmp_path: Path) -> None:
+    batch = _cli(plugin, "batch", "cartpole", "--controller", "softlqr", "--runs", "6",
+                 "--duration", "1", "--workers", "2", "--json")
+    assert batch.returncode == 0, batch.stderr
+    assert json.loads(batch.stdout)["stayed_up"] == 6
+    out = tmp_path / "study.parquet"
+    study = _cli(plugin, "sweep", "cartpole", "--vary", "controller=lqr,softlqr", "--runs", "4",
+                 "--duration", "1", "--out", str(out))
+    assert study.returncode == 0, study.stderr
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(out).to_pydict()
+    assert table["controller"] == ["lqr", "softlqr"]
+    assert table["status"] == ["ok", "ok"] and table["fraction_up"] == [1.0, 1.0]
+
+
+def test_the_environment_takes_it_as_its_expert(plugin) -> None:
+    script = textwrap.dedent('''
+        import gymnasium as gym
+        import equilibrist.envs
+        from equilibrist.envs.expert import expert
+        env = gym.make("equilibrist/cartpole-balance-v0", observe="state")
+        policy = expert(env, "softlqr", options={"softness": 20.0})
+        obs, _ = env.reset(seed=2)
+        policy.reset()
+        steps, done = 0, False
+        while not done:
+            obs, reward, terminated, truncated, _ = env.step(policy(obs))
+            steps += 1
+            done = terminated or truncated
+        print(steps, terminated, abs(env.unwrapped.state[1]) < 0.01)
+    ''')
+    proc = subprocess.run([sys.executable, "-c", script], env=plugin, capture_output=True,
+                          text=True, timeout=600, check=False)
+    assert proc.returncode == 0, proc.stderr
+    steps, terminated, upright = proc.stdout.split()
+    assert int(steps) > 100 and terminated == "False" and upright == "True"
+
+
+def test_it_exports_as_c_that_make_check_proves_bit_for_bit(plugin, tmp_path: Path) -> None:
+    import shutil
+
+    out = tmp_path / "soft"
+    done = _cli(plugin, "export", "cartpole", "--controller", "softlqr", "--softness", "8",
+                "--duration", "1", "--out", str(out), "--json")
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["controller"] == "softlqr"
+    assert "tanh(" in (out / "softlqr.c").read_text()
+    if shutil.which("make") is None or shutil.which("cc") is None:
+        pytest.fail("make and a C compiler are needed (CI installs them)")
+    check = subprocess.run(["make", "check"], cwd=out, capture_output=True, text=True,
+                           timeout=600, check=False)
+    assert check.returncode == 0, check.stdout + check.stderr
