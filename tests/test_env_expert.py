@@ -19,7 +19,7 @@ def test_an_lqg_expert_steps_the_env_as_simulate_runs_the_same_controller() -> N
     # controller from the same start, no noise on either side.
     env = gym.make("equilibrist/cartpole-balance-v0", noise=False, action_units="physical")
     policy = expert(env, "lqg")
-    obs, info = env.reset(seed=4)
+    obs, _ = env.reset(seed=4)
     policy.reset()
     core = env.unwrapped.core
     states = [np.array(env.unwrapped.state)]
