@@ -14,526 +14,43 @@ a Monte-Carlo fan over uncertain parameters.
 The scenarios (how far off upright a run starts, how hard the push is) are
 in :data:`SCENARIOS`, one per system, in the units of its states and
 inputs; a system not listed gets :func:`default_scenario`.
+
+The scenarios and what the steps share are in :mod:`equilibrist.viz._tour_common`,
+the tour of one system in :mod:`equilibrist.viz._tour_systems`; this module runs
+the whole tour and writes the report. Their public names are importable from here.
 """
 
 from __future__ import annotations
 
-import math
 import os
 import shutil
 import tempfile
-import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from equilibrist.viz._tour_common import (
+    GYRO_DURATION,
+    GYRO_SPIN,
+    GYRO_THETA,
+    SCENARIOS,
+    SEED,
+    SUMMARY_HEADER,
+    Outcome,
+    Scenario,
+    _say,
+    default_scenario,
+)
+from equilibrist.viz._tour_systems import (
+    balance_outputs,
+    final_error,
+    recovery_time,
+    tour_controlled,
+    tour_gyroscope,
+    watched_outputs,
+)
 from equilibrist.viz.output import VizError
-from equilibrist.viz.report import Image, Section, write_index
-
-#: Seed of the noise of every demo run (the report is reproducible).
-SEED = 2024
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """What the demo does to one system.
-
-    Attributes
-    ----------
-    duration : float
-        Seconds simulated.
-    start : dict
-        Initial offsets from the operating point, by state name (state units).
-    push : float
-        A push added to the first input's channel (beside the actuator, which
-        does not limit it) at half the duration, in the input's unit.
-    push_duration : float
-        How long the push lasts [s].
-    step : dict
-        Offsets of the tracked outputs' reference from the operating point,
-        from ``step_at`` seconds on (empty: no reference change).
-    step_at : float
-        When the reference steps [s].
-    push_name : str
-        What the push is, in words ("a 40 N shove on the cart").
-    note : str
-        What the reader should know to read the run (shown in the report).
-    """
-
-    duration: float = 8.0
-    start: dict[str, float] = field(default_factory=dict)
-    push: float = 0.0
-    push_duration: float = 0.1
-    step: dict[str, float] = field(default_factory=dict)
-    step_at: float = 1.0
-    push_name: str = "a push"
-    note: str = ""
-
-
-SCENARIOS: dict[str, Scenario] = {
-    "seesaw": Scenario(duration=8.0, start={"theta": -0.15}, push=-2.0, push_duration=0.15,
-                       step={"theta": 0.1}, step_at=1.5,
-                       push_name="a downward tap of 2 N on the motor end for 0.15 s"),
-    "cartpole": Scenario(duration=12.0, start={"theta": 0.1}, push=120.0, push_duration=0.1,
-                         step={"x": 0.3}, step_at=1.0,
-                         push_name="a shove of 120 N on the cart for 0.1 s"),
-    "double_cartpole": Scenario(duration=10.0, start={"theta1": 0.04, "theta2": -0.03}, push=8.0,
-                                push_duration=0.1, step={"x": 0.15}, step_at=1.0,
-                                push_name="a shove of 8 N on the cart for 0.1 s"),
-    "wheeled_pendulum": Scenario(duration=8.0, start={"theta": 0.08}, push=0.12, push_duration=0.1,
-                                 step={"phi": 5.0}, step_at=1.0,
-                                 push_name="a torque kick of 0.12 N m on the wheel for 0.1 s"),
-    "reaction_wheel_pendulum": Scenario(duration=8.0, start={"theta": 0.08}, push=0.1,
-                                        push_duration=0.1,
-                                        push_name="a torque kick of 0.1 N m for 0.1 s"),
-    "ball_beam": Scenario(duration=8.0, start={"R": -0.05}, push=0.2, push_duration=0.1,
-                          step={"R": 0.05}, step_at=1.0,
-                          push_name="a torque kick of 0.2 N m on the beam for 0.1 s"),
-    "ball_beam_servo": Scenario(duration=8.0, start={"R": -0.05}, push=2.0, push_duration=0.1,
-                                step={"R": 0.05}, step_at=1.0,
-                                push_name="a jolt of 2 rad/s on the beam's rate for 0.1 s",
-                                note="The jolt acts on the servo's rate, which this model takes "
-                                "as exact: the design gives the beam angle almost no process "
-                                "noise (only a floor), so the Kalman filter trusts its "
-                                "prediction over the encoder and its estimate of theta (dashed) "
-                                "takes seconds to rejoin the truth; the ball recovers as "
-                                "slowly."),
-    "cmg_robot": Scenario(duration=8.0, start={"theta": 0.03}, push=0.15, push_duration=0.1,
-                          push_name="a kick of 0.15 N m on the gimbals for 0.1 s"),
-}
-
-#: The gyroscope's demo: nutation angle, spin and duration.
-GYRO_THETA = 0.6
-GYRO_SPIN = 250.0
-GYRO_DURATION = 2.0
-
-
-def default_scenario(system: Any) -> Scenario:
-    """A scenario from the spec alone: start at half a design scale off the
-    operating point on the first angle, push at half the input's limit."""
-    scales = dict(system.spec.design_scales)
-    coords = [n for n in system.state_names if not n.endswith("_dot")]
-    first = next((c for c in coords if c.startswith("theta")), coords[0])
-    start = {first: 0.5 * scales.get(first, 0.1)}
-    low, high = system.input_limits
-    push = 0.5 * float(max(abs(low[0]), abs(high[0]))) if system.n_inputs else 0.0
-    return Scenario(start=start, push=push, push_name=f"a push of {push:g} {system.input_units[0]}"
-                    if system.n_inputs else "")
-
-
-@dataclass(frozen=True)
-class Outcome:
-    """What the tour found for one system: a row of the summary table and a report section."""
-
-    key: str
-    row: tuple[str, ...]
-    section: Section
-    stayed_up: bool
-    seconds: float
-
-
-SUMMARY_HEADER = ("system", "controller", "settling after push", "peak input", "final error",
-                  "stayed up")
-
-
-# -- formatting ----------------------------------------------------------------
-
-
-def _fmt(value: float, unit: str, *, degrees: bool = True, digits: int = 3) -> str:
-    from equilibrist.viz.plots import display_unit
-
-    f, shown = display_unit(unit, degrees=degrees)
-    return f"{f * value:.{digits}g} {shown}".strip()
-
-
-def _slug(key: str) -> str:
-    return "".join(c if c.isalnum() else "_" for c in key).strip("_")
-
-
-def _say(log: Callable[[str], None] | None, text: str) -> None:
-    if log is not None:
-        log(text)
-
-
-# -- one controlled system -----------------------------------------------------
-
-
-def tour_controlled(
-    system: Any,
-    folder: Path,
-    *,
-    scenario: Scenario | None = None,
-    size: tuple[int, int] = (400, 300),
-    fps: float = 15.0,
-    max_frames: int = 150,
-    extras: bool = False,
-    progress: bool = False,
-) -> Outcome:
-    """Design, simulate, plot and animate one system with an input.
-
-    Parameters
-    ----------
-    system : equilibrist.numeric.system.System
-        The system.
-    folder : pathlib.Path
-        The report folder; this system's files go into ``folder / <slug>``.
-    scenario : Scenario, optional
-        What to do (default: :data:`SCENARIOS` or :func:`default_scenario`).
-    size : (int, int)
-        Animation frame size in pixels.
-    fps, max_frames : float, int
-        Animation frame rate and cap.
-    extras : bool
-        Also map the region of attraction and run a Monte-Carlo batch.
-    progress : bool
-        Progress bars for the slow steps.
-
-    Returns
-    -------
-    Outcome
-    """
-    from equilibrist.control import design
-    from equilibrist.sim import LQG, Noise, Pulse, StateFeedback, Step, simulate
-    from equilibrist.viz.animation import animate_result
-    from equilibrist.viz.plots import plot_comparison, plot_poles, plot_response
-
-    began = time.perf_counter()
-    sc = scenario or SCENARIOS.get(system.name) or default_scenario(system)
-    slug = _slug(_label(system))
-    sub = folder / slug
-    sub.mkdir(parents=True, exist_ok=True)
-    d = design(system, rate=system.spec.control_rate)
-    tracking = bool(sc.step) and d.Kc is not None
-    x_op = np.asarray(d.plant.x0, float)
-    x0 = x_op.copy()
-    for name, offset in sc.start.items():
-        x0[system.state_index(name)] += offset
-    reference = None
-    if tracking:
-        r0 = np.asarray(d.r0, float)
-        r1 = r0 + np.array([sc.step.get(n, 0.0) for n in d.tracked])
-        reference = Step(value=r1, at=sc.step_at, initial=r0)
-    push_at = sc.duration / 2
-    events = [Pulse(time=push_at, value=sc.push, duration=sc.push_duration)] if sc.push else []
-    common: dict[str, Any] = {"duration": sc.duration, "x0": x0, "reference": reference,
-                              "events": events}
-    lqg = LQG.from_design(d, tracking=tracking)
-    main = simulate(system, lqg, noise=Noise.from_design(d), seed=SEED, progress=progress, **common)
-    ideal = simulate(system, StateFeedback.from_design(d, tracking=tracking), **common)
-    main.save(sub / "run.npz")
-
-    rate = f"{d.rate:g} Hz"
-    label_main = f"digital LQG at {rate}, noisy sensors"
-    plot_response(main, sub / "response.png",
-                  title=f"{system.spec.title}: {label_main}, {'FELL' if main.fell else 'stayed up'}")
-    plot_comparison({label_main: main, "ideal LQR on the true state, no noise": ideal},
-                    sub / "comparison.png",
-                    title=f"{system.spec.title}: what the estimator and the noise cost")
-    plot_poles(d, sub / "poles.png")
-    animate_result(main, sub / "animation.gif", width=size[0], height=size[1], fps=fps,
-                   max_frames=max_frames, progress=progress)
-    images = [
-        Image(f"{slug}/animation.gif", "The run, drawn to scale from the simulated states "
-              "(time stamp top right; the gauge shows the input applied, red when saturated)."),
-        Image(f"{slug}/poles.png", "Poles: open loop (x), with the LQR state feedback (o) and of "
-              "the Kalman estimator (diamonds). The loop is stable when all closed-loop poles are "
-              "inside the unit circle."),
-        Image(f"{slug}/response.png", "Time response: true states (solid), the Kalman filter's "
-              "estimates (dashed), the sensor readings (grey dots), the reference (dash-dot); the "
-              "input applied, the command before saturation (dotted), the limits (red dashed).",
-              wide=True),
-        Image(f"{slug}/comparison.png", "The same run with the ideal loop: LQR on the true "
-              "state without noise.", wide=True),
-    ]
-    notes: list[str] = [*([sc.note] if sc.note else []), *getattr(d, "notes", ())]
-    if system.name in ("cartpole", "reaction_wheel_pendulum", "furuta", "acrobot"):
-        from equilibrist.viz.swingup_demo import swingup_animation
-
-        _gif, caption = swingup_animation(system, sub, width=size[0], height=size[1], fps=fps,
-                                          max_frames=max_frames, progress=progress)
-        images.insert(1, Image(f"{slug}/swingup.gif", caption))
-    if extras:
-        images += _extras(system, d, sub, slug, sc, progress=progress)
-        if system.name == "cartpole":
-            from equilibrist.viz.mpc_demo import mpc_images
-
-            images += mpc_images(system, sub, slug)
-
-    m = main.metrics()
-    u_name, u_unit = system.input_names[0], system.input_units[0]
-    low, high = system.input_limits
-    full = float(max(abs(low[0]), abs(high[0])))
-    peak = float(np.abs(main.input(u_name)).max()) if main.n_rows else 0.0
-    watched = watched_outputs(system, main)
-    after = recovery_time(main, balance_outputs(system, main), push_at) if sc.push else None
-    final = final_error(main, watched)
-    errors = ", ".join(f"{w} {_fmt(v, main.unit(w), digits=2)}" for w, v in final.items())
-    row = (
-        _label(system),
-        f"LQG {rate}",
-        ("-" if main.fell or not sc.push else f"> {sc.duration - push_at:.0f} s")
-        if after is None else f"{after:.2f} s",
-        f"{peak:.3g} {u_unit} ({100 * peak / full:.0f} %)" if full > 0 else f"{peak:.3g} {u_unit}",
-        errors,
-        "no" if main.fell else "yes",
-    )
-    story = _story(system, d, sc, main, m, push_at=push_at, tracking=tracking, peak=peak, full=full,
-                   after=after)
-    facts = [
-        ("controller", f"LQG: Kalman filter on {', '.join(d.output_names)} + LQR, {rate}"),
-        ("start", ", ".join(f"{k} {_fmt(v, main.unit(k))} off the operating point"
-                            for k, v in sc.start.items()) or "at the operating point"),
-        ("reference step", ", ".join(f"{k} by {_fmt(v, main.unit(k))} at {sc.step_at:g} s"
-                                     for k, v in sc.step.items()) if tracking else "none"),
-        ("push", f"{sc.push_name} at {push_at:g} s" if sc.push else "none"),
-        ("peak input", row[3]),
-        ("time in saturation", f"{m['time_saturated']:.3g} s"),
-        ("settling after the push", row[2]),
-        ("final error (mean of the last second)", errors or "-"),
-        ("estimation error (RMS)", ", ".join(
-            f"{k} {_fmt(v, main.unit(k))}" for k, v in (m["estimation_error_rms"] or {}).items())),
-        ("ideal loop (LQR, no noise)", "stayed up" if not ideal.fell else "fell"),
-        ("result file", f"{slug}/run.npz (equilibrist plot / equilibrist animate read it)"),
-    ]
-    return Outcome(
-        key=system.key,
-        row=row,
-        section=_section(system, slug, story, images, facts, notes),
-        stayed_up=not main.fell,
-        seconds=time.perf_counter() - began,
-    )
-
-
-def watched_outputs(system: Any, result: Any) -> list[str]:
-    """The outputs that say how well a run went: the tracked ones, then the
-    states whose range defines falling (the balance), else the measured ones."""
-    names = list(result.reference_names)
-    names += [n for n in system.spec.region if n in system.state_names and n not in names]
-    return names or list(result.output_names) or list(system.state_names)
-
-
-def balance_outputs(system: Any, result: Any) -> list[str]:
-    """The states whose range decides a fall (the balance), else the watched outputs."""
-    names = [n for n in system.spec.region if n in system.state_names]
-    return names or watched_outputs(system, result)
-
-
-def _errors(result: Any, names: Sequence[str]) -> np.ndarray:
-    """Each watched output minus its target (its reference, else the operating point)."""
-    cols = []
-    for n in names:
-        target = (result.reference_of(n) if n in result.reference_names
-                  else np.full(result.n_rows, result.x_op[result.state_names.index(n)]))
-        cols.append(result.state(n) - target)
-    return np.column_stack(cols) if cols else np.zeros((result.n_rows, 0))
-
-
-def recovery_time(result: Any, names: Sequence[str], push_at: float) -> float | None:
-    """Seconds after *push_at* until the watched outputs are back for good.
-
-    "Back" is within the larger of 1.5 times their excursion in the second
-    before the push (the noise the loop lives with) and a tenth of the
-    excursion the push caused. None when the run fell or never came back.
-    """
-    if result.fell or not names:
-        return None
-    t = result.time
-    e = np.abs(_errors(result, names))
-    before = (t >= push_at - 1.0) & (t < push_at)
-    after = t >= push_at
-    if not before.any() or not after.any():
-        return None
-    band = np.maximum(1.5 * e[before].max(axis=0), 0.1 * e[after].max(axis=0))
-    outside = after & np.any(e > band, axis=1)
-    if not outside.any():
-        return 0.0
-    last = int(np.nonzero(outside)[0][-1])
-    if last >= len(t) - 1:
-        return None
-    return float(t[last + 1] - push_at)
-
-
-def final_error(result: Any, names: Sequence[str], *, window: float = 1.0) -> dict[str, float]:
-    """Mean of each watched output's error over the last *window* seconds."""
-    if not result.n_rows:
-        return {}
-    e = _errors(result, names)
-    tail = result.time >= result.time[-1] - window
-    return {n: float(e[tail, j].mean()) for j, n in enumerate(names)}
-
-
-def _story(system: Any, d: Any, sc: Scenario, run: Any, m: dict[str, Any], *, push_at: float,
-           tracking: bool, peak: float, full: float, after: float | None) -> list[str]:
-    unit = system.input_units[0]
-    start = ", ".join(f"{k} = {_fmt(v, run.unit(k))}" for k, v in sc.start.items())
-    first = (
-        f"The run starts off balance ({start} from the operating point). A digital LQG "
-        f"controller at {d.rate:g} Hz reads only the noisy sensors ({', '.join(d.output_names)}), "
-        "estimates the full state with a Kalman filter and commands "
-        f"{system.input_names[0]} within its limits."
-    )
-    if tracking:
-        steps = ", ".join(f"{k} by {_fmt(v, run.unit(k))}" for k, v in sc.step.items())
-        first += f" At {sc.step_at:g} s the reference asks it to move {steps}."
-    if sc.push:
-        first += f" At {push_at:g} s it gets {sc.push_name}."
-    if run.fell:
-        second = (f"It fell: {run.fell_state} left its safe range at {run.fell_at:.2f} s. "
-                  "The scenario is harder than this controller can take.")
-    else:
-        second = "It stayed up"
-        if sc.push:
-            second += (f" and settled again {after:.2f} s after the push" if after is not None
-                       else " but had not settled again by the end of the run")
-        second += (f"; the input peaked at {peak:.3g} {unit}, {100 * peak / full:.0f} % of its "
-                   f"limit, and was saturated for {m['time_saturated']:.2g} s.")
-    return [system.spec.description, first, second]
-
-
-def _section(system: Any, slug: str, story: list[str], images: list[Image],
-             facts: list[tuple[str, str]], notes: list[str]) -> Section:
-    from equilibrist.mechanics.printing import equations_latex, equations_text
-
-    model = system.symbolic
-    return Section(
-        anchor=slug,
-        title=system.spec.title,
-        subtitle=f"{_label(system)}: {system.spec.description}",
-        story=story[1:],
-        images=images,
-        facts=facts,
-        equations=equations_text(model, system.spec),
-        equations_latex=equations_latex(model, system.spec),
-        notes=notes,
-    )
-
-
-def _extras(system: Any, d: Any, sub: Path, slug: str, sc: Scenario, *, progress: bool) -> list[Image]:
-    """Region of attraction and Monte-Carlo fan (the cart-pole's tour)."""
-    from equilibrist.sim import LQG, Noise, monte_carlo, region_of_attraction
-    from equilibrist.viz.plots import plot_fan, plot_region_of_attraction
-
-    lqg = LQG.from_design(d)
-    angle = next(n for n in system.state_names if n.startswith("theta") and not n.endswith("_dot"))
-    rate_name = f"{angle}_dot"
-    roa = region_of_attraction(system, lqg, grid={angle: (-0.6, 0.6, 25), rate_name: (-3.0, 3.0, 21)},
-                               duration=4.0, seed=SEED, progress=progress)
-    units = dict(zip(system.state_names, system.state_units, strict=True))
-    plot_region_of_attraction(
-        roa.points[:, 0], roa.points[:, 1], roa.caught, sub / "region_of_attraction.png",
-        x_name=angle, y_name=rate_name, x_unit=units[angle], y_unit=units[rate_name],
-        title=f"{system.spec.title}: which starts the LQG catches ({roa.fraction_caught:.0%})")
-    spread = {n: 0.3 for n in ("m_p", "l", "m_c") if n in system.params}
-    mc = monte_carlo(system, lqg, spread=spread, runs=40, seed=SEED, duration=sc.duration,
-                     x0={k: float(d.plant.x0[system.state_index(k)]) + v for k, v in sc.start.items()},
-                     noise=Noise.from_design(d), record=True, progress=progress)
-    runs = [mc.batch.run(i) for i in range(mc.batch.runs)]
-    spread_text = ", ".join(f"{k} ±{100 * v:.0f} %" for k, v in spread.items())
-    if len(set(spread.values())) == 1:  # one spread for all: "m_p, l, m_c ±30 %"
-        short = f"{', '.join(spread)} ±{100 * next(iter(spread.values())):.0f} %"
-    else:
-        short = spread_text
-    plot_fan(runs, sub / "monte_carlo.png",
-             title=f"{system.spec.title}: 40 runs with {short} (nominal controller), "
-                   f"{mc.batch.stayed_up} stayed up")
-    return [
-        Image(f"{slug}/region_of_attraction.png", f"Region of attraction: each cell is a run started "
-              f"at that {angle} and {rate_name} (other states at rest); green ones were caught."),
-        Image(f"{slug}/monte_carlo.png", "Monte-Carlo fan: the spread of 40 runs whose plant "
-              f"parameters differ from the design's ({spread_text}): median, 25-75 % and "
-              "5-95 % bands.", wide=True),
-    ]
-
-
-# -- the gyroscope -------------------------------------------------------------
-
-
-def tour_gyroscope(
-    system: Any,
-    folder: Path,
-    *,
-    size: tuple[int, int] = (400, 300),
-    fps: float = 15.0,
-    max_frames: int = 150,
-    progress: bool = False,
-) -> Outcome:
-    """Steady and nutating precession of the heavy top (zxz variant)."""
-    from equilibrist.sim import simulate
-    from equilibrist.systems._gyro_tools import steady_precession_rates, zxz_to_xyz
-    from equilibrist.viz.animation import animate_result
-    from equilibrist.viz.plots import plot_comparison, plot_response
-
-    began = time.perf_counter()
-    slug = _slug(_label(system))
-    sub = folder / slug
-    sub.mkdir(parents=True, exist_ok=True)
-    euler = system.spec.variant[1] if system.spec.variant else "zxz"
-    slow, fast = steady_precession_rates(system, GYRO_THETA, GYRO_SPIN)
-    zxz = {
-        "steady": np.array([0.0, GYRO_THETA, 0.0, slow, 0.0, GYRO_SPIN]),
-        "nutating": np.array([0.0, GYRO_THETA, 0.0, 0.0, 0.0, GYRO_SPIN]),
-    }
-    starts = {k: (v if euler == "zxz" else zxz_to_xyz(v)) for k, v in zxz.items()}
-    runs = {k: simulate(system, None, duration=GYRO_DURATION, rate=500.0, x0=x0,
-                        integrator="adaptive", progress=progress)
-            for k, x0 in starts.items()}
-    for k, r in runs.items():
-        r.save(sub / f"{k}.npz")
-        animate_result(r, sub / f"{k}.gif", width=size[0], height=size[1], fps=fps,
-                       max_frames=max_frames, speed=0.25, progress=progress)
-    labels = {"steady": f"steady: released at the slow precession rate {slow:.3g} rad/s",
-              "nutating": "nutating: released without precession"}
-    axis_states = [n for n in ("theta", "phi_dot", "theta_dot") if n in system.state_names]
-    plot_comparison({labels[k]: r for k, r in runs.items()}, sub / "comparison.png",
-                    states=axis_states if euler == "zxz" else None, inputs=False,
-                    title=f"{system.spec.title}: steady vs nutating precession")
-    plot_response(runs["nutating"], sub / "response.png",
-                  title=f"{system.spec.title}: nutating precession")
-    theta_idx = system.state_index("theta")
-    drift = {k: float(r.states[-1, theta_idx] - r.states[0, theta_idx]) for k, r in runs.items()}
-    energy = {k: _relative_drift([system.energy(x) for x in (r.states[0], r.states[-1])])
-              for k, r in runs.items()}
-    fell = any(r.fell for r in runs.values())
-    row = (_label(system), "none (no input)", "-", "-",
-           f"theta drift {_fmt(drift['steady'], 'rad')} (steady)", "no" if fell else "yes")
-    story = [
-        f"The wheel spins at {GYRO_SPIN:g} rad/s with its axis tilted {math.degrees(GYRO_THETA):.0f}° "
-        f"from vertical. For that tilt and spin the steady-precession relation has two roots: "
-        f"a slow precession of {slow:.3g} rad/s and a fast one of {fast:.3g} rad/s.",
-        f"Released at the slow rate, the axis sweeps round at constant tilt: its tilt drifted by "
-        f"{_fmt(drift['steady'], 'rad')} in {GYRO_DURATION:g} s. Released without precession, it "
-        "dips and nods (nutation) while it precesses: the blue trace of its tip draws the cusps. "
-        f"Nothing drives or brakes it, so the energy is conserved: it drifted by "
-        f"{energy['steady']:.1e} (steady) and {energy['nutating']:.1e} (nutating), relative.",
-        "The animations play at a quarter of real speed so that the nutation shows.",
-    ]
-    images = [
-        Image(f"{slug}/steady.gif", "Steady precession (slow motion x0.25): the axis keeps its tilt."),
-        Image(f"{slug}/nutating.gif", "Nutating precession (slow motion x0.25): the tip traces cusps."),
-        Image(f"{slug}/comparison.png", "Tilt and precession rate of both runs.", wide=True),
-        Image(f"{slug}/response.png", "Every state of the nutating run.", wide=True),
-    ]
-    facts = [
-        ("spin psi_dot", f"{GYRO_SPIN:g} rad/s"),
-        ("tilt theta", f"{math.degrees(GYRO_THETA):.1f} deg"),
-        ("steady precession rates (slow, fast)", f"{slow:.4g}, {fast:.4g} rad/s"),
-        ("tilt drift, steady run", _fmt(drift["steady"], "rad")),
-        ("tilt range, nutating run", _fmt(float(np.ptp(runs["nutating"].states[:, theta_idx])), "rad")),
-        ("relative energy drift (steady, nutating)", f"{energy['steady']:.1e}, {energy['nutating']:.1e}"),
-        ("result files", f"{slug}/steady.npz, {slug}/nutating.npz"),
-    ]
-    return Outcome(key=system.key, row=row,
-                   section=_section(system, slug, [system.spec.description, *story], images, facts, []),
-                   stayed_up=not fell, seconds=time.perf_counter() - began)
-
-
-def _relative_drift(values: Sequence[float]) -> float:
-    a, b = float(values[0]), float(values[-1])
-    return abs(b - a) / max(abs(a), 1e-300)
-
+from equilibrist.viz.report import write_index
 
 # -- the whole tour ------------------------------------------------------------
 
@@ -555,16 +72,6 @@ def tour_one(
                                extras=system.name in extras, progress=progress)
     return tour_gyroscope(system, folder, size=size, fps=fps, max_frames=max_frames,
                           progress=progress)
-
-
-def _label(system: Any) -> str:
-    """How the report names a system: its key, or a user's file by its own name."""
-    key = str(system.key)
-    if key == system.spec.key:
-        return key
-    file = Path(key).name
-    # A model file's system is named after the file: say it once.
-    return file if system.name in (file, Path(key).stem) else f"{system.name} ({file})"
 
 
 def _tour_in_worker(key: str, params: dict[str, float], digest: str | None, folder: str,
@@ -771,3 +278,27 @@ def write_report(folder: Path, outcomes: Sequence[Outcome]) -> Path:
                "Every run is saved beside its plots and can be replotted with 'equilibrist plot' "
                "or re-animated with 'equilibrist animate'.",
     )
+
+
+__all__ = [
+    "GYRO_DURATION",
+    "GYRO_SPIN",
+    "GYRO_THETA",
+    "REPORT_MARKER",
+    "SCENARIOS",
+    "SEED",
+    "SUMMARY_HEADER",
+    "Outcome",
+    "Scenario",
+    "balance_outputs",
+    "check_report_folder",
+    "default_scenario",
+    "final_error",
+    "recovery_time",
+    "run_tour",
+    "tour_controlled",
+    "tour_gyroscope",
+    "tour_one",
+    "watched_outputs",
+    "write_report",
+]
