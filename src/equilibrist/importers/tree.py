@@ -7,28 +7,44 @@ joints), checks that the compiled model holds only what equilibrist models,
 and copies what the derivation needs into frozen dataclasses of floats.
 Anything that the compiled model has and equilibrist does not model is
 refused with one line naming the element; nothing is silently dropped.
+
+MuJoCo's compiler and the checks of the compiled model's values are in
+:mod:`equilibrist.importers._mujoco`, the search for the operating point in
+:mod:`equilibrist.importers._tree_equilibrium`; their public names are
+importable from here.
 """
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from equilibrist.errors import DefinitionError
-
-if TYPE_CHECKING:
-    import mujoco
+from equilibrist.importers._mujoco import (
+    _check_inertia,
+    _identifier,
+    _model_name,
+    _name,
+    _not_finite,
+    compile_model,
+    load_mujoco,
+    one_line,
+)
+from equilibrist.importers._tree_equilibrium import (
+    MAX_MOVE,
+    _authority,
+    _holds,
+    _nearest_equilibrium,
+)
 
 Vector3 = tuple[float, float, float]
 Matrix3 = tuple[Vector3, Vector3, Vector3]
 
 # Below this, a value read from the file counts as zero (MuJoCo's mjMINVAL).
 TINY = 1e-15
-_IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
 @dataclass(frozen=True)
@@ -104,67 +120,6 @@ class Tree:
     # whatever its sign: the model's scale of process noise (docs/models.md).
     authority: tuple[float, ...]
     notes: tuple[str, ...]
-
-
-def load_mujoco() -> Any:
-    try:
-        import mujoco
-    except ImportError:
-        raise DefinitionError(
-            "reading MJCF or URDF models needs MuJoCo: pip install 'equilibrist[models]'"
-        ) from None
-    return mujoco
-
-
-def compile_model(file: Path) -> mujoco.MjModel:
-    """The compiled model of *file*; MuJoCo's error becomes one line."""
-    mujoco = load_mujoco()
-    try:
-        return mujoco.MjModel.from_xml_path(str(file))
-    except ValueError as exc:
-        message = one_line(str(exc))
-    import xml.etree.ElementTree as ET
-
-    try:
-        ET.parse(file)
-    except ET.ParseError as exc:  # says where, plainly
-        raise DefinitionError(f"{file.name}: malformed XML: {exc}") from None
-    raise DefinitionError(f"{file.name}: {message}")
-
-
-def one_line(message: str) -> str:
-    """MuJoCo's multi-line compile error as one line: what, and where."""
-    lines = [ln.strip() for ln in message.strip().splitlines() if ln.strip()]
-    if not lines:
-        return "MuJoCo could not read the model"
-    what = re.sub(r"^(Error|XML Error|Parse error)\s*:\s*", "", lines[0]).rstrip(".")
-    what = what.replace("mjMINVAL", "1e-15 (mjMINVAL)")
-    where = ""
-    for ln in lines[1:]:
-        found = re.search(r"line (\d+)", ln)
-        element = re.search(r"Element name '([^']*)'", ln)
-        bits = []
-        if element and element.group(1) and element.group(1) not in what:
-            bits.append(f"element {element.group(1)!r}")
-        if found:
-            bits.append(f"line {found.group(1)}")
-        if bits:
-            where = f" ({', '.join(bits)})"
-            break
-    return f"{what}{where}"
-
-
-def _name(model: Any, obj: Any, index: int) -> str:
-    mujoco = load_mujoco()
-    return mujoco.mj_id2name(model, obj, index) or ""
-
-
-def _identifier(kind: str, name: str, file: Path) -> None:
-    if not _IDENTIFIER.match(name):
-        raise DefinitionError(
-            f"{file.name}: {kind} {name!r} can not name a state or parameter: "
-            "expected letters, digits and underscores, not starting with a digit"
-        )
 
 
 def _quat_matrix(q: np.ndarray) -> np.ndarray:
@@ -409,179 +364,6 @@ def read_tree(
     )
 
 
-# The nearest equilibrium may lie at most this far from the file's pose, in
-# each coordinate that moves (rad or m); farther, the file's pose is kept and
-# the operating point is refused where it is used, saying what was found.
-MAX_MOVE = 0.1
-
-
-def _holds(model: Any, data: Any, qpos: np.ndarray, qvel: np.ndarray, ctrl: np.ndarray) -> bool:
-    """Whether *qpos*, *qvel* with the controls *ctrl* is an equilibrium (qacc = 0)."""
-    mujoco = load_mujoco()
-    data.qpos[:], data.qvel[:] = qpos, qvel
-    if model.nu:
-        data.ctrl[:] = ctrl
-    mujoco.mj_forward(model, data)
-    return bool(np.all(np.abs(data.qacc) < 1e-9 * (1.0 + np.abs(data.qfrc_bias).max(initial=0.0))))
-
-
-def _nearest_equilibrium(
-    model: Any, data: Any, qpos: np.ndarray, qvel: np.ndarray, ctrl: np.ndarray,
-    actuators: tuple[ActuatorData, ...], order: list[int], names: list[str],
-) -> tuple[np.ndarray, np.ndarray, list[tuple[str, float]]]:
-    """The equilibrium nearest the file's pose, by MuJoCo's inverse dynamics.
-
-    The joints no actuator drives are free; at ``qacc = 0`` the generalized
-    force that MuJoCo's ``mj_inverse`` asks for must vanish on them (solved
-    from the file's pose, so the solution is the nearest one) and equal the
-    motors' force on the driven joints (their controls solved by least
-    squares). Returns the pose, the controls (in the actuators' order) and
-    the coordinates that moved; a solution farther than :data:`MAX_MOVE`,
-    or none, keeps the file's pose and controls.
-    """
-    from scipy.optimize import least_squares
-
-    mujoco = load_mujoco()
-    driven = {order[a.joint] for a in actuators}
-    free = [j for j in range(model.njnt) if j not in driven]
-    adr = [int(model.jnt_qposadr[j]) for j in free]
-    dofs = [int(model.jnt_dofadr[j]) for j in free]
-
-    def inverse(q: np.ndarray) -> np.ndarray:
-        data.qpos[:], data.qvel[:] = q, qvel
-        data.qacc[:] = 0.0
-        mujoco.mj_inverse(model, data)
-        return np.array(data.qfrc_inverse, float)
-
-    q = qpos.copy()
-    scale = 1.0 + float(np.abs(inverse(q)).max(initial=0.0))
-    if free:
-        def residual(z: np.ndarray) -> np.ndarray:
-            qq = qpos.copy()
-            qq[adr] = z
-            return inverse(qq)[dofs] / scale
-
-        with np.errstate(all="ignore"):
-            z = least_squares(residual, qpos[adr], xtol=1e-15, ftol=1e-15, gtol=1e-15).x
-        if not (np.all(np.isfinite(z)) and np.abs(z - qpos[adr]).max() <= MAX_MOVE
-                and np.abs(residual(z)).max() <= 1e-12):
-            return qpos, ctrl, []
-        q[adr] = z
-    force = inverse(q)
-    new_ctrl = ctrl.copy()
-    if actuators:
-        gains = np.zeros((model.nv, len(actuators)))
-        for k, a in enumerate(actuators):
-            gains[int(model.jnt_dofadr[order[a.joint]]), k] = a.gain
-        solved = np.linalg.lstsq(gains, force, rcond=None)[0]
-        if len(new_ctrl) == len(actuators):
-            new_ctrl = solved
-    # Moves of round-off size (a joint the solver only grazed) are not reported.
-    moved = [(names[j], float(q[a] - qpos[a])) for j, a in zip(free, adr, strict=True)
-             if abs(q[a] - qpos[a]) > 1e-12]
-    return q, new_ctrl, moved
-
-
-def _authority(model: Any, data: Any, qpos: np.ndarray, actuators: tuple[ActuatorData, ...],
-               order: list[int]) -> tuple[float, ...]:
-    """Per joint (in *order*), ``sum_a |M^-1[j, a]| * |gain_a| * (high_a - low_a) / 2``."""
-    mujoco = load_mujoco()
-    data.qpos[:] = qpos
-    mujoco.mj_forward(model, data)
-    mass = np.zeros((model.nv, model.nv))
-    mujoco.mj_fullM(model, data, mass)
-    inverse = np.linalg.inv(mass)
-    reach = np.zeros(model.nv)
-    for a in actuators:
-        dof = int(model.jnt_dofadr[order[a.joint]])
-        reach += np.abs(inverse[:, dof]) * abs(a.gain) * (a.high - a.low) / 2
-    return tuple(float(reach[int(model.jnt_dofadr[j])]) for j in order)
-
-
-# What each compiled array holds, for a value that is not a finite number.
-_FINITE = (
-    ("jnt_axis", "joint", "mjOBJ_JOINT", "axis"),
-    ("jnt_pos", "joint", "mjOBJ_JOINT", "pos"),
-    ("qpos0", None, None, "joint reference (ref)"),
-    ("jnt_stiffness", "joint", "mjOBJ_JOINT", "stiffness"),
-    ("qpos_spring", None, None, "joint springref"),
-    ("dof_damping", "dof", "mjOBJ_JOINT", "damping"),
-    ("dof_armature", "dof", "mjOBJ_JOINT", "armature"),
-    ("body_pos", "body", "mjOBJ_BODY", "pos"),
-    ("body_quat", "body", "mjOBJ_BODY", "orientation"),
-    ("body_ipos", "body", "mjOBJ_BODY", "centre of mass (inertial pos)"),
-    ("body_iquat", "body", "mjOBJ_BODY", "inertial orientation"),
-    ("body_mass", "body", "mjOBJ_BODY", "mass"),
-    ("body_inertia", "body", "mjOBJ_BODY", "inertia"),
-    ("actuator_gear", "actuator", "mjOBJ_ACTUATOR", "gear"),
-    ("actuator_gainprm", "actuator", "mjOBJ_ACTUATOR", "gain"),
-    ("actuator_ctrlrange", "actuator", "mjOBJ_ACTUATOR", "ctrlrange"),
-    ("actuator_forcerange", "actuator", "mjOBJ_ACTUATOR", "forcerange"),
-    ("jnt_actfrcrange", "joint", "mjOBJ_JOINT", "actuatorfrcrange"),
-    ("key_qpos", "key", "mjOBJ_KEY", "qpos"),
-    ("key_qvel", "key", "mjOBJ_KEY", "qvel"),
-    ("key_ctrl", "key", "mjOBJ_KEY", "ctrl"),
-    ("sensor_noise", "sensor", "mjOBJ_SENSOR", "noise"),
-)
-
-
-def _not_finite(model: Any, mujoco: Any) -> list[str]:
-    """Values of the compiled model that are not finite numbers (NaN, inf), and
-    damping, stiffness or armature below zero: each one named."""
-    problems = []
-    T = mujoco.mjtObj
-    gravity = np.asarray(model.opt.gravity, float)
-    if not np.all(np.isfinite(gravity)):
-        problems.append(f"option gravity {' '.join(f'{v:g}' for v in gravity)} is not finite: "
-                        "expected three numbers")
-    for field, kind, obj, what in _FINITE:
-        values = np.asarray(getattr(model, field), float)
-        if values.size == 0:
-            continue
-        rows = values.reshape(values.shape[0], -1)
-        for i in np.flatnonzero(~np.all(np.isfinite(rows), axis=1)):
-            if kind is None:  # indexed by qpos address
-                j = int(np.flatnonzero(np.asarray(model.jnt_qposadr) <= i)[-1])
-                label = f"joint {_name(model, T.mjOBJ_JOINT, j) or j!r}"
-            elif kind == "dof":
-                j = int(model.dof_jntid[i])
-                label = f"joint {_name(model, T.mjOBJ_JOINT, j) or j!r}"
-            else:
-                label = f"{'keyframe' if kind == 'key' else kind} {_name(model, getattr(T, str(obj)), int(i)) or int(i)!r}"
-            problems.append(f"{label}: {what} is not a finite number "
-                            f"({' '.join(f'{v:g}' for v in rows[i])})")
-    for field, what in (("dof_damping", "damping"), ("dof_armature", "armature"),
-                        ("jnt_stiffness", "stiffness")):
-        values = np.asarray(getattr(model, field), float)
-        for i in np.flatnonzero(values < 0):
-            j = int(model.dof_jntid[i]) if field.startswith("dof") else int(i)
-            problems.append(f"joint {_name(model, T.mjOBJ_JOINT, j) or j!r} has {what} {values[i]:g}: "
-                            "expected >= 0")
-    return problems
-
-
-def _model_name(model: Any, file: Path) -> str:
-    # The model's name is the first entry of its names buffer.
-    raw = bytes(model.names)
-    name = raw.split(b"\0", 1)[0].decode(errors="replace")
-    return name or file.stem
-
-
-def _check_inertia(where: str, name: str, principal: np.ndarray) -> None:
-    a, b, c = (float(v) for v in principal)
-    if min(a, b, c) <= 0:
-        raise DefinitionError(
-            f"{where}: body {name!r} has an inertia that is not positive definite "
-            f"(principal moments {a:g}, {b:g}, {c:g})"
-        )
-    slack = 1e-9 * (a + b + c)
-    if a + b < c - slack or b + c < a - slack or a + c < b - slack:
-        raise DefinitionError(
-            f"{where}: body {name!r} has principal moments {a:g}, {b:g}, {c:g} that violate "
-            "the triangle inequality (each must be at most the sum of the other two)"
-        )
-
-
 def _motors(model: Any, file: Path, position: dict[int, int]) -> tuple[ActuatorData, ...]:
     """The compiled model's actuators, each a motor on one joint."""
     mujoco = load_mujoco()
@@ -639,3 +421,19 @@ def _motors(model: Any, file: Path, position: dict[int, int]) -> tuple[ActuatorD
         per_joint[j] = a
         out.append(ActuatorData(name=name, joint=position[j], gain=gain, low=low, high=high))
     return tuple(out)
+
+
+__all__ = [
+    "MAX_MOVE",
+    "TINY",
+    "ActuatorData",
+    "BodyData",
+    "JointData",
+    "Matrix3",
+    "Tree",
+    "Vector3",
+    "compile_model",
+    "load_mujoco",
+    "one_line",
+    "read_tree",
+]
