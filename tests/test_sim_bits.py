@@ -10,8 +10,10 @@ project's own (equilibrist.numeric.libm, fdlibm's kernels) instead of the C
 library's, which glibc picks by the CPU's features: a few results in ten
 thousand moved by one ulp, and every closed loop amplifies that. They are
 now the same on every x86-64 CPU (tests/test_bits_cpu.py runs them under
-another feature set); the controllers' gains still come from LAPACK, whose
-BLAS kernel the CPU selects (see docs/reproducibility.md). This file says
+another feature set). The runs that design their controller were taken again
+when the designs moved from LAPACK (whose BLAS kernel the CPU selects) to
+the fixed order of equilibrist.control.fixed: they are the same under
+another BLAS kernel too (see docs/reproducibility.md). This file says
 which arrays differ. Independent truths of the simulation are tested elsewhere
 (test_sim_systems, test_sim_linear, test_sim_noise); this file pins the
 numbers, LQR and LQG, single runs and batches, with noise, events,
@@ -58,15 +60,27 @@ def digests(result: object, names: tuple[str, ...]) -> dict[str, str]:
     return {name: digest(getattr(result, name)) for name in names}
 
 
+#: The benchmark's continuous LQR gain (Q = diag(10, 10, 1, 1), R = 0.1) as numbers: scipy's
+#: continuous Riccati solver runs LAPACK, whose last bits depend on the BLAS kernel the CPU
+#: selects, and this file pins the core's bits, not LAPACK's (the gain itself is checked
+#: against scipy below, to 1e-12).
+BENCH_K = np.array([[-9.999999999999618, -303.9634076212058, -20.256689881153306,
+                     -77.35929432136862]])
+
+
 def _cartpole_lqr_continuous():
     system = get_system("cartpole")
     lm = system.linearize()
+    return system, StateFeedback(K=BENCH_K, x_op=lm.x0, u_op=lm.u0)
+
+
+def test_the_pinned_gain_is_the_continuous_lqr_of_the_benchmark() -> None:
     import scipy.linalg as sl
 
+    lm = get_system("cartpole").linearize()
     q, r = np.diag([10.0, 10.0, 1.0, 1.0]), np.array([[0.1]])
-    p = sl.solve_continuous_are(lm.A, lm.B, q, r)
-    k = np.linalg.solve(r, lm.B.T @ p)
-    return system, StateFeedback(K=k, x_op=lm.x0, u_op=lm.u0)
+    k = np.linalg.solve(r, lm.B.T @ sl.solve_continuous_are(lm.A, lm.B, q, r))
+    np.testing.assert_allclose(k, BENCH_K, rtol=1e-12, atol=0)
 
 
 def scenario(name: str) -> object:
@@ -153,58 +167,58 @@ EXPECTED: dict[str, dict[str, str]] = {
         "final_state": "f740b843071196ab",
     },
     "lqr-saturating-delay": {
-        "states": "a82a0ae1508491a1",
-        "estimates": "a82a0ae1508491a1",
-        "measurements": "a82a0ae1508491a1",
-        "commanded": "864729ce95df3b6c",
-        "saturated": "2da5d793b813b27e",
-        "applied": "d933f32f9023b84c",
-        "final_state": "d3598e22add2275a",
+        "states": "e68aea3478499f41",
+        "estimates": "e68aea3478499f41",
+        "measurements": "e68aea3478499f41",
+        "commanded": "2d88783efd247349",
+        "saturated": "c60653b48d9bcc5a",
+        "applied": "8021a8341e9b9c08",
+        "final_state": "5dbefa2af34e20c4",
     },
     "lqg-noise-events": {
-        "states": "861f3b78ce829066",
-        "estimates": "c5450975a121a24b",
-        "measurements": "5190c0a14c3afef2",
-        "commanded": "1c9dd73a5298ab83",
-        "saturated": "290294aea2b99663",
-        "applied": "290294aea2b99663",
-        "final_state": "2a48454d7549269d",
+        "states": "345abac6cbfc6b77",
+        "estimates": "768a7d79c9fb0609",
+        "measurements": "9b71f60d690576fe",
+        "commanded": "da7011df240f09d1",
+        "saturated": "2068d5d3212b916d",
+        "applied": "2068d5d3212b916d",
+        "final_state": "22672a414a48dd02",
     },
     "lqg-predictor-tracking": {
-        "states": "ff7f32ca7aad1c8b",
-        "estimates": "d31c669e82fde5d7",
-        "measurements": "173bb4751d9816bc",
-        "commanded": "706edc5ca03f7e2c",
-        "saturated": "706edc5ca03f7e2c",
-        "applied": "706edc5ca03f7e2c",
-        "final_state": "55b9ba6111fad008",
+        "states": "11b725e7dc5ae106",
+        "estimates": "030ea5397c69c772",
+        "measurements": "a2b56036f8145bb0",
+        "commanded": "c42977d3a2e14b66",
+        "saturated": "c42977d3a2e14b66",
+        "applied": "c42977d3a2e14b66",
+        "final_state": "23b7b01ccedd5324",
     },
     "lqg-reaction-wheel": {
-        "states": "94d55c99ea8bfbfd",
-        "estimates": "1d25f524bc77dfee",
-        "measurements": "694e4df3c12c026b",
-        "commanded": "0a15a91cb1b56ccc",
-        "saturated": "0a15a91cb1b56ccc",
-        "applied": "0a15a91cb1b56ccc",
-        "final_state": "243532f0c3a2823b",
+        "states": "8334a0d69299cab6",
+        "estimates": "f9b286a107ae3792",
+        "measurements": "357972bcc8e9fe42",
+        "commanded": "b7d12d28e9ee2862",
+        "saturated": "b7d12d28e9ee2862",
+        "applied": "b7d12d28e9ee2862",
+        "final_state": "fb2f25cb7a129597",
     },
     "lqr-adaptive": {
-        "states": "6c0fa461ec1317f0",
-        "estimates": "6c0fa461ec1317f0",
-        "measurements": "6c0fa461ec1317f0",
-        "commanded": "23577add85ec3f9f",
-        "saturated": "23577add85ec3f9f",
-        "applied": "23577add85ec3f9f",
-        "final_state": "a0ff2f905826b789",
+        "states": "f7c614ad4aca1262",
+        "estimates": "f7c614ad4aca1262",
+        "measurements": "f7c614ad4aca1262",
+        "commanded": "5ac5be7ad1c5dcf6",
+        "saturated": "5ac5be7ad1c5dcf6",
+        "applied": "5ac5be7ad1c5dcf6",
+        "final_state": "3b00aa8c4e78e5f8",
     },
     "lqg-linear-plant": {
-        "states": "98e76932c2b1a225",
-        "estimates": "99e857e645f5b586",
-        "measurements": "8956e2c58029fe83",
-        "commanded": "299068821fc9f2ad",
-        "saturated": "31e81538a492c295",
-        "applied": "31e81538a492c295",
-        "final_state": "b0ae9ac2d462fdc8",
+        "states": "32273c8b40784fd9",
+        "estimates": "efe54cad05577aef",
+        "measurements": "c2d42df0a0c1e154",
+        "commanded": "2211c3342627660d",
+        "saturated": "c93012c2f5ae9486",
+        "applied": "c93012c2f5ae9486",
+        "final_state": "774f252c82e67987",
     },
     "open-loop-falls": {
         "states": "c0fbf4a75b69801c",
@@ -220,15 +234,15 @@ EXPECTED: dict[str, dict[str, str]] = {
         "fell_at": "4effff3f5b15c210",
         "fell_code": "0ea920c2bde894e9",
         "fell_x": "657a8232a19d90d1",
-        "final_state": "621ec5adeca1d5f0",
-        "peak_input": "1cc023a8127cdfef",
-        "peak_command": "7136aefae56ba4b1",
-        "rms_input": "27012c46233d118c",
+        "final_state": "0cdaf4373d961baf",
+        "peak_input": "b738999a17a181bc",
+        "peak_command": "a437d9c2cc27ae5f",
+        "rms_input": "127f7cb674c173af",
         "time_saturated": "03fa368ccefcd3a3",
-        "peak_deviation": "d4f0065ede165c4b",
-        "estimation_error_rms": "1fe3efe80e9442ec",
+        "peak_deviation": "3b92dfbe9ab1c8ca",
+        "estimation_error_rms": "7a0551cb9c65b043",
         "rows": "e64f3662ef173cb9",
-        "trajectories": "511eb0333d5f7f7c",
+        "trajectories": "e8893dfe7a9f2ac0",
     },
     "batch-lqr-outcomes": {
         "fell": "195550dc41841fae",
@@ -250,13 +264,13 @@ EXPECTED: dict[str, dict[str, str]] = {
         "fell_at": "f66ecb3ae6a5ed0b",
         "fell_code": "c37fc27f4eb48f66",
         "fell_x": "33245eb5fa89eeec",
-        "final_state": "5201bd01feeb8a91",
-        "peak_input": "4264eb636364185f",
-        "peak_command": "4264eb636364185f",
-        "rms_input": "3d15bf1809feaa83",
+        "final_state": "4ad37ce1a54c3247",
+        "peak_input": "c67bb8777b2c8045",
+        "peak_command": "c67bb8777b2c8045",
+        "rms_input": "b2a0e908f4a22e70",
         "time_saturated": "13e862f160a6c463",
-        "peak_deviation": "324e13a2259d13cd",
-        "estimation_error_rms": "0e0a4650182a397c",
+        "peak_deviation": "eff0bb67b836a72d",
+        "estimation_error_rms": "44687470dbab4adf",
         "rows": "e8fdc33cd961d431",
         "trajectories": "none",
     },

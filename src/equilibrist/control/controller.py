@@ -660,6 +660,7 @@ class LinearController:
         :func:`equilibrist.control.lqg.lqg_compensator` (inputs ``[u; y; r]``).
         *x_hat0* is the starting estimate as a deviation (default zero).
         """
+        from equilibrist.control import fixed
         from equilibrist.control.lqg import lqg_compensator
         from equilibrist.numeric.linear import LinearModel
 
@@ -691,14 +692,14 @@ class LinearController:
         p, nr = len(outs), len(comp.tracked_names)
         Kf_arr = np.asarray(Kfm, dtype=float)
         if form == "current":
-            Ez, Ey = np.eye(n) - Kf_arr @ C, Kf_arr
+            Ez, Ey = np.eye(n) - fixed.matmul(Kf_arr, C), Kf_arr
         else:
             Ez, Ey = np.eye(n), np.zeros((n, p))
         z0 = np.zeros(n) if x_hat0 is None else np.asarray(x_hat0, dtype=float).reshape(n)
         return cls(
             Ac=comp.A, Bu=comp.B[:, :m], By=comp.B[:, m : m + p], Br=comp.B[:, m + p : m + p + nr],
             Cc=comp.C, Dy=comp.D[:, m : m + p], Dr=comp.D[:, m + p : m + p + nr],
-            Ez=Ez, Ey=Ey, x_op=xo, u_op=uo, y_op=C @ xo, r_op=comp.r0, z0=z0,
+            Ez=Ez, Ey=Ey, x_op=xo, u_op=uo, y_op=fixed.matvec(C, xo), r_op=comp.r0, z0=z0,
             state_map=np.eye(n), rate=float(rate), state_names=states, input_names=inputs,
             output_names=outs, tracked_names=comp.tracked_names, u_min=_optional(u_min),
             u_max=_optional(u_max), kind="lqg", form=form, design=design,
@@ -863,8 +864,7 @@ class NonlinearController:
 
     def python_functions(self) -> dict[str, Callable[..., Any]]:
         """The source executed as plain Python (slow; for checks against the compiled core)."""
-        namespace: dict[str, Any] = {"math": math, "np": np, **linear_constants()}
-        namespace.update(_python_linear())
+        namespace = contract_namespace()
         exec(compile(self.source, f"<controller {self.name}>", "exec"), namespace)
         return {k: namespace[k] for k in NONLINEAR_FUNCTIONS if k in namespace}
 
@@ -876,6 +876,20 @@ class NonlinearController:
         return {"kind": self.name, "rate": self.rate, "source": self.source_hash,
                 "outputs": list(self.output_names), "tracked": list(self.tracked_names),
                 "settings": dict(self.settings)}
+
+
+def contract_namespace() -> dict[str, Any]:
+    """What a controller's source sees when it runs as Python: ``math``, ``np``, the linear
+    library (``linear_output``...) and its layout's constants, and the project's ``eq_sin``,
+    ``eq_cos``, ``eq_log`` (:mod:`equilibrist.numeric.libm`: the same bits on every CPU,
+    and in the C the translation writes)."""
+    from equilibrist.numeric import libm
+
+    namespace: dict[str, Any] = {"math": math, "np": np, **linear_constants(),
+                                 "eq_sin": libm.eq_sin, "eq_cos": libm.eq_cos,
+                                 "eq_log": libm.eq_log}
+    namespace.update(_python_linear())
+    return namespace
 
 
 def check_source(source: str, *, has_estimate: bool) -> tuple[str, ...]:
@@ -1299,6 +1313,7 @@ __all__ = [
     "as_python_controller",
     "build_controller",
     "check_source",
+    "contract_namespace",
     "linear_constants",
     "linear_layout_source",
     "linear_sizes",

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from equilibrist.control import _checks
+from equilibrist.control import _checks, fixed
 from equilibrist.errors import DesignError
 from equilibrist.numeric.linear import LinearModel
 
@@ -39,9 +39,8 @@ def _method(method: str) -> str:
 def discrete_matrices(
     A: np.ndarray, B: np.ndarray, dt: float, *, method: str = "zoh"
 ) -> tuple[np.ndarray, np.ndarray]:
-    """``(Ad, Bd)`` of ``x_dot = A x + B u`` sampled every *dt* seconds."""
-    import scipy.linalg  # here: a design needs it, a command that runs one does not
-
+    """``(Ad, Bd)`` of ``x_dot = A x + B u`` sampled every *dt* seconds (the exponential in
+    a fixed order of operations: :func:`equilibrist.control.fixed.expm`)."""
     _method(method)
     T = _checks.positive_period(dt)
     Am = _checks.square(A, "A")
@@ -53,7 +52,7 @@ def discrete_matrices(
     block = np.zeros((n + m, n + m))
     block[:n, :n] = Am * T
     block[:n, n:] = Bm * T
-    E = scipy.linalg.expm(block)
+    E = fixed.expm(block)
     return E[:n, :n], E[:n, n:]
 
 
@@ -118,8 +117,6 @@ def van_loan(A: object, W: object, dt: float) -> np.ndarray:
     dt:
         Period ``T`` [s].
     """
-    import scipy.linalg  # here: a design needs it, a command that runs one does not
-
     T = _checks.positive_period(dt)
     Am = _checks.square(A, "A")
     n = Am.shape[0]
@@ -128,9 +125,9 @@ def van_loan(A: object, W: object, dt: float) -> np.ndarray:
     block[:n, :n] = -Am * T
     block[:n, n:] = Wm * T
     block[n:, n:] = Am.T * T
-    E = scipy.linalg.expm(block)
+    E = fixed.expm(block)
     F = E[n:, n:].T
-    return _checks.symmetric(F @ E[:n, n:])
+    return _checks.symmetric(fixed.matmul(F, E[:n, n:]))
 
 
 def discrete_noise(
@@ -155,6 +152,6 @@ def discrete_noise(
     k = Gm.shape[1]
     QNm = _checks.matrix(QN, "QN", (k, k), f"one row and column per noise input, {k} of them")
     RNm = _checks.square(RN, "RN")
-    W = _checks.symmetric(Gm @ QNm @ Gm.T)
+    W = _checks.symmetric(fixed.mm(Gm, QNm, Gm.T))
     Qd = W * T if method == "euler" else van_loan(Am, W, T)
     return Qd, RNm / T

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from equilibrist.control import _checks
+from equilibrist.control import _checks, fixed
 from equilibrist.control.kalman import check_form
 from equilibrist.errors import DesignError, DimensionError
 from equilibrist.numeric.linear import LinearModel
@@ -180,18 +180,18 @@ def lqg_compensator(
     A, B, C, D = plant.A, plant.B, plant.C, plant.D
     zeros_r = np.zeros((n, k))
     if kind in ("continuous", "predictor"):
-        Ac = A - Lm @ C
-        Bc = np.hstack([B - Lm @ D, Lm, zeros_r])
+        Ac = A - fixed.matmul(Lm, C)
+        Bc = np.hstack([B - fixed.matmul(Lm, D), Lm, zeros_r])
         Cc = -Km
         Dc = np.hstack([np.zeros((m, m)), np.zeros((m, p)), Kcm])
     else:
         if np.any(D != 0):
             raise DesignError("the current-form compensator needs a plant with D = 0")
-        correct = np.eye(n) - Lm @ C
-        Ac = A @ correct
-        Bc = np.hstack([B, A @ Lm, zeros_r])
-        Cc = -Km @ correct
-        Dc = np.hstack([np.zeros((m, m)), -Km @ Lm, Kcm])
+        correct = np.eye(n) - fixed.matmul(Lm, C)
+        Ac = fixed.matmul(A, correct)
+        Bc = np.hstack([B, fixed.matmul(A, Lm), zeros_r])
+        Cc = -fixed.matmul(Km, correct)
+        Dc = np.hstack([np.zeros((m, m)), -fixed.matmul(Km, Lm), Kcm])
     return Compensator(
         A=Ac,
         B=Bc,

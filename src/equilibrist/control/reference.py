@@ -19,7 +19,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from equilibrist.control import _checks
+from equilibrist.control import _checks, fixed
 from equilibrist.errors import DesignError, DimensionError
 
 # A DC gain below this fraction of ||C_r|| ||(A - BK)^-1 B|| counts as zero.
@@ -44,8 +44,8 @@ def _gain(
             f"{what} is singular: the state feedback leaves a pole at "
             f"{'z = 1' if sign > 0 else 's = 0'}, so no reference gain exists"
         )
-    XB = np.linalg.solve(closed, Bm)  # (A - BK)^-1 B or (I - F + GK)^-1 G
-    dc = Cr @ XB
+    XB = fixed.solve(closed, Bm)  # (A - BK)^-1 B or (I - F + GK)^-1 G
+    dc = fixed.matmul(Cr, XB)
     scale = max(float(np.linalg.norm(Cr, 2) * np.linalg.norm(XB, 2)), 1e-300)
     zero_rows = [
         tracked[i] for i in range(dc.shape[0]) if np.linalg.norm(dc[i]) <= ZERO_GAIN_TOL * scale
@@ -65,7 +65,7 @@ def _gain(
             f"{', '.join(tracked)} are dependent (smallest singular value {s[-1]:.3g}), "
             f"so there is no reference gain Kc"
         )
-    return sign * np.linalg.inv(dc)
+    return sign * fixed.solve(dc, np.eye(dc.shape[0]))
 
 
 def _args(
@@ -124,7 +124,7 @@ def reference_gain(
         ``A - B K`` singular, or a tracked output with zero DC gain (named).
     """
     Am, Bm, Cr, Km, tracked, inputs = _args(A, B, C_r, K, tracked_names, input_names)
-    return _gain(Am - Bm @ Km, Bm, Cr, tracked, inputs, -1.0, "A - B K")
+    return _gain(Am - fixed.matmul(Bm, Km), Bm, Cr, tracked, inputs, -1.0, "A - B K")
 
 
 def discrete_reference_gain(
@@ -143,4 +143,4 @@ def discrete_reference_gain(
     """
     Fm, Gm, Cr, Km, tracked, inputs = _args(F, G, C_r, K, tracked_names, input_names)
     n = Fm.shape[0]
-    return _gain(np.eye(n) - (Fm - Gm @ Km), Gm, Cr, tracked, inputs, 1.0, "I - (F - G K)")
+    return _gain(np.eye(n) - (Fm - fixed.matmul(Gm, Km)), Gm, Cr, tracked, inputs, 1.0, "I - (F - G K)")

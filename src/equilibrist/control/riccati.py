@@ -7,9 +7,11 @@ The seed's ``lrq`` and ``lre`` (seeds/002, "Control theory")::
 
 and their discrete counterparts :func:`dlqr` and :func:`dlqe`, with the same
 conventions as python-control (whose ``lqr/lqe/dlqr/dlqe`` they reproduce)
-but without slycot: the Riccati equations are solved by
-:func:`scipy.linalg.solve_continuous_are` and
-:func:`scipy.linalg.solve_discrete_are`.
+but without slycot: the continuous Riccati equation is solved by
+:func:`scipy.linalg.solve_continuous_are`, the discrete one (what every
+sampled design, and so every simulation, runs) by
+:func:`equilibrist.control.fixed.dare`, in a fixed order of IEEE operations
+that gives the same bits on every CPU, as do the gains computed from it.
 
 Before solving, the problem is checked so that a failure says why:
 
@@ -30,7 +32,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from equilibrist.control import _checks
+from equilibrist.control import _checks, fixed
 from equilibrist.control.analysis import (
     Mode,
     _pbh_modes,
@@ -150,7 +152,7 @@ def _solve(
 
     try:
         if discrete:
-            S = scipy.linalg.solve_discrete_are(Am, Bm, Qm, Rm)
+            S = fixed.dare(Am, Bm, Qm, Rm)
         else:
             S = scipy.linalg.solve_continuous_are(Am, Bm, Qm, Rm)
     except (np.linalg.LinAlgError, ValueError) as exc:
@@ -160,7 +162,7 @@ def _solve(
         ) from None
     S = _checks.symmetric(S)
     if discrete:
-        K = np.linalg.solve(Bm.T @ S @ Bm + Rm, Bm.T @ S @ Am)
+        K = fixed.solve(fixed.mm(Bm.T, S, Bm) + Rm, fixed.mm(Bm.T, S, Am))
     else:
         K = np.linalg.solve(Rm, Bm.T @ S)
     E = np.linalg.eigvals(Am - Bm @ K)
@@ -249,7 +251,7 @@ def _estimator_args(
         _checks.weight_problems(QNm, "QN", definite=False)
         + _checks.weight_problems(RNm, "RN", definite=True)
     )
-    return Am, Cm, _checks.symmetric(Gm @ QNm @ Gm.T), RNm
+    return Am, Cm, _checks.symmetric(fixed.mm(Gm, QNm, Gm.T)), RNm
 
 
 def lqe(
@@ -335,5 +337,5 @@ def dlqe(
 
 def current_gain(P: np.ndarray, C: np.ndarray, RN: np.ndarray) -> np.ndarray:
     """``M = P C'(C P C' + RN)^-1``: the update gain from an a-priori covariance ``P``."""
-    S = C @ P @ C.T + RN
-    return np.linalg.solve(S.T, (P @ C.T).T).T
+    S = fixed.mm(C, P, C.T) + RN
+    return fixed.solve(S.T, fixed.mm(P, C.T).T).T

@@ -186,14 +186,14 @@ def su_energy(x0, x1, x2, x3, p):
         i1 = p[ph + 5]
         i2 = p[ph + 6]
         g = p[ph + 7]
-        c2 = math.cos(x1)
+        c2 = eq_cos(x1)
         d1 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2
         d2 = m2 * (lc2 * lc2 + l1 * lc2 * c2) + i2
         d3 = m2 * lc2 * lc2 + i2
         kin = 0.5 * (d1 * x2 * x2 + 2.0 * d2 * x2 * x3 + d3 * x3 * x3)
-        pot = -g * (m1 * lc1 * math.cos(x0) + m2 * (l1 * math.cos(x0) + lc2 * math.cos(x0 + x1)))
+        pot = -g * (m1 * lc1 * eq_cos(x0) + m2 * (l1 * eq_cos(x0) + lc2 * eq_cos(x0 + x1)))
         return kin + pot - g * (m1 * lc1 + m2 * (l1 + lc2))
-    return 0.5 * p[ph] * x3 * x3 + p[ph + 1] * (math.cos(x1) - 1.0)
+    return 0.5 * p[ph] * x3 * x3 + p[ph + 1] * (eq_cos(x1) - 1.0)
 
 
 def su_pump(x0, x1, x2, x3, p):
@@ -203,17 +203,17 @@ def su_pump(x0, x1, x2, x3, p):
     ke = p[SU_KE]
     amax = p[SU_AMAX]
     if law == 0:
-        a = su_clip(ke * e * su_sign(x3 * math.cos(x1)), -amax, amax)
+        a = su_clip(ke * e * su_sign(x3 * eq_cos(x1)), -amax, amax)
         a = a - p[SU_KX] * x0 - p[SU_KV] * x2
         # The force that gives the cart the acceleration a exactly.
-        mlc = p[ph + 4] * math.cos(x1)
-        th_dd = (p[ph + 1] * math.sin(x1) - p[ph + 5] * x3 - mlc * a) / p[ph]
-        return (p[ph + 2] * a + mlc * th_dd - p[ph + 4] * math.sin(x1) * x3 * x3
+        mlc = p[ph + 4] * eq_cos(x1)
+        th_dd = (p[ph + 1] * eq_sin(x1) - p[ph + 5] * x3 - mlc * a) / p[ph]
+        return (p[ph + 2] * a + mlc * th_dd - p[ph + 4] * eq_sin(x1) * x3 * x3
                 + p[ph + 3] * x2)
     if law == 1:
         return su_clip(ke * e * su_sign(x3), -amax, amax) - p[SU_KV] * (x2 - x3)
     if law == 2:
-        return su_clip(ke * e * su_sign(x3 * math.cos(x1)), -amax, amax) - p[SU_KV] * x2
+        return su_clip(ke * e * su_sign(x3 * eq_cos(x1)), -amax, amax) - p[SU_KV] * x2
     m1 = p[ph]
     m2 = p[ph + 1]
     l1 = p[ph + 2]
@@ -223,15 +223,15 @@ def su_pump(x0, x1, x2, x3, p):
     i2 = p[ph + 6]
     g = p[ph + 7]
     t2 = su_wrap(x1)
-    c2 = math.cos(t2)
-    s2 = math.sin(t2)
+    c2 = eq_cos(t2)
+    s2 = eq_sin(t2)
     m11 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2
     m12 = m2 * (lc2 * lc2 + l1 * lc2 * c2) + i2
     m22 = m2 * lc2 * lc2 + i2
     det = m11 * m22 - m12 * m12
-    hg2 = m2 * l1 * lc2 * s2 * x2 * x2 + m2 * lc2 * g * math.sin(x0 + t2)
+    hg2 = m2 * l1 * lc2 * s2 * x2 * x2 + m2 * lc2 * g * eq_sin(x0 + t2)
     hg1 = (-m2 * l1 * lc2 * s2 * (2.0 * x2 * x3 + x3 * x3)
-           + (m1 * lc1 + m2 * l1) * g * math.sin(x0) + m2 * lc2 * g * math.sin(x0 + t2))
+           + (m1 * lc1 + m2 * l1) * g * eq_sin(x0) + m2 * lc2 * g * eq_sin(x0 + t2))
     # Xin and Kaneda's energy law: V = ke (E - E0)^2 / 2 + kd x3^2 / 2 + kp t2^2 / 2
     # falls as dV/dt = -kv x3^2 (while the motor is not saturated).
     kd = p[SU_KD]
@@ -407,7 +407,9 @@ def python_namespace(*, compiled: bool = False) -> Any:
         return controller_functions(controller_source(), ("output", "update", "estimate"))
     key = "python"
     if key not in _NAMESPACES:
-        ns: dict[str, Any] = {"math": math, "np": np}
+        from equilibrist.control.controller import contract_namespace
+
+        ns = contract_namespace()
         exec(compile(controller_source(), "<equilibrist swing-up>", "exec"), ns)
         _NAMESPACES[key] = ns
     return _NAMESPACES[key]

@@ -316,7 +316,9 @@ def build_core(
         # The rig's own noise, as simulate draws it: process noise held over
         # each physics step with covariance QN / h, sensor noise per sample.
         spec_noise = Noise.from_spec(sysm, outputs=outputs, rate=run_rate)
-        lw = spec_noise.process_gain @ spec_noise.process_root / math.sqrt(h)
+        from equilibrist.control import fixed
+
+        lw = fixed.matmul(spec_noise.process_gain, spec_noise.process_root) / math.sqrt(h)
         lw = lw[:, np.any(lw != 0.0, axis=0)]
         lv = square_root(spec_noise.measurement_covariance, "the measurement noise covariance")
     region = np.array([[-np.inf] * n, [np.inf] * n])

@@ -11,8 +11,10 @@ order as the Python source, so compiled without contraction of
 multiply-adds (``-ffp-contract=off``) it gives the Python controller's
 commands bit for bit on the same inputs.
 
-Math functions: ``cos``, ``sin`` and ``floor`` from the C library's
-``<math.h>`` (link with ``-lm``). No dynamic memory; the controller's state
+Math functions: ``fabs`` and ``floor`` from the C library's ``<math.h>``
+(link with ``-lm``); the sine and cosine are the project's own
+(:mod:`equilibrist.numeric.libm`, fdlibm's kernels), written into the
+library, so its commands are the simulation's on any CPU. No dynamic memory; the controller's state
 is ``<NAME>_NZ`` doubles (14: the tracker's estimate, the mode, the held
 reference and the Kalman filter's state of the LQG hand-over). Every
 function but the four below is ``static`` (the translated ones are named
@@ -50,8 +52,9 @@ if TYPE_CHECKING:
     from equilibrist.hil.firmware import Adapter
     from equilibrist.numeric.system import System
 
-#: The C library functions the exported code calls.
-MATH_FUNCTIONS = ("cos", "sin", "floor")
+#: The C library functions the exported code calls (its sine and cosine are the project's own,
+#: equilibrist.numeric.libm, written into the library: the same bits on every CPU).
+MATH_FUNCTIONS = ("fabs", "floor")
 
 #: The exported functions take neither the time (the law does not read it) nor references.
 INTERFACE = Interface(time=False, references=False)

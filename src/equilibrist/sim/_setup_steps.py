@@ -409,7 +409,9 @@ def noise_roots(noise: Noise | None, n: int, h: float | None, outs: tuple[str, .
             try:
                 sq = noise.process_root
                 if h is not None:
-                    lw = noise.process_gain @ sq / math.sqrt(h)
+                    from equilibrist.control import fixed
+
+                    lw = fixed.matmul(noise.process_gain, sq) / math.sqrt(h)
                     # Channels without noise (zero columns) cost deviates for nothing.
                     lw = lw[:, np.any(lw != 0.0, axis=0)]
                 r_full = np.zeros((ny, ny))

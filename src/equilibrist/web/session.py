@@ -756,7 +756,9 @@ class Session:
 
         system, loop = self.system, self.loop
         noise = Noise.from_spec(system, outputs=loop.outputs, rate=self.settings.rate)
-        lw = noise.process_gain @ noise.process_root / math.sqrt(self.h)
+        from equilibrist.control import fixed
+
+        lw = fixed.matmul(noise.process_gain, noise.process_root) / math.sqrt(self.h)
         lw = lw[:, np.any(lw != 0.0, axis=0)]
         lv = np.zeros((0, 0))
         if self.settings.noise > 0 and np.any(self.sigma_y > 0):
