@@ -127,18 +127,18 @@ def test_every_actuated_system_recovers_its_parameters(key):
     truth = {n: 1.25 * float(nominal.params[n]) for n in free}
     plant = nominal.with_params(**truth)
     amplitude = 0.5 * float(spec.design_scales.get(spec.inputs[0].name, 1.0))
-    z = []
-    for seed in range(2):
-        run, log = _log(plant, nominal, seed=seed, duration=8.0, amplitude=amplitude)
-        if run.fell:  # too strong for this rig: the experiment is made gentler
-            run, log = _log(plant, nominal, seed=seed, duration=8.0, amplitude=amplitude / 4)
-        assert not run.fell
-        result = identify(nominal, log, free)
-        assert result.method["name"] == "prediction error"
-        z.extend(_z(result, truth))
-        _pole_check(nominal, result, truth)
-    z = np.array(z)
-    assert np.mean(np.abs(z) < 3.0) >= 0.9, z
+    # One log of 8 s a rig (a fit left biased, or at its start, lies as many standard
+    # errors from the truth as on either of two such logs): the standard errors'
+    # honesty over many logs is the cart-pole's and the CMG robot's tests.
+    run, log = _log(plant, nominal, seed=0, duration=8.0, amplitude=amplitude)
+    if run.fell:  # too strong for this rig: the experiment is made gentler
+        run, log = _log(plant, nominal, seed=0, duration=8.0, amplitude=amplitude / 4)
+    assert not run.fell
+    result = identify(nominal, log, free)
+    assert result.method["name"] == "prediction error"
+    _pole_check(nominal, result, truth)
+    z = np.array(_z(result, truth))
+    assert np.all(np.abs(z) < 3.0), z
 
 
 @pytest.mark.slow
