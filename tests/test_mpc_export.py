@@ -3,16 +3,17 @@ the commands equal the simulated controller's to round-off, the filter too, make
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from equilibrist import get_system
+from equilibrist.cli.main import main
 from equilibrist.control.design import design
 from equilibrist.control.mpc import KalmanFront, MPCRuntime, mpc
 from equilibrist.export.mpc_c import (
@@ -22,22 +23,39 @@ from equilibrist.export.mpc_c import (
     footprint,
 )
 from equilibrist.sim.run import simulate
+from support.cc_cache import cached_cc, environment
 
 
-def test_generated_solver_matches_python_and_make_check_passes(tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def daqp_objects(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Where DAQP's sources, the same in every export, compile once (``support.cc_cache``):
+    each ``make check`` still builds and runs its own program from its folder's sources."""
+    base = tmp_path_factory.getbasetemp()
+    return (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "daqp-objects"
+
+
+def _make_check(folder: Path, daqp_objects: Path) -> str:
+    assert shutil.which("make") and shutil.which("cc"), "make check needs make and a C compiler"
+    proc = subprocess.run(["make", "check"], cwd=folder, capture_output=True, text=True, check=False,
+                          env=environment(daqp_objects))
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return proc.stdout
+
+
+def test_generated_solver_matches_python_and_make_check_passes(tmp_path: Path,
+                                                               daqp_objects: Path) -> None:
     system = get_system("cartpole")
     ctrl = mpc(system, horizon=30, estimator="state")
     folder = export_mpc(ctrl, tmp_path / "mpc", duration=0.5, x0={"theta": 0.5})
-    assert shutil.which("make") and shutil.which("cc"), "make check needs make and a C compiler"
-    proc = subprocess.run(["make", "check"], cwd=folder, capture_output=True, text=True, check=False)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    worst = float(re.search(r"worst difference (\S+),", proc.stdout).group(1))  # type: ignore[union-attr]
+    out = _make_check(folder, daqp_objects)
+    worst = float(re.search(r"worst difference (\S+),", out).group(1))  # type: ignore[union-attr]
     assert worst < 1e-9  # the same active-set solver on the same data: round-off
     # The recorded commands reach the input limit (a constrained case) and stay inside it.
     text = (folder / "mpc_vectors.h").read_text()
     u = np.array([float(v) for v in re.findall(r"\{([-0-9.e+]+)\}", text.split("vec_u")[1])])
     assert np.isclose(np.abs(u).max(), 200.0, atol=1e-6) and np.all(np.abs(u) <= 200.0 + 1e-9)
-    size = footprint(folder)
+    with cached_cc(daqp_objects):
+        size = footprint(folder)
     assert size["text"] > 0 and size["data"] > 0
     # DAQP's workspace holds at least the constraint rows scaled by the Hessian's factor
     # (rows x variables doubles) and at most a few such matrices.
@@ -46,21 +64,14 @@ def test_generated_solver_matches_python_and_make_check_passes(tmp_path: Path) -
     assert dense <= size["heap"] <= 4 * dense
 
 
-def _make_check(folder: Path) -> str:
-    assert shutil.which("make") and shutil.which("cc"), "make check needs make and a C compiler"
-    proc = subprocess.run(["make", "check"], cwd=folder, capture_output=True, text=True, check=False)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return proc.stdout
-
-
 @pytest.mark.parametrize("form", ["current", "predictor"])
-def test_kalman_filter_in_front_make_check(tmp_path: Path, form: str) -> None:
+def test_kalman_filter_in_front_make_check(tmp_path: Path, form: str, daqp_objects: Path) -> None:
     """The MPC on the measured outputs: the C filter and QP against the Python ones on a noisy run."""
     system = get_system("cartpole")
     ctrl = mpc(system, design=design(system, rate=200.0, kalman_form=form), horizon=30)
     assert ctrl.estimator == "kalman" and ctrl.outputs == ("x", "theta") and ctrl.form == form
     folder = export_mpc(ctrl, tmp_path / "mpc", duration=0.5, seed=3)
-    out = _make_check(folder)
+    out = _make_check(folder, daqp_objects)
     worst = float(re.search(r"worst difference (\S+),", out).group(1))  # type: ignore[union-attr]
     worst_z = float(re.search(r"filter state: worst (\S+),", out).group(1))  # type: ignore[union-attr]
     assert worst < 1e-9 and worst_z < Z_TOLERANCE
@@ -93,7 +104,7 @@ def test_filter_form_is_the_runtime_filter() -> None:
             np.testing.assert_allclose(front.z, z, rtol=0, atol=1e-12)
 
 
-def test_compiled_mpc_with_filter_closes_the_loop() -> None:
+def test_compiled_mpc_with_filter_closes_the_loop(daqp_objects: Path) -> None:
     """The C MPC with its Kalman filter balances the nonlinear cart-pole from noisy measurements,
     inside the hard limits, and follows the simulated controller's run."""
     from equilibrist.sim.noise import Noise
@@ -101,7 +112,8 @@ def test_compiled_mpc_with_filter_closes_the_loop() -> None:
     system = get_system("cartpole")
     d = design(system, rate=200.0)
     ctrl = mpc(system, design=d, horizon=30)
-    c = CompiledMPC(ctrl)
+    with cached_cc(daqp_objects):
+        c = CompiledMPC(ctrl)
     try:
         x0 = {"theta": 0.4}
         res = simulate(system, c, duration=2.0, x0=x0, noise=Noise.from_design(d), seed=1)
@@ -117,27 +129,26 @@ def test_compiled_mpc_with_filter_closes_the_loop() -> None:
     assert np.all(np.abs(res.states - ref.states) <= 1e-9 * span)
 
 
-def test_command_line_export_has_the_filter(tmp_path: Path) -> None:
-    cmd = [sys.executable, "-m", "equilibrist.cli.main"]
+def test_command_line_export_has_the_filter(tmp_path: Path, daqp_objects: Path, capsys) -> None:
+    # The command's main() in this process: what is tested is what it writes (the console
+    # script in a process of its own, its exit status, is test_cli_core's).
     out = tmp_path / "cart"
-    proc = subprocess.run([*cmd, "export", "cartpole", "--controller", "mpc", "--horizon", "20",
-                           "--out", str(out)], capture_output=True, text=True, check=False)
-    assert proc.returncode == 0, proc.stderr
+    argv = ["export", "cartpole", "--controller", "mpc", "--horizon", "20", "--out", str(out)]
+    assert main(argv) == 0, capsys.readouterr().err
     assert "mpc_update" in (out / "mpc.h").read_text()
-    assert "filter state: worst" in _make_check(out)
-    again = subprocess.run([*cmd, "export", "cartpole", "--controller", "mpc", "--horizon", "20",
-                            "--out", str(out)], capture_output=True, text=True, check=False)
-    assert again.returncode == 0, again.stderr
+    assert "filter state: worst" in _make_check(out, daqp_objects)
+    assert main(argv) == 0, capsys.readouterr().err
 
 
 @pytest.mark.parametrize("name", ["double_cartpole", "acrobot", "reaction_wheel_pendulum"])
-def test_every_kind_of_rig_exports_from_its_default_start(tmp_path: Path, name: str) -> None:
+def test_every_kind_of_rig_exports_from_its_default_start(tmp_path: Path, name: str,
+                                                          daqp_objects: Path) -> None:
     """Rigs without a 'theta' state, and the wheel's fast filter state: the default recorded
     run (default_start) asks for more than the input allows, and make check passes."""
     system = get_system(name)
     ctrl = mpc(system)
     folder = export_mpc(ctrl, tmp_path / name, duration=0.5)
-    out = _make_check(folder)
+    out = _make_check(folder, daqp_objects)
     worst = float(re.search(r"worst difference (\S+),", out).group(1))  # type: ignore[union-attr]
     assert worst < 1e-8
     text = (folder / "mpc_vectors.h").read_text()
