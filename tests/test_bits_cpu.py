@@ -116,6 +116,14 @@ def test_sin_cos_log_are_within_one_ulp_of_mpmath() -> None:
     for x in map(float, logs):
         if x > 0.0:
             worst["log"] = max(worst["log"], _ulps(libm.log(x), mpmath.log(mpmath.mpf(x))))
+    exps = np.concatenate([rng.uniform(-1.0, 1.0, 3000), rng.uniform(-740.0, 709.0, 3000),
+                           [0.0, -0.0, 1e-20, 0.34657359027997264, 0.3465735902799727,
+                            1.0397207708399179, -1.0397207708399179, 709.78, -745.0]])
+    worst["exp"] = 0.0
+    for x in map(float, exps):
+        exact = mpmath.exp(mpmath.mpf(x))
+        if float(exact) >= 2.2250738585072014e-308:  # normal results (subnormals: 1 ulp of
+            worst["exp"] = max(worst["exp"], _ulps(libm.eq_exp(x), exact))  # their spacing)
     assert max(worst.values()) < 1.0, worst
 
 
@@ -124,6 +132,9 @@ def test_special_values() -> None:
     assert all(math.isnan(f(v)) for f in (libm.sin, libm.cos) for v in (math.inf, -math.inf, math.nan))
     assert libm.log(0.0) == -math.inf and libm.log(math.inf) == math.inf and libm.log(1.0) == 0.0
     assert math.isnan(libm.log(-1.0)) and math.isnan(libm.log(math.nan))
+    assert libm.eq_exp(0.0) == 1.0 and libm.eq_exp(-math.inf) == 0.0
+    assert libm.eq_exp(math.inf) == math.inf and math.isnan(libm.eq_exp(math.nan))
+    assert libm.eq_exp(710.0) == math.inf and libm.eq_exp(-746.0) == 0.0
 
 
 def test_the_core_gives_the_python_bits_without_fused_multiply_add() -> None:
@@ -154,22 +165,24 @@ def test_the_c_version_gives_the_python_bits(tmp_path: Path) -> None:
     require("cc")
     xs = _inputs(5000)
     (tmp_path / "in.bin").write_bytes(xs.tobytes())
-    prog = libm.c_source(log=True) + textwrap.dedent("""
+    prog = libm.c_source(log=True, exp=True) + textwrap.dedent("""
         #include <stdio.h>
         int main(void)
         {
-            double x, y[3];
+            double x, y[4];
             FILE *in = fopen("in.bin", "rb"), *out = fopen("out.bin", "wb");
             while (fread(&x, sizeof x, 1, in) == 1) {
                 y[0] = eq_sin(x); y[1] = eq_cos(x); y[2] = eq_log(fabs(x));
-                fwrite(y, sizeof y[0], 3, out);
+                y[3] = eq_exp(x * 1e-3);
+                fwrite(y, sizeof y[0], 4, out);
             }
             fclose(in); fclose(out);
             return 0;
         }
     """)
     (tmp_path / "t.c").write_text("#include <math.h>\n" + prog)
-    want = np.array([[libm.sin(float(x)), libm.cos(float(x)), libm.log(abs(float(x)))] for x in xs])
+    want = np.array([[libm.sin(float(x)), libm.cos(float(x)), libm.log(abs(float(x))),
+                      libm.eq_exp(float(x) * 1e-3)] for x in xs])
     # -march=native: the host's FMA is there to use; -ffp-contract=off forbids it.
     for flags in (["-O2"], ["-O3", "-march=native"]):
         subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", *flags,

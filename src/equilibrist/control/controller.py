@@ -881,13 +881,13 @@ class NonlinearController:
 def contract_namespace() -> dict[str, Any]:
     """What a controller's source sees when it runs as Python: ``math``, ``np``, the linear
     library (``linear_output``...) and its layout's constants, and the project's ``eq_sin``,
-    ``eq_cos``, ``eq_log`` (:mod:`equilibrist.numeric.libm`: the same bits on every CPU,
+    ``eq_cos``, ``eq_log``, ``eq_exp`` (:mod:`equilibrist.numeric.libm`: the same bits on every CPU,
     and in the C the translation writes)."""
     from equilibrist.numeric import libm
 
     namespace: dict[str, Any] = {"math": math, "np": np, **linear_constants(),
                                  "eq_sin": libm.eq_sin, "eq_cos": libm.eq_cos,
-                                 "eq_log": libm.eq_log}
+                                 "eq_log": libm.eq_log, "eq_exp": libm.eq_exp}
     namespace.update(_python_linear())
     return namespace
 

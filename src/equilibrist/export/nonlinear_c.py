@@ -12,7 +12,7 @@ commands bit for bit on the same inputs (with the same C library's ``sin``,
 ``cos``...: the header names the ``<math.h>`` functions it calls).
 
 Every function of the translation, and the helpers it needs (the
-prelude's ``eq_modf``..., the project's ``eq_sin``/``eq_cos``/``eq_log``
+prelude's ``eq_modf``..., the project's ``eq_sin``/``eq_cos``/``eq_log``/``eq_exp``
 when the source calls them), is ``static``; the only external symbols are
 ``<name>_init``, ``<name>_output``, ``<name>_update`` and
 ``<name>_estimate``, so two exported controllers link into one firmware.
@@ -135,9 +135,10 @@ def translate(ctrl: NonlinearController, prefix: str) -> Translation:
         raise ExportError(f"the {ctrl.name} controller's source: {exc}") from None
     code = mod.c_source()
     parts = []
-    if re.search(r"\beq_(sin|cos|log)\(", code):
-        # The project's own sin, cos (and log): static, the unused one kept quiet.
-        parts += [libm.c_source(log=re.search(r"\beq_log\(", code) is not None),
+    if re.search(r"\beq_(sin|cos|log|exp)\(", code):
+        # The project's own sin, cos (and log, exp): static, the unused one kept quiet.
+        parts += [libm.c_source(log=re.search(r"\beq_(log|exp)\(", code) is not None,
+                                exp=re.search(r"\beq_exp\(", code) is not None),
                   f"\nstatic inline void {prefix}_libm_used(void)\n{{\n"
                   "    (void)eq_sin;\n    (void)eq_cos;\n}\n"]
     prelude = _prelude(code)

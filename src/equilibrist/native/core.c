@@ -232,11 +232,11 @@ static int eq_dopri(double *x, const double *u, const double *p, const double *w
                 x[i] = yn[i];
                 k1[i] = k7[i];
             }
-            fac = err == 0.0 ? 5.0 : eq_minf(5.0, eq_maxf(0.2, 0.9 * pow(err, -0.2)));
+            fac = err == 0.0 ? 5.0 : eq_minf(5.0, eq_maxf(0.2, 0.9 * eq_exp(-0.2 * eq_log(err))));
             if (!last) hstate[0] = dt * fac;
             dt = dt * fac;
         } else {
-            dt *= eq_maxf(0.2, 0.9 * pow(err, -0.2));
+            dt *= eq_maxf(0.2, 0.9 * eq_exp(-0.2 * eq_log(err)));
             if (dt < h * 1e-14) return 0;
         }
     }

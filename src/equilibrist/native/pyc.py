@@ -19,7 +19,7 @@ bits the numba core gave):
   ``b if b > a else a``); ``int(x)`` truncates; ``abs`` of a float is
   ``fabs``;
 - ``math``'s functions are the C library's of the same name, the project's
-  ``eq_sin``/``eq_cos``/``eq_log`` are :mod:`equilibrist.numeric.libm`'s C
+  ``eq_sin``/``eq_cos``/``eq_log``/``eq_exp`` are :mod:`equilibrist.numeric.libm`'s C
   versions;
 - every intermediate is a C ``double`` expression fully parenthesized in
   Python's evaluation order, compiled with ``-ffp-contract=off`` and
@@ -65,7 +65,7 @@ _MATH = {
 _MATH_BOOL = {"isfinite": "isfinite", "isnan": "isnan", "isinf": "isinf"}
 _MATH_CONST = {"pi": "3.141592653589793", "e": "2.718281828459045", "inf": "INFINITY",
                "nan": "NAN", "tau": "6.283185307179586"}
-_LIBM = ("eq_sin", "eq_cos", "eq_log")
+_LIBM = ("eq_sin", "eq_cos", "eq_log", "eq_exp")
 
 #: C helpers the translated functions call (written once into every unit by :func:`prelude`).
 PRELUDE = r"""

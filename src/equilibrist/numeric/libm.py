@@ -203,6 +203,80 @@ def eq_log(x):
 # ---8<--- end of libm body
 
 
+# fdlibm's exp (musl src/math/exp.c), for the C core's own use (the adaptive integrator's
+# step-size control): not copied into generated modules.
+EXP_P1 = 1.66666666666666019037e-01
+EXP_P2 = -2.77777777770155933842e-03
+EXP_P3 = 6.61375632143793436117e-05
+EXP_P4 = -1.65339022054652515390e-06
+EXP_P5 = 4.13813679705723846039e-08
+EXP_INVLN2 = 1.44269504088896338700e00
+EXP_HUGE = 709.782712893383973096
+EXP_TINY = -745.13321910194110842
+EXP_HALF_LN2 = 0.34657359027997264  # fdlibm's |x| > 0.5 ln2 (high word 0x3fd62e42)
+EXP_TWO_M28 = 3.725290298461914e-09
+
+
+def eq_exp(x: float) -> float:
+    """e**x, the same bits on every CPU (within 1 ulp: fdlibm's exp)."""
+    if math.isnan(x):
+        return x
+    if x > EXP_HUGE:
+        return math.inf
+    if x < EXP_TINY:
+        return 0.0
+    a = abs(x)
+    if a > EXP_HALF_LN2:
+        k = int(EXP_INVLN2 * x + (0.5 if x >= 0.0 else -0.5))  # C's (int): toward zero
+        hi = x - k * EQ_LN2_HI  # exact: EQ_LN2_HI has 32 trailing zero bits
+        lo = k * EQ_LN2_LO
+        r = hi - lo
+    elif a > EXP_TWO_M28:
+        k, hi, lo, r = 0, x, 0.0, x
+    else:
+        return 1.0 + x
+    xx = r * r
+    c = r - xx * (EXP_P1 + xx * (EXP_P2 + xx * (EXP_P3 + xx * (EXP_P4 + xx * EXP_P5))))
+    y = 1.0 + (r * c / (2.0 - c) - lo + hi)
+    return y if k == 0 else math.ldexp(y, k)
+
+
+EXP_C = """
+static double {p}eq_exp(double x)
+{{
+    double a, hi, lo, r, xx, c, y;
+    int k;
+    if (x != x) {{
+        return x;
+    }}
+    if (x > EXP_HUGE) {{
+        return HUGE_VAL;
+    }}
+    if (x < EXP_TINY) {{
+        return 0.0;
+    }}
+    a = fabs(x);
+    if (a > EXP_HALF_LN2) {{
+        k = (int)(EXP_INVLN2 * x + (x >= 0.0 ? 0.5 : -0.5));
+        hi = x - k * EQ_LN2_HI;
+        lo = k * EQ_LN2_LO;
+        r = hi - lo;
+    }} else if (a > EXP_TWO_M28) {{
+        k = 0;
+        hi = x;
+        lo = 0.0;
+        r = x;
+    }} else {{
+        return 1.0 + x;
+    }}
+    xx = r * r;
+    c = r - xx * (EXP_P1 + xx * (EXP_P2 + xx * (EXP_P3 + xx * (EXP_P4 + xx * EXP_P5))));
+    y = 1.0 + (r * c / (2.0 - c) - lo + hi);
+    return k == 0 ? y : ldexp(y, k);
+}}
+"""
+
+
 def source() -> str:
     """The section above, as copied into each generated module."""
     text = Path(__file__).read_text()
@@ -219,11 +293,11 @@ log = eq_log
 
 def _c_constants() -> str:
     g = globals()
-    names = [n for n in g if n.startswith("EQ_")]
+    names = [n for n in g if n.startswith(("EQ_", "EXP_")) and isinstance(g[n], float)]
     return "\n".join(f"#define {n} ({float(g[n])!r})" for n in names)
 
 
-def c_source(prefix: str = "", *, log: bool = False) -> str:
+def c_source(prefix: str = "", *, log: bool = False, exp: bool = False) -> str:
     """The same functions in C99, operation for operation (``static``; needs ``<math.h>``
     for ``fabs`` and ``frexp``, both exact).
 
@@ -379,4 +453,5 @@ static double {p}eq_log(double x)
 """
     head = ("/* sin, cos, log of equilibrist.numeric.libm (fdlibm's kernels, as in musl): the\n"
             " * simulation's bits on every CPU. Compile with -ffp-contract=off, never -ffast-math. */\n")
-    return head + _c_constants() + "\n" + body + (log_body if log else "")
+    return (head + _c_constants() + "\n" + body + (log_body if log else "")
+            + (EXP_C.format(p=prefix) if exp else ""))
