@@ -269,7 +269,13 @@ class Chirp:
             span = 1.0
         tc = np.clip(t, 0.0, span)
         phase = f0 * tc + (f1 - f0) * tc**2 / (2.0 * span) + f1 * np.maximum(t - span, 0.0)
-        value = np.where(t < 0, 0.0, np.sin(2.0 * np.pi * phase))
+        # The project's sine (equilibrist.numeric.libm), not numpy's, whose kernel the CPU
+        # selects: the excitation decides the trajectory, so it is the same bits everywhere.
+        from equilibrist.numeric.libm import eq_sin
+
+        arg = (2.0 * np.pi * phase).tolist()
+        sines = np.fromiter((eq_sin(a) for a in arg), dtype=float, count=len(arg))
+        value = np.where(t < 0, 0.0, sines)
         return centre + value[:, None] * amp
 
     def describe(self) -> dict[str, object]:
