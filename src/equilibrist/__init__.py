@@ -8,14 +8,21 @@ Nothing does work at import time: systems are derived (or loaded from the
 on-disk cache) when first asked for.
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 from equilibrist.errors import EquilibristError
+
+if TYPE_CHECKING:
+    from equilibrist.numeric.system import System
 
 __version__ = "0.1.0"
 
 __all__ = ["EquilibristError", "__version__", "get_system", "list_systems"]
 
 
-def get_system(name: str, **options: object):  # re-exported lazily
+def get_system(name: str, **options: object) -> System:  # re-exported lazily
     """Return the :class:`~equilibrist.numeric.system.System` called *name*."""
     from equilibrist.numeric.system import get_system as _get
 

@@ -17,7 +17,7 @@ file it names.
 """
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     from equilibrist.viz.cli_hooks import add_animation_options
 
     p = sub.add_parser(

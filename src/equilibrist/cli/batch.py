@@ -27,7 +27,7 @@ time_saturated, peak_dev_STATE). --max-steps bounds runs x physics steps.
 """
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "batch",
         help="run many simulations at once (initial states, parameters, seeds)",

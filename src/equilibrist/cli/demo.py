@@ -15,7 +15,7 @@ import time
 from equilibrist.cli import common
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "demo",
         help="a tour of the catalogue with a report folder (what 'make demo' runs)",

@@ -33,7 +33,7 @@ controller that does not apply to the system is refused in one line.
 CONTROLLERS = ("lqr", "lqg", "swingup", "mpc", "none")
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "design",
         help="design LQR + Kalman (LQG) controllers at an operating point",

@@ -7,7 +7,7 @@ import argparse
 from equilibrist.cli import common
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("dynamics", help="evaluate x_dot = f(x, u) at a state and input")
     common.add_system(p)
     p.add_argument("--state", required=True, metavar="V1,V2,...", help="state values in state order")

@@ -39,7 +39,7 @@ as for 'equilibrist design'.
 """
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "export",
         help="export the digital controller as a tested C99 library",

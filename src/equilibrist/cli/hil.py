@@ -30,7 +30,7 @@ The protocol, the wiring and the loop back to identification: docs/hil.md.
 """
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     from equilibrist.cli.simulate import add_run_options
     from equilibrist.viz.cli_hooks import add_output_options
 
@@ -59,16 +59,22 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def design_id(kind: str, controller: Any) -> str:
-    """The design id the export of *controller* carries (what the device reports)."""
-    if kind in ("lqr", "lqg"):
+    """The design id the export of *controller* carries (what the device reports): by the
+    value's form, as the export writes it (an LQR/LQG design's library, the MPC, any
+    nonlinear controller translated to C)."""
+    from equilibrist.control.controller import LinearController, NonlinearController
+
+    if isinstance(controller, LinearController) and controller.design is not None:
         from equilibrist.export.data import from_design
 
         return from_design(controller.design, controller=kind).fingerprint
-    if kind == "swingup":
-        from equilibrist.export.swingup_c import design_id as swingup_id
+    if isinstance(controller, NonlinearController):
+        from equilibrist.export.nonlinear_c import design_id as nonlinear_id
 
-        return swingup_id(controller)
-    if kind == "mpc":
+        return nonlinear_id(controller)
+    from equilibrist.control.mpc import MPCRuntime
+
+    if isinstance(controller, MPCRuntime):
         from equilibrist.export.mpc_c import design_id as mpc_id
 
         return mpc_id(controller)
@@ -81,6 +87,7 @@ def run(args: argparse.Namespace) -> int:
         check_out,
         parse_excitation,
         parse_x0,
+        start_of,
         run_metrics,
     )
     from equilibrist.control.controller import measured_outputs
@@ -114,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
                                   u_op=system.operating_point().u, mode=args.mode, timeout=timeout,
                                   excitation=parse_excitation(args))
         device.connect()
-        done = run_hil(system, device, x0=parse_x0(args.x0), **options)
+        done = run_hil(system, device, x0=start_of(options, parse_x0(args.x0)), **options)
     result = done.result
     saved = result.save(args.out) if args.out is not None else None
     from equilibrist.viz.cli_hooks import handle_outputs

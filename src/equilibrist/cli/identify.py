@@ -37,7 +37,7 @@ writes the parameters for 'design', 'simulate' and 'export' (--params).
 """
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "identify",
         help="fit physical parameters of a system to a logged run (grey-box, multiple shooting)",

@@ -15,7 +15,7 @@ if TYPE_CHECKING:
     from equilibrist.numeric.system import Equilibrium, System
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "linearize",
         help="linearize at the canonical operating point (or another one)",

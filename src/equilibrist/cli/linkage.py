@@ -11,7 +11,7 @@ from equilibrist.cli import common
 LENGTHS = ("a", "b", "c", "d", "e")
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "linkage",
         help="four-bar linkage: platform angle from motor angle, or the reverse",

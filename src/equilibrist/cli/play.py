@@ -23,7 +23,7 @@ import threading
 from equilibrist.cli import common
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "play",
         help="a live web page to watch a system balance, push it and tune it",

@@ -28,7 +28,7 @@ a data file never runs the Python file it names (docs/models.md).
 """
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "plot",
         help="plot saved results: a time response, a comparison, a batch's outcomes",

@@ -8,7 +8,7 @@ from equilibrist.cli import common
 from equilibrist.errors import NoEquilibriumError
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("show", help="print a system's equations of motion and linearization")
     common.add_system(p)
     common.add_set(p)
@@ -61,4 +61,5 @@ def run(args: argparse.Namespace) -> int:
 def common_matrix_latex(mat: object) -> str:
     import sympy as sp
 
-    return sp.latex(sp.Matrix(mat).applyfunc(lambda v: sp.Float(v, 6)))
+    text: str = sp.latex(sp.Matrix(mat).applyfunc(lambda v: sp.Float(v, 6)))
+    return text

@@ -138,7 +138,7 @@ def check_out(args: argparse.Namespace, what: str) -> None:
     check_result_path(Path(args.out), what)
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "simulate",
         help="simulate a closed loop with a digital controller, noise and saturation",

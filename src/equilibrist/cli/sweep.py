@@ -42,7 +42,7 @@ number of workers (every seed derives from --seed and the point's index).
 """
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "sweep",
         help="a study: a grid or sample of parameters and designs, many runs each, to Parquet",

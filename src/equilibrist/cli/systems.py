@@ -8,7 +8,7 @@ from typing import Any
 from equilibrist.cli import common
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser("systems", help="list every system with its states, inputs and parameters")
     common.add_json(p)
     p.add_argument("--markdown", action="store_true",

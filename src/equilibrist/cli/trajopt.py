@@ -35,7 +35,7 @@ names (docs/trajopt.md).
 """
 
 
-def add_parser(sub: argparse._SubParsersAction) -> None:
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     from equilibrist.viz.cli_hooks import add_output_options
 
     p = sub.add_parser(
