@@ -158,7 +158,8 @@ def raise_if(problems: Sequence[str]) -> None:
 
 def symmetric(mat: np.ndarray) -> np.ndarray:
     """The symmetric part (removes round-off asymmetry of Riccati solutions)."""
-    return 0.5 * (mat + mat.T)
+    sym: np.ndarray = 0.5 * (mat + mat.T)
+    return sym
 
 
 def names(given: Sequence[str] | None, n: int, prefix: str) -> tuple[str, ...]:

@@ -305,7 +305,8 @@ class Design:
             "observability": self.observability.to_dict(),
             "notes": list(self.notes),
         }
-        return _plain(out)
+        plain: dict[str, Any] = _plain(out)
+        return plain
 
     def summary(self) -> str:
         """A readable report of the design."""

@@ -62,7 +62,8 @@ def matvec(a: object, x: object) -> np.ndarray:
 def symmetric(a: object) -> np.ndarray:
     """``(a + a') / 2``: exactly symmetric."""
     A = _f(a)
-    return (A + A.T) * 0.5
+    sym: np.ndarray = (A + A.T) * 0.5
+    return sym
 
 
 def solve(a: object, b: object) -> np.ndarray:

@@ -114,7 +114,8 @@ class Compensator:
                 raise DimensionError("this compensator has references: give r")
             parts.append(np.asarray(r, dtype=float).reshape(-1))
         w = np.concatenate(parts)
-        return self.C @ np.asarray(xhat, dtype=float) + self.D @ w
+        du: np.ndarray = self.C @ np.asarray(xhat, dtype=float) + self.D @ w
+        return du
 
 
 def lqg_compensator(

@@ -426,7 +426,7 @@ class MPCRuntime:
         dx0 = np.asarray(dx0, dtype=float)
         t0 = time.perf_counter()
         bu, bl = prob.qp_bounds(dx0)
-        du_lqr = -self.ctrl.K @ dx0
+        du_lqr: np.ndarray = -self.ctrl.K @ dx0
         if self.exact_unconstrained and self._zero_feasible(bu, bl):
             self.solve_times.append(time.perf_counter() - t0)
             self.last_status = "unconstrained"
@@ -444,14 +444,17 @@ class MPCRuntime:
             # the hard limits, and a cold start next time.
             self.fallbacks += 1
             self._solver.update(sense=self._cold)
-            return np.clip(du_lqr, prob.u_lo, prob.u_hi)
+            held: np.ndarray = np.clip(du_lqr, prob.u_lo, prob.u_hi)
+            return held
         # The solution meets the hard bounds to DAQP's primal tolerance; the clip makes it exact.
-        return np.clip(du_lqr + sol[:m], prob.u_lo, prob.u_hi)
+        du: np.ndarray = np.clip(du_lqr + sol[:m], prob.u_lo, prob.u_hi)
+        return du
 
     def output(self, t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray:
         dx = self._state(y)
         self.estimate = self.ctrl.x_op + dx
-        return self.ctrl.u_op + self.solve(dx)
+        u: np.ndarray = self.ctrl.u_op + self.solve(dx)
+        return u
 
     def update(self, t: float, y: np.ndarray, r: np.ndarray, u_applied: np.ndarray) -> None:
         self.front.update(y, u_applied)
@@ -482,6 +485,7 @@ class KalmanFront:
         """The deviation of the state estimate at this sample, from the measurement *y*."""
         c = self.ctrl
         dy = np.asarray(y, dtype=float) - c.x_op[self._idx]
+        dx: np.ndarray
         if c.estimator == "state":
             dx = dy.copy()
         elif c.form == "current":

@@ -77,7 +77,8 @@ def _boundary_modes(modes: Sequence[Mode], discrete: bool, scale: float) -> list
 def _sqrt_psd(mat: np.ndarray) -> np.ndarray:
     """A factor ``F`` with ``F F' = mat`` for a symmetric PSD matrix."""
     w, v = np.linalg.eigh(_checks.symmetric(mat))
-    return v * np.sqrt(np.clip(w, 0.0, None))
+    factor: np.ndarray = v * np.sqrt(np.clip(w, 0.0, None))
+    return factor
 
 
 def _solve(

@@ -89,7 +89,8 @@ class Trajectory:
         h = self.times[k + 1] - self.times[k]
         s = ((tt - self.times[k]) / h)[:, None]
         u0, um, u1 = self.inputs[k], self.mid_inputs[k], self.inputs[k + 1]
-        out = (2 * (s - 0.5) * (s - 1)) * u0 + (-4 * s * (s - 1)) * um + (2 * s * (s - 0.5)) * u1
+        out: np.ndarray = ((2 * (s - 0.5) * (s - 1)) * u0 + (-4 * s * (s - 1)) * um
+                           + (2 * s * (s - 0.5)) * u1)
         return out if np.ndim(t) else out[0]
 
     def summary(self) -> dict[str, Any]:

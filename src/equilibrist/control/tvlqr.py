@@ -84,8 +84,9 @@ def _hermite_states(system: System, traj: Trajectory, t: np.ndarray) -> np.ndarr
     s = ((t - traj.times[k]) / h[:, 0])[:, None]
     h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
     h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
-    return (h00 * traj.states[k] + h10 * h * f[k] + h01 * traj.states[k + 1]
-            + h11 * h * f[k + 1])
+    states: np.ndarray = (h00 * traj.states[k] + h10 * h * f[k] + h01 * traj.states[k + 1]
+                          + h11 * h * f[k + 1])
+    return states
 
 
 def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np.ndarray,

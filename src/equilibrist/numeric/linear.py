@@ -65,15 +65,18 @@ class LinearModel:
     @property
     def y0(self) -> np.ndarray:
         """Outputs at the operating point."""
-        return self.C @ self.x0 + self.D @ self.u0
+        y0: np.ndarray = self.C @ self.x0 + self.D @ self.u0
+        return y0
 
     def deviation(self, x: np.ndarray) -> np.ndarray:
         """``x - x0``: absolute state to deviation coordinates."""
-        return np.asarray(x, dtype=float) - self.x0
+        dx: np.ndarray = np.asarray(x, dtype=float) - self.x0
+        return dx
 
     def absolute(self, dx: np.ndarray) -> np.ndarray:
         """``x0 + dx``: deviation back to absolute coordinates."""
-        return np.asarray(dx, dtype=float) + self.x0
+        x: np.ndarray = np.asarray(dx, dtype=float) + self.x0
+        return x
 
     @property
     def poles(self) -> np.ndarray:
