@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -82,3 +83,27 @@ def test_the_command_line_tracks_a_plan_with_noise_and_refuses_what_does_not_fit
         assert words in err and len(err.splitlines()) == 1, err
     assert main(["simulate", "furuta", "--controller", "tvlqr", "--trajectory", str(cart_plan)]) == 2
     assert "not of furuta" in capsys.readouterr().err
+
+
+def test_the_export_replays_a_tracked_swing_up_to_the_bit(
+        cart_plan: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The TVLQR exports as any NonlinearController: its source translated to C, vectors
+    recorded from where the plan starts (hanging), make check exact."""
+    import shutil
+    import subprocess
+
+    out = tmp_path / "tv"
+    assert main(["export", "cartpole", "--controller", "tvlqr", "--trajectory", str(cart_plan),
+                 "--out", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["controller"] == "tvlqr"
+    assert report["vector_start"]["theta"] == pytest.approx(math.pi, abs=1e-9)
+    if shutil.which("make") is None:
+        pytest.fail("make is needed (CI has it)")
+    check = subprocess.run(["make", "check"], cwd=out, capture_output=True, text=True,
+                           timeout=600, check=False)
+    assert check.returncode == 0, check.stdout + check.stderr
+    assert " 0 mismatches" in check.stdout
+    # The export needs its plan as simulate does.
+    assert main(["export", "cartpole", "--controller", "tvlqr", "--out", str(tmp_path / "x")]) == 2
+    assert "--trajectory" in capsys.readouterr().err

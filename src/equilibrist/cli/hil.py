@@ -87,8 +87,8 @@ def run(args: argparse.Namespace) -> int:
         check_out,
         parse_excitation,
         parse_x0,
-        start_of,
         run_metrics,
+        start_of,
     )
     from equilibrist.control.controller import measured_outputs
     from equilibrist.hil.link import SerialLink
@@ -121,7 +121,8 @@ def run(args: argparse.Namespace) -> int:
                                   u_op=system.operating_point().u, mode=args.mode, timeout=timeout,
                                   excitation=parse_excitation(args))
         device.connect()
-        done = run_hil(system, device, x0=start_of(options, parse_x0(args.x0)), **options)
+        x0 = start_of({"controller": simulated}, parse_x0(args.x0))  # a plan starts the run
+        done = run_hil(system, device, x0=x0, **options)
     result = done.result
     saved = result.save(args.out) if args.out is not None else None
     from equilibrist.viz.cli_hooks import handle_outputs

@@ -22,5 +22,5 @@ KIND = ControllerKind(
     build=build,
     options=(Option("--trajectory", "with --controller tvlqr: the plan to track "
                     "('equilibrist trajopt --out')", metavar="FILE.npz"),),
-    surfaces=frozenset({"simulate"}), task="swingup", order=50,
+    surfaces=frozenset({"simulate", "export"}), task="swingup", order=50,
 )

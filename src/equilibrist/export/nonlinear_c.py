@@ -264,10 +264,18 @@ def nonlinear_files(ctrl: NonlinearController, *, name: str | None = None) -> di
 
 # -- test vectors and make check -------------------------------------------------------------
 def default_start(ctrl: NonlinearController, system: System) -> np.ndarray:
-    """The recorded run's start: the controller's operating point with each coordinate that
-    has a design scale displaced by a quarter of it (as the linear exports' runs)."""
+    """The recorded run's start: where the controller's plan starts (a tracked trajectory's
+    ``settings["start"]``, as ``simulate`` starts it), else the controller's operating point
+    with each coordinate that has a design scale displaced by a quarter of it (as the linear
+    exports' runs)."""
     from equilibrist.export.vectors import START_FRACTION
 
+    planned = ctrl.settings.get("start") if isinstance(ctrl.settings, Mapping) else None
+    if isinstance(planned, Mapping) and set(planned) <= set(ctrl.state_names):
+        x = np.array(ctrl.x_op, dtype=float)
+        for state, value in planned.items():
+            x[ctrl.state_names.index(state)] = float(value)
+        return x
     scales = system.spec.design_scales
     coordinates = system.spec.coordinates
     x = np.array(ctrl.x_op, dtype=float)

@@ -273,7 +273,9 @@ static void answer_step(hil_device *d, unsigned int seq, const unsigned char *p,
     hil_ctrl_step(y, nr > 0 ? r : NULL, u, est);
     us = d->micros() - t0;
     for (i = 0; i < HIL_M; ++i) put_real(out + i * k, u[i], (int)k);
+#if HIL_NE > 0
     for (i = 0; i < HIL_NE; ++i) put_real(out + (HIL_M + i) * k, est[i], (int)k);
+#endif
     i = (HIL_M + HIL_NE) * k;
     out[i] = (unsigned char)(us & 0xFF); out[i + 1] = (unsigned char)((us >> 8) & 0xFF);
     out[i + 2] = (unsigned char)((us >> 16) & 0xFF); out[i + 3] = (unsigned char)((us >> 24) & 0xFF);
