@@ -223,6 +223,56 @@ def get_task(system: System, name: str) -> Task:
     )
 
 
+#: "Balanced": every coordinate of the system's fall region within this of the operating
+#: point (an angle in rad, taken modulo a turn), its rate within :data:`BALANCED_RATE`.
+BALANCED_ANGLE = 0.1
+#: [rad/s] (or the rate's own unit for a coordinate that is not an angle).
+BALANCED_RATE = 0.5
+#: A coordinate of the fall region that is not an angle: within this share of its half-width.
+BALANCED_SHARE = 0.05
+
+
+def balance_box(system: System) -> np.ndarray:
+    """Per state, ``(low, high, period)`` of the deviation from the operating point that
+    counts as balanced (``period`` 2 pi for an angle, taken modulo a turn; 0 otherwise;
+    unbounded states have ``(-inf, inf, 0)``). A run *ends balanced* when its state is in
+    the box from some time to its end (the batch's ``balanced_since``)."""
+    names, units = system.state_names, system.state_units
+    box = np.tile(np.array([-math.inf, math.inf, 0.0]), (system.n_states, 1))
+    for coord, (lo, hi) in system.spec.region.items():
+        k = names.index(coord)
+        if units[k] == "rad":
+            box[k] = (-BALANCED_ANGLE, BALANCED_ANGLE, 2.0 * math.pi)
+        else:
+            half = BALANCED_SHARE * 0.5 * (float(hi) - float(lo))
+            box[k] = (-half, half, 0.0)
+        rate = f"{coord}_dot"
+        if rate in names:
+            box[names.index(rate)] = (-BALANCED_RATE, BALANCED_RATE, 0.0)
+    return box
+
+
+def balance_criterion(system: System) -> dict[str, str]:
+    """:func:`balance_box` in words, by state (what JSON and tables report)."""
+    out = {}
+    for name, (_lo, hi, period), unit in zip(system.state_names, balance_box(system),
+                                            system.state_units, strict=True):
+        if math.isfinite(hi):
+            turn = " (modulo a turn)" if period else ""
+            out[name] = f"within {hi:g} {unit} of the operating point{turn}"
+    return out
+
+
+def in_box(x: np.ndarray, x_op: np.ndarray, box: np.ndarray) -> np.ndarray:
+    """Whether each row of *x* is in *box* (:func:`balance_box`), with the core's operations
+    in the core's order (the Python twin of its accumulator)."""
+    d = np.asarray(x, dtype=float) - x_op
+    period = box[:, 2]
+    wrapped = np.where(period > 0.0, d - period * np.floor(d / np.where(period > 0, period, 1.0)
+                                                           + 0.5), d)
+    return np.all((wrapped >= box[:, 0]) & (wrapped <= box[:, 1]), axis=-1)
+
+
 def all_tasks(system: System) -> tuple[Task, ...]:
     """Every task *system* offers."""
     return tuple(get_task(system, n) for n in task_names(system))

@@ -389,6 +389,20 @@ static int eq_advance(const eq_args *a, int64_t k, double *x, const double *u_ap
     return 0;
 }
 
+/* Whether x is in the balance box (equilibrist.tasks.balance_box: per state the deviation's
+ * low and high, and its period, 2 pi for an angle taken modulo a turn, else 0). */
+static inline int eq_in_box(const double *x, const double *op, const double *box)
+{
+    int i;
+    for (i = 0; i < EQ_N; i++) {
+        double d = x[i] - op[i];
+        double period = box[3 * i + 2];
+        if (period > 0.0) d = d - period * floor(d / period + 0.5);
+        if (!(d >= box[3 * i] && d <= box[3 * i + 1])) return 0;
+    }
+    return 1;
+}
+
 /* Samples k_start .. k_end - 1 of one closed-loop run (resumable); see _kernel_template._run. */
 static void eq_run(const eq_args *a, int64_t k_start, int64_t k_end, double *x, double *z,
                    double *u_prev, uint64_t *rng, const double *p_sets, const double *lin_s,
@@ -416,6 +430,7 @@ static void eq_run(const eq_args *a, int64_t k_start, int64_t k_end, double *x, 
     const int64_t a_sat = a->acc_cols[EQ_ACC_N_SAT], a_dx = a->acc_cols[EQ_ACC_PEAK_DX];
     const int64_t a_est = a->acc_cols[EQ_ACC_SUM_EST2];
     const int64_t a_peak_app = a->acc_cols[EQ_ACC_PEAK_U_APP];
+    const int64_t a_last_out = a->acc_cols[EQ_ACC_LAST_OUT];
     int64_t ps0 = eq_pset(a->p_switch, a->n_sets, k_start * n_sub);
     int64_t k, i, j;
     for (i = 0; i < a->p_len; i++) pcur[i] = p_sets[ps0 * a->p_len + i];
@@ -469,6 +484,7 @@ static void eq_run(const eq_args *a, int64_t k_start, int64_t k_end, double *x, 
                     acc[a_est + i] += e * e;
                 }
             }
+            if (a->nbal > 0 && !eq_in_box(x, a->op, a->bal)) acc[a_last_out] = (double)(k + 1);
         }
         status[EQ_ST_ROWS] = k + 1;
         if (nz > 0) {

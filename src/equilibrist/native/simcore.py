@@ -56,7 +56,7 @@ FIELDS: tuple[tuple[str, str], ...] = (
     ("pulse_value", "pf"), ("rec_cols", "pi"), ("acc_cols", "pi"), ("rec", "pf"),
     ("rec_w", "i"), ("acc", "pf"), ("status", "pi"), ("fell_x", "pf"), ("stop", "vi"),
     ("n_runs", "i"), ("n_threads", "i"), ("x0s", "pf"), ("rngs", "pu"), ("acc_w", "i"),
-    ("x_ends", "pf"),
+    ("x_ends", "pf"), ("bal", "pf"), ("nbal", "i"),
 )
 _C_TYPES = {"i": "int64_t", "pi": "int64_t *", "pf": "double *", "pu": "uint64_t *",
             "vi": "volatile int64_t *"}
@@ -313,7 +313,7 @@ class NativeCore:
     def _common(self, *, op: Any, c_idx: Any, cp: Any, ref: Any, uff: Any, lv: Any, lw: Any,
                 p_switch: Any, region: Any, kicks: Any, kick_value: Any, pulses: Any,
                 pulse_value: Any, rec_cols: Any, acc_cols: Any, iopts: Any,
-                fopts: Any) -> dict[str, Any]:
+                fopts: Any, bal: Any = None) -> dict[str, Any]:
         ref = np.asarray(ref, dtype=float)
         lv = np.asarray(lv, dtype=float)
         lw = np.asarray(lw, dtype=float)
@@ -324,6 +324,7 @@ class NativeCore:
             p_switch=p_switch, n_sets=len(p_switch), region=region, kicks=kicks,
             n_kicks=len(kicks), kick_value=kick_value, pulses=pulses, n_pulses=len(pulses),
             pulse_value=pulse_value, rec_cols=rec_cols, acc_cols=acc_cols,
+            bal=bal, nbal=0 if bal is None else 1,
         )
 
     def run_one(self, k_start: int, k_end: int, iopts: Any, fopts: Any, x: Any, z: Any,
@@ -358,12 +359,14 @@ class NativeCore:
                  p_switch: Any, lin_r: Any, region: Any, kicks: Any, kick_value: Any,
                  pulses: Any, pulse_value: Any, rec_cols: Any, acc_cols: Any, recs: Any,
                  accs: Any, statuses: Any, fell_xs: Any, x_ends: Any, stop: Any,
-                 threads: int = 1) -> None:
-        """The numba core's ``run_many``, argument for argument (plus the thread count)."""
+                 threads: int = 1, bal: Any = None) -> None:
+        """The numba core's ``run_many``, argument for argument (plus the thread count, and
+        the balance box whose last exit each run's accumulators keep)."""
         values = self._common(op=op, c_idx=c_idx, cp=cp, ref=ref, uff=uff, lv=lv, lw=lw,
                               p_switch=p_switch, region=region, kicks=kicks,
                               kick_value=kick_value, pulses=pulses, pulse_value=pulse_value,
-                              rec_cols=rec_cols, acc_cols=acc_cols, iopts=iopts, fopts=fopts)
+                              rec_cols=rec_cols, acc_cols=acc_cols, iopts=iopts, fopts=fopts,
+                              bal=bal)
         for arr, dtype, what in ((recs, np.float64, "recs"), (accs, np.float64, "accs"),
                                  (statuses, np.int64, "statuses"),
                                  (fell_xs, np.float64, "fell_xs"),

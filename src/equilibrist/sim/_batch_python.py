@@ -19,6 +19,7 @@ from equilibrist.sim.kernel import Kernel
 from equilibrist.sim.noise import generator_state
 from equilibrist.sim.result import SimResult
 from equilibrist.sim.run import _run_python
+from equilibrist.tasks import balance_box, in_box
 
 
 def _python_batch(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
@@ -101,6 +102,7 @@ def _python_runs(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
     fell_xs = np.zeros((runs, n))
     x_ends = np.zeros((runs, n))
     recs = np.empty((runs, setup.n_rows if record else 0, setup.record_width))
+    box = balance_box(sysm)
     for i in range(runs):
         sysi = sysm.with_params(**dict(zip(names, pmat[i].tolist(), strict=True)))
         s = _setup.Setup(**{**setup.__dict__, "system": sysi, "x0": x0s[i]})
@@ -116,6 +118,8 @@ def _python_runs(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
         accs[i, acc["sum_u2"]] = (res.applied**2).sum(axis=0)
         accs[i, acc["n_sat"]] = np.count_nonzero(np.any(res.saturated != res.commanded, axis=1))
         accs[i, acc["peak_dx"]] = np.abs(res.states - res.x_op).max(axis=0)
+        outside = np.nonzero(~in_box(res.states, res.x_op, box))[0]
+        accs[i, acc["last_out"]] = float(outside[-1] + 1) if outside.size else 0.0
         if res.fell_x is not None:
             fell_xs[i] = res.fell_x
         x_ends[i] = res.final_state

@@ -21,6 +21,7 @@ from equilibrist.sim import _setup, layout
 from equilibrist.sim.noise import describe_seed, seed_from_description
 from equilibrist.sim.result import SimResult, check_result_path, digest_field, read_npz
 from equilibrist.sim.run import _result, fall_reason
+from equilibrist.tasks import balance_criterion
 
 # Format 2 adds the peak command beside the peak input applied.
 FORMAT = "equilibrist-batch-2"
@@ -79,6 +80,7 @@ class BatchResult:
     steps: int = 0
     trajectories: np.ndarray | None = None
     system_digest: str | None = None
+    balanced_since: np.ndarray | None = None
     _setup: Any = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
@@ -108,6 +110,27 @@ class BatchResult:
     @property
     def fraction_up(self) -> float:
         return self.stayed_up / self.runs if self.runs else math.nan
+
+    @property
+    def balanced(self) -> int:
+        """How many runs ended balanced and stayed so (``balanced_since`` is a time)."""
+        return 0 if self.balanced_since is None else int(np.count_nonzero(
+            np.isfinite(self.balanced_since)))
+
+    @property
+    def fraction_balanced(self) -> float:
+        """The share of runs that end in the balance box and stay in it to the end (the
+        criterion: ``settings["balanced"]``, equilibrist.tasks.balance_box)."""
+        if self.balanced_since is None or not self.runs:
+            return math.nan
+        return self.balanced / self.runs
+
+    def time_to_balance(self, q: float) -> float | None:
+        """The *q*-quantile (0..1) of the time from which the balanced runs stayed balanced."""
+        if self.balanced_since is None:
+            return None
+        t = self.balanced_since[np.isfinite(self.balanced_since)]
+        return float(np.quantile(t, q)) if t.size else None
 
     @property
     def steps_per_second(self) -> float:
@@ -164,6 +187,13 @@ class BatchResult:
             "fell_at_median": float(np.median(fell_at)) if fell_at.size else None,
             "peak_input_max": dict(zip(self.input_names, self.peak_input.max(axis=0).tolist(), strict=True)) if self.runs else {},
             "time_saturated_mean": float(self.time_saturated.mean()) if self.runs else None,
+            # Runs that end balanced and stay (a swing-up's success: fraction_up only says
+            # no run left its region), the time from which they stayed, and the criterion.
+            "balanced": self.balanced,
+            "fraction_balanced": self.fraction_balanced,
+            "time_to_balance_median": self.time_to_balance(0.5),
+            "time_to_balance_p90": self.time_to_balance(0.9),
+            "balanced_criterion": dict(self.settings.get("balanced", {})),
         }
 
     def save(self, path: str | Path) -> Path:
@@ -185,6 +215,8 @@ class BatchResult:
             "rms_input", "time_saturated", "peak_deviation", "rows")}
         if self.estimation_error_rms is not None:
             arrays["estimation_error_rms"] = self.estimation_error_rms
+        if self.balanced_since is not None:
+            arrays["balanced_since"] = self.balanced_since
         with atomic_path(p) as tmp:
             np.savez(tmp, meta=np.array(json.dumps(meta)), **arrays)
         return p
@@ -260,6 +292,14 @@ def _check_batch_file(p: Path, meta: dict[str, Any], arrays: dict[str, np.ndarra
             raise SimulationError(f"{bad}: {key} is not one row of numbers per run")
 
 
+def _balanced_since(last_out: np.ndarray, fell: np.ndarray, rows: np.ndarray,
+                    setup: _setup.Setup) -> np.ndarray:
+    """Per run, the time from which its state stayed in the balance box to the end
+    (equilibrist.tasks.balance_box), NaN for a run that fell or did not end in it."""
+    ended_in = ~fell & (last_out < rows)
+    return np.where(ended_in, last_out / setup.rate, np.nan)
+
+
 def _batch_result(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
                   seqs: list[np.random.SeedSequence | None], statuses: np.ndarray,
                   accs: np.ndarray, fell_xs: np.ndarray, x_ends: np.ndarray,
@@ -274,6 +314,7 @@ def _batch_result(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
     steps_done = np.where(fell, statuses[:, st["fell_step"]], setup.n_samples * setup.n_sub)
     settings = setup.describe()
     settings["x0"] = None
+    settings["balanced"] = balance_criterion(sysm)
     count = np.maximum(rows, 1)[:, None]
     return BatchResult(
         system=sysm.key, system_digest=sysm.digest, state_names=sysm.state_names,
@@ -285,6 +326,7 @@ def _batch_result(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
         peak_deviation=accs[:, acc["peak_dx"]],
         estimation_error_rms=(np.sqrt(accs[:, acc["sum_est2"]] / count)
                               if setup.estimates else None),
+        balanced_since=_balanced_since(accs[:, acc["last_out"].start], fell, rows, setup),
         rows=rows, seeds=tuple(None if s is None else describe_seed(s) for s in seqs),
         settings=settings, elapsed=elapsed, steps=int(steps_done.sum()), trajectories=recs,
         _setup=setup,

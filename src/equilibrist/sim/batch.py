@@ -42,10 +42,12 @@ from equilibrist.sim._batch_inputs import (
 )
 from equilibrist.sim._batch_python import _python_batch
 from equilibrist.sim._batch_result import FORMAT, BatchResult, _batch_result
+from equilibrist.sim._setup_checks import _has_operating_point
 from equilibrist.sim.events import Event
 from equilibrist.sim.kernel import Kernel, set_workers
 from equilibrist.sim.noise import Noise, SeedLike, generator_state, seed_sequence
 from equilibrist.sim.run import _progress_bar, call_interruptibly
+from equilibrist.tasks import balance_box
 
 
 def _threads(workers: object) -> int:
@@ -126,7 +128,7 @@ def simulate_batch(
     # A system without a canonical point (the zxz gyroscope) has no default
     # initial state: the settings are checked on the first run's.
     template_x0 = None
-    if x0 is not None and not _setup._has_operating_point(system):
+    if x0 is not None and not _has_operating_point(system):
         given = _floats(x0, "initial states x0")
         template_x0 = given[0] if given.ndim == 2 else given
     setup = _setup.build(
@@ -179,7 +181,7 @@ def simulate_batch(
         p_switch=setup.p_switch, region=setup.region, kicks=setup.kicks,
         kick_value=setup.kick_value, pulses=setup.pulses, pulse_value=setup.pulse_value,
         rec_cols=setup.rec_cols, acc_cols=setup.acc_cols, stop=stop,
-        core=kernel.core(setup.cp),
+        core=kernel.core(setup.cp), bal=np.ascontiguousarray(balance_box(system)),
     )
 
     def run_arrays(sl: slice) -> dict[str, np.ndarray]:

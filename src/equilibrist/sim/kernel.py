@@ -123,12 +123,13 @@ class Kernel:
                  p_switch: Any, lin_r: Any, region: Any, kicks: Any, kick_value: Any,
                  pulses: Any, pulse_value: Any, rec_cols: Any, acc_cols: Any, recs: Any,
                  accs: Any, statuses: Any, fell_xs: Any, x_ends: Any, stop: Any,
-                 core: Any = None) -> None:
-        """Independent runs, on :func:`thread_count` threads."""
+                 core: Any = None, bal: Any = None) -> None:
+        """Independent runs, on :func:`thread_count` threads (*bal*: the balance box whose
+        last exit the accumulators keep, :func:`equilibrist.tasks.balance_box`)."""
         (core or self.core(cp)).run_many(
             iopts, fopts, x0s, z0, rngs, op, c_idx, cp, ref, uff, lv, lw, p_sets_r, p_switch,
             lin_r, region, kicks, kick_value, pulses, pulse_value, rec_cols, acc_cols, recs,
-            accs, statuses, fell_xs, x_ends, stop, threads=_THREADS[0],
+            accs, statuses, fell_xs, x_ends, stop, threads=_THREADS[0], bal=bal,
         )
 
     def scratch(self, *, p_len: int, ny: int, nw: int) -> Any:

@@ -101,9 +101,10 @@ INTEGRATORS = {"rk4": 0, "adaptive": 1, "linear": 2}
 RECORD = Blocks("REC", (("x", "n"), ("x_hat", "n"), ("y", "ny"), ("u_cmd", "m"),
                         ("u_sat", "m"), ("u_app", "m")))
 #: A run's accumulators: peak |u_cmd|, sum u_app^2, samples saturated, peak |x - x_op|,
-#: sum of squared estimation errors, peak |u_app|.
+#: sum of squared estimation errors, peak |u_app|, and 1 + the last sample whose state was
+#: outside the balance box (``bal``, equilibrist.tasks.balance_box; 0: never).
 ACC = Blocks("ACC", (("peak_u", "m"), ("sum_u2", "m"), ("n_sat", "1"), ("peak_dx", "n"),
-                     ("sum_est2", "n"), ("peak_u_app", "m")))
+                     ("sum_est2", "n"), ("peak_u_app", "m"), ("last_out", "1")))
 #: Rows of the per-run scratch array (``fell_x`` receives the state at a fall).
 SCRATCH = Slots("S", ("y", "x_hat", "u_cmd", "u_sat", "u_app", "z_new", "k1", "k2", "k3", "k4",
                       "xt", "xprev", "ubuf", "wvec", "zbuf", "pcur", "fell_x", "wk"))

@@ -54,6 +54,7 @@ def metric_names(input_names: Sequence[str]) -> list[str]:
         *(f"peak_input_p50.{u}" for u in input_names),
         *(f"peak_input_max.{u}" for u in input_names),
         "time_saturated_mean", "time_saturated_max", "cost_mean", "cost_p90", "roa_fraction",
+        "fraction_balanced", "time_to_balance_p50", "time_to_balance_p90",
     ]
 
 
@@ -167,6 +168,7 @@ def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> d
                                      seed=study.point_seed(index, 1), x_op=x_op)
         fell = np.zeros(runs, dtype=bool)
         fell_at = np.full(runs, np.nan)
+        balanced_since = np.full(runs, np.nan)
         settle = np.full(runs, np.inf)
         peak = np.zeros((runs, len(inputs)))
         saturated = np.zeros(runs)
@@ -185,6 +187,8 @@ def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> d
             steps += batch.steps
             fell[sl] = batch.fell
             fell_at[sl] = batch.fell_at
+            if batch.balanced_since is not None:
+                balanced_since[sl] = batch.balanced_since
             peak[sl] = batch.peak_input
             saturated[sl] = batch.time_saturated
             if full and batch.trajectories is not None:
@@ -222,6 +226,10 @@ def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> d
         "time_saturated_max": float(saturated.max()),
         "roa_fraction": roa_fraction,
         "steps": int(steps),
+        # Ends balanced and stays (equilibrist.tasks.balance_box): a swing-up's success.
+        "fraction_balanced": float(np.isfinite(balanced_since).mean()),
+        "time_to_balance_p50": _quantile(balanced_since[np.isfinite(balanced_since)], 0.5),
+        "time_to_balance_p90": _quantile(balanced_since[np.isfinite(balanced_since)], 0.9),
     })
     for j, u in enumerate(inputs):
         row[f"peak_input_p50.{u}"] = _quantile(peak[:, j], 0.5)
