@@ -75,7 +75,8 @@ def _filter_riccati(Ad: np.ndarray, C: np.ndarray, Qd: np.ndarray, R: np.ndarray
         if not np.all(np.isfinite(H_next)):
             return None
         if np.max(np.abs(H_next - H)) <= 1e-13 * max(1.0, float(np.max(np.abs(H_next)))):
-            return (H_next + H_next.T) / 2
+            H_sym: np.ndarray = (H_next + H_next.T) / 2
+            return H_sym
         H = H_next
     return None
 
@@ -86,11 +87,12 @@ def _information_inverse(H: np.ndarray) -> np.ndarray:
 
     H = (H + H.T) / 2
     try:
-        return cho_solve(cho_factor(H), np.eye(H.shape[0]))
+        inverse: np.ndarray = cho_solve(cho_factor(H), np.eye(H.shape[0]))
     except LinAlgError:
         lam, V = np.linalg.eigh(H)
         keep = lam > STRUCTURAL_RATIO * max(float(lam.max()), 1e-300)
-        return (V[:, keep] / lam[keep]) @ V[:, keep].T
+        inverse = (V[:, keep] / lam[keep]) @ V[:, keep].T
+    return inverse
 
 
 def _sensor_prior(system: System, log: Log, given: Mapping[str, float] | None) -> np.ndarray:

@@ -55,7 +55,8 @@ class _Predictor(_Unknowns):
             self.memo.clear()
         key = (p.tobytes(), self.q.tobytes(), float(q_factor), sigma_y.tobytes())
         if key in self.memo:
-            return self.memo[key]
+            known: tuple[np.ndarray, np.ndarray] = self.memo[key]
+            return known
         n, ny = self.n, self.ny
         lin_key = key[:2]
         if lin_key not in self.memo:

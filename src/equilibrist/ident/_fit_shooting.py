@@ -85,7 +85,7 @@ class _Unknowns:
 
     @property
     def ny(self) -> int:
-        return self.c_idx.shape[0]
+        return int(self.c_idx.shape[0])
 
     @property
     def n_theta(self) -> int:
@@ -125,7 +125,7 @@ class _Problem(_Unknowns):
 
     @property
     def n_seg(self) -> int:
-        return self.bounds.shape[0] - 1
+        return int(self.bounds.shape[0]) - 1
 
     def split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         theta, off, rest = self.head(z)

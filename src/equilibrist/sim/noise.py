@@ -83,7 +83,8 @@ def square_root(cov: np.ndarray, what: str) -> np.ndarray:
         raise SimulationError(
             f"{what} is not positive semi-definite (eigenvalue {vals.min():.3g})"
         ) from None
-    return vecs * np.sqrt(np.clip(vals, 0.0, None))
+    factor: np.ndarray = vecs * np.sqrt(np.clip(vals, 0.0, None))
+    return factor
 
 
 @dataclass(frozen=True, eq=False)

@@ -82,13 +82,14 @@ def call_interruptibly(work: Callable[[], T], stop: np.ndarray,
         return work()
     # An interrupt whose exception a finalizer swallowed (equilibrist.interrupt).
     interrupt.raise_if_requested()
-    box: dict[str, Any] = {}
+    value: list[T] = []
+    error: list[BaseException] = []
 
     def target() -> None:
         try:
-            box["value"] = work()
+            value.append(work())
         except BaseException as exc:  # handed to the waiting thread
-            box["error"] = exc
+            error.append(exc)
 
     helper = threading.Thread(target=target, name="equilibrist-core", daemon=True)
     helper.start()
@@ -102,9 +103,9 @@ def call_interruptibly(work: Callable[[], T], stop: np.ndarray,
         stop[0] = 1
         helper.join()
         raise
-    if "error" in box:
-        raise box["error"]
-    return box["value"]
+    if error:
+        raise error[0]
+    return value[0]
 
 
 def fall_reason(code: int, state_names: Sequence[str]) -> str:

@@ -98,7 +98,8 @@ class Ramp:
         v0 = _vector(self.initial, base, "the ramp's initial value")
         slope = _vector(self.slope, base, "the ramp's slope")
         elapsed = np.maximum(np.asarray(times, dtype=float) - start, 0.0)
-        return v0 + elapsed[:, None] * slope
+        out: np.ndarray = v0 + elapsed[:, None] * slope
+        return out
 
     def describe(self) -> dict[str, object]:
         return {"kind": "ramp", "slope": _plain(self.slope), "start": self.start,
@@ -128,7 +129,8 @@ class Square:
         phase = np.mod(t, period) < period / 2
         sign = np.where(phase, 1.0, -1.0)
         sign = np.where(t < 0, 0.0, sign)
-        return centre + sign[:, None] * amp
+        out: np.ndarray = centre + sign[:, None] * amp
+        return out
 
     def describe(self) -> dict[str, object]:
         return {"kind": "square", "amplitude": _plain(self.amplitude), "period": self.period,
@@ -276,7 +278,8 @@ class Chirp:
         arg = (2.0 * np.pi * phase).tolist()
         sines = np.fromiter((eq_sin(a) for a in arg), dtype=float, count=len(arg))
         value = np.where(t < 0, 0.0, sines)
-        return centre + value[:, None] * amp
+        out: np.ndarray = centre + value[:, None] * amp
+        return out
 
     def describe(self) -> dict[str, object]:
         return {"kind": "chirp", "amplitude": _plain(self.amplitude), "f0": self.f0, "f1": self.f1,
@@ -326,7 +329,8 @@ class PRBS:
         index = np.floor(np.maximum(t, 0.0) / period + 1e-9).astype(np.int64)
         bits = self.bits(int(index.max()) + 1 if index.size else 0)
         sign = np.where(t < 0, 0.0, 2.0 * bits[index] - 1.0) if index.size else np.zeros(0)
-        return centre + sign[:, None] * amp
+        out: np.ndarray = centre + sign[:, None] * amp
+        return out
 
     def describe(self) -> dict[str, object]:
         return {"kind": "prbs", "amplitude": _plain(self.amplitude), "period": self.period,
