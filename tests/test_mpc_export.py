@@ -3,7 +3,6 @@ the commands equal the simulated controller's to round-off, the filter too, make
 
 from __future__ import annotations
 
-import os
 import re
 import shutil
 import subprocess
@@ -23,6 +22,7 @@ from equilibrist.export.mpc_c import (
     footprint,
 )
 from equilibrist.sim.run import simulate
+from support import cc_cache
 from support.cc_cache import cached_cc, environment
 
 
@@ -30,8 +30,7 @@ from support.cc_cache import cached_cc, environment
 def daqp_objects(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Where DAQP's sources, the same in every export, compile once (``support.cc_cache``):
     each ``make check`` still builds and runs its own program from its folder's sources."""
-    base = tmp_path_factory.getbasetemp()
-    return (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "daqp-objects"
+    return cc_cache.folder(tmp_path_factory)
 
 
 def _make_check(folder: Path, daqp_objects: Path) -> str:

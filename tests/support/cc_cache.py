@@ -25,10 +25,20 @@ import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # the front itself runs without pytest, once a compile
+    import pytest
 
 CACHED = "daqp/src/"
 #: Options of a link only (every other option is a compile flag of each source).
 LINK_ONLY = ("-shared", "-l", "-Wl,", "-L")
+
+
+def folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The cache of a test run: shared by the xdist workers of the run, gone with its temp."""
+    base = tmp_path_factory.getbasetemp()
+    return (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "daqp-objects"
 
 
 def environment(cache: Path) -> dict[str, str]:
