@@ -5,13 +5,13 @@ from __future__ import annotations
 import math
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from equilibrist import get_system
+from equilibrist.cli.main import main
 from equilibrist.control.controller import NonlinearController
 from equilibrist.control.swingup import SwingUpRuntime, swingup
 from equilibrist.export.swingup_c import (
@@ -94,34 +94,33 @@ def test_exported_code_closes_the_loop() -> None:
     assert abs(math.remainder(res.final_state[1], 2 * math.pi)) < 0.02
 
 
-def test_command_line_export_and_refusal(tmp_path: Path) -> None:
-    cmd = [sys.executable, "-m", "equilibrist.cli.main"]
+def test_command_line_export_and_refusal(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # main() in this process: what is tested is what the command writes and refuses (the
+    # console script's exit status in a process of its own is test_cli_core's).
     out = tmp_path / "cart"
-    proc = subprocess.run([*cmd, "export", "cartpole", "--controller", "swingup", "--out", str(out)],
-                          capture_output=True, text=True, check=False)
-    assert proc.returncode == 0, proc.stderr
+    code = main(["export", "cartpole", "--controller", "swingup", "--out", str(out)])
+    assert code == 0, capsys.readouterr().err
     check = subprocess.run(["make", "check"], cwd=out, capture_output=True, text=True, check=False)
     assert check.returncode == 0 and "0 mismatches" in check.stdout
-    bad = subprocess.run([*cmd, "export", "ball_beam", "--controller", "swingup", "--out",
-                          str(tmp_path / "bb")], capture_output=True, text=True, check=False)
-    assert bad.returncode == 2
-    assert bad.stderr.strip().count("\n") == 0 and "no swing-up" in bad.stderr
+    capsys.readouterr()
+    code = main(["export", "ball_beam", "--controller", "swingup", "--out", str(tmp_path / "bb")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.strip().count("\n") == 0 and "no swing-up" in err
     assert not (tmp_path / "bb").exists()
 
 
-def test_command_line_lqg_hand_over(tmp_path: Path) -> None:
+def test_command_line_lqg_hand_over(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """``--balance lqg`` reaches the builder: the exported library balances with the LQG."""
-    cmd = [sys.executable, "-m", "equilibrist.cli.main"]
     out = tmp_path / "furuta"
-    proc = subprocess.run([*cmd, "export", "furuta", "--controller", "swingup", "--balance", "lqg",
-                           "--out", str(out)], capture_output=True, text=True, check=False)
-    assert proc.returncode == 0, proc.stderr
+    code = main(["export", "furuta", "--controller", "swingup", "--balance", "lqg", "--out", str(out)])
+    assert code == 0, capsys.readouterr().err
     assert "balanced by the LQG" in (out / "swingup.h").read_text()
     check = subprocess.run(["make", "check"], cwd=out, capture_output=True, text=True, check=False)
     assert check.returncode == 0 and "0 mismatches" in check.stdout
-    bad = subprocess.run([*cmd, "export", "furuta", "--controller", "swingup", "--balance", "pid",
-                          "--out", str(tmp_path / "x")], capture_output=True, text=True, check=False)
-    assert bad.returncode == 2 and not (tmp_path / "x").exists()
+    assert main(["export", "furuta", "--controller", "swingup", "--balance", "pid",
+                 "--out", str(tmp_path / "x")]) == 2
+    assert not (tmp_path / "x").exists()
 
 
 # -- the same translation for any NonlinearController ------------------------------------------
