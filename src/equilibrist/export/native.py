@@ -139,7 +139,8 @@ class CompiledController:
     @property
     def version(self) -> str:
         """The library's version line (generator, design id and settings)."""
-        return self._version().decode()
+        line: bytes = self._version()  # ctypes.c_char_p: bytes
+        return line.decode()
 
     def reset(self, x_estimate: object | None = None) -> None:
         """``init`` (at the operating point) or ``init_at`` (an absolute state estimate)."""

@@ -109,7 +109,8 @@ def tolerance(data: ControllerData, u: np.ndarray, precision: str) -> np.ndarray
     activity = np.max(np.abs(u - data.u0), axis=0) if u.size else np.zeros(data.n_inputs)
     floor = 1e-6 * (data.u_max - data.u_min)
     scale = np.maximum(np.maximum(activity, floor), np.abs(data.u0) * 1e-6)
-    return RELATIVE_TOLERANCE[precision] * scale
+    tolerance: np.ndarray = RELATIVE_TOLERANCE[precision] * scale
+    return tolerance
 
 
 def make_vectors(data: ControllerData, y: npt.ArrayLike, r: npt.ArrayLike, u: npt.ArrayLike,

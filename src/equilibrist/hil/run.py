@@ -208,7 +208,8 @@ class DeviceController(PythonControllerBase):
     def _excite(self, t: float, u: np.ndarray) -> np.ndarray:
         if self._excitation is None:
             return u.copy()
-        return u + self._excitation.evaluate(np.array([t]), np.zeros(u.size))[0]
+        excited: np.ndarray = u + self._excitation.evaluate(np.array([t]), np.zeros(u.size))[0]
+        return excited
 
     # -- faults -----------------------------------------------------------------------------
     def finish(self) -> None:

@@ -117,7 +117,8 @@ class EnvSteps:
         """Row 0's episode started from its row: its first observation (a new array)."""
         _a, fs, us, obs, _r, _f, cf, ci, _st = self._p
         self.core.lib.eq_env_begin_one(fs, us, obs, cf, ci)
-        return self.obs[0].copy()
+        first: np.ndarray = self.obs[0].copy()
+        return first
 
     def reset_many(self) -> np.ndarray:
         """Every copy drawn and started: the first observations (a new array)."""

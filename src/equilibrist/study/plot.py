@@ -210,4 +210,5 @@ def _unique(col: np.ndarray) -> np.ndarray:
 def _eq(col: np.ndarray, value: Any) -> np.ndarray:
     if col.dtype == object:
         return np.array([c == value for c in col], dtype=bool)
-    return col == value
+    mask: np.ndarray = col == value
+    return mask

@@ -283,11 +283,13 @@ class _Linear:
     def output(self, y: np.ndarray) -> np.ndarray:
         c = self.ctrl
         self._dy = y - c.y_op
-        return c.u_op + c.Cc @ self.z + c.Dy @ self._dy
+        u: np.ndarray = c.u_op + c.Cc @ self.z + c.Dy @ self._dy
+        return u
 
     def estimate(self) -> np.ndarray:
         c = self.ctrl
-        return c.x_op + c.Ez @ self.z + c.Ey @ self._dy
+        x: np.ndarray = c.x_op + c.Ez @ self.z + c.Ey @ self._dy
+        return x
 
     def update(self, u_applied: np.ndarray) -> None:
         c = self.ctrl
