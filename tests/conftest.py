@@ -1,7 +1,40 @@
-"""Shared fixtures: the registry's specs, and a headless matplotlib."""
+"""Shared fixtures: the registry's specs, and a headless matplotlib; the order of the run."""
 
 from __future__ import annotations
 
 import os
 
+import pytest
+
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+#: The modules that take longest (seconds of CPU, a few to a hundred each), longest first.
+#: They run first, each whole on one worker, so that neither worker is left with a long
+#: module at the end while the other waits, and no module-scoped fixture (an export's
+#: build, the playground's server and browser) is set up on both workers.
+LONGEST_FIRST = (
+    "test_ident_coverage.py", "test_hostile_cli.py", "test_hostile.py", "test_web_browser.py",
+    "test_viz_systems.py", "test_viz_results.py", "test_hil.py", "test_swingup.py",
+    "test_mpc_export.py", "test_tvlqr.py", "test_web_protocol.py", "test_bits_cpu.py",
+    "test_sim_systems.py", "test_sim_batch.py", "test_models_real.py", "test_user_systems.py",
+    "test_import_cli.py", "test_study_cluster.py", "test_export_sim.py", "test_packaged_models.py",
+    "test_study.py", "test_mpc.py", "test_sim_controllers.py", "test_swingup_export.py",
+)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Whole modules reordered, longest first (each module's tests keep their order)."""
+    rank = {name: k for k, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))  # stable
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | None:
+    """Under ``-n`` with the default distribution: whole modules to a worker (``loadfile``)
+    in the order of the collection above, instead of chunks of tests."""
+    if config.getvalue("dist") != "load":
+        return None  # a distribution asked for on the command line is kept
+    from xdist.scheduler import LoadFileScheduling
+
+    config.option.loadscopereorder = False  # keep the order above, not by count of tests
+    return LoadFileScheduling(config, log)
