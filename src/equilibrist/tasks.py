@@ -223,6 +223,21 @@ def get_task(system: System, name: str) -> Task:
     )
 
 
+#: Share of a task's state bounds a plan leaves free for the tracker to correct in.
+PLAN_MARGIN = 0.3
+
+
+def planning_bounds(task: Task, margin: float = PLAN_MARGIN) -> dict[str, tuple[float, float]]:
+    """The task's region shrunk about its centre by *margin* (a share of its width): where a
+    plan (``equilibrist trajopt``) keeps its states, so that the time-varying LQR tracking
+    it has room to correct (the cart-pole plans within 70 % of its track by default)."""
+    if not 0.0 <= margin < 1.0:
+        raise ValueError(f"margin {margin!r}: expected a fraction in [0, 1)")
+    keep = 1.0 - margin
+    return {k: (0.5 * (lo + hi) - 0.5 * (hi - lo) * keep, 0.5 * (lo + hi) + 0.5 * (hi - lo) * keep)
+            for k, (lo, hi) in task.region.items()}
+
+
 #: "Balanced": every coordinate of the system's fall region within this of the operating
 #: point (an angle in rad, taken modulo a turn), its rate within :data:`BALANCED_RATE`.
 BALANCED_ANGLE = 0.1

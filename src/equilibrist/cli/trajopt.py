@@ -20,8 +20,10 @@ from equilibrist.cli import common
 
 _EPILOG = """\
 By default the system's swing-up task (where it has one): from hanging at
-rest to the operating point, within the task's bounds (the cart-pole's track
-|x| <= x_max) and the input limits, in --duration seconds (default 5), with
+rest to the operating point, within the task's bounds less --margin (default
+0.3: the cart-pole plans within 70 % of its track |x| <= x_max, so that the
+time-varying LQR that tracks the plan has room to correct a perturbed start)
+and the input limits, in --duration seconds (default 5), with
 the least effort (integral of (u / scale)^2, the inputs' Bryson scales).
 --to NAME=VALUE,... plans a transfer to the operating point with those
 components changed (from --from, by default the operating point).
@@ -55,6 +57,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     time_group.add_argument("--duration", metavar="S", help="a fixed final time (default 5 s)")
     time_group.add_argument("--duration-max", metavar="S", help="a free final time, at most S")
     p.add_argument("--minimize", choices=("effort", "time"), default="effort")
+    p.add_argument("--margin", metavar="FRACTION", default="0.3",
+                   help="share of the task's state bounds kept free for the tracker to correct "
+                   "in (default 0.3: the cart-pole plans within 70 %% of its track)")
     p.add_argument("--knots", default="60", metavar="N", help="collocation intervals (default 60)")
     p.add_argument("--seed", default="0", metavar="S", help="seed of a random guess (default 0)")
     p.add_argument("--guess", default="straight", metavar="random|straight|FILE",
@@ -133,7 +138,12 @@ def run(args: argparse.Namespace) -> int:
             raise common.UsageError(f"{system.key} has no swing-up task (it states no hanging "
                                     "pose): give --to NAME=VALUE,... for a transfer")
         task = get_task(system, "swingup")
-        start, goal, bounds = task.start, task.x_op, dict(task.region)
+        from equilibrist.tasks import planning_bounds
+
+        margin = common.parse_number(args.margin, "--margin")
+        if not 0.0 <= margin < 1.0:
+            raise common.UsageError(f"--margin {args.margin}: expected a fraction in [0, 1)")
+        start, goal, bounds = task.start, task.x_op, planning_bounds(task, margin)
     traj = plan(system, start=start, goal=goal, knots=knots, duration=duration,
                 duration_max=duration_max, minimize=args.minimize, guess=guess, seed=seed,
                 bounds=bounds)
