@@ -82,7 +82,7 @@ EQ_LG7 = 1.479819860511658591e-01
 EQ_SQRT2_HALF_HI = 0.7071065902709961  # high word 0x3fe6a09e: fdlibm's split of the mantissa
 
 
-def eq_ksin(x, y, iy):
+def eq_ksin(x: float, y: float, iy: int) -> float:
     """sin(x + y) for |x + y| <= pi/4 (y the tail of x; iy 0 when y is zero)."""
     z = x * x
     w = z * z
@@ -93,7 +93,7 @@ def eq_ksin(x, y, iy):
     return x - ((z * (0.5 * y - v * r) - y) - v * EQ_S1)
 
 
-def eq_kcos(x, y):
+def eq_kcos(x: float, y: float) -> float:
     """cos(x + y) for |x + y| <= pi/4."""
     z = x * x
     w = z * z
@@ -103,7 +103,7 @@ def eq_kcos(x, y):
     return w + (((1.0 - w) - hz) + (z * r - x * y))
 
 
-def eq_rem_pio2(x):
+def eq_rem_pio2(x: float) -> tuple[int, float, float]:
     """``(q, y0, y1)`` with ``x = n pi/2 + y0 + y1``, ``|y0 + y1| <= pi/4``, ``q = n mod 4`` (x finite)."""
     fn = x * EQ_INVPIO2 + EQ_TOINT - EQ_TOINT
     r = x - fn * EQ_PIO2_1
@@ -138,7 +138,7 @@ def eq_rem_pio2(x):
     return 0, y0, y1  # |x| > 7e15: deterministic, not accurate
 
 
-def eq_sin(x):
+def eq_sin(x: float) -> float:
     """sin(x), the same bits on every CPU."""
     a = abs(x)
     if a < EQ_PIO4_HI:
@@ -157,7 +157,7 @@ def eq_sin(x):
     return -eq_kcos(y0, y1)
 
 
-def eq_cos(x):
+def eq_cos(x: float) -> float:
     """cos(x), the same bits on every CPU."""
     a = abs(x)
     if a < EQ_PIO4_HI:
@@ -176,7 +176,7 @@ def eq_cos(x):
     return eq_ksin(y0, y1, 1)
 
 
-def eq_log(x):
+def eq_log(x: float) -> float:
     """The natural logarithm, the same bits on every CPU."""
     if not (x > 0.0):
         if x == 0.0:
