@@ -37,7 +37,7 @@ from equilibrist.sim import Noise, simulate_batch
 from equilibrist.sim.batch import monte_carlo
 from equilibrist.tasks import get_task, planning_bounds
 
-SYSTEMS = {"acrobot": 8.0, "cartpole": 4.0, "furuta": 4.0}  # planned duration [s]
+SYSTEMS = {"acrobot": 4.0, "cartpole": 4.0, "furuta": 4.0}  # planned duration [s]
 DURATION = 15.0
 
 
