@@ -119,17 +119,20 @@ class Task:
 
     def draw_initial(self, rng: np.random.Generator) -> np.ndarray:
         """An initial state drawn from the task's distribution with *rng*."""
-        return self.start + rng.uniform(-1.0, 1.0, self.start.size) * self.spread
+        x0: np.ndarray = self.start + rng.uniform(-1.0, 1.0, self.start.size) * self.spread
+        return x0
 
     def draw_initials(self, rng: np.random.Generator, runs: int) -> np.ndarray:
         """``runs`` initial states (rows) drawn with *rng*."""
-        return self.start + rng.uniform(-1.0, 1.0, (int(runs), self.start.size)) * self.spread
+        x0: np.ndarray = self.start + rng.uniform(-1.0, 1.0, (int(runs), self.start.size)) * self.spread
+        return x0
 
     def cost(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Quadratic stage cost ``dx' Q dx + du' R du`` (rows of *x*, *u*; or one pair)."""
         dx = (np.asarray(x, dtype=float) - self.x_op) / self.state_scales
         du = (np.asarray(u, dtype=float) - self.u_op) / self.input_scales
-        return np.sum(dx * dx, axis=-1) + np.sum(du * du, axis=-1)
+        stage: np.ndarray = np.sum(dx * dx, axis=-1) + np.sum(du * du, axis=-1)
+        return stage
 
     def fallen(self, x: np.ndarray) -> bool:
         """Whether the state *x* is outside the task's region."""
@@ -285,7 +288,8 @@ def in_box(x: np.ndarray, x_op: np.ndarray, box: np.ndarray) -> np.ndarray:
     period = box[:, 2]
     wrapped = np.where(period > 0.0, d - period * np.floor(d / np.where(period > 0, period, 1.0)
                                                            + 0.5), d)
-    return np.all((wrapped >= box[:, 0]) & (wrapped <= box[:, 1]), axis=-1)
+    inside: np.ndarray = np.all((wrapped >= box[:, 0]) & (wrapped <= box[:, 1]), axis=-1)
+    return inside
 
 
 def all_tasks(system: System) -> tuple[Task, ...]:

@@ -168,7 +168,8 @@ class Core:
         lo, hi = self.limits
         a = np.asarray(action, dtype=float)
         u = a if self.action_units == "physical" else lo + 0.5 * (a + 1.0) * (hi - lo)
-        return np.minimum(np.maximum(u, lo), hi)
+        applied: np.ndarray = np.minimum(np.maximum(u, lo), hi)
+        return applied
 
     @property
     def n_params(self) -> int:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 import sys
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -20,6 +20,9 @@ from equilibrist.envs._core import FINITE, OPTION_DEFAULTS, Core, EnvError, as_a
 from equilibrist.errors import DimensionError, nearest
 from equilibrist.native.steps import EnvSteps
 from equilibrist.sim.noise import generator_state
+
+if TYPE_CHECKING:
+    from equilibrist.viz.frames import FrameRenderer
 
 # Backends of matplotlib that draw to files only.
 _FILE_BACKENDS = frozenset({"agg", "pdf", "ps", "svg", "pgf", "cairo", "template"})
@@ -99,7 +102,7 @@ class Renderer:
     def __init__(self, core: Core, mode: str) -> None:
         self.core = core
         self.mode = mode
-        self._frames: Any = None
+        self._frames: FrameRenderer | None = None
         self._window: Any = None
 
     def _extent_states(self) -> np.ndarray:

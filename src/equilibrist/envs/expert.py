@@ -71,12 +71,13 @@ class Expert:
         t = self._k / core.rate
         u = np.asarray(self.runtime.output(t, y, self._r), dtype=float)
         lo, hi = core.limits
-        applied = np.minimum(np.maximum(u, lo), hi)
+        applied: np.ndarray = np.minimum(np.maximum(u, lo), hi)
         self.runtime.update(t, y, self._r, applied)
         self._k += 1
         if core.action_units == "physical":
             return applied
-        return 2.0 * (applied - lo) / (hi - lo) - 1.0
+        action: np.ndarray = 2.0 * (applied - lo) / (hi - lo) - 1.0
+        return action
 
 
 def expert(env: Any, kind: str = "lqg", *, options: Mapping[str, Any] | None = None,

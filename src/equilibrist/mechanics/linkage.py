@@ -462,4 +462,5 @@ def _circle_intersection(
     across = np.sqrt(np.maximum(radius**2 - along**2, 0.0))
     unit = ray / distance[..., None]
     normal = np.stack([-unit[..., 1], unit[..., 0]], -1)  # counter-clockwise of the ray
-    return centre + along[..., None] * unit + sign * across[..., None] * normal
+    point: np.ndarray = centre + along[..., None] * unit + sign * across[..., None] * normal
+    return point

@@ -15,7 +15,9 @@ from equilibrist.mechanics.model import SymbolicModel
 from equilibrist.mechanics.spec import SystemSpec
 
 
-class _Literal(sp.Symbol):
+# sympy ships no type information, so Symbol is Any to mypy and subclassing it is an error
+# under --strict.
+class _Literal(sp.Symbol):  # type: ignore[misc]
     """A symbol printed as its name, underscores and digits as written.
 
     sympy reads ``_`` in a name as a subscript and ``__`` as a superscript,
@@ -27,7 +29,7 @@ class _Literal(sp.Symbol):
     accent: str
 
     def __new__(cls, name: str, accent: str = "") -> _Literal:
-        obj = super().__new__(cls, f"{name}\u2063{accent}")
+        obj: _Literal = super().__new__(cls, f"{name}\u2063{accent}")
         obj.accent = accent
         obj.shown = name
         return obj
@@ -136,5 +138,6 @@ def matrix_latex(model: SymbolicModel, spec: SystemSpec, which: str) -> str:
     mat = {"M": model.M, "F": model.F, "f": model.f, "A": model.A, "B": model.B}[which]
     if mat is None:
         raise ValueError(f"model of {spec.key} has no {which}")
-    return sp.latex(mat.xreplace(display_symbols(model, spec)),
-                    symbol_names=_latex_overrides(model, spec))
+    text: str = sp.latex(mat.xreplace(display_symbols(model, spec)),
+                         symbol_names=_latex_overrides(model, spec))
+    return text

@@ -212,10 +212,11 @@ def angular_velocity_expr(sequence: str, *, frame: str = "body") -> sp.Immutable
 
 
 @cache
-def _matrix_function(sequence: str, frame: str) -> Callable[..., list]:
+def _matrix_function(sequence: str, frame: str) -> Callable[..., list[object]]:
     angles, _ = angle_symbols(sequence)
     entries = list(angular_velocity_matrix_expr(sequence, frame=frame))
-    return sp.lambdify(angles, entries, modules="numpy")
+    function: Callable[..., list[object]] = sp.lambdify(angles, entries, modules="numpy")
+    return function
 
 
 def _as_triples(values: object, what: str) -> np.ndarray:
@@ -274,7 +275,8 @@ def angular_velocity(
     """
     E = angular_velocity_matrix(sequence, angles, frame=frame)
     r = _as_triples(rates, "rates")
-    return np.einsum("...ij,...j->...i", E, r)
+    omega: np.ndarray = np.einsum("...ij,...j->...i", E, r)
+    return omega
 
 
 def rotation_matrix(sequence: str, angles: object) -> np.ndarray:

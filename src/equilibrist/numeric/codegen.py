@@ -44,8 +44,8 @@ LIBM_REVISION = 2
 
 
 # sympy ships no type information, so its printer is Any to mypy (a subclass of Any is an
-# error only under --strict, hence unused-ignore too).
-class _Printer(PythonCodePrinter):  # type: ignore[misc, unused-ignore]
+# error under --strict).
+class _Printer(PythonCodePrinter):  # type: ignore[misc]
     def __init__(self) -> None:
         super().__init__({"fully_qualified_modules": True, "standard": "python3"})
 

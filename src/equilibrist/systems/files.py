@@ -28,10 +28,14 @@ import marshal
 import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from equilibrist.errors import DefinitionError, UnknownNameError
 from equilibrist.mechanics.spec import SystemSpec
 from equilibrist.systems.registry import SPEC_ATTRIBUTE, DeriveFunction, Entry, family_names
+
+if TYPE_CHECKING:
+    from equilibrist.mechanics.model import Derivation, SymbolicModel
 
 PYTHON_SUFFIX = ".py"
 MODEL_SUFFIXES = (".xml", ".urdf")
@@ -134,7 +138,7 @@ def _from_python(data: bytes, origin: str, digest: str) -> Entry:
     name = getattr(user_derive, "__name__", "derive")
 
     @functools.wraps(user_derive)
-    def derive(d):
+    def derive(d: Derivation) -> SymbolicModel:
         from equilibrist.mechanics.model import SymbolicModel
 
         try:

@@ -75,7 +75,7 @@ def _pts(*xy: Sequence[float]) -> np.ndarray:
     return np.array(xy, dtype=float).reshape(-1, 2)
 
 
-def bar(p0: np.ndarray, p1: np.ndarray, width: float) -> np.ndarray:
+def bar(p0: np.ndarray | Sequence[float], p1: np.ndarray | Sequence[float], width: float) -> np.ndarray:
     """The rectangle of a rod of *width* from *p0* to *p1*."""
     p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
     d = p1 - p0
@@ -100,7 +100,8 @@ def rotate(points: np.ndarray, angle: float, about: Sequence[float] = (0.0, 0.0)
     c, s = math.cos(angle), math.sin(angle)
     o = np.asarray(about, float)
     p = np.asarray(points, float) - o
-    return np.column_stack([c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1]]) + o
+    turned: np.ndarray = np.column_stack([c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1]]) + o
+    return turned
 
 
 def arrow(start: np.ndarray | Sequence[float], vector: np.ndarray | Sequence[float],
@@ -183,10 +184,11 @@ def _ticks(size: float) -> np.ndarray:
 def _nice(v: float) -> float:
     """The largest 1, 2 or 5 times a power of ten not above *v*."""
     e = math.floor(math.log10(v))
+    power = 10.0**e
     for m in (5.0, 2.0, 1.0):
-        if m * 10**e <= v:
-            return m * 10**e
-    return 10**e
+        if m * power <= v:
+            return m * power
+    return power
 
 
 def _spokes(key: str, center: np.ndarray, radius: float, angle: float) -> list[Shape]:

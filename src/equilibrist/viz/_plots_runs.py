@@ -53,7 +53,8 @@ def _operating_point(run: Run) -> tuple[np.ndarray | None, np.ndarray | None]:
 def _saturated(run: Run) -> np.ndarray | None:
     if run.u is None or run.u_command is None:
         return None
-    return ~np.isclose(run.u, run.u_command, rtol=1e-6, atol=1e-9)
+    saturated: np.ndarray = ~np.isclose(run.u, run.u_command, rtol=1e-6, atol=1e-9)
+    return saturated
 
 
 def _events(ax: Any, run: Run) -> None:

@@ -67,11 +67,14 @@ class GyroscopeScene(Scene):
     def orientation(self, x: np.ndarray) -> np.ndarray:
         """The wheel's rotation matrix in the room frame (z up)."""
         euler = self.system.spec.variant[1] if self.system.spec.variant else "zxz"  # type: ignore[attr-defined]
+        rot: np.ndarray
         if euler == "xyz":
-            return _rx(self.q(x, "theta")) @ _ry(self.q(x, "phi")) @ _rz(self.q(x, "psi"))
-        return _rz(self.q(x, "phi")) @ _rx(self.q(x, "theta")) @ _rz(self.q(x, "psi"))
+            rot = _rx(self.q(x, "theta")) @ _ry(self.q(x, "phi")) @ _rz(self.q(x, "psi"))
+        else:
+            rot = _rz(self.q(x, "phi")) @ _rx(self.q(x, "theta")) @ _rz(self.q(x, "psi"))
+        return rot
 
-    def shapes(self, x, u, trail=None):
+    def shapes(self, x: np.ndarray, u: np.ndarray | None, trail: np.ndarray | None = None) -> list[Shape]:
         p = self.params
         R = p["R"]
         rw = disc_radius(p["I_s"], p["m"])
@@ -113,7 +116,7 @@ class GyroscopeScene(Scene):
         ]
         return out
 
-    def extent(self, states, inputs=None):
+    def extent(self, states: np.ndarray, inputs: np.ndarray | None = None) -> tuple[float, float, float, float]:
         p = self.params
         reach = p["R"] + 1.6 * disc_radius(p["I_s"], p["m"])
         return (-1.25 * reach, 1.25 * reach, -1.1 * reach, 1.25 * reach)
@@ -129,7 +132,7 @@ class CmgRobotScene(Scene):
 
     caption = "front view (x towards you): roll θ counter-clockwise; dial: gimbal angle φ"
 
-    def shapes(self, x, u, trail=None):
+    def shapes(self, x: np.ndarray, u: np.ndarray | None, trail: np.ndarray | None = None) -> list[Shape]:
         p = self.params
         th, phi = self.q(x, "theta"), self.q(x, "phi")
         rw = disc_radius(p["I_z"], p["m_wheel"])
@@ -143,7 +146,8 @@ class CmgRobotScene(Scene):
             return np.atleast_2d(p3)[:, 1:3]
 
         def body_pt(y: float, z: float) -> np.ndarray:
-            return screen(roll @ np.array([0.0, y, z]))[0]
+            point: np.ndarray = screen(roll @ np.array([0.0, y, z]))[0]
+            return point
 
         body = np.array([body_pt(-width / 2, 0), body_pt(width / 2, 0),
                          body_pt(width / 2, height), body_pt(-width / 2, height)])
@@ -189,7 +193,7 @@ class FurutaScene(Scene):
     caption = "3D view: arm angle φ counter-clockwise from above; pendulum θ from up; arrow: torque τ"
     projected = True
 
-    def shapes(self, x, u, trail=None):
+    def shapes(self, x: np.ndarray, u: np.ndarray | None, trail: np.ndarray | None = None) -> list[Shape]:
         p = self.params
         La, lp = p["L_a"], p["l_p"]
         phi, th = self.q(x, "phi"), self.q(x, "theta")
@@ -225,7 +229,7 @@ class FurutaScene(Scene):
         ]
         return out
 
-    def extent(self, states, inputs=None):
+    def extent(self, states: np.ndarray, inputs: np.ndarray | None = None) -> tuple[float, float, float, float]:
         p = self.params
         reach = p["L_a"] + 2 * p["l_p"]
         return (-1.15 * reach, 1.15 * reach, -1.15 * reach, 1.15 * reach)

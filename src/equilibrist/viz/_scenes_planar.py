@@ -33,7 +33,7 @@ class SeesawScene(Scene):
 
     caption = "beam angle θ counter-clockwise from level; arrow: motor thrust F"
 
-    def shapes(self, x, u, trail=None):
+    def shapes(self, x: np.ndarray, u: np.ndarray | None, trail: np.ndarray | None = None) -> list[Shape]:
         p = self.params
         L = p["L"]
         th = self.q(x, "theta")
@@ -103,7 +103,7 @@ class CartpoleScene(_CartMixin, Scene):
 
     caption = "cart position x to the right; pole angle θ clockwise from up; arrow: force F"
 
-    def shapes(self, x, u, trail=None):
+    def shapes(self, x: np.ndarray, u: np.ndarray | None, trail: np.ndarray | None = None) -> list[Shape]:
         l = self.params["l"]
         size = 2 * l
         out, pivot = self._cart(self.q(x, "x"), size, self.input_fraction(u))
@@ -112,7 +112,7 @@ class CartpoleScene(_CartMixin, Scene):
         out.append(_fill("pivot", circle(pivot, 0.03 * size, 20), COLORS["pivot"], z=6))
         return out
 
-    def reach(self, states):
+    def reach(self, states: np.ndarray) -> tuple[float, float, float, float]:
         return self._swing(states, 2 * self.params["l"], 2 * self.params["l"])
 
 
@@ -121,7 +121,7 @@ class DoubleCartpoleScene(_CartMixin, Scene):
 
     caption = "cart position x; link angles θ1, θ2 clockwise from up; arrow: force F"
 
-    def shapes(self, x, u, trail=None):
+    def shapes(self, x: np.ndarray, u: np.ndarray | None, trail: np.ndarray | None = None) -> list[Shape]:
         l1, l2 = self.params["l1"], self.params["l2"]
         size = l1 + l2
         out, pivot = self._cart(self.q(x, "x"), size, self.input_fraction(u))
@@ -133,7 +133,7 @@ class DoubleCartpoleScene(_CartMixin, Scene):
         out.append(_fill("elbow", circle(elbow, 0.022 * size, 20), COLORS["pivot"], z=6))
         return out
 
-    def reach(self, states):
+    def reach(self, states: np.ndarray) -> tuple[float, float, float, float]:
         size = self.params["l1"] + self.params["l2"]
         return self._swing(states, size, size)  # both links stretched out: l1 + l2
 
@@ -143,7 +143,7 @@ class WheeledPendulumScene(Scene):
 
     caption = "wheel angle φ (red spoke) and body angle θ clockwise; arrow: motor torque τ"
 
-    def shapes(self, x, u, trail=None):
+    def shapes(self, x: np.ndarray, u: np.ndarray | None, trail: np.ndarray | None = None) -> list[Shape]:
         p = self.params
         R, L = p["R"], p["L"]
         phi, th = self.q(x, "phi"), self.q(x, "theta")
@@ -161,7 +161,7 @@ class WheeledPendulumScene(Scene):
         ]
         return out
 
-    def reach(self, states):
+    def reach(self, states: np.ndarray) -> tuple[float, float, float, float]:
         p = self.params
         R, L = p["R"], p["L"]
         xs = R * states[:, self._index["phi"]]
@@ -175,7 +175,7 @@ class ReactionWheelScene(Scene):
 
     caption = "wheel angle φ (red spoke) and arm angle θ clockwise from up; arrow: torque τ"
 
-    def shapes(self, x, u, trail=None):
+    def shapes(self, x: np.ndarray, u: np.ndarray | None, trail: np.ndarray | None = None) -> list[Shape]:
         p = self.params
         Lw = p["L_w"]
         rw = disc_radius(p["I_w"], p["m_w"])
@@ -195,7 +195,7 @@ class ReactionWheelScene(Scene):
         ]
         return out
 
-    def reach(self, states):
+    def reach(self, states: np.ndarray) -> tuple[float, float, float, float]:
         p = self.params
         arm = p["L_w"] + 1.4 * disc_radius(p["I_w"], p["m_w"])  # the wheel and its torque arrow
         return (-arm, arm, -0.15 * p["L_w"], arm)
@@ -212,11 +212,12 @@ class BallBeamScene(Scene):
     caption = "beam angle θ counter-clockwise; ball position R along the beam; red: ball spin"
     nominal_radius = 0.0125
 
-    def shapes(self, x, u, trail=None):
+    def shapes(self, x: np.ndarray, u: np.ndarray | None, trail: np.ndarray | None = None) -> list[Shape]:
         p = self.params
         r = p.get("r", self.nominal_radius)
         d = p.get("d", 0.0)
-        region = self.system.spec.region.get("R", (-0.25, 0.25))
+        # The bound System, typed object in Scene (as the other scenes read its spec).
+        region = self.system.spec.region.get("R", (-0.25, 0.25))  # type: ignore[attr-defined]
         half = max(abs(region[0]), abs(region[1]))
         th, R = self.q(x, "theta"), self.q(x, "R")
         e = np.array([math.cos(th), math.sin(th)])
@@ -259,7 +260,7 @@ class TwoLinkScene(Scene):
     #: The joint the motor drives.
     motor_at = "shoulder"
 
-    def shapes(self, x, u, trail=None):
+    def shapes(self, x: np.ndarray, u: np.ndarray | None, trail: np.ndarray | None = None) -> list[Shape]:
         p = self.params
         l1, l2 = p["l1"], p["l2"]
         size = l1 + l2
@@ -282,7 +283,7 @@ class TwoLinkScene(Scene):
         ]
         return out
 
-    def reach(self, states):
+    def reach(self, states: np.ndarray) -> tuple[float, float, float, float]:
         r = self.params["l1"] + self.params["l2"]
         return (-r, r, -r, r)  # the whole circle the links sweep
 

@@ -17,8 +17,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from equilibrist.viz._drawing import _nice
 from equilibrist.viz.output import VizError, save_figure
-from equilibrist.viz.scenes import COLORS, Scene, Shape, _nice, scene_for
+from equilibrist.viz.scenes import COLORS, Scene, Shape, scene_for
 
 if TYPE_CHECKING:
     from equilibrist.numeric.system import System
@@ -141,7 +142,8 @@ class FrameRenderer:
         the caption leaves no room for the note, the note moves down a line
         (right-aligned, opposite the event note); a caption wider than the
         frame is shrunk to fit it."""
-        renderer = self.canvas.get_renderer()
+        # matplotlib's Agg canvas methods are unannotated (untyped calls under --strict).
+        renderer = self.canvas.get_renderer()  # type: ignore[no-untyped-call]
         gap = 0.8 * self.font * self.figure.dpi / 72.0  # pixels
         self.caption_text.set_fontsize(self.font * 0.8)
         self.speed_text.set_y(self._speed_y)
@@ -301,12 +303,13 @@ class FrameRenderer:
         if self._background is None:
             for a in self._dynamic():
                 a.set_animated(True)
-            self.canvas.draw()
-            self._background = self.canvas.copy_from_bbox(self.figure.bbox)
-        self.canvas.restore_region(self._background)
+            # matplotlib's Agg canvas methods are unannotated (untyped calls under --strict).
+            self.canvas.draw()  # type: ignore[no-untyped-call]
+            self._background = self.canvas.copy_from_bbox(self.figure.bbox)  # type: ignore[no-untyped-call]
+        self.canvas.restore_region(self._background)  # type: ignore[no-untyped-call]
         for a in self._dynamic():
             self.figure.draw_artist(a)
-        rgba = np.asarray(self.canvas.buffer_rgba())
+        rgba = np.asarray(self.canvas.buffer_rgba())  # type: ignore[no-untyped-call]
         return rgba[: self.height, : self.width, :3].copy()
 
     def save(self, path: str | Path) -> Path:

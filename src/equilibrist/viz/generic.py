@@ -117,7 +117,7 @@ class GenericScene(Scene):
         self._points_fn(np.asarray(x, float), self._p, out)
         return out
 
-    def shapes(self, x, u, trail=None):
+    def shapes(self, x: np.ndarray, u: np.ndarray | None, trail: np.ndarray | None = None) -> list[Shape]:
         world = self.positions(x)
         pts = world[:, [self.right, self.up]]
         width = 0.035 * self.size
@@ -137,7 +137,7 @@ class GenericScene(Scene):
                                  COLORS["pivot"], z=4.0))
         return out
 
-    def reach(self, states):
+    def reach(self, states: np.ndarray) -> tuple[float, float, float, float]:
         lo, hi = self._sample_extent
         pad = 0.08 * self.size
         return (float(lo[0] - pad), float(hi[0] + pad), float(lo[1] - pad), float(hi[1] + pad))

@@ -33,7 +33,6 @@ from equilibrist.viz._drawing import (
     COLORS,
     Scene,
     Shape,
-    _nice,  # noqa: F401 (imported from here by equilibrist.viz.frames)
     arc_arrow,
     arrow,
     bar,
