@@ -26,7 +26,7 @@ from equilibrist.errors import EquilibristError
 
 # Order of the subcommands in --help; modules not listed come after.
 _ORDER = ("systems", "show", "dynamics", "linearize", "linkage", "design", "simulate", "batch", "sweep", "identify",
-          "plot", "animate", "export", "demo")
+          "roa", "plot", "animate", "export", "demo")
 
 
 class _Parser(argparse.ArgumentParser):

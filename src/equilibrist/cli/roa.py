@@ -1,0 +1,273 @@
+"""``equilibrist roa``: how far it can lean and how hard it can be pushed, from the real loop."""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import TYPE_CHECKING, Any
+
+from equilibrist.cli import common
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from equilibrist.numeric.system import System
+
+_EPILOG = """\
+Every figure comes from the sampled, saturated, nonlinear loop as 'simulate'
+runs it (the compiled batch, --noise off by default here), each run --duration
+seconds; a run is caught when it never leaves the system's region and ends
+balanced (the fall region's angles within 0.1 rad of the operating point, their
+rates within 0.5 rad/s).
+
+--slice A,B: the two states of the slice (default: the first coordinate of the
+system's region and its rate), the others at the operating point, over --range
+A=LO:HI,B=LO:HI (absolute values; default the region's width for an angle and
+three times that per second for its rate). The slice is sampled on a grid and
+refined where neighbouring starts disagree, up to --samples runs.
+max_tilt: the largest deviation of the slice's first state recovered from rest
+on both sides; max_push: the largest impulse on the first input (its unit x s)
+recovered from rest, both ways (an impulse J changes the velocities by B J).
+rho_sampled: the largest level of the LQR's Riccati function dx' S dx whose
+section by the slice lies in the sampled window and that no run falsifies, an
+estimate: sampling finds counterexamples, it proves nothing, so 'certified' is
+false and 'rho' null (no certificate is computed yet).
+--json prints the figures; --plot FILE.png draws the slice; --out FILE.parquet
+keeps every run's start and outcome.
+"""
+
+
+def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    p = sub.add_parser(
+        "roa", help="region of attraction: the largest tilt and push recovered, a slice",
+        description="Estimate the region of attraction of a closed loop from the real loop: "
+        "a 2-D slice refined along its boundary, the largest tilt and the largest push.",
+        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    common.add_system(p)
+    common.add_controller(p, "simulate", default=None,
+                          help="the controller (default lqg, lqr shown best with --noise off)")
+    p.add_argument("--rate", metavar="HZ", help="controller rate (default the system's)")
+    p.add_argument("--noise", choices=("on", "off"), default="off",
+                   help="the rig's noise in the runs (default off)")
+    p.add_argument("--slice", metavar="A,B", help="the slice's two states")
+    p.add_argument("--range", metavar="A=LO:HI,B=LO:HI", help="the slice's bounds (absolute)")
+    p.add_argument("--samples", default="20000", metavar="N",
+                   help="most runs of the slice (default 20000)")
+    p.add_argument("--duration", default="3", metavar="S", help="seconds per run (default 3)")
+    p.add_argument("--seed", default="0", metavar="N", help="noise seed (default 0)")
+    p.add_argument("--plot", metavar="FILE.png", help="draw the slice")
+    p.add_argument("--out", metavar="FILE.parquet", help="every run's start and outcome")
+    common.add_design_options(p)
+    common.add_set(p)
+    common.add_params(p)
+    common.add_json(p)
+    p.set_defaults(func=run)
+
+
+def _slice(system: System, text: str | None) -> tuple[str, str]:
+    if text is None:
+        region = list(system.spec.region)
+        if not region:
+            raise common.UsageError(f"{system.key} states no fall region: give --slice A,B")
+        first = region[0]
+        rate = f"{first}_dot"
+        second = rate if rate in system.state_names else next(
+            s for s in system.state_names if s != first)
+        return first, second
+    names = common.parse_names(text, "--slice")
+    assert names is not None
+    if len(names) != 2 or names[0] == names[1]:
+        raise common.UsageError(f"--slice {text!r}: expected two different states A,B")
+    for n in names:
+        if n not in system.state_names:
+            raise common.UsageError(f"--slice: {system.key} has no state {n!r} (its states: "
+                                    f"{', '.join(system.state_names)})")
+    return names[0], names[1]
+
+
+def _bounds(system: System, states: tuple[str, str], x_op: np.ndarray,
+            text: str | None) -> tuple[tuple[float, float], tuple[float, float]]:
+    region = system.spec.region
+    out: dict[str, tuple[float, float]] = {}
+    for s in states:
+        if s in region:
+            lo, hi = region[s]
+            out[s] = (float(lo), float(hi))
+    for s in states:
+        base = s[:-4] if s.endswith("_dot") else None
+        if s not in out and base in region:
+            half = 1.5 * (float(region[base][1]) - float(region[base][0]))
+            c = float(x_op[system.state_index(s)])
+            out[s] = (c - half, c + half)
+    if text is not None:
+        for item, value in common.parse_assignments(text.split(","), "--range").items():
+            if item not in states:
+                raise common.UsageError(f"--range {item}: not a state of the slice "
+                                        f"({', '.join(states)})")
+            lo_t, sep, hi_t = value.partition(":")
+            lo = common.parse_number(lo_t, f"--range {item}")
+            hi = common.parse_number(hi_t, f"--range {item}") if sep else math.nan
+            if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+                raise common.UsageError(f"--range {item}={value}: expected LO:HI, LO < HI")
+            out[item] = (lo, hi)
+    missing = [s for s in states if s not in out]
+    if missing:
+        raise common.UsageError(f"--range: give the bounds of {', '.join(missing)} "
+                                "(A=LO:HI,B=LO:HI)")
+    return out[states[0]], out[states[1]]
+
+
+def _whole(text: str, option: str, low: int) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise common.UsageError(f"{option} {text!r}: expected a whole number >= {low}") from None
+    if v < low:
+        raise common.UsageError(f"{option} {text!r}: expected a whole number >= {low}")
+    return v
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from equilibrist.control import kinds
+    from equilibrist.sim.noise import Noise
+    from equilibrist.sim.roa import estimate_slice, max_push, max_tilt, rho_sampled
+
+    if args.out is not None and not args.out.lower().endswith(".parquet"):
+        raise common.UsageError(f"--out {args.out!r}: expected FILE.parquet")
+    if args.plot is not None and not args.plot.lower().endswith(".png"):
+        raise common.UsageError(f"--plot {args.plot!r}: expected FILE.png")
+    samples = _whole(args.samples, "--samples", 100)
+    seed = _whole(args.seed, "--seed", 0)
+    duration = common.parse_number(args.duration, "--duration")
+    if not (math.isfinite(duration) and duration > 0):
+        raise common.UsageError(f"--duration {args.duration}: expected a positive number of seconds")
+    system = common.load_system(args)
+    if system.n_inputs == 0:
+        raise common.UsageError(f"{system.key} has no input: there is no loop to catch anything")
+    rate = (common.parse_number(args.rate, "--rate") if args.rate is not None
+            else float(system.spec.control_rate))
+    if not (math.isfinite(rate) and rate > 0):
+        raise common.UsageError(f"--rate {args.rate}: expected a positive rate in Hz")
+    name = args.controller or "lqg"
+    kind = kinds.get(name, "simulate")
+    if kind.open_loop:
+        raise common.UsageError("--controller none is the open loop: it catches nothing")
+    request = kinds.ControllerRequest(system=system, rate=rate,
+                                      design_options=common.design_options(args),
+                                      options=common.controller_options(args, name, "simulate"))
+    controller = kind.make(request)
+    states = _slice(system, args.slice)
+    eq = system.operating_point()
+    x_op, u_op = np.asarray(eq.x, dtype=float), np.asarray(eq.u, dtype=float)
+    bounds = _bounds(system, states, x_op, args.range)
+    noise = None
+    if args.noise == "on":
+        from equilibrist.control.controller import measured_outputs
+
+        noise = (Noise.from_design(request.design()) if kind.noise == "design"
+                 else Noise.from_spec(system, outputs=measured_outputs(controller), rate=rate))
+    options: dict[str, Any] = {"duration": duration, "rate": rate, "noise": noise}
+    est = estimate_slice(system, controller, states, bounds, x_op=x_op, max_samples=samples,
+                         seed=seed, **options)
+    tilt_state = states[0]
+    k = system.state_index(tilt_state)
+    limit = max(abs(bounds[0][0] - x_op[k]), abs(bounds[0][1] - x_op[k]))
+    down, up, tilt_x0, tilt_ok = max_tilt(system, controller, tilt_state, limit, x_op=x_op,
+                                          seed=seed, **options)
+    lo_u, hi_u = system.input_limits
+    push_limit = float(max(abs(lo_u[0]), abs(hi_u[0]))) if math.isfinite(float(hi_u[0])) else 100.0
+    neg, pos, push_x0, push_ok = max_push(system, controller, push_limit, x_op=x_op, u_op=u_op,
+                                          seed=seed, **options)
+    x0s = np.vstack([est.x0s, np.array(tilt_x0), np.array(push_x0)])
+    caught = np.concatenate([est.caught, np.array(tilt_ok, dtype=bool),
+                             np.array(push_ok, dtype=bool)])
+    design = getattr(controller, "design", None)
+    S = getattr(design, "S", None)
+    rho_est = None
+    if S is not None:
+        S = np.asarray(S, dtype=float)
+        rho_est = rho_sampled(S, x_op, x0s, caught)
+        # Only as far as the slice was sampled: the largest level whose section by the slice
+        # fits in the window (its extent along state i is sqrt(rho (S_ss^-1)_ii)).
+        ij = [system.state_index(s) for s in states]
+        inv = np.linalg.inv(S[np.ix_(ij, ij)])
+        for a, (lo, hi) in zip(range(2), bounds, strict=True):
+            half = min(x_op[ij[a]] - lo, hi - x_op[ij[a]])
+            rho_est = min(rho_est, half * half / float(inv[a, a]))
+    unit = system.state_units[k]
+    figures = {
+        "system": system.key, "controller": name, "slice": list(states),
+        "bounds": {states[0]: list(bounds[0]), states[1]: list(bounds[1])},
+        "samples": int(caught.size), "slice_samples": est.samples, "levels": est.levels,
+        "fraction_caught": est.fraction_caught,
+        "max_tilt": float(min(down, up)), "max_tilt_down": float(down), "max_tilt_up": float(up),
+        "tilt_state": tilt_state, "tilt_unit": unit,
+        "max_push": float(min(neg, pos)), "max_push_negative": float(neg),
+        "max_push_positive": float(pos), "push_unit": f"{system.input_units[0]} s",
+        "rho": None, "certified": False, "method": None,
+        "rho_sampled": (None if rho_est is None or math.isinf(rho_est) else rho_est),
+        "counterexamples": None, "coverage": None,
+        "duration": duration, "rate": rate, "noise": args.noise,
+    }
+    if args.out is not None:
+        _write_parquet(args.out, system, x0s, caught)
+    if args.plot is not None:
+        _plot(args.plot, est, system, x_op, S, rho_est)
+    if args.json:
+        common.print_json(figures)
+        return 0
+    print(f"{system.key}, {name}: {est.samples} starts of the slice {states[0]}, {states[1]} "
+          f"({est.levels} refinements), {est.fraction_caught:.1%} caught")
+    print(f"  largest tilt recovered: {min(down, up):.4g} {unit} (down {down:.4g}, up {up:.4g})")
+    print(f"  largest push recovered: {min(neg, pos):.4g} {system.input_units[0]} s "
+          f"(negative {neg:.4g}, positive {pos:.4g})")
+    if rho_est is not None:
+        print(f"  largest level of dx' S dx no run falsifies: {rho_est:.4g} (an estimate; not "
+              "certified)")
+    return 0
+
+
+def _write_parquet(path: str, system: System, x0s: np.ndarray, caught: np.ndarray) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from equilibrist.atomic import atomic_path
+
+    cols = {f"{n}_0": x0s[:, i] for i, n in enumerate(system.state_names)}
+    cols["caught"] = caught
+    with atomic_path(path) as tmp:
+        pq.write_table(pa.table(cols), str(tmp))
+
+
+def _plot(path: str, est: Any, system: System, x_op: np.ndarray, S: Any,
+          rho: float | None) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from equilibrist.atomic import atomic_path
+
+    fig, ax = plt.subplots(figsize=(6.4, 5.2))
+    pts, ok = est.points, est.caught
+    ax.scatter(pts[ok, 0], pts[ok, 1], s=3, color="#2a9d8f", label="caught")
+    ax.scatter(pts[~ok, 0], pts[~ok, 1], s=3, color="#e76f51", label="not caught")
+    if S is not None and rho is not None and math.isfinite(rho):
+        i, j = (system.state_index(s) for s in est.states)
+        sub = np.asarray(S, dtype=float)[np.ix_([i, j], [i, j])]
+        w, v = np.linalg.eigh(sub)
+        t = np.linspace(0.0, 2.0 * np.pi, 400)
+        circle = np.vstack([np.cos(t), np.sin(t)]) * np.sqrt(rho / w)[:, None]
+        ring = v @ circle
+        ax.plot(x_op[i] + ring[0], x_op[j] + ring[1], color="black", lw=1.2,
+                label="dx' S dx = rho_sampled (estimate)")
+    ax.set_xlabel(f"{est.states[0]} [{system.state_units[system.state_index(est.states[0])]}]")
+    ax.set_ylabel(f"{est.states[1]} [{system.state_units[system.state_index(est.states[1])]}]")
+    ax.set_title(f"{system.key}: region of attraction, slice ({est.samples} runs)")
+    ax.legend(loc="upper right", fontsize=8, markerscale=3)
+    with atomic_path(path) as tmp:
+        fig.savefig(str(tmp), format="png", dpi=110)
+    plt.close(fig)
