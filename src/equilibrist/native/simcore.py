@@ -27,13 +27,13 @@ from typing import Any
 
 import numpy as np
 
+from equilibrist.control._controller_layout import linear_unrolled_source
 from equilibrist.control.controller import (
     CONTRACT_TYPES,
     LINEAR_SOURCE,
     NonlinearController,
     check_source,
     linear_layout_source,
-    linear_unrolled_source,
     translate_controller,
 )
 from equilibrist.native import build, pyc

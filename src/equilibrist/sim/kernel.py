@@ -34,9 +34,9 @@ from __future__ import annotations
 import os
 from typing import Any
 
+from equilibrist.control._controller_layout import linear_pattern
 from equilibrist.control.controller import (
     NonlinearController,
-    linear_pattern,
     linear_sizes,
 )
 from equilibrist.numeric.system import System

@@ -1,0 +1,251 @@
+"""The packed linear controller's layout, read by the simulation core, Python and C: the header
+and blocks of a packed :class:`~equilibrist.control.controller.LinearController`, the
+generic loop (:data:`LINEAR_SOURCE`), its unrolled form for small patterns, and that source
+run as plain Python (split from :mod:`equilibrist.control.controller`, which re-exports it).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+# -- the packed linear controller: one layout, read by the core, Python and C -------------------
+#: Header slots of a packed :class:`LinearController` (name -> index): the sizes, then
+#: the offset of each block in the vector.
+LINEAR_HEADER: tuple[str, ...] = (
+    "nz", "ny", "nr", "m", "n",
+    "Ac", "By", "Br", "Bu", "Cc", "Dy", "Dr", "Ez", "Ey", "u_op", "y_op", "r_op", "x_op",
+)
+#: The blocks of a packed controller after the header, with their shapes in sizes.
+LINEAR_BLOCKS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("Ac", ("nz", "nz")), ("By", ("nz", "ny")), ("Br", ("nz", "nr")), ("Bu", ("nz", "m")),
+    ("Cc", ("m", "nz")), ("Dy", ("m", "ny")), ("Dr", ("m", "nr")),
+    ("Ez", ("n", "nz")), ("Ey", ("n", "ny")),
+    ("u_op", ("m",)), ("y_op", ("ny",)), ("r_op", ("nr",)), ("x_op", ("n",)),
+)
+
+
+def linear_constants() -> dict[str, int]:
+    """``{"_LIN_NZ": 0, ..., "_LIN_X_OP": 17}``: the header slots as source constants."""
+    return {f"_LIN_{name.upper()}": i for i, name in enumerate(LINEAR_HEADER)}
+
+
+def linear_sizes(p: np.ndarray) -> dict[str, int] | None:
+    """The sizes ``nz, ny, nr, m, n`` in the header of the packed vector *p* (None if it has none)."""
+    if p.shape[0] < len(LINEAR_HEADER):
+        return None
+    return {key: int(p[LINEAR_HEADER.index(key)]) for key in ("nz", "ny", "nr", "m", "n")}
+
+
+def linear_layout_source(sizes: Mapping[str, int] | None = None) -> str:
+    """Source of ``linear_layout(p)``: the sizes and block offsets :data:`LINEAR_SOURCE` reads.
+
+    It returns the :data:`LINEAR_HEADER` slots in order. Without *sizes*
+    they are read from the header of *p* at every call (any packed
+    controller); with *sizes* (``nz, ny, nr, m, n``) the function returns
+    them, and the offsets they imply, as literals, so that the compiled
+    loops of the linear library have fixed trip counts and constant
+    indices (the C compiler unrolls them). Such a source serves only
+    vectors of exactly those sizes; the sums and their order are the same
+    either way, so the results are too, bit for bit.
+    """
+    head = 'def linear_layout(p):\n    """Sizes and offsets of the packed controller *p*."""\n'
+    if sizes is None:
+        items = [f"int(p[_LIN_{name.upper()}])" for name in LINEAR_HEADER]
+        return head + "    return (" + ", ".join(items) + ")\n"
+    values = {key: int(sizes[key]) for key in ("nz", "ny", "nr", "m", "n")}
+    offset = len(LINEAR_HEADER)
+    for name, dims in LINEAR_BLOCKS:
+        values[name] = offset
+        offset += math.prod(values[d] for d in dims)
+    return head + "    return (" + ", ".join(str(values[name]) for name in LINEAR_HEADER) + ")\n"
+
+
+#: The most multiply-adds a linear controller may have for :func:`linear_unrolled_source`
+#: to write its sums out term by term (larger ones run the loops of :data:`LINEAR_SOURCE`).
+UNROLL_LIMIT = 1024
+
+# Per function: the output (its offset block, its row count) and the terms of each row,
+# ``(matrix, input)`` in the order of the sums of LINEAR_SOURCE (z, then y, r, u).
+_UNROLLED: tuple[tuple[str, str, str, str, tuple[tuple[str, str], ...]], ...] = (
+    ("linear_output", "t, z, y, r, p, u_out", "u_out", "m",
+     (("Cc", "z"), ("Dy", "y"), ("Dr", "r"))),
+    ("linear_update", "t, z, y, r, u_applied, p, z_out", "z_out", "nz",
+     (("Ac", "z"), ("By", "y"), ("Br", "r"), ("Bu", "u"))),
+    ("linear_estimate", "t, z, y, r, p, x_out", "x_out", "n",
+     (("Ez", "z"), ("Ey", "y"))),
+)
+_UNROLLED_BASE = {"u_out": "u_op", "z_out": None, "x_out": "x_op"}
+_INPUTS = {"z": ("nz", None, "z"), "y": ("ny", "y_op", "y"), "r": ("nr", "r_op", "r"),
+           "u": ("m", "u_op", "u_applied")}
+
+
+def linear_pattern(p: np.ndarray) -> bytes | None:
+    """What :func:`linear_unrolled_source` specializes to in the packed vector *p*.
+
+    The sizes, then one byte per matrix coefficient (every block from ``Ac``
+    to ``Ey``, in order): 0 for an exact zero, 1 for an exact one, 2 for any
+    other number. None for a vector without a header, or one too large to
+    be written out term by term (:data:`UNROLL_LIMIT`).
+    """
+    sizes = linear_sizes(p)
+    if sizes is None:
+        return None
+    start = int(p[LINEAR_HEADER.index("Ac")])
+    end = int(p[LINEAR_HEADER.index("u_op")])
+    if end - start > UNROLL_LIMIT:
+        return None
+    block = p[start:end]
+    codes = np.where(block == 0.0, 0, np.where(block == 1.0, 1, 2)).astype(np.uint8)
+    head = np.array([sizes[k] for k in ("nz", "ny", "nr", "m", "n")], dtype=np.int64)
+    return head.tobytes() + codes.tobytes()
+
+
+def linear_unrolled_source(pattern: bytes) -> str:
+    """The linear library (``linear_layout``, ``linear_output``, ``linear_update``,
+    ``linear_estimate``) written out for the vectors of one :func:`linear_pattern`.
+
+    Each sum is written term by term with the offsets as literals, each
+    input deviation (``y[j] - y_op[j]``...) is computed once, and every
+    result is stored after all are computed. Terms whose coefficient is an
+    exact zero are left out and an exact one multiplies nothing: with
+    finite inputs that gives the very bits of :data:`LINEAR_SOURCE`'s sums
+    (the sum starts at ``+0.0`` and is never ``-0.0``, so adding ``+-0.0``
+    changes nothing, and ``1.0 * d`` is ``d``). Where an input that such a
+    term would multiply is not finite (``0 * inf`` is NaN), the function
+    takes the full sums instead, so the results are the same in every case.
+    The source serves only vectors of that pattern (their sizes, and
+    zeros and ones where the pattern has them).
+    """
+    head = np.frombuffer(pattern[:40], dtype=np.int64)
+    sizes = dict(zip(("nz", "ny", "nr", "m", "n"), (int(v) for v in head), strict=True))
+    codes = pattern[40:]
+    offsets = dict(sizes)
+    offset = len(LINEAR_HEADER)
+    for name, dims in LINEAR_BLOCKS:
+        offsets[name] = offset
+        offset += math.prod(sizes[d] for d in dims)
+    base = offsets["Ac"]
+    lines = [linear_layout_source(sizes)]
+
+    def deviation(kind: str, j: int) -> str:
+        _size, op, arg = _INPUTS[kind]
+        return f"{arg}[{j}]" if op is None else f"{arg}[{j}] - p[{offsets[op] + j}]"
+
+    def sums(rows: int, terms: tuple[tuple[str, str], ...], skip: bool, indent: str) -> list[str]:
+        out = []
+        for i in range(rows):
+            expr = None
+            for matrix, kind in terms:
+                width = sizes[_INPUTS[kind][0]]
+                for j in range(width):
+                    at = offsets[matrix] + i * width + j
+                    code = codes[at - base]
+                    if skip and code == 0:
+                        continue
+                    term = f"d_{kind}{j}" if skip and code == 1 else f"p[{at}] * d_{kind}{j}"
+                    expr = f"0.0 + {term}" if expr is None else f"v{i} + {term}"
+                    out.append(f"{indent}v{i} = {expr}")
+            if expr is None:
+                out.append(f"{indent}v{i} = 0.0")
+        return out
+
+    for name, args, result, rows_key, terms in _UNROLLED:
+        rows = sizes[rows_key]
+        used = [(kind, j) for _m, kind in terms for j in range(sizes[_INPUTS[kind][0]])]
+        lines.append(f"\n\ndef {name}({args}):")
+        lines.append('    """The linear library\'s sums, written out for one pattern of vectors."""')
+        lines += [f"    d_{kind}{j} = {deviation(kind, j)}" for kind, j in used]
+        # Inputs that multiply an exact zero somewhere: their finiteness decides the path.
+        zeroed = sorted({(kind, j) for matrix, kind in terms
+                         for i in range(rows) for j in range(sizes[_INPUTS[kind][0]])
+                         if codes[offsets[matrix] + i * sizes[_INPUTS[kind][0]] + j - base] == 0})
+        op = _UNROLLED_BASE[result]
+        stores = [f"{result}[{i}] = " + (f"p[{offsets[op] + i}] + v{i}" if op else f"v{i}")
+                  for i in range(rows)]
+        if zeroed:
+            finite = " + ".join(f"0.0 * d_{kind}{j}" for kind, j in zeroed)
+            lines.append(f"    if {finite} == 0.0:")
+            lines += sums(rows, terms, True, "        ")
+            lines += [f"        {s}" for s in stores]
+            lines.append("    else:")
+            lines += sums(rows, terms, False, "        ")
+            lines += [f"        {s}" for s in stores]
+        else:
+            lines += sums(rows, terms, False, "    ")
+            lines += [f"    {s}" for s in stores]
+        if not used and not rows:
+            lines.append("    pass")
+    return "\n".join(lines) + "\n"
+
+
+#: The compiled linear controller: plain Python translated to C into every
+#: simulation core, and that :class:`LinearController` runs as is in Python.
+#: Every sum runs in one fixed order (z, then y, then r, then u), the order the
+#: exported C code repeats. It reads its sizes and block offsets through
+#: ``linear_layout`` (:func:`linear_layout_source`), defined beside it: from the
+#: vector's header in Python and in a nonlinear controller's core, as literals
+#: in the core of one linear controller.
+LINEAR_SOURCE = '''
+def linear_output(t, z, y, r, p, u_out):
+    """u = u_op + Cc z + Dy (y - y_op) + Dr (r - r_op) (absolute u, not saturated)."""
+    (nz, ny, nr, m, n, o_ac, o_by, o_br, o_bu, o_cc, o_dy, o_dr, o_ez, o_ey,
+     o_u0, o_y0, o_r0, o_x0) = linear_layout(p)
+    for i in range(m):
+        v = 0.0
+        for j in range(nz):
+            v += p[o_cc + i * nz + j] * z[j]
+        for j in range(ny):
+            v += p[o_dy + i * ny + j] * (y[j] - p[o_y0 + j])
+        for j in range(nr):
+            v += p[o_dr + i * nr + j] * (r[j] - p[o_r0 + j])
+        u_out[i] = p[o_u0 + i] + v
+
+
+def linear_update(t, z, y, r, u_applied, p, z_out):
+    """z_out = Ac z + By (y - y_op) + Br (r - r_op) + Bu (u_applied - u_op)."""
+    (nz, ny, nr, m, n, o_ac, o_by, o_br, o_bu, o_cc, o_dy, o_dr, o_ez, o_ey,
+     o_u0, o_y0, o_r0, o_x0) = linear_layout(p)
+    for i in range(nz):
+        v = 0.0
+        for j in range(nz):
+            v += p[o_ac + i * nz + j] * z[j]
+        for j in range(ny):
+            v += p[o_by + i * ny + j] * (y[j] - p[o_y0 + j])
+        for j in range(nr):
+            v += p[o_br + i * nr + j] * (r[j] - p[o_r0 + j])
+        for j in range(m):
+            v += p[o_bu + i * m + j] * (u_applied[j] - p[o_u0 + j])
+        z_out[i] = v
+
+
+def linear_estimate(t, z, y, r, p, x_out):
+    """x_out = x_op + Ez z + Ey (y - y_op): the state estimate behind the command."""
+    (nz, ny, nr, m, n, o_ac, o_by, o_br, o_bu, o_cc, o_dy, o_dr, o_ez, o_ey,
+     o_u0, o_y0, o_r0, o_x0) = linear_layout(p)
+    for i in range(n):
+        v = 0.0
+        for j in range(nz):
+            v += p[o_ez + i * nz + j] * z[j]
+        for j in range(ny):
+            v += p[o_ey + i * ny + j] * (y[j] - p[o_y0 + j])
+        x_out[i] = p[o_x0 + i] + v
+'''
+
+#: Names the linear library defines (a nonlinear controller's source may call them).
+LINEAR_FUNCTIONS = ("linear_output", "linear_update", "linear_estimate")
+
+_PY_LINEAR: dict[str, Any] = {}
+
+
+def _python_linear() -> dict[str, Any]:
+    """:data:`LINEAR_SOURCE` executed as plain Python (the reference the core is checked on)."""
+    if not _PY_LINEAR:
+        namespace: dict[str, Any] = {"math": math, "np": np, **linear_constants()}
+        exec(compile(linear_layout_source() + LINEAR_SOURCE, "<equilibrist linear controller>",
+                     "exec"), namespace)
+        _PY_LINEAR.update({name: namespace[name] for name in LINEAR_FUNCTIONS})
+    return _PY_LINEAR
