@@ -54,6 +54,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--samples", default="20000", metavar="N",
                    help="most runs of the slice (default 20000)")
     p.add_argument("--duration", default="3", metavar="S", help="seconds per run (default 3)")
+    p.add_argument("--physics-step", metavar="S",
+                   help="integration step [s], dividing 1/rate (default as simulate: at most 1 ms)")
     p.add_argument("--seed", default="0", metavar="N", help="noise seed (default 0)")
     p.add_argument("--plot", metavar="FILE.png", help="draw the slice")
     p.add_argument("--out", metavar="FILE.parquet", help="every run's start and outcome")
@@ -169,6 +171,12 @@ def run(args: argparse.Namespace) -> int:
         noise = (Noise.from_design(request.design()) if kind.noise == "design"
                  else Noise.from_spec(system, outputs=measured_outputs(controller), rate=rate))
     options: dict[str, Any] = {"duration": duration, "rate": rate, "noise": noise}
+    if args.physics_step is not None:
+        step = common.parse_number(args.physics_step, "--physics-step")
+        if not (math.isfinite(step) and step > 0):
+            raise common.UsageError(f"--physics-step {args.physics_step}: expected a positive "
+                                    "number of seconds")
+        options["physics_step"] = step
     est = estimate_slice(system, controller, states, bounds, x_op=x_op, max_samples=samples,
                          seed=seed, **options)
     tilt_state = states[0]
@@ -210,6 +218,7 @@ def run(args: argparse.Namespace) -> int:
         "rho_sampled": (None if rho_est is None or math.isinf(rho_est) else rho_est),
         "counterexamples": None, "coverage": None,
         "duration": duration, "rate": rate, "noise": args.noise,
+        "physics_step": options.get("physics_step"),
     }
     if args.out is not None:
         _write_parquet(args.out, system, x0s, caught)
