@@ -47,27 +47,45 @@ the sensors are made perfect).
 
 from __future__ import annotations
 
-import io
 import math
 import secrets
 import time
 import types
-import zipfile
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from equilibrist.errors import DesignError, EquilibristError
-from equilibrist.web.protocol import Limits, Message, controllers, kind_name
-from equilibrist.web.runners import Runner, build_runner, hanging_refusal, runner_kinds, unavailable
+# The module was split in four; every name stays importable from here. The names marked
+# F401 are not used here: imported so that they stay importable from this module.
+from equilibrist.web._session_design import (
+    NOISE_FLOOR,  # noqa: F401
+    Catalogue,
+    SessionError,
+    Settings,
+    describe_design,
+    design_for,
+    label,
+    make_design,
+    redesign,
+    tuned_system,
+)
+from equilibrist.web._session_loop import (
+    _Linear,  # noqa: F401
+    _Loop,
+    _Record,
+)
+from equilibrist.web._session_output import (
+    DIGITS,  # noqa: F401
+    MAX_CHART_SAMPLES,  # noqa: F401
+    MAX_UNSEEN,  # noqa: F401
+    _SessionOutput,
+)
+from equilibrist.web.protocol import Limits, Message, controllers
+from equilibrist.web.runners import Runner, hanging_refusal, unavailable
 
 if TYPE_CHECKING:
-    from equilibrist.control.controller import LinearController
     from equilibrist.control.design import Design
     from equilibrist.numeric.system import System
-    from equilibrist.sim.result import SimResult
     from equilibrist.viz.scenes import Scene
 
 #: Longest catch-up after a stall [s]: beyond it the simulation skips ahead.
@@ -85,302 +103,15 @@ MAX_PARAM_SLIDERS = 6
 PARAM_FACTOR = 4.0
 #: Range of a Bryson scale's slider, as factors of its default.
 SCALE_FACTOR = 100.0
-#: Floor of the measurement noise the Kalman filter assumes, as a fraction of the rig's.
-NOISE_FLOOR = 0.05
-#: Digits of the drawing's coordinates sent to the page.
-DIGITS = 5
-#: Frames a page that reports what it has drawn may be behind before frames are held back.
-MAX_UNSEEN = 12
-#: Chart samples kept for a page that is behind (the oldest are dropped).
-MAX_CHART_SAMPLES = 2000
+
+
 #: Share of the wall time a batch of samples may take before the page is told the loop lags.
 LAG_SHARE = 0.8
 #: Seconds between two lag warnings of one session.
 LAG_WARN_EVERY = 5.0
 
 
-def label(controller: str) -> str:
-    """The picker's label of a controller: its kind's (:mod:`equilibrist.control.kinds`)."""
-    from equilibrist.control import kinds
-
-    return kinds.get(kind_name(controller)).label
-
-
-class SessionError(EquilibristError, ValueError):
-    """A request the session cannot carry out (download with the controller off, ...)."""
-
-
-# -- catalogue -------------------------------------------------------------------
-
-
-@dataclass
-class Catalogue:
-    """The systems a server offers, each built once and shared by the sessions.
-
-    *names* are catalogue names or a user's model file given on the command
-    line; the page can only pick among them.
-    """
-
-    names: tuple[str, ...]
-    _systems: dict[str, System] = field(default_factory=dict, repr=False)
-
-    @classmethod
-    def default(cls, extra: Sequence[str] = ()) -> Catalogue:
-        """Every system of the catalogue with an input, an operating point and a drawing, plus *extra*."""
-        from equilibrist.systems import registry
-        from equilibrist.viz.scenes import SCENES
-
-        names: list[str] = []
-        for entry in registry.all_entries():
-            spec = entry.spec
-            drawn = spec.name in SCENES
-            if drawn and spec.inputs and spec.operating_point is not None and spec.name not in names:
-                names.append(spec.name)
-        for e in extra:
-            if e not in names:
-                names.insert(0, e)
-        return cls(tuple(names))
-
-    def system(self, name: str) -> System:
-        """The system *name* with its default parameters (built on first use)."""
-        if name not in self.names:
-            raise SessionError(f"system {name!r} is not offered: expected one of {', '.join(self.names)}")
-        if name not in self._systems:
-            from equilibrist.numeric.system import get_system
-
-            self._systems[name] = get_system(name)
-        return self._systems[name]
-
-    def check(self, name: str) -> System:
-        """The system *name*, refused when it cannot be played (no input, operating point or drawing)."""
-        system = self.system(name)
-        if not system.n_inputs:
-            raise SessionError(f"{system.key} has no input: there is nothing to control in the playground")
-        if system.spec.operating_point is None:
-            raise SessionError(f"{system.key} has no operating point to balance at")
-        from equilibrist.viz.scenes import scene_for
-
-        scene_for(system)  # one clear line when the system has no drawing
-        return system
-
-
-# -- settings and designs -------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Settings:
-    """What the page tuned (a value: each change makes a new one)."""
-
-    controller: str
-    rate: float
-    noise: float
-    limit: float
-    scales: Mapping[str, float]
-    params: Mapping[str, float]
-
-    def changed(self, fields: Mapping[str, Any]) -> Settings:
-        scales = dict(self.scales)
-        scales.update(fields.get("scales", {}))
-        params = dict(self.params)
-        params.update(fields.get("params", {}))
-        return Settings(
-            controller=fields.get("controller", self.controller),
-            rate=float(fields.get("rate", self.rate)),
-            noise=float(fields.get("noise", self.noise)),
-            limit=float(fields.get("limit", self.limit)),
-            scales=types.MappingProxyType(scales),
-            params=types.MappingProxyType(params),
-        )
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"controller": self.controller, "rate": self.rate, "noise": self.noise,
-                "limit": self.limit, "scales": dict(self.scales), "params": dict(self.params)}
-
-
-def tuned_system(base: System, settings: Settings) -> System:
-    """*base* with the tuned physical parameters and the scaled input limits."""
-    values: dict[str, float] = dict(settings.params)
-    for name in base.input_names:
-        values[f"{name}_min"] = settings.limit * float(base.params[f"{name}_min"])
-        values[f"{name}_max"] = settings.limit * float(base.params[f"{name}_max"])
-    return base.with_params(**values)
-
-
-def make_design(system: System, settings: Settings) -> Design:
-    """The discrete LQG design of the tuned *system* (raises an ``EquilibristError``)."""
-    from equilibrist.control.design import design
-
-    states, inputs = system.state_names, system.input_names
-    q = [1.0 / settings.scales[s] ** 2 for s in states]
-    r = [1.0 / settings.scales[i] ** 2 for i in inputs]
-    spec = system.spec
-    outputs = tuple(system.output_names or states)
-    sigma = [float(spec.sensor_noise.get(o, 0.0)) for o in outputs]
-    if all(s > 0 for s in sigma):
-        level = max(settings.noise, NOISE_FLOOR)
-        rn: object = [(level * s) ** 2 / settings.rate for s in sigma]
-    else:
-        rn = None  # the design names the missing sensor noise
-    return design(system, q=q, r=r, rn=rn, outputs=outputs, rate=settings.rate)
-
-
-def describe_design(d: Design, controller: str, seconds: float,
-                    runner: Runner | None = None, controller_seconds: float = 0.0) -> dict[str, Any]:
-    """The ``design`` frame: gains, poles, margins (JSON-ready).
-
-    *seconds* is the time of the LQG design, *controller_seconds* the time
-    of building the swing-up or the MPC (*runner*) on it.
-    """
-    full = d.to_dict()
-    return {
-        "type": "design",
-        "controller": controller,
-        "rate": d.rate,
-        "states": full["states"],
-        "inputs": full["inputs"],
-        "outputs": full["outputs"],
-        "K": full["K"],
-        "Kf": full["Kf"],
-        "poles": full["poles"],
-        "estimator_poles": full["estimator_poles"],
-        "open_loop_poles": full["open_loop_poles"],
-        "pole_table": full["pole_table"],
-        "margins": full["margins"],
-        "notes": full["notes"],
-        "x0": full["x0"],
-        "u0": full["u0"],
-        "milliseconds": round((seconds + controller_seconds) * 1e3, 2),
-        "design_milliseconds": round(seconds * 1e3, 2),
-        "controller_milliseconds": round(controller_seconds * 1e3, 2),
-        "controller_info": None if runner is None else runner.describe(),
-    }
-
-
-# -- the running loop ----------------------------------------------------------------
-
-
-class _Linear:
-    """One :class:`~equilibrist.control.controller.LinearController` run sample by sample.
-
-    The contract's form in deviation coordinates (``dy = y - y_op``, no
-    reference: ``dr = 0``)::
-
-        u = u_op + Cc z + Dy dy,   x_hat = x_op + Ez z + Ey dy,
-        z+ = Ac z + By dy + Bu (u_applied - u_op)
-
-    in plain numpy: a few small products per sample.
-    """
-
-    def __init__(self, ctrl: LinearController, system: System) -> None:
-        self.ctrl = ctrl
-        self.idx = np.array([system.state_index(o) for o in ctrl.output_names], dtype=np.int64)
-        self.z = np.array(ctrl.z0, dtype=float)
-        self._dy = np.zeros(len(ctrl.output_names))
-
-    def start_at(self, x_estimate: np.ndarray) -> None:
-        self.z = self.ctrl.state_map @ (np.asarray(x_estimate, dtype=float) - self.ctrl.x_op)
-
-    def output(self, y: np.ndarray) -> np.ndarray:
-        c = self.ctrl
-        self._dy = y - c.y_op
-        u: np.ndarray = c.u_op + c.Cc @ self.z + c.Dy @ self._dy
-        return u
-
-    def estimate(self) -> np.ndarray:
-        c = self.ctrl
-        x: np.ndarray = c.x_op + c.Ez @ self.z + c.Ey @ self._dy
-        return x
-
-    def update(self, u_applied: np.ndarray) -> None:
-        c = self.ctrl
-        self.z = c.Ac @ self.z + c.By @ self._dy + c.Bu @ (u_applied - c.u_op)
-
-
-class _Loop:
-    """The controllers of one design: LQG (in charge, or its filter running alongside for
-    the estimate and a bumpless switch) and LQR on the true state."""
-
-    def __init__(self, d: Design, system: System, previous: _Loop | None = None,
-                 runner: Runner | None = None, x_estimate: np.ndarray | None = None) -> None:
-        from equilibrist.control.controller import LinearController
-
-        self.design = d
-        self.x_op = np.array(d.plant.x0, dtype=float)
-        self.u_op = np.array(d.plant.u0, dtype=float)
-        self.outputs = tuple(d.plant.output_names)
-        self.out_idx = np.array([system.state_index(o) for o in self.outputs], dtype=np.int64)
-        self.lqg = _Linear(LinearController.from_design(d, kind="lqg"), system)
-        self.lqr = _Linear(LinearController.from_design(d, kind="lqr"), system)
-        if previous is not None:
-            # The new filter goes on from the previous one's estimate.
-            self.lqg.start_at(previous.lqg.estimate())
-        # The swing-up or the MPC, when one is in charge: it goes on from the previous
-        # one of its kind (a retune), or starts at the estimate in force (a switch).
-        self.runner = runner
-        self.runner_pick: np.ndarray | None = None
-        self.runner_sigma = np.zeros(0)
-        if runner is not None:
-            prev = previous.runner if previous is not None else None
-            if prev is not None and prev.kind == runner.kind:
-                runner.adopt(prev)
-            elif x_estimate is not None:
-                runner.start_at(x_estimate)
-            if all(o in self.outputs for o in runner.outputs):
-                # The runner reads the same noisy measurement as the filter.
-                self.runner_pick = np.array([self.outputs.index(o) for o in runner.outputs],
-                                            dtype=np.int64)
-            else:
-                noise = system.spec.sensor_noise
-                self.runner_sigma = np.array([float(noise.get(o, 0.0)) for o in runner.outputs])
-
-    def reset(self) -> None:
-        self.lqg.z = np.array(self.lqg.ctrl.z0, dtype=float)
-        self.lqr.z = np.array(self.lqr.ctrl.z0, dtype=float)
-        if self.runner is not None:
-            self.runner.reset()
-
-
-@dataclass
-class _Record:
-    """The samples of the last run (since a reset, a rate change or a new system)."""
-
-    capacity: int
-    n: int
-    m: int
-    ny: int
-    rows: int = 0
-    start: int = 0
-
-    def __post_init__(self) -> None:
-        self.time = np.empty(self.capacity)
-        self.states = np.empty((self.capacity, self.n))
-        self.estimates = np.empty((self.capacity, self.n))
-        self.measurements = np.empty((self.capacity, self.ny))
-        self.commanded = np.empty((self.capacity, self.m))
-        self.saturated = np.empty((self.capacity, self.m))
-        self.applied = np.empty((self.capacity, self.m))
-
-    def add(self, t: float, x: np.ndarray, xhat: np.ndarray, y: np.ndarray, u_cmd: np.ndarray,
-            u_sat: np.ndarray, u_app: np.ndarray) -> None:
-        i = (self.start + self.rows) % self.capacity
-        if self.rows == self.capacity:
-            self.start = (self.start + 1) % self.capacity
-        else:
-            self.rows += 1
-        self.time[i] = t
-        self.states[i] = x
-        self.estimates[i] = xhat
-        self.measurements[i] = y
-        self.commanded[i] = u_cmd
-        self.saturated[i] = u_sat
-        self.applied[i] = u_app
-
-    def ordered(self, arr: np.ndarray) -> np.ndarray:
-        idx = (self.start + np.arange(self.rows)) % self.capacity
-        return arr[idx]
-
-
-class Session:
+class Session(_SessionOutput):
     """One browser tab's running system (see the module docstring).
 
     Parameters
@@ -833,221 +564,6 @@ class Session:
             out = np.nonzero((v <= self.region_lo) | (v >= self.region_hi))[0]
             if out.size:
                 self.fell = {"at": self.t, "state": self.state_names[int(self.region_idx[out[0]])]}
-
-    # -- output ---------------------------------------------------------------------------------
-    def margin(self) -> dict[str, Any] | None:
-        """How far the state is from leaving its region: ``1`` at the centre, ``0`` at the edge."""
-        if not self.region_idx.size:
-            return None
-        v = self.x[self.region_idx]
-        half = (self.region_hi - self.region_lo) / 2
-        centre = (self.region_hi + self.region_lo) / 2
-        frac = 1.0 - np.abs(v - centre) / half
-        i = int(np.argmin(frac))
-        return {"fraction": float(np.clip(frac[i], 0.0, 1.0)) if np.isfinite(frac[i]) else 0.0,
-                "state": self.state_names[int(self.region_idx[i])]}
-
-    def behind(self) -> bool:
-        """Whether the page is too far behind to be sent another frame now.
-
-        A page that reports the frames it drew (``seen``) gets frames no
-        faster than it draws them; the chart samples wait for the next frame
-        it gets. A client that never reports gets every frame.
-        """
-        if self.seen is None or self.frame_no - self.seen <= MAX_UNSEEN:
-            return False
-        if len(self.chart_t) > MAX_CHART_SAMPLES:
-            cut = len(self.chart_t) - MAX_CHART_SAMPLES
-            del self.chart_t[:cut], self.chart_x[:cut], self.chart_xhat[:cut], self.chart_u[:cut]
-        return True
-
-    def frame(self) -> dict[str, Any]:
-        """The ``frame`` message for the page (and clears the chart samples sent)."""
-        shapes = []
-        for s in self.scene.shapes(self.x, self.u_app):
-            raw = np.asarray(s.points, float)
-            sig = (s.kind, s.color, s.z, s.text, s.edge, s.width, raw.tobytes())
-            if self.sent_shapes.get(s.key) == sig:
-                continue  # unchanged since the last frame: the page keeps it
-            self.sent_shapes[s.key] = sig
-            pts = np.round(raw, DIGITS)
-            # NaN (a break in a polyline) goes out as null.
-            flat = [None if math.isnan(v) else v for v in pts.reshape(-1).tolist()]
-            shapes.append({"key": s.key, "kind": s.kind, "points": flat, "color": s.color,
-                           "width": s.width, "z": s.z, "text": s.text, "edge": s.edge,
-                           "bounds": s.bounds})
-        self.frame_no += 1
-        out = {
-            "type": "frame",
-            "n": self.frame_no,
-            "run": self.run,
-            "t": round(self.t, 6),
-            "x": self.x.tolist(),
-            "xhat": self.xhat.tolist(),
-            "u": self.u_app.tolist(),
-            "u_cmd": np.asarray(self.u_cmd).tolist(),
-            "u_limits": [self.u_low.tolist(), self.u_high.tolist()],
-            "push": self.push_value,
-            "pushes": self.pushes,
-            "push_seq": self.push_seq,
-            "paused": self.paused,
-            "fell": self.fell,
-            "margin": self.margin(),
-            "controller": self.settings.controller,
-            "mode": self.mode,
-            "mode_since": round(self.mode_since, 4),
-            "hanging": self.hanging,
-            "solve": self.loop.runner.solve_stats() if self.loop.runner is not None else None,
-            "shapes": shapes,
-            "samples": {"t": self.chart_t, "x": self.chart_x, "xhat": self.chart_xhat,
-                        "u": self.chart_u},
-        }
-        self.chart_t, self.chart_x, self.chart_xhat, self.chart_u = [], [], [], []
-        return out
-
-    def take_messages(self) -> list[dict[str, Any]]:
-        out, self.messages = self.messages, []
-        return out
-
-    # -- downloads ----------------------------------------------------------------------------
-    def last_run(self) -> SimResult:
-        """The samples since the last reset, rate change or new system, as a result."""
-        from equilibrist.sim.result import SimResult
-
-        rec = self.record
-        if rec.rows == 0:
-            raise SessionError("nothing has run yet: let the system run a moment first")
-        system = self.system
-        m = system.n_inputs
-        return SimResult(
-            system=system.key,
-            system_digest=system.digest,
-            params=dict(system.params),
-            state_names=system.state_names,
-            state_units=system.state_units,
-            input_names=system.input_names,
-            input_units=system.input_units,
-            output_names=self.loop.outputs,
-            reference_names=(),
-            time=rec.ordered(rec.time),
-            states=rec.ordered(rec.states),
-            estimates=rec.ordered(rec.estimates),
-            measurements=rec.ordered(rec.measurements),
-            commanded=rec.ordered(rec.commanded),
-            saturated=rec.ordered(rec.saturated),
-            applied=rec.ordered(rec.applied),
-            reference=np.zeros((rec.rows, 0)),
-            x_op=self.loop.x_op,
-            u_op=self.loop.u_op,
-            fell=self.fell is not None,
-            fell_at=None if self.fell is None else float(self.fell["at"]),
-            fell_state=None if self.fell is None else str(self.fell["state"]),
-            fell_x=None if self.fell is None else self.x.copy(),
-            final_state=self.x.copy(),
-            settings={"source": "playground", "rate": self.settings.rate,
-                      "controller": {"kind": self.settings.controller},
-                      "playground": self.settings.to_dict(), "inputs": m},
-        )
-
-    def run_file(self, kind: str, result: SimResult | None = None) -> bytes:
-        """The last run (or *result*, the copy :meth:`last_run` made) as ``"csv"`` or ``"npz"`` bytes.
-
-        The server takes the copy on its event loop, where the samples are
-        added, and writes it in another thread: read from there, the record
-        could gain a row between its time and its states.
-        """
-        import tempfile
-        from pathlib import Path
-
-        if result is None:
-            result = self.last_run()
-        with tempfile.TemporaryDirectory(prefix="equilibrist-play-") as tmp:
-            path = Path(tmp) / f"run.{kind}"
-            written = result.to_csv(path) if kind == "csv" else result.save(path)
-            return written.read_bytes()
-
-    def export_zip(self) -> bytes:
-        """The C export of the controller in force, as a zip archive."""
-        from equilibrist.export.vectors import record
-        from equilibrist.export.writer import _describe, controller_data, generator_version, render
-
-        kind = self.settings.controller
-        if kind == "off":
-            raise SessionError("the controller is off: pick LQG, LQR, swing-up or MPC to export it")
-        if self.loop.runner is not None:
-            return self._export_runner(self.loop.runner)
-        d, system = self.loop.design, self.system
-        data = controller_data(d, controller=kind)
-        vectors = record(d, system, controller=kind, precision="double")
-        title, table = _describe(system, data)
-        files = render(data, vectors, precision="double", version=generator_version(),
-                       title=title, param_table=table)
-        buf = io.BytesIO()
-        with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
-            for rel, (text, _what) in files.items():
-                zf.writestr(f"{data.name}/{rel}", text)
-        return buf.getvalue()
-
-    def _export_runner(self, runner: Runner) -> bytes:
-        """The swing-up's or the MPC's C export (``equilibrist export --controller ...``), zipped."""
-        import tempfile
-        from pathlib import Path
-
-        from equilibrist.web.runners import export_folder
-
-        top = f"{self.system.name}_{runner.kind}"
-        with tempfile.TemporaryDirectory(prefix="equilibrist-play-") as tmp:
-            folder = Path(tmp) / top
-            export_folder(runner, self.system, str(folder))
-            return _zip_folder(folder, top)
-
-
-def _zip_folder(folder: Any, top: str) -> bytes:
-    buf = io.BytesIO()
-    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
-        for path in sorted(folder.rglob("*")):
-            if path.is_file():
-                zf.write(path, f"{top}/{path.relative_to(folder).as_posix()}")
-    return buf.getvalue()
-
-
-def design_for(system: System, settings: Settings) -> tuple[Design | None, float, str | None]:
-    """Design for *settings* on *system*: ``(design or None, seconds, error or None)``."""
-    began = time.perf_counter()
-    try:
-        d = make_design(system, settings)
-    except EquilibristError as exc:
-        return None, time.perf_counter() - began, str(exc)
-    except (ArithmeticError, np.linalg.LinAlgError, ValueError) as exc:
-        return None, time.perf_counter() - began, f"the design failed: {exc}"
-    seconds = time.perf_counter() - began
-    unstable = [p for p in np.asarray(d.poles, complex) if not abs(p) < 1.0]
-    if unstable:
-        return None, seconds, DesignError(
-            f"the design's closed loop is not stable (pole at |z| = {abs(unstable[0]):.4g})").args[0]
-    return d, seconds, None
-
-
-def redesign(system: System, settings: Settings) -> tuple[Design | None, float, str | None,
-                                                         Runner | None, float]:
-    """Design for *settings*, and build the swing-up or MPC on the design when it is asked for.
-
-    Returns ``(design or None, design seconds, error or None, runner or None,
-    controller seconds)``; a controller that cannot be built is an error
-    like a failed design (the previous controller keeps running).
-    """
-    d, seconds, error = design_for(system, settings)
-    if d is None or settings.controller not in runner_kinds():
-        return d, seconds, error, None, 0.0
-    began = time.perf_counter()
-    try:
-        runner = build_runner(settings.controller, system, d)
-    except EquilibristError as exc:
-        return None, seconds, str(exc), None, time.perf_counter() - began
-    except (ArithmeticError, np.linalg.LinAlgError, ValueError) as exc:
-        return None, seconds, f"the {settings.controller} controller failed: {exc}", None, \
-            time.perf_counter() - began
-    return d, seconds, None, runner, time.perf_counter() - began
 
 
 __all__ = ["Catalogue", "Session", "SessionError", "Settings", "design_for", "make_design",
