@@ -3,6 +3,7 @@ the gyroscope's demo settings, the outcome of one system, and formatting helpers
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -88,17 +89,38 @@ GYRO_SPIN = 250.0
 GYRO_DURATION = 2.0
 
 
-def default_scenario(system: Any) -> Scenario:
-    """A scenario from the spec alone: start at half a design scale off the
-    operating point on the first angle, push at half the input's limit."""
+def default_scenario(system: Any, controller: Any = None) -> Scenario:
+    """A scenario from the spec alone: start at half a design scale off the operating point
+    on the first angle, a push on the first input for 0.1 s.
+
+    The push is half of what the design holds: with *controller* (the design's state
+    feedback), the largest impulse it recovers from rest in the real loop
+    (:func:`equilibrist.sim.roa.max_push`, noise off) halved, and never more than half the
+    input's limit; without one, half the input's limit."""
     scales = dict(system.spec.design_scales)
     coords = [n for n in system.state_names if not n.endswith("_dot")]
     first = next((c for c in coords if c.startswith("theta")), coords[0])
     start = {first: 0.5 * scales.get(first, 0.1)}
+    if not system.n_inputs:
+        return Scenario(start=start, push=0.0, push_name="")
     low, high = system.input_limits
-    push = 0.5 * float(max(abs(low[0]), abs(high[0]))) if system.n_inputs else 0.0
-    return Scenario(start=start, push=push, push_name=f"a push of {push:g} {system.input_units[0]}"
-                    if system.n_inputs else "")
+    limit = float(max(abs(low[0]), abs(high[0])))
+    duration = 0.1
+    push = 0.5 * limit if math.isfinite(limit) else 1.0
+    why = "half the input's limit"
+    if controller is not None:
+        from equilibrist.sim.roa import max_push
+
+        eq = system.operating_point()
+        # The impulse searched up to twice the half-limit push's (0.1 s of it).
+        neg, pos, _, _ = max_push(system, controller, 2.0 * push * duration, x_op=eq.x,
+                                  u_op=eq.u, duration=3.0)
+        held = 0.5 * min(neg, pos) / duration
+        if held < push:
+            push, why = held, "half of what the design holds"
+    unit = system.input_units[0]
+    return Scenario(start=start, push=push, push_duration=duration,
+                    push_name=f"a push of {push:.3g} {unit} for {duration:g} s ({why})")
 
 
 @dataclass(frozen=True)

@@ -70,11 +70,12 @@ def tour_controlled(
     from equilibrist.viz.plots import plot_comparison, plot_poles, plot_response
 
     began = time.perf_counter()
-    sc = scenario or SCENARIOS.get(system.name) or default_scenario(system)
+    d = design(system, rate=system.spec.control_rate)
+    sc = scenario or SCENARIOS.get(system.name) or default_scenario(
+        system, StateFeedback.from_design(d))
     slug = _slug(_label(system))
     sub = folder / slug
     sub.mkdir(parents=True, exist_ok=True)
-    d = design(system, rate=system.spec.control_rate)
     tracking = bool(sc.step) and d.Kc is not None
     x_op = np.asarray(d.plant.x0, float)
     x0 = x_op.copy()
