@@ -5,6 +5,8 @@
 
 writes ``cartpole_frame.png`` (one frame of the animation, just after the
 push) and ``cartpole_response.png`` (the run's time response) here.
+``roa.png`` is ``equilibrist roa cartpole --controller lqr --samples 6000
+--physics-step 0.005 --plot docs/images/roa.png``.
 """
 
 from __future__ import annotations
