@@ -1,0 +1,390 @@
+"""The record of an LQG design, :class:`Design`: its gains, covariances and poles, what it
+says of itself (:meth:`Design.to_dict`, :meth:`Design.summary`) and the formatting those
+use; split from :mod:`equilibrist.control.design`, which re-exports it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from equilibrist.control.analysis import (
+    Margins,
+    PoleInfo,
+    Structure,
+    controllability,
+    loop_margins,
+    observability,
+    pole_table,
+)
+from equilibrist.control.kalman import DiscreteKalmanFilter
+from equilibrist.control.lqg import Compensator, lqg_compensator
+from equilibrist.errors import DesignError
+from equilibrist.numeric.linear import LinearModel
+
+
+@dataclass(frozen=True, eq=False)
+class Design:
+    """An LQG design: LQR state feedback, Kalman estimator and reference gain.
+
+    Everything is in deviation coordinates about the plant's operating
+    point ``plant.x0, plant.u0``: the control law is
+    ``u = u0 - K (xhat - x0) + Kc (r - r0)`` with ``r0`` the tracked outputs
+    at the operating point.
+
+    Attributes
+    ----------
+    system_key:
+        The system's registry key (``"cartpole"``, ``"gyroscope[euler=xyz]"``).
+    params:
+        The parameter values the design was made with.
+    plant:
+        Continuous linearization at the canonical point, with the chosen outputs.
+    Q, R:
+        LQR weights (``n x n``, ``m x m``).
+    QN, RN, G:
+        Process noise intensity (``k x k``) entering through ``G`` (``n x k``),
+        and measurement noise intensity (``p x p``), in continuous time.
+    rate:
+        Sample rate [Hz] of a discrete design, None for a continuous one.
+    discretization:
+        ``"zoh"`` or ``"euler"`` (recorded also for a continuous design).
+    kalman_form:
+        ``"current"`` or ``"predictor"``: which discrete gain ``Kf`` is.
+    discrete:
+        The sampled plant (``Ad, Bd, C, D`` with ``dt``), None when continuous.
+    K, S, poles:
+        LQR gain (``u = -K x``), Riccati solution (cost ``x0' S x0``) and the
+        closed-loop poles of the state feedback (``s``, or ``z`` when discrete).
+    Kf:
+        Estimator gain. Continuous: the ``lqe`` gain,
+        ``xhat_dot = A xhat + B u + Kf (y - C xhat)``. Discrete ``"current"``:
+        ``M = P C'(C P C' + Rd)^-1`` used as ``xhat = xpred + M (y - C xpred)``.
+        Discrete ``"predictor"``: ``L = Ad M`` used as
+        ``xhat+ = Ad xhat + Bd u + L (y - C xhat)``.
+    P:
+        Continuous: the ``lqe`` error covariance. Discrete: the steady-state
+        a-priori (predicted) covariance.
+    Kc, kc_note:
+        Reference gain (``m x m``), or None with the reason in ``kc_note``
+        (empty when ``Kc`` exists).
+    Qd, Rd:
+        Per-sample noise covariances of a discrete design, else None.
+    tracked:
+        The tracked outputs (the first ``m`` of the outputs).
+    estimator_poles:
+        Eigenvalues of ``A - Kf C`` (continuous) or ``Ad - L C`` (discrete,
+        the same for both forms).
+    notes:
+        Choices made on the user's behalf (a process-noise floor).
+    """
+
+    system_key: str
+    params: Mapping[str, float]
+    plant: LinearModel
+    Q: np.ndarray
+    R: np.ndarray
+    QN: np.ndarray
+    RN: np.ndarray
+    G: np.ndarray
+    rate: float | None
+    discretization: str
+    kalman_form: str
+    discrete: LinearModel | None
+    K: np.ndarray
+    S: np.ndarray
+    poles: np.ndarray
+    Kf: np.ndarray
+    P: np.ndarray
+    Kc: np.ndarray | None
+    kc_note: str
+    Qd: np.ndarray | None
+    Rd: np.ndarray | None
+    tracked: tuple[str, ...]
+    estimator_poles: np.ndarray
+    notes: tuple[str, ...] = field(default=())
+
+    # -- derived --------------------------------------------------------------------
+    @property
+    def dt(self) -> float | None:
+        """Sample period ``1 / rate`` [s], None for a continuous design."""
+        return None if self.rate is None else 1.0 / self.rate
+
+    @property
+    def is_discrete(self) -> bool:
+        return self.rate is not None
+
+    @property
+    def model(self) -> LinearModel:
+        """The model the gains were computed on: ``discrete`` if any, else ``plant``."""
+        return self.discrete if self.discrete is not None else self.plant
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return self.plant.state_names
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return self.plant.input_names
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return self.plant.output_names
+
+    @property
+    def r0(self) -> np.ndarray:
+        """The tracked outputs at the operating point (references are offsets from it)."""
+        rows = [self.output_names.index(t) for t in self.tracked]
+        return self.plant.y0[rows]
+
+    @cached_property
+    def controllability(self) -> Structure:
+        m = self.model
+        return controllability(m.A, m.B, state_names=m.state_names, discrete=m.is_discrete)
+
+    @cached_property
+    def observability(self) -> Structure:
+        m = self.model
+        return observability(m.A, m.C, state_names=m.state_names, discrete=m.is_discrete)
+
+    @cached_property
+    def open_loop_poles(self) -> np.ndarray:
+        return _sorted(np.linalg.eigvals(self.model.A), self.is_discrete)
+
+    @cached_property
+    def pole_table(self) -> tuple[PoleInfo, ...]:
+        """Closed-loop state-feedback poles with damping, frequency, time constant."""
+        return pole_table(self.poles, dt=self.dt)
+
+    @cached_property
+    def estimator_pole_table(self) -> tuple[PoleInfo, ...]:
+        return pole_table(self.estimator_poles, dt=self.dt)
+
+    @cached_property
+    def margins(self) -> Margins | None:
+        """Margins of the loop broken at the input (single-input plants; else None)."""
+        if self.plant.n_inputs != 1:
+            return None
+        m = self.model
+        return loop_margins(m.A, m.B, self.K, dt=self.dt)
+
+    @cached_property
+    def kalman_filter(self) -> DiscreteKalmanFilter:
+        """The discrete Kalman filter of this design (discrete designs only)."""
+        if self.discrete is None or self.Qd is None or self.Rd is None:
+            raise DesignError("a continuous design has no discrete Kalman filter: give a rate")
+        return DiscreteKalmanFilter.from_model(
+            self.discrete, self.Qd, self.Rd, form=self.kalman_form
+        )
+
+    @cached_property
+    def compensator(self) -> Compensator:
+        """The LQG compensator with inputs ``(u, y, r)`` and output ``u``."""
+        return lqg_compensator(
+            self.model,
+            self.K,
+            self.Kf,
+            self.Kc,
+            tracked=self.tracked if self.Kc is not None else (),
+            form=None if self.discrete is None else self.kalman_form,
+        )
+
+    # -- reports --------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """Everything as plain JSON-ready values.
+
+        Matrices are lists of rows; poles are lists of ``{"re", "im"}``
+        objects (also when real); a non-finite number (an infinite time
+        constant, an undefined damping ratio) is ``None``.
+        """
+        disc = self.discrete
+        out: dict[str, Any] = {
+            "system": self.system_key,
+            "params": dict(self.params),
+            "rate": self.rate,
+            "dt": self.dt,
+            "discretization": self.discretization,
+            "kalman_form": self.kalman_form,
+            "states": list(self.state_names),
+            "inputs": list(self.input_names),
+            "outputs": list(self.output_names),
+            "tracked": list(self.tracked),
+            "x0": self.plant.x0,
+            "u0": self.plant.u0,
+            "plant": {"A": self.plant.A, "B": self.plant.B, "C": self.plant.C, "D": self.plant.D},
+            "discrete": None
+            if disc is None
+            else {
+                "A": disc.A,
+                "B": disc.B,
+                "C": disc.C,
+                "D": disc.D,
+                "dt": disc.dt,
+            },
+            "Q": self.Q,
+            "R": self.R,
+            "QN": self.QN,
+            "RN": self.RN,
+            "G": self.G,
+            "Qd": self.Qd,
+            "Rd": self.Rd,
+            "K": self.K,
+            "S": self.S,
+            "poles": _complex_list(self.poles),
+            "Kf": self.Kf,
+            "P": self.P,
+            "estimator_poles": _complex_list(self.estimator_poles),
+            "Kc": self.Kc,
+            "kc_note": self.kc_note,
+            "open_loop_poles": _complex_list(self.open_loop_poles),
+            "pole_table": [p.to_dict() for p in self.pole_table],
+            "estimator_pole_table": [p.to_dict() for p in self.estimator_pole_table],
+            "margins": None if self.margins is None else self.margins.to_dict(),
+            "controllability": self.controllability.to_dict(),
+            "observability": self.observability.to_dict(),
+            "notes": list(self.notes),
+        }
+        plain: dict[str, Any] = _plain(out)
+        return plain
+
+    def summary(self) -> str:
+        """A readable report of the design."""
+        kind = (
+            f"discrete at {self.rate:g} Hz (dt = {self.dt:.4g} s, {self.discretization}, "
+            f"{self.kalman_form} Kalman form)"
+            if self.rate is not None
+            else "continuous"
+        )
+        var = "z" if self.is_discrete else "s"
+        states, inputs, outputs = self.state_names, self.input_names, self.output_names
+        lines = [
+            f"LQG design for {self.system_key}: {kind}",
+            "operating point: "
+            + ", ".join(f"{n} = {v:.4g}" for n, v in zip(states, self.plant.x0, strict=True))
+            + "; "
+            + ", ".join(f"{n} = {v:.4g}" for n, v in zip(inputs, self.plant.u0, strict=True)),
+            f"measured outputs: {', '.join(outputs)}; tracked: {', '.join(self.tracked) or 'none'}",
+            "",
+            "weights: Q = diag("
+            + _numbers(np.diag(self.Q))
+            + "), R = diag("
+            + _numbers(np.diag(self.R))
+            + ")",
+            "noise:   QN = diag("
+            + _numbers(np.diag(self.QN))
+            + "), RN = diag("
+            + _numbers(np.diag(self.RN))
+            + ")",
+            "",
+            "LQR gain K (u = -K x):",
+            _matrix(self.K, inputs, states),
+            "",
+            f"closed-loop poles ({var}):",
+            _pole_lines(self.pole_table, self.is_discrete),
+        ]
+        if self.margins is not None:
+            mg = self.margins
+            lines += [
+                "",
+                "loop broken at the input:",
+                f"  gain margins: stable for a loop gain scaled by x{_num(mg.gain_lower)} "
+                f"({_num(mg.gain_lower_db)} dB, at {_num(mg.lower_crossover)} rad/s) "
+                f"to x{_num(mg.gain_upper)} ({_num(mg.gain_upper_db)} dB, at "
+                f"{_num(mg.upper_crossover)} rad/s)",
+                f"  phase margin: {_num(mg.phase_margin)} deg at {_num(mg.gain_crossover)} rad/s",
+                f"  min |1 + L|: {_num(mg.return_difference)}",
+            ]
+        gain_name = (
+            "Kalman gain Kf"
+            if not self.is_discrete
+            else "Kalman gain M (current form)"
+            if self.kalman_form == "current"
+            else "Kalman gain L (predictor form)"
+        )
+        lines += [
+            "",
+            f"{gain_name}:",
+            _matrix(self.Kf, states, outputs),
+            "",
+            f"estimator poles ({var}):",
+            _pole_lines(self.estimator_pole_table, self.is_discrete),
+            "",
+        ]
+        if self.Kc is not None:
+            lines += [
+                "reference gain Kc (u = -K x + Kc r):",
+                _matrix(self.Kc, inputs, self.tracked),
+            ]
+        else:
+            lines.append(f"no reference gain: {self.kc_note}")
+        for note in self.notes:
+            lines.append(f"note: {note}")
+        return "\n".join(lines)
+
+
+# -- formatting helpers ------------------------------------------------------------------
+
+
+def _sorted(values: np.ndarray, discrete: bool) -> np.ndarray:
+    vals = np.asarray(values, dtype=complex)
+    key = np.abs(vals) if discrete else vals.real
+    order = np.lexsort((vals.imag, key))
+    return vals[order]
+
+
+def _complex_list(values: np.ndarray) -> list[dict[str, float]]:
+    return [{"re": float(v.real), "im": float(v.imag)} for v in np.asarray(values, dtype=complex)]
+
+
+def _plain(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _plain(obj.tolist())
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    return obj
+
+
+def _num(v: float) -> str:
+    return f"{v:.4g}" if math.isfinite(v) else ("inf" if v > 0 else "-inf" if v < 0 else "n/a")
+
+
+def _numbers(values: np.ndarray) -> str:
+    return ", ".join(f"{v:.4g}" for v in values)
+
+
+def _matrix(mat: np.ndarray, rows: Sequence[str], cols: Sequence[str], width: int = 12) -> str:
+    label = max([len(r) for r in rows] + [1])
+    out = [" " * (label + 2) + "".join(f"{c:>{width}}" for c in cols)]
+    for r, row in zip(rows, np.atleast_2d(mat), strict=True):
+        out.append(f"  {r:<{label}}" + "".join(f"{v:>{width}.5g}" for v in row))
+    return "\n".join(out)
+
+
+def _pole_lines(table: Sequence[PoleInfo], discrete: bool) -> str:
+    out = []
+    for p in table:
+        value = (
+            f"{p.pole.real:.5g} {'+' if p.pole.imag >= 0 else '-'} {abs(p.pole.imag):.4g}j"
+            if p.pole.imag
+            else f"{p.pole.real:.5g}"
+        )
+        extra = f"  |z| = {abs(p.pole):.5f}" if discrete else ""
+        out.append(
+            f"  {value:<26} wn = {_num(p.natural_frequency):>9} rad/s  zeta = "
+            f"{_num(p.damping):>7}  tau = {_num(p.time_constant):>9} s{extra}"
+        )
+    return "\n".join(out)
