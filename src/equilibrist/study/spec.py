@@ -39,387 +39,29 @@ order in which points finish.
 
 from __future__ import annotations
 
-import hashlib
-import json
-import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
-import numpy as np
+from equilibrist.errors import nearest
 
-from equilibrist.errors import EquilibristError, nearest
-
-FORMAT = "equilibrist-study-1"
-#: The project's own kinds a study takes (the registry may offer more: :func:`controllers`).
-CONTROLLERS = ("lqr", "lqg", "swingup", "mpc")
-
-
-def _does_not_apply(kind: str, system: Any) -> str | None:
-    from equilibrist.control import kinds
-
-    return kinds.get(kind).applies(system)
-
-
-def controllers() -> tuple[str, ...]:
-    """The controller kinds a study takes (:mod:`equilibrist.control.kinds`, surface ``study``)."""
-    from equilibrist.control import kinds
-
-    return kinds.names("study")
-SPECIAL = ("rate", "controller", "noise", "delay")
-DESIGN_FOR = ("point", "nominal")
-METRICS = ("full", "basic")
-# Samples kept in memory per batch (runs x rows x columns) for the
-# trajectory metrics: about 32 MB of doubles.
-BATCH_CELLS = 4_000_000
-MAX_POINTS = 10_000_000
-# Initial states of a point's region-of-attraction grid (the product of its N's): each
-# is a run of every point, and the grid is allocated whole.
-MAX_ROA_STATES = 100_000
-# Samples of one run at most (a day at 100 Hz): a longer run is no study's, and its
-# length would overflow the batch's sizing.
-MAX_RUN_SAMPLES = 10_000_000
-
-
-class StudyError(EquilibristError, ValueError):
-    """A study that cannot be run as described."""
-
-
-@dataclass(frozen=True)
-class Axis:
-    """One varied quantity.
-
-    Attributes
-    ----------
-    name : str
-        As written: ``m_p``, ``rate``, ``q.theta``, ``controller``, ...
-    kind : str
-        ``parameter``, ``rate``, ``q``, ``r``, ``controller``, ``noise`` or ``delay``.
-    values : tuple
-        The grid's values (a random sample's list to draw from), or empty
-        for a range of a random sample.
-    low, high : float or None
-        The range of a random sample (None for a list).
-    log : bool
-        Geometric spacing (grid) or log-uniform draws (sample).
-    """
-
-    name: str
-    kind: str
-    values: tuple[Any, ...]
-    low: float | None = None
-    high: float | None = None
-    log: bool = False
-
-    @property
-    def target(self) -> str:
-        """The state, input or parameter the axis acts on (its name for the others)."""
-        return self.name.split(".", 1)[1] if self.kind in ("q", "r") else self.name
-
-    @property
-    def is_text(self) -> bool:
-        return self.kind == "controller"
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "kind": self.kind, "values": list(self.values),
-                "low": self.low, "high": self.high, "log": self.log}
-
-
-@dataclass(frozen=True)
-class Study:
-    """A complete, validated study description (build it with :func:`make_study`).
-
-    Everything that shapes the table is here and in :meth:`to_dict` (the
-    file's metadata); how it is run (where, how many workers, chunking)
-    is not, and never changes the table.
-    """
-
-    system: str
-    settings: Mapping[str, Any]
-    axes: tuple[Axis, ...]
-    sample: int | None
-    runs: int
-    duration: float
-    x0: Mapping[str, tuple[float, float]]
-    spread: Mapping[str, float]
-    seed: int
-    controller: str
-    noise: float
-    delay: bool
-    rate: float
-    design_for: str
-    metrics: str
-    roa: Mapping[str, tuple[float, float, int]]
-    batch_size: int
-
-    # -- points -----------------------------------------------------------------------
-    @property
-    def n_points(self) -> int:
-        if self.sample is not None:
-            return self.sample
-        return math.prod(len(a.values) for a in self.axes) if self.axes else 1
-
-    @property
-    def total_runs(self) -> int:
-        return self.n_points * self.runs
-
-    def point(self, index: int) -> dict[str, Any]:
-        """The varied quantities' values at point *index* (in axis order)."""
-        if not 0 <= index < self.n_points:
-            raise StudyError(f"point {index} out of range 0..{self.n_points - 1}")
-        if self.sample is None:
-            shape = [len(a.values) for a in self.axes]
-            idx = np.unravel_index(index, shape) if shape else ()
-            return {a.name: a.values[int(i)] for a, i in zip(self.axes, idx, strict=True)}
-        gen = np.random.default_rng(self.point_seed(index, 0))
-        out: dict[str, Any] = {}
-        for a in self.axes:
-            if a.values:
-                out[a.name] = a.values[int(gen.integers(len(a.values)))]
-            else:
-                lo, hi = float(a.low), float(a.high)  # type: ignore[arg-type]
-                u = float(gen.random())
-                out[a.name] = (math.exp(math.log(lo) + u * (math.log(hi) - math.log(lo)))
-                               if a.log else lo + u * (hi - lo))
-        return out
-
-    def point_seed(self, index: int, *key: int) -> np.random.SeedSequence:
-        """The seed of point *index*'s draws of kind *key* (see the module docstring)."""
-        return np.random.SeedSequence(self.seed, spawn_key=(int(index), *map(int, key)))
-
-    # -- description ----------------------------------------------------------------
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "format": FORMAT,
-            "system": self.system,
-            "set": dict(self.settings),
-            "vary": [a.to_dict() for a in self.axes],
-            "sample": self.sample,
-            "runs": self.runs,
-            "duration": self.duration,
-            "x0": {k: list(v) for k, v in self.x0.items()},
-            "spread": dict(self.spread),
-            "seed": self.seed,
-            "controller": self.controller,
-            "noise": self.noise,
-            "delay": self.delay,
-            "rate": self.rate,
-            "design_for": self.design_for,
-            "metrics": self.metrics,
-            "roa": {k: list(v) for k, v in self.roa.items()},
-            "batch_size": self.batch_size,
-        }
-
-    def to_json(self) -> str:
-        """The canonical description (sorted keys): what the file's metadata holds."""
-        return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
-
-    @property
-    def digest(self) -> str:
-        return hashlib.sha256(self.to_json().encode()).hexdigest()
-
-    @classmethod
-    def from_json(cls, text: str) -> Study:
-        """The study of :meth:`to_json` (as recorded in a table's metadata)."""
-        d = json.loads(text)
-        if d.get("format") != FORMAT:
-            raise StudyError(f"not a study description of format {FORMAT}")
-        return _from_description(d)
-
-
-def _from_description(d: Mapping[str, Any]) -> Study:
-    axes = tuple(Axis(a["name"], a["kind"], tuple(a["values"]), a["low"], a["high"], a["log"])
-                 for a in d["vary"])
-    return Study(
-        system=d["system"], settings=dict(d["set"]), axes=axes, sample=d["sample"],
-        runs=int(d["runs"]), duration=float(d["duration"]),
-        x0={k: (float(v[0]), float(v[1])) for k, v in d["x0"].items()},
-        spread={k: float(v) for k, v in d["spread"].items()}, seed=int(d["seed"]),
-        controller=d["controller"], noise=float(d["noise"]), delay=bool(d["delay"]),
-        rate=float(d["rate"]), design_for=d["design_for"], metrics=d["metrics"],
-        roa={k: (float(v[0]), float(v[1]), int(v[2])) for k, v in d["roa"].items()},
-        batch_size=int(d["batch_size"]),
-    )
-
-
-# -- building and checking ---------------------------------------------------------------
-
-
-def _number(value: object, what: str, problems: list[str]) -> float | None:
-    if isinstance(value, bool):
-        problems.append(f"{what}: {value!r} is not a number")
-        return None
-    try:
-        v = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        problems.append(f"{what}: {value!r} is not a number")
-        return None
-    if not math.isfinite(v):
-        problems.append(f"{what}: {value!r} is not a finite number")
-        return None
-    return v
-
-
-def _whole(value: object, what: str, problems: list[str], *, minimum: int = 1) -> int | None:
-    if isinstance(value, bool):
-        problems.append(f"{what}: expected a whole number >= {minimum}, got {value!r}")
-        return None
-    try:
-        v = int(str(value).strip()) if not isinstance(value, int) else value
-    except ValueError:
-        problems.append(f"{what}: expected a whole number >= {minimum}, got {value!r}")
-        return None
-    if v < minimum:
-        problems.append(f"{what}: expected a whole number >= {minimum}, got {v}")
-        return None
-    return v
-
-
-def _parse_values(name: str, value: object, sampled: bool, problems: list[str]
-                  ) -> tuple[tuple[Any, ...], float | None, float | None, bool] | None:
-    """``(values, low, high, log)`` of an axis from its text, list or table."""
-    what = f"--vary {name}"
-    if isinstance(value, Mapping):  # TOML {low = .., high = .., n = .., log = ..}
-        unknown = sorted(set(value) - {"low", "high", "n", "log"})
-        if unknown:
-            problems.append(f"{what}: unknown key(s) {', '.join(unknown)} (expected low, high, n, log)")
-            return None
-        pieces = [value.get("low"), value.get("high")]
-        if "n" in value:
-            pieces.append(value["n"])
-        if value.get("log"):
-            pieces.append("log")
-        text = ":".join("" if p is None else str(p) for p in pieces)
-        return _parse_values(name, text, sampled, problems)
-    if isinstance(value, (list, tuple)):
-        if not value:
-            problems.append(f"{what}: the list of values is empty")
-            return None
-        return tuple(value), None, None, False
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        return (value,), None, None, False
-    text = str(value).strip()
-    if not text:
-        problems.append(f"{what}: no values (expected LOW:HIGH:N, V1,V2,... or V)")
-        return None
-    if ":" not in text:
-        items = [t.strip() for t in text.split(",")]
-        if not all(items):
-            problems.append(f"{what}={text}: expected comma-separated values")
-            return None
-        return tuple(items), None, None, False
-    parts = [t.strip() for t in text.split(":")]
-    log = False
-    if parts and parts[-1].lower() == "log":
-        log = True
-        parts = parts[:-1]
-    form = "LOW:HIGH[:log]" if sampled else "LOW:HIGH:N[:log]"
-    if len(parts) != (2 if sampled else 3):
-        extra = (" (a random sample draws its own points: give the range only)"
-                 if sampled and len(parts) == 3 else "")
-        problems.append(f"{what}={text}: expected {form}{extra}")
-        return None
-    before = len(problems)
-    lo = _number(parts[0], f"{what} LOW", problems)
-    hi = _number(parts[1], f"{what} HIGH", problems)
-    count = None if sampled else _whole(parts[2], f"{what} N", problems)
-    if len(problems) > before or lo is None or hi is None:
-        return None
-    if lo > hi:
-        problems.append(f"{what}={text}: reversed range, LOW {lo:g} is above HIGH {hi:g}")
-        return None
-    if lo == hi:
-        problems.append(f"{what}={text}: empty range, LOW equals HIGH (give one value as {name}={lo:g})")
-        return None
-    if log and lo <= 0:
-        problems.append(f"{what}={text}: a log range needs LOW > 0")
-        return None
-    if sampled:
-        return (), lo, hi, log
-    assert count is not None
-    if count > MAX_POINTS:  # refused before the grid is allocated
-        problems.append(f"{what}={text}: N = {count} values, at most {MAX_POINTS} per study")
-        return None
-    grid = np.geomspace(lo, hi, count) if log else np.linspace(lo, hi, count)
-    return tuple(float(v) for v in grid), lo, hi, log
-
-
-def _axis(system: Any, name: str, value: object, sampled: bool, problems: list[str]) -> Axis | None:
-    spec = system.spec
-    params = {p.name: p for p in spec.all_parameters}
-    if name in params:
-        kind = "parameter"
-    elif name in SPECIAL:
-        kind = name
-    elif name.startswith(("q.", "r.")):
-        kind = name[0]
-        target = name[2:]
-        names = system.state_names if kind == "q" else system.input_names
-        if target not in names:
-            what = "state" if kind == "q" else "input"
-            problems.append(f"--vary {name}: {system.key} has no {what} {target!r} "
-                            f"({nearest(target, names)})")
-            return None
-    else:
-        choices = [*spec.parameter_names, *SPECIAL, *(f"q.{s}" for s in system.state_names),
-                   *(f"r.{i}" for i in system.input_names)]
-        problems.append(f"--vary: unknown quantity {name!r} of {system.key} ({nearest(name, choices)})")
-        return None
-    parsed = _parse_values(name, value, sampled, problems)
-    if parsed is None:
-        return None
-    raw, low, high, log = parsed
-    before = len(problems)
-    values: list[Any] = []
-    if kind == "controller":
-        for v in raw:
-            text = str(v).strip().lower()
-            if text not in controllers():
-                problems.append(f"--vary controller: {v!r} is not a controller (expected one "
-                                f"of {', '.join(controllers())})")
-            else:
-                why = _does_not_apply(text, system)
-                if why is not None:
-                    problems.append(f"--vary controller: {why}")
-            values.append(text)
-        if low is not None:
-            problems.append("--vary controller: expected a list of controllers (lqr,lqg)")
-    elif kind == "delay":
-        for v in raw:
-            text = str(v).strip().lower()
-            if text not in ("0", "1", "true", "false", "0.0", "1.0"):
-                problems.append(f"--vary delay: {v!r} is not 0 or 1")
-                continue
-            values.append(text in ("1", "true", "1.0"))
-        if low is not None:
-            problems.append("--vary delay: expected a list of 0 and 1")
-    else:
-        values = [_number(v, f"--vary {name}", problems) for v in raw]
-        checked = [v for v in values if v is not None]
-        if low is not None and high is not None:
-            checked += [low, high]
-        for v in sorted(set(checked)):
-            problem = None
-            if kind == "parameter":
-                problem = params[name].check(v)
-                if problem:
-                    problem = f"--vary {name}: {problem}"
-            elif kind == "rate" and not v > 0:
-                problem = f"--vary rate: {v:g} Hz is not a positive sample rate"
-            elif kind in ("q", "r") and not v > 0:
-                problem = f"--vary {name}: a Bryson scale must be > 0, got {v:g}"
-            elif kind == "noise" and not v >= 0:
-                problem = f"--vary noise: a noise scale must be >= 0, got {v:g}"
-            if problem:
-                problems.append(problem)
-                break
-    if len(problems) > before:
-        return None
-    if len(set(values)) != len(values):
-        problems.append(f"--vary {name}: a value is given twice")
-        return None
-    return Axis(name, kind, tuple(values), low, high, log)
+# The module was split in three; every name stays importable from here.
+from equilibrist.study._spec_axes import _axis, _number, _ranges, _whole
+from equilibrist.study._spec_study import (
+    BATCH_CELLS,
+    CONTROLLERS,
+    DESIGN_FOR,
+    FORMAT,
+    MAX_POINTS,
+    MAX_ROA_STATES,
+    MAX_RUN_SAMPLES,
+    METRICS,
+    SPECIAL,
+    Axis,
+    Study,
+    StudyError,
+    _does_not_apply,
+    controllers,
+)
 
 
 def make_study(
@@ -589,45 +231,6 @@ def _replace_batch(study: Study, size: int) -> Study:
     return replace(study, batch_size=size)
 
 
-def _ranges(system: Any, given: Mapping[str, object], option: str, problems: list[str], *,
-            counted: bool) -> dict[str, tuple[float, ...]]:
-    out: dict[str, tuple[float, ...]] = {}
-    form = "LOW:HIGH:N" if counted else "LOW:HIGH"
-    for name, value in given.items():
-        if name not in system.state_names:
-            problems.append(f"{option}: {system.key} has no state {name!r} "
-                            f"({nearest(name, system.state_names)})")
-            continue
-        if isinstance(value, (list, tuple)):
-            parts: list[object] = list(value)
-        elif isinstance(value, (int, float)) and not isinstance(value, bool) and not counted:
-            parts = [value, value]
-        else:
-            parts = [t.strip() for t in str(value).split(":")]
-            if len(parts) == 1 and not counted:
-                parts = parts * 2
-        if len(parts) != (3 if counted else 2):
-            problems.append(f"{option} {name}={value}: expected {form}")
-            continue
-        before = len(problems)
-        lo = _number(parts[0], f"{option} {name} LOW", problems)
-        hi = _number(parts[1], f"{option} {name} HIGH", problems)
-        n = _whole(parts[2], f"{option} {name} N", problems) if counted else 1
-        if len(problems) > before or lo is None or hi is None or n is None:
-            continue
-        if lo > hi:
-            problems.append(f"{option} {name}={value}: reversed range, LOW {lo:g} is above HIGH {hi:g}")
-            continue
-        out[name] = (lo, hi, n) if counted else (lo, hi)
-    if counted and out:
-        cells = math.prod(int(v[2]) for v in out.values())
-        if cells > MAX_ROA_STATES:
-            grid = " x ".join(str(int(v[2])) for v in out.values())
-            problems.append(f"{option}: a grid of {grid} = {cells} initial states per point; at "
-                            f"most {MAX_ROA_STATES} (each is a run of every point)")
-    return out
-
-
 # -- study files ------------------------------------------------------------------------
 
 _FILE_KEYS = ("system", "set", "vary", "sample", "runs", "duration", "x0", "spread", "seed",
@@ -713,3 +316,22 @@ def _named_system(study_file: Path, recorded: str, named: str | None) -> str:
         raise StudyError(f"{named} is not the system file the study {study_file} names "
                          f"({recorded}): their contents differ")
     return named
+
+
+__all__ = [
+    "BATCH_CELLS",
+    "CONTROLLERS",
+    "DESIGN_FOR",
+    "FORMAT",
+    "MAX_POINTS",
+    "MAX_ROA_STATES",
+    "MAX_RUN_SAMPLES",
+    "METRICS",
+    "SPECIAL",
+    "Axis",
+    "Study",
+    "StudyError",
+    "controllers",
+    "load_study_file",
+    "make_study",
+]
