@@ -238,6 +238,17 @@ def format_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str
     return "\n".join(out)
 
 
+def parse_whole(text: str, option: str, minimum: int = 1) -> int:
+    """*text* as a whole number >= *minimum*, else one line naming the option."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise UsageError(f"{option} {text!r}: expected a whole number >= {minimum}") from None
+    if v < minimum:
+        raise UsageError(f"{option} {text!r}: expected a whole number >= {minimum}")
+    return v
+
+
 def parse_names(text: str | None, option: str) -> tuple[str, ...] | None:
     """``"x,theta"`` -> ``("x", "theta")``; empty items are refused."""
     if text is None:

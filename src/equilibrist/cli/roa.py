@@ -119,16 +119,6 @@ def _bounds(system: System, states: tuple[str, str], x_op: np.ndarray,
     return out[states[0]], out[states[1]]
 
 
-def _whole(text: str, option: str, low: int) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise common.UsageError(f"{option} {text!r}: expected a whole number >= {low}") from None
-    if v < low:
-        raise common.UsageError(f"{option} {text!r}: expected a whole number >= {low}")
-    return v
-
-
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -140,8 +130,8 @@ def run(args: argparse.Namespace) -> int:
         raise common.UsageError(f"--out {args.out!r}: expected FILE.parquet")
     if args.plot is not None and not args.plot.lower().endswith(".png"):
         raise common.UsageError(f"--plot {args.plot!r}: expected FILE.png")
-    samples = _whole(args.samples, "--samples", 100)
-    seed = _whole(args.seed, "--seed", 0)
+    samples = common.parse_whole(args.samples, "--samples", 100)
+    seed = common.parse_whole(args.seed, "--seed", 0)
     duration = common.parse_number(args.duration, "--duration")
     if not (math.isfinite(duration) and duration > 0):
         raise common.UsageError(f"--duration {args.duration}: expected a positive number of seconds")

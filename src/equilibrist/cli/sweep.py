@@ -99,15 +99,7 @@ _STUDY_OPTIONS = ("system", "vary", "sample", "runs", "duration", "x0", "spread"
 
 
 def _count(text: str | None, option: str, minimum: int = 1) -> int | None:
-    if text is None:
-        return None
-    try:
-        v = int(text)
-    except ValueError:
-        raise common.UsageError(f"{option} {text!r}: expected a whole number >= {minimum}") from None
-    if v < minimum:
-        raise common.UsageError(f"{option} {text!r}: expected a whole number >= {minimum}")
-    return v
+    return None if text is None else common.parse_whole(text, option, minimum)
 
 
 def _sample(text: str | None) -> int | None:

@@ -242,6 +242,36 @@ class ControllerKind:
         return export_controller(self.make(request), out, system=request.system, **options)
 
 
+def linear_builder(kind: str) -> Callable[[ControllerRequest], Any]:
+    """``build`` of an LQR/LQG kind: the request's design as a ``LinearController``."""
+
+    def build(request: ControllerRequest) -> Any:
+        from equilibrist.control.controller import LinearController
+
+        return LinearController.from_design(request.design(), kind=kind, tracking=request.tracking)
+
+    return build
+
+
+def registered_exporter(name: str, check: Callable[[ControllerRequest], None] | None = None
+                        ) -> Callable[..., ExportReport]:
+    """``export`` of a kind whose exporter a module registers under *name*
+    (:func:`equilibrist.export.writer.register_exporter`): *check* the request first (before
+    anything is built), then export the kind's controller for it."""
+
+    def export(request: ControllerRequest, out: Any, **options: Any) -> ExportReport:
+        from equilibrist.export.writer import load_exporter
+
+        if check is not None:
+            check(request)
+        exporter = load_exporter(name)
+        if exporter is None:
+            raise KindError(f"the {name} controller has no C exporter in this installation")
+        return exporter(get(name).make(request), out, system=request.system, **options)
+
+    return export
+
+
 _KINDS: dict[str, ControllerKind] = {}
 _LOADED = False
 
@@ -332,5 +362,5 @@ def build(name: str, request: ControllerRequest) -> Any:
 
 
 __all__ = ["ENTRY_POINTS", "PACKAGE", "SURFACES", "ControllerKind", "ControllerRequest",
-           "KindError", "Option", "all_kinds", "build", "get", "names", "options", "owners",
-           "register"]
+           "KindError", "Option", "all_kinds", "build", "get", "linear_builder", "names",
+           "options", "owners", "register", "registered_exporter"]

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from equilibrist.control.kinds import ControllerKind, ControllerRequest, Option
+from equilibrist.control.kinds import ControllerKind, ControllerRequest, Option, registered_exporter
 
 if TYPE_CHECKING:
     from equilibrist.control.mpc import MPCRuntime
@@ -35,15 +35,12 @@ def build(request: ControllerRequest) -> MPCRuntime:
     return ctrl.runtime()
 
 
-def export(request: ControllerRequest, out: Any, **options: Any) -> Any:
+def check_export(request: ControllerRequest) -> None:
+    """The horizon the export can hold, before the QP is built."""
     from equilibrist.control.mpc import HORIZON
     from equilibrist.export.mpc_c import check_horizon
-    from equilibrist.export.writer import load_exporter
 
-    check_horizon(request.system, request.options.get("horizon", HORIZON))  # before the QP
-    exporter = load_exporter("mpc")
-    assert exporter is not None
-    return exporter(KIND.make(request), out, system=request.system, **options)
+    check_horizon(request.system, request.options.get("horizon", HORIZON))
 
 
 KIND = ControllerKind(
@@ -52,5 +49,5 @@ KIND = ControllerKind(
     build=build,
     options=(Option("--horizon", "prediction horizon of --controller mpc [samples] (default 30)",
                     parse=_horizon, expected="a whole number of samples >= 1", metavar="N"),),
-    applies=applies, export=export, order=40,
+    applies=applies, export=registered_exporter("mpc", check_export), order=40,
 )

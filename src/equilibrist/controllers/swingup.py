@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-from equilibrist.control.kinds import ControllerKind, ControllerRequest, Option
+from equilibrist.control.kinds import ControllerKind, ControllerRequest, Option, registered_exporter
 
 if TYPE_CHECKING:
     from equilibrist.control.controller import NonlinearController
@@ -35,19 +35,11 @@ def build(request: ControllerRequest) -> NonlinearController:
                    balance=str(request.options.get("balance", "lqr")))
 
 
-def export(request: ControllerRequest, out: Any, **options: Any) -> Any:
-    from equilibrist.export.writer import load_exporter
-
-    exporter = load_exporter("swingup")
-    assert exporter is not None
-    return exporter(KIND.make(request), out, system=request.system, **options)
-
-
 KIND = ControllerKind(
     name="swingup", label="Swing-up (energy pumping, then LQR)",
     help="pump energy from hanging, catch near upright and balance (--balance lqr|lqg)",
     build=build,
     options=(Option("--balance", "what balances after --controller swingup's catch (default lqr)",
                     choices=BALANCES),),
-    applies=applies, task="swingup", export=export, order=30,
+    applies=applies, task="swingup", export=registered_exporter("swingup"), order=30,
 )
