@@ -1,0 +1,326 @@
+"""The swing-up's law as source: the layout of its parameters ``cp`` and state ``z`` (one
+place for the source, the Python and the C export), the energy-shaping law itself
+(:data:`LAW_SOURCE`), the controller's source and its namespace as Python; split from
+:mod:`equilibrist.control.swingup`, which re-exports them.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+#: The systems a swing-up exists for, and the law each uses.
+LAWS = {"cartpole": 0, "reaction_wheel_pendulum": 1, "furuta": 2, "acrobot": 3}
+LAW_NAMES = ("cart", "wheel", "rotary", "acrobot")
+
+# --- layout of the parameters ``cp`` and of the state ``z`` (one place: the source,
+# the Python runtime and the C export read these) -----------------------------------
+CP_SLOTS = ("law", "T", "ke", "amax", "e0", "kx", "kv", "kp", "c_in", "c_out", "alpha",
+            "beta", "u_min", "u_max", "u_op", "kd", "lqg", "kform")
+N_PHYS = 8
+N_STATES = 4  # every rig with a swing-up has two coordinates
+CP_BLOCKS = (("phys", N_PHYS), ("x_op", N_STATES), ("K", N_STATES), ("S", N_STATES * N_STATES),
+             ("wrap", N_STATES), ("free", N_STATES), ("Ad", N_STATES * N_STATES),
+             ("Bd", N_STATES), ("Kf", N_STATES * 2))
+Z_SLOTS = (("init", 1), ("mode", 1), ("xhat", N_STATES), ("ref", N_STATES), ("kz", N_STATES))
+
+#: The balancing controllers the supervisor can hand over to (``balance=``).
+BALANCES = ("lqr", "lqg")
+
+MODE_PUMP, MODE_BALANCE = 0.0, 1.0
+
+
+def _offsets(slots: tuple[tuple[str, int], ...], start: int = 0) -> dict[str, int]:
+    out, at = {}, start
+    for name, size in slots:
+        out[name] = at
+        at += size
+    out["end"] = at
+    return out
+
+
+CP = {**{name: i for i, name in enumerate(CP_SLOTS)},
+      **_offsets(CP_BLOCKS, len(CP_SLOTS))}
+Z = _offsets(Z_SLOTS)
+
+
+def layout_constants() -> dict[str, int]:
+    """The layout as the source's constants (``SU_KE = 2``, ``SU_Z_MODE = 1`` ...)."""
+    out = {f"SU_{k.upper()}": v for k, v in CP.items() if k != "end"}
+    out.update({f"SU_Z_{k.upper()}": v for k, v in Z.items() if k != "end"})
+    return out
+
+
+#: The law, in the Python the C translation knows: compiled into the simulation core as a
+#: :class:`~equilibrist.control.controller.NonlinearController` and run as is
+#: in Python. Written with scalars for the four states (no allocation).
+LAW_SOURCE = """
+def su_wrap(a):
+    return a - 2.0 * math.pi * math.floor((a + math.pi) / (2.0 * math.pi))
+
+
+def su_sign(v):
+    if v > 0.0:
+        return 1.0
+    if v < 0.0:
+        return -1.0
+    return 0.0
+
+
+def su_clip(v, lo, hi):
+    if v < lo:
+        return lo
+    if v > hi:
+        return hi
+    return v
+
+
+def su_energy(x0, x1, x2, x3, p):
+    law = int(p[SU_LAW])
+    ph = SU_PHYS
+    if law == 3:
+        m1 = p[ph]
+        m2 = p[ph + 1]
+        l1 = p[ph + 2]
+        lc1 = p[ph + 3]
+        lc2 = p[ph + 4]
+        i1 = p[ph + 5]
+        i2 = p[ph + 6]
+        g = p[ph + 7]
+        c2 = eq_cos(x1)
+        d1 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2
+        d2 = m2 * (lc2 * lc2 + l1 * lc2 * c2) + i2
+        d3 = m2 * lc2 * lc2 + i2
+        kin = 0.5 * (d1 * x2 * x2 + 2.0 * d2 * x2 * x3 + d3 * x3 * x3)
+        pot = -g * (m1 * lc1 * eq_cos(x0) + m2 * (l1 * eq_cos(x0) + lc2 * eq_cos(x0 + x1)))
+        return kin + pot - g * (m1 * lc1 + m2 * (l1 + lc2))
+    return 0.5 * p[ph] * x3 * x3 + p[ph + 1] * (eq_cos(x1) - 1.0)
+
+
+def su_pump(x0, x1, x2, x3, p):
+    law = int(p[SU_LAW])
+    ph = SU_PHYS
+    e = su_energy(x0, x1, x2, x3, p) - p[SU_E0]
+    ke = p[SU_KE]
+    amax = p[SU_AMAX]
+    if law == 0:
+        a = su_clip(ke * e * su_sign(x3 * eq_cos(x1)), -amax, amax)
+        a = a - p[SU_KX] * x0 - p[SU_KV] * x2
+        # The force that gives the cart the acceleration a exactly.
+        mlc = p[ph + 4] * eq_cos(x1)
+        th_dd = (p[ph + 1] * eq_sin(x1) - p[ph + 5] * x3 - mlc * a) / p[ph]
+        return (p[ph + 2] * a + mlc * th_dd - p[ph + 4] * eq_sin(x1) * x3 * x3
+                + p[ph + 3] * x2)
+    if law == 1:
+        return su_clip(ke * e * su_sign(x3), -amax, amax) - p[SU_KV] * (x2 - x3)
+    if law == 2:
+        return su_clip(ke * e * su_sign(x3 * eq_cos(x1)), -amax, amax) - p[SU_KV] * x2
+    m1 = p[ph]
+    m2 = p[ph + 1]
+    l1 = p[ph + 2]
+    lc1 = p[ph + 3]
+    lc2 = p[ph + 4]
+    i1 = p[ph + 5]
+    i2 = p[ph + 6]
+    g = p[ph + 7]
+    t2 = su_wrap(x1)
+    c2 = eq_cos(t2)
+    s2 = eq_sin(t2)
+    m11 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2
+    m12 = m2 * (lc2 * lc2 + l1 * lc2 * c2) + i2
+    m22 = m2 * lc2 * lc2 + i2
+    det = m11 * m22 - m12 * m12
+    hg2 = m2 * l1 * lc2 * s2 * x2 * x2 + m2 * lc2 * g * eq_sin(x0 + t2)
+    hg1 = (-m2 * l1 * lc2 * s2 * (2.0 * x2 * x3 + x3 * x3)
+           + (m1 * lc1 + m2 * l1) * g * eq_sin(x0) + m2 * lc2 * g * eq_sin(x0 + t2))
+    # Xin and Kaneda's energy law: V = ke (E - E0)^2 / 2 + kd x3^2 / 2 + kp t2^2 / 2
+    # falls as dV/dt = -kv x3^2 (while the motor is not saturated).
+    kd = p[SU_KD]
+    num = -(p[SU_KV] * x3 + p[SU_KP] * t2) * det + kd * (m11 * hg2 - m12 * hg1)
+    den = ke * e * det + kd * m11
+    if den == 0.0:
+        return 0.0
+    return num / den
+
+
+def su_xhat(z, y, p, i):
+    # The alpha-beta tracker's current estimate of state i (positions 0, 1; rates 2, 3).
+    if z[SU_Z_INIT] == 0.0:
+        if i < 2:
+            return y[i]
+        return 0.0
+    if i < 2:
+        return z[SU_Z_XHAT + i] + p[SU_ALPHA] * (y[i] - z[SU_Z_XHAT + i])
+    return z[SU_Z_XHAT + i] + p[SU_BETA] / p[SU_T] * (y[i - 2] - z[SU_Z_XHAT + i - 2])
+
+
+def su_ref(z, xi, p, i, balancing):
+    # The balance's reference of state i: held while balancing; a free
+    # coordinate is caught where it is.
+    if balancing:
+        return z[SU_Z_REF + i]
+    if p[SU_FREE + i] != 0.0:
+        return xi
+    return p[SU_X_OP + i]
+
+
+def su_dev(xi, ri, p, i):
+    d = xi - ri
+    if p[SU_WRAP + i] != 0.0:
+        d = su_wrap(d)
+    return d
+
+
+def su_level(d0, d1, d2, d3, p):
+    s = SU_S
+    v = 0.0
+    v += d0 * (p[s] * d0 + p[s + 1] * d1 + p[s + 2] * d2 + p[s + 3] * d3)
+    v += d1 * (p[s + 4] * d0 + p[s + 5] * d1 + p[s + 6] * d2 + p[s + 7] * d3)
+    v += d2 * (p[s + 8] * d0 + p[s + 9] * d1 + p[s + 10] * d2 + p[s + 11] * d3)
+    v += d3 * (p[s + 12] * d0 + p[s + 13] * d1 + p[s + 14] * d2 + p[s + 15] * d3)
+    return v
+
+
+def su_kest(z, y, p, i):
+    # The Kalman filter's estimate (deviation from the held reference) of state i
+    # while the LQG balances: current form kz + M (dy - C kz), predictor form kz.
+    kz = SU_Z_KZ
+    if p[SU_KFORM] != 0.0:
+        return z[kz + i]
+    m = SU_KF + 2 * i
+    e0 = su_dev(y[0], z[SU_Z_REF], p, 0) - z[kz]
+    e1 = su_dev(y[1], z[SU_Z_REF + 1], p, 1) - z[kz + 1]
+    return z[kz + i] + p[m] * e0 + p[m + 1] * e1
+
+
+def su_kpred(z, y, p, i, d0, d1, d2, d3, du, balancing):
+    # The filter's prediction of state i for the next sample from this sample's
+    # estimate d (at the hand-over: the tracker's), the predictor form's correction
+    # once it runs.
+    a = SU_AD + 4 * i
+    v = p[a] * d0 + p[a + 1] * d1 + p[a + 2] * d2 + p[a + 3] * d3 + p[SU_BD + i] * du
+    if balancing and p[SU_KFORM] != 0.0:
+        kz = SU_Z_KZ
+        m = SU_KF + 2 * i
+        e0 = su_dev(y[0], z[SU_Z_REF], p, 0) - z[kz]
+        e1 = su_dev(y[1], z[SU_Z_REF + 1], p, 1) - z[kz + 1]
+        v = v + p[m] * e0 + p[m + 1] * e1
+    return v
+
+
+def su_mode(z, v, p):
+    if z[SU_Z_MODE] == 1.0:
+        if v <= p[SU_C_OUT]:
+            return 1.0
+        return 0.0
+    if v < p[SU_C_IN]:
+        return 1.0
+    return 0.0
+
+
+def output(t, z, y, r, p, u_out):
+    x0 = su_xhat(z, y, p, 0)
+    x1 = su_xhat(z, y, p, 1)
+    x2 = su_xhat(z, y, p, 2)
+    x3 = su_xhat(z, y, p, 3)
+    bal = z[SU_Z_MODE] == 1.0
+    d0 = su_dev(x0, su_ref(z, x0, p, 0, bal), p, 0)
+    d1 = su_dev(x1, su_ref(z, x1, p, 1, bal), p, 1)
+    d2 = su_dev(x2, su_ref(z, x2, p, 2, bal), p, 2)
+    d3 = su_dev(x3, su_ref(z, x3, p, 3, bal), p, 3)
+    mode = su_mode(z, su_level(d0, d1, d2, d3, p), p)
+    if mode == 1.0 and bal and p[SU_LQG] != 0.0:
+        d0 = su_kest(z, y, p, 0)
+        d1 = su_kest(z, y, p, 1)
+        d2 = su_kest(z, y, p, 2)
+        d3 = su_kest(z, y, p, 3)
+    if mode == 1.0:
+        k = SU_K
+        raw = p[SU_U_OP] - (p[k] * d0 + p[k + 1] * d1 + p[k + 2] * d2 + p[k + 3] * d3)
+    else:
+        raw = su_pump(x0, x1, x2, x3, p)
+    u_out[0] = su_clip(raw, p[SU_U_MIN], p[SU_U_MAX])
+
+
+def update(t, z, y, r, u_applied, p, z_out):
+    x0 = su_xhat(z, y, p, 0)
+    x1 = su_xhat(z, y, p, 1)
+    x2 = su_xhat(z, y, p, 2)
+    x3 = su_xhat(z, y, p, 3)
+    bal = z[SU_Z_MODE] == 1.0
+    r0 = su_ref(z, x0, p, 0, bal)
+    r1 = su_ref(z, x1, p, 1, bal)
+    r2 = su_ref(z, x2, p, 2, bal)
+    r3 = su_ref(z, x3, p, 3, bal)
+    d0 = su_dev(x0, r0, p, 0)
+    d1 = su_dev(x1, r1, p, 1)
+    d2 = su_dev(x2, r2, p, 2)
+    d3 = su_dev(x3, r3, p, 3)
+    lqg = p[SU_LQG] != 0.0
+    mode = su_mode(z, su_level(d0, d1, d2, d3, p), p)
+    if mode == 1.0 and bal and lqg:
+        d0 = su_kest(z, y, p, 0)
+        d1 = su_kest(z, y, p, 1)
+        d2 = su_kest(z, y, p, 2)
+        d3 = su_kest(z, y, p, 3)
+    du = u_applied[0] - p[SU_U_OP]
+    for i in range(4):
+        if lqg and mode == 1.0:
+            z_out[SU_Z_KZ + i] = su_kpred(z, y, p, i, d0, d1, d2, d3, du, bal)
+        else:
+            z_out[SU_Z_KZ + i] = 0.0
+    z_out[SU_Z_INIT] = 1.0
+    z_out[SU_Z_MODE] = mode
+    z_out[SU_Z_REF] = r0
+    z_out[SU_Z_REF + 1] = r1
+    z_out[SU_Z_REF + 2] = r2
+    z_out[SU_Z_REF + 3] = r3
+    z_out[SU_Z_XHAT] = x0 + p[SU_T] * x2
+    z_out[SU_Z_XHAT + 1] = x1 + p[SU_T] * x3
+    z_out[SU_Z_XHAT + 2] = x2
+    z_out[SU_Z_XHAT + 3] = x3
+
+
+def estimate(t, z, y, r, p, x_out):
+    if z[SU_Z_MODE] == 1.0 and p[SU_LQG] != 0.0:
+        for i in range(4):
+            x_out[i] = z[SU_Z_REF + i] + su_kest(z, y, p, i)
+        return
+    x_out[0] = su_xhat(z, y, p, 0)
+    x_out[1] = su_xhat(z, y, p, 1)
+    x_out[2] = su_xhat(z, y, p, 2)
+    x_out[3] = su_xhat(z, y, p, 3)
+"""
+
+
+def controller_source() -> str:
+    """:data:`LAW_SOURCE` with the layout's constants in front."""
+    head = "\n".join(f"{k} = {v}" for k, v in layout_constants().items())
+    return head + "\n" + LAW_SOURCE
+
+
+def python_namespace(*, compiled: bool = False) -> Any:
+    """The source's functions, as plain Python (or compiled to C, as the simulation core
+    runs them, when *compiled*: then only ``output``, ``update`` and ``estimate``)."""
+    if compiled:
+        from equilibrist.native.ctrl import controller_functions
+
+        return controller_functions(controller_source(), ("output", "update", "estimate"))
+    key = "python"
+    if key not in _NAMESPACES:
+        from equilibrist.control.controller import contract_namespace
+
+        ns = contract_namespace()
+        exec(compile(controller_source(), "<equilibrist swing-up>", "exec"), ns)
+        _NAMESPACES[key] = ns
+    return _NAMESPACES[key]
+
+
+_NAMESPACES: dict[str, dict[str, Any]] = {}
+
+
+def energy(x: np.ndarray, cp: np.ndarray) -> float:
+    """The energy the law pumps (pendulum's from upright; acrobot: total from upright) at state *x*."""
+    x = np.asarray(x, dtype=float)
+    return float(python_namespace()["su_energy"](x[0], x[1], x[2], x[3], cp))
