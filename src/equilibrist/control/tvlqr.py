@@ -26,6 +26,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from equilibrist.control import fixed
 from equilibrist.control.controller import (
     ControllerError,
     NonlinearController,
@@ -110,10 +111,11 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     for k in range(steps - 1, -1, -1):
         A, B = system.jacobians(xs[k], us[k])
         Ad, Bd = discrete_matrices(A, B, dt)
-        G = R + Bd.T @ S @ Bd
-        Kk = np.linalg.solve(G, Bd.T @ S @ Ad)
-        S = Q + Ad.T @ S @ (Ad - Bd @ Kk)
-        S = 0.5 * (S + S.T)
+        # In the fixed order of control.fixed, as every sampled design: the same bits on
+        # every CPU (numpy's @ and LAPACK follow the BLAS kernel the CPU selects).
+        G = R + fixed.mm(Bd.T, S, Bd)
+        Kk = fixed.solve(G, fixed.mm(Bd.T, S, Ad))
+        S = fixed.symmetric(Q + fixed.mm(Ad.T, S, Ad - fixed.matmul(Bd, Kk)))
         gains[k] = Kk
     if not np.all(np.isfinite(gains)):
         raise ControllerError("the time-varying LQR's Riccati recursion did not stay finite along "
