@@ -99,6 +99,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from equilibrist.control import fixed
+
 # The module was split in two; every name stays importable from here. The names marked
 # F401 are not used here: imported so that they stay importable from this module.
 from equilibrist.control._swingup_law import (
@@ -258,9 +260,13 @@ def _physics(system: System, law: str) -> list[float]:
 
 def catch_level(K: np.ndarray, S: np.ndarray, u_room: np.ndarray) -> float:
     """The largest ``c`` with ``|K dx|_j <= u_room_j`` on the whole ellipse ``dx' S dx <= c``."""
-    Sinv = np.linalg.inv(S)
-    spread = np.einsum("ij,jk,ik->i", K, Sinv, K)
-    return float(np.min(u_room**2 / spread))
+    # In control.fixed's order (the level is a parameter of the controller: the same bits on
+    # every CPU, as the design it comes from).
+    Kt = np.asarray(K, dtype=float)
+    X = fixed.solve(np.asarray(S, dtype=float), Kt.T)  # S^-1 K'
+    spread = np.array([float(fixed.matmul(Kt[j:j + 1], X[:, j:j + 1])[0, 0])
+                       for j in range(Kt.shape[0])])
+    return float(np.min(np.asarray(u_room, dtype=float) ** 2 / spread))
 
 
 def swingup(
