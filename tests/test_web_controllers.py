@@ -13,6 +13,7 @@ import zipfile
 
 import numpy as np
 import pytest
+from tests.support import cc_cache
 from tests.support.web import LocalClient, opening, receive_until
 
 from equilibrist.web.app import create_app
@@ -194,7 +195,7 @@ def test_mpc_holds_a_push_within_its_limits(client):
         assert 0 < solve["median_ms"] <= solve["worst_ms"] and solve["samples"] > 0
 
 
-def test_downloads_of_the_swingup_and_the_mpc(client, tmp_path):
+def test_downloads_of_the_swingup_and_the_mpc(client, tmp_path, tmp_path_factory):
     with client.websocket_connect("/ws") as ws:
         token = opening(ws)["system"]["token"]
         ws.send_text(json.dumps({"type": "tune", "controller": "swingup"}))
@@ -219,9 +220,11 @@ def test_downloads_of_the_swingup_and_the_mpc(client, tmp_path):
         names = zipfile.ZipFile(io.BytesIO(got.content)).namelist()
         assert "cartpole_mpc/mpc.c" in names and any(n.startswith("cartpole_mpc/daqp/src/") for n in names)
         zipfile.ZipFile(io.BytesIO(got.content)).extractall(tmp_path)
-        # DAQP's sources and the driver, compiled, replay the Python MPC's recorded commands.
+        # DAQP's sources and the driver, compiled, replay the Python MPC's recorded commands
+        # (DAQP's unchanged sources compile once a run: support.cc_cache).
         done = subprocess.run([make, "-s", "-C", str(tmp_path / "cartpole_mpc"), "check"], check=False,
-                              capture_output=True, text=True, timeout=300)
+                              capture_output=True, text=True, timeout=300,
+                              env=cc_cache.environment(cc_cache.folder(tmp_path_factory)))
         assert done.returncode == 0, done.stdout + done.stderr
 
 
