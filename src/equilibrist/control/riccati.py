@@ -96,8 +96,6 @@ def _solve(
 
     For the estimator, the caller passes the dual ``(A', C', G QN G', RN)``.
     """
-    import scipy.linalg  # here: a design needs it, a command that runs one does not
-
     Am = _checks.square(A, "A")
     n = Am.shape[0]
     bname, qname, rname = ("C'", "G QN G'", "RN") if estimator else ("B", "Q", "R")
@@ -155,6 +153,8 @@ def _solve(
         if discrete:
             S = fixed.dare(Am, Bm, Qm, Rm)
         else:
+            import scipy.linalg  # here: only a continuous design needs it
+
             S = scipy.linalg.solve_continuous_are(Am, Bm, Qm, Rm)
     except (np.linalg.LinAlgError, ValueError) as exc:
         kind = "Kalman" if estimator else "LQR"
