@@ -20,27 +20,67 @@ cached on disk by content (:mod:`equilibrist.sim.kernel`, :mod:`equilibrist.nati
 Importing this package does no work; a core is built or loaded on first use.
 """
 
-from equilibrist.control.controller import (
-    LinearController,
-    NonlinearController,
-    PythonController,
-    PythonControllerBase,
-)
-from equilibrist.sim.batch import (
-    BatchResult,
-    MonteCarloResult,
-    RegionOfAttraction,
-    monte_carlo,
-    region_of_attraction,
-    simulate_batch,
-)
-from equilibrist.sim.controllers import LQG, Controller, OpenLoop, StateFeedback
-from equilibrist.sim.events import Impulse, Kick, ParameterChange, Pulse
-from equilibrist.sim.noise import Noise
-from equilibrist.sim.result import SimResult
-from equilibrist.sim.run import simulate
-from equilibrist.sim.signals import Constant, Ramp, Samples, Square, Step
-from equilibrist.sim.stepper import Stepper
+from typing import TYPE_CHECKING
+
+from equilibrist._lazy import exports
+
+# Each name from its module on first use (PEP 562): a command that runs one simulation
+# does not import the batch machinery (worker pools, result files) it does not need.
+_WHERE = {
+    "LinearController": "equilibrist.control.controller",
+    "NonlinearController": "equilibrist.control.controller",
+    "PythonController": "equilibrist.control.controller",
+    "PythonControllerBase": "equilibrist.control.controller",
+    "BatchResult": "equilibrist.sim.batch",
+    "MonteCarloResult": "equilibrist.sim.batch",
+    "RegionOfAttraction": "equilibrist.sim.batch",
+    "monte_carlo": "equilibrist.sim.batch",
+    "region_of_attraction": "equilibrist.sim.batch",
+    "simulate_batch": "equilibrist.sim.batch",
+    "LQG": "equilibrist.sim.controllers",
+    "Controller": "equilibrist.sim.controllers",
+    "OpenLoop": "equilibrist.sim.controllers",
+    "StateFeedback": "equilibrist.sim.controllers",
+    "Impulse": "equilibrist.sim.events",
+    "Kick": "equilibrist.sim.events",
+    "ParameterChange": "equilibrist.sim.events",
+    "Pulse": "equilibrist.sim.events",
+    "Noise": "equilibrist.sim.noise",
+    "SimResult": "equilibrist.sim.result",
+    "simulate": "equilibrist.sim.run",
+    "Constant": "equilibrist.sim.signals",
+    "Ramp": "equilibrist.sim.signals",
+    "Samples": "equilibrist.sim.signals",
+    "Square": "equilibrist.sim.signals",
+    "Step": "equilibrist.sim.signals",
+    "Stepper": "equilibrist.sim.stepper",
+}
+
+if TYPE_CHECKING:
+    from equilibrist.control.controller import (
+        LinearController,
+        NonlinearController,
+        PythonController,
+        PythonControllerBase,
+    )
+    from equilibrist.sim.batch import (
+        BatchResult,
+        MonteCarloResult,
+        RegionOfAttraction,
+        monte_carlo,
+        region_of_attraction,
+        simulate_batch,
+    )
+    from equilibrist.sim.controllers import LQG, Controller, OpenLoop, StateFeedback
+    from equilibrist.sim.events import Impulse, Kick, ParameterChange, Pulse
+    from equilibrist.sim.noise import Noise
+    from equilibrist.sim.result import SimResult
+    from equilibrist.sim.run import simulate
+    from equilibrist.sim.signals import Constant, Ramp, Samples, Square, Step
+    from equilibrist.sim.stepper import Stepper
+
+
+__getattr__ = exports(__name__, _WHERE, globals())
 
 __all__ = [
     "LQG",
