@@ -320,6 +320,13 @@ def register(kind: ControllerKind) -> ControllerKind:
     return kind
 
 
+def unregister(name: str) -> None:
+    """Remove the kind *name* added by :func:`register` in this process (a script's or a
+    test's own; the modules' and entry points' kinds stay)."""
+    _load()
+    _KINDS.pop(name, None)
+
+
 def all_kinds(surface: str | None = None) -> tuple[ControllerKind, ...]:
     """The kinds in their order (those offered on *surface* when given)."""
     _load()
@@ -363,4 +370,4 @@ def build(name: str, request: ControllerRequest) -> Any:
 
 __all__ = ["ENTRY_POINTS", "PACKAGE", "SURFACES", "ControllerKind", "ControllerRequest",
            "KindError", "Option", "all_kinds", "build", "get", "linear_builder", "names",
-           "options", "owners", "register", "registered_exporter"]
+           "options", "owners", "register", "registered_exporter", "unregister"]
