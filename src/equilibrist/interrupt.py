@@ -42,3 +42,29 @@ def clear() -> None:
 
 
 __all__ = ["clear", "raise_if_requested", "request", "requested"]
+
+
+#: multiprocessing's resource tracker reports, when the command ends, the semaphores of a
+#: process pool whose workers an interrupt stopped at once: it removes them itself, and its
+#: message would follow "equilibrist: interrupted" on the terminal.
+_TRACKER_QUIET = "ignore::UserWarning:multiprocessing.resource_tracker"
+
+
+def quiet_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker without its leaked-resource warnings (call
+    it before making a process pool). The tracker is a separate interpreter, started once
+    per process; it reads ``PYTHONWARNINGS``, which is set only for that start."""
+    import os
+    from multiprocessing import resource_tracker
+
+    if getattr(resource_tracker._resource_tracker, "_pid", None) is not None:
+        return  # already running
+    before = os.environ.get("PYTHONWARNINGS")
+    os.environ["PYTHONWARNINGS"] = _TRACKER_QUIET if not before else f"{before},{_TRACKER_QUIET}"
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        if before is None:
+            os.environ.pop("PYTHONWARNINGS", None)
+        else:
+            os.environ["PYTHONWARNINGS"] = before

@@ -35,7 +35,10 @@ def _python_batch(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
     else:
         payload = _portable(setup)
         chunks = np.array_split(np.arange(runs), count)
+        from equilibrist.interrupt import quiet_resource_tracker
+
         ctx = multiprocessing.get_context("spawn")
+        quiet_resource_tracker()  # an interrupt terminates the pool: no leak report after
         pool = ctx.Pool(count)
         try:
             pending = [pool.apply_async(_python_worker, (payload, x0s[c], pmat[c],

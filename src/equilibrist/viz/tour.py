@@ -214,7 +214,10 @@ def _tour_into(
 
             # Fresh interpreters (not forks): the core's OpenMP threads and
             # matplotlib's state are not safe to fork.
+            from equilibrist.interrupt import quiet_resource_tracker
+
             context = multiprocessing.get_context("spawn")
+            quiet_resource_tracker()  # Ctrl-C stops the workers at once: no leak report after
             pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context)
             try:
                 futures = {
