@@ -29,8 +29,6 @@ shows; swingup and mpc are designed by their own modules when installed; a
 controller that does not apply to the system is refused in one line.
 """
 
-# The project's own kinds (the choices come from equilibrist.control.kinds, which may have more).
-CONTROLLERS = ("lqr", "lqg", "swingup", "mpc", "none")
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

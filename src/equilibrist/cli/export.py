@@ -15,8 +15,6 @@ if TYPE_CHECKING:
     from equilibrist.export.writer import ExportReport
     from equilibrist.numeric.system import System
 
-# The project's own kinds (the choices come from equilibrist.control.kinds, which may have more).
-CONTROLLERS = ("lqg", "lqr", "swingup", "mpc", "none")
 PRECISIONS = ("double", "float")
 
 _EPILOG = """\

@@ -22,8 +22,6 @@ if TYPE_CHECKING:
     from equilibrist.sim.events import Event
     from equilibrist.sim.signals import PRBS, Chirp
 
-# The project's own kinds (the choices come from equilibrist.control.kinds, which may have more).
-CONTROLLERS = ("lqr", "lqg", "swingup", "mpc", "tvlqr", "none")
 
 _EPILOG = """\
 The run: the nonlinear plant integrated with RK4 (or --integrator adaptive)

@@ -146,9 +146,6 @@ def as_python_controller(obj: object) -> PythonController:
 
 
 # -- the registry of controller kinds lives in equilibrist.control.kinds ---------------------
-#: The project's own kinds, in the command line's order (the registry lists every kind:
-#: :func:`equilibrist.control.kinds.names`).
-CONTROLLER_KINDS = ("lqr", "lqg", "swingup", "mpc", "tvlqr", "none")
 
 
 def __getattr__(name: str) -> Any:
@@ -202,7 +199,6 @@ def build_controller(name: str, request: Any) -> LinearController | NonlinearCon
 
 __all__ = [
     "CONTRACT_TYPES",
-    "CONTROLLER_KINDS",
     "LINEAR_BLOCKS",
     "LINEAR_HEADER",
     "LINEAR_SOURCE",

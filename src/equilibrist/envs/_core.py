@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from equilibrist.control import fixed
 from equilibrist.control._checks import given_text, real_array
 from equilibrist.errors import EquilibristError, UnknownNameError, nearest
 from equilibrist.native.simcore import load_core
@@ -317,8 +318,6 @@ def build_core(
         # The rig's own noise, as simulate draws it: process noise held over
         # each physics step with covariance QN / h, sensor noise per sample.
         spec_noise = Noise.from_spec(sysm, outputs=outputs, rate=run_rate)
-        from equilibrist.control import fixed
-
         lw = fixed.matmul(spec_noise.process_gain, spec_noise.process_root) / math.sqrt(h)
         lw = lw[:, np.any(lw != 0.0, axis=0)]
         lv = square_root(spec_noise.measurement_covariance, "the measurement noise covariance")

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from equilibrist.control import fixed
 from equilibrist.control.controller import LinearController, NonlinearController, PythonController
 from equilibrist.errors import EquilibristError, SimulationError
 from equilibrist.numeric.system import System
@@ -409,8 +410,6 @@ def noise_roots(noise: Noise | None, n: int, h: float | None, outs: tuple[str, .
             try:
                 sq = noise.process_root
                 if h is not None:
-                    from equilibrist.control import fixed
-
                     lw = fixed.matmul(noise.process_gain, sq) / math.sqrt(h)
                     # Channels without noise (zero columns) cost deviates for nothing.
                     lw = lw[:, np.any(lw != 0.0, axis=0)]

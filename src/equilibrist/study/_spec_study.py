@@ -17,8 +17,6 @@ import numpy as np
 from equilibrist.errors import EquilibristError
 
 FORMAT = "equilibrist-study-1"
-#: The project's own kinds a study takes (the registry may offer more: :func:`controllers`).
-CONTROLLERS = ("lqr", "lqg", "swingup", "mpc")
 
 
 def _does_not_apply(kind: str, system: Any) -> str | None:

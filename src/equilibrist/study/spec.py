@@ -48,7 +48,6 @@ from equilibrist.errors import nearest
 from equilibrist.study._spec_axes import _axis, _number, _ranges, _whole
 from equilibrist.study._spec_study import (
     BATCH_CELLS,
-    CONTROLLERS,
     DESIGN_FOR,
     FORMAT,
     MAX_POINTS,
@@ -320,7 +319,6 @@ def _named_system(study_file: Path, recorded: str, named: str | None) -> str:
 
 __all__ = [
     "BATCH_CELLS",
-    "CONTROLLERS",
     "DESIGN_FOR",
     "FORMAT",
     "MAX_POINTS",

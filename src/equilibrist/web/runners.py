@@ -59,9 +59,6 @@ def runner_kinds() -> tuple[str, ...]:
 
     return tuple(k.name for k in kinds.all_kinds("playground") if not (k.linear or k.open_loop))
 
-
-#: :func:`runner_kinds` when the server started.
-KINDS = runner_kinds()
 #: Solve times kept for the page's median and worst (samples).
 SOLVE_WINDOW = 400
 _EMPTY = np.zeros(0)
@@ -270,7 +267,6 @@ def export_folder(runner: Runner, system: System, folder: str) -> Mapping[str, s
 
 
 __all__ = [
-    "KINDS",
     "MPCRunner",
     "NonlinearRunner",
     "Runner",

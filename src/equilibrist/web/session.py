@@ -57,6 +57,7 @@ import numpy as np
 
 # The module was split in four; every name stays importable from here. The names marked
 # F401 are not used here: imported so that they stay importable from this module.
+from equilibrist.control import fixed
 from equilibrist.web._session_design import (
     NOISE_FLOOR,  # noqa: F401
     Catalogue,
@@ -489,8 +490,6 @@ class Session(_SessionOutput):
 
         system, loop = self.system, self.loop
         noise = Noise.from_spec(system, outputs=loop.outputs, rate=self.settings.rate)
-        from equilibrist.control import fixed
-
         lw = fixed.matmul(noise.process_gain, noise.process_root) / math.sqrt(self.h)
         lw = lw[:, np.any(lw != 0.0, axis=0)]
         lv = np.zeros((0, 0))
