@@ -15,14 +15,22 @@ if TYPE_CHECKING:
     from equilibrist.export.writer import ExportReport
     from equilibrist.numeric.system import System
 
-PRECISIONS = ("double", "float")
+PRECISIONS = ("double", "float", "float64", "float32")
+#: Other names of the precisions: float32 is float, float64 is double.
+PRECISION_NAMES = {"float32": "float", "float64": "double"}
 
 _EPILOG = """\
 Writes into --out (default ./<system>_<controller>): <name>.h and <name>.c
 (the library), example_desktop.c, example_arduino/ (a sketch), test vectors
 <name>_vectors.h with the test program test_<name>.c, a Makefile ('make'
 builds everything with -std=c99 -Wall -Wextra -Werror -pedantic, 'make
-check' runs the test program) and README.txt.
+check' runs the test program, 'make size' prints the library's code, static
+data and stack in bytes) and README.txt (with those figures as measured at
+export, also in --json as "footprint").
+
+--precision float (float32) is single-precision arithmetic: the LQR/LQG
+library and the MPC (DAQP built with -DDAQP_SINGLE_PRECISION, 'make check'
+within 1e-4 of the input range of the double controller's commands).
 
 The test vectors are a recorded closed-loop run of the simulation's own
 controller on the nonlinear plant, with noise (--duration seconds, --seed).
@@ -50,7 +58,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--rate", metavar="HZ", default=None,
                    help="sample rate [Hz] (default: the system's control rate)")
     p.add_argument("--precision", choices=PRECISIONS, default="double",
-                   help="arithmetic of the C code (default double)")
+                   help="arithmetic of the C code: double (float64) or float (float32); "
+                        "default double")
     p.add_argument("--force", action="store_true",
                    help="write into a folder that holds files equilibrist did not write, "
                         "replacing those of the export's names")
@@ -123,7 +132,8 @@ def _export(args: argparse.Namespace, out: Path, rate: float | None, duration: f
         system=system, rate=rate, design_options=common.design_options(args),
         options=common.controller_options(args, args.controller, "export"))
     done = kinds.get(args.controller, "export").write_export(
-        request, out, precision=args.precision, duration=duration, seed=args.seed,
+        request, out, precision=PRECISION_NAMES.get(args.precision, args.precision),
+        duration=duration, seed=args.seed,
         force=args.force)
     return _report(args, done, system, start)
 
@@ -154,6 +164,7 @@ def _report(args: argparse.Namespace, done: ExportReport, system: System,
             "files": dict(done.files),
             "vector_steps": done.vectors.n_steps,
             "vector_start": used,
+            **_budget(done),
         })
         return 0
     print(f"{done.name}: {done.data.controller.upper()} controller of {system.key} at "
@@ -162,7 +173,29 @@ def _report(args: argparse.Namespace, done: ExportReport, system: System,
     width = max(len(f) for f in done.files)
     for fname, what in done.files.items():
         print(f"  {fname:<{width}}  {what}")
+    footprint = getattr(done, "footprint", None)
+    if footprint is not None:
+        print(f"make size: code {footprint.code} bytes, data {footprint.data} bytes, "
+              f"stack {footprint.stack} bytes")
+    iterations = getattr(done, "iterations", None)
+    if iterations:
+        print(f"DAQP's iterations, worst: {iterations['recorded_run']} over the recorded run, "
+              f"{iterations['sampled_states']} over {iterations['samples']} sampled states")
     if used:
         print("test vectors recorded from " + ", ".join(f"{k} = {v:.6g}" for k, v in used.items()))
     print(f"build and check it: make -C {done.folder} check")
     return 0
+
+
+def _budget(done: ExportReport) -> dict[str, object]:
+    """The footprint ``make size`` printed at export (``null`` and ``footprint_note`` when it
+    was not measured) and, for the MPC, DAQP's worst iteration counts."""
+    footprint = getattr(done, "footprint", None)
+    out: dict[str, object] = {
+        "footprint": None if footprint is None else footprint.as_dict(),
+        "footprint_note": str(getattr(done, "size_note", "")),
+    }
+    iterations = getattr(done, "iterations", None)
+    if iterations:
+        out["daqp_iterations"] = dict(iterations)
+    return out

@@ -3,9 +3,10 @@ replays them, the desktop and Arduino examples, the Makefile and the README."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 from equilibrist.export._c_text import Vectors, _matrix, _names, _unit, _vector, literal
+from equilibrist.export._size import BUILD, size_rules
 from equilibrist.export.data import ControllerData
 
 
@@ -330,7 +331,8 @@ def arduino_sketch(data: ControllerData, *, precision: str = "double") -> str:
 
 # -- build ------------------------------------------------------------------------------
 def makefile(data: ControllerData) -> str:
-    """The export's Makefile: ``make`` builds everything, ``make check`` runs the test program."""
+    """The export's Makefile: ``make`` builds everything, ``make check`` runs the test program,
+    ``make size`` prints the library's footprint (:func:`equilibrist.export._size.size_rules`)."""
     name = data.name
     return "\n".join([
         f"# Makefile of {name}: 'make' builds the library, the desktop example and the test",
@@ -366,13 +368,16 @@ def makefile(data: ControllerData) -> str:
         "",
         "clean:",
         "\trm -f $(NAME).o lib$(NAME).a example_desktop test_$(NAME)",
+        f"\trm -rf {BUILD}",
         "",
-    ])
+    ]) + size_rules(sources="$(NAME).c", entry=(f"{name}_step", f"{name}_estimate"),
+                    cflags="$(STRICT) $(CFLAGS)")
 
 
 def readme(data: ControllerData, *, precision: str, version: str,
-           files: Mapping[str, str]) -> str:
-    """A short README.txt listing the files of the export."""
+           files: Mapping[str, str], footprint: Sequence[str] = ()) -> str:
+    """A short README.txt listing the files of the export, then the *footprint*'s lines
+    (:func:`equilibrist.export._size.readme_lines`)."""
     lines = [
         f"{data.name}: the digital {data.controller.upper()} controller of {data.system}, "
         f"{data.rate:.10g} Hz, {precision} precision.",
@@ -380,6 +385,7 @@ def readme(data: ControllerData, *, precision: str, version: str,
         "",
         "  make          build the library, the desktop example and the test program",
         "  make check    run the test program (exit status 0 when the C code matches)",
+        "  make size     the library's code, static data and stack [bytes]",
         "",
     ]
     width = max(len(f) for f in files)
@@ -389,5 +395,6 @@ def readme(data: ControllerData, *, precision: str, version: str,
         "",
         f"Units, order of the arrays, operating point and design: see {data.name}.h.",
         "",
+        *footprint,
     ]
     return "\n".join(lines)

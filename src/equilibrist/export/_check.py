@@ -12,7 +12,9 @@
     library's header and the vectors included.
 ``Makefile``
     ``make check`` builds the test program from it and the library's
-    sources and runs it; ``make clean``.
+    sources and runs it; ``make size`` prints the library's code, static
+    data and stack (:func:`equilibrist.export._size.size_rules`, the rule
+    every export's Makefile shares); ``make clean``.
 
 :class:`ControllerExport` is what those exports return (the fields the
 command line reports). Used by the swing-up's and the MPC's exports (:mod:`equilibrist.export.swingup_c`,
@@ -24,8 +26,12 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from equilibrist.export._size import Footprint
 
 
 def c_rows(values: np.ndarray) -> str:
@@ -61,6 +67,7 @@ def check_files(
     cflags: str = "-std=c99 -O2 -ffp-contract=off",
     include: Sequence[str] = (),
     defines: Mapping[str, object] | None = None,
+    entry: Sequence[str] | None = None,
 ) -> dict[str, str]:
     """``<name>_vectors.h``, ``test_<name>.c`` and a ``Makefile`` whose ``make check`` runs them.
 
@@ -86,7 +93,12 @@ def check_files(
         Include folders (``-I``) beyond the export's own.
     defines:
         ``#define`` in the vectors' header (tolerances).
+    entry:
+        The library's step functions, where ``make size`` starts the stack's chain
+        (default ``<name>_output`` and ``<name>_update``).
     """
+    from equilibrist.export._size import BUILD, size_rules
+
     prog = (
         f"/* test_{name}.c: {what} */\n"
         "#include <math.h>\n#include <stdio.h>\n"
@@ -100,8 +112,9 @@ def check_files(
         f"test_{name}: test_{name}.c $(SRC) {name}.h {name}_vectors.h\n"
         f"\t$(CC) $(CFLAGS) $(INC) -o $@ test_{name}.c $(SRC) -lm\n\n"
         f"check: test_{name}\n\t./test_{name}\n\n"
-        f"clean:\n\trm -f test_{name}\n\n.PHONY: check clean\n"
-    )
+        f"clean:\n\trm -f test_{name}\n\trm -rf {BUILD}\n\n.PHONY: check clean\n"
+    ) + size_rules(sources="$(SRC)", include="$(INC)",
+                   entry=entry or (f"{name}_output", f"{name}_update"))
     return {
         f"{name}_vectors.h": vectors_header(arrays, comment=comment, defines=defines),
         f"test_{name}.c": prog,
@@ -138,3 +151,8 @@ class ControllerExport:
     precision: str
     data: Described
     vectors: Steps
+    #: What ``make size`` printed at export (None: not measured, see :attr:`size_note`).
+    footprint: Footprint | None = None
+    size_note: str = ""
+    #: DAQP's worst iteration counts (the MPC's export only).
+    iterations: Mapping[str, int] | None = None

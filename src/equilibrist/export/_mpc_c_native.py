@@ -36,12 +36,16 @@ int main(void) {{
 """
 
 
-def footprint(folder: str | Path, *, name: str = "mpc", n: int = 4, m: int = 1) -> dict[str, int]:
+def footprint(folder: str | Path, *, name: str = "mpc", n: int = 4, m: int = 1,
+              precision: str = "double") -> dict[str, int]:
     """Bytes of the library alone (DAQP's sources and the driver; without the test and its
     vectors): code (``text``), initialized and zeroed static data (``data``, ``bss``), measured
     with the C compiler and ``size`` on the object files, and ``heap``: what
     ``<name>_setup`` allocates (DAQP's workspace), counted by a program linked with
-    ``malloc`` and ``calloc`` wrapped. *n*, *m*: the controller's states and inputs."""
+    ``malloc`` and ``calloc`` wrapped (none since DAQP's workspace is static). *n*, *m*: the
+    controller's states and inputs; *precision* the library's (``"float"``: DAQP in single
+    precision). ``make size`` (:mod:`equilibrist.export._size`) prints the same code and data
+    and the stack."""
     import subprocess
     import tempfile
 
@@ -51,10 +55,12 @@ def footprint(folder: str | Path, *, name: str = "mpc", n: int = 4, m: int = 1) 
     files = [*_daqp_c_files(src), src / f"{name}.c"]
     inc = [f"-I{src / 'daqp' / 'include'}", f"-I{src}"]
     total = {"text": 0, "data": 0, "bss": 0}
+    flags = ["-O2", "-std=c99", "-ffp-contract=off",
+             *(["-DDAQP_SINGLE_PRECISION"] if precision == "float" else [])]
     with tempfile.TemporaryDirectory() as tmp:
         for i, f in enumerate(files):
             obj = Path(tmp) / f"{i}.o"
-            subprocess.run([*compiler(), "-O2", "-std=c99", "-ffp-contract=off", *inc, "-c", str(f),
+            subprocess.run([*compiler(), *flags, *inc, "-c", str(f),
                             "-o", str(obj)],
                            check=True, capture_output=True)
             out = subprocess.run(["size", str(obj)], check=True, capture_output=True, text=True)
@@ -65,7 +71,7 @@ def footprint(folder: str | Path, *, name: str = "mpc", n: int = 4, m: int = 1) 
         prog = Path(tmp) / "heap.c"
         prog.write_text(_HEAP_PROGRAM.format(name=name, n=n, m=m))
         exe = Path(tmp) / "heap"
-        subprocess.run([*compiler(), "-O2", "-std=c99", "-ffp-contract=off", *inc, str(prog),
+        subprocess.run([*compiler(), *flags, *inc, str(prog),
                         *map(str, files),
                         "-Wl,--wrap=malloc,--wrap=calloc", "-o", str(exe), "-lm"],
                        check=True, capture_output=True)

@@ -7,15 +7,19 @@
     same release (0.11.0) as the ``daqp`` Python package that solves the
     simulated controller's QP, shipped with equilibrist.
 ``<name>.h``, ``<name>.c``
-    The QP's data as constants (the condensed Hessian, linear cost and
-    constraint rows of :attr:`~equilibrist.control.mpc.MPCProblem.condensed`,
-    the LQR's predictions ``Fu``, ``Fs``, the gain, the limits) and::
+    The QP of :attr:`~equilibrist.control.mpc.MPCProblem.condensed` as
+    DAQP's least-distance problem, formed here
+    (:func:`~equilibrist.export._mpc_c_library.ldp_form`: the constraint
+    rows times the Hessian's inverse factor, scaled to unit length, their
+    offsets, the map back to the first move) as constants, the LQR's
+    predictions ``Fu``, ``Fs``, the gain, the limits, and::
 
         int <name>_setup(void);
         int <name>_step(const double x[n], double u[m]);
+        int <name>_iterations(void);
 
-    ``<name>_setup`` sets DAQP's workspace up (once: it factorizes the
-    Hessian and allocates the workspace with ``malloc``; afterwards it only
+    ``<name>_setup`` sets DAQP's workspace up (once, in static arrays: no
+    ``malloc``, the rows stay constants in flash; afterwards it only
     empties the working set) and returns 0, or DAQP's negative setup flag.
     ``<name>_step`` (which calls ``<name>_setup`` itself the first time) is
     the MPC at the full state ``x``, computed as the simulated controller
@@ -25,6 +29,11 @@
     sample's working set (returns DAQP's exit flag: 1 or 2 solved; a
     negative flag means no solution, and the clipped LQR's move is applied
     and the working set emptied). ``u = u_op + clip(-K dx + v_0)``.
+    ``<name>_iterations`` is DAQP's iteration count of the last step.
+    With ``precision="float"`` the arithmetic is single precision (``c_float``
+    is ``float``: every source compiled with ``-DDAQP_SINGLE_PRECISION``,
+    DAQP's tolerances :data:`~equilibrist.export._mpc_c_library.FLOAT_SETTINGS`);
+    the arguments stay ``double``.
 
     With the Kalman filter in front (``estimator="kalman"``, the default
     when the measured outputs are not the full state) also::
@@ -47,12 +56,17 @@
     within ``tolerance`` of the simulated controller's (the same QP, solved
     by the same DAQP through its Python interface) and the filter's state
     after each update equal to the Python filter's to round-off
-    (``Z_TOLERANCE`` relative).
+    (``Z_TOLERANCE`` relative); in single precision within
+    :func:`command_tolerance` (:data:`FLOAT_TOLERANCE` of the widest input
+    range) and ``Z_TOLERANCE_FLOAT``. ``make size`` prints the library's
+    code, static data and stack (:mod:`equilibrist.export._size`).
 
 Math functions: the driver calls none; DAQP calls ``sqrt``, ``fabs`` and
 ``fmax`` from the C library's ``libm`` (linked with ``-lm``).
 Memory: :func:`footprint` measures the code and static data with ``size``
-and the heap that ``<name>_setup`` allocates by wrapping ``malloc``.
+and the heap that ``<name>_setup`` allocates by wrapping ``malloc`` (none).
+The cart-pole at 200 Hz, ``N = 30``, fits a Cortex-M4's 64 kB of RAM and
+256 kB of flash in double and in single precision (docs/export.md).
 """
 
 from __future__ import annotations
@@ -126,7 +140,8 @@ def record(ctrl: MPC, *, x0: Mapping[str, float] | None = None, duration: float 
     """Recorded vectors: a closed-loop run of the simulated MPC with the design's sensor noise.
 
     ``y`` (measurements), ``u_applied``, and a fresh simulated controller's
-    commands ``u`` and filter states ``z`` (after each update) on them.
+    commands ``u``, filter states ``z`` (after each update) and DAQP's
+    ``iterations`` (0 where the LQR's move was exact) on them.
     """
     from equilibrist.control.mpc import MPCRuntime
     from equilibrist.numeric.system import system_from_key
@@ -140,19 +155,27 @@ def record(ctrl: MPC, *, x0: Mapping[str, float] | None = None, duration: float 
                    region={}, noise=Noise.from_design(design), seed=seed)
     ys, applied = np.array(run.measurements), np.array(run.applied)
     ref = MPCRuntime(ctrl)
-    us, zs = [], []
+    us, zs, its = [], [], []
     no_r = np.zeros(0)
     for k, (y, ua) in enumerate(zip(ys, applied, strict=True)):
         us.append(ref.output(k / ctrl.rate, y, no_r))
+        its.append(ref.last_iterations)
         ref.update(k / ctrl.rate, y, no_r, ua)
         zs.append(ref.front.z.copy())
-    return {"y": ys, "u_applied": applied, "u": np.array(us), "z": np.array(zs)}
+    return {"y": ys, "u_applied": applied, "u": np.array(us), "z": np.array(zs),
+            "iterations": np.array(its)}
 
 
 #: Round-off bound of the filter's state in ``make check`` (relative to ``1 + |z|``): the C
 #: filter takes its products in another order than numpy; the reaction-wheel pendulum's
 #: fast wheel reaches 1.1e-12 over a second.
 Z_TOLERANCE = 1e-10
+#: The same bound in single precision (float's epsilon is 1.2e-7; the filter's state is a sum
+#: of products of a few terms each sample, and its errors decay with the filter's poles).
+Z_TOLERANCE_FLOAT = 1e-4
+#: ``make check`` in single precision: each command within this fraction of the widest input
+#: range of the double controller's (the cart-pole: 400 N of range, 0.04 N).
+FLOAT_TOLERANCE = 1e-4
 #: Entries of the condensed QP's dense matrices (``H`` and ``A``) at most: the library
 #: holds them as text, and the controller builds them whole (8 MB of doubles).
 MAX_QP_ENTRIES = 1_000_000
@@ -181,40 +204,51 @@ def check_horizon(system: System, horizon: int, option: str = "--horizon") -> No
 
 def export_mpc(ctrl: MPC, folder: str | Path, *, name: str = "mpc",
                x0: dict[str, float] | None = None, duration: float = 1.0,
-               tolerance: float = 1e-6, seed: int = 0) -> Path:
+               tolerance: float | None = None, seed: int = 0, precision: str = "double") -> Path:
     """Write the MPC's C code, recorded vectors and ``make check`` into *folder*.
 
     *x0* starts the recorded run (default :func:`default_start`, which
     drives the input into its limits), *seed* its sensor noise;
     *tolerance* bounds the difference of each command to the Python
-    controller's [input units].
+    controller's [input units] (default :func:`command_tolerance` of *precision*, ``"double"``
+    or ``"float"``).
     """
     from equilibrist.export.writer import write_files
 
     out = Path(folder)
     write_files(out, mpc_files(ctrl, name=name, x0=x0, duration=duration, tolerance=tolerance,
-                               seed=seed))
+                               seed=seed, precision=precision))
     return out
 
 
 def mpc_files(ctrl: MPC, *, name: str = "mpc", x0: dict[str, float] | None = None,
-              duration: float = 1.0, tolerance: float = 1e-6, seed: int = 0) -> dict[str, str]:
+              duration: float = 1.0, tolerance: float | None = None, seed: int = 0,
+              precision: str = "double",
+              vectors: Mapping[str, np.ndarray] | None = None) -> dict[str, str]:
     """Every file of the MPC's export, relative path -> text (DAQP's sources under ``daqp/``,
-    the library, the recorded vectors, the test program and the Makefile)."""
+    the library, the recorded vectors, the test program and the Makefile).
+
+    *tolerance* defaults to :func:`command_tolerance` of *precision*; *vectors* (default
+    :func:`record`) are the recorded run."""
     from equilibrist.export._check import check_files
 
     kalman = ctrl.estimator == "kalman"
-    files = library_files(ctrl, name=name)
-    vectors = record(ctrl, x0=x0, duration=duration, seed=seed)
+    files = library_files(ctrl, name=name, precision=precision)
+    if vectors is None:
+        vectors = record(ctrl, x0=x0, duration=duration, seed=seed)
+    if tolerance is None:
+        tolerance = command_tolerance(ctrl, precision)
+    z_tolerance = Z_TOLERANCE if precision == "double" else Z_TOLERANCE_FLOAT
     n, m = ctrl.problem.n, ctrl.problem.m
     if kalman:
         program = f"""    {name}_filter f;
-    int k, i, bad = 0, bad_z = 0;
+    int k, i, bad = 0, bad_z = 0, iters = 0;
     double worst = 0.0, worst_z = 0.0;
     {name}_init(&f);
     for (k = 0; k < N_VECTORS; ++k) {{
         double u[{m}];
         {name}_output(&f, vec_y[k], u);
+        if ({name}_iterations() > iters) iters = {name}_iterations();
         for (i = 0; i < {m}; ++i) {{
             double d = fabs(u[i] - vec_u[k][i]);
             if (d > worst) worst = d;
@@ -228,25 +262,27 @@ def mpc_files(ctrl: MPC, *, name: str = "mpc", x0: dict[str, float] | None = Non
         }}
     }}
     printf("%d samples, worst difference %.3g, %d beyond %.3g; "
-           "filter state: worst %.3g, %d beyond %.3g\\n",
-           N_VECTORS, worst, bad, TOLERANCE, worst_z, bad_z, Z_TOLERANCE);
+           "filter state: worst %.3g, %d beyond %.3g; DAQP iterations: worst %d\\n",
+           N_VECTORS, worst, bad, TOLERANCE, worst_z, bad_z, Z_TOLERANCE, iters);
     return bad != 0 || bad_z != 0;"""
         arrays = {"y": vectors["y"], "u_applied": vectors["u_applied"], "u": vectors["u"],
                   "z": vectors["z"]}
-        defines: dict[str, object] = {"TOLERANCE": tolerance, "Z_TOLERANCE": Z_TOLERANCE}
+        defines: dict[str, object] = {"TOLERANCE": tolerance, "Z_TOLERANCE": z_tolerance}
     else:
-        program = f"""    int k, i, bad = 0;
+        program = f"""    int k, i, bad = 0, iters = 0;
     double worst = 0.0;
     for (k = 0; k < N_VECTORS; ++k) {{
         double u[{m}];
         {name}_step(vec_y[k], u);
+        if ({name}_iterations() > iters) iters = {name}_iterations();
         for (i = 0; i < {m}; ++i) {{
             double d = fabs(u[i] - vec_u[k][i]);
             if (d > worst) worst = d;
             if (d > TOLERANCE) ++bad;
         }}
     }}
-    printf("%d samples, worst difference %.3g, %d beyond %.3g\\n", N_VECTORS, worst, bad, TOLERANCE);
+    printf("%d samples, worst difference %.3g, %d beyond %.3g; DAQP iterations: worst %d\\n",
+           N_VECTORS, worst, bad, TOLERANCE, iters);
     return bad != 0;"""
         arrays = {"y": vectors["y"], "u": vectors["u"]}
         defines = {"TOLERANCE": tolerance}
@@ -257,23 +293,79 @@ def mpc_files(ctrl: MPC, *, name: str = "mpc", x0: dict[str, float] | None = Non
         what="the C MPC against the Python controller on recorded measurements.",
         sources=("$(wildcard daqp/src/*.c)",),
         include=("daqp/include",),
-        cflags="-O2 -std=c99 -ffp-contract=off",
+        cflags="-O2 -std=c99 -ffp-contract=off" + precision_flags(precision),
+        entry=(f"{name}_output", f"{name}_update") if kalman else (f"{name}_step",),
     )
     return {**files, **checks}
+
+
+def precision_flags(precision: str) -> str:
+    """The compiler flags a *precision* needs beyond the defaults (DAQP's single precision)."""
+    return " -DDAQP_SINGLE_PRECISION" if precision == "float" else ""
+
+
+def command_tolerance(ctrl: MPC, precision: str = "double") -> float:
+    """How far ``make check`` lets each C command be from the simulated (double) controller's:
+    1e-6 input units in double; in float :data:`FLOAT_TOLERANCE` of the widest input range."""
+    if precision == "double":
+        return 1e-6
+    span = float(np.max(np.asarray(ctrl.problem.u_hi) - np.asarray(ctrl.problem.u_lo)))
+    return FLOAT_TOLERANCE * span
 
 
 #: What :func:`export_files` returns (kept under its former name).
 MPCExport = ControllerExport
 
 
+#: The sampled states of :func:`iteration_counts`: how many, their seed, and their box (this
+#: many design scales of each state around the operating point: on the cart-pole at N = 30
+#: about a third of them need the solver).
+SAMPLED_STATES, SAMPLE_SEED, SAMPLE_SPREAD = 200, 0, 2.0
+
+
+def iteration_counts(ctrl: MPC, recorded: Mapping[str, np.ndarray], *,
+                     samples: int = SAMPLED_STATES, seed: int = SAMPLE_SEED) -> dict[str, int]:
+    """DAQP's worst iteration counts (the simulated controller's solver, double precision).
+
+    ``recorded_run``: over the recorded run (each sample warm-started from
+    the last, as the controller runs); ``sampled_states``: over *samples*
+    states drawn uniformly within each state's design scale of the
+    operating point, each solved from an empty working set (a cold start);
+    ``at_cap``: how many of those ended at the iteration cap.
+    """
+    from equilibrist.control.mpc import ITER_LIMIT, MPCRuntime
+    from equilibrist.numeric.system import system_from_key
+
+    design = ctrl.design
+    scales = system_from_key(design.system_key, dict(design.params)).spec.design_scales
+    span = np.array([float(scales.get(k) or 0.0) for k in ctrl.state_names])
+    rng = np.random.default_rng(seed)
+    rt = MPCRuntime(ctrl)
+    worst_cold, at_cap, constrained = 0, 0, 0
+    for _ in range(samples):
+        rt.reset()
+        rt.solve(SAMPLE_SPREAD * rng.uniform(-1.0, 1.0, span.size) * span)
+        worst_cold = max(worst_cold, rt.last_iterations)
+        at_cap += rt.last_iterations >= ITER_LIMIT
+        constrained += rt.last_status != "unconstrained"
+    runs = np.asarray(recorded.get("iterations", np.zeros(1)))
+    return {"recorded_run": int(runs.max(initial=0)), "sampled_states": worst_cold,
+            "samples": samples, "constrained": constrained, "seed": seed, "at_cap": at_cap,
+            "iter_limit": ITER_LIMIT}
+
+
 @register_exporter("mpc")
 def export_files(built: MPCRuntime, out: str | Path, *, system: System, precision: str = "double",
                  duration: float | None = None, seed: int = 0, force: bool = False) -> MPCExport:
-    """``equilibrist export SYSTEM --controller mpc``: DAQP's sources, the driver, ``make check``.
+    """``equilibrist export SYSTEM --controller mpc``: DAQP's sources, the driver, ``make check``,
+    ``make size`` and README.txt (the footprint, DAQP's worst iteration counts).
 
     The controller exported is the one simulated: with the Kalman filter in
     front when the design's measured outputs are not the full state.
+    *precision* ``"double"`` or ``"float"`` (DAQP in single precision, checked
+    against the double controller within :func:`command_tolerance`).
     """
+    from equilibrist.export._size import controller_readme, measure
     from equilibrist.export.writer import (
         EXPORT_MARKER,
         check_folder,
@@ -282,17 +374,20 @@ def export_files(built: MPCRuntime, out: str | Path, *, system: System, precisio
     )
     from equilibrist.hil.firmware import WHAT, with_hil
 
-    if precision != "double":
-        raise ExportError(f"the MPC is exported in double precision only, not {precision!r}")
+    if precision not in ("double", "float"):
+        raise ExportError(f"the MPC is exported in double or float precision, not {precision!r}")
     from equilibrist.export.vectors import check_duration
 
     ctrl = built.ctrl
     check_duration(duration, ctrl.rate)
     folder = check_folder(out, force=force)
-    texts = with_hil(mpc_files(ctrl, duration=duration or 1.0, seed=seed),
-                     hil_adapter(built, system), sketch_copies=("mpc.h", "mpc.c"))
-    texts[EXPORT_MARKER] = f"written by {generator_version()}\n"
-    write_files(folder, texts)
+    vectors = record(ctrl, duration=duration or 1.0, seed=seed)
+    texts = with_hil(mpc_files(ctrl, duration=duration or 1.0, seed=seed, precision=precision,
+                               vectors=vectors),
+                     hil_adapter(built, system, precision=precision),
+                     sketch_copies=("mpc.h", "mpc.c"))
+    footprint, why = measure(texts)
+    iterations = iteration_counts(ctrl, vectors)
     digest = design_id(built)
     kalman = ctrl.estimator == "kalman"
     files = {"daqp/": "DAQP's C sources (the QP solver, MIT licence)",
@@ -300,14 +395,46 @@ def export_files(built: MPCRuntime, out: str | Path, *, system: System, precisio
              "mpc.c": ("the Kalman filter and " if kalman else "")
              + "the QP's data and the step: bounds at the state, DAQP, the move",
              "mpc_vectors.h": "recorded measurements and the Python controller's commands",
-             "test_mpc.c": "test program", "Makefile": "make check, make hil-host",
+             "test_mpc.c": "test program", "Makefile": "make check, make size, make hil-host",
              **{rel: what for rel, what in WHAT.items()}}
+    texts["README.txt"] = controller_readme(
+        f"mpc: the constrained MPC (horizon {ctrl.problem.horizon}) of {system.key}, "
+        f"{ctrl.rate:g} Hz, {precision} precision; design id {digest}.\n"
+        f"Generated by {generator_version()}."
+        + ("\nBuild every source with -DDAQP_SINGLE_PRECISION (the Makefile does)."
+           if precision == "float" else ""),
+        files, footprint=footprint, why=why,
+        heap="none (DAQP's workspace is static: no malloc)",
+        notes=_readme_notes(ctrl, precision, iterations))
+    texts[EXPORT_MARKER] = f"written by {generator_version()}\n"
+    write_files(folder, texts)
     steps = round((duration or 1.0) * ctrl.rate) + 1
-    return MPCExport(folder=folder, name="mpc", files=files, precision="double",
-                     data=Described(digest, "mpc", ctrl.rate), vectors=Steps(steps))
+    return MPCExport(folder=folder, name="mpc", files={**files, "README.txt": "this list"},
+                     precision=precision, data=Described(digest, "mpc", ctrl.rate),
+                     vectors=Steps(steps), footprint=footprint, size_note=why,
+                     iterations=iterations)
 
 
-def hil_adapter(built: MPCRuntime, system: System) -> Adapter:
+def _readme_notes(ctrl: MPC, precision: str, iterations: Mapping[str, int]) -> list[str]:
+    tol = command_tolerance(ctrl, precision)
+    lines = [
+        "DAQP's iterations per sample, worst (the simulated controller's solver, double):",
+        f"  {iterations['recorded_run']:>5}  over the recorded run (warm-started, as it runs)",
+        f"  {iterations['sampled_states']:>5}  over {iterations['samples']} states drawn within "
+        f"{SAMPLE_SPREAD:g} design scales (seed {iterations['seed']}; "
+        f"{iterations['constrained']} need the solver), each from a cold start",
+        f"  cap {iterations['iter_limit']} (reached {iterations['at_cap']} times); mpc_iterations() "
+        "returns the last step's count.",
+        "",
+        f"'make check': every command within {tol:.3g} of the double simulated controller's"
+        + (f" ({FLOAT_TOLERANCE:g} of the widest input range, single precision)."
+           if precision == "float" else "."),
+        "",
+    ]
+    return lines
+
+
+def hil_adapter(built: MPCRuntime, system: System, *, precision: str = "double") -> Adapter:
     """The MPC (with its filter, if any) behind the hardware-in-the-loop interface."""
     from equilibrist.hil.firmware import Adapter
 
@@ -332,7 +459,8 @@ def hil_adapter(built: MPCRuntime, system: System) -> Adapter:
                    estimate=n, rate=float(ctrl.rate), u_min=u_min, u_max=u_max,
                    includes=("mpc.h",), sources=("$(wildcard daqp/src/*.c)", "mpc.c"),
                    globals=globals_, init=init, step=step,
-                   cflags="-std=c99 -O2 -ffp-contract=off -Idaqp/include -I.")
+                   cflags="-std=c99 -O2 -ffp-contract=off -Idaqp/include -I."
+                   + precision_flags(precision))
 
 
 def design_id(built: MPCRuntime) -> str:
@@ -345,6 +473,6 @@ def design_id(built: MPCRuntime) -> str:
                           ).hexdigest()[:12]
 
 
-__all__ = ["DAQP_SOURCES", "OVERDRIVE", "Z_TOLERANCE", "CompiledMPC", "MPCExport", "default_start",
-           "export_files", "export_mpc",
-           "footprint", "mpc_files", "record"]
+__all__ = ["DAQP_SOURCES", "FLOAT_TOLERANCE", "OVERDRIVE", "Z_TOLERANCE", "Z_TOLERANCE_FLOAT",
+           "CompiledMPC", "MPCExport", "command_tolerance", "default_start", "export_files",
+           "export_mpc", "footprint", "iteration_counts", "mpc_files", "precision_flags", "record"]

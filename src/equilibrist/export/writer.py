@@ -22,6 +22,7 @@ from equilibrist.export.data import ControllerData, check_controller, check_prec
 
 if TYPE_CHECKING:
     from equilibrist.control.design import Design
+    from equilibrist.export._size import Footprint
     from equilibrist.hil.firmware import Adapter
     from equilibrist.numeric.system import System
 
@@ -128,6 +129,9 @@ class Export:
     data: ControllerData
     precision: str
     vectors: c_code.Vectors
+    #: What ``make size`` printed at export (None: not measured, see :attr:`size_note`).
+    footprint: Footprint | None = None
+    size_note: str = ""
 
     @property
     def name(self) -> str:
@@ -152,6 +156,22 @@ def render(
     param_table: tuple[tuple[str, float, str, str], ...] = (),
 ) -> dict[str, tuple[str, str]]:
     """Every file of the export: relative path -> (text, what it is)."""
+    return render_measured(data, vectors, precision=precision, version=version, title=title,
+                           param_table=param_table)[0]
+
+
+def render_measured(
+    data: ControllerData,
+    vectors: c_code.Vectors,
+    *,
+    precision: str,
+    version: str,
+    title: str = "",
+    param_table: tuple[tuple[str, float, str, str], ...] = (),
+) -> tuple[dict[str, tuple[str, str]], Footprint | None, str]:
+    """:func:`render`, and the footprint ``make size`` printed for it (None and why not)."""
+    from equilibrist.export._size import measure, readme_lines
+
     name = data.name
     head = c_code.header(data, precision=precision, version=version, title=title,
                          param_table=param_table)
@@ -164,7 +184,7 @@ def render(
         f"test_{name}.c": (c_code.test_program(data), "test program: replays the test vectors"),
         f"{name}_vectors.h": (c_code.vectors_header(data, vectors, version=version),
                               "test vectors: a recorded noisy closed-loop run"),
-        "Makefile": (c_code.makefile(data), "make / make check / make clean"),
+        "Makefile": (c_code.makefile(data), "make / make check / make size / make clean"),
         f"{ARDUINO_FOLDER}/{ARDUINO_FOLDER}.ino": (
             c_code.arduino_sketch(data, precision=precision),
             "Arduino sketch (with its own copy of the library)",
@@ -173,13 +193,15 @@ def render(
         f"{ARDUINO_FOLDER}/{name}.c": (src, "copy of the library for the sketch"),
     }
     files = _with_hil(files, data)
+    footprint, why = measure({rel: text for rel, (text, _) in files.items()})
     listing = {path: what for path, (_, what) in files.items()}
     listing["README.txt"] = "this list"
     files["README.txt"] = (
-        c_code.readme(data, precision=precision, version=version, files=listing),
+        c_code.readme(data, precision=precision, version=version, files=listing,
+                      footprint=readme_lines(footprint, why)),
         "this list",
     )
-    return files
+    return files, footprint, why
 
 
 def hil_adapter(data: ControllerData) -> Adapter:
@@ -421,8 +443,8 @@ def export_c(
                          duration=duration, seed=seed)
     version = generator_version()
     title, table = _describe(system, data)
-    files = render(data, vectors, precision=precision, version=version, title=title,
-                   param_table=table)
+    files, footprint, why = render_measured(data, vectors, precision=precision, version=version,
+                                            title=title, param_table=table)
     texts = {rel: text for rel, (text, _) in files.items()}
     texts[EXPORT_MARKER] = f"written by equilibrist {version}\n"
     write_files(folder, texts)
@@ -432,6 +454,8 @@ def export_c(
         data=data,
         precision=precision,
         vectors=vectors,
+        footprint=footprint,
+        size_note=why,
     )
 
 
