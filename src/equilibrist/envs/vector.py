@@ -53,7 +53,11 @@ PARALLEL_MIN = 256
 # interval, up to PROBE_EVERY_MAX steps, and a switch, or the way in use
 # growing RESLOWED times slower than at the last probe, starts again from
 # PROBE_EVERY. Probes come rarer still when the other way is much slower,
-# so that they take at most about 1 / PROBE_SHARE of the time. Of the steps
+# so that they take at most about 1 / PROBE_SHARE of the time: the next probe
+# waits PROBE_SHARE times the whole last probe (every one of its steps, the
+# first too: on a busy machine a parallel step that waits for a descheduled
+# thread takes a whole time slice, some milliseconds), in steps of the way
+# in use, and so does a probe that a slower step calls early. Of the steps
 # between probes, one in TIME_EVERY is timed.
 TIME_EVERY = 4
 PROBE_EVERY = 50
@@ -126,6 +130,8 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._countdown = 0  # steps before the next probe
         self._untimed = 0  # steps before the next timed one
         self._probe_best = math.inf  # the best time of the probe under way
+        self._probe_spent = 0.0  # the whole time of the probe under way
+        self._probe_wait = PROBE_EVERY  # steps the last probe's cost asks to wait
         self._interval = PROBE_EVERY  # steps between probes, doubled while they confirm the way
         self._at_probe = math.inf  # the way in use's time per step at the last probe
         self._probe_left = 0  # steps left of the probe under way
@@ -237,11 +243,13 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         if first:
             self._probe_left = PROBE_STEPS
             self._probe_best = math.inf
+            self._probe_spent = 0.0
         self._probe_left -= 1
         mode = 1 - mode
         start = time.perf_counter()
         bad = self._ways[mode]()
         spent = time.perf_counter() - start
+        self._probe_spent += spent
         if not first:
             self._probe_best = min(self._probe_best, spent)
         if self._probe_left > 0:
@@ -255,8 +263,9 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._interval = min(2 * self._interval, PROBE_EVERY_MAX) \
             if self._mode == before else PROBE_EVERY
         self._at_probe = cost[self._mode]
-        ratio = cost[1 - self._mode] / max(cost[self._mode], 1e-12)
-        self._countdown = max(self._interval, int(PROBE_STEPS * PROBE_SHARE * ratio))
+        # The probe's whole time, PROBE_SHARE times over, in steps of the way in use.
+        self._probe_wait = int(PROBE_SHARE * self._probe_spent / max(cost[self._mode], 1e-12))
+        self._countdown = max(self._interval, self._probe_wait)
         return int(bad)
 
     def _changed(self, mode: int) -> None:
@@ -266,7 +275,8 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         if cost[mode] > cost[1 - mode]:
             self._mode = 1 - mode
         self._interval = PROBE_EVERY
-        self._countdown = min(self._countdown, PROBE_EVERY)
+        # Soon, but not sooner than the last probe's cost allows.
+        self._countdown = min(self._countdown, max(PROBE_EVERY, self._probe_wait))
         self._at_probe = math.inf
 
     @property

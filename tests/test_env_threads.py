@@ -1,0 +1,88 @@
+"""The vector environment's choice of threads on a busy machine: probes of the parallel way
+take a bounded share of the time, even when each wakes a descheduled thread (a whole time
+slice) and the way in use is slowed now and then."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import pytest
+
+import equilibrist.envs  # noqa: F401  (registers the environments)
+from equilibrist.envs import vector as vector_module
+from equilibrist.envs.vector import EquilibristVectorEnv
+
+
+def _on_fake_clock(monkeypatch: pytest.MonkeyPatch, seconds: Callable[[int], float]) -> Any:
+    """4 copies that may run parallel; their two ways (0: one thread, 1: all) take
+    ``seconds(way)`` of a fake clock per step and do nothing else."""
+    monkeypatch.setattr(vector_module, "PARALLEL_MIN", 1)
+    vec = EquilibristVectorEnv(4, "cartpole", noise=False)
+    vec.reset(seed=0)
+    now = [0.0]
+
+    def way(mode: int) -> Callable[..., int]:
+        def entry(*args: object) -> int:
+            now[0] += seconds(mode)
+            return 0
+        return entry
+
+    vec._ways[:] = [way(0), way(1)]
+    monkeypatch.setattr(vector_module.time, "perf_counter", lambda: now[0])
+    return vec
+
+
+def test_probes_take_a_bounded_share_on_a_busy_machine(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The parallel way's first step in a probe waits a whole time slice (100 times a step on
+    one thread), its others take 9; the one-thread step drifts between 1 and 1.6 every 300
+    steps (the other work on the machine comes and goes), which calls probes early. The
+    choice stays on one thread and the probes take at most about 1 / PROBE_SHARE of the
+    time (they took a quarter when the first step of a probe was not counted)."""
+    spent = {0: 0.0, 1: 0.0}
+    state = {"step": 0, "streak": 0, "last": 0}
+
+    def seconds(mode: int) -> float:
+        state["streak"] = state["streak"] + 1 if mode == 1 and state["last"] == 1 else int(mode)
+        state["last"] = mode
+        if mode == 1:
+            t = 100.0 if state["streak"] == 1 else 9.0
+        else:
+            t = 1.0 if (state["step"] // 300) % 2 == 0 else 1.6
+        spent[mode] += t
+        return t
+
+    vec = _on_fake_clock(monkeypatch, seconds)
+    a = np.zeros((4, 1))
+    for step in range(20000):
+        state["step"] = step
+        vec.step(a)
+    assert vec.threads_in_use == 1
+    share = spent[1] / (spent[0] + spent[1])
+    assert 0 < share < 1.5 / vector_module.PROBE_SHARE
+
+
+def test_a_quiet_machine_is_noticed_after_a_costly_probe(monkeypatch: pytest.MonkeyPatch) -> None:
+    """After costly probes, the parallel way getting fast again (the other cores free) is
+    still found: within the wait that the last probe's cost asks for."""
+    slow = [True]
+
+    def seconds(mode: int) -> float:
+        if mode == 0:
+            return 1.0
+        return 40.0 if slow[0] else 0.5
+
+    vec = _on_fake_clock(monkeypatch, seconds)
+    a = np.zeros((4, 1))
+    for _ in range(2000):
+        vec.step(a)
+    assert vec.threads_in_use == 1
+    slow[0] = False
+    steps = 0
+    while vec.threads_in_use == 1 and steps < 10000:
+        vec.step(a)
+        steps += 1
+    assert vec.threads_in_use > 1
+    # 3 probe steps of 40 s, PROBE_SHARE times over, in one-thread steps of 1 s
+    assert steps <= vector_module.PROBE_SHARE * 3 * 40.0 + vector_module.PROBE_EVERY_MAX
