@@ -21,8 +21,11 @@ the C library (``sqrt``...) not counted, each group of mutually recursive
 functions (a strongly connected component of the graph) counted once and
 named on the standard error with its frames (DAQP's pivoting:
 ``daqp_pivot_last`` and the constraint updates call each other, at most
-once per constraint of the working set). A compiler without call graphs
-(clang) gives the largest single frame, said on the standard error.
+once per constraint of the working set). Calls through a function pointer
+are not followed and are named on the standard error (DAQP's elimination of
+equality constraints, which the MPC's QP, without equalities, never runs).
+A compiler without call graphs (clang) gives the largest single frame,
+said on the standard error.
 ``SIZE`` names the ``size`` program (``SIZE=arm-none-eabi-size`` with
 ``CC=arm-none-eabi-gcc`` and the target's ``CFLAGS`` for a device's figures).
 
@@ -89,6 +92,8 @@ END {
     } while (changed);
     worst = 0;
     for (i = 1; i <= n; i++) if (deep[comp[entry[i]]] > worst) worst = deep[comp[entry[i]]];
+    for (e = 1; e <= ne; e++) if ((src[e] in comp) && dst[e] == "__indirect_call") pointers = pointers " " src[e];
+    if (pointers != "") print "size: calls through a pointer not followed, from:" pointers > "/dev/stderr";
     if (unbounded != "") print "size: frames of unbounded dynamic size:" unbounded > "/dev/stderr";
     print "stack", worst;
 }
