@@ -109,7 +109,8 @@ def library_files(ctrl: MPC, *, name: str = "mpc", precision: str = "double") ->
         f" * State: {', '.join(ctrl.state_names)}."
         + (f" Measured: {', '.join(ctrl.output_names)} (Kalman filter, {ctrl.form} form)."
            if kalman else ""),
-        " * Build every source (DAQP's too) with -DDAQP_SINGLE_PRECISION. */" if single
+        " * No dynamic memory. Build every source (DAQP's too) with -DDAQP_SINGLE_PRECISION. */"
+        if single
         else " * No dynamic memory: DAQP's workspace is static. */",
         f"#ifndef {up}_H", f"#define {up}_H", f"#define {up}_NX {n}", f"#define {up}_NU {m}",
         f"#define {up}_RATE_HZ {ctrl.rate!r}", "",
