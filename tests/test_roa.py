@@ -58,12 +58,12 @@ def test_the_command_reports_plots_and_keeps_its_runs(tmp_path: Path,
                                                       capsys: pytest.CaptureFixture[str]) -> None:
     png, table = tmp_path / "roa.png", tmp_path / "roa.parquet"
     assert main(["roa", "cartpole", "--controller", "lqr", "--samples", "1500", "--json",
-                 "--plot", str(png), "--out", str(table)]) == 0
+                 "--certify", "off", "--plot", str(png), "--out", str(table)]) == 0
     out = json.loads(capsys.readouterr().out)
     for key in ("rho", "certified", "method", "max_tilt", "max_push", "samples",
                 "counterexamples", "coverage", "rho_sampled"):
         assert key in out
-    assert out["certified"] is False and out["rho"] is None  # an estimate, never called proof
+    assert out["certified"] is False and out["rho"] is None  # without the proof: an estimate
     assert out["slice"] == ["theta", "theta_dot"] and out["samples"] > 1000
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     import pyarrow.parquet as pq
@@ -84,6 +84,9 @@ def test_the_command_reports_plots_and_keeps_its_runs(tmp_path: Path,
     (["--samples", "5"], ">= 100"),
     (["--out", "x.csv"], "FILE.parquet"),
     (["--controller", "none"], "open loop"),
+    (["--boxes", "10"], ">= 1000"),
+    (["--falsify", "-3"], "--falsify"),
+    (["--certify", "maybe"], "invalid choice"),
 ])
 def test_bad_options_are_one_line_and_status_2(argv: list[str], words: str,
                                                capsys: pytest.CaptureFixture[str]) -> None:

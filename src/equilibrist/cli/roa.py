@@ -30,8 +30,15 @@ on both sides; max_push: the largest impulse on the first input (its unit x s)
 recovered from rest, both ways (an impulse J changes the velocities by B J).
 rho_sampled: the largest level of the LQR's Riccati function dx' S dx whose
 section by the slice lies in the sampled window and that no run falsifies, an
-estimate: sampling finds counterexamples, it proves nothing, so 'certified' is
-false and 'rho' null (no certificate is computed yet).
+estimate: sampling finds counterexamples, it proves nothing.
+rho (LQR, and the LQG's state feedback): the largest level of dx' S dx on which
+dV/dt is proven negative for the exact equations with the input's saturation,
+by interval branch-and-bound (--certify off skips it; --boxes N caps its boxes).
+It assumes the feedback acts continuously, without the estimator. It is then
+checked: --falsify N runs start inside it (half on its surface), and every run
+of the slice, tilt and push searches that starts inside counts;
+counterexamples is how many of them fell (a certificate is reported only when
+it is 0), coverage the share of the slice's caught area inside it.
 --json prints the figures; --plot FILE.png draws the slice; --out FILE.parquet
 keeps every run's start and outcome.
 """
@@ -57,6 +64,12 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--physics-step", metavar="S",
                    help="integration step [s], dividing 1/rate (default as simulate: at most 1 ms)")
     p.add_argument("--seed", default="0", metavar="N", help="noise seed (default 0)")
+    p.add_argument("--certify", choices=("on", "off"), default="on",
+                   help="prove a level of the LQR's V (default on, for lqr and lqg)")
+    p.add_argument("--boxes", default="1000000", metavar="N",
+                   help="most boxes of the certificate's branch-and-bound (default 1000000)")
+    p.add_argument("--falsify", default="2000", metavar="N",
+                   help="runs started inside the certified level to check it (default 2000)")
     p.add_argument("--plot", metavar="FILE.png", help="draw the slice")
     p.add_argument("--out", metavar="FILE.parquet", help="every run's start and outcome")
     common.add_design_options(p)
@@ -131,6 +144,8 @@ def run(args: argparse.Namespace) -> int:
     if args.plot is not None and not args.plot.lower().endswith(".png"):
         raise common.UsageError(f"--plot {args.plot!r}: expected FILE.png")
     samples = common.parse_whole(args.samples, "--samples", 100)
+    boxes = common.parse_whole(args.boxes, "--boxes", 1000)
+    falsify = common.parse_whole(args.falsify, "--falsify", 0)
     seed = common.parse_whole(args.seed, "--seed", 0)
     duration = common.parse_number(args.duration, "--duration")
     if not (math.isfinite(duration) and duration > 0):
@@ -184,6 +199,15 @@ def run(args: argparse.Namespace) -> int:
     design = getattr(controller, "design", None)
     S = getattr(design, "S", None)
     rho_est = None
+    cert, note = None, None
+    if S is not None and args.certify == "on":
+        cert, note, extra = _certify(system, design, x_op, u_op, boxes, falsify, controller,
+                                     options, seed)
+        if extra is not None:
+            x0s = np.vstack([x0s, extra[0]])
+            caught = np.concatenate([caught, extra[1]])
+    elif args.certify == "on":
+        note = f"--controller {name} has no Riccati function to certify (lqr and lqg have)"
     if S is not None:
         S = np.asarray(S, dtype=float)
         rho_est = rho_sampled(S, x_op, x0s, caught)
@@ -204,16 +228,16 @@ def run(args: argparse.Namespace) -> int:
         "tilt_state": tilt_state, "tilt_unit": unit,
         "max_push": float(min(neg, pos)), "max_push_negative": float(neg),
         "max_push_positive": float(pos), "push_unit": f"{system.input_units[0]} s",
-        "rho": None, "certified": False, "method": None,
         "rho_sampled": (None if rho_est is None or math.isinf(rho_est) else rho_est),
-        "counterexamples": None, "coverage": None,
+        **_checked(cert, note, system, S, x_op, x0s, caught, est, states),
         "duration": duration, "rate": rate, "noise": args.noise,
         "physics_step": options.get("physics_step"),
     }
     if args.out is not None:
         _write_parquet(args.out, system, x0s, caught)
     if args.plot is not None:
-        _plot(args.plot, est, system, x_op, S, rho_est)
+        _plot(args.plot, est, system, x_op, S, rho_est,
+              figures["rho"] if figures["certified"] else None)
     if args.json:
         common.print_json(figures)
         return 0
@@ -223,9 +247,56 @@ def run(args: argparse.Namespace) -> int:
     print(f"  largest push recovered: {min(neg, pos):.4g} {system.input_units[0]} s "
           f"(negative {neg:.4g}, positive {pos:.4g})")
     if rho_est is not None:
-        print(f"  largest level of dx' S dx no run falsifies: {rho_est:.4g} (an estimate; not "
-              "certified)")
+        print(f"  largest level of dx' S dx no run falsifies: {rho_est:.4g} (an estimate)")
+    if figures["certified"]:
+        print(f"  certified level of dx' S dx: {figures['rho']:.4g} ({figures['method']}; "
+              f"assumes {figures['certificate']['assumes']}); limited by "
+              f"{figures['certificate']['limited_by']}; {figures['falsify_runs']} runs inside "
+              f"it, {figures['counterexamples']} fell; it covers {figures['coverage']:.1%} of "
+              "the slice's caught area")
+    elif figures["certificate_note"]:
+        print(f"  no certificate: {figures['certificate_note']}")
     return 0
+
+
+def _certify(system: System, design: Any, x_op: np.ndarray, u_op: np.ndarray, boxes: int,
+             falsify: int, controller: object, options: dict[str, Any],
+             seed: int) -> tuple[Any, str | None, tuple[np.ndarray, np.ndarray] | None]:
+    """The certificate and the runs started inside it (or why there is none)."""
+    from equilibrist.control.certify import CertificateUnavailable, certify
+    from equilibrist.sim.roa import outcomes, sample_level
+
+    try:
+        cert = certify(system, design.K, design.S, x_op=x_op, u_op=u_op, max_boxes=boxes)
+    except CertificateUnavailable as err:
+        return None, str(err), None
+    if falsify == 0:
+        return cert, None, None
+    starts = sample_level(design.S, x_op, cert.rho, falsify, seed=seed + 77)
+    return cert, None, (starts, outcomes(system, controller, starts, options, seed + 77))
+
+
+def _checked(cert: Any, note: str | None, system: System, S: Any, x_op: np.ndarray,
+             x0s: np.ndarray, caught: np.ndarray, est: Any,
+             states: tuple[str, str]) -> dict[str, Any]:
+    """The certificate's JSON keys, checked against every run that started inside it."""
+    from equilibrist.sim.roa import levels_of, slice_coverage
+
+    if cert is None:
+        return {"rho": None, "certified": False, "method": None, "counterexamples": None,
+                "coverage": None, "falsify_runs": 0, "certificate": None,
+                "certificate_note": note}
+    inside = levels_of(S, x_op, x0s) <= cert.rho
+    fell = int((inside & ~caught).sum())
+    idx = (system.state_index(states[0]), system.state_index(states[1]))
+    return {
+        "rho": cert.rho, "certified": fell == 0, "method": cert.method,
+        "counterexamples": fell, "coverage": slice_coverage(est, S, x_op, idx, cert.rho),
+        "falsify_runs": int(inside.sum()), "certificate": cert.to_dict(),
+        "certificate_note": None if fell == 0 else (
+            f"{fell} runs started inside the proven level fell: the sampled loop differs from "
+            "the continuous one the proof assumes"),
+    }
 
 
 def _write_parquet(path: str, system: System, x0s: np.ndarray, caught: np.ndarray) -> None:
@@ -241,7 +312,7 @@ def _write_parquet(path: str, system: System, x0s: np.ndarray, caught: np.ndarra
 
 
 def _plot(path: str, est: Any, system: System, x_op: np.ndarray, S: Any,
-          rho: float | None) -> None:
+          rho: float | None, rho_cert: float | None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -254,15 +325,16 @@ def _plot(path: str, est: Any, system: System, x_op: np.ndarray, S: Any,
     pts, ok = est.points, est.caught
     ax.scatter(pts[ok, 0], pts[ok, 1], s=3, color="#2a9d8f", label="caught")
     ax.scatter(pts[~ok, 0], pts[~ok, 1], s=3, color="#e76f51", label="not caught")
-    if S is not None and rho is not None and math.isfinite(rho):
-        i, j = (system.state_index(s) for s in est.states)
+    i, j = (system.state_index(s) for s in est.states)
+    for level, style, label in ((rho, "--", "dx' S dx = rho_sampled (estimate)"),
+                                (rho_cert, "-", "dx' S dx = rho (certified)")):
+        if S is None or level is None or not math.isfinite(level):
+            continue
         sub = np.asarray(S, dtype=float)[np.ix_([i, j], [i, j])]
         w, v = np.linalg.eigh(sub)
         t = np.linspace(0.0, 2.0 * np.pi, 400)
-        circle = np.vstack([np.cos(t), np.sin(t)]) * np.sqrt(rho / w)[:, None]
-        ring = v @ circle
-        ax.plot(x_op[i] + ring[0], x_op[j] + ring[1], color="black", lw=1.2,
-                label="dx' S dx = rho_sampled (estimate)")
+        ring = v @ (np.vstack([np.cos(t), np.sin(t)]) * np.sqrt(level / w)[:, None])
+        ax.plot(x_op[i] + ring[0], x_op[j] + ring[1], style, color="black", lw=1.2, label=label)
     ax.set_xlabel(f"{est.states[0]} [{system.state_units[system.state_index(est.states[0])]}]")
     ax.set_ylabel(f"{est.states[1]} [{system.state_units[system.state_index(est.states[1])]}]")
     ax.set_title(f"{system.key}: region of attraction, slice ({est.samples} runs)")

@@ -72,8 +72,9 @@ class SliceEstimate:
         return float(self.caught.mean()) if self.caught.size else math.nan
 
 
-def _outcomes(system: System, controller: object, x0s: np.ndarray, options: Mapping[str, Any],
-              seed: int) -> np.ndarray:
+def outcomes(system: System, controller: object, x0s: np.ndarray, options: Mapping[str, Any],
+             seed: int) -> np.ndarray:
+    """Whether the loop catches each start (see :class:`SliceEstimate`'s ``caught``)."""
     from equilibrist.sim.batch import simulate_batch
 
     if x0s.shape[0] == 0:
@@ -113,7 +114,7 @@ def estimate_slice(system: System, controller: object, states: tuple[str, str],
         x0s = np.tile(np.asarray(x_op, dtype=float), (len(keys), 1))
         x0s[:, idx[0]] = lo0 + lat[:, 0] * (hi0 - lo0)
         x0s[:, idx[1]] = lo1 + lat[:, 1] * (hi1 - lo1)
-        got = _outcomes(system, controller, x0s, options, seed + len(known))
+        got = outcomes(system, controller, x0s, options, seed + len(known))
         known.update(zip(keys, got.tolist(), strict=True))
 
     step = scale
@@ -152,20 +153,20 @@ def _largest(system: System, controller: object, start: np.ndarray, direction: n
     ``0 <= s <= a``, caught: a grid of *per_round* values, then the same inside the bracket
     where the first fall is, *rounds* times. Returns ``a`` and every start run."""
     runs: list[np.ndarray] = []
-    outcomes: list[bool] = []
+    seen: list[bool] = []
     lo, hi = 0.0, float(limit)
     for r in range(rounds):
         s = np.linspace(lo, hi, per_round + 1)[1:]
         x0s = start + np.outer(s, direction)
-        got = _outcomes(system, controller, x0s, options, seed + r)
+        got = outcomes(system, controller, x0s, options, seed + r)
         runs += list(x0s)
-        outcomes += got.tolist()
+        seen += got.tolist()
         fell = np.nonzero(~got)[0]
         if fell.size == 0:
-            return hi, runs, outcomes
+            return hi, runs, seen
         first = int(fell[0])
         lo, hi = (s[first - 1] if first > 0 else lo), s[first]
-    return lo, runs, outcomes
+    return lo, runs, seen
 
 
 def max_tilt(system: System, controller: object, state: str, limit: float, *,
@@ -205,8 +206,60 @@ def rho_sampled(S: np.ndarray, x_op: np.ndarray, x0s: np.ndarray,
     fell = ~np.asarray(caught, dtype=bool)
     if not fell.any():
         return math.inf
-    dx = np.asarray(x0s, dtype=float)[fell] - x_op
-    return float(np.min(np.einsum("ij,jk,ik->i", dx, S, dx)))
+    return float(np.min(levels_of(S, x_op, np.asarray(x0s, dtype=float)[fell])))
 
 
-__all__ = ["SliceEstimate", "estimate_slice", "max_push", "max_tilt", "rho_sampled"]
+def levels_of(S: np.ndarray, x_op: np.ndarray, x0s: np.ndarray) -> np.ndarray:
+    """``V = dx' S dx`` of each start."""
+    dx = np.asarray(x0s, dtype=float) - x_op
+    v: np.ndarray = np.einsum("ij,jk,ik->i", dx, S, dx)
+    return v
+
+
+def sample_level(S: np.ndarray, x_op: np.ndarray, rho: float, count: int,
+                 seed: int = 0) -> np.ndarray:
+    """*count* starts drawn uniformly from the ellipsoid ``dx' S dx <= rho`` (half of them on
+    its surface, where a falsifying start is likeliest)."""
+    n = S.shape[0]
+    rng = np.random.default_rng(seed)
+    z = rng.normal(size=(count, n))
+    z /= np.linalg.norm(z, axis=1)[:, None]
+    radius = np.sqrt(rho) * rng.uniform(size=count) ** (1.0 / n)
+    radius[: count // 2] = np.sqrt(rho) * (1.0 - 1e-9)
+    T = np.linalg.inv(np.linalg.cholesky(S).T)
+    starts: np.ndarray = x_op + (z * radius[:, None]) @ T.T
+    return starts
+
+
+def slice_coverage(est: SliceEstimate, S: np.ndarray, x_op: np.ndarray, idx: tuple[int, int],
+                   rho: float, resolution: int = 201) -> float:
+    """The share of the slice's caught area inside the section ``dx' S dx <= rho`` (the
+    other states at the operating point): each point of a uniform grid takes the outcome of
+    its nearest sampled start."""
+    from scipy.spatial import cKDTree
+
+    (lo0, hi0), (lo1, hi1) = est.bounds
+    g0, g1 = np.meshgrid(np.linspace(lo0, hi0, resolution), np.linspace(lo1, hi1, resolution))
+    grid = np.column_stack([g0.ravel(), g1.ravel()])
+    scale = np.array([hi0 - lo0, hi1 - lo1])
+    _d, near = cKDTree(est.points / scale).query(grid / scale)
+    caught = est.caught[near]
+    if not caught.any():
+        return math.nan
+    sub = S[np.ix_(idx, idx)]
+    d = grid - np.asarray(x_op, dtype=float)[list(idx)]
+    inside = np.einsum("ij,jk,ik->i", d, sub, d) <= rho
+    return float((caught & inside).sum() / caught.sum())
+
+
+__all__ = [
+    "SliceEstimate",
+    "estimate_slice",
+    "levels_of",
+    "max_push",
+    "max_tilt",
+    "outcomes",
+    "rho_sampled",
+    "sample_level",
+    "slice_coverage",
+]

@@ -1,0 +1,478 @@
+"""A certified region of attraction: the largest level set of the LQR's ``V`` that provably shrinks.
+
+For a state feedback ``u = sat(u_op - K (x - x_op))`` (the LQR, or the
+LQG's state feedback) and the Riccati solution ``S`` of its design,
+:func:`certify` finds a level ``rho`` such that on the whole set
+``{x : V(x) = (x - x_op)' S (x - x_op) <= rho}`` the derivative of ``V``
+along the **exact** equations of motion (the derived sympy model, not a
+polynomial fit) with the input's **saturation** is negative (outside a ball
+about the operating point whose radius the rounding of the operating point
+sets, 1e-15 or so): the set is invariant and every start in it is caught.
+
+Method: interval branch-and-bound. In coordinates ``z`` with ``dx = T z``
+(``T = L^-T``, ``S = L L'``) the level set is a ball. It is covered by
+boxes; on each box an enclosure of ``dV/dt`` is computed in interval
+arithmetic rounded outward (:mod:`equilibrist.numeric.interval`): the
+direct enclosure, intersected with the mean-value form (the enclosure at the
+box's centre plus the enclosure of the gradient over the box times the box's
+half-widths; the saturation's slope is ``[0, 1]`` where the box straddles a
+limit, its Clarke gradient). A box whose upper bound is negative is proven;
+the others are split in ``2^n``. Near the operating point boxes cannot
+prove anything (``dV/dt`` vanishes there to second order); a ball of radius
+``r0`` is proven at once instead: ``dV/dt = 2 z'T'S f0 + z' sym(T'S M T) z``
+with ``M`` the mean of the closed loop's Jacobian along the segment, inside
+its enclosure over the box ``[-r0, r0]^n``, so ``dV/dt <= Lambda |z|^2 +
+b |z|`` with ``Lambda`` the bound of the largest eigenvalue of that interval
+matrix (Weyl: the midpoint's plus the radius's norm) and ``b`` the
+enclosure of ``2 |T'S f(x_op, u_op)|``.
+
+Where a box cannot be proven down to the finest width (a true violation
+of the decrease, or a boundary the boxes do not resolve), the radius
+retreats below it. ``rho`` is also held to the system's fall region (the
+ellipsoid inside it).
+
+What it assumes: the feedback acts continuously (the zero-order hold of the
+sampled loop and an estimator in front are not in the proof); the model's
+parameters are the doubles the simulation uses. The estimate of
+``equilibrist roa`` (the sampled, saturated loop at the rig's rate) is run
+inside the certified set to check it (docs/roa.md).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from equilibrist.numeric.interval import Interval, UnsupportedError, lambdify
+
+METHOD = "interval branch-and-bound on the exact dynamics"
+ASSUMES = ("continuous-time state feedback u = sat(u_op - K (x - x_op)) with the design's K "
+           "(no zero-order hold, no estimator), the model's exact equations, the input limits")
+
+# The level's safety against the rounding of T (the ball in z covers the ellipsoid in x).
+_COVER = 1e-9
+# Where dV/dt >= 0 was found at radius r, the search goes on at _SHY r: right at the
+# boundary the decrease vanishes and no box is small enough to prove it.
+_SHY = 0.97
+
+
+class CertificateUnavailable(ValueError):
+    """The controller or the model has nothing this method can prove."""
+
+
+@dataclass(frozen=True)
+class Certificate:
+    """A certified level of ``V = dx' S dx`` (see the module).
+
+    ``rho`` is the level; ``limited_by`` says what stopped it from being larger:
+    ``"region"`` (the ellipsoid reached the fall region), ``"decrease"`` (a point where
+    ``dV/dt >= 0`` was found just outside), ``"resolution"`` (boxes of the finest width did
+    not prove it there), ``"budget"`` (the box budget ran out).
+    """
+
+    rho: float
+    method: str
+    assumes: str
+    limited_by: str
+    rho_region: float
+    inner: float
+    inner_floor: float
+    boxes: int
+    levels: int  # rounds of the branch-and-bound
+    seconds: float
+    violation: list[float] | None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"rho": self.rho, "method": self.method, "assumes": self.assumes,
+                "limited_by": self.limited_by, "rho_region": self.rho_region,
+                "inner_level": self.inner, "inner_floor": self.inner_floor,
+                "boxes": self.boxes, "levels": self.levels, "seconds": self.seconds,
+                "violation": self.violation}
+
+
+def _imat(a: np.ndarray) -> list[list[Interval]]:
+    return [[Interval(float(v)) for v in row] for row in np.atleast_2d(a)]
+
+
+def _imatmul(a: list[list[Interval]], b: list[list[Interval]]) -> list[list[Interval]]:
+    n, k, m = len(a), len(b), len(b[0])
+    out = []
+    for i in range(n):
+        row = []
+        for j in range(m):
+            acc = a[i][0] * b[0][j]
+            for t in range(1, k):
+                acc = acc + a[i][t] * b[t][j]
+            row.append(acc)
+        out.append(row)
+    return out
+
+
+def _transpose(a: list[list[Interval]]) -> list[list[Interval]]:
+    return [list(col) for col in zip(*a, strict=True)]
+
+
+class _Loop:
+    """The closed loop's ``dV/dt`` and its gradient in ``z``, on batches of boxes."""
+
+    def __init__(self, system: Any, K: np.ndarray, S: np.ndarray, x_op: np.ndarray,
+                 u_op: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+        model = system.symbolic
+        if model.f is None or len(model.states) != S.shape[0]:
+            raise CertificateUnavailable(f"{system.key}'s model has no explicit equations of "
+                                         "the design's states")
+        args = [*model.states, *model.inputs, *model.params]
+        try:
+            self._f = lambdify(args, model.f)
+            self._fab = lambdify(args, [model.f, model.A, model.B])
+        except UnsupportedError as err:
+            raise CertificateUnavailable(f"{system.key}'s equations: {err}") from None
+        self.n, self.m = S.shape[0], K.shape[0]
+        self.params = [Interval(float(v)) for v in np.asarray(system.p, dtype=float)]
+        self.x_op, self.u_op, self.lo, self.hi = x_op, u_op, lo, hi
+        self.S, self.K = S, K
+        L = np.linalg.cholesky(S)
+        self.T = np.linalg.inv(L.T)
+        off = float(np.abs(self.T.T @ S @ self.T - np.eye(self.n)).sum())
+        if off > 0.1 * _COVER:
+            raise CertificateUnavailable("S is too badly conditioned to be certified here "
+                                         f"(T'ST - I is {off:.2g})")
+        T_i = _imat(self.T)
+        self.ST = _imatmul(_imat(S), T_i)  # enclosures of the products
+        self.KT = _imatmul(_imat(K), T_i)
+        self.T_i = T_i
+
+    # -- pieces ------------------------------------------------------------------
+    def _lin(self, rows: list[list[Interval]], z: list[Interval]) -> list[Interval]:
+        out = []
+        for row in rows:
+            acc = row[0] * z[0]
+            for j in range(1, len(z)):
+                acc = acc + row[j] * z[j]
+            out.append(acc)
+        return out
+
+    def _state(self, z: list[Interval]) -> tuple[list[Interval], list[Interval], list[Interval],
+                                                   list[Interval], list[Interval]]:
+        dx = self._lin(self.T_i, z)
+        x = [dx[i] + float(self.x_op[i]) for i in range(self.n)]
+        v = [float(self.u_op[k]) - w for k, w in enumerate(self._lin(self.KT, z))]
+        u, s = [], []
+        for k, vk in enumerate(v):
+            lo, hi = float(self.lo[k]), float(self.hi[k])
+            u.append(Interval(np.clip(vk.lo, lo, hi), np.clip(vk.hi, lo, hi)))
+            inside = (vk.lo > lo) & (vk.hi < hi)
+            outside = (vk.hi <= lo) | (vk.lo >= hi)
+            s.append(Interval(np.where(inside, 1.0, 0.0), np.where(outside, 0.0, 1.0)))
+        sdx = self._lin(self.ST, z)
+        return dx, x, u, s, sdx
+
+    def vdot_point(self, c: np.ndarray) -> Interval:
+        """An enclosure of ``dV/dt`` at the points *c* (rows, in z)."""
+        z = [Interval(c[:, j]) for j in range(self.n)]
+        _dx, x, u, _s, sdx = self._state(z)
+        f = self._f(*x, *u, *self.params)
+        acc = sdx[0] * _row(f, 0)
+        for i in range(1, self.n):
+            acc = acc + sdx[i] * _row(f, i)
+        return 2.0 * acc
+
+    def jacobian(self, z: list[Interval]) -> tuple[list[Interval], list[list[Interval]],
+                                                   list[Interval]]:
+        """``f``, the closed loop's Jacobian ``A - B diag(s) K`` and ``S dx`` over boxes."""
+        _dx, x, u, s, sdx = self._state(z)
+        f, A, B = self._fab(*x, *u, *self.params)
+        n, m = self.n, self.m
+        fl = [_row(f, i) for i in range(n)]
+        J = []
+        for i in range(n):
+            row = []
+            for j in range(n):
+                acc = Interval.of(_cell(A, i, j))
+                for k in range(m):
+                    acc = acc - _cell(B, i, k) * s[k] * float(self.K[k, j])
+                row.append(acc)
+            J.append(row)
+        return fl, J, sdx
+
+    def vdot_box(self, lo: np.ndarray, hi: np.ndarray) -> tuple[Interval, np.ndarray]:
+        """An enclosure of ``dV/dt`` over each box ``[lo, hi]`` (rows, in z), and each box's
+        smear per coordinate (the gradient's bound times the width: where to split)."""
+        z = [Interval(lo[:, j], hi[:, j]) for j in range(self.n)]
+        f, J, sdx = self.jacobian(z)
+        n = self.n
+        direct = sdx[0] * f[0]
+        for i in range(1, n):
+            direct = direct + sdx[i] * f[i]
+        direct = 2.0 * direct
+        # The gradient in z: 2 (ST)' f + 2 (J T)' (S dx).
+        JT = _imatmul(J, self.T_i)
+        c = 0.5 * lo + 0.5 * hi
+        mv = self.vdot_point(c)
+        smear = np.empty_like(lo)
+        for j in range(n):
+            g = self.ST[0][j] * f[0] + JT[0][j] * sdx[0]
+            for i in range(1, n):
+                g = g + self.ST[i][j] * f[i] + JT[i][j] * sdx[i]
+            mv = mv + 2.0 * g * (z[j] - c[:, j])
+            smear[:, j] = np.maximum(np.abs(g.lo), np.abs(g.hi)) * (hi[:, j] - lo[:, j])
+        return direct.intersect(mv), np.nan_to_num(smear, nan=np.inf)
+
+    def cones(self, r: float, plo: np.ndarray, phi: np.ndarray) -> np.ndarray:
+        """For patches ``[plo, phi]`` of the unit cube's surface: an upper bound of
+        ``dV/dt / t^2`` (less its ``f0`` part) on each cone ``{t w : w in patch, t <= r}``."""
+        n = self.n
+        hull = [Interval(np.minimum(0.0, r * plo[:, j]), np.maximum(0.0, r * phi[:, j]))
+                for j in range(n)]
+        _f, J, _sdx = self.jacobian(hull)
+        JT = _imatmul(J, self.T_i)
+        w = [Interval(plo[:, j], phi[:, j]) for j in range(n)]
+        q = Interval(np.zeros(plo.shape[0]))
+        for i in range(n):
+            for j in range(i, n):
+                qij = self.ST[0][i] * JT[0][j]
+                qji = self.ST[0][j] * JT[0][i]
+                for t in range(1, n):
+                    qij = qij + self.ST[t][i] * JT[t][j]
+                    qji = qji + self.ST[t][j] * JT[t][i]
+                q = q + (2.0 * qij * w[i].square() if i == j else 2.0 * (qij + qji) * w[i] * w[j])
+        bound: np.ndarray = np.nan_to_num(q.hi, nan=np.inf)
+        return bound
+
+    def inner(self, r0: float) -> tuple[float, float]:
+        """``(Lambda, b)``: ``dV/dt <= Lambda |z|^2 + b |z|`` on ``|z| <= r0``."""
+        n = self.n
+        box = [Interval(np.array([-r0]), np.array([r0])) for _ in range(n)]
+        _f, J, _sdx = self.jacobian(box)
+        Q = _imatmul(_transpose(self.ST), _imatmul(J, self.T_i))
+        lo = np.array([[_first(Q[i][j].lo) + _first(Q[j][i].lo) for j in range(n)]
+                       for i in range(n)])
+        hi = np.array([[_first(Q[i][j].hi) + _first(Q[j][i].hi) for j in range(n)]
+                       for i in range(n)])
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            return math.inf, math.inf
+        mid, rad = 0.5 * (lo + hi), 0.5 * (hi - lo)
+        lam = float(np.linalg.eigvalsh(0.5 * (mid + mid.T)).max())
+        lam += float(np.linalg.norm(rad)) * (1 + 1e-12) + 1e-12 * float(np.linalg.norm(mid))
+        z0 = [Interval(np.zeros(1)) for _ in range(n)]
+        f0, _J, _s = self.jacobian(z0)
+        b2 = Interval(0.0)
+        for j in range(n):
+            g = self.ST[0][j] * f0[0]
+            for i in range(1, n):
+                g = g + self.ST[i][j] * f0[i]
+            b2 = b2 + g.square()
+        b = 2.0 * float(np.sqrt(_first(b2.hi))) * (1 + 1e-12)
+        return lam, b
+
+
+def _first(a: np.ndarray) -> float:
+    return float(np.ravel(a)[0])
+
+
+def _row(f: Any, i: int) -> Interval:
+    v = f[i]
+    return Interval.of(v[0] if isinstance(v, list) else v)
+
+
+def _cell(a: Any, i: int, j: int) -> Interval:
+    return Interval.of(a[i][j])
+
+
+def _cone_ball(loop: _Loop, r0: float, lam: float, R: float,
+               max_patches: int) -> tuple[float, float]:
+    """The ball about the operating point grown by cones: the unit cube's surface in patches,
+    each cone ``{t w : t <= r}`` proven where ``w' sym(T'S M T) w < 0`` for every ``M`` in the
+    closed loop's Jacobian over the cone's box hull; patches that fail are split. The radius
+    grows by half while every patch is proven within *max_patches* evaluations."""
+    n = loop.n
+    faces_lo, faces_hi = [], []
+    for j in range(n):
+        for sign in (-1.0, 1.0):
+            lo, hi = -np.ones(n), np.ones(n)
+            lo[j] = hi[j] = sign
+            faces_lo.append(lo)
+            faces_hi.append(hi)
+    plo, phi = np.array(faces_lo), np.array(faces_hi)
+    best_r, best_lam = r0, lam
+    r = 1.5 * r0
+    while r < R:
+        lo, hi, spent, worst, ok = plo, phi, 0, -math.inf, True
+        while lo.shape[0]:
+            spent += lo.shape[0]
+            if spent > max_patches:
+                ok = False
+                break
+            q = loop.cones(r, lo, hi)
+            proven = q < 0.0
+            if proven.any():
+                worst = max(worst, float(q[proven].max()))
+            lo, hi = lo[~proven], hi[~proven]
+            if not lo.shape[0]:
+                break
+            # Split each open patch across its widest free coordinate.
+            j = np.argmax(hi - lo, axis=1)
+            rows = np.arange(lo.shape[0])
+            if float((hi - lo)[rows, j].min()) < 1e-3:
+                ok = False
+                break
+            mid = 0.5 * (lo[rows, j] + hi[rows, j])
+            lo2, hi1 = lo.copy(), hi.copy()
+            hi1[rows, j] = mid
+            lo2[rows, j] = mid
+            lo, hi = np.concatenate([lo, lo2]), np.concatenate([hi1, hi])
+        if not ok:
+            break
+        best_r, best_lam = r, worst
+        r *= 1.5
+    return best_r, best_lam
+
+
+def region_level(S: np.ndarray, x_op: np.ndarray, names: tuple[str, ...],
+                 region: Mapping[str, tuple[float, float]]) -> float:
+    """The largest ``rho`` whose ellipsoid lies inside the fall region (its extent along
+    state ``i`` is ``sqrt(rho (S^-1)_ii)``)."""
+    inv = np.linalg.inv(S)
+    best = math.inf
+    for coord, (lo, hi) in region.items():
+        k = names.index(coord)
+        d = min(float(x_op[k]) - float(lo), float(hi) - float(x_op[k]))
+        best = min(best, d * d / float(inv[k, k]))
+    return best
+
+
+def certify(system: Any, K: Any, S: Any, *, x_op: Any, u_op: Any,
+            rho_max: float | None = None, max_boxes: int = 1_000_000, min_width: float = 1 / 256,
+            grid: int | None = None, chunk: int = 20_000,
+            progress: Callable[[str], None] | None = None) -> Certificate:
+    """The largest level ``rho`` of ``dx' S dx`` proven to shrink (see the module).
+
+    *rho_max* caps the search (e.g. a level sampling has already falsified); *max_boxes*
+    caps the boxes evaluated (nearest first, *chunk* at a time); *min_width* is the finest box's
+    width relative to its distance from the operating point.
+    """
+    t0 = time.perf_counter()
+    K = np.atleast_2d(np.asarray(K, dtype=float))
+    S = np.asarray(S, dtype=float)
+    x_op, u_op = np.asarray(x_op, dtype=float), np.asarray(u_op, dtype=float)
+    n = S.shape[0]
+    if K.shape != (system.n_inputs, n) or n != system.n_states:
+        raise CertificateUnavailable(f"the gain is {K.shape}, expected ({system.n_inputs}, "
+                                     f"{system.n_states}): a full-state feedback")
+    try:
+        np.linalg.cholesky(S)
+    except np.linalg.LinAlgError:
+        raise CertificateUnavailable("S is not positive definite") from None
+    lo, hi = (np.asarray(v, dtype=float) for v in system.input_limits)
+    loop = _Loop(system, K, S, x_op, u_op, lo, hi)
+    rho_region = region_level(S, x_op, system.state_names, system.spec.region)
+    cap = rho_region if rho_max is None else min(rho_region, float(rho_max))
+    if not math.isfinite(cap):
+        raise CertificateUnavailable("no fall region and no cap: the level is unbounded")
+    R = math.sqrt(cap)
+    # The ball about the operating point proven at once.
+    r0, lam, b = R, math.inf, math.inf
+    for _ in range(60):
+        lam, b = loop.inner(r0)
+        if lam < 0 and b / -lam < 0.5 * r0:
+            break
+        r0 *= 0.5
+    else:
+        raise CertificateUnavailable("dV/dt is not negative definite at the operating point: "
+                                     "the design does not stabilize the continuous loop")
+    say = progress or (lambda _m: None)
+    say(f"inner ball |z| <= {r0:.3g} (level {r0 * r0:.3g}), Lambda {lam:.3g}")
+    r0, lam = _cone_ball(loop, r0, lam, R, max_patches=20_000)
+    floor = b * math.sqrt(n) / -lam
+    say(f"cones: ball |z| <= {r0:.3g} (level {r0 * r0:.3g})")
+    limited = "region"
+    violation: list[float] | None = None
+    # Points first (cheap): the nearest sampled point where dV/dt >= 0 bounds any level this
+    # V can have; the search starts a little inside it, where the decrease is not marginal.
+    rng = np.random.default_rng(0)
+    dirs = rng.normal(size=(4096, n))
+    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+    for r in np.linspace(R / 64, R, 64):
+        pts = dirs * r
+        bad = loop.vdot_point(pts).lo >= 0.0
+        if bad.any():
+            R, limited = _SHY * float(r), "decrease"
+            violation = (x_op + loop.T @ pts[int(np.argmax(bad))]).tolist()
+            break
+    g = grid or (8 if n <= 4 else 4 if n <= 6 else 2)
+    edges = np.linspace(-R, R, g + 1)
+    idx = np.array(np.meshgrid(*[np.arange(g)] * n, indexing="ij")).reshape(n, -1).T
+    # The pending boxes, nearest first: when the budget runs out, every box nearer than the
+    # nearest pending one is proven, and that is the radius.
+    blo, bhi = edges[idx], edges[idx + 1]
+    total, rounds = 0, 0
+    while blo.shape[0] and total < max_boxes:
+        rounds += 1
+        a2 = np.where((blo <= 0) & (bhi >= 0), 0.0, np.minimum(blo * blo, bhi * bhi))
+        near = np.sqrt(a2.sum(axis=1))
+        far = np.sqrt(np.maximum(blo * blo, bhi * bhi).sum(axis=1))
+        keep = (near < R) & (far > r0)
+        blo, bhi, near = blo[keep], bhi[keep], near[keep]
+        take = min(blo.shape[0], chunk, max_boxes - total)
+        if take < blo.shape[0]:
+            part = np.argpartition(near, take - 1)
+            now, later = part[:take], part[take:]
+        else:
+            now, later = np.arange(blo.shape[0]), np.arange(0)
+        rest_lo, rest_hi = blo[later], bhi[later]
+        blo, bhi, near = blo[now], bhi[now], near[now]
+        if not blo.shape[0]:
+            break
+        total += blo.shape[0]
+        enclosure, smear = loop.vdot_box(blo, bhi)
+        open_ = ~(enclosure.hi < 0.0)
+        blo, bhi, near, smear = blo[open_], bhi[open_], near[open_], smear[open_]
+        c = 0.5 * (blo + bhi)
+        bad = loop.vdot_point(c).lo >= 0.0 if blo.shape[0] else np.zeros(0, dtype=bool)
+        if bad.any():
+            rc = np.sqrt((c[bad] ** 2).sum(axis=1))
+            k = int(np.argmin(rc))
+            if _SHY * rc[k] < R:
+                R, limited = _SHY * float(rc[k]), "decrease"
+                violation = (x_op + loop.T @ c[bad][k]).tolist()
+        width = (bhi - blo).max(axis=1)
+        fine = width <= min_width * np.maximum(near, r0)
+        if fine.any():
+            m = float(near[fine].min())
+            if m < R:
+                R, limited = m, "resolution"
+        split = ~fine & (near < R)
+        blo, bhi, smear = blo[split], bhi[split], smear[split]
+        # Each box in two across the coordinate that smears its enclosure most.
+        j = np.argmax(smear, axis=1)
+        rows = np.arange(blo.shape[0])
+        mid = 0.5 * (blo[rows, j] + bhi[rows, j])
+        lo2, hi1 = blo.copy(), bhi.copy()
+        hi1[rows, j] = mid
+        lo2[rows, j] = mid
+        blo = np.concatenate([rest_lo, blo, lo2])
+        bhi = np.concatenate([rest_hi, hi1, bhi])
+        if rounds % 10 == 0:
+            say(f"{total} boxes, {blo.shape[0]} pending, radius {R:.4g}")
+    if blo.shape[0]:
+        a2 = np.where((blo <= 0) & (bhi >= 0), 0.0, np.minimum(blo * blo, bhi * bhi))
+        near = np.sqrt(a2.sum(axis=1))
+        far = np.sqrt(np.maximum(blo * blo, bhi * bhi).sum(axis=1))
+        pending = (near < R) & (far > r0)
+        if pending.any() and float(near[pending].min()) < R:
+            R, limited = float(near[pending].min()), "budget"
+    levels = rounds
+    rho = max(R, r0) ** 2 * (1.0 - _COVER)
+    return Certificate(rho=rho, method=METHOD, assumes=ASSUMES, limited_by=limited,
+                       rho_region=rho_region, inner=r0 * r0, inner_floor=floor * floor,
+                       boxes=total, levels=levels, seconds=time.perf_counter() - t0,
+                       violation=violation)
+
+
+__all__ = ["ASSUMES", "METHOD", "Certificate", "CertificateUnavailable", "certify",
+           "region_level"]
