@@ -85,6 +85,7 @@ def library_files(ctrl: MPC, *, name: str = "mpc", precision: str = "double") ->
     """The library alone, relative path -> text: DAQP's sources under ``daqp/``,
     ``<name>.h`` and ``<name>.c`` (*precision* ``"double"`` or ``"float"``: ``c_float``, built
     with ``-DDAQP_SINGLE_PRECISION`` for ``"float"``)."""
+    from equilibrist.control._mpc_runtime import COLD_SLACK
     from equilibrist.control.mpc import EPS, INF, ITER_LIMIT, KalmanFront
     from equilibrist.export.linear_c import LINEAR_C
 
@@ -162,7 +163,9 @@ def library_files(ctrl: MPC, *, name: str = "mpc", precision: str = "double") ->
         "static const int S_IDX[" + str(max(1, ns)) + "] = {"
         + (", ".join(str(i) for i in prob.soft_index) or "0") + "};",
         "static c_float BU[NM], BL[NM], SOL[NZ], LAM[NM];",
-        "static int COLD[NM];  /* an empty working set */",
+        "/* A cold start's working set: the slacks' bounds s >= 0 active (MPCRuntime's). */",
+        "static int COLD[NM] = {" + ", ".join(
+            str(COLD_SLACK if N * m <= i < nz else 0) for i in range(nz + na)) + "};",
         "/* DAQP's workspace, static (what allocate_daqp_workspace would allocate for NZ",
         " * variables and no soft constraint; the rows M stay in flash). */",
         "static c_float W_LAM[NZ + 1], W_LAM_STAR[NZ + 1], W_D[NZ + 1], W_XLDL[NZ + 1],",
