@@ -81,14 +81,12 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 def _slice(system: System, text: str | None) -> tuple[str, str]:
     if text is None:
-        region = list(system.spec.region)
-        if not region:
+        from equilibrist.sim.roa import default_slice
+
+        pair = default_slice(system)
+        if pair is None:
             raise common.UsageError(f"{system.key} states no fall region: give --slice A,B")
-        first = region[0]
-        rate = f"{first}_dot"
-        second = rate if rate in system.state_names else next(
-            s for s in system.state_names if s != first)
-        return first, second
+        return pair
     names = common.parse_names(text, "--slice")
     assert names is not None
     if len(names) != 2 or names[0] == names[1]:
@@ -102,18 +100,9 @@ def _slice(system: System, text: str | None) -> tuple[str, str]:
 
 def _bounds(system: System, states: tuple[str, str], x_op: np.ndarray,
             text: str | None) -> tuple[tuple[float, float], tuple[float, float]]:
-    region = system.spec.region
-    out: dict[str, tuple[float, float]] = {}
-    for s in states:
-        if s in region:
-            lo, hi = region[s]
-            out[s] = (float(lo), float(hi))
-    for s in states:
-        base = s[:-4] if s.endswith("_dot") else None
-        if s not in out and base in region:
-            half = 1.5 * (float(region[base][1]) - float(region[base][0]))
-            c = float(x_op[system.state_index(s)])
-            out[s] = (c - half, c + half)
+    from equilibrist.sim.roa import default_bounds
+
+    out = default_bounds(system, states, x_op)
     if text is not None:
         for item, value in common.parse_assignments(text.split(","), "--range").items():
             if item not in states:

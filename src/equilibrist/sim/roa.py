@@ -72,6 +72,39 @@ class SliceEstimate:
         return float(self.caught.mean()) if self.caught.size else math.nan
 
 
+def default_slice(system: System) -> tuple[str, str] | None:
+    """The slice ``roa`` draws by default: the first coordinate of the system's fall region
+    and its rate (or the first other state when it has none); None when there is no region."""
+    region = list(system.spec.region)
+    if not region:
+        return None
+    first = region[0]
+    rate = f"{first}_dot"
+    second = rate if rate in system.state_names else next(
+        s for s in system.state_names if s != first)
+    return first, second
+
+
+def default_bounds(system: System, states: tuple[str, ...],
+                   x_op: np.ndarray) -> dict[str, tuple[float, float]]:
+    """The default bounds of those *states* that have one (absolute values): a state of the
+    fall region its region's; the rate of one, three times that region's width per second
+    about the operating point (``1.5`` widths each side)."""
+    region = system.spec.region
+    out: dict[str, tuple[float, float]] = {}
+    for s in states:
+        if s in region:
+            lo, hi = region[s]
+            out[s] = (float(lo), float(hi))
+    for s in states:
+        base = s[:-4] if s.endswith("_dot") else None
+        if s not in out and base in region:
+            half = 1.5 * (float(region[base][1]) - float(region[base][0]))
+            c = float(x_op[system.state_index(s)])
+            out[s] = (c - half, c + half)
+    return out
+
+
 def outcomes(system: System, controller: object, x0s: np.ndarray, options: Mapping[str, Any],
              seed: int) -> np.ndarray:
     """Whether the loop catches each start (see :class:`SliceEstimate`'s ``caught``)."""
@@ -254,6 +287,8 @@ def slice_coverage(est: SliceEstimate, S: np.ndarray, x_op: np.ndarray, idx: tup
 
 __all__ = [
     "SliceEstimate",
+    "default_bounds",
+    "default_slice",
     "estimate_slice",
     "levels_of",
     "max_push",
