@@ -38,14 +38,17 @@ def test_probes_take_a_bounded_share_on_a_busy_machine(monkeypatch: pytest.Monke
     """The parallel way's first step in a probe waits a whole time slice (100 times a step on
     one thread), its others take 9; the one-thread step drifts between 1 and 1.6 every 300
     steps (the other work on the machine comes and goes), which calls probes early. The
-    choice stays on one thread and the probes take at most about 1 / PROBE_SHARE of the
-    time (they took a quarter when the first step of a probe was not counted)."""
+    choice stays on one thread, each probe ends at its first step, and the probes take at
+    most about 1 / PROBE_SHARE of the time (they took a quarter when the first step of a
+    probe was not counted)."""
     spent = {0: 0.0, 1: 0.0}
     state = {"step": 0, "streak": 0, "last": 0}
 
     def seconds(mode: int) -> float:
         state["streak"] = state["streak"] + 1 if mode == 1 and state["last"] == 1 else int(mode)
         state["last"] = mode
+        state["longest"] = max(state.get("longest", 0), state["streak"]) if state["step"] > 300 \
+            else 0
         if mode == 1:
             t = 100.0 if state["streak"] == 1 else 9.0
         else:
@@ -61,6 +64,8 @@ def test_probes_take_a_bounded_share_on_a_busy_machine(monkeypatch: pytest.Monke
     assert vec.threads_in_use == 1
     share = spent[1] / (spent[0] + spent[1])
     assert 0 < share < 1.5 / vector_module.PROBE_SHARE
+    # A first step of a whole time slice ends its probe: one parallel step per probe.
+    assert state["longest"] == 1
 
 
 def test_a_quiet_machine_is_noticed_after_a_costly_probe(monkeypatch: pytest.MonkeyPatch) -> None:

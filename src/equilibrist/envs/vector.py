@@ -60,6 +60,11 @@ PARALLEL_MIN = 256
 # in use, and so does a probe that a slower step calls early. Of the steps
 # between probes, one in TIME_EVERY is timed.
 TIME_EVERY = 4
+# A probe whose first step takes PROBE_GIVE_UP times a step of the way in use, and at
+# least PROBE_GIVE_UP_S seconds, ends there (that step is its time): waking the other
+# threads costs microseconds; a step that waits for a descheduled one, a time slice.
+PROBE_GIVE_UP = 20.0
+PROBE_GIVE_UP_S = 1e-3
 PROBE_EVERY = 50
 PROBE_EVERY_MAX = 1600
 RESLOWED = 1.5
@@ -252,6 +257,10 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._probe_spent += spent
         if not first:
             self._probe_best = min(self._probe_best, spent)
+        elif spent > max(PROBE_GIVE_UP * cost[1 - mode], PROBE_GIVE_UP_S):
+            # The other cores are taken (a whole time slice, not a wake-up): the probe
+            # ends at its first step, which counts.
+            self._probe_best, self._probe_left = spent, 0
         if self._probe_left > 0:
             return int(bad)
         cost[mode] = self._probe_best  # the best of the probe's timed steps
