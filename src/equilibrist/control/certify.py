@@ -146,6 +146,10 @@ class _Loop:
         self.ST = _imatmul(_imat(S), T_i)  # enclosures of the products
         self.KT = _imatmul(_imat(K), T_i)
         self.T_i = T_i
+        self._linear_part()
+
+    def A_cl(self, i: int, j: int) -> Interval:
+        return self._acl[i][j]
 
     # -- pieces ------------------------------------------------------------------
     def _lin(self, rows: list[list[Interval]], z: list[Interval]) -> list[Interval]:
@@ -174,13 +178,72 @@ class _Loop:
 
     def vdot_point(self, c: np.ndarray) -> Interval:
         """An enclosure of ``dV/dt`` at the points *c* (rows, in z)."""
+        return self._at(c)[0]
+
+    def _at(self, c: np.ndarray) -> tuple[Interval, list[Interval]]:
+        """``dV/dt`` and ``f`` enclosed at the points *c*."""
         z = [Interval(c[:, j]) for j in range(self.n)]
         _dx, x, u, _s, sdx = self._state(z)
-        f = self._f(*x, *u, *self.params)
-        acc = sdx[0] * _row(f, 0)
+        out = self._f(*x, *u, *self.params)
+        f = [_row(out, i) for i in range(self.n)]
+        acc = sdx[0] * f[0]
         for i in range(1, self.n):
-            acc = acc + sdx[i] * _row(f, i)
-        return 2.0 * acc
+            acc = acc + sdx[i] * f[i]
+        return 2.0 * acc, f
+
+    def _linear_part(self) -> None:
+        """``A_cl``, the closed loop's Jacobian at the operating point (unsaturated), and
+        ``P = sym(2 T'S A_cl T)``: ``dV/dt = z'P z + R(z)`` with ``R`` of third order. Where
+        every matrix of ``P``'s enclosure is negative definite, :meth:`vdot_box` bounds the
+        quadratic part exactly (a concave quadratic is at most its tangent plane) and only
+        the remainder by intervals: boxes near the operating point prove as easily as far."""
+        n, m = self.n, self.m
+        self.quad = False
+        inside = np.all((self.u_op > self.lo) & (self.u_op < self.hi))
+        if not inside:
+            return
+        x = [Interval(np.array([float(v)])) for v in self.x_op]
+        u = [Interval(np.array([float(v)])) for v in self.u_op]
+        _f, A, B = self._fab(*x, *u, *self.params)
+        acl = [[Interval.of(_cell(A, i, j)) - _sum(
+            [_cell(B, i, k) * float(self.K[k, j]) for k in range(m)]) for j in range(n)]
+            for i in range(n)]
+        self._acl = acl
+        self.AclT = _imatmul(acl, self.T_i)
+        half = _imatmul(_transpose(self.ST), self.AclT)
+        lo = np.array([[_first((half[i][j] + half[j][i]).lo) for j in range(n)] for i in range(n)])
+        hi = np.array([[_first((half[i][j] + half[j][i]).hi) for j in range(n)] for i in range(n)])
+        mid, rad = 0.5 * (lo + hi), 0.5 * (hi - lo)
+        top = float(np.linalg.eigvalsh(0.5 * (mid + mid.T)).max()) + float(np.linalg.norm(rad))
+        self.P = [[Interval(2.0 * lo[i, j], 2.0 * hi[i, j]) for j in range(n)] for i in range(n)]
+        self.quad = bool(top + 1e-12 * float(np.linalg.norm(mid)) < 0.0)
+
+    def _quadratic_bound(self, z: list[Interval], c: np.ndarray, f: list[Interval],
+                         J: list[list[Interval]], sdx: list[Interval], vc: Interval,
+                         fc: list[Interval]) -> tuple[np.ndarray, np.ndarray]:
+        """An upper bound of ``dV/dt`` over the boxes: the quadratic part's tangent plane at
+        the centre plus the remainder's mean-value form (see :meth:`_linear_part`)."""
+        n = self.n
+        ci = [Interval(c[:, j]) for j in range(n)]
+        w = [z[j] - c[:, j] for j in range(n)]
+        Pc = [_sum([self.P[i][j] * ci[j] for j in range(n)]) for i in range(n)]
+        cPc = _sum([ci[i] * Pc[i] for i in range(n)])
+        D = [[J[i][j] - self.A_cl(i, j) for j in range(n)] for i in range(n)]
+        DT = _imatmul(D, self.T_i)
+        e = [fc[i] - _sum([self.AclT[i][j] * ci[j] for j in range(n)])
+             + _sum([DT[i][j] * w[j] for j in range(n)]) for i in range(n)]
+        R = vc - cPc
+        upper_lin = cPc.hi
+        smear = np.empty_like(c)
+        for j in range(n):
+            g = 2.0 * _sum([self.ST[i][j] * e[i] + DT[i][j] * sdx[i] for i in range(n)])
+            R = R + g * w[j]
+            half = 0.5 * (z[j].hi - z[j].lo)
+            lin = np.maximum(np.abs(Pc[j].lo), np.abs(Pc[j].hi)) * 2.0 * half
+            upper_lin = upper_lin + lin
+            smear[:, j] = lin + np.maximum(np.abs(g.lo), np.abs(g.hi)) * 2.0 * half
+        bound: np.ndarray = np.nextafter(np.nextafter(upper_lin, np.inf) + R.hi, np.inf)
+        return np.nan_to_num(bound, nan=np.inf), smear
 
     def jacobian(self, z: list[Interval]) -> tuple[list[Interval], list[list[Interval]],
                                                    list[Interval]]:
@@ -213,7 +276,8 @@ class _Loop:
         # The gradient in z: 2 (ST)' f + 2 (J T)' (S dx).
         JT = _imatmul(J, self.T_i)
         c = 0.5 * lo + 0.5 * hi
-        mv = self.vdot_point(c)
+        vc, fc = self._at(c)
+        mv = vc
         smear = np.empty_like(lo)
         for j in range(n):
             g = self.ST[0][j] * f[0] + JT[0][j] * sdx[0]
@@ -221,7 +285,13 @@ class _Loop:
                 g = g + self.ST[i][j] * f[i] + JT[i][j] * sdx[i]
             mv = mv + 2.0 * g * (z[j] - c[:, j])
             smear[:, j] = np.maximum(np.abs(g.lo), np.abs(g.hi)) * (hi[:, j] - lo[:, j])
-        return direct.intersect(mv), np.nan_to_num(smear, nan=np.inf)
+        out = direct.intersect(mv)
+        if self.quad:
+            bound, qsmear = self._quadratic_bound(z, c, f, J, sdx, vc, fc)
+            better = bound < out.hi
+            out = Interval(out.lo, np.minimum(out.hi, bound))
+            smear = np.where(better[:, None], qsmear, smear)
+        return out, np.nan_to_num(smear, nan=np.inf)
 
     def cones(self, r: float, plo: np.ndarray, phi: np.ndarray) -> np.ndarray:
         """For patches ``[plo, phi]`` of the unit cube's surface: an upper bound of
@@ -269,6 +339,13 @@ class _Loop:
             b2 = b2 + g.square()
         b = 2.0 * float(np.sqrt(_first(b2.hi))) * (1 + 1e-12)
         return lam, b
+
+
+def _sum(terms: list[Interval]) -> Interval:
+    acc = terms[0]
+    for t in terms[1:]:
+        acc = acc + t
+    return acc
 
 
 def _first(a: np.ndarray) -> float:

@@ -39,13 +39,22 @@ class UnsupportedError(ValueError):
     """An expression holds a function that has no enclosure here."""
 
 
+# One step outward from a correctly rounded result: |x| 2^-52 is at least one ulp of x (an
+# exact product), so x - |x| 2^-52 rounds to a float below x's exact value; the smallest
+# subnormal covers zero and the subnormals. Cheaper than nextafter, and as sound.
+_EPS = 2.0**-52
+_TINY = float(np.finfo(float).smallest_subnormal)
+
+
 def _down(x: Any) -> np.ndarray:
-    out: np.ndarray = np.nextafter(x, -np.inf)
+    with np.errstate(invalid="ignore", over="ignore"):
+        out: np.ndarray = x - (np.abs(x) * _EPS + _TINY)
     return out
 
 
 def _up(x: Any) -> np.ndarray:
-    out: np.ndarray = np.nextafter(x, np.inf)
+    with np.errstate(invalid="ignore", over="ignore"):
+        out: np.ndarray = x + (np.abs(x) * _EPS + _TINY)
     return out
 
 
@@ -122,9 +131,16 @@ class Interval:
     def __mul__(self, other: Any) -> Interval:
         o = Interval.of(other)
         with np.errstate(invalid="ignore", over="ignore"):
-            p = np.stack(np.broadcast_arrays(self.lo * o.lo, self.lo * o.hi,
-                                             self.hi * o.lo, self.hi * o.hi))
-        return Interval(_down(p.min(axis=0)), _up(p.max(axis=0)))
+            if o.lo is o.hi and o.lo.ndim == 0:  # times a number
+                a, b = self.lo * o.lo, self.hi * o.lo
+                return Interval(_down(np.minimum(a, b)), _up(np.maximum(a, b)))
+            if self.lo is self.hi and self.lo.ndim == 0:
+                return o * self
+            p1, p2 = self.lo * o.lo, self.lo * o.hi
+            p3, p4 = self.hi * o.lo, self.hi * o.hi
+            lo = np.minimum(np.minimum(p1, p2), np.minimum(p3, p4))
+            hi = np.maximum(np.maximum(p1, p2), np.maximum(p3, p4))
+        return Interval(_down(lo), _up(hi))
 
     __rmul__ = __mul__
 
@@ -139,9 +155,11 @@ class Interval:
         o = Interval.of(other)
         if not np.any((o.lo <= 0.0) & (o.hi >= 0.0)):
             with np.errstate(invalid="ignore", over="ignore"):
-                p = np.stack(np.broadcast_arrays(self.lo / o.lo, self.lo / o.hi,
-                                                 self.hi / o.lo, self.hi / o.hi))
-            return Interval(_down(p.min(axis=0)), _up(p.max(axis=0)))
+                p1, p2 = self.lo / o.lo, self.lo / o.hi
+                p3, p4 = self.hi / o.lo, self.hi / o.hi
+                lo = np.minimum(np.minimum(p1, p2), np.minimum(p3, p4))
+                hi = np.maximum(np.maximum(p1, p2), np.maximum(p3, p4))
+            return Interval(_down(lo), _up(hi))
         return self * o.reciprocal()
 
     def __rtruediv__(self, other: Any) -> Interval:
