@@ -72,6 +72,7 @@ def client(app):
         ('{"type": "push", "size": 1, "seq": -1}', "seq"),
         ('{"type": "push", "size": 1, "seq": 1.5}', "seq"),
         ('{"type": "seen", "frame": -3}', "frame must be an integer"),
+        ('{"type": "roa", "grid": 64}', "unknown field"),
         ("[" * 8000 + "]" * 8000, "not valid JSON"),
     ],
 )
@@ -98,6 +99,7 @@ def test_parse_accepts_the_documented_messages():
         "size": -1.0, "duration": 0.2}
     assert parse('{"type": "select", "system": "seesaw"}', LIMITS).fields == {"system": "seesaw"}
     assert parse('{"type": "seen", "frame": 12}', LIMITS).fields == {"frame": 12}
+    assert parse('{"type": "roa", "seq": 3}', LIMITS).fields == {}
 
 
 # -- the server --------------------------------------------------------------------------------
@@ -156,6 +158,97 @@ def test_a_seen_frame_from_the_future_gets_an_error_frame_and_the_session_goes_o
         # A frame that was sent is a good report.
         ws.send_text(json.dumps({"type": "seen", "frame": frames[-1]["n"], "seq": 33}))
         assert receive_until(ws, lambda m: m["type"] in ("error", "ack"))["type"] == "ack"
+
+
+def _roa_until(ws, status, frames):
+    """The next ``roa`` frame of *status* (a tuple), the live frames before it kept in *frames*
+    as (wall time, frame)."""
+    import time
+
+    def done(m):
+        if m["type"] == "frame":
+            frames.append((time.monotonic(), m))
+        return m["type"] == "roa" and m["status"] in status
+
+    return receive_until(ws, done, limit=100_000)
+
+
+def test_region_of_attraction_is_computed_aside_and_a_bad_request_is_one_error(client):
+    """``roa``: a bad message is one error line and the session goes on; a good one is
+    computed off the live loop (its frames keep coming), the slice is ``roa``'s default one
+    (theta, theta_dot over the region), the LQG's level certified; a change of controller
+    clears it, and a result the change superseded is never sent."""
+    import time
+
+    from equilibrist import get_system
+    from equilibrist.sim.roa import default_bounds
+
+    with client.websocket_connect("/ws") as ws:
+        opening(ws)
+        ws.send_text(json.dumps({"type": "roa", "grid": 64, "seq": 50}))
+        err = receive_until(ws, lambda m: m["type"] in ("error", "ack", "roa"))
+        assert err["type"] == "error" and "unknown field" in err["message"], err
+        assert len(err["message"].splitlines()) == 1
+        ws.send_text(json.dumps({"type": "roa", "seq": 51}))
+        assert receive_until(ws, lambda m: m["type"] in ("error", "ack"))["seq"] == 51
+        frames: list = []
+        computing = _roa_until(ws, ("computing",), frames)
+        began = time.monotonic()
+        got = _roa_until(ws, ("slice", "failed"), frames)
+        assert got["status"] == "slice", got
+        assert got["id"] == computing["id"] and got["controller"] == "lqg"
+        assert got["states"] == ["theta", "theta_dot"] and got["units"] == ["rad", "rad/s"]
+        system = get_system("cartpole")
+        x_op = np.asarray(system.operating_point().x, dtype=float)
+        expected = default_bounds(system, ("theta", "theta_dot"), x_op)
+        assert got["bounds"] == [list(expected["theta"]), list(expected["theta_dot"])]
+        points = np.array(got["points"]).reshape(-1, 2)
+        caught = np.array([c == "1" for c in got["caught"]])
+        assert set(got["caught"]) == {"0", "1"} and len(points) == len(caught) == got["samples"]
+        assert got["samples"] <= 1500
+        # Caught near the operating point; not far out, leaning and falling the same way.
+        scaled = (points - x_op[got["index"]]) / np.ptp(np.array(got["bounds"]), axis=1)
+        dist = np.hypot(scaled[:, 0], scaled[:, 1])
+        away = (scaled[:, 0] * scaled[:, 1] > 0) & (dist > 0.5)
+        assert caught[dist < 0.05].all() and away.any() and not caught[away].any()
+        assert got["certificate"] == "computing"
+        cert = _roa_until(ws, ("certificate", "failed"), frames)
+        assert cert["status"] == "certificate" and cert["id"] == got["id"], cert
+        c = cert["certificate"]
+        S2 = np.array(c["S"])
+        assert S2.shape == (2, 2) and np.allclose(S2, S2.T) and np.all(np.linalg.eigvalsh(S2) > 0)
+        assert c["rho"] > 0 and c["counterexamples"] == 0 and c["certified"]
+        # The live loop went on meanwhile, in real time.
+        wall = time.monotonic() - began
+        live = [f for t, f in frames if t >= began]
+        assert len(live) >= 0.25 * 40 * wall, (len(live), wall)
+        assert live[-1]["t"] - live[0]["t"] >= 0.5 * (wall - 1.0), wall
+        # Asked again with nothing changed: the same answer at once.
+        ws.send_text(json.dumps({"type": "roa"}))
+        again = _roa_until(ws, ("slice",), frames)
+        assert again["id"] == got["id"] and again["points"] == got["points"]
+        # Another controller clears it; a request superseded by a change is dropped.
+        ws.send_text(json.dumps({"type": "tune", "controller": "swingup"}))
+        _roa_until(ws, ("cleared",), frames)
+        ws.send_text(json.dumps({"type": "roa"}))
+        stale = _roa_until(ws, ("computing",), frames)
+        ws.send_text(json.dumps({"type": "tune", "noise": 2.0}))
+        _roa_until(ws, ("cleared",), frames)
+        ws.send_text(json.dumps({"type": "roa"}))
+        fresh = _roa_until(ws, ("computing",), frames)
+        assert fresh["id"] > stale["id"]
+        done = _roa_until(ws, ("slice", "failed"), frames)
+        assert done["status"] == "slice" and done["id"] == fresh["id"], done
+        assert done["controller"] == "swingup" and done["certificate"] is None
+        # The open loop has no region to show: one error line, the session goes on.
+        ws.send_text(json.dumps({"type": "tune", "controller": "off"}))
+        receive_until(ws, lambda m: m["type"] == "design")
+        ws.send_text(json.dumps({"type": "roa", "seq": 52}))
+        refused = receive_until(ws, lambda m: m["type"] in ("error", "ack"))
+        assert refused["type"] == "error" and refused["seq"] == 52
+        assert "controller is off" in refused["message"]
+        t1 = next_frame(ws)["t"]
+        assert receive_until(ws, lambda m: m["type"] == "frame" and m["t"] > t1 + 0.2)
 
 
 def test_a_flood_is_cut_and_other_sessions_do_not_notice(client, app):

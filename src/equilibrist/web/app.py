@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from equilibrist.errors import EquilibristError
+from equilibrist.web._session_roa import compute_roa
 from equilibrist.web.protocol import ProtocolError, parse
 from equilibrist.web.session import Catalogue, Session, redesign
 
@@ -331,8 +332,10 @@ def create_app(
         except WebSocketDisconnect:
             pass
         finally:
-            # A closed socket frees its session (and its stream) at once.
+            # A closed socket frees its session (and its stream) at once; a region of
+            # attraction under way for it stops at its next check.
             state.sessions.pop(session.token, None)
+            session.roa_clear()
             if streamer is not None:
                 streamer.cancel()
                 # Waited for, not awaited: its end (cancelled, or a closed socket) is no error
@@ -466,44 +469,57 @@ async def _work(ws: Any, session: Session, inbox: asyncio.Queue[str | bytes]) ->
     """Check and carry out the queued messages, one at a time.
 
     Each is checked against the limits in force when its turn comes (a
-    ``select`` changes them for the messages after it).
+    ``select`` changes them for the messages after it). A region of attraction
+    is computed aside (:func:`~equilibrist.web._session_roa.compute_roa`): the
+    messages after it do not wait for it.
     """
     designing = 0
-    while True:
-        payload = await inbox.get()
-        try:
-            message = parse(payload, session.limits)
-        except ProtocolError as exc:
-            await _send(ws, {"type": "error", "message": str(exc)})
-            continue
-        try:
-            if message.type == "select":
-                # Building a system and its design takes a moment: off the event loop,
-                # with the stream holding its frames meanwhile.
-                session.busy = True
-                try:
-                    await asyncio.to_thread(session.load, message.fields["system"])
-                finally:
-                    session.busy = False
+    jobs: set[asyncio.Task[None]] = set()
+    try:
+        while True:
+            payload = await inbox.get()
+            try:
+                message = parse(payload, session.limits)
+            except ProtocolError as exc:
+                await _send(ws, {"type": "error", "message": str(exc)})
+                continue
+            try:
                 settings = None
-            else:
-                settings = session.handle(message)
-            if settings is not None:
-                system = session.prepare(settings)
-        except EquilibristError as exc:
-            await _send(ws, {"type": "error", "message": str(exc), "seq": message.seq})
-            continue
-        if message.seq is not None:
-            await _send(ws, {"type": "ack", "seq": message.seq, "of": message.type})
-        if settings is None:
-            continue
-        designing += 1
-        ticket = designing
-        session.pending_design = ticket
-        d, seconds, error, runner, built = await asyncio.to_thread(redesign, system, settings)
-        if session.pending_design != ticket or session.base.spec is not system.spec:
-            continue  # a later change, or another system, superseded this one
-        session.install(settings, system, d, seconds, error, runner, built)
+                if message.type == "select":
+                    # Building a system and its design takes a moment: off the event loop,
+                    # with the stream holding its frames meanwhile.
+                    session.busy = True
+                    try:
+                        await asyncio.to_thread(session.load, message.fields["system"])
+                    finally:
+                        session.busy = False
+                elif message.type == "roa":
+                    job = session.roa_job()
+                    if job is not None:
+                        task = asyncio.create_task(compute_roa(session, job))
+                        jobs.add(task)
+                        task.add_done_callback(jobs.discard)
+                else:
+                    settings = session.handle(message)
+                if settings is not None:
+                    system = session.prepare(settings)
+            except EquilibristError as exc:
+                await _send(ws, {"type": "error", "message": str(exc), "seq": message.seq})
+                continue
+            if message.seq is not None:
+                await _send(ws, {"type": "ack", "seq": message.seq, "of": message.type})
+            if settings is None:
+                continue
+            designing += 1
+            ticket = designing
+            session.pending_design = ticket
+            d, seconds, error, runner, built = await asyncio.to_thread(redesign, system, settings)
+            if session.pending_design != ticket or session.base.spec is not system.spec:
+                continue  # a later change, or another system, superseded this one
+            session.install(settings, system, d, seconds, error, runner, built)
+    finally:
+        for task in jobs:
+            task.cancel()
 
 
 __all__ = ["FPS", "LOOPBACK_NAMES", "MAX_SESSIONS", "HostCheck", "create_app"]

@@ -74,6 +74,7 @@ FIELDS: dict[str, tuple[frozenset[str], frozenset[str]]] = {
     "pause": (frozenset({"paused"}), frozenset({"paused"})),
     "full": (frozenset(), frozenset()),
     "seen": (frozenset({"frame"}), frozenset({"frame"})),
+    "roa": (frozenset(), frozenset()),
 }
 
 
@@ -277,6 +278,10 @@ def _full(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
     return {}
 
 
+def _roa(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+    return {}
+
+
 def _seen(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
     raw = data["frame"]
     if isinstance(raw, bool) or not isinstance(raw, int) or not SEQ_RANGE[0] <= raw <= SEQ_RANGE[1]:
@@ -294,6 +299,7 @@ _FIELD_CHECKS = {
     "pause": _pause,
     "full": _full,
     "seen": _seen,
+    "roa": _roa,
 }
 
 __all__ = ["CONTROLLERS", "FIELDS", "MAX_MESSAGE_BYTES", "OFF", "Limits", "Message", "ProtocolError", "controllers", "kind_name", "parse"]

@@ -81,6 +81,7 @@ from equilibrist.web._session_output import (
     MAX_UNSEEN,  # noqa: F401
     _SessionOutput,
 )
+from equilibrist.web._session_roa import _SessionRoa
 from equilibrist.web.protocol import Limits, Message, controllers
 from equilibrist.web.runners import Runner, hanging_refusal, unavailable
 
@@ -112,7 +113,7 @@ LAG_SHARE = 0.8
 LAG_WARN_EVERY = 5.0
 
 
-class Session(_SessionOutput):
+class Session(_SessionOutput, _SessionRoa):
     """One browser tab's running system (see the module docstring).
 
     Parameters
@@ -178,6 +179,7 @@ class Session(_SessionOutput):
         self._apply_region()
         self._apply_rate()
         self.design_message = describe_design(d, settings.controller, seconds)
+        self.roa_clear()
         self.messages.append(self.describe())
         self.messages.append(self.design_message)
         self.reset(kick=0.5 * float(spec.design_scales.get(system.state_names[self.angle_index], 0.1)))
@@ -410,6 +412,7 @@ class Session(_SessionOutput):
             self.mode = None if runner is None else runner.mode
             self.mode_since = self.t
         self._apply_region()
+        self.roa_clear()  # the slice shown was another loop's
         if rate_changed:
             self._apply_rate()  # a new rate starts a new recording
         if error:

@@ -11,6 +11,7 @@
     shapes: new Map(), view: null, frame: null, fell: null,
     charts: [], data: null, tuneInFlight: null, tunePending: null,
     drag: null, paused: false, lastFrameAt: 0, frames: 0, retries: 0, history: [],
+    hooks: {},  // {type: function}: the other views' handlers, after the page's own (roa.js)
   };
   window.playground = state; // for the page's tests and the curious
 
@@ -35,6 +36,8 @@
       try { msg = JSON.parse(ev.data); } catch (e) { return; }
       const handler = HANDLERS[msg.type];
       if (handler) handler(msg);
+      const hook = state.hooks[msg.type];
+      if (hook) hook(msg);
     };
   }
 
@@ -44,6 +47,8 @@
     state.ws.send(JSON.stringify(obj));
     return numbered ? state.seq : null;
   }
+
+  state.send = send;
 
   function setConnection(text) { $("connection").textContent = text; }
 
