@@ -28,9 +28,9 @@ refined where neighbouring starts disagree, up to --samples runs.
 max_tilt: the largest deviation of the slice's first state recovered from rest
 on both sides; max_push: the largest impulse on the first input (its unit x s)
 recovered from rest, both ways (an impulse J changes the velocities by B J).
-rho_sampled: the largest level of the LQR's Riccati function dx' S dx whose
-section by the slice lies in the sampled window and that no run falsifies, an
-estimate: sampling finds counterexamples, it proves nothing.
+rho_sampled: the largest level of the LQR's Riccati function dx' S dx below
+which no run was lost (the least V of a lost start), an estimate: sampling
+finds counterexamples, it proves nothing.
 rho (LQR, and the LQG's state feedback): the largest level of dx' S dx on which
 dV/dt is proven negative for the exact equations with the input's saturation,
 by interval branch-and-bound (--certify off skips it; --boxes N caps its boxes).
@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
 
     from equilibrist.control import kinds
     from equilibrist.sim.noise import Noise
-    from equilibrist.sim.roa import estimate_slice, max_push, max_tilt, rho_sampled
+    from equilibrist.sim.roa_report import analyse
 
     if args.out is not None and not args.out.lower().endswith(".parquet"):
         raise common.UsageError(f"--out {args.out!r}: expected FILE.parquet")
@@ -171,72 +171,30 @@ def run(args: argparse.Namespace) -> int:
             raise common.UsageError(f"--physics-step {args.physics_step}: expected a positive "
                                     "number of seconds")
         options["physics_step"] = step
-    est = estimate_slice(system, controller, states, bounds, x_op=x_op, max_samples=samples,
-                         seed=seed, **options)
-    tilt_state = states[0]
-    k = system.state_index(tilt_state)
-    limit = max(abs(bounds[0][0] - x_op[k]), abs(bounds[0][1] - x_op[k]))
-    down, up, tilt_x0, tilt_ok = max_tilt(system, controller, tilt_state, limit, x_op=x_op,
-                                          seed=seed, **options)
-    lo_u, hi_u = system.input_limits
-    push_limit = float(max(abs(lo_u[0]), abs(hi_u[0]))) if math.isfinite(float(hi_u[0])) else 100.0
-    neg, pos, push_x0, push_ok = max_push(system, controller, push_limit, x_op=x_op, u_op=u_op,
-                                          seed=seed, **options)
-    x0s = np.vstack([est.x0s, np.array(tilt_x0), np.array(push_x0)])
-    caught = np.concatenate([est.caught, np.array(tilt_ok, dtype=bool),
-                             np.array(push_ok, dtype=bool)])
-    design = getattr(controller, "design", None)
-    S = getattr(design, "S", None)
-    rho_est = None
-    cert, note = None, None
-    if S is not None and args.certify == "on":
-        cert, note, extra = _certify(system, design, x_op, u_op, boxes, falsify, controller,
-                                     options, seed)
-        if extra is not None:
-            x0s = np.vstack([x0s, extra[0]])
-            caught = np.concatenate([caught, extra[1]])
-    elif args.certify == "on":
-        note = f"--controller {name} has no Riccati function to certify (lqr and lqg have)"
-    if S is not None:
-        S = np.asarray(S, dtype=float)
-        rho_est = rho_sampled(S, x_op, x0s, caught)
-        # Only as far as the slice was sampled: the largest level whose section by the slice
-        # fits in the window (its extent along state i is sqrt(rho (S_ss^-1)_ii)).
-        ij = [system.state_index(s) for s in states]
-        inv = np.linalg.inv(S[np.ix_(ij, ij)])
-        for a, (lo, hi) in zip(range(2), bounds, strict=True):
-            half = min(x_op[ij[a]] - lo, hi - x_op[ij[a]])
-            rho_est = min(rho_est, half * half / float(inv[a, a]))
-    unit = system.state_units[k]
-    figures = {
-        "system": system.key, "controller": name, "slice": list(states),
-        "bounds": {states[0]: list(bounds[0]), states[1]: list(bounds[1])},
-        "samples": int(caught.size), "slice_samples": est.samples, "levels": est.levels,
-        "fraction_caught": est.fraction_caught,
-        "max_tilt": float(min(down, up)), "max_tilt_down": float(down), "max_tilt_up": float(up),
-        "tilt_state": tilt_state, "tilt_unit": unit,
-        "max_push": float(min(neg, pos)), "max_push_negative": float(neg),
-        "max_push_positive": float(pos), "push_unit": f"{system.input_units[0]} s",
-        "rho_sampled": (None if rho_est is None or math.isinf(rho_est) else rho_est),
-        **_checked(cert, note, system, S, x_op, x0s, caught, est, states),
-        "duration": duration, "rate": rate, "noise": args.noise,
-        "physics_step": options.get("physics_step"),
-    }
+    report = analyse(system, controller, states=states, bounds=bounds, x_op=x_op, u_op=u_op,
+                     samples=samples, boxes=boxes if args.certify == "on" else None,
+                     falsify=falsify, seed=seed, options=options, name=name)
+    est, x0s, caught, figures = report.est, report.x0s, report.caught, report.figures
+    figures.update({"duration": duration, "rate": rate, "noise": args.noise,
+                    "physics_step": options.get("physics_step")})
     if args.out is not None:
         _write_parquet(args.out, system, x0s, caught)
     if args.plot is not None:
-        _plot(args.plot, est, system, x_op, S, rho_est,
-              figures["rho"] if figures["certified"] else None)
+        from equilibrist.viz.plots import plot_roa_slice
+
+        plot_roa_slice(report, args.plot)
     if args.json:
         common.print_json(figures)
         return 0
+    f = figures
     print(f"{system.key}, {name}: {est.samples} starts of the slice {states[0]}, {states[1]} "
           f"({est.levels} refinements), {est.fraction_caught:.1%} caught")
-    print(f"  largest tilt recovered: {min(down, up):.4g} {unit} (down {down:.4g}, up {up:.4g})")
-    print(f"  largest push recovered: {min(neg, pos):.4g} {system.input_units[0]} s "
-          f"(negative {neg:.4g}, positive {pos:.4g})")
-    if rho_est is not None:
-        print(f"  largest level of dx' S dx no run falsifies: {rho_est:.4g} (an estimate)")
+    print(f"  largest tilt recovered: {f['max_tilt']:.4g} {f['tilt_unit']} (down "
+          f"{f['max_tilt_down']:.4g}, up {f['max_tilt_up']:.4g})")
+    print(f"  largest push recovered: {f['max_push']:.4g} {f['push_unit']} "
+          f"(negative {f['max_push_negative']:.4g}, positive {f['max_push_positive']:.4g})")
+    if f["rho_sampled"] is not None:
+        print(f"  largest level of dx' S dx no run falsifies: {f['rho_sampled']:.4g} (an estimate)")
     if figures["certified"]:
         print(f"  certified level of dx' S dx: {figures['rho']:.4g} ({figures['method']}; "
               f"assumes {figures['certificate']['assumes']}); limited by "
@@ -246,46 +204,6 @@ def run(args: argparse.Namespace) -> int:
     elif figures["certificate_note"]:
         print(f"  no certificate: {figures['certificate_note']}")
     return 0
-
-
-def _certify(system: System, design: Any, x_op: np.ndarray, u_op: np.ndarray, boxes: int,
-             falsify: int, controller: object, options: dict[str, Any],
-             seed: int) -> tuple[Any, str | None, tuple[np.ndarray, np.ndarray] | None]:
-    """The certificate and the runs started inside it (or why there is none)."""
-    from equilibrist.control.certify import CertificateUnavailable, certify
-    from equilibrist.sim.roa import outcomes, sample_level
-
-    try:
-        cert = certify(system, design.K, design.S, x_op=x_op, u_op=u_op, max_boxes=boxes)
-    except CertificateUnavailable as err:
-        return None, str(err), None
-    if falsify == 0:
-        return cert, None, None
-    starts = sample_level(design.S, x_op, cert.rho, falsify, seed=seed + 77)
-    return cert, None, (starts, outcomes(system, controller, starts, options, seed + 77))
-
-
-def _checked(cert: Any, note: str | None, system: System, S: Any, x_op: np.ndarray,
-             x0s: np.ndarray, caught: np.ndarray, est: Any,
-             states: tuple[str, str]) -> dict[str, Any]:
-    """The certificate's JSON keys, checked against every run that started inside it."""
-    from equilibrist.sim.roa import levels_of, slice_coverage
-
-    if cert is None:
-        return {"rho": None, "certified": False, "method": None, "counterexamples": None,
-                "coverage": None, "falsify_runs": 0, "certificate": None,
-                "certificate_note": note}
-    inside = levels_of(S, x_op, x0s) <= cert.rho
-    fell = int((inside & ~caught).sum())
-    idx = (system.state_index(states[0]), system.state_index(states[1]))
-    return {
-        "rho": cert.rho, "certified": fell == 0, "method": cert.method,
-        "counterexamples": fell, "coverage": slice_coverage(est, S, x_op, idx, cert.rho),
-        "falsify_runs": int(inside.sum()), "certificate": cert.to_dict(),
-        "certificate_note": None if fell == 0 else (
-            f"{fell} runs started inside the proven level fell: the sampled loop differs from "
-            "the continuous one the proof assumes"),
-    }
 
 
 def _write_parquet(path: str, system: System, x0s: np.ndarray, caught: np.ndarray) -> None:
@@ -298,36 +216,3 @@ def _write_parquet(path: str, system: System, x0s: np.ndarray, caught: np.ndarra
     cols["caught"] = caught
     with atomic_path(path) as tmp:
         pq.write_table(pa.table(cols), str(tmp))
-
-
-def _plot(path: str, est: Any, system: System, x_op: np.ndarray, S: Any,
-          rho: float | None, rho_cert: float | None) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    from equilibrist.atomic import atomic_path
-
-    fig, ax = plt.subplots(figsize=(6.4, 5.2))
-    pts, ok = est.points, est.caught
-    ax.scatter(pts[ok, 0], pts[ok, 1], s=3, color="#2a9d8f", label="caught")
-    ax.scatter(pts[~ok, 0], pts[~ok, 1], s=3, color="#e76f51", label="not caught")
-    i, j = (system.state_index(s) for s in est.states)
-    for level, style, label in ((rho, "--", "dx' S dx = rho_sampled (estimate)"),
-                                (rho_cert, "-", "dx' S dx = rho (certified)")):
-        if S is None or level is None or not math.isfinite(level):
-            continue
-        sub = np.asarray(S, dtype=float)[np.ix_([i, j], [i, j])]
-        w, v = np.linalg.eigh(sub)
-        t = np.linspace(0.0, 2.0 * np.pi, 400)
-        ring = v @ (np.vstack([np.cos(t), np.sin(t)]) * np.sqrt(level / w)[:, None])
-        ax.plot(x_op[i] + ring[0], x_op[j] + ring[1], style, color="black", lw=1.2, label=label)
-    ax.set_xlabel(f"{est.states[0]} [{system.state_units[system.state_index(est.states[0])]}]")
-    ax.set_ylabel(f"{est.states[1]} [{system.state_units[system.state_index(est.states[1])]}]")
-    ax.set_title(f"{system.key}: region of attraction, slice ({est.samples} runs)")
-    ax.legend(loc="upper right", fontsize=8, markerscale=3)
-    with atomic_path(path) as tmp:
-        fig.savefig(str(tmp), format="png", dpi=110)
-    plt.close(fig)

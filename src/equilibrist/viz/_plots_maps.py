@@ -265,3 +265,34 @@ def plot_poles(
     _legend(fig, panels)
     _title(fig, title or default_title)
     return _finish(fig, path)
+
+
+def plot_roa_slice(report: Any, path: str | Path | None = None, *,
+                   title: str | None = None) -> Any:
+    """The slice of an ``equilibrist roa`` analysis (:class:`~equilibrist.sim.roa_report.RoaReport`):
+    each run caught or not, the level of ``dx' S dx`` no run falsifies (dashed) and the
+    certified one (solid), cut by the slice (the other states at the operating point)."""
+    system, est, x_op = report.system, report.est, report.x_op
+    fig = _figure(6.4, 5.2, 110.0)
+    ax = fig.add_subplot()
+    pts, ok = est.points, est.caught
+    ax.scatter(pts[ok, 0], pts[ok, 1], s=3, color="#2a9d8f", label="caught")
+    ax.scatter(pts[~ok, 0], pts[~ok, 1], s=3, color="#e76f51", label="not caught")
+    i, j = (system.state_index(s) for s in est.states)
+    for level, style, label in (
+            (report.figures["rho_sampled"], "--", "dx' S dx = rho_sampled (estimate)"),
+            (report.rho_certified, "-", "dx' S dx = rho (certified)")):
+        if report.S is None or level is None or not math.isfinite(level):
+            continue
+        sub = np.asarray(report.S, dtype=float)[np.ix_([i, j], [i, j])]
+        w, v = np.linalg.eigh(sub)
+        t = np.linspace(0.0, 2.0 * np.pi, 400)
+        ring = v @ (np.vstack([np.cos(t), np.sin(t)]) * np.sqrt(level / w)[:, None])
+        ax.plot(x_op[i] + ring[0], x_op[j] + ring[1], style, color="black", lw=1.2, label=label)
+    ax.set_xlim(*est.bounds[0])
+    ax.set_ylim(*est.bounds[1])
+    ax.set_xlabel(axis_label(est.states[0], system.state_units[i]))
+    ax.set_ylabel(axis_label(est.states[1], system.state_units[j]))
+    _title(fig, title or f"{system.key}: region of attraction, slice ({est.samples} runs)")
+    ax.legend(loc="upper right", fontsize=8, markerscale=3)
+    return _finish(fig, path)

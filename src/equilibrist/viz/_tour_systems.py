@@ -56,7 +56,8 @@ def tour_controlled(
     fps, max_frames : float, int
         Animation frame rate and cap.
     extras : bool
-        Also map the region of attraction and run a Monte-Carlo batch.
+        Also run a Monte-Carlo batch (the systems of :data:`ROA_SYSTEMS` get their region of
+        attraction in any case).
     progress : bool
         Progress bars for the slow steps.
 
@@ -125,6 +126,10 @@ def tour_controlled(
         _gif, caption = swingup_animation(system, sub, width=size[0], height=size[1], fps=fps,
                                           max_frames=max_frames, progress=progress)
         images.insert(1, Image(f"{slug}/swingup.gif", caption))
+    roa_fact = None
+    if system.key in ROA_SYSTEMS:
+        roa_image, roa_fact = _roa(system, d, sub, slug)
+        images.append(roa_image)
     if extras:
         images += _extras(system, d, sub, slug, sc, progress=progress)
         if system.name == "cartpole":
@@ -166,6 +171,7 @@ def tour_controlled(
         ("estimation error (RMS)", ", ".join(
             f"{k} {_fmt(v, main.unit(k))}" for k, v in (m["estimation_error_rms"] or {}).items())),
         ("ideal loop (LQR, no noise)", "stayed up" if not ideal.fell else "fell"),
+        *([roa_fact] if roa_fact else []),
         ("result file", f"{slug}/run.npz (equilibrist plot / equilibrist animate read it)"),
     ]
     return Outcome(
@@ -175,6 +181,51 @@ def tour_controlled(
         stayed_up=not main.fell,
         seconds=time.perf_counter() - began,
     )
+
+
+#: The systems whose tour shows the LQR's region of attraction, estimated and certified.
+ROA_SYSTEMS = ("cartpole", "furuta", "reaction_wheel_pendulum")
+
+
+def _roa(system: Any, d: Any, sub: Path, slug: str) -> tuple[Image, tuple[str, str]]:
+    """The LQR's region of attraction as ``equilibrist roa`` finds it (its default slice, a
+    smaller budget): the slice, the largest tilt and push, the certified level."""
+    from equilibrist.control.controller import LinearController
+    from equilibrist.sim.roa import default_bounds, default_slice
+    from equilibrist.sim.roa_report import analyse
+    from equilibrist.viz.plots import plot_roa_slice
+
+    ctrl = LinearController.from_design(d, kind="lqr")
+    eq = system.operating_point()
+    x_op, u_op = np.asarray(eq.x, float), np.asarray(eq.u, float)
+    states = default_slice(system)
+    assert states is not None  # the systems of ROA_SYSTEMS have a fall region
+    bounds = default_bounds(system, states, x_op)
+    report = analyse(system, ctrl, states=states, bounds=(bounds[states[0]], bounds[states[1]]),
+                     x_op=x_op, u_op=u_op, samples=2500, boxes=ROA_BOXES, falsify=500,
+                     seed=SEED, name="lqr",
+                     options={"duration": 3.0, "rate": d.rate, "noise": None,
+                              "physics_step": 1.0 / d.rate})
+    f = report.figures
+    plot_roa_slice(report, sub / "roa.png",
+                   title=f"{system.spec.title}: the LQR's region of attraction "
+                         f"({f['slice_samples']} runs)")
+    cert = (f"certified level of dx' S dx: {f['rho']:.3g} (interval branch-and-bound on the "
+            f"exact equations with saturation, continuous-time feedback; limited by "
+            f"{f['certificate']['limited_by']}; {f['falsify_runs']} runs started inside it, "
+            f"{f['counterexamples']} lost; it covers {f['coverage']:.0%} of the slice's caught "
+            "area)") if f["certified"] else f"no certificate ({f['certificate_note']})"
+    text = (f"tilt up to {f['max_tilt']:.3g} {f['tilt_unit']} and push up to "
+            f"{f['max_push']:.3g} {f['push_unit']} recovered from rest; {cert}")
+    caption = (f"Region of attraction of the LQR (no noise, 3 s per run): starts of the slice "
+               f"{states[0]}, {states[1]}, refined along its boundary, caught (green) or not; "
+               "the certified level of the LQR's V (solid) and the least V of a lost start "
+               "(dashed). equilibrist roa computes it for any system.")
+    return Image(f"{slug}/roa.png", caption), ("region of attraction (LQR)", text)
+
+
+#: The certificate's box budget in the tour (equilibrist roa's default is 1,000,000).
+ROA_BOXES = 250_000
 
 
 def watched_outputs(system: Any, result: Any) -> list[str]:
@@ -282,20 +333,11 @@ def _section(system: Any, slug: str, story: list[str], images: list[Image],
 
 
 def _extras(system: Any, d: Any, sub: Path, slug: str, sc: Scenario, *, progress: bool) -> list[Image]:
-    """Region of attraction and Monte-Carlo fan (the cart-pole's tour)."""
-    from equilibrist.sim import LQG, Noise, monte_carlo, region_of_attraction
-    from equilibrist.viz.plots import plot_fan, plot_region_of_attraction
+    """The Monte-Carlo fan (the cart-pole's tour)."""
+    from equilibrist.sim import LQG, Noise, monte_carlo
+    from equilibrist.viz.plots import plot_fan
 
     lqg = LQG.from_design(d)
-    angle = next(n for n in system.state_names if n.startswith("theta") and not n.endswith("_dot"))
-    rate_name = f"{angle}_dot"
-    roa = region_of_attraction(system, lqg, grid={angle: (-0.6, 0.6, 25), rate_name: (-3.0, 3.0, 21)},
-                               duration=4.0, seed=SEED, progress=progress)
-    units = dict(zip(system.state_names, system.state_units, strict=True))
-    plot_region_of_attraction(
-        roa.points[:, 0], roa.points[:, 1], roa.caught, sub / "region_of_attraction.png",
-        x_name=angle, y_name=rate_name, x_unit=units[angle], y_unit=units[rate_name],
-        title=f"{system.spec.title}: which starts the LQG catches ({roa.fraction_caught:.0%})")
     spread = {n: 0.3 for n in ("m_p", "l", "m_c") if n in system.params}
     mc = monte_carlo(system, lqg, spread=spread, runs=40, seed=SEED, duration=sc.duration,
                      x0={k: float(d.plant.x0[system.state_index(k)]) + v for k, v in sc.start.items()},
@@ -310,8 +352,6 @@ def _extras(system: Any, d: Any, sub: Path, slug: str, sc: Scenario, *, progress
              title=f"{system.spec.title}: 40 runs with {short} (nominal controller), "
                    f"{mc.batch.stayed_up} stayed up")
     return [
-        Image(f"{slug}/region_of_attraction.png", f"Region of attraction: each cell is a run started "
-              f"at that {angle} and {rate_name} (other states at rest); green ones were caught."),
         Image(f"{slug}/monte_carlo.png", "Monte-Carlo fan: the spread of 40 runs whose plant "
               f"parameters differ from the design's ({spread_text}): median, 25-75 % and "
               "5-95 % bands.", wide=True),

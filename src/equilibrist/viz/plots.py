@@ -41,6 +41,7 @@ from equilibrist.viz._plots_maps import (
     plot_poles,
     plot_region_of_attraction,
     plot_regions_side_by_side,
+    plot_roa_slice,
 )
 from equilibrist.viz._plots_runs import plot_comparison, plot_fan, plot_response
 from equilibrist.viz.output import VizError
@@ -149,4 +150,5 @@ __all__ = [
     "plot_region_of_attraction",
     "plot_regions_side_by_side",
     "plot_response",
+    "plot_roa_slice",
 ]

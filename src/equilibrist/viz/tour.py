@@ -8,8 +8,10 @@ the ideal loop (LQR on the true state, no noise). For the gyroscope, which
 has no input: a steady precession (started at the slow rate of
 ``steady_precession_rates``) and a nutating one (released without
 precession). Each system gets plots, an animation and a section of the
-report's ``index.html``; the cart-pole also gets a region of attraction and
-a Monte-Carlo fan over uncertain parameters.
+report's ``index.html``; the cart-pole, the rotary pendulum and the
+reaction-wheel pendulum also get their LQR's region of attraction, estimated
+and certified (as ``equilibrist roa`` finds it), and the cart-pole a
+Monte-Carlo fan over uncertain parameters.
 
 The scenarios (how far off upright a run starts, how hard the push is) are
 in :data:`SCENARIOS`, one per system, in the units of its states and
