@@ -464,7 +464,7 @@ def certify(system: Any, K: Any, S: Any, *, x_op: Any, u_op: Any,
                                      "the design does not stabilize the continuous loop")
     say = progress or (lambda _m: None)
     say(f"inner ball |z| <= {r0:.3g} (level {r0 * r0:.3g}), Lambda {lam:.3g}")
-    r0, lam = _cone_ball(loop, r0, lam, R, max_patches=20_000)
+    r0, lam = _cone_ball(loop, r0, lam, R, max_patches=min(20_000, max(2_000, max_boxes // 5)))
     floor = b * math.sqrt(n) / -lam
     say(f"cones: ball |z| <= {r0:.3g} (level {r0 * r0:.3g})")
     limited = "region"
