@@ -38,6 +38,7 @@ bench: $(STAMP)
 	$(PY) bench/bench_envs.py
 	$(PY) bench/bench_swingup.py
 	$(PY) bench/bench_mpc.py
+	$(PY) bench/bench_peers.py --only mpc
 	$(PY) bench/bench_import.py
 	$(PY) bench/bench_hil.py
 

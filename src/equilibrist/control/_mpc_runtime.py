@@ -72,7 +72,7 @@ class MPCRuntime:
 
     def reset(self) -> None:
         self.front.reset()
-        self._solver.update(sense=self._cold)  # an empty working set
+        self._solver.update(sense=self._cold)  # a cold start: the slacks' bounds only
         self.estimate = None
         self.last_status = ""
         self.last_iterations = 0
