@@ -123,6 +123,14 @@ class ControllerRequest:
     options: Mapping[str, Any] = field(default_factory=dict)
     _designs: dict[str, Design] = field(default_factory=dict, repr=False, compare=False)
 
+    @classmethod
+    def of_design(cls, system: System, design: Design, **fields: Any) -> ControllerRequest:
+        """A request whose design is *design*, made elsewhere (the playground's, tuned there;
+        a study point's), at its rate: :meth:`design` returns it instead of designing."""
+        request = cls(system=system, rate=design.rate, **fields)
+        request._designs["d"] = design
+        return request
+
     @property
     def sample_rate(self) -> float:
         """The run's rate, the system's control rate when the request names none."""

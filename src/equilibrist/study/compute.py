@@ -145,8 +145,7 @@ def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> d
     except EquilibristError as exc:
         return failed("design failed", exc)
     record = registry.get(kind, "study")
-    request = registry.ControllerRequest(system=base, rate=rate)
-    request._designs["d"] = d  # the point's design, as made above
+    request = registry.ControllerRequest.of_design(base, d)  # the point's design, made above
     try:
         controller = record.make(request)
     except EquilibristError as exc:

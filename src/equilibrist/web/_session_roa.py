@@ -86,8 +86,7 @@ class RoaJob:
         from equilibrist.control import kinds
 
         record = kinds.get(kind_name(self.controller))
-        request = kinds.ControllerRequest(system=self.system, rate=self.rate)
-        request._designs["d"] = self.design  # the page's own design, tuned there
+        request = kinds.ControllerRequest.of_design(self.system, self.design)  # the page's own
         return record.make(request)
 
     def run_slice(self) -> dict[str, Any]:

@@ -235,8 +235,7 @@ def build_runner(kind: str, system: System, design: Design) -> Runner:
     from equilibrist.control.mpc import MPCRuntime
 
     record = kinds.get(kind, "playground")
-    request = kinds.ControllerRequest(system=system, rate=design.rate)
-    request._designs["d"] = design  # the page's own design, tuned there
+    request = kinds.ControllerRequest.of_design(system, design)  # the page's own, tuned there
     began = time.perf_counter()
     built = record.make(request)
     if isinstance(built, MPCRuntime):
