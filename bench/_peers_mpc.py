@@ -21,8 +21,8 @@ active in about half of them.
 * equilibrist's exported C (``library_files``: DAQP's sources and the driver),
   compiled with the same flags, ``mpc_setup`` once, then ``mpc_step`` per sample.
 
-Each pass replays the 300 states in order from an empty working set (a run
-starting cold), the contenders alternating pass by pass. Times are per call
+Each pass replays the 300 states in order from a cold start (DAQP's working
+set emptied, or holding only the slacks' bounds in equilibrist's default MPC), the contenders alternating pass by pass. Times are per call
 (``perf_counter`` in Python, ``CLOCK_MONOTONIC`` in C); a call during which
 the process was preempted (its involuntary context switches, from
 ``getrusage``, changed) is counted, and the worst of the others reported
@@ -89,7 +89,7 @@ int main(int argc, char **argv)
 _OURS = {
     "include": '#include "mpc.h"', "globals": "",
     "setup": "if (mpc_setup() != 0) return 1;",
-    "reset": "mpc_setup();  /* an empty working set: the run starts cold */",
+    "reset": "mpc_setup();  /* the cold working set: the run starts cold */",
     "step": "mpc_step(STATES[i], u);",
 }
 _DAQP = {

@@ -93,7 +93,7 @@ def print_mpc(r: dict[str, Any]) -> None:
              "c soft": "  equilibrist exported C, default MPC"}
     print(f"MPC: cart-pole 200 Hz, N = 30, |F| <= 20 N; {r['states']} closed-loop states after a "
           f"push, {r['active']} with the limit active; {r['passes']} Python passes, "
-          f"{r['c_passes']} C passes, each from an empty working set")
+          f"{r['c_passes']} C passes, each from a cold start")
     print(f"{'us per call':48s} {'median':>7s} {'active':>7s} {'p99':>7s} {'worst':>8s} "
           f"{'w/o pre':>8s} {'pre':>5s} {'code':>7s} {'cold':>7s} {'|du| vs DAQP':>12s}")
     for k, s in r["rows"].items():
@@ -102,7 +102,7 @@ def print_mpc(r: dict[str, Any]) -> None:
               f"{s['worst_best']:7.1f} {s['first_state']:7.1f} {s['du']:12.1e}")
     print("  active: states with the limit active; w/o pre: worst of the calls not preempted "
           "(pre: how many were); code: the worst state's best call; cold: the first state, "
-          "from an empty working set (median)")
+          "from a cold start (median)")
     it = r["iterations"]
     print(f"DAQP iterations (median on active states / worst): equilibrist {it['ours']['median_active']:.0f}"
           f" / {it['ours']['worst']}, default MPC {it['soft']['median_active']:.0f} / "
