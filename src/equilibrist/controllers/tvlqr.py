@@ -9,6 +9,10 @@ from equilibrist.control.kinds import ControllerKind, ControllerRequest, Option
 if TYPE_CHECKING:
     from equilibrist.control.controller import NonlinearController
 
+#: What ``--balance`` takes: the full measured state (``lqr``) or the design's outputs
+#: through a Kalman filter along the plan and the design's after it (``lqg``).
+BALANCES = ("lqr", "lqg")
+
 
 def build(request: ControllerRequest) -> NonlinearController:
     from equilibrist.control.tvlqr import build_request
@@ -18,9 +22,11 @@ def build(request: ControllerRequest) -> NonlinearController:
 
 KIND = ControllerKind(
     name="tvlqr", label="Time-varying LQR (tracks a plan)",
-    help="track --trajectory (a plan of 'equilibrist trajopt'), then balance",
+    help="track --trajectory (a plan of 'equilibrist trajopt'), then balance (--balance lqr|lqg)",
     build=build,
     options=(Option("--trajectory", "with --controller tvlqr: the plan to track "
-                    "('equilibrist trajopt --out')", metavar="FILE.npz"),),
-    surfaces=frozenset({"simulate", "export"}), task="swingup", order=50,
+                    "('equilibrist trajopt --out')", metavar="FILE.npz"),
+             Option("--balance", "with --controller tvlqr: the full state (lqr, default) or the "
+                    "design's outputs through its Kalman filter (lqg)", choices=BALANCES)),
+    surfaces=frozenset({"simulate", "export", "study"}), task="swingup", order=50,
 )
