@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +40,7 @@ def tour_controlled(
     max_frames: int = 150,
     extras: bool = False,
     progress: bool = False,
+    at: Mapping[str, float] | None = None,
 ) -> Outcome:
     """Design, simulate, plot and animate one system with an input.
 
@@ -60,6 +61,9 @@ def tour_controlled(
         attraction in any case).
     progress : bool
         Progress bars for the slow steps.
+    at : mapping, optional
+        States of the operating point to design at and run about (``design(at=...)``);
+        None: the canonical one.
 
     Returns
     -------
@@ -71,7 +75,7 @@ def tour_controlled(
     from equilibrist.viz.plots import plot_comparison, plot_poles, plot_response
 
     began = time.perf_counter()
-    d = design(system, rate=system.spec.control_rate)
+    d = design(system, rate=system.spec.control_rate, at=at)
     sc = scenario or SCENARIOS.get(system.name) or default_scenario(
         system, StateFeedback.from_design(d))
     slug = _slug(_label(system))
@@ -196,8 +200,7 @@ def _roa(system: Any, d: Any, sub: Path, slug: str) -> tuple[Image, tuple[str, s
     from equilibrist.viz.plots import plot_roa_slice
 
     ctrl = LinearController.from_design(d, kind="lqr")
-    eq = system.operating_point()
-    x_op, u_op = np.asarray(eq.x, float), np.asarray(eq.u, float)
+    x_op, u_op = np.asarray(d.plant.x0, float), np.asarray(d.plant.u0, float)  # the design's point
     states = default_slice(system)
     assert states is not None  # the systems of ROA_SYSTEMS have a fall region
     bounds = default_bounds(system, states, x_op)
