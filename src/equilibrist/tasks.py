@@ -10,10 +10,13 @@ Two tasks exist:
 
 ``balance``
     Every system with an input and an operating point. A run starts at the
-    operating point, each coordinate that decides a fall (``spec.region``)
+    operating point (the canonical one, or the equilibrium with the states
+    given as ``at``), each coordinate that decides a fall (``spec.region``)
     drawn uniformly within a quarter of its Bryson scale
     (``spec.design_scales``; the others and the rates start there); it falls
-    when a state leaves the system's region (``spec.region``).
+    when a state leaves the system's region (``spec.region``; moved with the
+    operating point, by the distance between the two, for a state whose
+    ``at`` value lies outside it).
 ``swingup``
     Rigs that state where they hang (``spec.hanging``: the cart-pole, the
     reaction-wheel pendulum, the rotary pendulum, the acrobot). A run starts
@@ -181,8 +184,70 @@ def _scales(system: System, names: tuple[str, ...]) -> np.ndarray:
     return np.array([float(scales[n]) for n in names])
 
 
-def get_task(system: System, name: str) -> Task:
-    """The task *name* (``"balance"``, ``"swingup"``) posed on *system*."""
+def check_point(system: System, at: object) -> list[str]:
+    """What is wrong with *at* as the states of an operating point of *system* (a mapping
+    ``{state: number}``), every problem at once; empty when nothing is."""
+    if at is None:
+        return []
+    if not isinstance(at, Mapping):
+        return [f"at: expected a mapping {{state: value}} of {system.key}'s states "
+                f"({', '.join(system.state_names)}), got {type(at).__name__}"]
+    problems = []
+    for key, value in at.items():
+        if not isinstance(key, str) or key not in system.state_names:
+            problems.append(f"at: {system.key} has no state {key!r} "
+                            f"({nearest(str(key), system.state_names)})")
+        elif isinstance(value, bool) or not isinstance(value, int | float | np.integer | np.floating) \
+                or not math.isfinite(float(value)):
+            problems.append(f"at: {key} = {value!r} is not a finite number")
+    return problems
+
+
+def operating_point(system: System, at: Mapping[str, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(x_op, u_op)``: the canonical operating point of *system*, or the equilibrium with
+    the states *at* (its other components solved as for the canonical one, as
+    ``design(at=...)`` finds it)."""
+    problems = check_point(system, at)
+    if problems:
+        raise DesignError("; ".join(problems))
+    if not at:
+        eq = system.operating_point()
+        return eq.x, eq.u
+    eq = system.equilibrium(state={k: float(v) for k, v in at.items()})
+    if eq.residual > 1e-6 * (1.0 + float(np.max(np.abs(eq.x)))):
+        raise DesignError(
+            f"{system.key} has no equilibrium with " + ", ".join(f"{k} = {v:g}" for k, v in at.items())
+            + f" (the closest point leaves |f| = {eq.residual:.3g})")
+    lo, hi = system.input_limits
+    for i, name in enumerate(system.input_names):
+        if not lo[i] <= eq.u[i] <= hi[i]:
+            raise DesignError(
+                "at: the operating point with " + ", ".join(f"{k} = {v:g}" for k, v in at.items())
+                + f" needs {name} = {eq.u[i]:g}, outside its limits "
+                f"[{lo[i]:g}, {hi[i]:g}] ({name}_min, {name}_max)")
+    return eq.x, eq.u
+
+
+def _moved_region(system: System, x_op: np.ndarray) -> dict[str, tuple[float, float]]:
+    """The system's region, each bound whose state lies outside it at *x_op* moved by the
+    distance from the canonical point (as ``simulate`` moves it for a design ``--at``)."""
+    names = system.state_names
+    region = dict(system.spec.region)
+    canonical = system.operating_point().x
+    for name, (lo, hi) in system.spec.region.items():
+        k = names.index(name)
+        if not lo < x_op[k] < hi:
+            shift = float(x_op[k] - canonical[k])
+            region[name] = (float(lo) + shift, float(hi) + shift)
+    return region
+
+
+def get_task(system: System, name: str, *, at: Mapping[str, float] | None = None) -> Task:
+    """The task *name* (``"balance"``, ``"swingup"``) posed on *system*.
+
+    *at* (``{state: value}``, balance only) poses it about the equilibrium with those states
+    instead of the canonical operating point: the start, the cost and the region move there.
+    """
     if not isinstance(system, System):
         raise UnknownNameError(f"task: system = {system!r}: expected a System "
                                f"(equilibrist.get_system(name)), not {type(system).__name__}")
@@ -194,18 +259,21 @@ def get_task(system: System, name: str) -> Task:
             why = "it has no input" if not system.n_inputs else f"it offers {', '.join(offered) or 'none'}"
             raise UnknownNameError(f"{system.key} has no task {name!r}: {why}")
         raise UnknownNameError(f"unknown task {name!r}: {nearest(name, TASK_NAMES)}")
-    eq = system.operating_point()
+    if at and name != "balance":
+        raise DesignError(f"at: the {name} task ends at {system.key}'s canonical operating "
+                          "point; another point is posed for the balance task only")
+    x_op, u_op = operating_point(system, at)
     names = system.state_names
     state_scales = _scales(system, names)
     input_scales = _scales(system, system.input_names)
     nq = len(system.spec.coordinates)
     spread = np.zeros(system.n_states)
     if name == "balance":
-        start = eq.x.copy()
+        start = x_op.copy()
         for k in range(nq):
             if names[k] in system.spec.region:
                 spread[k] = BALANCE_SPREAD * state_scales[k]
-        region = dict(system.spec.region)
+        region = _moved_region(system, x_op) if at else dict(system.spec.region)
     else:
         hanging = system.spec.hanging or {}
         start = np.zeros(system.n_states)
@@ -221,7 +289,7 @@ def get_task(system: System, name: str) -> Task:
         arr.setflags(write=False)
     return Task(
         name=name, system=system, rate=float(system.spec.control_rate), duration=DURATION[name],
-        start=start, spread=spread, region=region, x_op=eq.x, u_op=eq.u,
+        start=start, spread=spread, region=region, x_op=x_op, u_op=u_op,
         state_scales=state_scales, input_scales=input_scales,
     )
 

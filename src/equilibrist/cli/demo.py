@@ -26,6 +26,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("system", nargs="?", metavar="SYSTEM",
                    help="one system only (default: the whole catalogue)")
     common.add_set(p)
+    common.add_items(p, "--at", marker="=", metavar="STATE=VALUE",
+                     help="design at the equilibrium with these states (the others solved) and "
+                     "run the scenario about it; one SYSTEM only (default: its canonical point)")
     p.add_argument("--out", default="report", metavar="DIR",
                    help="report folder (default: ./report)")
     p.add_argument("--size", default="400x300", metavar="WxH",
@@ -49,9 +52,14 @@ def run(args: argparse.Namespace) -> int:
     if args.system is None:
         if args.settings:
             raise common.UsageError("--set needs a SYSTEM: parameters belong to one system")
+        if args.at:
+            raise common.UsageError("--at needs a SYSTEM: an operating point belongs to one system")
         systems = [get_system(name) for name in registry.family_names()]
     else:
         systems = [common.load_system(args)]
+    at = common.operating_point_option(args.at)
+    if at:
+        _check_point(systems[0], at)
     import os
 
     if args.jobs is None:
@@ -69,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     from equilibrist.viz.tour import SUMMARY_HEADER, run_tour
 
     outcomes = run_tour(systems, out, size=size, jobs=jobs, progress=progress,
-                        log=lambda line: print(line, file=sys.stderr))
+                        log=lambda line: print(line, file=sys.stderr), at=at)
     if any(s.key == "cartpole" for s in systems):
         from equilibrist.study.demo import add_study_to_report
 
@@ -86,3 +94,16 @@ def run(args: argparse.Namespace) -> int:
     print(f"report with plots, animations and equations: {out / 'index.html'} "
           f"({time.perf_counter() - began:.0f} s)")
     return 0
+
+
+def _check_point(system: object, at: dict[str, float]) -> None:
+    """Refuse, before the tour begins, an ``--at`` for a system without input or naming a
+    state the system does not have (the design says when there is no equilibrium there)."""
+    from equilibrist.numeric.system import System
+
+    assert isinstance(system, System)
+    if not system.n_inputs:
+        raise common.UsageError(f"--at: {system.key} has no input, so no design to make at "
+                                "another operating point")
+    for name in at:
+        system.state_index(name)  # an unknown state: named with the nearest ones

@@ -23,12 +23,12 @@ import numpy as np
 
 from equilibrist.control import fixed
 from equilibrist.control._checks import given_text, real_array
-from equilibrist.errors import EquilibristError, UnknownNameError, nearest
+from equilibrist.errors import DesignError, EquilibristError, UnknownNameError, nearest
 from equilibrist.native.simcore import load_core
 from equilibrist.numeric.system import System, get_system
 from equilibrist.sim import layout
 from equilibrist.sim.noise import Noise, square_root
-from equilibrist.tasks import Task, get_task
+from equilibrist.tasks import Task, check_point, get_task
 
 OBSERVE = ("outputs", "state")
 ACTION_UNITS = ("normalized", "physical")
@@ -50,7 +50,7 @@ US_WIDTH = 4 + len(US_SLOTS)
 #: environment take the same ones).
 OPTION_DEFAULTS: dict[str, object] = {
     "params": None, "rate": None, "physics_step": None, "observe": "outputs", "noise": True,
-    "randomize": None, "action_units": "normalized", "alive_bonus": ALIVE_BONUS,
+    "randomize": None, "action_units": "normalized", "alive_bonus": ALIVE_BONUS, "at": None,
 }
 
 
@@ -112,6 +112,9 @@ class Core:
         The rig's process and sensor noise, or None.
     randomize:
         ``{parameter: relative spread}`` drawn per reset.
+    at:
+        The states of the balance task's operating point (``{state: value}``), or None for
+        the canonical one; the expert designs there too.
     """
 
     system: System
@@ -126,6 +129,7 @@ class Core:
     noise: Noise | None
     randomize: Mapping[str, float]
     alive_bonus: float
+    at: Mapping[str, float] | None
     kernel: Any
     c_idx: np.ndarray
     lv: np.ndarray
@@ -214,6 +218,7 @@ class Core:
             "noise": self.noise is not None,
             "randomize": dict(self.randomize),
             "alive_bonus": self.alive_bonus,
+            "at": dict(self.at) if self.at else None,
         }
 
 
@@ -229,12 +234,20 @@ def build_core(
     randomize: Mapping[str, object] | None = None,
     action_units: str = "normalized",
     alive_bonus: float = ALIVE_BONUS,
+    at: Mapping[str, object] | None = None,
 ) -> Core:
     """Validate an environment's options (every problem at once) and pack them."""
     sysm = bind_system(system, params)
     if not sysm.n_inputs:
         raise EnvError(f"{sysm.key} has no input: there is nothing for an agent to do")
-    tsk = get_task(sysm, task)
+    point = _point(sysm, at)
+    if point is None:
+        tsk = get_task(sysm, task)
+    else:
+        try:
+            tsk = get_task(sysm, task, at=point)
+        except DesignError as exc:  # no equilibrium there, or a swing-up
+            raise EnvError(str(exc)) from None
     problems: list[str] = []
     names = sysm.state_names
     n = sysm.n_states
@@ -352,6 +365,7 @@ def build_core(
         n_samples=int(n_samples), observe=observe,
         observation_names=tuple(names) if observe == "state" else outputs,
         action_units=action_units, noise=spec_noise, randomize=dict(rnd), alive_bonus=bonus,
+        at=point,
         kernel=load_core(sysm), c_idx=c_idx, lv=np.ascontiguousarray(lv),
         lw=np.ascontiguousarray(lw), region=region,
         op=op, sc=sc, hang=hang, p_nom=p_nom, rnd_idx=rnd_idx, rnd_spread=rnd_spread,
@@ -402,6 +416,18 @@ def _pack(ints: Mapping[str, int], index_blocks: Mapping[str, np.ndarray],
         cf_list.extend(float(v) for v in np.asarray(block, dtype=float).ravel())
     ci = np.array([int(head[name]) for name in CI_SLOTS] + ci_tail, dtype=np.int64)
     return ci, np.array(cf_list, dtype=np.float64)
+
+
+def _point(system: System, at: object) -> dict[str, float] | None:
+    """The option ``at`` checked (a mapping of the system's states to finite numbers), or
+    None when it is not given; every problem in one :class:`EnvError`."""
+    if at is None:
+        return None
+    problems = check_point(system, at)
+    if problems:
+        raise EnvError("; ".join(problems))
+    assert isinstance(at, Mapping)
+    return {str(k): float(v) for k, v in at.items()} or None
 
 
 def unknown_task(task: object) -> UnknownNameError:

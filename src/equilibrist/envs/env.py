@@ -177,6 +177,12 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         itself bounded by its limits.
     alive_bonus : float
         Balance reward per second inside the region.
+    at : mapping, optional
+        ``{state: value}``: the balance task about the equilibrium with these
+        states (its other components solved, as ``design(at=...)``): the
+        start, the reward's cost and the region move there, and
+        :func:`~equilibrist.envs.expert` designs there. Default: the
+        canonical operating point.
 
     The options (:data:`~equilibrist.envs._core.OPTION_DEFAULTS`) are the
     vector environment's too; an unknown one is an :class:`EnvError`.

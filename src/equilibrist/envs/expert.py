@@ -85,8 +85,8 @@ def expert(env: Any, kind: str = "lqg", *, options: Mapping[str, Any] | None = N
     """The controller *kind* as a policy of *env* (an equilibrist environment, wrapped or not).
 
     The kind is built for the environment's system at its rate, measuring
-    its observations (``design_options`` and the kind's own ``options`` as
-    ``simulate`` takes them); refused in one line when it does not apply or
+    its observations, at the environment's operating point (``design_options`` and
+    the kind's own ``options`` as ``simulate`` takes them); refused in one line when it does not apply or
     reads other signals than the environment observes.
     """
     from equilibrist.control import kinds
@@ -96,7 +96,9 @@ def expert(env: Any, kind: str = "lqg", *, options: Mapping[str, Any] | None = N
         raise ExpertError(f"{type(env).__name__} is not an equilibrist environment")
     observed = tuple(core.observation_names)
     # The Kalman filter measures what the agent observes; the whole state is the LQR's own.
-    design = {} if observed == tuple(core.system.state_names) else {"outputs": observed}
+    design: dict[str, Any] = {} if observed == tuple(core.system.state_names) else {"outputs": observed}
+    if core.at:  # the environment's operating point (its option at=)
+        design["at"] = dict(core.at)
     design.update(design_options or {})
     request = kinds.ControllerRequest(system=core.system, rate=core.rate, design_options=design,
                                       options=dict(options or {}))

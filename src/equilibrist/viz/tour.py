@@ -27,7 +27,7 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -66,19 +66,25 @@ def tour_one(
     max_frames: int = 150,
     extras: Sequence[str] = ("cartpole",),
     progress: bool = False,
+    at: Mapping[str, float] | None = None,
 ) -> Outcome:
-    """The tour of one system: :func:`tour_controlled`, or :func:`tour_gyroscope`
-    for a system without input."""
+    """The tour of one system: :func:`tour_controlled` (designed at *at*, the states of
+    another operating point, when given), or :func:`tour_gyroscope` for a system without
+    input."""
     if system.n_inputs:
         return tour_controlled(system, folder, size=size, fps=fps, max_frames=max_frames,
-                               extras=system.name in extras, progress=progress)
+                               extras=system.name in extras, progress=progress, at=at)
+    if at:
+        raise VizError(f"{system.key} has no input: there is no design to make at another "
+                       "operating point")
     return tour_gyroscope(system, folder, size=size, fps=fps, max_frames=max_frames,
                           progress=progress)
 
 
 def _tour_in_worker(key: str, params: dict[str, float], digest: str | None, folder: str,
                     options: dict[str, Any]) -> Outcome:
-    """:func:`tour_one` in a worker process (the system the user named, rebuilt from its key)."""
+    """:func:`tour_one` in a worker process (the system the user named, rebuilt from its key;
+    *options* those of :func:`tour_one`, the operating point ``at`` among them)."""
     from equilibrist.numeric.system import rebuild_system
 
     return tour_one(rebuild_system(key, params, digest), Path(folder), progress=False, **options)
@@ -95,6 +101,7 @@ def run_tour(
     jobs: int = 1,
     progress: bool = False,
     log: Callable[[str], None] | None = None,
+    at: Mapping[str, float] | None = None,
 ) -> list[Outcome]:
     """Run the demo on *systems* and write the report folder.
 
@@ -117,6 +124,9 @@ def run_tour(
         Progress bars for steps that take more than a second.
     log : callable, optional
         Receives one line per system as it is done.
+    at : mapping, optional
+        ``{state: value}``: design at the equilibrium with these states and run each
+        scenario about it (``equilibrist demo SYSTEM --at``; one system's states).
 
     Returns
     -------
@@ -131,7 +141,7 @@ def run_tour(
     folder = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.partial-"))
     try:
         outcomes = _tour_into(systems, folder, size=size, fps=fps, max_frames=max_frames,
-                              extras=extras, jobs=jobs, progress=progress, log=log)
+                              extras=extras, jobs=jobs, progress=progress, log=log, at=at)
         (folder / REPORT_MARKER).write_text("written by equilibrist demo\n")
         _put_in_place(folder, target)
     finally:
@@ -192,11 +202,12 @@ def _tour_into(
     jobs: int,
     progress: bool,
     log: Callable[[str], None] | None,
+    at: Mapping[str, float] | None = None,
 ) -> list[Outcome]:
     from tqdm.auto import tqdm
 
     options: dict[str, Any] = {"size": size, "fps": fps, "max_frames": max_frames,
-                               "extras": tuple(extras)}
+                               "extras": tuple(extras), "at": dict(at) if at else None}
     bar = tqdm(total=len(systems), desc="demo", unit="system", disable=not progress, leave=False)
     done: dict[int, Outcome] = {}
 
