@@ -193,7 +193,8 @@ class _Loop:
 
     def _linear_part(self) -> None:
         """``A_cl``, the closed loop's Jacobian at the operating point (unsaturated), and
-        ``P = sym(2 T'S A_cl T)``: ``dV/dt = z'P z + R(z)`` with ``R`` of third order. Where
+        ``P = T'S A_cl T + (T'S A_cl T)'``: ``dV/dt = z'P z + R(z)`` with ``R`` of third
+        order. Where
         every matrix of ``P``'s enclosure is negative definite, :meth:`vdot_box` bounds the
         quadratic part exactly (a concave quadratic is at most its tangent plane) and only
         the remainder by intervals: boxes near the operating point prove as easily as far."""
@@ -215,8 +216,19 @@ class _Loop:
         hi = np.array([[_first((half[i][j] + half[j][i]).hi) for j in range(n)] for i in range(n)])
         mid, rad = 0.5 * (lo + hi), 0.5 * (hi - lo)
         top = float(np.linalg.eigvalsh(0.5 * (mid + mid.T)).max()) + float(np.linalg.norm(rad))
-        self.P = [[Interval(2.0 * lo[i, j], 2.0 * hi[i, j]) for j in range(n)] for i in range(n)]
+        self.P = [[Interval(lo[i, j], hi[i, j]) for j in range(n)] for i in range(n)]
         self.quad = bool(top + 1e-12 * float(np.linalg.norm(mid)) < 0.0)
+        if not self.quad:
+            return
+        # For the ball bound: P's midpoint in its eigenbasis, and what the enclosure and the
+        # rounding of the decomposition may add to z'P z per |z|^2.
+        pm = mid
+        lam, V = np.linalg.eigh(0.5 * (pm + pm.T))
+        self._eig = (lam, V)
+        self._slack = (float(np.linalg.norm(rad)) + float(np.linalg.norm(
+            V @ np.diag(lam) @ V.T - pm)) + 1e-12 * float(np.linalg.norm(pm)))
+        # Multipliers tried in the dual bound, spread over the scales of P's eigenvalues.
+        self._mu = np.geomspace(1e-3 * float(-lam.max()), 1e3 * float(-lam.min()), 48)
 
     def _quadratic_bound(self, z: list[Interval], c: np.ndarray, f: list[Interval],
                          J: list[list[Interval]], sdx: list[Interval], vc: Interval,
@@ -242,6 +254,19 @@ class _Loop:
             lin = np.maximum(np.abs(Pc[j].lo), np.abs(Pc[j].hi)) * 2.0 * half
             upper_lin = upper_lin + lin
             smear[:, j] = lin + np.maximum(np.abs(g.lo), np.abs(g.hi)) * 2.0 * half
+        # Better where the box is not small beside its distance: the concave quadratic's
+        # largest value on the ball about the centre that holds the box, bounded by Lagrange
+        # duality (any multiplier mu >= 0 bounds it from above: the least of a few is kept).
+        lam, V = self._eig
+        ct = c @ V
+        rho2 = sum((0.5 * (z[j].hi - z[j].lo)) ** 2 for j in range(n))
+        far2 = sum(np.maximum(np.abs(z[j].lo), np.abs(z[j].hi)) ** 2 for j in range(n))
+        mu = self._mu[None, :]
+        g = mu * rho2[:, None] + ((ct**2)[:, None, :] * (mu[..., None] * lam)
+                                  / (mu[..., None] - lam)).sum(axis=2)
+        ball = g.min(axis=1)
+        ball = ball + np.abs(ball) * 1e-12 + self._slack * far2
+        upper_lin = np.minimum(upper_lin, ball)
         bound: np.ndarray = np.nextafter(np.nextafter(upper_lin, np.inf) + R.hi, np.inf)
         return np.nan_to_num(bound, nan=np.inf), smear
 
