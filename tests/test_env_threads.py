@@ -4,34 +4,12 @@ slice) and the way in use is slowed now and then."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
-
 import numpy as np
 import pytest
+from tests.support.envs import on_fake_clock
 
 import equilibrist.envs  # noqa: F401  (registers the environments)
 from equilibrist.envs import vector as vector_module
-from equilibrist.envs.vector import EquilibristVectorEnv
-
-
-def _on_fake_clock(monkeypatch: pytest.MonkeyPatch, seconds: Callable[[int], float]) -> Any:
-    """4 copies that may run parallel; their two ways (0: one thread, 1: all) take
-    ``seconds(way)`` of a fake clock per step and do nothing else."""
-    monkeypatch.setattr(vector_module, "PARALLEL_MIN", 1)
-    vec = EquilibristVectorEnv(4, "cartpole", noise=False)
-    vec.reset(seed=0)
-    now = [0.0]
-
-    def way(mode: int) -> Callable[..., int]:
-        def entry(*args: object) -> int:
-            now[0] += seconds(mode)
-            return 0
-        return entry
-
-    vec._ways[:] = [way(0), way(1)]
-    monkeypatch.setattr(vector_module.time, "perf_counter", lambda: now[0])
-    return vec
 
 
 def test_probes_take_a_bounded_share_on_a_busy_machine(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -56,7 +34,7 @@ def test_probes_take_a_bounded_share_on_a_busy_machine(monkeypatch: pytest.Monke
         spent[mode] += t
         return t
 
-    vec = _on_fake_clock(monkeypatch, seconds)
+    vec = on_fake_clock(monkeypatch, seconds)
     a = np.zeros((4, 1))
     for step in range(20000):
         state["step"] = step
@@ -78,7 +56,7 @@ def test_a_quiet_machine_is_noticed_after_a_costly_probe(monkeypatch: pytest.Mon
             return 1.0
         return 40.0 if slow[0] else 0.5
 
-    vec = _on_fake_clock(monkeypatch, seconds)
+    vec = on_fake_clock(monkeypatch, seconds)
     a = np.zeros((4, 1))
     for _ in range(2000):
         vec.step(a)

@@ -8,7 +8,6 @@ import math
 import os
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -16,6 +15,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from tests.support.envs import on_fake_clock
 
 import equilibrist.envs.vector as vector_module
 from equilibrist import envs, get_system
@@ -409,26 +409,6 @@ def test_vector_parallel_equals_serial(monkeypatch: pytest.MonkeyPatch) -> None:
             np.testing.assert_array_equal(p, q)
 
 
-def _on_fake_clock(monkeypatch: pytest.MonkeyPatch, seconds: Callable[[int], float]) -> Any:
-    """A vector environment of 4 copies that may run parallel, whose two ways
-    (0: one thread, 1: all) take ``seconds(way)`` of a fake clock per step and
-    do nothing else."""
-    monkeypatch.setattr(vector_module, "PARALLEL_MIN", 1)
-    vec = _vec(4, noise=False)
-    vec.reset(seed=0)
-    now = [0.0]
-
-    def way(mode: int) -> Callable[..., int]:
-        def entry(*args: object) -> int:
-            now[0] += seconds(mode)
-            return 0
-        return entry
-
-    vec._ways[:] = [way(0), way(1)]
-    monkeypatch.setattr(vector_module.time, "perf_counter", lambda: now[0])
-    return vec
-
-
 def test_vector_runs_the_faster_way(monkeypatch: pytest.MonkeyPatch) -> None:
     """The switch between one thread and all, on a fake clock: it settles on the
     faster way, follows a change, and probes a much slower way rarely."""
@@ -439,7 +419,7 @@ def test_vector_runs_the_faster_way(monkeypatch: pytest.MonkeyPatch) -> None:
         runs[mode] += 1
         return cost[mode]
 
-    vec = _on_fake_clock(monkeypatch, seconds)
+    vec = on_fake_clock(monkeypatch, seconds)
     a = np.zeros((4, 1))
     for _ in range(200):
         vec.step(a)
@@ -476,7 +456,7 @@ def test_vector_probe_outlasts_one_interrupted_step(monkeypatch: pytest.MonkeyPa
         last[0] = mode
         return 1.0 if mode == 0 else (5.0 if streak[0] <= 2 else 0.5)
 
-    vec = _on_fake_clock(monkeypatch, seconds)
+    vec = on_fake_clock(monkeypatch, seconds)
     vec._mode = 0  # start on one thread
     a = np.zeros((4, 1))
     for _ in range(400):
