@@ -28,5 +28,5 @@ KIND = ControllerKind(
                     "('equilibrist trajopt --out')", metavar="FILE.npz"),
              Option("--balance", "with --controller tvlqr: the full state (lqr, default) or the "
                     "design's outputs through its Kalman filter (lqg)", choices=BALANCES)),
-    surfaces=frozenset({"simulate", "export", "study"}), task="swingup", order=50,
+    surfaces=frozenset({"simulate", "export", "study", "playground"}), task="swingup", order=50,
 )

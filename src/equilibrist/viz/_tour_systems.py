@@ -130,6 +130,10 @@ def tour_controlled(
         _gif, caption = swingup_animation(system, sub, width=size[0], height=size[1], fps=fps,
                                           max_frames=max_frames, progress=progress)
         images.insert(1, Image(f"{slug}/swingup.gif", caption))
+        from equilibrist.viz.planned_demo import planned_images
+
+        images[2:2] = planned_images(system, sub, slug, notes, width=size[0], height=size[1],
+                                     fps=fps, max_frames=max_frames, progress=progress)
     roa_fact = None
     if system.key in ROA_SYSTEMS:
         roa_image, roa_fact = _roa(system, d, sub, slug)

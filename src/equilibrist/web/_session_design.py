@@ -15,7 +15,7 @@ import numpy as np
 
 from equilibrist.errors import DesignError, EquilibristError
 from equilibrist.web.protocol import kind_name
-from equilibrist.web.runners import Runner, build_runner, runner_kinds
+from equilibrist.web.runners import PLANNED, Runner, build_plan_runner, build_runner, runner_kinds
 
 if TYPE_CHECKING:
     from equilibrist.control.design import Design
@@ -200,20 +200,28 @@ def design_for(system: System, settings: Settings) -> tuple[Design | None, float
     return d, seconds, None
 
 
-def redesign(system: System, settings: Settings) -> tuple[Design | None, float, str | None,
-                                                         Runner | None, float]:
+def redesign(system: System, settings: Settings, plan: Any = None
+             ) -> tuple[Design | None, float, str | None, Runner | None, float]:
     """Design for *settings*, and build the swing-up or MPC on the design when it is asked for.
 
     Returns ``(design or None, design seconds, error or None, runner or None,
     controller seconds)``; a controller that cannot be built is an error
-    like a failed design (the previous controller keeps running).
+    like a failed design (the previous controller keeps running). A kind that
+    tracks a plan (:data:`~equilibrist.web.runners.PLANNED`) is built on *plan*, the
+    session's trajectory still valid for *system*; without one, no runner: the
+    session plans first (:mod:`equilibrist.web._session_plan`).
     """
     d, seconds, error = design_for(system, settings)
     if d is None or settings.controller not in runner_kinds():
         return d, seconds, error, None, 0.0
+    if settings.controller in PLANNED and plan is None:
+        return d, seconds, error, None, 0.0
     began = time.perf_counter()
     try:
-        runner = build_runner(settings.controller, system, d)
+        if settings.controller in PLANNED:
+            runner: Runner = build_plan_runner(settings.controller, system, d, plan)
+        else:
+            runner = build_runner(settings.controller, system, d)
     except EquilibristError as exc:
         return None, seconds, str(exc), None, time.perf_counter() - began
     except (ArithmeticError, np.linalg.LinAlgError, ValueError) as exc:

@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from equilibrist.errors import EquilibristError
+from equilibrist.web._session_plan import compute_plan
 from equilibrist.web._session_roa import compute_roa
 from equilibrist.web.protocol import ProtocolError, parse
 from equilibrist.web.session import Catalogue, Session, redesign
@@ -336,6 +337,7 @@ def create_app(
             # attraction under way for it stops at its next check.
             state.sessions.pop(session.token, None)
             session.roa_clear()
+            session.plan_clear()
             if streamer is not None:
                 streamer.cancel()
                 # Waited for, not awaited: its end (cancelled, or a closed socket) is no error
@@ -470,8 +472,9 @@ async def _work(ws: Any, session: Session, inbox: asyncio.Queue[str | bytes]) ->
 
     Each is checked against the limits in force when its turn comes (a
     ``select`` changes them for the messages after it). A region of attraction
-    is computed aside (:func:`~equilibrist.web._session_roa.compute_roa`): the
-    messages after it do not wait for it.
+    is computed aside (:func:`~equilibrist.web._session_roa.compute_roa`), and so is
+    the plan a tracking kind needs (:func:`~equilibrist.web._session_plan.compute_plan`):
+    the messages after them do not wait for them.
     """
     designing = 0
     jobs: set[asyncio.Task[None]] = set()
@@ -513,10 +516,17 @@ async def _work(ws: Any, session: Session, inbox: asyncio.Queue[str | bytes]) ->
             designing += 1
             ticket = designing
             session.pending_design = ticket
-            d, seconds, error, runner, built = await asyncio.to_thread(redesign, system, settings)
+            plan = session.plan_for(system, settings)
+            d, seconds, error, runner, built = await asyncio.to_thread(redesign, system, settings,
+                                                                        plan)
             if session.pending_design != ticket or session.base.spec is not system.spec:
                 continue  # a later change, or another system, superseded this one
             session.install(settings, system, d, seconds, error, runner, built)
+            planning = session.plan_job()  # a kind that tracks a plan, without one yet
+            if planning is not None:
+                task = asyncio.create_task(compute_plan(session, planning))
+                jobs.add(task)
+                task.add_done_callback(jobs.discard)
     finally:
         for task in jobs:
             task.cancel()

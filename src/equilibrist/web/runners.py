@@ -64,14 +64,27 @@ SOLVE_WINDOW = 400
 _EMPTY = np.zeros(0)
 
 
+#: The kinds that track a plan: the session plans the swing-up before it builds them
+#: (:mod:`equilibrist.web._session_plan`).
+PLANNED = ("tvlqr",)
+
+
 def unavailable(system: System) -> dict[str, str]:
     """``{controller: reason}`` of the playground's controllers that do not apply to *system*
-    (each kind's own :attr:`~equilibrist.control.kinds.ControllerKind.applies`)."""
+    (each kind's own :attr:`~equilibrist.control.kinds.ControllerKind.applies`; a kind that
+    tracks a plan needs a swing-up to plan and CasADi to plan it)."""
+    import importlib.util
+
     from equilibrist.control import kinds
 
     out: dict[str, str] = {}
     for kind in kinds.all_kinds("playground"):
         why = kind.applies(system)
+        if why is None and kind.name in PLANNED:
+            why = hanging_refusal(system)
+            if why is None and importlib.util.find_spec("casadi") is None:
+                why = ("planning the swing-up needs CasADi with IPOPT: pip install "
+                       "'equilibrist[trajopt]'")
         if why is not None:
             out["off" if kind.open_loop else kind.name] = why
     return out
@@ -148,6 +161,87 @@ class SwingUpRunner(NonlinearRunner):
         s = self.ctrl.settings
         return {"kind": "swingup", "law": s.get("law"), "c_in": s.get("c_in"), "c_out": s.get("c_out"),
                 "tuning": dict(s.get("tuning", {}))}
+
+
+class PlanRunner(NonlinearRunner):
+    """The time-varying LQR on a plan of the session (:data:`PLANNED`), on a clock of its own.
+
+    Its time is the plan's: it starts at the first sample after a reset or a switch, from
+    the plan's beginning when the state is nearer the plan's start than its end (a run
+    started hanging), else from the plan's end (the balancing LQR: a reset upright). A
+    retune on the same plan goes on at the same plan time (:meth:`adopt`).
+    """
+
+    def __init__(self, ctrl: NonlinearController, system: System, kind: str,
+                 trajectory: Any, scales: np.ndarray) -> None:
+        super().__init__(ctrl, system, kind)
+        from equilibrist.viz.planned_demo import plan_samples
+
+        self.trajectory = trajectory
+        self.duration = float(trajectory.duration)
+        _t, self.xs, self.us = plan_samples(ctrl, system.n_states, system.n_inputs)
+        self.rate = float(ctrl.rate)
+        self.scales = np.asarray(scales, dtype=float)
+        self.t0: float | None = None  # the session's time at the plan's beginning
+        self.tau = 0.0  # the plan's time of the last sample
+        self.ghost_keys: frozenset[str] | None = None  # the drawing's shapes the plan moves
+
+    @property
+    def mode(self) -> str:
+        """``"tracking"`` while the plan runs, ``"balancing"`` after it."""
+        return "balancing" if self.t0 is not None and self.tau >= self.duration else "tracking"
+
+    def reset(self) -> None:
+        super().reset()
+        self.t0 = None
+
+    def adopt(self, previous: Runner | None) -> None:
+        if isinstance(previous, PlanRunner) and previous.trajectory is self.trajectory:
+            self.t0, self.tau = previous.t0, previous.tau
+
+    def start_at(self, x_estimate: np.ndarray) -> None:
+        self.t0 = None
+
+    def plan_state(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The plan's state and input at the plan time of the last sample (None: no plan
+        runs, before the first sample or after the plan's end)."""
+        if self.t0 is None or not 0.0 <= self.tau <= self.duration:
+            return None
+        k = min(int(np.floor(self.tau * self.rate + 0.5)), self.xs.shape[0] - 1)
+        return self.xs[k], self.us[k]
+
+    def output(self, t: float, y: np.ndarray) -> np.ndarray:
+        if self.t0 is None:
+            far_start = np.abs((y - self.xs[0][self.idx]) / self.scales[self.idx]).max()
+            far_end = np.abs((y - self.xs[-1][self.idx]) / self.scales[self.idx]).max()
+            self.t0 = t if far_start <= far_end else t - self.duration
+        self.tau = t - self.t0
+        return super().output(self.tau, y)
+
+    def update(self, t: float, y: np.ndarray, u_applied: np.ndarray) -> None:
+        super().update(t - (self.t0 or 0.0), y, u_applied)
+
+    def describe(self) -> dict[str, Any]:
+        traj = self.trajectory
+        return {"kind": self.kind, "plan_duration": self.duration, "knots": traj.knots,
+                "solve_time": traj.solve_time, "samples": int(self.ctrl.params[0]),
+                "balance": "lqr"}
+
+
+def build_plan_runner(kind: str, system: System, design: Design, trajectory: Any) -> PlanRunner:
+    """The time-varying LQR of *kind* along *trajectory* on the page's *design* (its weights,
+    its rate, its balancing LQR at the end)."""
+    from equilibrist.control.tvlqr import tvlqr
+
+    if design.discrete is None:
+        raise EquilibristError("the time-varying LQR needs a discrete design (a rate)")
+    ctrl = tvlqr(system, trajectory, rate=float(design.rate or system.spec.control_rate),
+                 Q=design.Q, R=design.R, S_end=design.S, K_end=design.K,
+                 x_op=np.asarray(design.plant.x0, dtype=float),
+                 u_op=np.asarray(design.plant.u0, dtype=float))
+    scales = np.array([float(system.spec.design_scales.get(s, 1.0)) or 1.0
+                       for s in system.state_names])
+    return PlanRunner(ctrl, system, kind, trajectory, scales)
 
 
 class MPCRunner:
@@ -266,10 +360,13 @@ def export_folder(runner: Runner, system: System, folder: str) -> Mapping[str, s
 
 
 __all__ = [
+    "PLANNED",
     "MPCRunner",
     "NonlinearRunner",
+    "PlanRunner",
     "Runner",
     "SwingUpRunner",
+    "build_plan_runner",
     "build_runner",
     "export_folder",
     "hanging_refusal",

@@ -79,8 +79,9 @@ from equilibrist.web._session_output import (
     DIGITS,  # noqa: F401
     MAX_CHART_SAMPLES,  # noqa: F401
     MAX_UNSEEN,  # noqa: F401
-    _SessionOutput,
+    _SessionOutput,  # noqa: F401
 )
+from equilibrist.web._session_plan import _SessionPlan
 from equilibrist.web._session_roa import _SessionRoa
 from equilibrist.web.protocol import Limits, Message, controllers
 from equilibrist.web.runners import Runner, hanging_refusal, unavailable
@@ -113,7 +114,7 @@ LAG_SHARE = 0.8
 LAG_WARN_EVERY = 5.0
 
 
-class Session(_SessionOutput, _SessionRoa):
+class Session(_SessionPlan, _SessionRoa):
     """One browser tab's running system (see the module docstring).
 
     Parameters
@@ -180,6 +181,7 @@ class Session(_SessionOutput, _SessionRoa):
         self._apply_rate()
         self.design_message = describe_design(d, settings.controller, seconds)
         self.roa_clear()
+        self.plan_clear()
         self.messages.append(self.describe())
         self.messages.append(self.design_message)
         self.reset(kick=0.5 * float(spec.design_scales.get(system.state_names[self.angle_index], 0.1)))
@@ -258,6 +260,7 @@ class Session(_SessionOutput, _SessionRoa):
         else:
             self.x = self.loop.x_op.copy()
             self.x[self.angle_index] += kick
+        self.hang_start = self.x.copy() if hang else None
         if hang != self.hanging:
             self.hanging = hang
             self._apply_region()
@@ -411,6 +414,7 @@ class Session(_SessionOutput, _SessionRoa):
             self.messages.append(self.design_message)
             self.mode = None if runner is None else runner.mode
             self.mode_since = self.t
+            self.plan_installed(runner)
         self._apply_region()
         self.roa_clear()  # the slice shown was another loop's
         if rate_changed:
@@ -435,7 +439,7 @@ class Session(_SessionOutput, _SessionRoa):
     # -- simulation ---------------------------------------------------------------------------
     def advance_to(self, now: float) -> int:
         """Run the samples due by wall-clock time *now* [s]; returns how many ran."""
-        if self.paused or self.fell is not None:
+        if self.paused or self.fell is not None or self.plan_holding:
             self._anchor(None)
             return 0
         if self.wall0 is None:
