@@ -11,7 +11,9 @@ import json
 
 import numpy as np
 import pytest
+from tests import test_web_browser as _shared
 from tests.support.web import LocalClient, next_frame, opening, receive_until
+from tests.test_web_browser import wait_for
 
 from equilibrist.errors import DesignError
 from equilibrist.web.app import create_app
@@ -109,3 +111,48 @@ def test_a_plan_that_fails_is_an_error_and_the_session_goes_on(client, monkeypat
         assert b["controller"] == "off" and b["ghost"] is None
         _pick(ws, "lqg", 4)
         assert receive_until(ws, lambda m: m["type"] == "design")["controller"] == "lqg"
+
+
+# -- the page -------------------------------------------------------------------------------
+
+
+# The playground served as a user starts it, a headless Chromium, the page open in it (the
+# fixtures of test_web_browser.py, which never skips).
+server = _shared.server
+browser = _shared.browser
+page = _shared.page
+
+
+@pytest.mark.slow
+def test_the_page_says_planning_then_draws_the_ghost_and_it_moves(page):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    Select(page.find_element(By.ID, "controller")).select_by_value("tvlqr")
+    status = page.find_element(By.ID, "plan-status")
+    wait_for(lambda: "Planning" in status.text or "Plan:" in status.text, 30, "planning…")
+    wait_for(lambda: status.text.startswith("Plan:"), 120, "the plan")
+    cv = page.find_element(By.ID, "scene")
+    wait_for(lambda: cv.get_attribute("data-ghost"), 30, "the ghost drawn")
+    seen = set()
+    wait_for(lambda: seen.add(cv.get_attribute("data-ghost-at")) or len(seen) >= 4, 30,
+             "the ghost moving")
+    first = float(cv.get_attribute("data-plan-t"))
+    wait_for(lambda: float(cv.get_attribute("data-plan-t") or 0) > first + 0.3, 30,
+             "the plan's clock running")
+    # The ghost is drawn over the live system: its dashed outline's colour is on the canvas.
+    colours = page.execute_script("""
+        const cv = document.getElementById('scene'), ctx = cv.getContext('2d');
+        const d = ctx.getImageData(0, 0, cv.width, cv.height).data;
+        let n = 0;
+        for (let k = 0; k < d.length; k += 4) {
+          if (Math.abs(d[k] - 0x5b) < 40 && Math.abs(d[k + 1] - 0x6b) < 40
+              && Math.abs(d[k + 2] - 0x8c) < 40 && d[k + 2] > d[k]) n += 1;
+        }
+        return n;""")
+    assert colours > 20, colours
+    # The plan ends, the balancing LQR holds it up: no ghost.
+    wait_for(lambda: page.execute_script("return window.playground.frame.mode") == "balancing",
+             30, "the hand-over to the balancing LQR")
+    wait_for(lambda: cv.get_attribute("data-ghost") is None, 10, "the ghost gone")
+    assert page.execute_script("return window.playground.frame.fell") is None

@@ -386,7 +386,7 @@
     }
   }
 
-  const NAMES = { lqg: "LQG", lqr: "LQR", swingup: "swing-up", mpc: "MPC", off: "controller off" };
+  const NAMES = { lqg: "LQG", lqr: "LQR", swingup: "swing-up", mpc: "MPC", tvlqr: "time-varying LQR", off: "controller off" };
 
   function showMode(f) {
     // The swing-up's supervisor (pumping or balancing), the MPC's solve times.
@@ -394,6 +394,7 @@
     if (f.mode) {
       mode = `mode: ${f.mode}` + (f.mode_since > 0 ? ` since t = ${f.mode_since.toFixed(2)} s` : "");
       if (f.controller === "swingup" && f.mode === "balancing" && f.mode_since > 0) mode += " (caught: the LQR balances)";
+      if (f.controller === "tvlqr") mode += f.mode === "tracking" ? " (following the plan: the dashed ghost)" : f.mode === "planning" ? " (holding at the start)" : " (the plan ended: the LQR balances)";
       if (f.controller === "mpc") mode += f.mode === "constrained" ? " (a constraint is active: DAQP solves the QP)" : " (no constraint active: the LQR's move)";
     }
     if ($("mode").textContent !== mode) { $("mode").textContent = mode; $("chart-mode").textContent = mode; }
@@ -419,6 +420,7 @@
     return { W, H, s, toPx: (x, y) => [W / 2 + (x - cx) * s, H / 2 - (y - cy) * s],
       toWorld: (px, py) => [cx + (px - W / 2) / s, cy - (py - H / 2) / s] };
   }
+  state.transform = transform;  // for the ghost of the plan (ghost.js)
 
   function follow() {
     // Keep the drawing in view: pan when the bounded parts leave the middle of the picture.
@@ -506,7 +508,7 @@
     $("reset").onclick = () => send({ type: "reset", kick: +$("kick").value });
     $("hang").onclick = () => {
       send({ type: "hang" });
-      if ($("controller").value !== "swingup") showMessage("Hanging: pick Swing-up in the Controller menu to bring it up.");
+      if (!["swingup", "tvlqr"].includes($("controller").value)) showMessage("Hanging: pick Swing-up or Time-varying LQR in the Controller menu to bring it up.");
     };
     $("kick-now").onclick = () => send({ type: "kick", angle: +$("kick").value });
     const showKick = () => { $("kick-value").textContent = `${(+$("kick").value).toFixed(2)} ${state.sys ? state.sys.state_units[state.sys.states.indexOf(state.sys.main_state)] || "" : ""}`; };
