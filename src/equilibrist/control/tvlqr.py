@@ -15,9 +15,37 @@ balancing LQR at the plan's end is seamless. The command is
     u_k = u_plan(t_k) - K_k (x_k - x_plan(t_k))          while the plan runs,
     u_k = u_op - K (x_k - x_op)                           after it,
 
-on the full measured state; both stages are one
+on the full measured state (``balance="lqr"``); both stages are one
 :class:`~equilibrist.control.controller.NonlinearController` whose tables are
 its parameters, so it runs in the compiled core like the swing-up.
+
+*Measured outputs* (``balance="lqg"``). The controller measures the
+design's outputs ``y = C x`` (states, so ``C`` selects them) and acts on an
+estimate. Its state ``z`` is the predicted estimate ``xhat_{k|k-1}``
+(absolute), started at the plan's first state. Along the plan a
+time-varying Kalman filter predicts along the plan's own linearizations,
+
+    xhat_k   = z_k + M_k (y_k - C z_k)                       (current form)
+    u_k      = u_plan_k - K_k (xhat_k - x_plan_k)
+    z_k+1    = x_plan_k+1 + A_k (xhat_k - x_plan_k) + B_k (u_k - u_plan_k),
+
+``u_k`` the command that acted (saturated), or in the predictor form
+``xhat_k = z_k`` and ``z_k+1 = x_plan_k+1 + A_k (z_k - x_plan_k) + B_k (u_k -
+u_plan_k) + L_k (y_k - C z_k)``, the design's ``kalman_form``. The gains come
+from the forward covariance recursion at build time, from ``P_0`` (unless given,
+Bryson's scales squared, ``1 / Q_ii``, on the design's stationary a-priori
+covariance: the start may be as far from the plan's as the design accepts) with the design's
+noise sampled at each linearization (``Qd_k``: Van Loan, or ``G QN G' T``
+for an Euler design; ``Rd`` the design's),
+
+    M_k = P_k C' (C P_k C' + Rd)^-1,   L_k = A_k M_k,
+    P_k+1 = A_k ((I - M_k C) P_k (I - M_k C)' + M_k Rd M_k') A_k' + Qd_k.
+
+After the plan the same sums run with the design's stationary filter about
+the operating point (``Ad``, ``Bd``, its ``Kf``) and the balancing gain:
+the contract's LQG, its state the same estimate handed over unchanged.
+All of it is built in :mod:`equilibrist.control.fixed`'s order (the same
+bits on every CPU).
 """
 
 from __future__ import annotations
@@ -34,12 +62,15 @@ from equilibrist.control.controller import (
 from equilibrist.control.discretize import discrete_matrices
 
 if TYPE_CHECKING:
+    from equilibrist.control.design import Design
     from equilibrist.control.kinds import ControllerRequest
     from equilibrist.control.trajopt import Trajectory
     from equilibrist.numeric.system import System
 
 #: The most samples a plan may span at the controller's rate (its tables are parameters).
 MAX_SAMPLES = 200_000
+#: What balances: the full measured state, or the design's outputs through Kalman filters.
+BALANCES = ("lqr", "lqg")
 
 SOURCE = '''
 def tvlqr_offsets(params):
@@ -77,6 +108,94 @@ def update(t, z, y, r, u_applied, params, z_out):
 '''
 
 
+#: ``balance="lqg"``: the same law on a Kalman filter's estimate of the design's outputs
+#: (the plan's time-varying filter, then the design's own); ``z`` is ``xhat_{k|k-1}``.
+SOURCE_LQG = '''
+def tvkf_layout(params):
+    K = int(params[0])
+    n = int(params[2])
+    m = int(params[3])
+    ny = int(params[4])
+    ox = 6
+    ou = ox + (K + 1) * n
+    og = ou + (K + 1) * m
+    oop = og + K * m * n
+    oup = oop + n
+    okb = oup + m
+    oi = okb + m * n
+    oa = oi + ny
+    ob = oa + K * n * n
+    of = ob + K * n * m
+    oad = of + K * n * ny
+    obd = oad + n * n
+    ofd = obd + n * m
+    return K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd
+
+
+def tvkf_stage(t, params):
+    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd = tvkf_layout(params)
+    k = int(math.floor(t * params[1] + 0.5))
+    oxr = oop
+    our = oup
+    oxn = oop
+    ogk = okb
+    oak = oad
+    obk = obd
+    ofk = ofd
+    if k < K:
+        oxr = ox + k * n
+        our = ou + k * m
+        oxn = ox + (k + 1) * n
+        ogk = og + k * m * n
+        oak = oa + k * n * n
+        obk = ob + k * n * m
+        ofk = of + k * n * ny
+    return oxr, our, oxn, ogk, oak, obk, ofk
+
+
+def tvkf_xhat(j, z, y, params, ny, oi, ofk):
+    x = z[j]
+    if params[5] < 0.5:
+        for l in range(ny):
+            x += params[ofk + j * ny + l] * (y[l] - z[int(params[oi + l])])
+    return x
+
+
+def output(t, z, y, r, params, u_out):
+    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd = tvkf_layout(params)
+    oxr, our, oxn, ogk, oak, obk, ofk = tvkf_stage(t, params)
+    for i in range(m):
+        acc = params[our + i]
+        for j in range(n):
+            acc -= params[ogk + i * n + j] * (tvkf_xhat(j, z, y, params, ny, oi, ofk)
+                                               - params[oxr + j])
+        u_out[i] = acc
+
+
+def update(t, z, y, r, u_applied, params, z_out):
+    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd = tvkf_layout(params)
+    oxr, our, oxn, ogk, oak, obk, ofk = tvkf_stage(t, params)
+    for i in range(n):
+        acc = params[oxn + i]
+        for j in range(n):
+            acc += params[oak + i * n + j] * (tvkf_xhat(j, z, y, params, ny, oi, ofk)
+                                               - params[oxr + j])
+        for l in range(m):
+            acc += params[obk + i * m + l] * (u_applied[l] - params[our + l])
+        if params[5] >= 0.5:
+            for l in range(ny):
+                acc += params[ofk + i * ny + l] * (y[l] - z[int(params[oi + l])])
+        z_out[i] = acc
+
+
+def estimate(t, z, y, r, params, x_out):
+    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd = tvkf_layout(params)
+    oxr, our, oxn, ogk, oak, obk, ofk = tvkf_stage(t, params)
+    for j in range(n):
+        x_out[j] = tvkf_xhat(j, z, y, params, ny, oi, ofk)
+'''
+
+
 def _hermite_states(system: System, traj: Trajectory, t: np.ndarray) -> np.ndarray:
     """The plan's states at times *t*: the cubic Hermite interpolant of the knots and their rates."""
     f = np.array([system.f(x, u) for x, u in zip(traj.states, traj.inputs, strict=True)])
@@ -91,9 +210,21 @@ def _hermite_states(system: System, traj: Trajectory, t: np.ndarray) -> np.ndarr
 
 
 def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np.ndarray,
-          S_end: np.ndarray, K_end: np.ndarray, x_op: np.ndarray, u_op: np.ndarray
+          S_end: np.ndarray, K_end: np.ndarray, x_op: np.ndarray, u_op: np.ndarray,
+          balance: str = "lqr", design: Design | None = None, P0: np.ndarray | None = None
           ) -> NonlinearController:
-    """The time-varying LQR along *traj* at *rate*, handing over to ``K_end`` at the end."""
+    """The time-varying LQR along *traj* at *rate*, handing over to ``K_end`` at the end.
+
+    ``balance="lqr"`` acts on the full measured state; ``"lqg"`` on the estimate of
+    *design*'s Kalman filter from its outputs, time-varying along the plan from the
+    a-priori covariance *P0* (default :func:`start_covariance`), then the design's
+    (see the module docstring).
+    """
+    if balance not in BALANCES:
+        raise ControllerError(f"--balance {balance!r}: expected one of {', '.join(BALANCES)}")
+    if balance == "lqg" and design is None:
+        raise ControllerError("the time-varying LQR with --balance lqg needs the balancing "
+                              "design (its outputs and Kalman filter)")
     if traj.state_names != system.state_names or traj.input_names != system.input_names:
         raise ControllerError(f"the trajectory is of states {', '.join(traj.state_names)} and inputs "
                               f"{', '.join(traj.input_names)}: not {system.key}'s")
@@ -108,9 +239,12 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     us = traj.input_at(t).reshape(steps + 1, m)
     S = np.array(S_end, dtype=float)
     gains = np.zeros((steps, m, n))
+    plant: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     for k in range(steps - 1, -1, -1):
         A, B = system.jacobians(xs[k], us[k])
         Ad, Bd = discrete_matrices(A, B, dt)
+        if balance == "lqg":
+            plant.append((A, Ad, Bd))
         # In the fixed order of control.fixed, as every sampled design: the same bits on
         # every CPU (numpy's @ and LAPACK follow the BLAS kernel the CPU selects).
         G = R + fixed.mm(Bd.T, S, Bd)
@@ -120,6 +254,10 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     if not np.all(np.isfinite(gains)):
         raise ControllerError("the time-varying LQR's Riccati recursion did not stay finite along "
                               "the trajectory")
+    if balance == "lqg":
+        assert design is not None
+        return _with_filter(system, traj, design, plant[::-1], xs, us, gains, rate=rate,
+                            x_op=x_op, u_op=u_op, K_end=K_end, P0=P0)
     params = np.concatenate([[steps, rate, n, m], xs.reshape(-1), us.reshape(-1), gains.reshape(-1),
                              x_op, u_op, np.asarray(K_end, dtype=float).reshape(-1)])
     return NonlinearController(
@@ -129,6 +267,111 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
         settings={"kind": "tvlqr", "trajectory_duration": traj.duration, "samples": steps,
                   "start": dict(zip(system.state_names, traj.states[0].tolist(), strict=True)),
                   "balance": "lqr"},
+    )
+
+
+def output_selection(design: Design, state_names: tuple[str, ...]) -> tuple[int, ...]:
+    """The state measured by each of *design*'s outputs: its ``C`` must select states."""
+    plant = design.plant
+    C = np.asarray(plant.C, dtype=float)
+    index = []
+    for row, name in enumerate(plant.output_names):
+        if name not in state_names:
+            raise ControllerError(f"the design's output {name!r} is not a state: the time-varying "
+                                  "filter measures states")
+        want = np.zeros(len(state_names))
+        want[state_names.index(name)] = 1.0
+        if not np.array_equal(C[row], want):
+            raise ControllerError(f"the design's output {name!r} is not the state itself (its row "
+                                  "of C selects no single state)")
+        index.append(state_names.index(name))
+    return tuple(index)
+
+
+def start_covariance(design: Design) -> np.ndarray:
+    """The filter's a-priori covariance where the plan starts: Bryson's scales squared
+    (``1 / Q_ii``, the largest deviation the design accepts: how far the start may be from
+    the plan's) on the design's stationary ``P`` (which keeps it definite where ``Q_ii = 0``).
+
+    The stationary ``P`` alone trusts the plan's start as a converged filter would: a start
+    0.05 rad off is then forgotten over some 0.5 s instead of a few samples."""
+    q = np.diag(np.asarray(design.Q, dtype=float))
+    scales = np.where(q > 0, 1.0 / np.where(q > 0, q, 1.0), 0.0)
+    return fixed.symmetric(np.asarray(design.P, dtype=float) + np.diag(scales))
+
+
+def kalman_along(plant: list[tuple[np.ndarray, np.ndarray, np.ndarray]], C: np.ndarray,
+                 design: Design, dt: float, P0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The time-varying Kalman filter along the plan's linearizations ``(A, Ad, Bd)``.
+
+    Returns the gains ``(steps, n, ny)`` in the design's form (``M_k`` current, ``L_k =
+    Ad_k M_k`` predictor) and the a-priori covariances ``(steps + 1, n, n)``, ``P_0`` first.
+    """
+    from equilibrist.control.discretize import discrete_noise
+    from equilibrist.control.riccati import current_gain
+
+    n, ny = C.shape[1], C.shape[0]
+    if design.Rd is None:
+        raise ControllerError("the time-varying filter needs a discrete design (its Rd)")
+    Rd = np.asarray(design.Rd, dtype=float)
+    G, QN, RN = (np.asarray(v, dtype=float) for v in (design.G, design.QN, design.RN))
+    P = fixed.symmetric(np.asarray(P0, dtype=float))
+    gains = np.zeros((len(plant), n, ny))
+    covariances = np.zeros((len(plant) + 1, n, n))
+    covariances[0] = P
+    eye = np.eye(n)
+    held: np.ndarray | None = None
+    Qd = np.zeros((n, n))
+    for k, (A, Ad, _Bd) in enumerate(plant):
+        M = current_gain(P, C, Rd)
+        I_MC = eye - fixed.matmul(M, C)
+        posterior = fixed.symmetric(fixed.mm(I_MC, P, I_MC.T) + fixed.mm(M, Rd, M.T))
+        if A is not held:  # the same linearization again (a plan held still): the same Qd
+            Qd, _ = discrete_noise(A, G, QN, RN, dt, method=design.discretization)
+            held = A
+        P = fixed.symmetric(fixed.mm(Ad, posterior, Ad.T) + Qd)
+        gains[k] = M if design.kalman_form == "current" else fixed.matmul(Ad, M)
+        covariances[k + 1] = P
+    if not (np.all(np.isfinite(gains)) and np.all(np.isfinite(covariances))):
+        raise ControllerError("the time-varying Kalman filter did not stay finite along the "
+                              "trajectory")
+    return gains, covariances
+
+
+def _with_filter(system: System, traj: Trajectory, design: Design,
+                 plant: list[tuple[np.ndarray, np.ndarray, np.ndarray]], xs: np.ndarray,
+                 us: np.ndarray, gains: np.ndarray, *, rate: float, x_op: np.ndarray,
+                 u_op: np.ndarray, K_end: np.ndarray, P0: np.ndarray | None) -> NonlinearController:
+    """The ``balance="lqg"`` controller: the gains on the estimate of the filters."""
+    names = system.state_names
+    n, m, steps = system.n_states, system.n_inputs, gains.shape[0]
+    index = output_selection(design, names)
+    disc = design.discrete
+    if disc is None or design.rate is None or not np.isclose(float(design.rate), rate):
+        raise ControllerError(f"the time-varying filter needs the balancing design at {rate:g} Hz")
+    C = np.zeros((len(index), n))
+    for row, j in enumerate(index):
+        C[row, j] = 1.0
+    start = np.asarray(start_covariance(design) if P0 is None else P0, dtype=float)
+    if start.shape != (n, n):
+        raise ControllerError(f"P0 has shape {start.shape}: expected ({n}, {n})")
+    filters, _ = kalman_along(plant, C, design, 1.0 / rate, start)
+    form = 0.0 if design.kalman_form == "current" else 1.0
+    params = np.concatenate([
+        [steps, rate, n, m, len(index), form], xs.reshape(-1), us.reshape(-1), gains.reshape(-1),
+        x_op, u_op, np.asarray(K_end, dtype=float).reshape(-1), np.asarray(index, dtype=float),
+        np.array([a for _, a, _ in plant]).reshape(-1), np.array([b for _, _, b in plant]).reshape(-1),
+        filters.reshape(-1), np.asarray(disc.A, dtype=float).reshape(-1),
+        np.asarray(disc.B, dtype=float).reshape(-1), np.asarray(design.Kf, dtype=float).reshape(-1),
+    ])
+    return NonlinearController(
+        name="tvlqr", source=SOURCE_LQG, params=params, z0=xs[0], rate=float(rate),
+        x_op=x_op, u_op=u_op, state_names=names, input_names=system.input_names,
+        output_names=design.plant.output_names, has_estimate=True,
+        settings={"kind": "tvlqr", "trajectory_duration": traj.duration, "samples": steps,
+                  "start": dict(zip(names, traj.states[0].tolist(), strict=True)),
+                  "balance": "lqg", "kalman_form": design.kalman_form,
+                  "outputs": list(design.plant.output_names)},
     )
 
 
@@ -148,5 +391,6 @@ def build_request(request: ControllerRequest) -> NonlinearController:
     if design.discrete is None:
         raise ControllerError("the time-varying LQR needs a discrete design (a rate)")
     rate = float(design.rate or system.spec.control_rate)
+    balance = str(request.options.get("balance", "lqr"))
     return tvlqr(system, traj, rate=rate, Q=design.Q, R=design.R, S_end=design.S, K_end=design.K,
-                 x_op=design.plant.x0, u_op=design.plant.u0)
+                 x_op=design.plant.x0, u_op=design.plant.u0, balance=balance, design=design)

@@ -9,7 +9,7 @@ import hashlib
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -23,6 +23,13 @@ def _does_not_apply(kind: str, system: Any) -> str | None:
     from equilibrist.control import kinds
 
     return kinds.get(kind).applies(system)
+
+
+def kind_options(kind: str, options: Mapping[str, str]) -> dict[str, Any]:
+    """The options of *options* that the kind *kind* takes, parsed (its request's options)."""
+    from equilibrist.control import kinds
+
+    return {o.key: o.value(options[o.key]) for o in kinds.get(kind).options if o.key in options}
 
 
 def controllers() -> tuple[str, ...]:
@@ -115,6 +122,9 @@ class Study:
     metrics: str
     roa: Mapping[str, tuple[float, float, int]]
     batch_size: int
+    #: The controllers' own options by key (``trajectory``, ``balance``, ``horizon``...) as
+    #: text: each point's kind takes those that are its own.
+    controller_options: Mapping[str, str] = field(default_factory=dict)
 
     # -- points -----------------------------------------------------------------------
     @property
@@ -153,7 +163,11 @@ class Study:
 
     # -- description ----------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
+        # The controllers' options only when given: a study without them keeps its digest.
+        extra = ({"controller_options": dict(self.controller_options)}
+                 if self.controller_options else {})
         return {
+            **extra,
             "format": FORMAT,
             "system": self.system,
             "set": dict(self.settings),
@@ -203,4 +217,5 @@ def _from_description(d: Mapping[str, Any]) -> Study:
         rate=float(d["rate"]), design_for=d["design_for"], metrics=d["metrics"],
         roa={k: (float(v[0]), float(v[1]), int(v[2])) for k, v in d["roa"].items()},
         batch_size=int(d["batch_size"]),
+        controller_options={str(k): str(v) for k, v in d.get("controller_options", {}).items()},
     )

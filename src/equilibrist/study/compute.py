@@ -35,12 +35,13 @@ Metrics of a point (columns of the table; NaN where a metric does not apply):
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
 from equilibrist.errors import EquilibristError
+from equilibrist.study._spec_study import kind_options
 from equilibrist.study.spec import Study
 
 SETTLE_FRACTION = 0.02
@@ -99,6 +100,20 @@ def _bryson_weights(system: Any, names: Sequence[str]) -> np.ndarray | None:
     return np.array([1.0 / float(scales[n]) ** 2 for n in names])
 
 
+def _start(system: Any, controller: Any, x_op: np.ndarray) -> np.ndarray:
+    """Where the states the study's ``x0`` leaves out start: where the controller's plan
+    starts (a tracked trajectory's ``settings["start"]``), else the operating point."""
+    settings = getattr(controller, "settings", None)
+    planned = settings.get("start") if isinstance(settings, Mapping) else None
+    if not isinstance(planned, Mapping):
+        return x_op
+    start = np.array(x_op, dtype=float)
+    for state, value in planned.items():
+        if state in system.state_names:
+            start[system.state_names.index(state)] = float(value)
+    return start
+
+
 def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> dict[str, Any]:
     """The table row of point *index* (a mapping column -> value)."""
     from equilibrist.control import kinds as registry
@@ -108,6 +123,7 @@ def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> d
     from equilibrist.sim._setup import operating_point
     from equilibrist.sim.batch import region_of_attraction, sample_uniform, simulate_batch
     from equilibrist.sim.noise import Noise
+    from equilibrist.tasks import get_task, task_names
 
     values = study.point(index)
     nominal = get_system(study.system, **study.settings)
@@ -145,8 +161,10 @@ def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> d
     except EquilibristError as exc:
         return failed("design failed", exc)
     record = registry.get(kind, "study")
-    request = registry.ControllerRequest.of_design(base, d)  # the point's design, made above
     try:
+        # The point's design, made above, and the kind's own options (a plan to track...).
+        request = registry.ControllerRequest.of_design(
+            base, d, options=kind_options(kind, study.controller_options))
         controller = record.make(request)
     except EquilibristError as exc:
         return failed("design failed", exc)
@@ -164,7 +182,8 @@ def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> d
     try:
         x_op, u_op = operating_point(plant, controller)
         x0s, spread = sample_uniform(plant, runs, ranges=dict(study.x0), spread=dict(study.spread),
-                                     seed=study.point_seed(index, 1), x_op=x_op)
+                                     seed=study.point_seed(index, 1),
+                                     x_op=_start(plant, controller, x_op))
         fell = np.zeros(runs, dtype=bool)
         fell_at = np.full(runs, np.nan)
         balanced_since = np.full(runs, np.nan)
@@ -177,6 +196,10 @@ def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> d
         rw = _bryson_weights(nominal, inputs)
         options: dict[str, Any] = {"duration": study.duration, "rate": rate, "delay": delay,
                                    "noise": noise}
+        if record.task is not None and record.task in task_names(plant):
+            # A swing-up starts hanging: only the task's region (the cart's track) ends it,
+            # as simulate and batch run it.
+            options["region"] = dict(get_task(plant, record.task).region)
         for b, start in enumerate(range(0, runs, study.batch_size)):
             sl = slice(start, min(runs, start + study.batch_size))
             batch = simulate_batch(

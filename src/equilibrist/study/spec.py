@@ -82,6 +82,7 @@ def make_study(
     metrics: str = "full",
     roa: Mapping[str, object] | None = None,
     batch_size: int | None = None,
+    controller_options: Mapping[str, object] | None = None,
 ) -> Study:
     """A validated :class:`Study`; every problem is collected and raised at once.
 
@@ -114,6 +115,13 @@ def make_study(
     batch_size : int, optional
         Runs per compiled batch (default: as many as fit in about 32 MB of
         trajectories). Part of the study: the noise seeds follow it.
+    controller_options : mapping key -> value, optional
+        The controllers' own options by key, as their flags without dashes
+        (``trajectory = "up.npz"`` and ``balance = "lqg"`` for ``tvlqr``,
+        ``horizon`` for ``mpc``): each must be an option of one of the
+        study's controllers and is checked as the command line checks it;
+        each point's kind takes those that are its own. A file (a
+        ``FILE...`` option) is recorded as an absolute path.
 
     Raises
     ------
@@ -163,6 +171,8 @@ def make_study(
         problems.append(f"--controller {controller!r}: expected one of {', '.join(controllers())}")
     elif _does_not_apply(controller, sysm) is not None:
         problems.append(f"--controller {controller}: {_does_not_apply(controller, sysm)}")
+    kinds_used = [controller] + [str(v) for a in axes if a.kind == "controller" for v in a.values]
+    options_v = _controller_options(controller_options or {}, kinds_used, problems)
     if isinstance(noise, str):
         noise_v = {"on": 1.0, "off": 0.0}.get(noise.strip().lower())
         if noise_v is None:
@@ -208,6 +218,7 @@ def make_study(
         seed=seed_v, controller=controller,
         noise=noise_v, delay=bool(delay), rate=rate_v, design_for=design_for, metrics=metrics,
         roa={k: (lo, hi, int(n)) for k, (lo, hi, n) in roa_r.items()}, batch_size=1,
+        controller_options=options_v,
     )
     if study.n_points > MAX_POINTS:
         raise StudyError(f"the study has {study.n_points} points: at most {MAX_POINTS} per study "
@@ -224,6 +235,38 @@ def make_study(
     return _replace_batch(study, min(size, n_runs))
 
 
+def _controller_options(given: Mapping[str, object], kinds_used: Sequence[str],
+                        problems: list[str]) -> dict[str, str]:
+    """*given* checked against the options of the study's kinds, as text (files absolute)."""
+    from equilibrist.control import kinds
+
+    known = [k for k in dict.fromkeys(kinds_used) if k in controllers()]
+    out: dict[str, str] = {}
+    for key, value in given.items():
+        options = [o for k in known for o in kinds.get(k).options if o.key == str(key)]
+        if not options:
+            takes = sorted({o.key for k in known for o in kinds.get(k).options})
+            problems.append(f"controller_options {key}: no option of the study's controller(s) "
+                            f"{', '.join(known) or '-'} (they take "
+                            f"{', '.join(takes) or 'none'})")
+            continue
+        text = str(value).lower() if isinstance(value, bool) else str(value)
+        try:
+            for opt in options:
+                opt.value(text)
+        except kinds.KindError as exc:
+            problems.append(f"controller_options {key}: {exc}")
+            continue
+        if any(_is_file(o) for o in options):
+            text = str(Path(text).expanduser().resolve())
+        out[str(key)] = text
+    return out
+
+
+def _is_file(option: object) -> bool:
+    return "FILE" in str(getattr(option, "metavar", None) or "")
+
+
 def _replace_batch(study: Study, size: int) -> Study:
     from dataclasses import replace
 
@@ -234,7 +277,7 @@ def _replace_batch(study: Study, size: int) -> Study:
 
 _FILE_KEYS = ("system", "set", "vary", "sample", "runs", "duration", "x0", "spread", "seed",
               "controller", "noise", "delay", "rate", "design_for", "metrics", "roa",
-              "batch_size")
+              "batch_size", "controller_options")
 
 
 def load_study_file(path: str | Path, *, system: str | None = None) -> Study:
@@ -260,6 +303,13 @@ def load_study_file(path: str | Path, *, system: str | None = None) -> Study:
         theta = "-0.3:0.3"          # or [-0.3, 0.3]
         [spread]
         l = 0.05
+
+    A controller's own options are a table (a file in it relative to the study file)::
+
+        controller = "tvlqr"
+        [controller_options]
+        trajectory = "up.npz"       # equilibrist trajopt cartpole --out up.npz
+        balance = "lqg"
     """
     import tomllib
 
@@ -277,7 +327,7 @@ def load_study_file(path: str | Path, *, system: str | None = None) -> Study:
                          f"(expected {', '.join(_FILE_KEYS)})")
     if "system" not in data:
         raise StudyError(f"study file {p}: no system = \"...\"")
-    for key in ("set", "vary", "x0", "spread", "roa"):
+    for key in ("set", "vary", "x0", "spread", "roa", "controller_options"):
         if key in data and not isinstance(data[key], Mapping):
             raise StudyError(f"study file {p}: [{key}] must be a table of NAME = VALUE")
     sample = data.get("sample")
@@ -286,7 +336,21 @@ def load_study_file(path: str | Path, *, system: str | None = None) -> Study:
             raise StudyError(f"study file {p}: [sample] takes random = N")
         sample = sample["random"]
     kwargs = {k: v for k, v in data.items() if k not in ("system", "sample")}
+    if "controller_options" in data:
+        kwargs["controller_options"] = _files_beside(p, data["controller_options"])
     return make_study(_named_system(p, str(data["system"]), system), sample=sample, **kwargs)
+
+
+def _files_beside(study_file: Path, options: Mapping[str, object]) -> dict[str, object]:
+    """*options* with each relative file of a ``FILE...`` option read from the study file's folder."""
+    from equilibrist.control import kinds
+
+    files = {o.key for o in kinds.options() if _is_file(o)}
+    out = dict(options)
+    for key, value in options.items():
+        if key in files and isinstance(value, str) and not Path(value).expanduser().is_absolute():
+            out[key] = str(study_file.parent / value)
+    return out
 
 
 def _named_system(study_file: Path, recorded: str, named: str | None) -> str:

@@ -1,0 +1,252 @@
+"""The time-varying LQR on measured outputs (``--balance lqg``): a Kalman filter along the plan,
+the design's after it; its gains against plain numpy, its export, studies that track a plan."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from equilibrist import get_system
+from equilibrist.cli.main import main
+from equilibrist.control.kinds import ControllerRequest, build
+from equilibrist.control.trajopt import load_trajectory, plan
+from equilibrist.control.tvlqr import SOURCE, kalman_along
+from equilibrist.sim.noise import Noise
+from equilibrist.sim.run import simulate
+from equilibrist.tasks import get_task
+
+RATE = 200.0
+
+
+@pytest.fixture(scope="module")
+def cart_plan(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    cart = get_system("cartpole")
+    task = get_task(cart, "swingup")
+    traj = plan(cart, start=task.start, goal=task.x_op, knots=60, duration=4.0,
+                bounds={"x": (-0.9, 0.9)})  # a margin inside the track for the tracking error
+    assert traj.converged
+    return traj.save(tmp_path_factory.mktemp("plan") / "up.npz")
+
+
+def _request(path: Path, balance: str | None = "lqg", form: str = "current") -> ControllerRequest:
+    options = {"trajectory": str(path)} | ({"balance": balance} if balance else {})
+    return ControllerRequest(system=get_system("cartpole"), rate=RATE, options=options,
+                             design_options={"kalman_form": form})
+
+
+def _tables(params: np.ndarray) -> dict[str, np.ndarray]:
+    """The parameter vector of ``balance="lqg"`` cut into its tables (the source's layout)."""
+    K, n, m, ny = (int(params[i]) for i in (0, 2, 3, 4))
+    shapes = (("xs", (K + 1, n)), ("us", (K + 1, m)), ("gains", (K, m, n)), ("x_op", (n,)),
+              ("u_op", (m,)), ("K_end", (m, n)), ("index", (ny,)), ("A", (K, n, n)),
+              ("B", (K, n, m)), ("F", (K, n, ny)), ("Ad", (n, n)), ("Bd", (n, m)),
+              ("Kf", (n, ny)))
+    out, at = {}, 6
+    for name, shape in shapes:
+        size = math.prod(shape)
+        out[name] = params[at : at + size].reshape(shape)
+        at += size
+    assert at == params.size
+    return out
+
+
+def _expm(a: np.ndarray) -> np.ndarray:
+    """``exp(a)`` by its Taylor series: plain numpy, exact to round-off for the small ``a T``
+    of one sample (norm well under 1)."""
+    assert np.abs(a).sum(axis=1).max() < 0.5
+    term, total = np.eye(a.shape[0]), np.eye(a.shape[0])
+    for k in range(1, 20):
+        term = term @ a / k
+        total = total + term
+    return total
+
+
+def _upright(x: np.ndarray) -> bool:
+    """Balanced: the pole within 0.05 rad of upright (modulo a turn), slow, the cart near 0."""
+    theta = math.remainder(float(x[1]), 2 * math.pi)
+    return abs(theta) < 0.05 and abs(x[0]) < 0.1 and abs(x[2]) < 0.2 and abs(x[3]) < 0.3
+
+
+@pytest.mark.parametrize("form", ["current", "predictor"])
+def test_noisy_swing_ups_end_balanced_on_the_estimate_of_the_measured_outputs(
+        cart_plan: Path, form: str) -> None:
+    cart = get_system("cartpole")
+    traj = load_trajectory(cart_plan)
+    ctrl = build("tvlqr", _request(cart_plan, form=form))
+    assert ctrl.output_names == ("x", "theta") and ctrl.has_estimate
+    assert ctrl.settings["balance"] == "lqg" and ctrl.settings["kalman_form"] == form
+    noise = Noise.from_spec(cart, outputs=ctrl.output_names, rate=RATE)
+    rng = np.random.default_rng(5)
+    for seed in range(4):
+        # From where the plan starts and from starts spread around it (the estimate starts
+        # at the plan's start: the filter finds the rest).
+        dx = np.zeros(4) if seed == 0 else rng.uniform(-1, 1, 4) * [0.02, 0.05, 0.1, 0.1]
+        run = simulate(cart, ctrl, duration=6.0, x0=traj.states[0] + dx, noise=noise, seed=seed,
+                       region={"x": (-1.0, 1.0)})
+        assert not run.fell and _upright(run.final_state), (seed, run.final_state)
+        assert run.estimates is not None
+        error = np.abs(run.estimates - run.states)
+        after = run.time >= traj.duration
+        # After the plan the estimate is as good as the sensors allow (1.5 mm, 1.5 mrad).
+        assert np.all(error[after].max(axis=0) < [0.01, 0.01, 0.06, 0.06]), error[after].max(0)
+        early = (run.time >= 0.05) & (run.time < 1.0)  # and soon along the plan too
+        assert np.all(error[early].max(axis=0) < [0.01, 0.02, 0.15, 0.15]), error[early].max(0)
+
+
+def test_the_filter_along_the_plan_is_the_one_plain_numpy_computes(cart_plan: Path) -> None:
+    request = _request(cart_plan)
+    cart, ctrl, d = request.system, build("tvlqr", request), request.design()
+    tab = _tables(ctrl.params)
+    steps, n = tab["gains"].shape[0], cart.n_states
+    index = tab["index"].astype(int)
+    C = np.eye(n)[index]
+    np.testing.assert_array_equal(index, [0, 1])  # x and theta
+    dt = 1.0 / RATE
+    W = d.G @ d.QN @ d.G.T
+    P = d.P + np.diag(1.0 / np.diag(d.Q))
+    for k in range(steps):
+        A, B = cart.jacobians(tab["xs"][k], tab["us"][k])
+        E = _expm(np.block([[A, B], [np.zeros((1, n + 1))]]) * dt)
+        np.testing.assert_allclose(tab["A"][k], E[:n, :n], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(tab["B"][k], E[:n, n:], rtol=1e-9, atol=1e-12)
+        M = P @ C.T @ np.linalg.inv(C @ P @ C.T + d.Rd)
+        np.testing.assert_allclose(tab["F"][k], M, rtol=1e-6, atol=1e-9, err_msg=str(k))
+        V = _expm(np.block([[-A, W], [np.zeros((n, n)), A.T]]) * dt)
+        F = V[n:, n:].T
+        Qd = F @ V[:n, n:]
+        P = F @ (P - M @ C @ P) @ F.T + Qd
+    # After the plan: the design's stationary filter and balancing gain, as the LQG has them.
+    np.testing.assert_array_equal(tab["Kf"], d.Kf)
+    np.testing.assert_array_equal(tab["Ad"], d.discrete.A)
+    np.testing.assert_array_equal(tab["K_end"], d.K)
+    # The recursion held at the operating point converges to that stationary filter, in
+    # either form (the predictor's gain L = Ad M).
+    A0 = np.asarray(d.plant.A)
+    for form in ("current", "predictor"):
+        df = _request(cart_plan, form=form).design()
+        still = [(A0, df.discrete.A, df.discrete.B)] * 800
+        gains, covariances = kalman_along(still, C, df, dt, np.diag(1.0 / np.diag(df.Q)))
+        np.testing.assert_allclose(gains[-1], df.Kf, rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(covariances[-1], df.P, rtol=1e-6, atol=1e-12)
+
+
+def test_the_default_balance_is_the_full_state_law_unchanged(cart_plan: Path) -> None:
+    plain = build("tvlqr", _request(cart_plan, balance=None))
+    lqr = build("tvlqr", _request(cart_plan, balance="lqr"))
+    assert plain.source == lqr.source == SOURCE and not lqr.has_estimate
+    np.testing.assert_array_equal(plain.params, lqr.params)
+    assert lqr.output_names == get_system("cartpole").state_names and lqr.n_z == 0
+
+
+@pytest.mark.slow
+def test_the_command_line_and_the_export_replay_the_estimating_controller_to_the_bit(
+        cart_plan: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    args = ["--controller", "tvlqr", "--trajectory", str(cart_plan), "--balance", "lqg"]
+    assert main(["simulate", "cartpole", *args, "--duration", "6", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["stayed_up"] is True and abs(out["final_error"]["theta"]) < 0.02
+    assert out["estimation_error_rms"]["theta"] < 0.01
+    # The compiled core's commands are the plain-Python runtime's (the reference the export's
+    # vectors hold), over the plan and the hand-over.
+    cart = get_system("cartpole")
+    ctrl = build("tvlqr", _request(cart_plan))
+    run = simulate(cart, ctrl, duration=5.0, x0=load_trajectory(cart_plan).states[0], seed=3,
+                   noise=Noise.from_spec(cart, outputs=ctrl.output_names, rate=RATE), region={})
+    runtime = ctrl.runtime()
+    runtime.reset()
+    for i, t in enumerate(run.time):
+        u = runtime.output(float(t), run.measurements[i].copy(), np.zeros(0))
+        np.testing.assert_allclose(u, run.commanded[i], rtol=1e-12, atol=1e-9, err_msg=str(t))
+        runtime.update(float(t), run.measurements[i].copy(), np.zeros(0), run.applied[i].copy())
+    # The export: the source in C, the tables as constants, vectors of a noisy run past the
+    # plan's end (4 s), make check exact.
+    folder = tmp_path / "tv"
+    assert main(["export", "cartpole", *args, "--duration", "5", "--out", str(folder),
+                 "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["controller"] == "tvlqr"
+    header = (folder / "tvlqr.h").read_text()
+    assert "tvlqr_estimate" in header
+    if shutil.which("make") is None:
+        pytest.fail("make is needed (CI has it)")
+    check = subprocess.run(["make", "check"], cwd=folder, capture_output=True, text=True,
+                           timeout=600, check=False)
+    assert check.returncode == 0, check.stdout + check.stderr
+    assert "1001 samples, 0 mismatches" in check.stdout, check.stdout
+
+
+def test_a_bad_balance_is_one_line_exit_2(cart_plan: Path, capsys: pytest.CaptureFixture[str]
+                                          ) -> None:
+    for argv, words in ((["--controller", "tvlqr", "--trajectory", str(cart_plan), "--balance",
+                          "foo"], "--balance"),
+                        (["--controller", "lqr", "--balance", "lqg"], "--balance")):
+        assert main(["simulate", "cartpole", *argv]) == 2
+        err = capsys.readouterr().err.strip()
+        assert words in err and len(err.splitlines()) == 1, err
+
+
+def test_a_study_tracks_a_plan_on_measured_outputs(cart_plan: Path, tmp_path: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    from equilibrist.study import StudyError, make_study, read_study
+
+    shutil.copy(cart_plan, tmp_path / "up.npz")
+    (tmp_path / "study.toml").write_text(
+        'system = "cartpole"\nruns = 3\nduration = 6\nseed = 2\ncontroller = "tvlqr"\n'
+        'metrics = "basic"\n[vary]\nm_p = [0.95, 1.05]\n[x0]\ntheta = "3.09:3.19"\n'
+        '[controller_options]\ntrajectory = "up.npz"\nbalance = "lqg"\n')
+    out = tmp_path / "s.parquet"
+    assert main(["sweep", "--study", str(tmp_path / "study.toml"), "--out", str(out),
+                 "--no-progress", "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["points"] == 2 and summary["failed_points"] == 0
+    table, study = read_study(out)
+    # The plan file is read beside the study file and recorded as an absolute path.
+    assert study.controller_options == {"trajectory": str(tmp_path / "up.npz"), "balance": "lqg"}
+    rows = table.to_pylist()
+    assert [r["status"] for r in rows] == ["ok", "ok"]
+    # Started hanging (the other states where the plan starts), judged on the cart's track.
+    assert all(r["fraction_up"] == 1.0 and r["fraction_balanced"] == 1.0 for r in rows), rows
+    assert all(2.0 < r["time_to_balance_p50"] < 5.0 for r in rows), rows
+    # Options that no controller of the study takes, or bad values, are named at once.
+    with pytest.raises(StudyError) as err:
+        make_study("cartpole", controller="lqr", controller_options={"balance": "lqg"})
+    assert "controller_options balance" in str(err.value)
+    with pytest.raises(StudyError) as err:
+        make_study("cartpole", controller="tvlqr", controller_options={"balance": "foo"})
+    assert "--balance 'foo'" in str(err.value)
+
+
+@pytest.mark.slow
+def test_the_filter_tables_are_the_same_bits_under_another_blas_kernel(cart_plan: Path) -> None:
+    """The covariance recursion runs in control.fixed's order, as the Riccati recursion does:
+    another BLAS kernel (what another CPU would select) changes no bit of the parameters."""
+    import hashlib
+    import os
+    import sys
+    import textwrap
+
+    code = textwrap.dedent(f"""
+        import hashlib
+        from equilibrist.control.kinds import ControllerRequest
+        from equilibrist.control.tvlqr import build_request
+        from equilibrist.numeric.system import get_system
+        ctrl = build_request(ControllerRequest(system=get_system("cartpole"), rate={RATE},
+            options={{"trajectory": {str(cart_plan)!r}, "balance": "lqg"}}))
+        print(hashlib.sha256(ctrl.params.tobytes()).hexdigest())
+    """)
+    digests = []
+    for kernel in ("", "Nehalem"):
+        env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
+        if kernel:
+            env["OPENBLAS_CORETYPE"] = kernel
+        proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                              text=True, timeout=600, check=False)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        digests.append(proc.stdout.strip())
+    assert digests[0] == digests[1] and len(digests[0]) == len(hashlib.sha256().hexdigest())
