@@ -28,245 +28,18 @@
  * equilibrist.native.simcore.FIELDS (which ctypes' RunArgs mirrors): the sample range,
  * options, state, controller, noise, parameter sets, events, and the outputs. ---- */
 
-/* Dormand-Prince 5(4) tableau. */
-#define EQ_A21 (1.0 / 5.0)
-#define EQ_A31 (3.0 / 40.0)
-#define EQ_A32 (9.0 / 40.0)
-#define EQ_A41 (44.0 / 45.0)
-#define EQ_A42 (-56.0 / 15.0)
-#define EQ_A43 (32.0 / 9.0)
-#define EQ_A51 (19372.0 / 6561.0)
-#define EQ_A52 (-25360.0 / 2187.0)
-#define EQ_A53 (64448.0 / 6561.0)
-#define EQ_A54 (-212.0 / 729.0)
-#define EQ_A61 (9017.0 / 3168.0)
-#define EQ_A62 (-355.0 / 33.0)
-#define EQ_A63 (46732.0 / 5247.0)
-#define EQ_A64 (49.0 / 176.0)
-#define EQ_A65 (-5103.0 / 18656.0)
-#define EQ_B1 (35.0 / 384.0)
-#define EQ_B3 (500.0 / 1113.0)
-#define EQ_B4 (125.0 / 192.0)
-#define EQ_B5 (-2187.0 / 6784.0)
-#define EQ_B6 (11.0 / 84.0)
-#define EQ_E1 (71.0 / 57600.0)
-#define EQ_E3 (-71.0 / 16695.0)
-#define EQ_E4 (71.0 / 1920.0)
-#define EQ_E5 (-17253.0 / 339200.0)
-#define EQ_E6 (22.0 / 525.0)
-#define EQ_E7 (-1.0 / 40.0)
-#define EQ_DOPRI_MAX_STEPS 100000
-#define EQ_TWO_M53 (1.0 / 9007199254740992.0)
-
-/* ---- xoshiro256** and Marsaglia's polar method ---- */
-static inline uint64_t eq_rotl(uint64_t v, int k) { return (v << k) | (v >> (64 - k)); }
-
-static inline uint64_t eq_next_u64(uint64_t *s)
-{
-    uint64_t result = eq_rotl(s[1] * 5u, 7) * 9u;
-    uint64_t t = s[1] << 17;
-    s[2] ^= s[0];
-    s[3] ^= s[1];
-    s[1] ^= s[2];
-    s[0] ^= s[3];
-    s[2] ^= t;
-    s[3] = eq_rotl(s[3], 45);
-    return result;
-}
-
-static inline double eq_uniform(uint64_t *s)
-{
-    return ((double)(eq_next_u64(s) >> 11) + 1.0) * EQ_TWO_M53;
-}
-
-static void eq_normals(uint64_t *s, double *out, int64_t count)
-{
-    int64_t i = 0;
-    while (i < count) {
-        double v1 = 2.0 * eq_uniform(s) - 1.0;
-        double v2 = 2.0 * eq_uniform(s) - 1.0;
-        double r2 = v1 * v1 + v2 * v2;
-        double scale;
-        if (r2 >= 1.0 || r2 == 0.0) {
-            continue;
-        }
-        scale = sqrt(-2.0 * eq_log(r2) / r2);
-        out[i] = v1 * scale;
-        if (i + 1 < count) {
-            out[i + 1] = v2 * scale;
-        }
-        i += 2;
-    }
-}
-
-/* ---- integrators ---- */
-static inline void eq_deriv(const double *x, const double *u, const double *p, const double *w,
-                            double *out)
-{
-    int i;
-    eq_f(x, u, p, out);
-    for (i = 0; i < EQ_N; i++) {
-        out[i] += w[i];
-    }
-}
-
-static void eq_rk4(double *restrict x, const double *restrict u, const double *restrict p,
-                   const double *restrict w, double h, double *restrict k1,
-                   double *restrict k2, double *restrict k3, double *restrict k4,
-                   double *restrict xt)
-{
-    int i;
-    eq_f(x, u, p, k1);
-    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * (k1[i] + w[i]);
-    eq_f(xt, u, p, k2);
-    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * (k2[i] + w[i]);
-    eq_f(xt, u, p, k3);
-    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + h * (k3[i] + w[i]);
-    eq_f(xt, u, p, k4);
-    for (i = 0; i < EQ_N; i++) {
-        x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i] + 6.0 * w[i]);
-    }
-}
-
-static void eq_rk4_free(double *restrict x, const double *restrict u,
-                        const double *restrict p, double h, double *restrict k1,
-                        double *restrict k2, double *restrict k3, double *restrict k4,
-                        double *restrict xt)
-{
-    int i;
-    eq_f(x, u, p, k1);
-    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * k1[i];
-    eq_f(xt, u, p, k2);
-    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * k2[i];
-    eq_f(xt, u, p, k3);
-    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + h * k3[i];
-    eq_f(xt, u, p, k4);
-    for (i = 0; i < EQ_N; i++) {
-        x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-    }
-}
-
-static inline int eq_no_negative_zero(const double *x)
-{
-    int i, clean = 1;
-    for (i = 0; i < EQ_N; i++) {
-        if (x[i] == 0.0 && copysign(1.0, x[i]) < 0.0) clean = 0;
-    }
-    return clean;
-}
-
-static inline void eq_rk4_step(double *x, const double *u, const double *p, const double *w,
-                               int64_t nw, double h, double *k1, double *k2, double *k3,
-                               double *k4, double *xt)
-{
-    if (nw == 0 && eq_no_negative_zero(x)) {
-        eq_rk4_free(x, u, p, h, k1, k2, k3, k4, xt);
-    } else {
-        eq_rk4(x, u, p, w, h, k1, k2, k3, k4, xt);
-    }
-}
-
-/* Integrate over [0, h] with adaptive Dormand-Prince steps; 0 if it gives up.
- * wk: rows of width `width` (k1..k7, yt, yn, ..., row 12 carries the step size). */
-static int eq_dopri(double *x, const double *u, const double *p, const double *w, double h,
-                    double rtol, double atol, double *wk, int64_t width)
-{
-    const int n = EQ_N;
-    double *k1 = wk, *k2 = wk + width, *k3 = wk + 2 * width, *k4 = wk + 3 * width;
-    double *k5 = wk + 4 * width, *k6 = wk + 5 * width, *k7 = wk + 6 * width;
-    double *yt = wk + 7 * width, *yn = wk + 8 * width, *hstate = wk + 12 * width;
-    double t = 0.0;
-    double dt = eq_minf(hstate[0], h);
-    long steps = 0;
-    int i;
-    eq_deriv(x, u, p, w, k1);
-    while (t < h) {
-        int last = 0;
-        double err = 0.0;
-        steps += 1;
-        if (steps > EQ_DOPRI_MAX_STEPS) return 0;
-        if (t + dt >= h * (1.0 - 1e-12)) {
-            dt = h - t;
-            last = 1;
-        }
-        for (i = 0; i < n; i++) yt[i] = x[i] + dt * EQ_A21 * k1[i];
-        eq_deriv(yt, u, p, w, k2);
-        for (i = 0; i < n; i++) yt[i] = x[i] + dt * (EQ_A31 * k1[i] + EQ_A32 * k2[i]);
-        eq_deriv(yt, u, p, w, k3);
-        for (i = 0; i < n; i++) {
-            yt[i] = x[i] + dt * (EQ_A41 * k1[i] + EQ_A42 * k2[i] + EQ_A43 * k3[i]);
-        }
-        eq_deriv(yt, u, p, w, k4);
-        for (i = 0; i < n; i++) {
-            yt[i] = x[i] + dt * (EQ_A51 * k1[i] + EQ_A52 * k2[i] + EQ_A53 * k3[i]
-                                 + EQ_A54 * k4[i]);
-        }
-        eq_deriv(yt, u, p, w, k5);
-        for (i = 0; i < n; i++) {
-            yt[i] = x[i] + dt * (EQ_A61 * k1[i] + EQ_A62 * k2[i] + EQ_A63 * k3[i]
-                                 + EQ_A64 * k4[i] + EQ_A65 * k5[i]);
-        }
-        eq_deriv(yt, u, p, w, k6);
-        for (i = 0; i < n; i++) {
-            yn[i] = x[i] + dt * (EQ_B1 * k1[i] + EQ_B3 * k3[i] + EQ_B4 * k4[i]
-                                 + EQ_B5 * k5[i] + EQ_B6 * k6[i]);
-        }
-        eq_deriv(yn, u, p, w, k7);
-        for (i = 0; i < n; i++) {
-            double e = dt * (EQ_E1 * k1[i] + EQ_E3 * k3[i] + EQ_E4 * k4[i] + EQ_E5 * k5[i]
-                             + EQ_E6 * k6[i] + EQ_E7 * k7[i]);
-            double sc = atol + rtol * eq_maxf(fabs(x[i]), fabs(yn[i]));
-            double q = e / sc;
-            err += q * q;
-        }
-        err = sqrt(err / (double)n);
-        if (!isfinite(err)) {
-            dt *= 0.2;
-            if (dt < h * 1e-14) return 0;
-            continue;
-        }
-        if (err <= 1.0) {
-            double fac;
-            t = last ? h : t + dt;
-            for (i = 0; i < n; i++) {
-                x[i] = yn[i];
-                k1[i] = k7[i];
-            }
-            fac = err == 0.0 ? 5.0 : eq_minf(5.0, eq_maxf(0.2, 0.9 * eq_exp(-0.2 * eq_log(err))));
-            if (!last) hstate[0] = dt * fac;
-            dt = dt * fac;
-        } else {
-            dt *= eq_maxf(0.2, 0.9 * eq_exp(-0.2 * eq_log(err)));
-            if (dt < h * 1e-14) return 0;
-        }
-    }
-    return 1;
-}
-
-/* Exact step of the affine model dx' = A dx + B du + f0 + w (held u, w); lin is
- * [Phi | E | Gamma | f0], n rows of 2n + m + 1. */
-static inline void eq_linear(double *x, const double *u, const double *op, const double *w,
-                             const double *lin, double *dx)
-{
-    const int n = EQ_N, m = EQ_M, cols = 2 * EQ_N + EQ_M + 1;
-    int i, j;
-    for (i = 0; i < n; i++) dx[i] = x[i] - op[i];
-    for (i = 0; i < n; i++) {
-        double v = 0.0;
-        for (j = 0; j < n; j++) {
-            v += lin[i * cols + j] * dx[j] + lin[i * cols + n + j] * (lin[j * cols + 2 * n + m] + w[j]);
-        }
-        for (j = 0; j < m; j++) {
-            v += lin[i * cols + 2 * n + j] * (u[j] - op[n + j]);
-        }
-        x[i] = op[i] + v;
-    }
-}
+/* ---- the generator and the integrators: integrators.c, inserted here ---- */
 
 /* -1 inside; the index of the first state outside its region; -2 if not finite. */
 static inline int64_t eq_outside(const double *x, const double *region)
 {
     int i;
+    /* Strictly between its bounds is finite and inside: one pass for the usual case (NaN
+     * fails every comparison); the others are sorted out below, as before. */
+    for (i = 0; i < EQ_N; i++) {
+        if (!(x[i] > region[i] && x[i] < region[EQ_N + i])) break;
+    }
+    if (i == EQ_N) return -1;
     for (i = 0; i < EQ_N; i++) {
         if (!isfinite(x[i])) return -2;
     }
@@ -323,10 +96,13 @@ static int64_t eq_width(int64_t p_len, int64_t ny, int64_t nw, int64_t nz)
 
 #define EQ_ROW(scr, width, r) ((scr) + (int64_t)(r) * (width))
 
-/* The physics steps between samples k and k + 1; 1 when the run fell or was stopped. */
-static int eq_advance(const eq_args *a, int64_t k, double *x, const double *u_app,
-                      const double *p_sets, const double *lin_s, uint64_t *rng, int64_t *status,
-                      double *scr, int64_t width, volatile int64_t *stop)
+/* The physics steps between samples k and k + 1; 1 when the run fell or was stopped.
+ * plain (a constant where it is inlined): a run with one parameter set, no kicks or
+ * pulses, no noise and RK4 (eq_plain), whose steps skip what it has not. */
+static inline __attribute__((always_inline)) int
+eq_advance_t(const eq_args *a, int64_t k, double *x, const double *u_app, const double *p_sets,
+             const double *lin_s, uint64_t *rng, int64_t *status, double *scr, int64_t width,
+             volatile int64_t *stop, const int plain)
 {
     const int n = EQ_N, m = EQ_M;
     const int64_t nw = a->nw;
@@ -347,6 +123,11 @@ static int eq_advance(const eq_args *a, int64_t k, double *x, const double *u_ap
         int64_t s = k * n_sub + j;
         int64_t code;
         if ((j & 4095) == 4095 && *stop != 0) return 1;
+        if (plain) {
+            for (i = 0; i < n; i++) xprev[i] = x[i];
+            eq_rk4_plain(x, u_app, pcur, h);
+            goto check;
+        }
         eq_switch(a, p_sets, s, pcur);
         for (e = 0; e < a->n_kicks; e++) {
             if (a->kicks[2 * e] == s) x[a->kicks[2 * e + 1]] += a->kick_value[e];
@@ -375,6 +156,7 @@ static int eq_advance(const eq_args *a, int64_t k, double *x, const double *u_ap
             eq_linear(x, ubuf, a->op, wvec,
                       lin_s + eq_pset(a->p_switch, a->n_sets, s) * lin_size, xt);
         }
+    check:
         code = eq_outside(x, a->region);
         if (!ok) code = -3;
         if (code != -1) {
@@ -389,6 +171,31 @@ static int eq_advance(const eq_args *a, int64_t k, double *x, const double *u_ap
     return 0;
 }
 
+static int eq_advance(const eq_args *a, int64_t k, double *x, const double *u_app,
+                      const double *p_sets, const double *lin_s, uint64_t *rng, int64_t *status,
+                      double *scr, int64_t width, volatile int64_t *stop)
+{
+    return eq_advance_t(a, k, x, u_app, p_sets, lin_s, rng, status, scr, width, stop, 0);
+}
+
+/* Whether a run can take eq_advance_t's and eq_run_t's plain path. */
+static int eq_plain(const eq_args *a)
+{
+    return a->n_sets == 1 && a->n_kicks == 0 && a->n_pulses == 0 && a->nw == 0
+        && a->nlv == 0 && a->iopts[EQ_IO_INTEGRATOR] == EQ_INT_RK4
+        && a->iopts[EQ_IO_RECORD] == 0;
+}
+
+/* floor(v), the same bits, without a call to libm where the value is small: truncation
+ * is exact below 2^52, and a truncation above v is one too high (v = -0.0 kept). */
+static inline double eq_floor(double v)
+{
+    double t;
+    if (!(fabs(v) < 4503599627370496.0) || v == 0.0) return floor(v);
+    t = (double)(int64_t)v;
+    return t > v ? t - 1.0 : t;
+}
+
 /* Whether x is in the balance box (equilibrist.tasks.balance_box: per state the deviation's
  * low and high, and its period, 2 pi for an angle taken modulo a turn, else 0). */
 static inline int eq_in_box(const double *x, const double *op, const double *box)
@@ -397,20 +204,22 @@ static inline int eq_in_box(const double *x, const double *op, const double *box
     for (i = 0; i < EQ_N; i++) {
         double d = x[i] - op[i];
         double period = box[3 * i + 2];
-        if (period > 0.0) d = d - period * floor(d / period + 0.5);
+        if (period > 0.0) d = d - period * eq_floor(d / period + 0.5);
         if (!(d >= box[3 * i] && d <= box[3 * i + 1])) return 0;
     }
     return 1;
 }
 
-/* Samples k_start .. k_end - 1 of one closed-loop run (resumable); see _kernel_template._run. */
-static void eq_run(const eq_args *a, int64_t k_start, int64_t k_end, double *x, double *z,
-                   double *u_prev, uint64_t *rng, const double *p_sets, const double *lin_s,
-                   double *rec, double *acc, int64_t *status, double *scr, int64_t width)
+/* Samples k_start .. k_end - 1 of one closed-loop run (resumable); see _kernel_template._run.
+ * plain: as in eq_advance_t (the constant of eq_run and eq_run_plain). */
+static inline __attribute__((always_inline)) void
+eq_run_t(const eq_args *a, int64_t k_start, int64_t k_end, double *x, double *z, double *u_prev,
+         uint64_t *rng, const double *p_sets, const double *lin_s, double *rec, double *acc,
+         int64_t *status, double *scr, int64_t width, const int plain)
 {
     const int n = EQ_N, m = EQ_M;
     const int64_t n_samples = a->iopts[EQ_IO_N_SAMPLES];
-    const int record = a->iopts[EQ_IO_RECORD] != 0;
+    const int record = !plain && a->iopts[EQ_IO_RECORD] != 0;
     const int accumulate = a->iopts[EQ_IO_ACCUMULATE] != 0;
     const int delay = a->iopts[EQ_IO_DELAY] != 0;
     const int64_t n_sub = a->iopts[EQ_IO_N_SUB];
@@ -439,14 +248,14 @@ static void eq_run(const eq_args *a, int64_t k_start, int64_t k_end, double *x, 
         const double *r = a->ref + k * nr;
         int saturated = 0;
         if (*a->stop != 0) return;
-        eq_switch(a, p_sets, k * n_sub, pcur);
+        if (!plain) eq_switch(a, p_sets, k * n_sub, pcur);
         if (k == 0) {
             for (i = 0; i < m; i++) {
                 u_prev[i] = eq_minf(eq_maxf(a->op[n + i], pcur[base + 2 * i]),
                                     pcur[base + 2 * i + 1]);
             }
         }
-        eq_measure(x, a->c_idx, ny, a->lv, a->nlv, rng, y, zbuf);
+        eq_measure(x, a->c_idx, ny, a->lv, plain ? 0 : a->nlv, rng, y, zbuf);
         t = (double)k / rate;
         eq_ctrl_output(t, z, nz, y, ny, r, nr, a->cp, ncp, u_cmd);
         if (estimates) eq_ctrl_estimate(t, z, nz, y, ny, r, nr, a->cp, ncp, xhat);
@@ -502,8 +311,25 @@ static void eq_run(const eq_args *a, int64_t k_start, int64_t k_end, double *x, 
             }
         }
         if (k >= n_samples) return;
-        if (eq_advance(a, k, x, u_app, p_sets, lin_s, rng, status, scr, width, a->stop)) return;
+        if (eq_advance_t(a, k, x, u_app, p_sets, lin_s, rng, status, scr, width, a->stop, plain)) {
+            return;
+        }
     }
+}
+
+static void eq_run(const eq_args *a, int64_t k_start, int64_t k_end, double *x, double *z,
+                   double *u_prev, uint64_t *rng, const double *p_sets, const double *lin_s,
+                   double *rec, double *acc, int64_t *status, double *scr, int64_t width)
+{
+    eq_run_t(a, k_start, k_end, x, z, u_prev, rng, p_sets, lin_s, rec, acc, status, scr, width, 0);
+}
+
+static void eq_run_plain(const eq_args *a, int64_t k_start, int64_t k_end, double *x, double *z,
+                         double *u_prev, uint64_t *rng, const double *p_sets,
+                         const double *lin_s, double *rec, double *acc, int64_t *status,
+                         double *scr, int64_t width)
+{
+    eq_run_t(a, k_start, k_end, x, z, u_prev, rng, p_sets, lin_s, rec, acc, status, scr, width, 1);
 }
 
 static double *eq_scratch(const eq_args *a, int64_t *width)
@@ -520,8 +346,9 @@ EQ_EXPORT int eq_run_one(const eq_args *a)
     int64_t width, i;
     double *scr = eq_scratch(a, &width);
     if (scr == NULL) return -1;
-    eq_run(a, a->k_start, a->k_end, a->x, a->z, a->u_prev, a->rng, a->p_sets, a->lin_s,
-           a->rec, a->acc, a->status, scr, width);
+    (eq_plain(a) ? eq_run_plain : eq_run)(a, a->k_start, a->k_end, a->x, a->z, a->u_prev,
+                                          a->rng, a->p_sets, a->lin_s, a->rec, a->acc,
+                                          a->status, scr, width);
     for (i = 0; i < EQ_N; i++) a->fell_x[i] = EQ_ROW(scr, width, EQ_S_FELL_X)[i];
     free(scr);
     return 0;
@@ -534,6 +361,7 @@ EQ_EXPORT int eq_run_many(const eq_args *a)
     const int64_t n_rows = a->iopts[EQ_IO_N_SAMPLES] + 1;
     const int64_t lin_size = a->lin_s == NULL ? 0
         : a->n_sets * (int64_t)EQ_N * (2 * EQ_N + EQ_M + 1);
+    const int plain = eq_plain(a);
     int failed = 0;
     int64_t r;
 #ifdef _OPENMP
@@ -557,10 +385,11 @@ EQ_EXPORT int eq_run_many(const eq_args *a)
             for (i = 0; i < a->nz; i++) z[i] = a->z[i];
             for (i = 0; i < EQ_M; i++) u_prev[i] = 0.0;
             for (i = 0; i < 4; i++) rng[i] = a->rngs[r * 4 + i];
-            eq_run(a, 0, n_rows, x, z, u_prev, rng, a->p_sets + r * a->n_sets * a->p_len,
-                   a->lin_s == NULL ? NULL : a->lin_s + r * lin_size,
-                   a->rec == NULL ? NULL : a->rec + r * n_rows * a->rec_w,
-                   a->acc + r * a->acc_w, a->status + r * 4, scr, width);
+            (plain ? eq_run_plain : eq_run)(
+                a, 0, n_rows, x, z, u_prev, rng, a->p_sets + r * a->n_sets * a->p_len,
+                a->lin_s == NULL ? NULL : a->lin_s + r * lin_size,
+                a->rec == NULL ? NULL : a->rec + r * n_rows * a->rec_w,
+                a->acc + r * a->acc_w, a->status + r * 4, scr, width);
             for (i = 0; i < EQ_N; i++) {
                 a->x_ends[r * EQ_N + i] = x[i];
                 a->fell_x[r * EQ_N + i] = EQ_ROW(scr, width, EQ_S_FELL_X)[i];

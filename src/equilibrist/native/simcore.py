@@ -6,7 +6,8 @@ constants (:mod:`equilibrist.sim.layout`), the run's argument struct
 (:mod:`equilibrist.numeric.libm`), the system's dynamics ``f`` and the
 controller's functions, both translated from their one Python definition
 by :mod:`equilibrist.native.pyc`, and the core's body (``core.c``, the
-numba template's loops written once in C). :func:`load_core` compiles it
+numba template's loops written once in C, with its generator and integrators
+from ``integrators.c``). :func:`load_core` compiles it
 (:mod:`equilibrist.native.build`: cached by content, atomic, checked) and
 :class:`NativeCore` calls its entries.
 
@@ -77,8 +78,15 @@ def _struct_source() -> str:
     return "\n".join(lines) + "\n} eq_args;\n"
 
 
+#: The line of core.c where the unit takes integrators.c (the generator and the integrators).
+_INTEGRATORS = "/* ---- the generator and the integrators: integrators.c, inserted here ---- */\n"
+
+
 def _body() -> str:
-    return (Path(__file__).parent / "core.c").read_text()
+    here = Path(__file__).parent
+    core = (here / "core.c").read_text()
+    assert _INTEGRATORS in core
+    return core.replace(_INTEGRATORS, (here / "integrators.c").read_text(), 1)
 
 
 
@@ -187,7 +195,7 @@ def unit_source(system: System, key: bytes | tuple[int, ...] | None = None,
 
 # What the generator reads besides the system's module and the controller: a change in
 # any of them makes a new unit (and so a new library name).
-_GENERATOR_FILES = ("core.c", "env.c", "shoot.c", "pyc.py", "simcore.py")
+_GENERATOR_FILES = ("core.c", "integrators.c", "env.c", "shoot.c", "pyc.py", "simcore.py")
 _GENERATOR_MODULES = ("equilibrist.numeric.libm", "equilibrist.sim.layout",
                       "equilibrist.control.controller")
 _GENERATOR: list[str] = []

@@ -16,7 +16,7 @@ from equilibrist.errors import SimulationError
 from equilibrist.sim import _setup, layout
 from equilibrist.sim._batch_result import BatchResult, _batch_result
 from equilibrist.sim.kernel import Kernel
-from equilibrist.sim.noise import generator_state
+from equilibrist.sim.noise import describe_seed, generator_state
 from equilibrist.sim.result import SimResult
 from equilibrist.sim.run import _run_python
 from equilibrist.tasks import balance_box, in_box
@@ -59,7 +59,8 @@ def _python_batch(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
     elapsed = time.perf_counter() - t0
     statuses, accs, fell_xs, x_ends, recs = (np.concatenate(a) for a in zip(*parts, strict=True))
     setup0 = _setup.Setup(**{**setup.__dict__, "estimates": False})
-    return _batch_result(setup0, x0s, pmat, seqs, statuses, accs, fell_xs, x_ends,
+    seeds = [None if s is None else describe_seed(s) for s in seqs]
+    return _batch_result(setup0, x0s, pmat, seeds, statuses, accs, fell_xs, x_ends,
                          recs if record else None, elapsed)
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 import math
 import zipfile
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -18,7 +18,7 @@ import numpy as np
 from equilibrist.atomic import atomic_path, write_text
 from equilibrist.errors import SimulationError, nearest
 from equilibrist.sim import _setup, layout
-from equilibrist.sim.noise import describe_seed, seed_from_description
+from equilibrist.sim.noise import seed_from_description
 from equilibrist.sim.result import SimResult, check_result_path, digest_field, read_npz
 from equilibrist.sim.run import _result, fall_reason
 from equilibrist.tasks import balance_criterion
@@ -301,9 +301,10 @@ def _balanced_since(last_out: np.ndarray, fell: np.ndarray, rows: np.ndarray,
 
 
 def _batch_result(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
-                  seqs: list[np.random.SeedSequence | None], statuses: np.ndarray,
+                  seeds: Sequence[dict[str, Any] | None], statuses: np.ndarray,
                   accs: np.ndarray, fell_xs: np.ndarray, x_ends: np.ndarray,
                   recs: np.ndarray | None, elapsed: float) -> BatchResult:
+    """The batch's result; *seeds*: each run's :func:`~equilibrist.sim.noise.describe_seed`."""
     sysm = setup.system
     st = layout.STATUS
     acc = layout.ACC.slices(**setup.sizes)
@@ -327,7 +328,7 @@ def _batch_result(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
         estimation_error_rms=(np.sqrt(accs[:, acc["sum_est2"]] / count)
                               if setup.estimates else None),
         balanced_since=_balanced_since(accs[:, acc["last_out"].start], fell, rows, setup),
-        rows=rows, seeds=tuple(None if s is None else describe_seed(s) for s in seqs),
+        rows=rows, seeds=tuple(seeds),
         settings=settings, elapsed=elapsed, steps=int(steps_done.sum()), trajectories=recs,
         _setup=setup,
     )

@@ -37,6 +37,7 @@ from equilibrist.sim._batch_inputs import (
     _initial_states,
     _mapping,
     _parameter_matrix,
+    child_descriptions,
     child_seed,
     sample_uniform,
 )
@@ -45,7 +46,7 @@ from equilibrist.sim._batch_result import FORMAT, BatchResult, _batch_result
 from equilibrist.sim._setup_checks import _has_operating_point
 from equilibrist.sim.events import Event
 from equilibrist.sim.kernel import Kernel, set_workers
-from equilibrist.sim.noise import Noise, SeedLike, generator_state, seed_sequence
+from equilibrist.sim.noise import Noise, SeedLike, describe_seed, generator_state, seed_sequence
 from equilibrist.sim.run import _progress_bar, call_interruptibly
 from equilibrist.tasks import balance_box
 
@@ -151,14 +152,20 @@ def simulate_batch(
     x0s = _initial_states(system, x0, runs, setup.x_op)
     pmat = _parameter_matrix(system, params, runs)
     base_seq = seed_sequence(seed) if (noise is not None or seed is not None) else None
-    seqs: list[np.random.SeedSequence | None]
-    if base_seq is not None:
+    # The runs' generators are made only where the core draws from them (noise); otherwise
+    # each run's seed is only named (the same names, without making 10^5 SeedSequences).
+    draws = setup.lv.shape[0] > 0 or (setup.lw.ndim == 2 and setup.lw.shape[1] > 0)
+    seqs: list[np.random.SeedSequence | None] = [None] * runs
+    seeds: Sequence[dict[str, Any] | None] = [None] * runs
+    rngs = np.zeros((runs, 4), dtype=np.uint64)
+    if base_seq is not None and (draws or not setup.compiled):
         children = [child_seed(base_seq, i) for i in range(runs)]
         seqs = list(children)
-        rngs = np.stack([generator_state(s) for s in children])
-    else:
-        seqs = [None] * runs
-        rngs = np.zeros((runs, 4), dtype=np.uint64)
+        seeds = [describe_seed(s) for s in children]
+        if draws:
+            rngs = np.stack([generator_state(s) for s in children])
+    elif base_seq is not None:
+        seeds = child_descriptions(base_seq, runs)
     p_sets_r = setup.p_sets(pmat)
     if plant == "linear":
         lin_r = np.stack([setup.linear_blocks(p_sets_r[i]) for i in range(runs)])
@@ -220,7 +227,7 @@ def simulate_batch(
         if bar is not None:
             bar.close()
     elapsed = timing[0]
-    return _batch_result(setup, x0s, pmat, seqs, statuses, accs, fell_xs, x_ends,
+    return _batch_result(setup, x0s, pmat, seeds, statuses, accs, fell_xs, x_ends,
                          recs if record else None, elapsed)
 
 
