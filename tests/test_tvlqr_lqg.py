@@ -152,6 +152,10 @@ def test_the_command_line_and_the_export_replay_the_estimating_controller_to_the
     out = json.loads(capsys.readouterr().out)
     assert out["stayed_up"] is True and abs(out["final_error"]["theta"]) < 0.02
     assert out["estimation_error_rms"]["theta"] < 0.01
+    assert main(["batch", "cartpole", *args, "--runs", "16", "--x0", "theta=3.09:3.19",
+                 "--duration", "6", "--json"]) == 0
+    batch = json.loads(capsys.readouterr().out)
+    assert batch["fraction_up"] == 1.0 and batch["fraction_balanced"] == 1.0
     # The compiled core's commands are the plain-Python runtime's (the reference the export's
     # vectors hold), over the plan and the hand-over.
     cart = get_system("cartpole")
