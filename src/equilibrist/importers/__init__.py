@@ -32,6 +32,7 @@ joint limits are not modelled; ``equilibrist show`` says so.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -55,9 +56,16 @@ if TYPE_CHECKING:
 HINGE_SCALE = 0.2  # rad
 SLIDE_SCALE = 0.5  # m
 RATE_SCALE = 1.0  # rad/s or m/s
-ENCODER_NOISE = 1e-3  # rad or m, per sample: an encoder's quantization
-# Process noise on each rate, per sqrt(s) (see _process_noise).
+# Sensor noise per sample where the file gives none: an encoder's quantization, that of
+# 4096 counts a turn for a hinge (2 pi / 4096 / sqrt(12) rad, the catalogue's acrobot's and
+# pendubot's), 1e-3 m for a slide.
+ENCODER_NOISE = 2 * math.pi / 4096 / math.sqrt(12)  # rad
+SLIDE_NOISE = 1e-3  # m
+# Process noise on each rate, per sqrt(s) (see _process_noise): the same on every rate, at
+# most PROCESS_NOISE, and no more than makes the default LQR's input (its standard
+# deviation) INPUT_SHARE of each input's half range.
 PROCESS_NOISE = 0.05
+INPUT_SHARE = 0.2
 CONTROL_RATE = 200.0  # Hz
 # A hinge may turn this far from the operating point before a balancing run
 # counts as fallen (hinges about the vertical can not fall).
@@ -142,17 +150,52 @@ _NAMES = frozenset({
 _NAME_STEMS = ("joint", "body", "site", "tendon", "geom")
 
 
-def _process_noise(tree: Tree) -> dict[str, float]:
-    """The default process noise of each rate: PROCESS_NOISE.
+def _process_noise(tree: Tree, scales: Sequence[float], ranges: Sequence[float]) -> dict[str, float]:
+    """The default process noise of each rate, scaled to what the motors can correct.
 
-    Scaled to the motors (a tenth of a percent of their authority), a weak
-    motor's rig is no longer toppled, but the default LQG's Kalman filter, which
-    assumes the same noise, became too slow for a strong one
-    (``examples/pendubot.urdf`` fell from 0.02 rad): until the design's
-    assumed noise and the simulated one can be chosen apart, the default
-    stays the same on every rate.
+    The same on every rate: :data:`PROCESS_NOISE`, or less where the default
+    LQR (Bryson's weights: the design *scales* of the states, half of each
+    input's range, *ranges*) would spend more than :data:`INPUT_SHARE` of an
+    input's half range on it (the stationary standard deviation of its input,
+    continuous time, at the operating point). A strong motor keeps 0.05 per
+    sqrt(s); dm_control's acrobot under its +-2 N m gets 0.01, which it
+    survives. The design's Kalman filter assumes the same noise, so it is not
+    made smaller than that: a filter that assumes too little is slow (with
+    0.005 on every rate ``examples/pendubot.urdf`` fell from 0.05 rad).
     """
-    return {f"{j.name}_dot": PROCESS_NOISE for j in tree.joints}
+    names = [f"{j.name}_dot" for j in tree.joints]
+    share = _input_share(tree, scales, ranges)
+    sigma = PROCESS_NOISE if share is None or share * PROCESS_NOISE <= INPUT_SHARE \
+        else float(f"{INPUT_SHARE / share:.2g}")
+    return dict.fromkeys(names, sigma)
+
+
+def _input_share(tree: Tree, scales: Sequence[float], ranges: Sequence[float]) -> float | None:
+    """The largest standard deviation of an input, as a share of its half range, that the
+    default LQR spends on process noise of unit intensity on every rate (None: no motor,
+    or no stabilizing LQR)."""
+    import numpy as np
+    from scipy.linalg import solve_continuous_are, solve_continuous_lyapunov
+
+    a, b = (np.array(m, dtype=float) for m in tree.linear)
+    if not tree.actuators or b.size == 0:
+        return None
+    n = a.shape[0] // 2
+    half = np.asarray(ranges, dtype=float)
+    try:
+        with np.errstate(all="ignore"):
+            s = solve_continuous_are(a, b, np.diag(1.0 / np.asarray(scales, float) ** 2),
+                                     np.diag(1.0 / half**2))
+            k = np.linalg.solve(np.diag(1.0 / half**2), b.T @ s)
+            closed = a - b @ k
+            if not np.all(np.linalg.eigvals(closed).real < 0):
+                return None
+            g = np.vstack([np.zeros((n, n)), np.eye(n)])
+            x = solve_continuous_lyapunov(closed, -g @ g.T)
+        share = float(np.max(np.sqrt(np.clip(np.diag(k @ x @ k.T), 0.0, None)) / half))
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    return share if math.isfinite(share) and share > 0 else None
 
 
 def _check_numbers(file: Path, content: bytes, depth: int = 0) -> None:
@@ -279,7 +322,8 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
         seen.add(n)
     sensors = tree.sensors or tuple((c, None) for c in coords)
     outputs = tuple(s for s, _ in sensors)
-    sensor_noise = {s: noise if noise is not None else ENCODER_NOISE for s, noise in sensors}
+    sensor_noise = {s: noise if noise is not None else ENCODER_NOISE if units[s] == "rad" else SLIDE_NOISE
+                    for s, noise in sensors}
     state = {c: v for c, v in zip(coords, tree.key_qpos, strict=True) if v != 0}
     state.update({f"{c}_dot": v for c, v in zip(coords, tree.key_qvel, strict=True) if v != 0})
     free = tuple(i.name for i in inputs)  # solved, from the keyframe's controls, so that the point holds
@@ -296,6 +340,8 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
     design_scales = {j.name: HINGE_SCALE if j.kind == "hinge" else SLIDE_SCALE for j in joints}
     design_scales.update({f"{c}_dot": RATE_SCALE for c in coords})
     design_scales.update({i.name: (i.high - i.low) / 2 for i in inputs})
+    process_noise = _process_noise(tree, [design_scales[s] for s in (*coords, *(f"{c}_dot" for c in coords))],
+                                   [design_scales[i.name] for i in inputs])
     where = f"the keyframe {tree.key_name!r}" if tree.key_name else "the zero configuration"
     if tree.key_moved:
         where += " moved to the nearest equilibrium (" + ", ".join(
@@ -307,8 +353,11 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
         f"operating point: {where}"
         + ("" if tree.key_is_equilibrium or not inputs else " (its inputs solved so that it holds)"),
         "defaults of the import (docs/models.md): design scales 0.2 rad, 0.5 m, 1 /s and half of "
-        "each input's range; sensor noise 1e-3 where the file gives none; 200 Hz; process noise "
-        + ", ".join(f"{k} {v:g}" for k, v in _process_noise(tree).items()) + " per sqrt(s)",
+        f"each input's range; sensor noise {ENCODER_NOISE:.2g} rad or {SLIDE_NOISE:g} m where the file "
+        "gives none; 200 Hz; process noise "
+        + ", ".join(f"{k} {v:g}" for k, v in process_noise.items()) + " per sqrt(s)"
+        + ("" if all(v == PROCESS_NOISE for v in process_noise.values())
+           else f" (less than {PROCESS_NOISE:g}: the motors can correct no more)"),
     ]
     return SystemSpec(
         name=name,
@@ -329,6 +378,6 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
         region=region,
         design_scales=design_scales,
         sensor_noise=sensor_noise,
-        process_noise=_process_noise(tree),
+        process_noise=process_noise,
         control_rate=CONTROL_RATE,
     )

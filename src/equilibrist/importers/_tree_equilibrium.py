@@ -100,3 +100,43 @@ def _authority(model: Any, data: Any, qpos: np.ndarray, actuators: tuple[Actuato
         dof = int(model.jnt_dofadr[order[a.joint]])
         reach += np.abs(inverse[:, dof]) * abs(a.gain) * (a.high - a.low) / 2
     return tuple(float(reach[int(model.jnt_dofadr[j])]) for j in order)
+
+
+def _linearization(model: Any, data: Any, qpos: np.ndarray, qvel: np.ndarray, ctrl: np.ndarray,
+                   actuators: tuple[ActuatorData, ...], order: list[int]
+                   ) -> tuple[tuple[tuple[float, ...], ...], tuple[tuple[float, ...], ...]]:
+    """``(A, B)`` of ``x_dot = f(x, u)`` at the operating point, by MuJoCo's forward
+    dynamics (central differences): ``x`` the joints' positions then their rates (in
+    *order*), ``u`` each motor's physical force or torque (``gain * ctrl``)."""
+    mujoco = load_mujoco()
+    n = len(order)
+    adr = [int(model.jnt_qposadr[j]) for j in order]
+    dof = [int(model.jnt_dofadr[j]) for j in order]
+
+    def qacc(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        data.qpos[:], data.qvel[:] = q, v
+        if model.nu:
+            data.ctrl[:] = ctrl
+        mujoco.mj_forward(model, data)
+        return np.array(data.qacc, float)[dof]
+
+    a = np.zeros((2 * n, 2 * n))
+    a[:n, n:] = np.eye(n)
+    step = 1e-6
+    for k in range(n):
+        for block, base, index in ((0, qpos, adr[k]), (n, qvel, dof[k])):
+            plus, minus = base.copy(), base.copy()
+            plus[index] += step
+            minus[index] -= step
+            args = ((plus, qvel), (minus, qvel)) if block == 0 else ((qpos, plus), (qpos, minus))
+            a[n:, block + k] = (qacc(*args[0]) - qacc(*args[1])) / (2 * step)
+    data.qpos[:], data.qvel[:] = qpos, qvel
+    mujoco.mj_forward(model, data)
+    mass = np.zeros((model.nv, model.nv))
+    mujoco.mj_fullM(model, data, mass)
+    inverse = np.linalg.inv(mass)
+    b = np.zeros((2 * n, len(actuators)))
+    for k, act in enumerate(actuators):
+        b[n:, k] = inverse[np.ix_(dof, [dof[act.joint]])][:, 0]
+    return (tuple(tuple(float(v) for v in row) for row in a),
+            tuple(tuple(float(v) for v in row) for row in b))

@@ -37,6 +37,7 @@ from equilibrist.importers._tree_equilibrium import (
     MAX_MOVE,
     _authority,
     _holds,
+    _linearization,
     _nearest_equilibrium,
 )
 
@@ -119,6 +120,10 @@ class Tree:
     # with half its range at the operating point, each motor's share counted
     # whatever its sign: the model's scale of process noise (docs/models.md).
     authority: tuple[float, ...]
+    # ``(A, B)`` of the motion at the operating point (positions then rates in joint
+    # order; each motor's physical force or torque): the scale of the default process
+    # noise (docs/models.md).
+    linear: tuple[tuple[tuple[float, ...], ...], tuple[tuple[float, ...], ...]]
     notes: tuple[str, ...]
 
 
@@ -360,6 +365,7 @@ def read_tree(
         key_is_equilibrium=key_is_equilibrium,
         key_moved=tuple(moved),
         authority=_authority(model, data, qpos, actuators, order),
+        linear=_linearization(model, data, qpos, qvel, ctrl, actuators, order),
         notes=tuple(notes),
     )
 
