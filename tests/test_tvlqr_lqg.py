@@ -224,6 +224,10 @@ def test_a_study_tracks_a_plan_on_measured_outputs(cart_plan: Path, tmp_path: Pa
     with pytest.raises(StudyError) as err:
         make_study("cartpole", controller="tvlqr", controller_options={"balance": "foo"})
     assert "--balance 'foo'" in str(err.value)
+    with pytest.raises(StudyError) as err:
+        make_study("cartpole", controller="tvlqr",
+                   controller_options={"trajectory": str(tmp_path / "none.npz")})
+    assert "controller_options trajectory: no file" in str(err.value)
 
 
 @pytest.mark.slow

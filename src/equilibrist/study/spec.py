@@ -259,6 +259,9 @@ def _controller_options(given: Mapping[str, object], kinds_used: Sequence[str],
             continue
         if any(_is_file(o) for o in options):
             text = str(Path(text).expanduser().resolve())
+            if not Path(text).is_file():
+                problems.append(f"controller_options {key}: no file {text!r}")
+                continue
         out[str(key)] = text
     return out
 
