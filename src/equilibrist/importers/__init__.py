@@ -158,10 +158,11 @@ def _process_noise(tree: Tree, scales: Sequence[float], ranges: Sequence[float])
     input's range, *ranges*) would spend more than :data:`INPUT_SHARE` of an
     input's half range on it (the stationary standard deviation of its input,
     continuous time, at the operating point). A strong motor keeps 0.05 per
-    sqrt(s); dm_control's acrobot under its +-2 N m gets 0.01, which it
+    sqrt(s); dm_control's acrobot under its +-2 N m gets about 0.01, which it
     survives. The design's Kalman filter assumes the same noise, so it is not
-    made smaller than that: a filter that assumes too little is slow (with
-    0.005 on every rate ``examples/pendubot.urdf`` fell from 0.05 rad).
+    made smaller than that: a filter that assumes too little against its
+    sensors' is slow (with 1e-3 rad sensors ``examples/pendubot.urdf`` needed
+    0.04 to balance from 0.05 rad; with :data:`ENCODER_NOISE`, 0.015 does).
     """
     names = [f"{j.name}_dot" for j in tree.joints]
     share = _input_share(tree, scales, ranges)
