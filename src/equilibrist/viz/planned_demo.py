@@ -158,8 +158,10 @@ def plot_planned(system: Any, pr: PlannedRun, path: str | Path) -> Path:
     return Path(path)
 
 
-def _when(t: float | None) -> str:
-    return "does not end balanced" if t is None else f"balanced from {t:.2f} s"
+def _when(t: float | None, run: Any) -> str:
+    if t is not None:
+        return f"balanced from {t:.2f} s"
+    return f"not balanced at the end of its {round(float(run.time[-1])):d} s run"
 
 
 def caption(system: Any, pr: PlannedRun) -> str:
@@ -173,9 +175,9 @@ def caption(system: Any, pr: PlannedRun) -> str:
             f"(Hermite-Simpson, {traj.knots} intervals,{bounds} IPOPT solved it in "
             f"{traj.solve_time:.2f} s of CPU, {traj.iterations} iterations, {pr.plan_seconds:.1f} s "
             f"with its setup) and tracked by the time-varying LQR with sensor and process noise: "
-            f"{_when(pr.balanced_at)}; the energy-shaping swing-up from the same start "
-            f"{_when(pr.energy_balanced_at)} (balanced: every angle within 0.1 rad of upright "
-            "and its rate under 0.5 rad/s, to the end).")
+            f"{_when(pr.balanced_at, pr.tracked)}; the energy-shaping swing-up from the same "
+            f"start: {_when(pr.energy_balanced_at, pr.energy)} (balanced as batch counts it: "
+            "every angle within 0.1 rad of upright and its rate under 0.5 rad/s, to the end).")
 
 
 def planned_images(system: Any, folder: Path, slug: str, notes: list[str], *, width: int,
