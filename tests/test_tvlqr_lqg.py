@@ -217,6 +217,21 @@ def test_a_study_tracks_a_plan_on_measured_outputs(cart_plan: Path, tmp_path: Pa
     # Started hanging (the other states where the plan starts), judged on the cart's track.
     assert all(r["fraction_up"] == 1.0 and r["fraction_balanced"] == 1.0 for r in rows), rows
     assert all(2.0 < r["time_to_balance_p50"] < 5.0 for r in rows), rows
+    # The same study from the command line: the kinds' own flags reach the study.
+    flags = tmp_path / "f.parquet"
+    assert main(["sweep", "cartpole", "--vary", "m_p=0.95,1.05", "--runs", "3", "--duration",
+                 "6", "--seed", "2", "--controller", "tvlqr", "--metrics", "basic", "--x0",
+                 "theta=3.09:3.19", "--trajectory", str(tmp_path / "up.npz"), "--balance",
+                 "lqg", "--out", str(flags), "--no-progress", "--json"]) == 0
+    capsys.readouterr()
+    again, study2 = read_study(flags)
+    assert study2.controller_options == study.controller_options
+    assert [r["fraction_balanced"] for r in again.to_pylist()] == \
+        [r["fraction_balanced"] for r in rows]
+    # Beside --study, a kind's flag is refused like every other option of the study.
+    assert main(["sweep", "--study", str(tmp_path / "study.toml"), "--out", str(out),
+                 "--balance", "lqg"]) == 2
+    assert "drop --balance" in capsys.readouterr().err
     # Options that no controller of the study takes, or bad values, are named at once.
     with pytest.raises(StudyError) as err:
         make_study("cartpole", controller="lqr", controller_options={"balance": "lqg"})

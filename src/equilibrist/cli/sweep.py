@@ -69,6 +69,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
     p.add_argument("--controller", choices=kinds.names("study"),
                    help="when not varied (default lqg): " + ", ".join(kinds.names("study")))
+    for opt in kinds.options("study"):  # the kinds' own options (--trajectory, --horizon ...)
+        p.add_argument(opt.flag, metavar=opt.metavar, choices=opt.choices, default=None,
+                       dest=opt.key, help=f"{opt.help} (to each point whose controller has it)")
     p.add_argument("--rate", metavar="HZ", help="when not varied (default: the rig's control rate)")
     p.add_argument("--noise", metavar="on|off|SCALE", help="when not varied (default on)")
     p.add_argument("--delay", action="store_true", help="commands one sample late (when not varied)")
@@ -117,7 +120,10 @@ def build_study(args: argparse.Namespace) -> Study:
 
     if args.study is not None:
         # SYSTEM beside --study names the study's system (a Python file is the user's to run).
+        from equilibrist.control import kinds
+
         given = [o for o in _STUDY_OPTIONS if o != "system" and getattr(args, o) not in (None, [], False)]
+        given += [o.key for o in kinds.options("study") if getattr(args, o.key, None) is not None]
         if given:
             flags = ", ".join("SYSTEM" if o == "system" else "--" + o.replace("_", "-")
                               .replace("settings", "set") for o in given)
@@ -141,6 +147,12 @@ def build_study(args: argparse.Namespace) -> Study:
         "settings": common.system_settings(args.system, args.settings),
         "delay": args.delay,
     }
+    from equilibrist.control import kinds
+
+    own = {o.key: getattr(args, o.key) for o in kinds.options("study")
+           if getattr(args, o.key, None) is not None}
+    if own:
+        options["controller_options"] = own
     for key, value in (("runs", args.runs), ("duration", args.duration), ("seed", args.seed),
                        ("controller", args.controller), ("rate", args.rate),
                        ("noise", args.noise), ("design_for", args.design_for),
