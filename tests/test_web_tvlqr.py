@@ -83,6 +83,18 @@ def test_picking_it_plans_from_hanging_then_tracks_the_plan_drawn_as_a_ghost(cli
         assert f1["plan_t"] > f0["plan_t"] and any(moved)
         # The static parts (the track, the labels) are not in the ghost.
         assert {s["kind"] for s in f0["ghost"]} <= {"fill", "line"}
+        # A retune that leaves the plant as it was rebuilds the tracker on the same plan, at
+        # the same plan time: no new plan, the run goes on.
+        ws.send_text(json.dumps({"type": "tune", "noise": 0.5, "seq": 6}))
+        seen = []
+        design = receive_until(ws, lambda m: seen.append(m) or m["type"] == "design")
+        assert not [m for m in seen if m["type"] == "plan"]
+        assert design["controller_info"]["kind"] == "tvlqr"
+        assert design["controller_info"]["plan_duration"] == 4.0
+        after = next_frame(ws)
+        assert after["run"] == f1["run"] and after["t"] > f1["t"]
+        assert after["controller"] == "tvlqr" and after["mode"] in ("tracking", "balancing")
+        assert after["plan_t"] is None or abs(after["plan_t"] - after["t"]) < 0.05
         # The plan ends upright, caught by the balancing LQR: the ghost is gone.
         up = receive_until(ws, lambda m: m["type"] == "frame" and (m["fell"] or m["t"] > 4.6),
                            limit=20000)
