@@ -58,8 +58,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="the rig's noise in the runs (default off)")
     p.add_argument("--slice", metavar="A,B", help="the slice's two states")
     p.add_argument("--range", metavar="A=LO:HI,B=LO:HI", help="the slice's bounds (absolute)")
-    p.add_argument("--samples", default="20000", metavar="N",
-                   help="most runs of the slice (default 20000)")
+    p.add_argument("--samples", default="100000", metavar="N",
+                   help="most runs of the slice (default 100000)")
     p.add_argument("--duration", default="3", metavar="S", help="seconds per run (default 3)")
     p.add_argument("--physics-step", metavar="S",
                    help="integration step [s], dividing 1/rate (default as simulate: at most 1 ms)")
