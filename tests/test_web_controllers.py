@@ -45,8 +45,8 @@ def wrapped(angle):
 
 
 def test_parse_offers_the_new_controllers_and_hang():
-    assert CONTROLLERS == ("lqg", "lqr", "swingup", "mpc", "off")
-    for c in ("swingup", "mpc"):
+    assert CONTROLLERS == ("lqg", "lqr", "swingup", "mpc", "tvlqr", "off")
+    for c in ("swingup", "mpc", "tvlqr"):
         assert parse(json.dumps({"type": "tune", "controller": c}), OPEN).fields == {"controller": c}
     assert parse('{"type": "hang", "seq": 3}', OPEN).type == "hang"
 
