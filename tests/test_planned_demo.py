@@ -26,7 +26,7 @@ def planned(cart):
 
 def test_the_cart_pole_is_planned_tracked_to_balance_and_drawn(cart, planned, tmp_path,
                                                                monkeypatch):
-    monkeypatch.setattr(planned_demo, "planned_run", lambda system, duration=None: planned)
+    monkeypatch.setattr(planned_demo, "planned_run", lambda system, duration=None, energy=None: planned)
     notes: list[str] = []
     images = planned_demo.planned_images(cart, tmp_path, "cart-pole", notes, width=160,
                                          height=120, fps=5.0, max_frames=8)

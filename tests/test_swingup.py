@@ -190,7 +190,7 @@ def test_demo_animates_a_swing_up(tmp_path: object) -> None:
 
     from equilibrist.viz.swingup_demo import swingup_animation
 
-    path, caption = swingup_animation(get_system("cartpole"), Path(str(tmp_path)), width=160,
+    path, caption, _run = swingup_animation(get_system("cartpole"), Path(str(tmp_path)), width=160,
                                       height=120, fps=5, max_frames=6, duration=4.0)
     with Image.open(path) as gif:
         assert gif.size == (160, 120) and gif.n_frames >= 2

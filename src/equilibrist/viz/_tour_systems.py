@@ -127,13 +127,15 @@ def tour_controlled(
     if system.name in ("cartpole", "reaction_wheel_pendulum", "furuta", "acrobot"):
         from equilibrist.viz.swingup_demo import swingup_animation
 
-        _gif, caption = swingup_animation(system, sub, width=size[0], height=size[1], fps=fps,
-                                          max_frames=max_frames, progress=progress)
+        _gif, caption, energy = swingup_animation(system, sub, width=size[0], height=size[1],
+                                                  fps=fps, max_frames=max_frames,
+                                                  progress=progress)
         images.insert(1, Image(f"{slug}/swingup.gif", caption))
         from equilibrist.viz.planned_demo import planned_images
 
         images[2:2] = planned_images(system, sub, slug, notes, width=size[0], height=size[1],
-                                     fps=fps, max_frames=max_frames, progress=progress)
+                                     fps=fps, max_frames=max_frames, progress=progress,
+                                     energy=energy)
     roa_fact = None
     if system.key in ROA_SYSTEMS:
         roa_image, roa_fact = _roa(system, d, sub, slug)
@@ -209,7 +211,7 @@ def _roa(system: Any, d: Any, sub: Path, slug: str) -> tuple[Image, tuple[str, s
     assert states is not None  # the systems of ROA_SYSTEMS have a fall region
     bounds = default_bounds(system, states, x_op)
     report = analyse(system, ctrl, states=states, bounds=(bounds[states[0]], bounds[states[1]]),
-                     x_op=x_op, u_op=u_op, samples=2500, boxes=ROA_BOXES, falsify=500,
+                     x_op=x_op, u_op=u_op, samples=1500, boxes=ROA_BOXES, falsify=300,
                      seed=SEED, name="lqr",
                      options={"duration": 3.0, "rate": d.rate, "noise": None,
                               "physics_step": 1.0 / d.rate})

@@ -37,8 +37,6 @@ KNOTS = 60
 #: Length of the tracked run shown [s]: the plan and two seconds of balance (an animation's
 #: frames are the demo's dearest part).
 RUN_SECONDS = 6.0
-#: Length of the energy-shaping run [s] (the energy-shaping demo's, at most).
-ENERGY_SECONDS = 8.0
 
 
 @dataclass(frozen=True)
@@ -80,11 +78,12 @@ def balanced_from(system: Any, run: Any) -> float | None:
     return float(run.time[0] if out.size == 0 else run.time[min(out[-1] + 1, run.n_rows - 1)])
 
 
-def planned_run(system: Any, *, duration: float | None = None) -> PlannedRun:
-    """Plan, track and compare (see the module docstring); raises ``DesignError`` without
-    CasADi or when the plan does not converge."""
+def planned_run(system: Any, *, duration: float | None = None,
+                energy: Any = None) -> PlannedRun:
+    """Plan, track and compare (see the module docstring) with *energy*, the energy-shaping
+    demo's run (:func:`equilibrist.viz.swingup_demo.energy_run`, made here when not given);
+    raises ``DesignError`` without CasADi or when the plan does not converge."""
     from equilibrist.control.design import design
-    from equilibrist.control.swingup import swingup
     from equilibrist.control.trajopt import plan
     from equilibrist.control.tvlqr import tvlqr
     from equilibrist.errors import DesignError
@@ -95,7 +94,6 @@ def planned_run(system: Any, *, duration: float | None = None) -> PlannedRun:
     task = get_task(system, "swingup")
     x0 = task.draw_initial(np.random.default_rng(SEED))
     seconds = duration or min(task.duration, RUN_SECONDS)
-    energy_seconds = duration or min(task.duration, ENERGY_SECONDS)
     began = time.perf_counter()
     traj = plan(system, start=x0, goal=task.x_op, knots=KNOTS,
                 duration=PLANNED.get(system.name, 4.0), bounds=planning_bounds(task))
@@ -109,9 +107,10 @@ def planned_run(system: Any, *, duration: float | None = None) -> PlannedRun:
     noise = Noise.from_spec(system, outputs=ctrl.output_names, rate=ctrl.rate)
     tracked = simulate(system, ctrl, duration=seconds, x0=x0, region=task.region, noise=noise,
                        seed=SEED)
-    # The energy-shaping run of the demo beside it (swingup_demo's, the same start and seed).
-    energy = simulate(system, swingup(system, design=d), duration=energy_seconds, x0=x0,
-                      region=task.region, noise=Noise.from_design(d), seed=SEED)
+    if energy is None:  # the energy-shaping run of the demo beside it (the same start, seed)
+        from equilibrist.viz.swingup_demo import energy_run
+
+        energy, _ctrl = energy_run(system, duration=duration)
     return PlannedRun(traj, ctrl, tracked, energy, plan_seconds, balanced_from(system, tracked),
                       balanced_from(system, energy))
 
@@ -182,7 +181,8 @@ def caption(system: Any, pr: PlannedRun) -> str:
 
 def planned_images(system: Any, folder: Path, slug: str, notes: list[str], *, width: int,
                    height: int, fps: float, max_frames: int | None = None,
-                   progress: bool = False, duration: float | None = None) -> list[Image]:
+                   progress: bool = False, duration: float | None = None,
+                   energy: Any = None) -> list[Image]:
     """The planned swing-up's animation and plot (``folder/planned_swingup.gif`` and
     ``.png``) as the report's images; none, and a line in *notes*, without CasADi or
     when the plan fails."""
@@ -192,7 +192,7 @@ def planned_images(system: Any, folder: Path, slug: str, notes: list[str], *, wi
     if system.name not in PLANNED:
         return []
     try:
-        pr = planned_run(system, duration=duration)
+        pr = planned_run(system, duration=duration, energy=energy)
     except DesignError as exc:
         notes.append(f"No planned swing-up: {exc}.")
         return []

@@ -17,26 +17,40 @@ import numpy as np
 SEED = 7
 
 
-def swingup_animation(system: Any, folder: Path, *, width: int, height: int, fps: float,
-                      max_frames: int | None = None, progress: bool = False,
-                      duration: float | None = None) -> tuple[Path, str]:
-    """Simulate and animate a swing-up of *system* into ``folder/swingup.gif``.
+#: Length of the run [s] (at most; the task's own when shorter).
+SECONDS = 8.0
 
-    Returns the file and a one-line caption (swing-up time or what went wrong).
-    """
+
+def energy_run(system: Any, *, duration: float | None = None) -> tuple[Any, Any]:
+    """The demo's energy-shaping swing-up of *system*: its default design's swing-up from the
+    task ``swingup``'s seeded hanging start, with the design's noise (the SimResult and the
+    controller)."""
     from equilibrist.control.design import design
     from equilibrist.control.swingup import swingup
     from equilibrist.sim.noise import Noise
     from equilibrist.sim.run import simulate
     from equilibrist.tasks import get_task
-    from equilibrist.viz.animation import animate_result
 
     task = get_task(system, "swingup")
     d = design(system, rate=task.rate)
-    ctrl = swingup(system, design=d)
     x0 = task.draw_initial(np.random.default_rng(SEED))
-    run = simulate(system, ctrl, duration=duration or min(task.duration, 8.0), x0=x0,
+    ctrl = swingup(system, design=d)
+    run = simulate(system, ctrl, duration=duration or min(task.duration, SECONDS), x0=x0,
                    region=task.region, noise=Noise.from_design(d), seed=SEED)
+    return run, ctrl
+
+
+def swingup_animation(system: Any, folder: Path, *, width: int, height: int, fps: float,
+                      max_frames: int | None = None, progress: bool = False,
+                      duration: float | None = None) -> tuple[Path, str, Any]:
+    """Simulate (:func:`energy_run`) and animate a swing-up of *system* into
+    ``folder/swingup.gif``.
+
+    Returns the file, a one-line caption (swing-up time or what went wrong) and the run.
+    """
+    from equilibrist.viz.animation import animate_result
+
+    run, ctrl = energy_run(system, duration=duration)
     path = animate_result(run, folder / "swingup.gif", width=width, height=height, fps=fps,
                           max_frames=max_frames, progress=progress)
     law = ctrl.settings.get("law", "")
@@ -45,4 +59,4 @@ def swingup_animation(system: Any, folder: Path, *, width: int, height: int, fps
     else:
         caption = (f"Swing-up from hanging ({law} law, energy pumping then the LQR catch), "
                    "with sensor noise; drawn to scale.")
-    return path, caption
+    return path, caption, run
