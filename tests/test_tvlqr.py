@@ -112,28 +112,7 @@ def test_the_export_replays_a_tracked_swing_up_to_the_bit(
 def test_the_gains_are_the_same_bits_under_another_blas_kernel(cart_plan: Path) -> None:
     """The recursion runs in control.fixed's order: another BLAS kernel (what another CPU
     would select) changes no bit of the controller made from the same plan file."""
-    import hashlib
-    import os
-    import subprocess
-    import sys
-    import textwrap
+    from tests.support.blas import tvlqr_params_digests
 
-    code = textwrap.dedent(f"""
-        import hashlib
-        from equilibrist.control.kinds import ControllerRequest
-        from equilibrist.control.tvlqr import build_request
-        from equilibrist.numeric.system import get_system
-        ctrl = build_request(ControllerRequest(system=get_system("cartpole"), rate=200.0,
-                                               options={{"trajectory": {str(cart_plan)!r}}}))
-        print(hashlib.sha256(ctrl.params.tobytes()).hexdigest())
-    """)
-    digests = []
-    for kernel in ("", "Nehalem"):
-        env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
-        if kernel:
-            env["OPENBLAS_CORETYPE"] = kernel
-        proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
-                              text=True, timeout=600, check=False)
-        assert proc.returncode == 0, proc.stderr[-2000:]
-        digests.append(proc.stdout.strip())
-    assert digests[0] == digests[1] and len(digests[0]) == len(hashlib.sha256().hexdigest())
+    digests = tvlqr_params_digests({"trajectory": str(cart_plan)}, rate=200.0)
+    assert digests[0] == digests[1]

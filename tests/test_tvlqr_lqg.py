@@ -249,27 +249,7 @@ def test_a_study_tracks_a_plan_on_measured_outputs(cart_plan: Path, tmp_path: Pa
 def test_the_filter_tables_are_the_same_bits_under_another_blas_kernel(cart_plan: Path) -> None:
     """The covariance recursion runs in control.fixed's order, as the Riccati recursion does:
     another BLAS kernel (what another CPU would select) changes no bit of the parameters."""
-    import hashlib
-    import os
-    import sys
-    import textwrap
+    from tests.support.blas import tvlqr_params_digests
 
-    code = textwrap.dedent(f"""
-        import hashlib
-        from equilibrist.control.kinds import ControllerRequest
-        from equilibrist.control.tvlqr import build_request
-        from equilibrist.numeric.system import get_system
-        ctrl = build_request(ControllerRequest(system=get_system("cartpole"), rate={RATE},
-            options={{"trajectory": {str(cart_plan)!r}, "balance": "lqg"}}))
-        print(hashlib.sha256(ctrl.params.tobytes()).hexdigest())
-    """)
-    digests = []
-    for kernel in ("", "Nehalem"):
-        env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_CORETYPE"}
-        if kernel:
-            env["OPENBLAS_CORETYPE"] = kernel
-        proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
-                              text=True, timeout=600, check=False)
-        assert proc.returncode == 0, proc.stderr[-2000:]
-        digests.append(proc.stdout.strip())
-    assert digests[0] == digests[1] and len(digests[0]) == len(hashlib.sha256().hexdigest())
+    digests = tvlqr_params_digests({"trajectory": str(cart_plan), "balance": "lqg"}, rate=RATE)
+    assert digests[0] == digests[1]
