@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import pytest
 
@@ -39,3 +40,20 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object | 
 
     config.option.loadscopereorder = False  # keep the order above, not by count of tests
     return LoadFileScheduling(config, log)
+
+
+@pytest.fixture(scope="session")
+def cart_plan(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The cart-pole's swing-up planned by trajopt (4 s, 60 intervals, within 0.9 m of the
+    track's centre: a margin for the tracking error), saved as a trajectory file: the plan
+    the time-varying LQR's tests track (made once per worker)."""
+    from equilibrist import get_system
+    from equilibrist.control.trajopt import plan
+    from equilibrist.tasks import get_task
+
+    cart = get_system("cartpole")
+    task = get_task(cart, "swingup")
+    traj = plan(cart, start=task.start, goal=task.x_op, knots=60, duration=4.0,
+                bounds={"x": (-0.9, 0.9)})
+    assert traj.converged
+    return traj.save(tmp_path_factory.mktemp("plan") / "up.npz")

@@ -12,19 +12,7 @@ import pytest
 from equilibrist import get_system
 from equilibrist.cli.main import main
 from equilibrist.control.controller import ControllerRequest, build_controller
-from equilibrist.control.trajopt import plan
 from equilibrist.sim.run import simulate
-from equilibrist.tasks import get_task
-
-
-@pytest.fixture(scope="module")
-def cart_plan(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    cart = get_system("cartpole")
-    task = get_task(cart, "swingup")
-    traj = plan(cart, start=task.start, goal=task.x_op, knots=60, duration=4.0,
-                bounds={"x": (-0.9, 0.9)})  # a margin inside the track for the tracking error
-    assert traj.converged
-    return traj.save(tmp_path_factory.mktemp("plan") / "up.npz")
 
 
 def _controller(system, path: Path):

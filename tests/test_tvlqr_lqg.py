@@ -15,23 +15,12 @@ import pytest
 from equilibrist import get_system
 from equilibrist.cli.main import main
 from equilibrist.control.kinds import ControllerRequest, build
-from equilibrist.control.trajopt import load_trajectory, plan
+from equilibrist.control.trajopt import load_trajectory
 from equilibrist.control.tvlqr import SOURCE, kalman_along
 from equilibrist.sim.noise import Noise
 from equilibrist.sim.run import simulate
-from equilibrist.tasks import get_task
 
 RATE = 200.0
-
-
-@pytest.fixture(scope="module")
-def cart_plan(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    cart = get_system("cartpole")
-    task = get_task(cart, "swingup")
-    traj = plan(cart, start=task.start, goal=task.x_op, knots=60, duration=4.0,
-                bounds={"x": (-0.9, 0.9)})  # a margin inside the track for the tracking error
-    assert traj.converged
-    return traj.save(tmp_path_factory.mktemp("plan") / "up.npz")
 
 
 def _request(path: Path, balance: str | None = "lqg", form: str = "current") -> ControllerRequest:
