@@ -73,10 +73,10 @@ def main() -> None:
         traj = plan(system, start=task.start, goal=task.x_op, knots=60, duration=planned,
                     bounds=planning_bounds(task))
         path = traj.save(f"/tmp/equilibrist_bench_{name}_plan.npz")
-        request = ControllerRequest(system=system, rate=float(system.spec.control_rate),
-                                    options={"trajectory": str(path)})
         try:
-            tracker = build_request(request)
+            tracker, to_end = (build_request(ControllerRequest(
+                system=system, rate=float(system.spec.control_rate),
+                options={"trajectory": str(path), "catch": catch})) for catch in ("on", "off"))
         except ControllerError as exc:
             print(f"{name}: no tracker: {exc}")
             continue
@@ -85,13 +85,15 @@ def main() -> None:
         energy = swingup(system)
         x0 = starts(system, task, args.runs, np.random.default_rng(2026))
         region = dict(task.region)
-        for ctrl, label in ((tracker, "TVLQR on the plan"), (energy, "energy shaping")):
+        for ctrl, label in ((tracker, "TVLQR on the plan"), (to_end, "TVLQR, --catch off"),
+                            (energy, "energy shaping")):
             noise = Noise.from_spec(system, outputs=ctrl.output_names, rate=ctrl.rate)
             batch = simulate_batch(system, ctrl, runs=args.runs, x0=x0, duration=DURATION,
                                    noise=noise, seed=7, region=region)
             print(row(label, batch))
         spread = {m: 0.2 for m in masses(system)}
-        for ctrl, label in ((tracker, "TVLQR, masses +-20 %"), (energy, "energy, masses +-20 %")):
+        for ctrl, label in ((tracker, "TVLQR, masses +-20 %"), (to_end, "TVLQR off, masses 20 %"),
+                            (energy, "energy, masses +-20 %")):
             noise = Noise.from_spec(system, outputs=ctrl.output_names, rate=ctrl.rate)
             mc = monte_carlo(system, ctrl, spread=spread, runs=args.runs, x0=x0,
                              duration=DURATION, noise=noise, seed=7, region=region)

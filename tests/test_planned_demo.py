@@ -8,6 +8,7 @@ import pytest
 from PIL import Image as PILImage
 
 from equilibrist import get_system
+from equilibrist.control.tvlqr import plan_samples
 from equilibrist.errors import DesignError
 from equilibrist.tasks import get_task
 from equilibrist.viz import planned_demo
@@ -56,7 +57,7 @@ def test_the_tracked_run_ends_balanced_on_its_track_from_the_energy_demos_start(
     assert pr.balanced_at < pr.trajectory.duration + 1.0
     assert np.max(np.abs(pr.tracked.state("x"))) < 1.0  # on its track
     # The plan as the tracker samples it: from the start to upright, within 70 % of the track.
-    t, xs, us = planned_demo.plan_samples(pr.controller, cart.n_states, cart.n_inputs)
+    t, xs, us = plan_samples(pr.controller)
     assert t[-1] == pytest.approx(4.0) and xs.shape == (t.size, 4) and us.shape == (t.size, 1)
     np.testing.assert_allclose(xs[0], start, atol=1e-9)
     np.testing.assert_allclose(xs[-1], task.x_op, atol=1e-6)

@@ -12,12 +12,13 @@ import pytest
 from equilibrist import get_system
 from equilibrist.cli.main import main
 from equilibrist.control.controller import ControllerRequest, build_controller
+from equilibrist.control.trajopt import load_trajectory
 from equilibrist.sim.run import simulate
 
 
-def _controller(system, path: Path):
-    return build_controller("tvlqr", ControllerRequest(system=system, rate=200.0,
-                                                       options={"trajectory": str(path)}))
+def _controller(system, path: Path, catch: str = "on"):
+    return build_controller("tvlqr", ControllerRequest(
+        system=system, rate=200.0, options={"trajectory": str(path), "catch": catch}))
 
 
 def test_the_gains_hand_over_to_the_balancing_lqr(cart_plan: Path) -> None:
@@ -25,9 +26,10 @@ def test_the_gains_hand_over_to_the_balancing_lqr(cart_plan: Path) -> None:
     ctrl = _controller(cart, cart_plan)
     steps, n, m = int(ctrl.params[0]), cart.n_states, cart.n_inputs
     assert steps == 800
-    off = 4 + (steps + 1) * n + (steps + 1) * m
+    # [steps, rate, n, m, catch level], states, inputs, gains, x_op, u_op, K, S
+    off = 5 + (steps + 1) * n + (steps + 1) * m
     gains = ctrl.params[off : off + steps * m * n].reshape(steps, m, n)
-    k_end = ctrl.params[-m * n :].reshape(m, n)
+    k_end = ctrl.params[-m * n - n * n : -n * n].reshape(m, n)
     # The last sample is linearized at the operating point and the recursion starts from the
     # balancing LQR's Riccati solution: its gain is the balancing gain.
     np.testing.assert_allclose(gains[-1], k_end, rtol=1e-6, atol=1e-9)
@@ -35,12 +37,11 @@ def test_the_gains_hand_over_to_the_balancing_lqr(cart_plan: Path) -> None:
 
 
 def test_the_plan_is_tracked_and_balanced_without_noise(cart_plan: Path) -> None:
-    from equilibrist.control.trajopt import load_trajectory
-
     cart = get_system("cartpole")
     traj = load_trajectory(cart_plan)
-    run = simulate(cart, _controller(cart, cart_plan), duration=6.0, x0=traj.states[0],
-                   region={"x": (-1.0, 1.0)})
+    # Tracked to the plan's end (no early catch): the plan takes the state to the top.
+    run = simulate(cart, _controller(cart, cart_plan, catch="off"), duration=6.0,
+                   x0=traj.states[0], region={"x": (-1.0, 1.0)})
     assert not run.fell
     # While the plan runs, the state follows it closely (the plan's own knots are the truth).
     k = np.searchsorted(run.time, traj.times[:-1])
@@ -48,6 +49,45 @@ def test_the_plan_is_tracked_and_balanced_without_noise(cart_plan: Path) -> None
     assert np.max(err[:, 1]) < 0.05, np.max(err[:, 1])
     assert np.max(np.abs(run.states[:, 0])) < 1.0
     np.testing.assert_allclose(run.final_state, np.zeros(4), atol=1e-3)
+
+
+def test_the_balancing_lqr_takes_over_inside_its_catch_region(cart_plan: Path) -> None:
+    """With ``--catch on`` (the default) the balancing LQR's law acts from the first sample
+    inside its catch region, before the plan ends; with ``off`` the plan is tracked."""
+    from equilibrist.control.design import design
+
+    cart = get_system("cartpole")
+    traj = load_trajectory(cart_plan)
+    d = design(cart, rate=200.0)  # the balancing design, on its own
+    K, S = np.asarray(d.K), np.asarray(d.S)
+    room = min(cart.input_limits[1][0], -cart.input_limits[0][0])  # u_op = 0
+    ctrl = _controller(cart, cart_plan)
+    level = ctrl.settings["catch_level"]
+    # The level: the largest ellipse dx' S dx <= level on which |K dx| stays within the
+    # limit, checked on 20,000 points of its surface (not by the formula that made it).
+    w = np.random.default_rng(1).normal(size=(20_000, 4))
+    L = np.linalg.cholesky(np.linalg.inv(S))
+    dx = (w / np.linalg.norm(w, axis=1, keepdims=True)) @ L.T * math.sqrt(level)
+    peak = np.max(np.abs(dx @ K[0]))
+    assert 0.97 * room < peak <= room * (1 + 1e-9), (peak, room)
+
+    for catch in ("on", "off"):
+        run = simulate(cart, _controller(cart, cart_plan, catch=catch), duration=6.0,
+                       x0=traj.states[0], region={"x": (-1.0, 1.0)})
+        assert not run.fell
+        y = run.measurements
+        v = np.einsum("ki,ij,kj->k", y, S, y)
+        first = int(np.argmax(v <= level))
+        assert first > 0 and run.time[first] < traj.duration - 0.5  # inside well before the end
+        balancing = -(y @ K[0])  # inside the catch region it stays within the limit
+        u = run.commanded[:, 0]
+        plan_end = int(np.searchsorted(run.time, traj.duration - 1e-9))
+        if catch == "on":
+            assert not np.allclose(u[:first], balancing[:first], atol=1e-6)
+            np.testing.assert_allclose(u[first:], balancing[first:], rtol=1e-9, atol=1e-9)
+        else:
+            assert np.max(np.abs(u[first:plan_end] - balancing[first:plan_end])) > 0.1
+            np.testing.assert_allclose(u[plan_end:], balancing[plan_end:], rtol=1e-9, atol=1e-9)
 
 
 @pytest.mark.slow

@@ -35,8 +35,8 @@ def _tables(params: np.ndarray) -> dict[str, np.ndarray]:
     shapes = (("xs", (K + 1, n)), ("us", (K + 1, m)), ("gains", (K, m, n)), ("x_op", (n,)),
               ("u_op", (m,)), ("K_end", (m, n)), ("index", (ny,)), ("A", (K, n, n)),
               ("B", (K, n, m)), ("F", (K, n, ny)), ("Ad", (n, n)), ("Bd", (n, m)),
-              ("Kf", (n, ny)))
-    out, at = {}, 6
+              ("Kf", (n, ny)), ("S", (n, n)))
+    out, at = {}, 7
     for name, shape in shapes:
         size = math.prod(shape)
         out[name] = params[at : at + size].reshape(shape)
@@ -130,7 +130,8 @@ def test_the_default_balance_is_the_full_state_law_unchanged(cart_plan: Path) ->
     lqr = build("tvlqr", _request(cart_plan, balance="lqr"))
     assert plain.source == lqr.source == SOURCE and not lqr.has_estimate
     np.testing.assert_array_equal(plain.params, lqr.params)
-    assert lqr.output_names == get_system("cartpole").state_names and lqr.n_z == 0
+    # Its one state is the catch's latch (0 tracking, 1 balancing).
+    assert lqr.output_names == get_system("cartpole").state_names and lqr.n_z == 1
 
 
 @pytest.mark.slow

@@ -269,6 +269,17 @@ def catch_level(K: np.ndarray, S: np.ndarray, u_room: np.ndarray) -> float:
     return float(np.min(np.asarray(u_room, dtype=float) ** 2 / spread))
 
 
+def catch_region(system: System, K: np.ndarray, S: np.ndarray, u_op: np.ndarray) -> float:
+    """The level ``c`` of the balancing LQR's catch region ``dx' S dx <= c`` (``dx = x -
+    x_op``): the largest on which its command ``u_op - K dx`` stays within the input limits
+    (:func:`catch_level`), or ``-1`` (never caught before the
+    plan ends) where an input has no limit on one side."""
+    lo, hi = (np.asarray(v, dtype=float) for v in system.input_limits)
+    room = np.minimum(hi - u_op, u_op - lo)
+    if not np.all(np.isfinite(room)) or np.any(room <= 0):
+        return -1.0
+    return catch_level(K, S, room)
+
 def swingup(
     system: System,
     *,
@@ -339,8 +350,7 @@ def swingup(
     lo, hi = system.input_limits
     K = np.asarray(design.K, dtype=float).reshape(1, n)
     S = np.asarray(design.S, dtype=float)
-    room = np.minimum(hi - u_op, u_op - lo)
-    c_in = tune.catch_fraction * catch_level(K, S, room)
+    c_in = tune.catch_fraction * catch_region(system, K, S, u_op)
     noise = [float(system.spec.sensor_noise.get(c, 1e-3)) for c in system.spec.coordinates]
     alpha, beta = tracking_gains(max(noise), tune.accel, 1.0 / hz)
     cp = np.zeros(CP["end"])
@@ -414,6 +424,7 @@ __all__ = [
     "Z",
     "balance_design",
     "catch_level",
+    "catch_region",
     "controller_source",
     "energy",
     "layout_constants",

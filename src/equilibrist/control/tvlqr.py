@@ -54,7 +54,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.control import fixed
+from equilibrist.control import fixed, swingup
 from equilibrist.control.controller import (
     ControllerError,
     NonlinearController,
@@ -77,19 +77,36 @@ def tvlqr_offsets(params):
     n = int(params[2])
     m = int(params[3])
     K = int(params[0])
-    ox = 4
+    ox = 5
     ou = ox + (K + 1) * n
     og = ou + (K + 1) * m
     oop = og + K * m * n
     oup = oop + n
     okb = oup + m
-    return K, n, m, ox, ou, og, oop, oup, okb
+    osb = okb + m * n
+    return K, n, m, ox, ou, og, oop, oup, okb, osb
+
+
+def tvlqr_caught(t, z, y, params):
+    K, n, m, ox, ou, og, oop, oup, okb, osb = tvlqr_offsets(params)
+    k = int(math.floor(t * params[1] + 0.5))
+    if k >= K or z[0] >= 0.5:
+        return 1.0
+    v = 0.0
+    for i in range(n):
+        acc = 0.0
+        for j in range(n):
+            acc += params[osb + i * n + j] * (y[j] - params[oop + j])
+        v += (y[i] - params[oop + i]) * acc
+    if v <= params[4]:
+        return 1.0
+    return 0.0
 
 
 def output(t, z, y, r, params, u_out):
-    K, n, m, ox, ou, og, oop, oup, okb = tvlqr_offsets(params)
+    K, n, m, ox, ou, og, oop, oup, okb, osb = tvlqr_offsets(params)
     k = int(math.floor(t * params[1] + 0.5))
-    if k < K:
+    if tvlqr_caught(t, z, y, params) < 0.5:
         for i in range(m):
             acc = params[ou + k * m + i]
             for j in range(n):
@@ -104,7 +121,7 @@ def output(t, z, y, r, params, u_out):
 
 
 def update(t, z, y, r, u_applied, params, z_out):
-    return
+    z_out[0] = tvlqr_caught(t, z, y, params)
 '''
 
 
@@ -116,7 +133,7 @@ def tvkf_layout(params):
     n = int(params[2])
     m = int(params[3])
     ny = int(params[4])
-    ox = 6
+    ox = 7
     ou = ox + (K + 1) * n
     og = ou + (K + 1) * m
     oop = og + K * m * n
@@ -129,28 +146,8 @@ def tvkf_layout(params):
     oad = of + K * n * ny
     obd = oad + n * n
     ofd = obd + n * m
-    return K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd
-
-
-def tvkf_stage(t, params):
-    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd = tvkf_layout(params)
-    k = int(math.floor(t * params[1] + 0.5))
-    oxr = oop
-    our = oup
-    oxn = oop
-    ogk = okb
-    oak = oad
-    obk = obd
-    ofk = ofd
-    if k < K:
-        oxr = ox + k * n
-        our = ou + k * m
-        oxn = ox + (k + 1) * n
-        ogk = og + k * m * n
-        oak = oa + k * n * n
-        obk = ob + k * n * m
-        ofk = of + k * n * ny
-    return oxr, our, oxn, ogk, oak, obk, ofk
+    osb = ofd + n * ny
+    return K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd, osb
 
 
 def tvkf_xhat(j, z, y, params, ny, oi, ofk):
@@ -161,9 +158,48 @@ def tvkf_xhat(j, z, y, params, ny, oi, ofk):
     return x
 
 
+def tvkf_caught(t, z, y, params):
+    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd, osb = tvkf_layout(params)
+    k = int(math.floor(t * params[1] + 0.5))
+    if k >= K or z[n] >= 0.5:
+        return 1.0
+    ofk = of + k * n * ny
+    v = 0.0
+    for i in range(n):
+        acc = 0.0
+        for j in range(n):
+            acc += params[osb + i * n + j] * (tvkf_xhat(j, z, y, params, ny, oi, ofk)
+                                              - params[oop + j])
+        v += (tvkf_xhat(i, z, y, params, ny, oi, ofk) - params[oop + i]) * acc
+    if v <= params[6]:
+        return 1.0
+    return 0.0
+
+
+def tvkf_stage(t, z, y, params):
+    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd, osb = tvkf_layout(params)
+    k = int(math.floor(t * params[1] + 0.5))
+    oxr = oop
+    our = oup
+    oxn = oop
+    ogk = okb
+    oak = oad
+    obk = obd
+    ofk = ofd
+    if tvkf_caught(t, z, y, params) < 0.5:
+        oxr = ox + k * n
+        our = ou + k * m
+        oxn = ox + (k + 1) * n
+        ogk = og + k * m * n
+        oak = oa + k * n * n
+        obk = ob + k * n * m
+        ofk = of + k * n * ny
+    return oxr, our, oxn, ogk, oak, obk, ofk
+
+
 def output(t, z, y, r, params, u_out):
-    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd = tvkf_layout(params)
-    oxr, our, oxn, ogk, oak, obk, ofk = tvkf_stage(t, params)
+    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd, osb = tvkf_layout(params)
+    oxr, our, oxn, ogk, oak, obk, ofk = tvkf_stage(t, z, y, params)
     for i in range(m):
         acc = params[our + i]
         for j in range(n):
@@ -173,8 +209,8 @@ def output(t, z, y, r, params, u_out):
 
 
 def update(t, z, y, r, u_applied, params, z_out):
-    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd = tvkf_layout(params)
-    oxr, our, oxn, ogk, oak, obk, ofk = tvkf_stage(t, params)
+    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd, osb = tvkf_layout(params)
+    oxr, our, oxn, ogk, oak, obk, ofk = tvkf_stage(t, z, y, params)
     for i in range(n):
         acc = params[oxn + i]
         for j in range(n):
@@ -186,14 +222,32 @@ def update(t, z, y, r, u_applied, params, z_out):
             for l in range(ny):
                 acc += params[ofk + i * ny + l] * (y[l] - z[int(params[oi + l])])
         z_out[i] = acc
+    z_out[n] = tvkf_caught(t, z, y, params)
 
 
 def estimate(t, z, y, r, params, x_out):
-    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd = tvkf_layout(params)
-    oxr, our, oxn, ogk, oak, obk, ofk = tvkf_stage(t, params)
+    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd, osb = tvkf_layout(params)
+    oxr, our, oxn, ogk, oak, obk, ofk = tvkf_stage(t, z, y, params)
     for j in range(n):
         x_out[j] = tvkf_xhat(j, z, y, params, ny, oi, ofk)
 '''
+
+
+#: Where the plan's tables begin in the parameters, after the header of each ``balance``
+#: (``[steps, rate, n, m, catch level]``; ``lqg`` adds the outputs' count and the form).
+HEADER = {"lqr": 5, "lqg": 7}
+
+
+def plan_samples(ctrl: NonlinearController) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(t, states, inputs)``: the plan as the tracker *ctrl* samples it (at its rate, from
+    its tables: the Hermite interpolant of the knots)."""
+    p = np.asarray(ctrl.params, dtype=float)
+    steps, rate, n, m = int(p[0]), float(p[1]), int(p[2]), int(p[3])
+    ox = HEADER[str(ctrl.settings["balance"])]
+    ou = ox + (steps + 1) * n
+    xs = p[ox:ou].reshape(steps + 1, n)
+    us = p[ou:ou + (steps + 1) * m].reshape(steps + 1, m)
+    return np.arange(steps + 1) / rate, xs, us
 
 
 def _hermite_states(system: System, traj: Trajectory, t: np.ndarray) -> np.ndarray:
@@ -211,14 +265,15 @@ def _hermite_states(system: System, traj: Trajectory, t: np.ndarray) -> np.ndarr
 
 def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np.ndarray,
           S_end: np.ndarray, K_end: np.ndarray, x_op: np.ndarray, u_op: np.ndarray,
-          balance: str = "lqr", design: Design | None = None, P0: np.ndarray | None = None
-          ) -> NonlinearController:
+          balance: str = "lqr", design: Design | None = None, P0: np.ndarray | None = None,
+          catch: bool = True) -> NonlinearController:
     """The time-varying LQR along *traj* at *rate*, handing over to ``K_end`` at the end.
 
     ``balance="lqr"`` acts on the full measured state; ``"lqg"`` on the estimate of
     *design*'s Kalman filter from its outputs, time-varying along the plan from the
     a-priori covariance *P0* (default :func:`start_covariance`), then the design's
-    (see the module docstring).
+    (see the module docstring). With *catch* the balancing stage takes over as soon as
+    the state (its estimate) enters :func:`catch_region` before the plan ends.
     """
     if balance not in BALANCES:
         raise ControllerError(f"--balance {balance!r}: expected one of {', '.join(BALANCES)}")
@@ -254,20 +309,24 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     if not np.all(np.isfinite(gains)):
         raise ControllerError("the time-varying LQR's Riccati recursion did not stay finite along "
                               "the trajectory")
+    S_end = np.asarray(S_end, dtype=float)
+    level = swingup.catch_region(system, np.asarray(K_end, dtype=float), S_end, u_op) if catch else -1.0
     if balance == "lqg":
         assert design is not None
         return _with_filter(system, traj, design, plant[::-1], xs, us, gains, rate=rate,
-                            x_op=x_op, u_op=u_op, K_end=K_end, P0=P0)
-    params = np.concatenate([[steps, rate, n, m], xs.reshape(-1), us.reshape(-1), gains.reshape(-1),
-                             x_op, u_op, np.asarray(K_end, dtype=float).reshape(-1)])
+                            x_op=x_op, u_op=u_op, K_end=K_end, S_end=S_end, level=level, P0=P0)
+    params = np.concatenate([[steps, rate, n, m, level], xs.reshape(-1), us.reshape(-1),
+                             gains.reshape(-1), x_op, u_op,
+                             np.asarray(K_end, dtype=float).reshape(-1), S_end.reshape(-1)])
     return NonlinearController(
-        name="tvlqr", source=SOURCE, params=params, z0=np.zeros(0), rate=float(rate),
+        name="tvlqr", source=SOURCE, params=params, z0=np.zeros(1), rate=float(rate),
         x_op=x_op, u_op=u_op, state_names=system.state_names, input_names=system.input_names,
         output_names=system.state_names,
         settings={"kind": "tvlqr", "trajectory_duration": traj.duration, "samples": steps,
                   "start": dict(zip(system.state_names, traj.states[0].tolist(), strict=True)),
-                  "balance": "lqr"},
+                  "balance": "lqr", "catch_level": level},
     )
+
 
 
 def output_selection(design: Design, state_names: tuple[str, ...]) -> tuple[int, ...]:
@@ -341,7 +400,8 @@ def kalman_along(plant: list[tuple[np.ndarray, np.ndarray, np.ndarray]], C: np.n
 def _with_filter(system: System, traj: Trajectory, design: Design,
                  plant: list[tuple[np.ndarray, np.ndarray, np.ndarray]], xs: np.ndarray,
                  us: np.ndarray, gains: np.ndarray, *, rate: float, x_op: np.ndarray,
-                 u_op: np.ndarray, K_end: np.ndarray, P0: np.ndarray | None) -> NonlinearController:
+                 u_op: np.ndarray, K_end: np.ndarray, S_end: np.ndarray, level: float,
+                 P0: np.ndarray | None) -> NonlinearController:
     """The ``balance="lqg"`` controller: the gains on the estimate of the filters."""
     names = system.state_names
     n, m, steps = system.n_states, system.n_inputs, gains.shape[0]
@@ -358,19 +418,21 @@ def _with_filter(system: System, traj: Trajectory, design: Design,
     filters, _ = kalman_along(plant, C, design, 1.0 / rate, start)
     form = 0.0 if design.kalman_form == "current" else 1.0
     params = np.concatenate([
-        [steps, rate, n, m, len(index), form], xs.reshape(-1), us.reshape(-1), gains.reshape(-1),
+        [steps, rate, n, m, len(index), form, level], xs.reshape(-1), us.reshape(-1), gains.reshape(-1),
         x_op, u_op, np.asarray(K_end, dtype=float).reshape(-1), np.asarray(index, dtype=float),
         np.array([a for _, a, _ in plant]).reshape(-1), np.array([b for _, _, b in plant]).reshape(-1),
         filters.reshape(-1), np.asarray(disc.A, dtype=float).reshape(-1),
         np.asarray(disc.B, dtype=float).reshape(-1), np.asarray(design.Kf, dtype=float).reshape(-1),
+        S_end.reshape(-1),
     ])
     return NonlinearController(
-        name="tvlqr", source=SOURCE_LQG, params=params, z0=xs[0], rate=float(rate),
+        name="tvlqr", source=SOURCE_LQG, params=params, z0=np.concatenate([xs[0], [0.0]]),
+        rate=float(rate),
         x_op=x_op, u_op=u_op, state_names=names, input_names=system.input_names,
         output_names=design.plant.output_names, has_estimate=True,
         settings={"kind": "tvlqr", "trajectory_duration": traj.duration, "samples": steps,
                   "start": dict(zip(names, traj.states[0].tolist(), strict=True)),
-                  "balance": "lqg", "kalman_form": design.kalman_form,
+                  "balance": "lqg", "kalman_form": design.kalman_form, "catch_level": level,
                   "outputs": list(design.plant.output_names)},
     )
 
@@ -392,5 +454,9 @@ def build_request(request: ControllerRequest) -> NonlinearController:
         raise ControllerError("the time-varying LQR needs a discrete design (a rate)")
     rate = float(design.rate or system.spec.control_rate)
     balance = str(request.options.get("balance", "lqr"))
+    catch = str(request.options.get("catch", "on"))
+    if catch not in ("on", "off"):
+        raise ControllerError(f"--catch {catch!r}: expected on or off")
     return tvlqr(system, traj, rate=rate, Q=design.Q, R=design.R, S_end=design.S, K_end=design.K,
-                 x_op=design.plant.x0, u_op=design.plant.u0, balance=balance, design=design)
+                 x_op=design.plant.x0, u_op=design.plant.u0, balance=balance, design=design,
+                 catch=catch == "on")

@@ -12,6 +12,8 @@ if TYPE_CHECKING:
 #: What ``--balance`` takes: the full measured state (``lqr``) or the design's outputs
 #: through a Kalman filter along the plan and the design's after it (``lqg``).
 BALANCES = ("lqr", "lqg")
+#: What ``--catch`` takes: hand over inside the catch region before the plan ends, or not.
+CATCHES = ("on", "off")
 
 
 def build(request: ControllerRequest) -> NonlinearController:
@@ -27,6 +29,9 @@ KIND = ControllerKind(
     options=(Option("--trajectory", "with --controller tvlqr: the plan to track "
                     "('equilibrist trajopt --out')", metavar="FILE.npz"),
              Option("--balance", "with --controller tvlqr: the full state (lqr, default) or the "
-                    "design's outputs through its Kalman filter (lqg)", choices=BALANCES)),
+                    "design's outputs through its Kalman filter (lqg)", choices=BALANCES),
+             Option("--catch", "with --controller tvlqr: balance as soon as the state enters the "
+                    "balancing LQR's catch region (on, default), or track the plan to its end "
+                    "(off)", choices=CATCHES)),
     surfaces=frozenset({"simulate", "export", "study", "playground"}), task="swingup", order=50,
 )

@@ -52,18 +52,6 @@ class PlannedRun:
     energy_balanced_at: float | None
 
 
-def plan_samples(ctrl: Any, n: int, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(t, states, inputs)``: the plan as the tracker samples it (at its rate, from its
-    tables: the Hermite interpolant of the knots), from the time-varying LQR *ctrl*."""
-    p = np.asarray(ctrl.params, dtype=float)
-    steps, rate = int(p[0]), float(p[1])
-    ox = 4
-    ou = ox + (steps + 1) * n
-    xs = p[ox:ou].reshape(steps + 1, n)
-    us = p[ou:ou + (steps + 1) * m].reshape(steps + 1, m)
-    return np.arange(steps + 1) / rate, xs, us
-
-
 def balanced_from(system: Any, run: Any) -> float | None:
     """The time from which *run* stays balanced to its end (the batch's criterion:
     :func:`equilibrist.tasks.balance_box`), None when it does not end balanced."""
@@ -117,6 +105,7 @@ def planned_run(system: Any, *, duration: float | None = None,
 
 def plot_planned(system: Any, pr: PlannedRun, path: str | Path) -> Path:
     """The plan (dashed) against the tracked run: each coordinate and each input over time."""
+    from equilibrist.control.tvlqr import plan_samples
     from equilibrist.viz._plot_common import (
         LIMIT,
         _figure,
@@ -127,8 +116,8 @@ def plot_planned(system: Any, pr: PlannedRun, path: str | Path) -> Path:
     )
 
     run = pr.tracked
-    n, m = system.n_states, system.n_inputs
-    t_plan, xs, us = plan_samples(pr.controller, n, m)
+    m = system.n_inputs
+    t_plan, xs, us = plan_samples(pr.controller)
     coords = [i for i, s in enumerate(system.state_names) if not s.endswith("_dot")]
     rows = len(coords) + m
     fig = _figure(8.0, 1.6 * rows + 0.9)
@@ -206,4 +195,4 @@ def planned_images(system: Any, folder: Path, slug: str, notes: list[str], *, wi
 
 
 __all__ = ["KNOTS", "PLANNED", "SEED", "PlannedRun", "balanced_from", "caption",
-           "plan_samples", "planned_images", "planned_run", "plot_planned"]
+           "planned_images", "planned_run", "plot_planned"]

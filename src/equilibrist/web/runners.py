@@ -175,11 +175,11 @@ class PlanRunner(NonlinearRunner):
     def __init__(self, ctrl: NonlinearController, system: System, kind: str,
                  trajectory: Any, scales: np.ndarray) -> None:
         super().__init__(ctrl, system, kind)
-        from equilibrist.viz.planned_demo import plan_samples
+        from equilibrist.control.tvlqr import plan_samples
 
         self.trajectory = trajectory
         self.duration = float(trajectory.duration)
-        _t, self.xs, self.us = plan_samples(ctrl, system.n_states, system.n_inputs)
+        _t, self.xs, self.us = plan_samples(ctrl)
         self.rate = float(ctrl.rate)
         self.scales = np.asarray(scales, dtype=float)
         self.t0: float | None = None  # the session's time at the plan's beginning
@@ -187,9 +187,15 @@ class PlanRunner(NonlinearRunner):
         self.ghost_keys: frozenset[str] | None = None  # the drawing's shapes the plan moves
 
     @property
+    def caught(self) -> bool:
+        """The balancing law acts: the plan has ended, or the state entered the catch region
+        before (the controller's latch, the last slot of its state)."""
+        return self.t0 is not None and (self.tau >= self.duration or self.runtime.z[-1] >= 0.5)
+
+    @property
     def mode(self) -> str:
-        """``"tracking"`` while the plan runs, ``"balancing"`` after it."""
-        return "balancing" if self.t0 is not None and self.tau >= self.duration else "tracking"
+        """``"tracking"`` while the plan runs, ``"balancing"`` after it or its catch."""
+        return "balancing" if self.caught else "tracking"
 
     def reset(self) -> None:
         super().reset()
@@ -198,6 +204,7 @@ class PlanRunner(NonlinearRunner):
     def adopt(self, previous: Runner | None) -> None:
         if isinstance(previous, PlanRunner) and previous.trajectory is self.trajectory:
             self.t0, self.tau = previous.t0, previous.tau
+            self.runtime.z[-1] = previous.runtime.z[-1]  # a retune keeps the catch
 
     def start_at(self, x_estimate: np.ndarray) -> None:
         self.t0 = None
@@ -205,7 +212,7 @@ class PlanRunner(NonlinearRunner):
     def plan_state(self) -> tuple[np.ndarray, np.ndarray] | None:
         """The plan's state and input at the plan time of the last sample (None: no plan
         runs, before the first sample or after the plan's end)."""
-        if self.t0 is None or not 0.0 <= self.tau <= self.duration:
+        if self.t0 is None or not 0.0 <= self.tau <= self.duration or self.caught:
             return None
         k = min(int(np.floor(self.tau * self.rate + 0.5)), self.xs.shape[0] - 1)
         return self.xs[k], self.us[k]
