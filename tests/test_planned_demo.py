@@ -61,7 +61,10 @@ def test_the_tracked_run_ends_balanced_on_its_track_from_the_energy_demos_start(
     assert t[-1] == pytest.approx(4.0) and xs.shape == (t.size, 4) and us.shape == (t.size, 1)
     np.testing.assert_allclose(xs[0], start, atol=1e-9)
     np.testing.assert_allclose(xs[-1], task.x_op, atol=1e-6)
-    assert np.max(np.abs(xs[:, 0])) <= 0.7 + 1e-6
+    # The transcription bounds the knots (and midpoints); the cubic between them may pass
+    # the bound by a hair where it is active.
+    assert np.max(np.abs(pr.trajectory.states[:, 0])) <= 0.7 + 1e-6
+    assert np.max(np.abs(xs[:, 0])) <= 0.7 * 1.01
 
 
 def test_without_a_plan_the_section_gets_a_note(cart, tmp_path, monkeypatch):

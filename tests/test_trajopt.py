@@ -68,6 +68,28 @@ def test_the_acrobot_converges_from_random_guesses() -> None:
     assert np.max(np.abs(err)) < 5e-3, np.max(np.abs(err))
 
 
+def test_a_problem_built_once_solves_as_a_fresh_one() -> None:
+    """The transcription is built once per shape and reused (its start and goal are
+    parameters): a reused problem gives the bits of a freshly built one, whatever it solved
+    before, and another start is not the last start's answer."""
+    from equilibrist.control import trajopt
+
+    cart = get_system("cartpole")
+    task = get_task(cart, "swingup")
+    kw = {"goal": task.x_op, "knots": 30, "duration": 3.0, "bounds": {"x": (-0.9, 0.9)}}
+    other = np.asarray(task.start, dtype=float) + np.array([0.0, 0.3, 0.0, 0.0])
+    trajopt._PROBLEMS.clear()
+    fresh = plan(cart, start=task.start, guess="random", seed=3, **kw)
+    moved = plan(cart, start=other, **kw)  # the same problem, another start and guess
+    again = plan(cart, start=task.start, guess="random", seed=3, **kw)
+    assert len(trajopt._PROBLEMS) == 1
+    assert fresh.converged and moved.converged
+    np.testing.assert_allclose(moved.states[0], other, atol=1e-9)
+    for name in ("states", "inputs", "mid_inputs"):
+        np.testing.assert_array_equal(getattr(again, name), getattr(fresh, name))
+    assert again.iterations == fresh.iterations
+
+
 def test_minimum_time_is_shorter_than_its_bound() -> None:
     cart = get_system("cartpole")
     task = get_task(cart, "swingup")

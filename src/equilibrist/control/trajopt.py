@@ -18,6 +18,7 @@ of time. Needs CasADi: ``pip install 'equilibrist[trajopt]'``.
 from __future__ import annotations
 
 import math
+import threading
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -150,6 +151,86 @@ def casadi_dynamics(system: System) -> Any:
     return ca.Function("f", [x, u], [ca.vertcat(x[nq:], qdd)])
 
 
+#: IPOPT through CasADi: the NLP expanded to scalar expressions (SX), whose derivatives
+#: evaluate about twice as fast as the matrix graph's; the barrier parameter adaptive
+#: (Mehrotra's probing), which takes fewer iterations on these problems (the acrobot's 54 to
+#: 41, the cart-pole's minimum time 112 to 59, medians of random guesses; bench/README.md).
+IPOPT_OPTIONS = {"print_time": False, "expand": True}
+IPOPT_SETTINGS = {"print_level": 0, "sb": "yes", "tol": 1e-8, "constr_viol_tol": 1e-8,
+                  "mu_strategy": "adaptive"}
+#: Problems built, by what shapes them (a plan from another start or guess reuses one).
+_PROBLEMS: dict[tuple[Any, ...], _Problem] = {}
+_PROBLEMS_LOCK = threading.Lock()
+
+
+@dataclass(eq=False)
+class _Problem:
+    """A transcription built once: its start and goal are parameters, its guess set per solve."""
+
+    f: Any
+    opti: Any
+    X: Any
+    U: Any
+    Um: Any
+    T: Any
+    start: Any
+    goal: Any
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    max_iterations: int = -1
+
+
+def _problem(system: System, N: int, duration: float | None, duration_max: float | None,
+             minimize: str, bounds: Mapping[str, tuple[float, float]], lo: np.ndarray,
+             hi: np.ndarray) -> _Problem:
+    """The collocation problem of *system* (cached by everything that shapes it)."""
+    key = (system.digest, tuple(sorted((k, float(v)) for k, v in system.params.items())), N,
+           duration, duration_max, minimize,
+           tuple(sorted((k, float(a), float(b)) for k, (a, b) in bounds.items())))
+    with _PROBLEMS_LOCK:
+        if key in _PROBLEMS:
+            return _PROBLEMS[key]
+    ca = require_casadi()
+    n, m = system.n_states, system.n_inputs
+    f = casadi_dynamics(system)
+    opti = ca.Opti()
+    X = opti.variable(n, N + 1)
+    U = opti.variable(m, N + 1)
+    Um = opti.variable(m, N)
+    start = opti.parameter(n)
+    goal = opti.parameter(n)
+    T = opti.variable() if duration is None else duration
+    t_max = duration if duration is not None else duration_max
+    assert t_max is not None
+    h = T / N
+    scales = np.array([float(system.spec.design_scales.get(i, 1.0)) or 1.0 for i in system.input_names])
+    Fk = f.map(N + 1)(X, U)
+    Xm = 0.5 * (X[:, :-1] + X[:, 1:]) + (h / 8) * (Fk[:, :-1] - Fk[:, 1:])
+    Fm = f.map(N)(Xm, Um)
+    opti.subject_to(X[:, 1:] - X[:, :-1] == (h / 6) * (Fk[:, :-1] + 4 * Fm + Fk[:, 1:]))
+    opti.subject_to(X[:, 0] == start)
+    opti.subject_to(X[:, N] == goal)
+    for i in range(m):
+        opti.subject_to(opti.bounded(lo[i], U[i, :], hi[i]))
+        opti.subject_to(opti.bounded(lo[i], Um[i, :], hi[i]))
+    for name, (a, b) in bounds.items():
+        k = system.state_index(name)
+        opti.subject_to(opti.bounded(a, X[k, :], b))
+        opti.subject_to(opti.bounded(a, Xm[k, :], b))
+    if duration is None:
+        opti.subject_to(opti.bounded(0.05 * t_max, T, t_max))
+    w = 1.0 / scales**2
+    effort = 0
+    for i in range(m):
+        effort = effort + w[i] * (h / 6) * (ca.sumsqr(U[i, :-1]) + 4 * ca.sumsqr(Um[i, :])
+                                            + ca.sumsqr(U[i, 1:]))
+    opti.minimize(effort if minimize == "effort" else T + 1e-6 * effort)
+    problem = _Problem(f, opti, X, U, Um, T, start, goal)
+    with _PROBLEMS_LOCK:
+        if len(_PROBLEMS) >= 16:
+            _PROBLEMS.pop(next(iter(_PROBLEMS)))
+        return _PROBLEMS.setdefault(key, problem)
+
+
 def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60,
          duration: float | None = None, duration_max: float | None = None,
          minimize: str = "effort", guess: str | Trajectory = "straight", seed: int = 0,
@@ -172,7 +253,7 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
     bounds : mapping
         ``{state: (low, high)}`` the motion must keep (the task's region).
     """
-    ca = require_casadi()
+    require_casadi()
     if minimize not in MINIMIZE:
         raise DesignError(f"minimize = {minimize!r}: expected one of {', '.join(MINIMIZE)}")
     if not isinstance(knots, int) or not 4 <= knots <= 2000:
@@ -189,41 +270,13 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
         raise DesignError(f"{system.key} has no input: there is no motion to plan")
     start = np.asarray(start, dtype=float).reshape(n)
     goal = np.asarray(goal, dtype=float).reshape(n)
-    f = casadi_dynamics(system)
     N = knots
-    opti = ca.Opti()
-    X = opti.variable(n, N + 1)
-    U = opti.variable(m, N + 1)
-    Um = opti.variable(m, N)
-    T = opti.variable() if duration is None else duration
-    t_max = duration if duration is not None else duration_max  # one of the two is given
-    assert t_max is not None
-    h = T / N
     lo = np.array([float(system.params[f"{i}_min"]) for i in system.input_names])
     hi = np.array([float(system.params[f"{i}_max"]) for i in system.input_names])
-    scales = np.array([float(system.spec.design_scales.get(i, 1.0)) or 1.0 for i in system.input_names])
-    F = f.map(N + 1)
-    Fk = F(X, U)
-    Xm = 0.5 * (X[:, :-1] + X[:, 1:]) + (h / 8) * (Fk[:, :-1] - Fk[:, 1:])
-    Fm = f.map(N)(Xm, Um)
-    opti.subject_to(X[:, 1:] - X[:, :-1] == (h / 6) * (Fk[:, :-1] + 4 * Fm + Fk[:, 1:]))
-    opti.subject_to(X[:, 0] == start)
-    opti.subject_to(X[:, N] == goal)
-    for i in range(m):
-        opti.subject_to(opti.bounded(lo[i], U[i, :], hi[i]))
-        opti.subject_to(opti.bounded(lo[i], Um[i, :], hi[i]))
-    for name, (a, b) in (bounds or {}).items():
-        k = system.state_index(name)
-        opti.subject_to(opti.bounded(a, X[k, :], b))
-        opti.subject_to(opti.bounded(a, Xm[k, :], b))
-    if duration is None:
-        opti.subject_to(opti.bounded(0.05 * t_max, T, t_max))
-    w = 1.0 / scales**2
-    effort = 0
-    for i in range(m):
-        effort = effort + w[i] * (h / 6) * (ca.sumsqr(U[i, :-1]) + 4 * ca.sumsqr(Um[i, :])
-                                            + ca.sumsqr(U[i, 1:]))
-    opti.minimize(effort if minimize == "effort" else T + 1e-6 * effort)
+    t_max = duration if duration is not None else duration_max  # one of the two is given
+    assert t_max is not None
+    problem = _problem(system, N, duration, duration_max, minimize, bounds or {}, lo, hi)
+    f, opti, X, U, Um, T = problem.f, problem.opti, problem.X, problem.U, problem.Um, problem.T
     # The initial guess.
     t_guess = t_max if duration is not None else 0.5 * t_max
     s = np.linspace(0.0, 1.0, N + 1)
@@ -245,35 +298,39 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
         ug = rng.uniform(lo, hi, (N + 1, m))
     else:
         raise DesignError(f"guess = {guess!r}: expected random, straight or a trajectory file")
-    opti.set_initial(X, xg.T)
-    opti.set_initial(U, ug.T)
-    opti.set_initial(Um, 0.5 * (ug[:-1] + ug[1:]).T)
-    if duration is None:
-        opti.set_initial(T, t_guess)
-    opti.solver("ipopt", {"print_time": False},
-                {"print_level": 0, "max_iter": int(max_iterations), "sb": "yes",
-                 "tol": 1e-8, "constr_viol_tol": 1e-8})
-    t0 = time.process_time()
-    try:
-        sol = opti.solve()
-        stats = sol.stats()
-        value = sol.value
-        converged = bool(stats.get("success"))
-    except RuntimeError:  # not converged: the debug values are the last iterate
-        stats = opti.stats()
-        value = opti.debug.value
-        converged = False
-    solve_time = time.process_time() - t0
-    Tv = float(value(T)) if duration is None else float(duration)
-    xs = np.asarray(value(X), dtype=float).T.reshape(N + 1, n)
-    us = np.asarray(value(U), dtype=float).T.reshape(N + 1, m)
-    ums = np.asarray(value(Um), dtype=float).T.reshape(N, m)
+    with problem.lock:
+        opti.set_value(problem.start, start)
+        opti.set_value(problem.goal, goal)
+        opti.set_initial(X, xg.T)
+        opti.set_initial(U, ug.T)
+        opti.set_initial(Um, 0.5 * (ug[:-1] + ug[1:]).T)
+        if duration is None:
+            opti.set_initial(T, t_guess)
+        if problem.max_iterations != int(max_iterations):
+            opti.solver("ipopt", IPOPT_OPTIONS, {**IPOPT_SETTINGS, "max_iter": int(max_iterations)})
+            problem.max_iterations = int(max_iterations)
+        t0 = time.process_time()
+        try:
+            sol = opti.solve()
+            stats = sol.stats()
+            value = sol.value
+            converged = bool(stats.get("success"))
+        except RuntimeError:  # not converged: the debug values are the last iterate
+            stats = opti.stats()
+            value = opti.debug.value
+            converged = False
+        solve_time = time.process_time() - t0
+        Tv = float(value(T)) if duration is None else float(duration)
+        xs = np.asarray(value(X), dtype=float).T.reshape(N + 1, n)
+        us = np.asarray(value(U), dtype=float).T.reshape(N + 1, m)
+        ums = np.asarray(value(Um), dtype=float).T.reshape(N, m)
+        cost = float(value(opti.f))
     defect = _max_defect(f, xs, us, ums, Tv / N, start, goal)
     return Trajectory(
         system=system.key, params=dict(system.params), state_names=system.state_names,
         input_names=system.input_names, times=np.linspace(0.0, Tv, N + 1), states=xs,
         inputs=us, mid_inputs=ums, converged=converged and defect < 1e-6,
-        cost=float(value(opti.f)), max_defect=defect, solve_time=solve_time,
+        cost=cost, max_defect=defect, solve_time=solve_time,
         iterations=int(stats.get("iter_count", 0)), solver="ipopt (CasADi, exact Hessian)",
         settings={"knots": N, "minimize": minimize,
                   "guess": guess if isinstance(guess, str) else "file", "seed": seed,
