@@ -816,6 +816,43 @@ def test_no_browser_is_started_without_a_display(monkeypatch) -> None:
     assert opened == ["http://127.0.0.1:1/"]
 
 
+def test_a_session_balancing_with_its_lqg_is_simulate_to_the_bit():
+    """The playground's LQG is simulate's: the same design, seed and noise give the same
+    states, measurements, estimates and commands, to the bit (the controller's sums in the
+    core's order, not numpy's products)."""
+    import dataclasses
+
+    from equilibrist.control.controller import LinearController
+    from equilibrist.sim import simulate
+    from equilibrist.sim.noise import Noise
+    from equilibrist.web.session import Session
+
+    session = Session(Catalogue.default(), "cartpole", seed=5)
+    session.settings = dataclasses.replace(session.settings, controller="lqg")
+    session.plant = None
+    x0 = session.x.copy()
+    x0[1] += 0.05  # off the operating point: the loop has work to do
+    session.x[:] = x0
+    states, measured, estimates, commands = [], [], [], []
+    for _ in range(300):
+        states.append(session.x.copy())
+        session._sample()
+        measured.append(session.y.copy())
+        estimates.append(np.array(session.xhat))
+        commands.append(session.u_cmd.copy())
+    rate = session.settings.rate
+    ctrl = LinearController.from_design(session.loop.design, kind="lqg")
+    noise = Noise.from_spec(session.system, outputs=ctrl.output_names, rate=rate)
+    res = simulate(session.system, ctrl, duration=299 / rate, rate=rate,
+                   physics_step=session.h, x0=x0, noise=noise, seed=5, region={})
+    assert res.states.shape[0] == 300
+    np.testing.assert_array_equal(np.array(states), res.states)
+    np.testing.assert_array_equal(np.array(measured), res.measurements)
+    np.testing.assert_array_equal(np.array(commands), res.commanded)
+    np.testing.assert_array_equal(np.array(estimates), res.estimates)
+    assert abs(res.states[-1, 1]) < 0.5 * abs(x0[1]) and not res.fell  # it balances
+
+
 def test_the_playground_is_simulate_in_real_time():
     """A session's plant and sensors are simulate's: with the controller off and the same
     seed, its states and measurements are those of ``simulate`` with the spec's noise,

@@ -1,12 +1,13 @@
-"""The controllers in force in a playground session, run in numpy (the one controller
-contract's linear forms, the swing-up or MPC runner) and the record of the last run; split
-from :mod:`equilibrist.web.session`.
+"""The controllers in force in a playground session (the one controller contract's linear
+forms, in the compiled core's order of sums; the swing-up or MPC runner) and the record of
+the last run; split from :mod:`equilibrist.web.session`.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -30,32 +31,71 @@ class _Linear:
         u = u_op + Cc z + Dy dy,   x_hat = x_op + Ez z + Ey dy,
         z+ = Ac z + By dy + Bu (u_applied - u_op)
 
-    in plain numpy: a few small products per sample.
+    by the linear library's sums written out for this controller's pattern
+    (:func:`~equilibrist.control._controller_layout.linear_unrolled_source`, run
+    as Python on lists): the compiled core's sums in the core's order, so a
+    session's LQG gives the bits of ``simulate`` (numpy's products follow the
+    BLAS kernel of the CPU), at some 10 us a sample.
     """
 
     def __init__(self, ctrl: LinearController, system: System) -> None:
         self.ctrl = ctrl
         self.idx = np.array([system.state_index(o) for o in ctrl.output_names], dtype=np.int64)
         self.z = np.array(ctrl.z0, dtype=float)
-        self._dy = np.zeros(len(ctrl.output_names))
+        self._y: list[float] = np.asarray(ctrl.y_op, dtype=float).tolist()
+        self._p = ctrl.packed().tolist()
+        self._fns = _library(ctrl)
+        self._m, self._nz, self._n = ctrl.n_inputs, ctrl.n_z, ctrl.n_states
 
     def start_at(self, x_estimate: np.ndarray) -> None:
         self.z = self.ctrl.state_map @ (np.asarray(x_estimate, dtype=float) - self.ctrl.x_op)
 
     def output(self, y: np.ndarray) -> np.ndarray:
-        c = self.ctrl
-        self._dy = y - c.y_op
-        u: np.ndarray = c.u_op + c.Cc @ self.z + c.Dy @ self._dy
-        return u
+        self._y = np.asarray(y, dtype=float).tolist()
+        u = [0.0] * self._m
+        self._fns["linear_output"](0.0, self.z.tolist(), self._y, (), self._p, u)
+        return np.array(u)
 
     def estimate(self) -> np.ndarray:
-        c = self.ctrl
-        x: np.ndarray = c.x_op + c.Ez @ self.z + c.Ey @ self._dy
-        return x
+        if not self.ctrl.has_estimate:
+            return np.array(self.ctrl.x_op, dtype=float)
+        x = [0.0] * self._n
+        self._fns["linear_estimate"](0.0, self.z.tolist(), self._y, (), self._p, x)
+        return np.array(x)
 
     def update(self, u_applied: np.ndarray) -> None:
-        c = self.ctrl
-        self.z = c.Ac @ self.z + c.By @ self._dy + c.Bu @ (u_applied - c.u_op)
+        z = [0.0] * self._nz
+        self._fns["linear_update"](0.0, self.z.tolist(), self._y, (),
+                                   np.asarray(u_applied, dtype=float).tolist(), self._p, z)
+        self.z = np.array(z)
+
+
+def _library(ctrl: LinearController) -> dict[str, Any]:
+    """The linear library's functions for *ctrl*'s vector: written out for its pattern, or
+    the generic loops where it is too large to write out (the same sums either way)."""
+    from equilibrist.control._controller_layout import (
+        LINEAR_FUNCTIONS,
+        _python_linear,
+        linear_constants,
+        linear_pattern,
+        linear_unrolled_source,
+    )
+
+    pattern = linear_pattern(ctrl.packed())
+    if pattern is None:
+        return _python_linear()
+    if pattern not in _LIBRARIES:
+        namespace: dict[str, Any] = {"math": math, **linear_constants()}
+        exec(compile(linear_unrolled_source(pattern), "<equilibrist linear controller>", "exec"),
+             namespace)
+        if len(_LIBRARIES) > 64:
+            _LIBRARIES.clear()
+        _LIBRARIES[pattern] = {name: namespace[name] for name in LINEAR_FUNCTIONS}
+    return _LIBRARIES[pattern]
+
+
+#: The written-out libraries by pattern (a redesign keeps its pattern: no new source).
+_LIBRARIES: dict[bytes, dict[str, Any]] = {}
 
 
 class _Loop:
