@@ -192,15 +192,23 @@ def test_damaged_compiled_core_is_rebuilt(compiled_cache, tmp_path, damage) -> N
 
 def test_two_processes_build_the_same_core_at_once(tmp_path) -> None:
     """Two fresh processes that build the same core into one empty cache: neither fails,
-    both get the same numbers, and the library left behind is whole."""
+    both get the same numbers, the library left behind is whole, and it was compiled once
+    (the second waits on the first's build lock, then loads its library)."""
     import hashlib
     import os
+    import shutil
     import subprocess
     import sys
 
     folder = tmp_path / "cache"
     folder.mkdir(mode=0o700)
-    env = {**os.environ, "EQUILIBRIST_CACHE": str(folder)}
+    log = tmp_path / "compiles.log"
+    cc = tmp_path / "cc"  # the machine's compiler, slowed and counted for a build
+    cc.write_text("#!/bin/sh\n"
+                  f'case "$*" in *" -o "*) echo build >> "{log}"; sleep 1;; esac\n'
+                  f'exec {shutil.which("cc") or shutil.which("gcc")} "$@"\n')
+    cc.chmod(0o755)
+    env = {**os.environ, "EQUILIBRIST_CACHE": str(folder), "CC": str(cc)}
     procs = [subprocess.Popen([sys.executable, "-c", _STEP_SCRIPT], stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True, env=env) for _ in range(2)]
     outs = [p.communicate(timeout=600) for p in procs]
@@ -210,7 +218,9 @@ def test_two_processes_build_the_same_core_at_once(tmp_path) -> None:
     assert len(libs) == 1
     digest = libs[0].with_suffix(".so.sha256").read_text().strip()
     assert digest == hashlib.sha256(libs[0].read_bytes()).hexdigest()
-    assert not [p.name for p in folder.glob("native/*") if p.suffix not in (".so", ".c", ".sha256")]
+    assert not [p.name for p in folder.glob("native/*")
+                if p.suffix not in (".so", ".c", ".sha256", ".lock")]
+    assert log.read_text().split() == ["build"]  # one compile for two processes
 
 
 def test_without_a_c_compiler_the_command_says_what_to_install(tmp_path) -> None:

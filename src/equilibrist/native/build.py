@@ -6,9 +6,12 @@ and this module's :data:`REVISION`. So a change in any of them makes a new
 library, and an unchanged one is loaded from the cache folder
 (:func:`equilibrist.numeric.cache.cache_dir`, ``native/``) in milliseconds.
 
-- **Atomic**: each build compiles into a file of its own and renames it
-  into place; two processes that build the same library at once both end
-  with a whole one (the last rename wins, with identical bytes).
+- **Atomic, and once**: each build compiles into a file of its own and
+  renames it into place; a process about to build a library first takes an
+  exclusive lock on its name (``flock`` on ``<library>.lock``, where the
+  system has it), so a second process that wants the same library at the
+  same time (the test suite's workers, the demo's, a batch's) waits and
+  loads the first one's instead of compiling it again.
 - **Checked**: beside each library a ``.sha256`` file holds its digest; a
   library whose bytes no longer match (a damaged cache), or that the loader
   refuses, is built again.
@@ -28,7 +31,8 @@ import shutil
 import subprocess
 import sys
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from functools import lru_cache
 from pathlib import Path
 
@@ -151,6 +155,32 @@ def _loads(path: Path) -> bool:
 _LOADED: dict[Path, ctypes.CDLL] = {}
 
 
+def _whole(path: Path, sidecar: Path) -> bool:
+    """Whether the library at *path* is there and matches the digest beside it."""
+    if not (path.exists() and sidecar.exists()):
+        return False
+    try:
+        return sidecar.read_text().strip() == _digest(path)
+    except OSError:
+        return False
+
+
+@contextmanager
+def _exclusive(path: Path) -> Iterator[None]:
+    """Hold the build lock of the library *path* (none where ``fcntl`` is missing)."""
+    try:
+        import fcntl
+    except ImportError:  # not a POSIX system: the atomic rename alone keeps the library whole
+        yield
+        return
+    with open(path.with_suffix(".lock"), "a") as fh:
+        fcntl.flock(fh.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh.fileno(), fcntl.LOCK_UN)
+
+
 def load(source: str | Callable[[], str], stem: str,
          inputs: str | None = None) -> tuple[ctypes.CDLL, Path]:
     """The library built from *source* (built now if the cache has no whole one).
@@ -167,23 +197,23 @@ def load(source: str | Callable[[], str], stem: str,
     if lib is not None:
         return lib, path
     sidecar = path.with_suffix(path.suffix + ".sha256")
-    whole = False
-    if path.exists() and sidecar.exists():
-        try:
-            whole = sidecar.read_text().strip() == _digest(path)
-        except OSError:
-            whole = False
+    whole = _whole(path, sidecar)
+
     def text() -> str:
         return source if isinstance(source, str) else source()
 
     if not whole:
-        _compile(text(), path)
+        with _exclusive(path):
+            whole = _whole(path, sidecar)  # built by another process while this one waited
+            if not whole:
+                _compile(text(), path)
     try:
         lib = ctypes.CDLL(str(path))
     except OSError:
         if not whole:
             raise BuildError(f"the compiled core {path} does not load") from None
-        _compile(text(), path)  # matched its digest yet does not load: build it again
+        with _exclusive(path):
+            _compile(text(), path)  # matched its digest yet does not load: build it again
         lib = ctypes.CDLL(str(path))
     _LOADED[path] = lib
     return lib, path
