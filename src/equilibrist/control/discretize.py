@@ -117,6 +117,12 @@ def van_loan(A: object, W: object, dt: float) -> np.ndarray:
     dt:
         Period ``T`` [s].
     """
+    return sampled_noise(A, W, dt)[1]
+
+
+def sampled_noise(A: object, W: object, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(F, Qd)``: ``F = e^{A T}`` and Van Loan's ``Qd`` (:func:`van_loan`), both from the
+    one exponential."""
     T = _checks.positive_period(dt)
     Am = _checks.square(A, "A")
     n = Am.shape[0]
@@ -127,7 +133,7 @@ def van_loan(A: object, W: object, dt: float) -> np.ndarray:
     block[n:, n:] = Am.T * T
     E = fixed.expm(block)
     F = E[n:, n:].T
-    return _checks.symmetric(fixed.matmul(F, E[:n, n:]))
+    return F, _checks.symmetric(fixed.matmul(F, E[:n, n:]))
 
 
 def discrete_noise(

@@ -37,13 +37,21 @@ def _f(a: object) -> np.ndarray:
 
 def matmul(a: object, b: object) -> np.ndarray:
     """``a @ b``, each element ``sum_k a[i, k] b[k, j]`` accumulated in increasing ``k``."""
-    A, B = _f(a), _f(b)
+    A, B = _view(a), _view(b)
     if A.shape[1] != B.shape[0]:
         raise ValueError(f"matmul: shapes {A.shape} and {B.shape} do not match")
     out = np.zeros((A.shape[0], B.shape[1]))
-    for k in range(A.shape[1]):
-        out = out + np.multiply.outer(A[:, k], B[k, :])
+    term = np.empty_like(out)
+    for k in range(A.shape[1]):  # in place: the same products and sums, fewer arrays
+        np.multiply(A[:, k, None], B[k], out=term)
+        out += term
     return out
+
+
+def _view(a: object) -> np.ndarray:
+    """*a* as a float array of at least two dimensions, not copied where it is one."""
+    A = np.asarray(a, dtype=float)
+    return A if A.ndim >= 2 else A.reshape(1, -1)
 
 
 def mm(*factors: object) -> np.ndarray:
@@ -162,10 +170,13 @@ def _doubling(A: np.ndarray, G: np.ndarray, H: np.ndarray, ident: np.ndarray) ->
     for _ in range(DARE_ITERATIONS):
         W = ident + matmul(G, H)
         try:
-            V1 = solve(W, A)
-            V2 = solve(W, G)
+            # One elimination for both right-hand sides: each column's own operations, so
+            # the same bits as two solves.
+            V = solve(W, np.concatenate([A, G], axis=1))
         except np.linalg.LinAlgError:
             break
+        n = A.shape[1]
+        V1, V2 = V[:, :n], V[:, n:]
         H_next = symmetric(H + matmul(A.T, matmul(H, V1)))
         G = symmetric(G + matmul(matmul(A, V2), A.T))
         A = matmul(A, V1)

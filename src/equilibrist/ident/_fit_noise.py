@@ -19,66 +19,38 @@ STRUCTURAL_RATIO = 1e-9
 
 
 def _van_loan(A: np.ndarray, GQG: np.ndarray, T: float) -> np.ndarray:
-    """``int_0^T e^(A s) GQG e^(A' s) ds``."""
+    """``int_0^T e^(A s) GQG e^(A' s) ds`` (the design's Van Loan)."""
     return _discretize(A, GQG, T)[1]
 
 
 def _discretize(A: np.ndarray, GQG: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
-    """``e^(A T)`` and ``int_0^T e^(A s) GQG e^(A' s) ds`` (Van Loan: one exponential)."""
-    from scipy.linalg import expm
+    """``e^(A T)`` and ``int_0^T e^(A s) GQG e^(A' s) ds`` (Van Loan: one exponential), as
+    the designs sample their noise (:func:`equilibrist.control.discretize.sampled_noise`)."""
+    from equilibrist.control.discretize import sampled_noise
 
-    n = A.shape[0]
-    M = np.zeros((2 * n, 2 * n))
-    M[:n, :n] = -A
-    M[:n, n:] = GQG
-    M[n:, n:] = A.T
-    E = expm(M * T)
-    Ad = E[n:, n:].T
-    Q = Ad @ E[:n, n:]
-    return Ad, (Q + Q.T) / 2
+    return sampled_noise(A, GQG, T)
 
 
 def _steady_gain(Ad: np.ndarray, C: np.ndarray, Qd: np.ndarray,
                  R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The steady-state Kalman gain ``K`` and innovation covariance ``S`` of the sampled
-    model (the filter Riccati equation by iteration, else scipy's DARE, else ``P = Qd``)."""
+    model: the predictor's covariance from the designs' own Riccati solver (structure-
+    preserving doubling, :func:`equilibrist.control.fixed.dare` on the dual problem), else
+    scipy's DARE, else ``P = Qd``."""
     from scipy.linalg import solve_discrete_are
 
-    P = _filter_riccati(Ad, C, Qd, R)
-    if P is None:
+    from equilibrist.control import fixed
+    from equilibrist.errors import DesignError
+
+    try:
+        P = fixed.dare(Ad.T, C.T, Qd, R)
+    except (DesignError, np.linalg.LinAlgError):
         try:
             P = solve_discrete_are(Ad.T, C.T, Qd, R)
         except (ValueError, np.linalg.LinAlgError):
             P = Qd.copy()
     S = C @ P @ C.T + R
     return P @ C.T @ np.linalg.inv(S), (S + S.T) / 2
-
-
-def _filter_riccati(Ad: np.ndarray, C: np.ndarray, Qd: np.ndarray, R: np.ndarray) -> np.ndarray | None:
-    """The Kalman predictor's steady covariance ``P = Ad P (I + C'R^-1 C P)^-1 Ad' + Qd`` by
-    the structure-preserving doubling algorithm (quadratic convergence; None if it does not)."""
-    n = Ad.shape[0]
-    A = Ad.T.copy()
-    G = C.T @ np.linalg.solve(R, C)
-    H = Qd.copy()
-    eye = np.eye(n)
-    for _ in range(60):
-        W = eye + G @ H
-        try:
-            WA = np.linalg.solve(W, A)
-            WG = np.linalg.solve(W, G)
-        except np.linalg.LinAlgError:
-            return None
-        H_next = H + A.T @ H @ WA
-        G = G + A @ WG @ A.T
-        A = A @ WA
-        if not np.all(np.isfinite(H_next)):
-            return None
-        if np.max(np.abs(H_next - H)) <= 1e-13 * max(1.0, float(np.max(np.abs(H_next)))):
-            H_sym: np.ndarray = (H_next + H_next.T) / 2
-            return H_sym
-        H = H_next
-    return None
 
 
 def _information_inverse(H: np.ndarray) -> np.ndarray:
