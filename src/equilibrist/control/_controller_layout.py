@@ -239,13 +239,32 @@ def linear_estimate(t, z, y, r, p, x_out):
 LINEAR_FUNCTIONS = ("linear_output", "linear_update", "linear_estimate")
 
 _PY_LINEAR: dict[str, Any] = {}
+#: The library written out per pattern (:func:`python_linear`), as Python.
+_PY_UNROLLED: dict[bytes, dict[str, Any]] = {}
+
+
+def _exec_linear(source: str) -> dict[str, Any]:
+    namespace: dict[str, Any] = {"math": math, "np": np, **linear_constants()}
+    exec(compile(source, "<equilibrist linear controller>", "exec"), namespace)
+    return {name: namespace[name] for name in LINEAR_FUNCTIONS}
 
 
 def _python_linear() -> dict[str, Any]:
     """:data:`LINEAR_SOURCE` executed as plain Python (the reference the core is checked on)."""
     if not _PY_LINEAR:
-        namespace: dict[str, Any] = {"math": math, "np": np, **linear_constants()}
-        exec(compile(linear_layout_source() + LINEAR_SOURCE, "<equilibrist linear controller>",
-                     "exec"), namespace)
-        _PY_LINEAR.update({name: namespace[name] for name in LINEAR_FUNCTIONS})
+        _PY_LINEAR.update(_exec_linear(linear_layout_source() + LINEAR_SOURCE))
     return _PY_LINEAR
+
+
+def python_linear(p: np.ndarray) -> dict[str, Any]:
+    """The linear library for the packed vector *p* as plain Python: written out for its
+    pattern (:func:`linear_unrolled_source`, the core's own form of it), or the generic loops
+    where it is too large to write out; the same sums either way. Fast on lists."""
+    pattern = linear_pattern(p)
+    if pattern is None:
+        return _python_linear()
+    if pattern not in _PY_UNROLLED:
+        if len(_PY_UNROLLED) > 64:
+            _PY_UNROLLED.clear()
+        _PY_UNROLLED[pattern] = _exec_linear(linear_unrolled_source(pattern))
+    return _PY_UNROLLED[pattern]

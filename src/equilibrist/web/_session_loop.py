@@ -5,12 +5,12 @@ the last run; split from :mod:`equilibrist.web.session`.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from equilibrist.control._controller_layout import python_linear
 from equilibrist.web.runners import Runner
 
 if TYPE_CHECKING:
@@ -32,10 +32,10 @@ class _Linear:
         z+ = Ac z + By dy + Bu (u_applied - u_op)
 
     by the linear library's sums written out for this controller's pattern
-    (:func:`~equilibrist.control._controller_layout.linear_unrolled_source`, run
+    (:func:`~equilibrist.control._controller_layout.python_linear`, run
     as Python on lists): the compiled core's sums in the core's order, so a
     session's LQG gives the bits of ``simulate`` (numpy's products follow the
-    BLAS kernel of the CPU), at some 10 us a sample.
+    BLAS kernel of the CPU).
     """
 
     def __init__(self, ctrl: LinearController, system: System) -> None:
@@ -43,8 +43,9 @@ class _Linear:
         self.idx = np.array([system.state_index(o) for o in ctrl.output_names], dtype=np.int64)
         self.z = np.array(ctrl.z0, dtype=float)
         self._y: list[float] = np.asarray(ctrl.y_op, dtype=float).tolist()
-        self._p = ctrl.packed().tolist()
-        self._fns = _library(ctrl)
+        packed = ctrl.packed()
+        self._p = packed.tolist()
+        self._fns = python_linear(packed)
         self._m, self._nz, self._n = ctrl.n_inputs, ctrl.n_z, ctrl.n_states
 
     def start_at(self, x_estimate: np.ndarray) -> None:
@@ -68,34 +69,6 @@ class _Linear:
         self._fns["linear_update"](0.0, self.z.tolist(), self._y, (),
                                    np.asarray(u_applied, dtype=float).tolist(), self._p, z)
         self.z = np.array(z)
-
-
-def _library(ctrl: LinearController) -> dict[str, Any]:
-    """The linear library's functions for *ctrl*'s vector: written out for its pattern, or
-    the generic loops where it is too large to write out (the same sums either way)."""
-    from equilibrist.control._controller_layout import (
-        LINEAR_FUNCTIONS,
-        _python_linear,
-        linear_constants,
-        linear_pattern,
-        linear_unrolled_source,
-    )
-
-    pattern = linear_pattern(ctrl.packed())
-    if pattern is None:
-        return _python_linear()
-    if pattern not in _LIBRARIES:
-        namespace: dict[str, Any] = {"math": math, **linear_constants()}
-        exec(compile(linear_unrolled_source(pattern), "<equilibrist linear controller>", "exec"),
-             namespace)
-        if len(_LIBRARIES) > 64:
-            _LIBRARIES.clear()
-        _LIBRARIES[pattern] = {name: namespace[name] for name in LINEAR_FUNCTIONS}
-    return _LIBRARIES[pattern]
-
-
-#: The written-out libraries by pattern (a redesign keeps its pattern: no new source).
-_LIBRARIES: dict[bytes, dict[str, Any]] = {}
 
 
 class _Loop:
