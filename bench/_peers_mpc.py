@@ -120,9 +120,9 @@ def problem() -> dict[str, Any]:
     states: list[np.ndarray] = []
 
     class Recorder(MPCRuntime):
-        def solve(self, dx0: np.ndarray) -> np.ndarray:
-            states.append(np.array(dx0, dtype=float))
-            return super().solve(dx0)
+        def output(self, t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray:
+            states.append(np.array(y, dtype=float) - self.ctrl.x_op)  # the full state measured
+            return super().output(t, y, r)
 
     simulate(system, Recorder(ctrl), duration=300 / RATE, x0=PUSH, region={})
     X = ctrl.x_op + np.array(states[:300])

@@ -54,15 +54,15 @@ class _Timed(MPCRuntime):
         self.statuses: list[str] = []
         self.iterations: list[int] = []
 
-    def solve(self, dx0: np.ndarray) -> np.ndarray:
+    def output(self, t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray:
         c0, w0 = time.thread_time(), time.perf_counter()
-        du = super().solve(dx0)
+        u = super().output(t, y, r)
         w1, c1 = time.perf_counter(), time.thread_time()
         self.cpu_times.append(c1 - c0)
         self.wall_times.append(w1 - w0)
         self.statuses.append(self.last_status)
         self.iterations.append(self.last_iterations)
-        return du
+        return u
 
 
 STARTS = [{"theta": 0.5}, {"theta": -0.4, "theta_dot": 1.0}, {"x_dot": 2.0},

@@ -169,23 +169,26 @@ def test_survives_every_push_the_clipped_lqr_survives(estimator: str) -> None:
 
 
 def test_an_unsolved_qp_is_not_applied_blindly(cart: tuple[object, object]) -> None:
-    """DAQP stopped after 1 iteration on a constrained state: no solution, so the command is the
-    clipped LQR's (K from an independent dlqr call), the fallback counted, and the next sample
-    starts cold and is solved."""
+    """DAQP stopped one iteration short of a constrained state's solution: no solution, so the
+    command is the clipped LQR's (K from an independent dlqr call), the fallback counted, and
+    the next sample starts cold (it takes the same iterations again, where a warm start from
+    the unfinished working set would take fewer)."""
     system, d = cart
     ctrl = mpc(system, design=d, horizon=30, estimator="state")  # type: ignore[arg-type]
     K = dlqr(d.discrete.A, d.discrete.B, d.Q, d.R).K  # type: ignore[attr-defined]
-    rt = MPCRuntime(ctrl)
-    rt._solver.settings = {"iter_limit": 1}
     dx = np.array([0.95, 0.0, 1.0, 0.0])
-    assert not rt.lqr_feasible(dx)
+    full = MPCRuntime(ctrl)
+    assert not full.lqr_feasible(dx)
+    full.solve(dx)
+    assert full.last_status == "solved" and full.last_iterations > 2
+    rt = MPCRuntime(ctrl, iter_limit=full.last_iterations - 1)
     du = rt.solve(dx)
     assert rt.last_status == "iteration limit" and rt.fallbacks == 1
     lo, hi = ctrl.problem.u_lo, ctrl.problem.u_hi
     np.testing.assert_allclose(du, np.clip(-K @ dx, lo, hi), rtol=0, atol=1e-9)
-    rt._solver.settings = {"iter_limit": 1000}
     rt.solve(dx)
-    assert rt.last_status == "solved" and rt.fallbacks == 1
+    assert rt.last_status == "iteration limit" and rt.fallbacks == 2
+    assert rt.last_iterations == full.last_iterations - 1
 
 
 def _sparse_reference(d: object, dx0: np.ndarray, horizon: int, soft: tuple[int, ...],

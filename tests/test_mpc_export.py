@@ -14,16 +14,15 @@ import pytest
 from equilibrist import get_system
 from equilibrist.cli.main import main
 from equilibrist.control.design import design
-from equilibrist.control.mpc import KalmanFront, MPCRuntime, mpc
+from equilibrist.control.mpc import MPCRuntime, mpc
 from equilibrist.export.mpc_c import (
-    Z_TOLERANCE,
-    CompiledMPC,
     export_mpc,
     footprint,
 )
 from equilibrist.sim.run import simulate
 from support import cc_cache
 from support.cc_cache import cached_cc, environment
+from support.mpc_reference import ReferenceMPC
 
 
 @pytest.fixture(scope="module")
@@ -41,14 +40,14 @@ def _make_check(folder: Path, daqp_objects: Path) -> str:
     return proc.stdout
 
 
-def test_generated_solver_matches_python_and_make_check_passes(tmp_path: Path,
+def test_exported_solver_is_the_simulated_one_and_make_check_passes(tmp_path: Path,
                                                                daqp_objects: Path) -> None:
     system = get_system("cartpole")
     ctrl = mpc(system, horizon=30, estimator="state")
     folder = export_mpc(ctrl, tmp_path / "mpc", duration=0.5, x0={"theta": 0.5})
     out = _make_check(folder, daqp_objects)
     worst = float(re.search(r"worst difference (\S+),", out).group(1))  # type: ignore[union-attr]
-    assert worst < 1e-9  # the same active-set solver on the same data: round-off
+    assert worst == 0.0  # the simulated MPC is this library: the same bits
     # The recorded commands reach the input limit (a constrained case) and stay inside it.
     text = (folder / "mpc_vectors.h").read_text()
     u = np.array([float(v) for v in re.findall(r"\{([-0-9.e+]+)\}", text.split("vec_u")[1])])
@@ -66,7 +65,8 @@ def test_generated_solver_matches_python_and_make_check_passes(tmp_path: Path,
 
 @pytest.mark.parametrize("form", ["current", "predictor"])
 def test_kalman_filter_in_front_make_check(tmp_path: Path, form: str, daqp_objects: Path) -> None:
-    """The MPC on the measured outputs: the C filter and QP against the Python ones on a noisy run."""
+    """The MPC on the measured outputs: the exported C filter and QP give the simulated
+    controller's bits on a noisy run."""
     system = get_system("cartpole")
     ctrl = mpc(system, design=design(system, rate=200.0, kalman_form=form), horizon=30)
     assert ctrl.estimator == "kalman" and ctrl.outputs == ("x", "theta") and ctrl.form == form
@@ -74,7 +74,7 @@ def test_kalman_filter_in_front_make_check(tmp_path: Path, form: str, daqp_objec
     out = _make_check(folder, daqp_objects)
     worst = float(re.search(r"worst difference (\S+),", out).group(1))  # type: ignore[union-attr]
     worst_z = float(re.search(r"filter state: worst (\S+),", out).group(1))  # type: ignore[union-attr]
-    assert worst < 1e-9 and worst_z < Z_TOLERANCE
+    assert worst == 0.0 and worst_z == 0.0  # the simulated MPC and filter are this library
     header = (folder / "mpc.h").read_text()
     assert "mpc_output(const mpc_filter *f, const double y[2], double u[1])" in header
     # The recorded run is constrained: the commands reach the input limit.
@@ -84,43 +84,40 @@ def test_kalman_filter_in_front_make_check(tmp_path: Path, form: str, daqp_objec
     assert np.isclose(np.abs(u).max(), 200.0, atol=1e-6)
 
 
-def test_filter_form_is_the_runtime_filter() -> None:
-    """The linear form written into C equals the runtime's filter on random data (round-off)."""
+def test_the_compiled_filter_is_the_kalman_filter() -> None:
+    """The filter in front of the compiled MPC (the LQG's estimator in the linear library's C)
+    equals the design's Kalman filter written out with numpy products (round-off), both forms,
+    on random measurements and applied inputs."""
     system = get_system("cartpole")
     for form in ("current", "predictor"):
         ctrl = mpc(system, design=design(system, rate=200.0, kalman_form=form), horizon=5)
-        front = KalmanFront(ctrl)
-        blocks = front.linear_form()
+        rt, ref = MPCRuntime(ctrl), ReferenceMPC(ctrl)
         rng = np.random.default_rng(4)
-        z = np.zeros(4)
         for _ in range(50):
             y = ctrl.x_op[[0, 1]] + rng.normal(scale=0.1, size=2)
             ua = ctrl.u_op + rng.normal(scale=10.0, size=1)
-            dy = y - blocks["y_op"]
-            dx = blocks["Ez"] @ z + blocks["Ey"] @ dy
-            np.testing.assert_allclose(front.estimate(y), dx, rtol=0, atol=1e-12)
-            z = blocks["Ac"] @ z + blocks["By"] @ dy + blocks["Bu"] @ (ua - ctrl.u_op)
-            front.update(y, ua)
-            np.testing.assert_allclose(front.z, z, rtol=0, atol=1e-12)
+            rt.output(0.0, y, np.zeros(0))
+            ref.output(0.0, y, np.zeros(0))
+            np.testing.assert_allclose(rt.estimate, ref.estimate, rtol=0, atol=1e-12)
+            rt.update(0.0, y, np.zeros(0), ua)
+            ref.update(0.0, y, np.zeros(0), ua)
+            np.testing.assert_allclose(rt.z, ref.z, rtol=0, atol=1e-12)
 
 
-def test_compiled_mpc_with_filter_closes_the_loop(daqp_objects: Path) -> None:
-    """The C MPC with its Kalman filter balances the nonlinear cart-pole from noisy measurements,
-    inside the hard limits, and follows the simulated controller's run."""
+def test_compiled_mpc_with_filter_closes_the_loop() -> None:
+    """The compiled MPC with its Kalman filter balances the nonlinear cart-pole from noisy
+    measurements, inside the hard limits, and follows the run of the MPC written out in Python
+    on DAQP's Python package (support.mpc_reference) to round-off."""
     from equilibrist.sim.noise import Noise
 
     system = get_system("cartpole")
     d = design(system, rate=200.0)
     ctrl = mpc(system, design=d, horizon=30)
-    with cached_cc(daqp_objects):
-        c = CompiledMPC(ctrl)
-    try:
-        x0 = {"theta": 0.4}
-        res = simulate(system, c, duration=2.0, x0=x0, noise=Noise.from_design(d), seed=1)
-        ref = simulate(system, MPCRuntime(ctrl), duration=2.0, x0=x0, noise=Noise.from_design(d),
-                       seed=1)
-    finally:
-        c.close()
+    x0 = {"theta": 0.4}
+    res = simulate(system, MPCRuntime(ctrl), duration=2.0, x0=x0, noise=Noise.from_design(d),
+                   seed=1)
+    ref = simulate(system, ReferenceMPC(ctrl), duration=2.0, x0=x0, noise=Noise.from_design(d),
+                   seed=1)
     assert not res.fell and abs(res.final_state[1]) < 0.05
     lo, hi = system.input_limits
     assert np.all(res.commanded >= lo - 1e-9) and np.all(res.commanded <= hi + 1e-9)

@@ -1,5 +1,6 @@
-"""The MPC's lean solve: the same moves, statuses and iterations as the QP of
-MPCProblem.qp_bounds solved step by step, on states inside, at and past every limit."""
+"""The compiled MPC's solve (the C that ships): the same moves and statuses as the QP of
+MPCProblem.qp_bounds written out in Python and solved by DAQP's Python package, on states
+inside, at and past every limit."""
 
 from __future__ import annotations
 
@@ -7,24 +8,9 @@ import numpy as np
 import pytest
 
 from equilibrist import get_system
-from equilibrist.control._mpc_problem import STATUS
 from equilibrist.control.design import design
 from equilibrist.control.mpc import MPCRuntime, mpc
-
-
-def _reference(rt: MPCRuntime, dx0: np.ndarray) -> tuple[np.ndarray, str]:
-    """The solve as written out from MPCProblem: the bounds, the LQR's check, DAQP, the clip."""
-    prob = rt.ctrl.problem
-    bu, bl = prob.qp_bounds(dx0)
-    lqr = -prob.K @ dx0
-    if rt.exact_unconstrained and rt._zero_feasible(bu, bl):
-        return lqr, "unconstrained"
-    rt._solver.update(bupper=bu, blower=bl)
-    sol, _, flag, _ = rt._solver.solve()
-    if flag <= 0:
-        rt._solver.update(sense=rt._cold)
-        return np.clip(lqr, prob.u_lo, prob.u_hi), STATUS.get(int(flag), "")
-    return np.clip(lqr + sol[:prob.m], prob.u_lo, prob.u_hi), STATUS[int(flag)]
+from support.mpc_reference import ReferenceMPC
 
 
 def _states(rng: np.random.Generator, count: int) -> np.ndarray:
@@ -46,11 +32,11 @@ def test_solve_equals_the_written_out_qp(limit: float, soft: bool, exact: bool) 
     d = design(system, rate=200.0)
     ctrl = mpc(system, design=d, horizon=15, estimator="state", constraints=None if soft else {})
     ours = MPCRuntime(ctrl, exact_unconstrained=exact)
-    ref = MPCRuntime(ctrl, exact_unconstrained=exact)
+    ref = ReferenceMPC(ctrl, exact_unconstrained=exact)
     statuses = set()
     for dx in _states(np.random.default_rng(3), 160):
         du = ours.solve(dx)
-        want, status = _reference(ref, dx)
+        want, status = ref.solve(dx), ref.last_status
         statuses.add(status)
         assert ours.last_status == status
         np.testing.assert_allclose(du, want, rtol=0, atol=1e-9)
@@ -85,10 +71,10 @@ def test_two_inputs() -> None:
     prob = dataclasses.replace(p, B=B, R=R, P=lqr.S, K=lqr.K, u_lo=np.array([-20.0, -3.0]),
                                u_hi=np.array([20.0, 3.0]))
     two = dataclasses.replace(ctrl, problem=prob, K=lqr.K, u_op=np.zeros(2))
-    ours, ref = MPCRuntime(two), MPCRuntime(two)
+    ours, ref = MPCRuntime(two), ReferenceMPC(two)
     statuses = set()
     for dx in _states(np.random.default_rng(5), 120):
-        want, status = _reference(ref, dx)
+        want, status = ref.solve(dx), ref.last_status
         du = ours.solve(dx)
         statuses.add(status)
         assert du.shape == (2,)

@@ -7,11 +7,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
 
 import numpy as np
-
-from equilibrist.control.controller import ControllerError
 
 #: DAQP's bound for "no bound".
 INF = 1e30
@@ -29,25 +26,6 @@ HORIZON = 30
 RHO_L1, RHO_L2 = 1e2, 4.0
 #: Track parameter bounding the cart's coordinate.
 TRACK = ("x_max", "x")
-
-
-#: Why the MPC cannot run when its solver is not installed.
-MISSING_SOLVER = "the MPC controller needs DAQP: pip install 'equilibrist[mpc]'"
-
-
-def solver_missing() -> str | None:
-    """:data:`MISSING_SOLVER` when DAQP is not installed (without importing it), else None."""
-    import importlib.util
-
-    return MISSING_SOLVER if importlib.util.find_spec("daqp") is None else None
-
-
-def _daqp() -> Any:
-    try:
-        import daqp
-    except ModuleNotFoundError as exc:  # pragma: no cover - the extra is missing
-        raise ControllerError(MISSING_SOLVER) from exc
-    return daqp
 
 
 @dataclass(frozen=True, eq=False)

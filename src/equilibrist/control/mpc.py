@@ -68,11 +68,16 @@ of them: 0.08 ms median, 0.6 ms worst per sample (bench/README.md).
 *Estimator.* With ``estimator="kalman"`` (the default when the measured
 outputs are not the full state) the design's discrete Kalman filter (its
 ``current`` or ``predictor`` form) runs in front and the QP starts at its
-estimate; with ``"state"`` the measured full state is used.
+estimate; with ``"state"`` the measured full state is used. The filter is
+the LQG controller's own estimator (:func:`filter_form`), run by the linear
+controller's library.
 
-The controller is a :class:`~equilibrist.control.controller.PythonController`:
-the solver is C code called from Python at every sample, so batches of it
-run in worker processes.
+*One definition.* The runtime (:class:`MPCRuntime`) is the C library that
+``export`` writes (:mod:`equilibrist.control._mpc_c`: DAQP's sources, the
+generated driver and the filter), compiled once per cache folder and called
+through ctypes at every sample: the simulated MPC is the shipped one, to the
+bit. It is a :class:`~equilibrist.control.controller.PythonController`, so
+batches of it run in worker processes.
 """
 
 from __future__ import annotations
@@ -83,6 +88,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from equilibrist.control._mpc_c import filter_form
+
 # The module was split in three; every name stays importable from here. The names marked
 # F401 are not used here: imported so that they stay importable from this module.
 from equilibrist.control._mpc_problem import (
@@ -90,16 +97,13 @@ from equilibrist.control._mpc_problem import (
     HORIZON,
     INF,
     ITER_LIMIT,
-    MISSING_SOLVER,
     RHO_L1,
     RHO_L2,
     STATUS,  # noqa: F401
     TRACK,
     MPCProblem,
-    _daqp,  # noqa: F401
-    solver_missing,
 )
-from equilibrist.control._mpc_runtime import KalmanFront, MPCRuntime
+from equilibrist.control._mpc_runtime import MPCRuntime
 from equilibrist.control.controller import ControllerError
 
 if TYPE_CHECKING:
@@ -256,5 +260,5 @@ def mpc(
     )
 
 
-__all__ = ["EPS", "HORIZON", "INF", "ITER_LIMIT", "MISSING_SOLVER", "MPC", "KalmanFront", "MPCProblem", "MPCRuntime", "mpc",
-           "soft_bounds", "solver_missing"]
+__all__ = ["EPS", "HORIZON", "INF", "ITER_LIMIT", "MPC", "MPCProblem", "MPCRuntime", "filter_form",
+           "mpc", "soft_bounds"]

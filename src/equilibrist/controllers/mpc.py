@@ -1,4 +1,5 @@
-"""``--controller mpc``: constrained MPC solved by DAQP (Kalman filter in front where needed)."""
+"""``--controller mpc``: constrained MPC solved by DAQP compiled with its driver (Kalman filter
+in front where needed)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,6 @@ from equilibrist.control.kinds import ControllerKind, ControllerRequest, Option,
 
 if TYPE_CHECKING:
     from equilibrist.control.mpc import MPCRuntime
-    from equilibrist.numeric.system import System
 
 
 def _horizon(text: str) -> int:
@@ -16,12 +16,6 @@ def _horizon(text: str) -> int:
     if value < 1 or str(value) != text.strip():
         raise ValueError(text)
     return value
-
-
-def applies(system: System) -> str | None:
-    from equilibrist.control.mpc import solver_missing
-
-    return solver_missing()
 
 
 def build(request: ControllerRequest) -> MPCRuntime:
@@ -49,5 +43,5 @@ KIND = ControllerKind(
     build=build,
     options=(Option("--horizon", "prediction horizon of --controller mpc [samples] (default 30)",
                     parse=_horizon, expected="a whole number of samples >= 1", metavar="N"),),
-    applies=applies, export=registered_exporter("mpc", check_export), order=40,
+    export=registered_exporter("mpc", check_export), order=40,
 )

@@ -3,19 +3,20 @@
 :func:`export_mpc` writes into a folder:
 
 ``daqp/``
-    DAQP's C sources (``src/``, ``include/``, its MIT ``LICENSE``), the
-    same release (0.11.0) as the ``daqp`` Python package that solves the
-    simulated controller's QP, shipped with equilibrist.
+    DAQP's C sources (``src/``, ``include/``, its MIT ``LICENSE``, release
+    0.11.0), shipped with equilibrist: the same sources the simulated
+    controller (:class:`~equilibrist.control.mpc.MPCRuntime`) is compiled from.
 ``<name>.h``, ``<name>.c``
     The QP of :attr:`~equilibrist.control.mpc.MPCProblem.condensed` as
     DAQP's least-distance problem, formed here
-    (:func:`~equilibrist.export._mpc_c_library.ldp_form`: the constraint
+    (:func:`~equilibrist.control._mpc_c.ldp_form`: the constraint
     rows times the Hessian's inverse factor, scaled to unit length, their
     offsets, the map back to the first move) as constants, the LQR's
     predictions ``Fu``, ``Fs``, the gain, the limits, and::
 
         int <name>_setup(void);
         int <name>_step(const double x[n], double u[m]);
+        int <name>_move(const double dx[n], double du[m]);
         int <name>_iterations(void);
 
     ``<name>_setup`` sets DAQP's workspace up (once, in static arrays: no
@@ -23,16 +24,17 @@
     empties the working set) and returns 0, or DAQP's negative setup flag.
     ``<name>_step`` (which calls ``<name>_setup`` itself the first time) is
     the MPC at the full state ``x``, computed as the simulated controller
-    computes it (:meth:`~equilibrist.control.mpc.MPCRuntime.solve`): the
+    computes it (the same code: :class:`~equilibrist.control.mpc.MPCRuntime`): the
     bounds at ``dx = x - x_op``; the LQR's move exactly when the LQR's
     trajectory meets every constraint (returns 0); else DAQP from the last
     sample's working set (returns DAQP's exit flag: 1 or 2 solved; a
     negative flag means no solution, and the clipped LQR's move is applied
     and the working set emptied). ``u = u_op + clip(-K dx + v_0)``.
+    ``<name>_move`` is the same from the deviation ``dx`` (``u = u_op + du``).
     ``<name>_iterations`` is DAQP's iteration count of the last step.
     With ``precision="float"`` the arithmetic is single precision (``c_float``
     is ``float``: every source compiled with ``-DDAQP_SINGLE_PRECISION``,
-    DAQP's tolerances :data:`~equilibrist.export._mpc_c_library.FLOAT_SETTINGS`);
+    DAQP's tolerances :data:`~equilibrist.control._mpc_c.FLOAT_SETTINGS`);
     the arguments stay ``double``.
 
     With the Kalman filter in front (``estimator="kalman"``, the default
@@ -46,16 +48,16 @@
     the design's discrete filter (``current`` or ``predictor`` form, as the
     simulated controller runs it) as generated constants of the linear
     controller form and its fixed, separately tested C code
-    (:data:`equilibrist.export.linear_c.LINEAR_C`: ``eq_linear_estimate``,
+    (:data:`equilibrist.control._linear_c.LINEAR_C`: ``eq_linear_estimate``,
     ``eq_linear_update``); ``<name>_output`` solves the QP at the filter's
     estimate. ``y`` are the measured outputs (absolute), ``u_applied`` the
     input that acted.
 ``<name>_vectors.h``, ``test_<name>.c``, ``Makefile``
     ``make check`` replays a recorded noisy closed-loop run (measurements
     and applied inputs) through the C controller and requires each command
-    within ``tolerance`` of the simulated controller's (the same QP, solved
-    by the same DAQP through its Python interface) and the filter's state
-    after each update equal to the Python filter's to round-off
+    within ``tolerance`` of the simulated controller's (the same library
+    compiled by equilibrist: equal to the bit in double precision) and the
+    filter's state after each update equal to the simulated one's
     (``Z_TOLERANCE`` relative); in single precision within
     :func:`command_tolerance` (:data:`FLOAT_TOLERANCE` of the widest input
     range) and ``Z_TOLERANCE_FLOAT``. ``make size`` prints the library's
@@ -78,19 +80,18 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.errors import ExportError
-from equilibrist.export._check import ControllerExport, Described, Steps
-
 # The module was split in three; every name stays importable from here. The names marked
 # F401 are not used here: imported so that they stay importable from this module.
-from equilibrist.export._mpc_c_library import (
+from equilibrist.control._mpc_c import (
     DAQP_SOURCES,
     _array,  # noqa: F401
     _daqp_c_files,  # noqa: F401
     _daqp_files,  # noqa: F401
     library_files,
 )
-from equilibrist.export._mpc_c_native import _HEAP_PROGRAM, CompiledMPC, footprint  # noqa: F401
+from equilibrist.errors import ExportError
+from equilibrist.export._check import ControllerExport, Described, Steps
+from equilibrist.export._mpc_c_native import _HEAP_PROGRAM, footprint  # noqa: F401
 from equilibrist.export.writer import register_exporter
 
 if TYPE_CHECKING:
@@ -161,14 +162,14 @@ def record(ctrl: MPC, *, x0: Mapping[str, float] | None = None, duration: float 
         us.append(ref.output(k / ctrl.rate, y, no_r))
         its.append(ref.last_iterations)
         ref.update(k / ctrl.rate, y, no_r, ua)
-        zs.append(ref.front.z.copy())
+        zs.append(ref.z)
     return {"y": ys, "u_applied": applied, "u": np.array(us), "z": np.array(zs),
             "iterations": np.array(its)}
 
 
-#: Round-off bound of the filter's state in ``make check`` (relative to ``1 + |z|``): the C
-#: filter takes its products in another order than numpy; the reaction-wheel pendulum's
-#: fast wheel reaches 1.1e-12 over a second.
+#: Bound of the filter's state in ``make check`` (relative to ``1 + |z|``). In double precision
+#: the simulated filter is this C code (the tests find 0); the bound leaves room for a
+#: compiler on the device that contracts products into fused multiply-adds.
 Z_TOLERANCE = 1e-10
 #: The same bound in single precision (float's epsilon is 1.2e-7; the filter's state carries
 #: its rounding from sample to sample): the reaction-wheel pendulum's fast wheel reaches 3e-4
@@ -475,5 +476,5 @@ def design_id(built: MPCRuntime) -> str:
 
 
 __all__ = ["DAQP_SOURCES", "FLOAT_TOLERANCE", "OVERDRIVE", "Z_TOLERANCE", "Z_TOLERANCE_FLOAT",
-           "CompiledMPC", "MPCExport", "command_tolerance", "default_start", "export_files",
+           "MPCExport", "command_tolerance", "default_start", "export_files",
            "export_mpc", "footprint", "iteration_counts", "mpc_files", "precision_flags", "record"]

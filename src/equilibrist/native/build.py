@@ -31,8 +31,9 @@ import shutil
 import subprocess
 import sys
 import tempfile
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager, suppress
 from functools import lru_cache
 from pathlib import Path
 
@@ -102,7 +103,7 @@ def _digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _compile(source: str, out: Path) -> None:
+def _compile(source: str, out: Path, extra: Sequence[str] = (), openmp: bool = True) -> None:
     folder = out.parent
     fd, tmp_c = tempfile.mkstemp(prefix=out.stem + ".", suffix=".c", dir=folder)
     tmp_so = Path(tmp_c).with_suffix(".so")
@@ -110,10 +111,10 @@ def _compile(source: str, out: Path) -> None:
         with os.fdopen(fd, "w") as fh:
             fh.write(source)
         errors = ""
-        for extra in (_OPENMP, ()):
-            cmd = [*compiler(), *FLAGS, *extra, tmp_c, "-o", str(tmp_so), "-lm"]
+        for omp in ((_OPENMP, ()) if openmp else ((),)):
+            cmd = [*compiler(), *FLAGS, *omp, tmp_c, *extra, "-o", str(tmp_so), "-lm"]
             proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
-            if proc.returncode == 0 and extra and not _loads(tmp_so):
+            if proc.returncode == 0 and omp and not _loads(tmp_so):
                 # Compiled with OpenMP but its runtime is not there to load (zig cc, a
                 # clang without libomp): built again without.
                 errors = f"{' '.join(cmd)} built a library that does not load"
@@ -121,7 +122,7 @@ def _compile(source: str, out: Path) -> None:
             if proc.returncode == 0:
                 break
             errors = (proc.stderr or proc.stdout).strip()
-            if extra and "openmp" not in errors.lower() and "omp" not in errors.lower():
+            if omp and "openmp" not in errors.lower() and "omp" not in errors.lower():
                 break  # an error of the unit, not of OpenMP: no second try
         else:
             proc = None
@@ -141,6 +142,66 @@ def _compile(source: str, out: Path) -> None:
         for leftover in (tmp_so, Path(str(tmp_so) + ".sha256")):
             leftover.unlink(missing_ok=True)
         raise
+
+
+def objects(sources: Sequence[tuple[Path, str]], stem: str, include: Path) -> list[Path]:
+    """Object files of a vendored library, compiled once per cache folder (and compiler).
+
+    *sources*: each C file with its optimization flag (``-O2`` where the code runs, ``-O0``
+    for what it never enters: the bits of IEEE arithmetic without contraction do not depend
+    on it), *include* its headers' folder. The folder ``<stem>_<key>`` of the cache is named
+    by the hash of every source and header, the flags and the compiler, built in a folder of
+    its own and renamed into place under the build lock, and its files' digests are checked
+    on each use (a damaged one is built again). Returns the objects' paths."""
+    h = hashlib.sha256()
+    headers = sorted(include.glob("*.h"))
+    for part in (*(f"{p.name} {opt}\n{p.read_text()}" for p, opt in sources),
+                 *(f"{p.name}\n{p.read_text()}" for p in headers),
+                 compiler_identity(), " ".join(FLAGS), str(REVISION)):
+        h.update(part.encode())
+        h.update(b"\0")
+    final = _folder() / f"{stem}_{h.hexdigest()[:20]}"
+    names = [f"{i:02d}_{p.stem}.o" for i, (p, _) in enumerate(sources)]
+
+    def whole() -> bool:
+        sums = final / "objects.sha256"
+        if not sums.exists():
+            return False
+        try:
+            want = dict(line.split() for line in sums.read_text().splitlines())
+            return all(want.get(n) == _digest(final / n) for n in names)
+        except (OSError, ValueError):
+            return False
+
+    if not whole():
+        with _exclusive(final.with_suffix(".dir")):
+            if not whole():
+                tmp = Path(tempfile.mkdtemp(prefix=final.name + ".", dir=final.parent))
+                try:
+                    common = [f for f in FLAGS if f not in ("-O2", "-shared")]
+
+                    def one(item: tuple[tuple[Path, str], str]) -> subprocess.CompletedProcess[str]:
+                        (src, opt), name = item
+                        return subprocess.run([*compiler(), *common, opt,
+                                               f"-I{include}", "-c",
+                                               str(src), "-o", str(tmp / name)],
+                                              capture_output=True, text=True, check=False)
+
+                    with ThreadPoolExecutor(max_workers=max(1, os.cpu_count() or 1)) as pool:
+                        done = list(pool.map(one, zip(sources, names, strict=True)))
+                    for proc in done:
+                        if proc.returncode != 0:
+                            lines = (proc.stderr or proc.stdout).strip().splitlines()
+                            raise BuildError(f"{stem} does not compile: " + " | ".join(lines[:8]))
+                    (tmp / "objects.sha256").write_text(
+                        "".join(f"{n} {_digest(tmp / n)}\n" for n in names))
+                    if final.exists():
+                        shutil.rmtree(final)  # damaged: replaced whole
+                    os.replace(tmp, final)
+                except BaseException:
+                    shutil.rmtree(tmp, ignore_errors=True)
+                    raise
+    return [final / n for n in names]
 
 
 def _loads(path: Path) -> bool:
@@ -182,17 +243,22 @@ def _exclusive(path: Path) -> Iterator[None]:
 
 
 def load(source: str | Callable[[], str], stem: str,
-         inputs: str | None = None) -> tuple[ctypes.CDLL, Path]:
+         inputs: str | None = None, *, link: Sequence[Path] = (),
+         flags: Sequence[str] = (), openmp: bool = True) -> tuple[ctypes.CDLL, Path]:
     """The library built from *source* (built now if the cache has no whole one).
 
     *source* may be a function that writes the unit, called only when the library must be
     built; then *inputs* is a text that determines the unit entirely (the hashes of what
-    the generator reads), and names the library in its place.
+    the generator reads), and names the library in its place. *link*: object files
+    (:func:`objects`) linked in, *flags*: the unit's own (after :data:`FLAGS`), *openmp*:
+    whether to try OpenMP; all three name the library too.
     """
     if inputs is None:
         assert isinstance(source, str)
         inputs = source
-    path = _folder() / f"{stem}_{library_key(inputs)}.so"
+    extra = [*flags, *map(str, link)]
+    named = inputs if not extra and openmp else chr(0).join([inputs, *extra, str(openmp)])
+    path = _folder() / f"{stem}_{library_key(named)}.so"
     lib = _LOADED.get(path)
     if lib is not None:
         return lib, path
@@ -206,18 +272,32 @@ def load(source: str | Callable[[], str], stem: str,
         with _exclusive(path):
             whole = _whole(path, sidecar)  # built by another process while this one waited
             if not whole:
-                _compile(text(), path)
+                _compile(text(), path, extra, openmp)
     try:
         lib = ctypes.CDLL(str(path))
     except OSError:
         if not whole:
             raise BuildError(f"the compiled core {path} does not load") from None
         with _exclusive(path):
-            _compile(text(), path)  # matched its digest yet does not load: build it again
+            _compile(text(), path, extra, openmp)  # matched its digest yet does not load: again
         lib = ctypes.CDLL(str(path))
     _LOADED[path] = lib
     return lib, path
 
 
+def private(path: Path) -> ctypes.CDLL:
+    """A copy of the library *path* loaded on its own: its static data is this copy's alone
+    (the loader shares one copy of a path among all its users). The copy's file is removed
+    once loaded (where the system allows it)."""
+    fd, tmp = tempfile.mkstemp(prefix=path.stem + ".", suffix=".so", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(path.read_bytes())
+        return ctypes.CDLL(tmp)
+    finally:
+        with suppress(OSError):  # a system that keeps a loaded library's file: left there
+            os.unlink(tmp)
+
+
 __all__ = ["FLAGS", "REVISION", "BuildError", "compiler", "compiler_identity", "library_key",
-           "load"]
+           "load", "objects", "private"]

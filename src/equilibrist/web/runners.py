@@ -285,8 +285,8 @@ class MPCRunner:
         self._set_filter(np.asarray(x_estimate, dtype=float) - self.ctrl.x_op)
 
     def _set_filter(self, z: np.ndarray) -> None:
-        # The filter's predicted deviation: its Kalman front's state.
-        self.runtime.front.z = np.array(z, dtype=float)
+        # The filter's predicted deviation.
+        self.runtime.z = np.array(z, dtype=float)
 
     def output(self, t: float, y: np.ndarray) -> np.ndarray:
         rt = self.runtime

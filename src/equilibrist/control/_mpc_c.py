@@ -1,6 +1,9 @@
-"""The exported MPC's library: DAQP's shipped C sources and the generated driver (the QP's
-data as constants, ``<name>_setup`` and ``<name>_step``); split from
-:mod:`equilibrist.export.mpc_c`, which re-exports its names.
+"""The MPC's C library: DAQP's shipped C sources and the generated driver (the QP's data as
+constants, ``<name>_setup``, ``<name>_step``, ``<name>_move`` and the Kalman filter in front).
+One definition for two consumers: the simulated MPC (:class:`MPCRuntime
+<equilibrist.control.mpc.MPCRuntime>` compiles and calls it) and the export
+(:mod:`equilibrist.export.mpc_c` writes it with its test program), so the controller that
+ships is the one simulated.
 """
 
 from __future__ import annotations
@@ -16,8 +19,13 @@ if TYPE_CHECKING:
     from equilibrist.control.mpc import MPC
 
 
+#: DAQP's sense of a constraint active at its lower bound (DAQP_ACTIVE + DAQP_LOWER): a cold
+#: start's working set holds the slacks' bounds ``s >= 0`` (the LQR's plan has zero slack,
+#: and a start from an empty set spent an iteration on each of them: 91 iterations instead
+#: of 31 on the cart-pole at N = 30 after a push).
+COLD_SLACK = 3
 #: DAQP's C sources, shipped with the package.
-DAQP_SOURCES = Path(__file__).with_name("daqp")
+DAQP_SOURCES = Path(__file__).parent.parent / "native" / "daqp"
 
 
 def _array(name: str, values: np.ndarray, *, const: bool = True) -> str:
@@ -81,13 +89,59 @@ def ldp_form(ctrl: MPC) -> dict[str, np.ndarray]:
             "rinv_top": rinv[: prob.m], "w_top": w[: prob.m]}
 
 
-def library_files(ctrl: MPC, *, name: str = "mpc", precision: str = "double") -> dict[str, str]:
+def filter_form(ctrl: MPC) -> dict[str, np.ndarray]:
+    """The Kalman filter in front of the MPC as blocks of the linear controller form (deviations,
+    row-major): the design's LQG controller's own estimator (``LinearController.lqg``), so one
+    filter serves the LQG and the MPC. ``z+ = Ac z + By dy + Bu du_applied`` and
+    ``dx = Ez z + Ey dy``: for the ``current`` form ``Ez = I - M C``, ``Ey = M``,
+    ``Ac = Ad Ez``, ``By = Ad M``; for the ``predictor`` form ``Ez = I``, ``Ey = 0``,
+    ``Ac = Ad - L C``, ``By = L``; ``Bu = Bd`` in both."""
+    from equilibrist.control.controller import ControllerError, LinearController
+
+    if ctrl.estimator == "state" or ctrl.Kf is None or ctrl.design is None:
+        raise ControllerError("the MPC measures the full state: it has no Kalman filter")
+    lin = LinearController.lqg(
+        ctrl.problem.K, Ad=np.asarray(ctrl.design.discrete.A, dtype=float),
+        Bd=np.asarray(ctrl.design.discrete.B, dtype=float), Kf=ctrl.Kf,
+        outputs=ctrl.output_names, x_op=ctrl.x_op, u_op=ctrl.u_op, rate=ctrl.rate,
+        form=ctrl.form, state_names=ctrl.state_names)
+    return {"Ac": lin.Ac, "By": lin.By, "Bu": lin.Bu, "Ez": lin.Ez, "Ey": lin.Ey,
+            "y_op": lin.y_op}
+
+
+#: DAQP's files the MPC's least-distance problem runs (optimized in the simulated MPC's build);
+#: the others (equality elimination, branch and bound, hierarchies, proximal iterations, AVI,
+#: presolve) are linked but never entered, and built unoptimized there (the arithmetic's bits
+#: do not depend on the level: IEEE operations, no contraction).
+DAQP_HOT = frozenset({"api", "auxiliary", "daqp", "factorization", "utils"})
+
+
+def compiled_library(ctrl: MPC, *, shortcut: bool = True, iter_limit: int | None = None) -> Path:
+    """The MPC's library (:func:`library_files`, symbols ``mpc_*``) compiled as a shared
+    library on this machine, cached by content (:mod:`equilibrist.native.build`): DAQP's
+    objects once per cache folder, the driver once per controller (double precision)."""
+    from equilibrist.native import build
+
+    files = library_files(ctrl, shortcut=shortcut, iter_limit=iter_limit)
+    objects = build.objects(
+        [(p, "-O2" if p.stem in DAQP_HOT else "-O0") for p in sorted((DAQP_SOURCES / "src").glob("*.c"))],
+        "daqp", DAQP_SOURCES / "include")
+    unit = files["mpc.c"].replace('#include "mpc.h"', files["mpc.h"])
+    _, path = build.load(unit, "mpc", link=objects, openmp=False,
+                         flags=[f"-I{DAQP_SOURCES / 'include'}", "-fvisibility=default"])
+    return path
+
+
+def library_files(ctrl: MPC, *, name: str = "mpc", precision: str = "double",
+                  shortcut: bool = True, iter_limit: int | None = None) -> dict[str, str]:
     """The library alone, relative path -> text: DAQP's sources under ``daqp/``,
     ``<name>.h`` and ``<name>.c`` (*precision* ``"double"`` or ``"float"``: ``c_float``, built
-    with ``-DDAQP_SINGLE_PRECISION`` for ``"float"``)."""
-    from equilibrist.control._mpc_runtime import COLD_SLACK
-    from equilibrist.control.mpc import EPS, INF, ITER_LIMIT, KalmanFront
-    from equilibrist.export.linear_c import LINEAR_C
+    with ``-DDAQP_SINGLE_PRECISION`` for ``"float"``). *shortcut*: the LQR's move without a
+    solve where its trajectory meets every constraint (the MPC's own; ``False`` solves every
+    QP, as ``MPCRuntime(exact_unconstrained=False)``). *iter_limit*: DAQP's cap on its
+    iterations (default :data:`~equilibrist.control.mpc.ITER_LIMIT`)."""
+    from equilibrist.control._linear_c import LINEAR_C
+    from equilibrist.control.mpc import EPS, INF, ITER_LIMIT
 
     if not name.isidentifier():
         raise ExportError(f"the library's name must be a C identifier, got {name!r}")
@@ -123,6 +177,8 @@ def library_files(ctrl: MPC, *, name: str = "mpc", precision: str = "double") ->
         "/* The MPC at the full state x: 0 (the LQR's move, exact), DAQP's exit flag (1, 2:",
         " * solved; negative: not solved, the clipped LQR's move). */",
         f"int {name}_step(const double x[{n}], double u[{m}]);",
+        "/* The same from the deviation dx = x - x_op: the move du, u = u_op + du. */",
+        f"int {name}_move(const double dx[{n}], double du[{m}]);",
         "/* DAQP's iterations in the last step (0: the LQR's move, no solve). */",
         f"int {name}_iterations(void);",
     ]
@@ -148,9 +204,9 @@ def library_files(ctrl: MPC, *, name: str = "mpc", precision: str = "double") ->
         f'#include "{name}.h"', "",
         f"#define NX {n}", f"#define NU {m}", f"#define NH {N}", f"#define NS {ns}",
         f"#define NV {N * m}", f"#define NSL {N * ns}", f"#define NZ {nz}", f"#define NM {nz + na}",
-        f"#define BIG {INF!r}", f"#define ITER_LIMIT {ITER_LIMIT}", "",
+        f"#define BIG {INF!r}", f"#define ITER_LIMIT {ITER_LIMIT if iter_limit is None else int(iter_limit)}", "",
         "/* The condensed QP as DAQP's least-distance problem (min |u|^2/2, computed by",
-        " * equilibrist.export._mpc_c_library.ldp_form): its rows M (unit length), their",
+        " * equilibrist.control._mpc_c.ldp_form): its rows M (unit length), their",
         " * scales SC and offsets AW (row i bounds SC_i (b_i + AW_i)), the simple bounds of u,",
         " * and the first move's correction v_0 = RINV_TOP u - W_TOP. */",
         _array("LDP_M", ldp["M"]), _array("SC", ldp["scale"]), _array("AW", ldp["aw"]),
@@ -253,7 +309,7 @@ def library_files(ctrl: MPC, *, name: str = "mpc", precision: str = "double") ->
         "{",
         "    return ITERATIONS;",
         "}", "",
-        "static int solve_at(const c_float dx[NX], double u[NU])",
+        "static int solve_at(const c_float dx[NX], c_float du_out[NU])",
         "{",
         "    int i, j, feasible = 1, ok;",
         "    c_float du[NU], v[NU];",
@@ -265,10 +321,11 @@ def library_files(ctrl: MPC, *, name: str = "mpc", precision: str = "double") ->
         "        du[i] = 0.0;",
         "        for (j = 0; j < NX; ++j) du[i] -= K[i * NX + j] * dx[j];",
         "    }",
-        "    for (i = NZ; i < NM; ++i) if (BL[i] > 0.0 || BU[i] < 0.0) { feasible = 0; break; }",
+        "    for (i = NZ; i < NM; ++i) if (BL[i] > 0.0 || BU[i] < 0.0) { feasible = 0; break; }"
+        if shortcut else "    feasible = 0;  /* every QP solved (no shortcut) */",
         "    if (feasible) {",
         "        /* The LQR's trajectory meets every constraint: it is the QP's minimizer. */",
-        "        for (i = 0; i < NU; ++i) u[i] = U_OP[i] + du[i];",
+        "        for (i = 0; i < NU; ++i) du_out[i] = du[i];",
         "        return 0;",
         "    }",
         "    /* Only the bounds change: DAQP starts from the last sample's working set. */",
@@ -292,20 +349,31 @@ def library_files(ctrl: MPC, *, name: str = "mpc", precision: str = "double") ->
         "        c_float d = ok ? du[i] + v[i] : du[i];",
         "        if (d < U_LO[i]) d = U_LO[i];",
         "        if (d > U_HI[i]) d = U_HI[i];",
-        "        u[i] = U_OP[i] + d;",
+        "        du_out[i] = d;",
         "    }",
         "    return res.exitflag;",
         "}", "",
         f"int {name}_step(const double x[NX], double u[NU])",
         "{",
-        "    c_float dx[NX];",
-        "    int i;",
+        "    c_float dx[NX], du[NU];",
+        "    int i, flag;",
         "    for (i = 0; i < NX; ++i) dx[i] = (c_float)x[i] - X_OP[i];",
-        "    return solve_at(dx, u);",
+        "    flag = solve_at(dx, du);",
+        "    for (i = 0; i < NU; ++i) u[i] = U_OP[i] + du[i];",
+        "    return flag;",
+        "}", "",
+        f"int {name}_move(const double dx_in[NX], double du_out[NU])",
+        "{",
+        "    c_float dx[NX], du[NU];",
+        "    int i, flag;",
+        "    for (i = 0; i < NX; ++i) dx[i] = (c_float)dx_in[i];",
+        "    flag = solve_at(dx, du);",
+        "    for (i = 0; i < NU; ++i) du_out[i] = du[i];",
+        "    return flag;",
         "}", "",
     ]
     if kalman:
-        form = KalmanFront(ctrl).linear_form()
+        form = filter_form(ctrl)
         body += [
             "#define EQ_REAL c_float", LINEAR_C,
             f"#define NY {ny}",
@@ -324,10 +392,12 @@ def library_files(ctrl: MPC, *, name: str = "mpc", precision: str = "double") ->
             "    eq_linear_estimate(&FILTER, f->z, yy, dx);",
             "    for (i = 0; i < NX; ++i) x[i] = X_OP[i] + dx[i];", "}", "",
             f"int {name}_output(const {name}_filter *f, const double y[NY], double u[NU])",
-            "{", "    c_float dx[NX], yy[NY];", "    int i;",
+            "{", "    c_float dx[NX], yy[NY], du[NU];", "    int i, flag;",
             "    for (i = 0; i < NY; ++i) yy[i] = (c_float)y[i];",
             "    eq_linear_estimate(&FILTER, f->z, yy, dx);",
-            "    return solve_at(dx, u);", "}", "",
+            "    flag = solve_at(dx, du);",
+            "    for (i = 0; i < NU; ++i) u[i] = U_OP[i] + du[i];",
+            "    return flag;", "}", "",
             f"void {name}_update({name}_filter *f, const double y[NY], const double u_applied[NU])",
             "{", "    c_float z[NX], yy[NY], ua[NU];", "    int i;",
             "    for (i = 0; i < NY; ++i) yy[i] = (c_float)y[i];",
