@@ -191,6 +191,30 @@ def test_balance_reward_is_the_task_cost_and_the_alive_bonus() -> None:
         assert reward == pytest.approx(expected, rel=1e-12, abs=1e-15)
 
 
+@pytest.mark.parametrize("env_id", ["equilibrist/cartpole-balance-v0",
+                                    "equilibrist/acrobot-swingup-v0"])
+def test_reward_is_the_tasks_own_source_to_the_bit(env_id: str) -> None:
+    """The core's reward is the task's reward function (its Python source in
+    ``equilibrist.tasks``, translated to C) run as plain Python on the same state, input and
+    parameters: the same bits."""
+    from equilibrist.tasks import python_reward, task_kind
+
+    env = _make(env_id, noise=False)
+    core = env.core
+    task = core.task
+    reward_py = python_reward(task_kind(task.name), core.system)
+    p = np.array(core.system.p, dtype=float)
+    eref = np.array([core.system.energy(task.x_op), core.system.energy(task.start)])
+    env.reset(seed=4)
+    lo, hi = (np.asarray(b, dtype=float) for b in core.system.input_limits)
+    for a in (0.3, -0.7, 0.05, 1.0):
+        _, reward, *_ = env.step(np.array([a] * core.system.n_inputs))
+        u = lo + (np.clip(a, -1.0, 1.0) + 1.0) * 0.5 * (hi - lo)
+        want = reward_py(np.array(env.state), u, p, core.op, 1.0 / core.sc, core.hang, eref,
+                         core.period, core.alive_bonus)
+        assert reward == want
+
+
 def test_swingup_reward_shapes_energy_and_height() -> None:
     env = _make("equilibrist/cartpole-swingup-v0", noise=False)
     system = env.core.system

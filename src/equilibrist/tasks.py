@@ -37,7 +37,7 @@ Examples
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,16 +46,151 @@ from equilibrist.errors import DesignError, UnknownNameError, nearest
 from equilibrist.mechanics.spec import SystemSpec
 from equilibrist.numeric.system import System
 
-TASK_NAMES = ("balance", "swingup")
-
-# Seconds a run of each task lasts (an environment's truncation, the demo's run).
-DURATION = {"balance": 10.0, "swingup": 15.0}
 # The balance start: each coordinate within this share of its Bryson scale.
 BALANCE_SPREAD = 0.25
 # The swing-up start: hanging, each hanging coordinate offset by up to this [rad].
 SWINGUP_OFFSET = 0.05
 # A track parameter bounds the cart's coordinate during a swing-up.
 TRACK_PARAMETER, TRACK_STATE = "x_max", "x"
+
+#: The arguments of a task's reward function (``reward_<task>``), all plain numbers and arrays
+#: as the environments' core holds them: the state ``x`` at the end of the period, the input
+#: ``u`` applied during it, the parameters ``p``, the operating point ``op`` (``[x_op;
+#: u_op]``), the inverse Bryson scales ``iscale`` (states, then inputs), the indices ``hang``
+#: of the coordinates that hang (``spec.hanging``, integers), ``eref`` (the energy at the
+#: operating point and at the task's nominal start), the period ``dt`` [s] and the alive
+#: bonus ``bonus`` [1/s]. It may call ``energy(x, p)`` (the system's generated energy) and
+#: ``eq_cos``/``eq_sin`` (:mod:`equilibrist.numeric.libm`). The environments translate it to
+#: C into each system's core (:mod:`equilibrist.native.pyc`); tests run it as Python.
+REWARD_ARGUMENTS = ("x", "u", "p", "op", "iscale", "hang", "eref", "dt", "bonus")
+#: The C translation's argument types of :data:`REWARD_ARGUMENTS`.
+REWARD_TYPES = ("F1", "F1", "F1", "F1", "F1", "I1", "F1", "f", "f")
+
+_BALANCE_REWARD = '''
+def reward_balance(x, u, p, op, iscale, hang, eref, dt, bonus):
+    """dt * max(0, bonus - cost): the alive bonus less the task's quadratic cost (Bryson's
+    weights), never below zero (struggling must not earn less than falling at once)."""
+    n = x.shape[0]
+    c = 0.0
+    for i in range(n):
+        d = (x[i] - op[i]) * iscale[i]
+        c += d * d
+    for i in range(u.shape[0]):
+        d = (u[i] - op[n + i]) * iscale[n + i]
+        c += d * d
+    return dt * max(0.0, bonus - c)
+'''
+
+_SWINGUP_REWARD = '''
+def reward_swingup(x, u, p, op, iscale, hang, eref, dt, bonus):
+    """dt * (up + shaping) / 2: the mean height of the hanging coordinates (1 upright, 0
+    hanging) and the energy's closeness to the upright's, 1 - e^2 clipped at zero, with e
+    the energy's distance from the upright's in units of the hanging-to-upright gap."""
+    up = 0.0
+    nh = hang.shape[0]
+    for j in range(nh):
+        q = hang[j]
+        up += 0.5 * (1.0 + eq_cos(x[q] - op[q]))
+    if nh > 0:
+        up /= nh
+    gap = eref[0] - eref[1]
+    if gap == 0.0:
+        gap = 1.0
+    e = (energy(x, p) - eref[0]) / gap
+    return dt * 0.5 * (up + max(0.0, 1.0 - e * e))
+'''
+
+
+def _offers_balance(spec: SystemSpec) -> bool:
+    return bool(spec.inputs) and spec.operating_point is not None
+
+
+def _offers_swingup(spec: SystemSpec) -> bool:
+    return _offers_balance(spec) and spec.hanging is not None
+
+
+def _pose_balance(system: System, x_op: np.ndarray, state_scales: np.ndarray, moved: bool
+                  ) -> tuple[np.ndarray, np.ndarray, dict[str, tuple[float, float]]]:
+    names = system.state_names
+    spread = np.zeros(system.n_states)
+    for k in range(len(system.spec.coordinates)):
+        if names[k] in system.spec.region:
+            spread[k] = BALANCE_SPREAD * state_scales[k]
+    region = _moved_region(system, x_op) if moved else dict(system.spec.region)
+    return x_op.copy(), spread, region
+
+
+def _pose_swingup(system: System, x_op: np.ndarray, state_scales: np.ndarray, moved: bool
+                  ) -> tuple[np.ndarray, np.ndarray, dict[str, tuple[float, float]]]:
+    start, spread = np.zeros(system.n_states), np.zeros(system.n_states)
+    for coord, value in (system.spec.hanging or {}).items():
+        k = system.state_index(coord)
+        start[k] = float(value)
+        spread[k] = SWINGUP_OFFSET
+    region: dict[str, tuple[float, float]] = {}
+    if TRACK_PARAMETER in system.params and TRACK_STATE in system.state_names:
+        bound = float(system.params[TRACK_PARAMETER])
+        region[TRACK_STATE] = (-bound, bound)
+    return start, spread, region
+
+
+@dataclass(frozen=True)
+class TaskKind:
+    """What a task asks, in one record: its name, how long a run lasts, which systems offer
+    it, where a run starts and what counts as a fall (``pose``), and its reward (the Python
+    source of ``reward_<name>``, :data:`REWARD_ARGUMENTS`). The environments, the demo,
+    batches and studies read these; a new task is a new record in :data:`TASK_KINDS`."""
+
+    name: str
+    #: Seconds a run lasts (an environment's truncation, the demo's run).
+    duration: float
+    offered: Callable[[SystemSpec], bool]
+    #: ``pose(system, x_op, state_scales, moved)`` -> start, spread, region.
+    pose: Callable[[System, np.ndarray, np.ndarray, bool],
+                   tuple[np.ndarray, np.ndarray, dict[str, tuple[float, float]]]]
+    reward_source: str
+    #: Whether the task may be posed about another equilibrium (``at``).
+    movable: bool = False
+
+    @property
+    def reward_function(self) -> str:
+        """The name of the function :attr:`reward_source` defines."""
+        return f"reward_{self.name}"
+
+
+TASK_KINDS: tuple[TaskKind, ...] = (
+    TaskKind("balance", 10.0, _offers_balance, _pose_balance, _BALANCE_REWARD, movable=True),
+    TaskKind("swingup", 15.0, _offers_swingup, _pose_swingup, _SWINGUP_REWARD),
+)
+TASK_NAMES = tuple(k.name for k in TASK_KINDS)
+# Seconds a run of each task lasts.
+DURATION = {k.name: k.duration for k in TASK_KINDS}
+
+
+def task_kind(name: str) -> TaskKind:
+    """The record of the task *name*."""
+    for kind in TASK_KINDS:
+        if kind.name == name:
+            return kind
+    raise UnknownNameError(f"unknown task {name!r}: {nearest(name, TASK_NAMES)}")
+
+
+def rewards_source() -> str:
+    """Every task's reward function, one source (what the environments' core translates)."""
+    return "".join(k.reward_source for k in TASK_KINDS)
+
+
+def python_reward(kind: TaskKind, system: System) -> Callable[..., float]:
+    """The reward of *kind* on *system* as plain Python (the reference the core's translation
+    is checked on): ``reward(x, u, p, op, iscale, hang, eref, dt, bonus)``."""
+    from equilibrist.numeric import libm
+
+    ns: dict[str, object] = {"eq_cos": libm.eq_cos, "eq_sin": libm.eq_sin,
+                             "energy": system.functions.energy}
+    exec(compile(kind.reward_source, f"<equilibrist {kind.name} reward>", "exec"), ns)
+    fn = ns[kind.reward_function]
+    assert callable(fn)
+    return fn
 
 
 @dataclass(frozen=True, eq=False)
@@ -165,12 +300,7 @@ def task_names(system: System) -> tuple[str, ...]:
 
 def spec_task_names(spec: SystemSpec) -> tuple[str, ...]:
     """The tasks a system of *spec* offers (read from the spec alone, without deriving it)."""
-    if not spec.inputs or spec.operating_point is None:
-        return ()
-    names = ["balance"]
-    if spec.hanging is not None:
-        names.append("swingup")
-    return tuple(names)
+    return tuple(k.name for k in TASK_KINDS if k.offered(spec))
 
 
 def _scales(system: System, names: tuple[str, ...]) -> np.ndarray:
@@ -259,36 +389,18 @@ def get_task(system: System, name: str, *, at: Mapping[str, float] | None = None
             why = "it has no input" if not system.n_inputs else f"it offers {', '.join(offered) or 'none'}"
             raise UnknownNameError(f"{system.key} has no task {name!r}: {why}")
         raise UnknownNameError(f"unknown task {name!r}: {nearest(name, TASK_NAMES)}")
-    if at and name != "balance":
+    kind = task_kind(name)
+    if at and not kind.movable:
         raise DesignError(f"at: the {name} task ends at {system.key}'s canonical operating "
                           "point; another point is posed for the balance task only")
     x_op, u_op = operating_point(system, at)
-    names = system.state_names
-    state_scales = _scales(system, names)
+    state_scales = _scales(system, system.state_names)
     input_scales = _scales(system, system.input_names)
-    nq = len(system.spec.coordinates)
-    spread = np.zeros(system.n_states)
-    if name == "balance":
-        start = x_op.copy()
-        for k in range(nq):
-            if names[k] in system.spec.region:
-                spread[k] = BALANCE_SPREAD * state_scales[k]
-        region = _moved_region(system, x_op) if at else dict(system.spec.region)
-    else:
-        hanging = system.spec.hanging or {}
-        start = np.zeros(system.n_states)
-        for coord, value in hanging.items():
-            k = system.state_index(coord)
-            start[k] = float(value)
-            spread[k] = SWINGUP_OFFSET
-        region = {}
-        if TRACK_PARAMETER in system.params and TRACK_STATE in names:
-            bound = float(system.params[TRACK_PARAMETER])
-            region[TRACK_STATE] = (-bound, bound)
+    start, spread, region = kind.pose(system, x_op, state_scales, bool(at))
     for arr in (start, spread):
         arr.setflags(write=False)
     return Task(
-        name=name, system=system, rate=float(system.spec.control_rate), duration=DURATION[name],
+        name=name, system=system, rate=float(system.spec.control_rate), duration=kind.duration,
         start=start, spread=spread, region=region, x_op=x_op, u_op=u_op,
         state_scales=state_scales, input_scales=input_scales,
     )

@@ -28,7 +28,7 @@ from equilibrist.native.simcore import load_core
 from equilibrist.numeric.system import System, get_system
 from equilibrist.sim import layout
 from equilibrist.sim.noise import Noise, square_root
-from equilibrist.tasks import Task, check_point, get_task
+from equilibrist.tasks import TASK_NAMES, Task, check_point, get_task
 
 OBSERVE = ("outputs", "state")
 ACTION_UNITS = ("normalized", "physical")
@@ -37,7 +37,6 @@ ALIVE_BONUS = 1.0
 # The observation space's bound: half the largest double, so "any finite
 # value" and ``observation_space.sample()`` does not overflow (high - low).
 FINITE = float(np.finfo(np.float64).max) / 2
-REWARD_KINDS = {"balance": 0, "swingup": 1}
 #: The slots of ``ci``'s head: sizes, switches, and the offsets of ``cf``'s
 #: blocks and of ``ci``'s own index blocks (:data:`equilibrist.sim.layout.ENV_CI`).
 CI_SLOTS = layout.ENV_CI.names
@@ -339,7 +338,7 @@ def build_core(
         region[0, names.index(name)] = lo
         region[1, names.index(name)] = hi
     hang = np.array(
-        [sysm.state_index(c) for c in (sysm.spec.hanging or {})] if tsk.name == "swingup" else [],
+        [sysm.state_index(c) for c in (sysm.spec.hanging or {})],
         dtype=np.int64,
     )
     n_samples = max(1, math.ceil(tsk.duration * run_rate - 1e-9))
@@ -350,7 +349,7 @@ def build_core(
     p_nom = np.array(sysm.p, dtype=float)
     ci, cf = _pack(
         ints={"n_sub": n_sub, "n_samples": n_samples, "observe_state": int(observe == "state"),
-              "reward": REWARD_KINDS[tsk.name], "physical": int(action_units == "physical"),
+              "reward": TASK_NAMES.index(tsk.name), "physical": int(action_units == "physical"),
               "chunks": 1, "autoreset": 0, "ny": len(c_idx), "nw": lw.shape[1],
               "nlv": lv.shape[0], "nhang": len(hang), "nrnd": len(rnd_idx), "np": len(p_nom)},
         index_blocks={"c_idx": c_idx, "hang": hang, "rnd_idx": rnd_idx},

@@ -136,35 +136,14 @@ static int64_t eq_env_physics(double *x, const double *u, const double *p, uint6
     return -1;
 }
 
-/* Reward of a period ending in x with u applied (see equilibrist.envs). */
-static double eq_env_reward(const double *x, const double *u, const double *p, double eref0,
-                            double eref1, const eq_env *S)
+/* Reward of a period ending in x with u applied: the task's own reward function (its
+ * Python source in equilibrist.tasks, translated into this unit: eq_task_reward). eref:
+ * the energies at the operating point and at the task's start. */
+static double eq_env_reward(const double *x, const double *u, const double *p,
+                            const double *eref, const eq_env *S)
 {
-    const double *op = S->op;
-    double up = 0.0, gap, e;
-    int64_t i, j;
-    if (S->reward == 0) {
-        double c = 0.0;
-        for (i = 0; i < EQ_N; i++) {
-            double d = (x[i] - op[i]) * S->iscale[i];
-            c += d * d;
-        }
-        for (i = 0; i < EQ_M; i++) {
-            double d = (u[i] - op[EQ_N + i]) * S->iscale[EQ_N + i];
-            c += d * d;
-        }
-        /* Never below zero: struggling must not earn less than falling at once. */
-        return S->dt * eq_maxf(0.0, S->bonus - c);
-    }
-    for (j = 0; j < S->nhang; j++) {
-        int64_t q = S->hang[j];
-        up += 0.5 * (1.0 + eq_cos(x[q] - op[q]));
-    }
-    if (S->nhang > 0) up /= (double)S->nhang;
-    gap = eref0 - eref1;
-    if (gap == 0.0) gap = 1.0;
-    e = (eq_energy(x, p) - eref0) / gap;
-    return S->dt * 0.5 * (up + eq_maxf(0.0, 1.0 - e * e));
+    return eq_task_reward(S->reward, x, u, p, S->op, S->iscale, S->hang, S->nhang, eref, S->dt,
+                          S->bonus);
 }
 
 /* Start copy r's episode from the state and parameters in its row: the shaping's reference
@@ -176,10 +155,8 @@ static void eq_env_begin(int64_t r, double *fs, uint64_t *us, double *orow, cons
     double *row = fs + r * fw;
     uint64_t *urow = us + r * EQ_US_WIDTH;
     eq_env S;
-    if (ci[EQ_CI_REWARD] == 1) {
-        row[EQ_N + np_] = eq_energy(cf + ci[EQ_CI_O_OP], row + EQ_N);
-        row[EQ_N + np_ + 1] = eq_energy(cf + ci[EQ_CI_O_START], row + EQ_N);
-    }
+    row[EQ_N + np_] = eq_energy(cf + ci[EQ_CI_O_OP], row + EQ_N);
+    row[EQ_N + np_ + 1] = eq_energy(cf + ci[EQ_CI_O_START], row + EQ_N);
     urow[EQ_US_K] = 0;
     urow[EQ_US_AUTO] = 0;
     eq_env_settings(cf, ci, &S);
@@ -235,7 +212,7 @@ static double eq_env_step_copy(int64_t r, const double *a, double *fs, uint64_t 
     k = (int64_t)urow[EQ_US_K] + 1;
     urow[EQ_US_K] = (uint64_t)k;
     eq_env_observe(x, urow, orow, S, zbuf);
-    reward = eq_env_reward(x, u, p, row[EQ_N + S->np], row[EQ_N + S->np + 1], S);
+    reward = eq_env_reward(x, u, p, row + EQ_N + S->np, S);
     *status = code != -1 ? 1 : (k >= S->n_samples ? 2 : 0);
     if (*status != 0 && S->autoreset != 0) urow[EQ_US_AUTO] = 1;
     return reward;
