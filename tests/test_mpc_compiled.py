@@ -9,10 +9,9 @@ import numpy as np
 import pytest
 
 from equilibrist import get_system
-from equilibrist.control._mpc_c import DAQP_HOT, DAQP_SOURCES
+from equilibrist.control._mpc_c import daqp_objects
 from equilibrist.control.design import design
 from equilibrist.control.mpc import MPCRuntime, mpc
-from equilibrist.native import build
 from support.mpc_reference import ReferenceMPC
 
 
@@ -45,13 +44,11 @@ def test_damaged_daqp_objects_are_rebuilt(tmp_path: Path, monkeypatch: pytest.Mo
     """An object file of DAQP cut short in the cache: its digest no longer matches, it is
     compiled again, and a new MPC linked with it solves as DAQP's Python package does."""
     monkeypatch.setenv("EQUILIBRIST_CACHE", str(tmp_path / "cache"))
-    sources = [(p, "-O2" if p.stem in DAQP_HOT else "-O0")
-               for p in sorted((DAQP_SOURCES / "src").glob("*.c"))]
-    objs = build.objects(sources, "daqp", DAQP_SOURCES / "include")
+    objs = daqp_objects()
     pristine = {p.name: p.read_bytes() for p in objs}
     victim = next(p for p in objs if "daqp" in p.stem)
     victim.write_bytes(victim.read_bytes()[:100])
-    again = build.objects(sources, "daqp", DAQP_SOURCES / "include")
+    again = daqp_objects()
     assert again == objs and {p.name: p.read_bytes() for p in again} == pristine
     system = get_system("cartpole", F_min=-20.0, F_max=20.0)
     ctrl = mpc(system, design=design(system, rate=200.0), horizon=9, estimator="state")
