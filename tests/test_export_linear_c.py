@@ -1,10 +1,11 @@
-"""The fixed C code of the linear controller form, on its own, against the Python controller.
+"""The linear controller's library in C, on its own, against the Python controller.
 
-The C text (``export.linear_c.LINEAR_C``) is compiled with the export's strict flags
-behind a small harness and run on random forms of every shape (with and without a
-controller state, references, measurements): in double precision it must give the
-very numbers of ``LinearController.output/update/estimate`` (the source the
-simulation core compiles), in single precision numbers within float rounding.
+The C the exports write (``export.linear_c.linear_c``: the library's Python source translated
+for one controller's sizes) is compiled with the export's strict flags behind a small harness
+and run on random forms of every shape (with and without a controller state, references,
+measurements): in double precision it must give the very numbers of
+``LinearController.output/update/estimate`` (the source the simulation core compiles), in
+single precision numbers within float rounding.
 """
 
 from __future__ import annotations
@@ -17,53 +18,41 @@ import numpy as np
 import pytest
 
 from equilibrist.control.controller import LinearController
-from equilibrist.export.linear_c import LINEAR_C
+from equilibrist.export.linear_c import deviation_vector, linear_c
 from equilibrist.export.native import build_shared_library
 
 HARNESS = """
 #include <stddef.h>
-#define EQ_REAL {real}
+#include <stdint.h>
+typedef {real} real;
 {code}
-static eq_linear_form make(const int *sizes, const EQ_REAL *const *blocks)
+void h_output(real *p, int64_t np, real *z, real *y, real *r, real *u)
 {{
-    eq_linear_form f;
-    f.nz = sizes[0]; f.ny = sizes[1]; f.nr = sizes[2]; f.m = sizes[3]; f.n = sizes[4];
-    f.Ac = blocks[0]; f.By = blocks[1]; f.Br = blocks[2]; f.Bu = blocks[3]; f.Cc = blocks[4];
-    f.Dy = blocks[5]; f.Dr = blocks[6]; f.Ez = blocks[7]; f.Ey = blocks[8];
-    f.u_op = blocks[9]; f.y_op = blocks[10]; f.r_op = blocks[11];
-    return f;
+    eq_linear_output(0.0, z, {nz}, y, {ny}, r, {nr}, p, np, u, {m});
 }}
-void h_output(const int *s, const EQ_REAL *const *b, const EQ_REAL *z, const EQ_REAL *y,
-              const EQ_REAL *r, EQ_REAL *u)
+void h_update(real *p, int64_t np, real *z, real *y, real *r, real *ua, real *zo)
 {{
-    eq_linear_form f = make(s, b);
-    eq_linear_output(&f, z, y, r, u);
+    eq_linear_update(0.0, z, {nz}, y, {ny}, r, {nr}, ua, {m}, p, np, zo, {nz});
 }}
-void h_update(const int *s, const EQ_REAL *const *b, const EQ_REAL *z, const EQ_REAL *y,
-              const EQ_REAL *r, const EQ_REAL *ua, EQ_REAL *zo)
+void h_estimate(real *p, int64_t np, real *z, real *y, real *dx)
 {{
-    eq_linear_form f = make(s, b);
-    eq_linear_update(&f, z, y, r, ua, zo);
-}}
-void h_estimate(const int *s, const EQ_REAL *const *b, const EQ_REAL *z, const EQ_REAL *y,
-                EQ_REAL *dx)
-{{
-    eq_linear_form f = make(s, b);
-    eq_linear_estimate(&f, z, y, dx);
+    eq_linear_estimate(0.0, z, {nz}, y, {ny}, NULL, 0, p, np, dx, {n});
 }}
 """
 
-BLOCKS = ("Ac", "By", "Br", "Bu", "Cc", "Dy", "Dr", "Ez", "Ey", "u_op", "y_op", "r_op")
+
+def _harness(tmp: Path, real: str, sizes: tuple[int, int, int, int, int]) -> ctypes.CDLL:
+    nz, ny, nr, m, n = sizes
+    src = tmp / f"h_{real}_{'_'.join(map(str, sizes))}.c"
+    code = linear_c({"nz": nz, "ny": ny, "nr": nr, "m": m, "n": n}, real)
+    src.write_text(HARNESS.format(real=real, code=code, nz=nz, ny=ny, nr=nr, m=m, n=n))
+    return ctypes.CDLL(str(build_shared_library([src], src.with_suffix(".so"), include=tmp)))
 
 
 @pytest.fixture(scope="module", params=["double", "float"])
 def harness(request):
-    real = request.param
     with tempfile.TemporaryDirectory() as tmp:
-        src = Path(tmp) / "h.c"
-        src.write_text(HARNESS.format(real=real, code=LINEAR_C))
-        lib = build_shared_library([src], Path(tmp) / "libh.so", include=Path(tmp))
-        yield real, ctypes.CDLL(str(lib))
+        yield request.param, lambda sizes: _harness(Path(tmp), request.param, sizes)
 
 
 def random_form(rng, nz, ny, nr, m, n) -> LinearController:
@@ -85,55 +74,74 @@ def random_form(rng, nz, ny, nr, m, n) -> LinearController:
 
 @pytest.mark.parametrize("sizes", [(4, 2, 1, 1, 4), (0, 4, 0, 1, 4), (6, 3, 2, 2, 6),
                                    (1, 1, 0, 1, 2), (3, 2, 2, 2, 3)])
-def test_fixed_c_step_is_the_python_controller(harness, sizes):
-    real, lib = harness
+def test_c_library_is_the_python_controller(harness, sizes):
+    real, build = harness
+    lib = build(sizes)
     ctype = ctypes.c_double if real == "double" else ctypes.c_float
     dtype = np.float64 if real == "double" else np.float32
     rng = np.random.default_rng(sum(sizes))
     nz, ny, nr, m, n = sizes
     ctrl = random_form(rng, *sizes)
     # The C side reads the form's numbers rounded to its precision; so does the reference.
-    keep = [np.ascontiguousarray(np.asarray(getattr(ctrl, b), dtype=dtype).reshape(-1)) for b in BLOCKS]
-    ptrs = (ctypes.POINTER(ctype) * len(BLOCKS))(*[
-        a.ctypes.data_as(ctypes.POINTER(ctype)) if a.size else ctypes.POINTER(ctype)() for a in keep
-    ])
-    c_sizes = (ctypes.c_int * 5)(nz, ny, nr, m, n)
+    packed = np.ascontiguousarray(deviation_vector(ctrl).astype(dtype))
+    np_ = ctypes.c_int64(packed.size)
 
     def ptr(a):
-        return a.ctypes.data_as(ctypes.POINTER(ctype))
+        return a.ctypes.data_as(ctypes.POINTER(ctype)) if a.size else None
 
     z = rng.standard_normal(nz).astype(dtype)
     for step in range(20):
         y = rng.standard_normal(ny).astype(dtype)
         r = rng.standard_normal(nr).astype(dtype)
-        u = np.zeros(max(m, 1), dtype=dtype)
-        lib.h_output(c_sizes, ptrs, ptr(z), ptr(y), ptr(r) if nr else None, ptr(u))
-        ua = (u[:m] + 0.1 * rng.standard_normal(m)).astype(dtype)
-        zo = np.zeros(max(nz, 1), dtype=dtype)
-        lib.h_update(c_sizes, ptrs, ptr(z), ptr(y), ptr(r) if nr else None, ptr(ua), ptr(zo))
+        u = np.zeros(m, dtype=dtype)
+        lib.h_output(ptr(packed), np_, ptr(z), ptr(y), ptr(r), ptr(u))
+        ua = (u + 0.1 * rng.standard_normal(m)).astype(dtype)
+        zo = np.zeros(nz, dtype=dtype)
+        lib.h_update(ptr(packed), np_, ptr(z), ptr(y), ptr(r), ptr(ua), ptr(zo))
         dx = np.zeros(n, dtype=dtype)
-        lib.h_estimate(c_sizes, ptrs, ptr(z), ptr(y), ptr(dx))
+        lib.h_estimate(ptr(packed), np_, ptr(z), ptr(y), ptr(dx))
         if real == "double":
-            np.testing.assert_array_equal(u[:m], ctrl.output(z, y, r))
-            np.testing.assert_array_equal(zo[:nz], ctrl.update(z, y, r, ua))
+            np.testing.assert_array_equal(u, ctrl.output(z, y, r))
+            np.testing.assert_array_equal(zo, ctrl.update(z, y, r, ua))
             np.testing.assert_array_equal(ctrl.x_op + dx, ctrl.estimate(z, y))
         else:
             scale = 1e-4 * (1 + np.abs(ctrl.output(z, y, r)))
-            assert np.all(np.abs(u[:m] - ctrl.output(z, y, r)) <= scale), step
-            assert np.allclose(zo[:nz], ctrl.update(z, y, r, ua), rtol=1e-4, atol=1e-4)
-        z = zo[:nz].copy()
+            assert np.all(np.abs(u - ctrl.output(z, y, r)) <= scale), step
+            assert np.allclose(zo, ctrl.update(z, y, r, ua), rtol=1e-4, atol=1e-4)
+            assert np.allclose(ctrl.x_op + dx, ctrl.estimate(z, y), rtol=1e-4, atol=1e-4)
+        z = zo.copy()
 
 
-def test_null_reference_holds_the_operating_reference(harness):
-    real, lib = harness
-    if real != "double":
-        return
-    rng = np.random.default_rng(5)
-    ctrl = random_form(rng, 2, 2, 1, 1, 3)
-    keep = [np.ascontiguousarray(np.asarray(getattr(ctrl, b), dtype=float).reshape(-1)) for b in BLOCKS]
+NULL_HARNESS = """
+#include "cartpole_lqg.h"
+int same_without_reference(const double *y, int steps)
+{
+    cartpole_lqg_state a, b;
+    double ua[CARTPOLE_LQG_N_INPUTS], ub[CARTPOLE_LQG_N_INPUTS];
+    int k, i, differ = 0;
+    cartpole_lqg_init(&a);
+    cartpole_lqg_init(&b);
+    for (k = 0; k < steps; ++k) {
+        cartpole_lqg_step(&a, y + k * CARTPOLE_LQG_N_MEASUREMENTS, NULL, ua);
+        cartpole_lqg_step(&b, y + k * CARTPOLE_LQG_N_MEASUREMENTS, cartpole_lqg_R0, ub);
+        for (i = 0; i < CARTPOLE_LQG_N_INPUTS; ++i) differ += ua[i] != ub[i];
+    }
+    return differ;
+}
+"""
+
+
+def test_null_reference_holds_the_operating_reference(tmp_path: Path) -> None:
+    """An exported tracking LQG stepped with ``r = NULL`` commands what it commands with the
+    operating reference ``R0``, to the bit, sample after sample."""
+    from equilibrist.cli.main import main
+
+    out = tmp_path / "lqg"
+    assert main(["export", "cartpole", "--out", str(out)]) == 0
+    assert "CARTPOLE_LQG_N_REFERENCES 1" in (out / "cartpole_lqg.h").read_text()
+    (out / "h.c").write_text(NULL_HARNESS)
+    lib = ctypes.CDLL(str(build_shared_library([out / "h.c", out / "cartpole_lqg.c"],
+                                               out / "libh.so", include=out)))
+    y = np.random.default_rng(2).normal(scale=0.05, size=(50, 2))
     P = ctypes.POINTER(ctypes.c_double)
-    ptrs = (P * len(BLOCKS))(*[a.ctypes.data_as(P) for a in keep])
-    c_sizes = (ctypes.c_int * 5)(2, 2, 1, 1, 3)
-    z, y, u = rng.standard_normal(2), rng.standard_normal(2), np.zeros(1)
-    lib.h_output(c_sizes, ptrs, z.ctypes.data_as(P), y.ctypes.data_as(P), None, u.ctypes.data_as(P))
-    np.testing.assert_array_equal(u, ctrl.output(z, y, ctrl.r_op))
+    assert lib.same_without_reference(np.ascontiguousarray(y).ctypes.data_as(P), 50) == 0

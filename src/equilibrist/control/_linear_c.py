@@ -1,13 +1,15 @@
-"""The linear controller form in C: one fixed piece of code in every export.
+"""The linear controller's library in C for the exports: translated from its one definition.
 
-:data:`LINEAR_C` is the C99 transcription of the compiled linear controller
-(:data:`equilibrist.control.controller.LINEAR_SOURCE`): the same sums in the
-same order, so that in double precision, built without fused multiply-adds,
-the exported controller and the simulated one agree to the last bit. It is
-written into each exported source unchanged, after ``#define EQ_REAL``
-names the library's number type; everything specific to a controller is in
-the constants the generator writes around it (an ``eq_linear_form`` with
-the sizes and the matrices, row-major).
+:func:`linear_c` is :data:`~equilibrist.control.controller.LINEAR_SOURCE` (the
+library the simulation core compiles and :class:`LinearController` runs as
+Python) translated to C by :mod:`equilibrist.native.pyc`, with the sizes of
+one controller as literals (the core's own form for a controller of those
+sizes): ``eq_linear_output``, ``eq_linear_update`` and ``eq_linear_estimate``
+over the controller's packed vector (:func:`deviation_vector`), the same sums
+in the same order. So in double precision, built without fused
+multiply-adds, the exported controller and the simulated one agree to the
+last bit, and nothing of the library is written a second time by hand. In
+single precision the translation's ``double`` is the export's real type.
 
 It is tested on its own (``tests/test_export_linear_c.py``) against the
 Python controller on random forms, in double and single precision.
@@ -15,81 +17,53 @@ Python controller on random forms, in double and single precision.
 
 from __future__ import annotations
 
-#: The fixed C code of the linear form (needs ``EQ_REAL`` and ``<stddef.h>``).
-LINEAR_C = r"""/* ---- The linear controller form: the same code in every export. ----
- * u  = u_op + Cc z + Dy (y - y_op) + Dr (r - r_op)
- * z+ = Ac z + By (y - y_op) + Br (r - r_op) + Bu (u_applied - u_op)
- * x_hat - x_op = Ez z + Ey (y - y_op)
- * Matrices row-major; a block with no elements is NULL. r == NULL holds r at r_op. */
-typedef struct {
-    int nz, ny, nr, m, n;
-    const EQ_REAL *Ac, *By, *Br, *Bu, *Cc, *Dy, *Dr, *Ez, *Ey;
-    const EQ_REAL *u_op, *y_op, *r_op;
-} eq_linear_form;
+import re
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
-static EQ_REAL eq_reference(const eq_linear_form *f, const EQ_REAL *r, int j)
-{
-    return r != NULL ? r[j] : f->r_op[j];
-}
+import numpy as np
 
-static void eq_linear_output(const eq_linear_form *f, const EQ_REAL *z, const EQ_REAL *y,
-                             const EQ_REAL *r, EQ_REAL *u)
-{
-    int i, j;
-    for (i = 0; i < f->m; ++i) {
-        EQ_REAL v = 0;
-        for (j = 0; j < f->nz; ++j) {
-            v += f->Cc[i * f->nz + j] * z[j];
-        }
-        for (j = 0; j < f->ny; ++j) {
-            v += f->Dy[i * f->ny + j] * (y[j] - f->y_op[j]);
-        }
-        for (j = 0; j < f->nr; ++j) {
-            v += f->Dr[i * f->nr + j] * (eq_reference(f, r, j) - f->r_op[j]);
-        }
-        u[i] = f->u_op[i] + v;
-    }
-}
+from equilibrist.control._controller_layout import (
+    LINEAR_HEADER,
+    LINEAR_SOURCE,
+    linear_layout_source,
+)
 
-static void eq_linear_update(const eq_linear_form *f, const EQ_REAL *z, const EQ_REAL *y,
-                             const EQ_REAL *r, const EQ_REAL *u_applied, EQ_REAL *z_out)
-{
-    int i, j;
-    for (i = 0; i < f->nz; ++i) {
-        EQ_REAL v = 0;
-        for (j = 0; j < f->nz; ++j) {
-            v += f->Ac[i * f->nz + j] * z[j];
-        }
-        for (j = 0; j < f->ny; ++j) {
-            v += f->By[i * f->ny + j] * (y[j] - f->y_op[j]);
-        }
-        for (j = 0; j < f->nr; ++j) {
-            v += f->Br[i * f->nr + j] * (eq_reference(f, r, j) - f->r_op[j]);
-        }
-        for (j = 0; j < f->m; ++j) {
-            v += f->Bu[i * f->m + j] * (u_applied[j] - f->u_op[j]);
-        }
-        z_out[i] = v;
-    }
-}
+if TYPE_CHECKING:
+    from equilibrist.control.controller import LinearController
 
-static void eq_linear_estimate(const eq_linear_form *f, const EQ_REAL *z, const EQ_REAL *y,
-                               EQ_REAL *dx)
-{
-    int i, j;
-    for (i = 0; i < f->n; ++i) {
-        EQ_REAL v = 0;
-        for (j = 0; j < f->nz; ++j) {
-            v += f->Ez[i * f->nz + j] * z[j];
-        }
-        for (j = 0; j < f->ny; ++j) {
-            v += f->Ey[i * f->ny + j] * (y[j] - f->y_op[j]);
-        }
-        dx[i] = v;
-    }
-}
-/* ---- end of the linear controller form ---- */
-"""
+# The functions in C, every array a pointer followed by its length (int64_t):
+#   eq_linear_output(t, z, nz, y, ny, r, nr, p, np, u_out, m)
+#   eq_linear_update(t, z, nz, y, ny, r, nr, u_applied, m, p, np, z_out, nz)
+#   eq_linear_estimate(t, z, nz, y, ny, r, nr, p, np, x_out, n)
 
-#: The blocks of ``eq_linear_form``, in the order of its initializer.
-FORM_BLOCKS = ("Ac", "By", "Br", "Bu", "Cc", "Dy", "Dr", "Ez", "Ey", "u_op", "y_op", "r_op")
+
+def linear_c(sizes: Mapping[str, int], real: str = "double") -> str:
+    """The library in C for controllers of *sizes* (``nz, ny, nr, m, n``), in *real*
+    (``"double"`` or ``"float"``): static functions ``eq_linear_*`` (needs ``<stdint.h>``)."""
+    from equilibrist.control.controller import translate_controller
+
+    fixed = {key: int(sizes[key]) for key in ("nz", "ny", "nr", "m", "n")}
+    mod, _ = translate_controller(
+        linear_layout_source(fixed) + LINEAR_SOURCE,
+        {role: f"linear_{role}" for role in ("output", "update", "estimate")},
+        prefix="eq_", library="")
+    text: str = mod.c_source()
+    if real != "double":
+        text = re.sub(r"\bdouble\b", real, text)
+    return ("/* ---- The linear controller's library, translated from its Python definition "
+            "(equilibrist.control.controller.LINEAR_SOURCE). ---- */\n" + text
+            + "/* ---- end of the linear controller's library ---- */\n")
+
+
+def deviation_vector(lin: LinearController) -> np.ndarray:
+    """*lin*'s packed vector (:attr:`LinearController.packed`) with its ``x_op`` block zero:
+    ``eq_linear_estimate`` then writes the estimate's deviation from the operating point,
+    ``Ez z + Ey (y - y_op)``, the sum :attr:`LinearController.estimate` adds to ``x_op``."""
+    p = lin.packed()
+    start = int(p[LINEAR_HEADER.index("x_op")])
+    p[start:start + int(p[LINEAR_HEADER.index("n")])] = 0.0
+    return p
+
+
+__all__ = ["deviation_vector", "linear_c"]

@@ -16,6 +16,7 @@ import numpy as np
 from equilibrist.errors import ExportError
 
 if TYPE_CHECKING:
+    from equilibrist.control.controller import LinearController
     from equilibrist.control.mpc import MPC
 
 
@@ -89,24 +90,22 @@ def ldp_form(ctrl: MPC) -> dict[str, np.ndarray]:
             "rinv_top": rinv[: prob.m], "w_top": w[: prob.m]}
 
 
-def filter_form(ctrl: MPC) -> dict[str, np.ndarray]:
-    """The Kalman filter in front of the MPC as blocks of the linear controller form (deviations,
-    row-major): the design's LQG controller's own estimator (``LinearController.lqg``), so one
-    filter serves the LQG and the MPC. ``z+ = Ac z + By dy + Bu du_applied`` and
-    ``dx = Ez z + Ey dy``: for the ``current`` form ``Ez = I - M C``, ``Ey = M``,
-    ``Ac = Ad Ez``, ``By = Ad M``; for the ``predictor`` form ``Ez = I``, ``Ey = 0``,
-    ``Ac = Ad - L C``, ``By = L``; ``Bu = Bd`` in both."""
+def filter_form(ctrl: MPC) -> LinearController:
+    """The Kalman filter in front of the MPC as a linear controller: the design's LQG
+    controller (``LinearController.lqg``), whose estimator the MPC runs, so one filter serves
+    the LQG and the MPC. ``z+ = Ac z + By dy + Bu du_applied`` and ``dx = Ez z + Ey dy``: for
+    the ``current`` form ``Ez = I - M C``, ``Ey = M``, ``Ac = Ad Ez``, ``By = Ad M``; for the
+    ``predictor`` form ``Ez = I``, ``Ey = 0``, ``Ac = Ad - L C``, ``By = L``; ``Bu = Bd`` in
+    both."""
     from equilibrist.control.controller import ControllerError, LinearController
 
     if ctrl.estimator == "state" or ctrl.Kf is None or ctrl.design is None:
         raise ControllerError("the MPC measures the full state: it has no Kalman filter")
-    lin = LinearController.lqg(
+    return LinearController.lqg(
         ctrl.problem.K, Ad=np.asarray(ctrl.design.discrete.A, dtype=float),
         Bd=np.asarray(ctrl.design.discrete.B, dtype=float), Kf=ctrl.Kf,
         outputs=ctrl.output_names, x_op=ctrl.x_op, u_op=ctrl.u_op, rate=ctrl.rate,
         form=ctrl.form, state_names=ctrl.state_names)
-    return {"Ac": lin.Ac, "By": lin.By, "Bu": lin.Bu, "Ez": lin.Ez, "Ey": lin.Ey,
-            "y_op": lin.y_op}
 
 
 #: DAQP's files the MPC's least-distance problem runs, built at ``-O1`` in the simulated MPC's
@@ -149,7 +148,7 @@ def library_files(ctrl: MPC, *, name: str = "mpc", precision: str = "double",
     solve where its trajectory meets every constraint (the MPC's own; ``False`` solves every
     QP, as ``MPCRuntime(exact_unconstrained=False)``). *iter_limit*: DAQP's cap on its
     iterations (default :data:`~equilibrist.control.mpc.ITER_LIMIT`)."""
-    from equilibrist.control._linear_c import LINEAR_C
+    from equilibrist.control._linear_c import deviation_vector, linear_c
     from equilibrist.control.mpc import EPS, INF, ITER_LIMIT
 
     if not name.isidentifier():
@@ -382,28 +381,27 @@ def library_files(ctrl: MPC, *, name: str = "mpc", precision: str = "double",
         "}", "",
     ]
     if kalman:
-        form = filter_form(ctrl)
+        packed = deviation_vector(filter_form(ctrl))
         body += [
-            "#define EQ_REAL c_float", LINEAR_C,
-            f"#define NY {ny}",
-            _array("F_AC", form["Ac"]), _array("F_BY", form["By"]), _array("F_BU", form["Bu"]),
-            _array("F_EZ", form["Ez"]), _array("F_EY", form["Ey"]), _array("Y_OP", form["y_op"]),
-            "",
-            "/* The Kalman filter in front: dx = Ez z + Ey dy, z+ = Ac z + By dy + Bu du. */",
-            "static const eq_linear_form FILTER = {NX, NY, 0, NU, NX, F_AC, F_BY, NULL, F_BU,",
-            "                                      NULL, NULL, NULL, F_EZ, F_EY, U_OP, Y_OP, NULL};",
+            "#include <stdint.h>",
+            linear_c({"nz": n, "ny": ny, "nr": 0, "m": m, "n": n}, "c_float"),
+            f"#define NY {ny}", f"#define NF {packed.size}",
+            "/* The Kalman filter in front, the LQG's estimator as the linear library reads it:",
+            " * dx = Ez z + Ey dy, z+ = Ac z + By dy + Bu du. */",
+            _array("FILTER", packed),
+            "#define FILTER_P (c_float *)FILTER, NF",
             "",
             f"void {name}_init({name}_filter *f)",
             "{", "    int i;", "    for (i = 0; i < NX; ++i) f->z[i] = 0.0;", "}", "",
             f"void {name}_estimate(const {name}_filter *f, const double y[NY], double x[NX])",
             "{", "    c_float dx[NX], yy[NY];", "    int i;",
             "    for (i = 0; i < NY; ++i) yy[i] = (c_float)y[i];",
-            "    eq_linear_estimate(&FILTER, f->z, yy, dx);",
+            "    eq_linear_estimate(0.0, (c_float *)f->z, NX, yy, NY, NULL, 0, FILTER_P, dx, NX);",
             "    for (i = 0; i < NX; ++i) x[i] = X_OP[i] + dx[i];", "}", "",
             f"int {name}_output(const {name}_filter *f, const double y[NY], double u[NU])",
             "{", "    c_float dx[NX], yy[NY], du[NU];", "    int i, flag;",
             "    for (i = 0; i < NY; ++i) yy[i] = (c_float)y[i];",
-            "    eq_linear_estimate(&FILTER, f->z, yy, dx);",
+            "    eq_linear_estimate(0.0, (c_float *)f->z, NX, yy, NY, NULL, 0, FILTER_P, dx, NX);",
             "    flag = solve_at(dx, du);",
             "    for (i = 0; i < NU; ++i) u[i] = U_OP[i] + du[i];",
             "    return flag;", "}", "",
@@ -411,7 +409,7 @@ def library_files(ctrl: MPC, *, name: str = "mpc", precision: str = "double",
             "{", "    c_float z[NX], yy[NY], ua[NU];", "    int i;",
             "    for (i = 0; i < NY; ++i) yy[i] = (c_float)y[i];",
             "    for (i = 0; i < NU; ++i) ua[i] = (c_float)u_applied[i];",
-            "    eq_linear_update(&FILTER, f->z, yy, NULL, ua, z);",
+            "    eq_linear_update(0.0, f->z, NX, yy, NY, NULL, 0, ua, NU, FILTER_P, z, NX);",
             "    for (i = 0; i < NX; ++i) f->z[i] = z[i];", "}", "",
         ]
     source = "\n".join(body)

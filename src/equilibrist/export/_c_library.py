@@ -7,6 +7,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from equilibrist.control._controller_layout import LINEAR_HEADER
 from equilibrist.errors import ExportError
 from equilibrist.export._c_text import (
     _INDENT,
@@ -22,7 +23,7 @@ from equilibrist.export._c_text import (
     literal,
 )
 from equilibrist.export.data import ControllerData
-from equilibrist.export.linear_c import FORM_BLOCKS, LINEAR_C
+from equilibrist.export.linear_c import deviation_vector, linear_c
 
 
 def _header_comment(data: ControllerData, *, version: str, precision: str,
@@ -197,17 +198,25 @@ def header(data: ControllerData, *, precision: str, version: str, title: str = "
         lines.append(
             f"extern const {real} {nm('KC')}[{nm.macro('N_INPUTS')}][{nm.macro('N_REFERENCES')}];"
         )
+    packed = deviation_vector(data.form_controller)
     lines += [
         "",
         "/* The controller as one linear form (what step runs), matrices row-major:",
         " *   u  = U0 + CC z + DY (y - Y0) + DR (r - R0), then saturated",
         " *   z+ = AC z + BY (y - Y0) + BR (r - R0) + BU (u - U0)",
         " *   estimate = X0 + EZ z + EY (y - Y0)",
-        " * (a matrix without elements is not defined). */",
+        " * packed in one vector, LINEAR, as the linear library reads it (its sizes and the",
+        " * offsets of its blocks, then the blocks; its estimate's operating point is zero: the",
+        " * library's estimate is the deviation). Each matrix is a pointer into it (a matrix",
+        " * without elements is not defined). */",
+        f"#define {nm.macro('N_LINEAR')} {packed.size}",
+        f"extern const {real} {nm('LINEAR')}[{nm.macro('N_LINEAR')}];",
     ]
     for label, rows, cols in _form_shapes(data):
         if rows * cols:
-            lines.append(f"extern const {real} {nm(label.upper())}[{rows * cols}];")
+            at = int(packed[LINEAR_HEADER.index(label)])
+            lines.append(f"#define {nm(label.upper())} ({nm('LINEAR')} + {at})"
+                         f"  /* {rows} x {cols} */")
     lines += [
         "",
         "/* Start at the operating point (estimate zero deviation). */",
@@ -274,34 +283,18 @@ def source(data: ControllerData, *, precision: str, version: str) -> str:
         lines.append(f"const {real} {nm('KF')}[{N}][{P}] = {_matrix(data.Kf, precision)};")
     if data.n_references:
         lines.append(f"const {real} {nm('KC')}[{M}][{NR}] = {_matrix(data.Kc, precision)};")
-    for label, rows, cols in _form_shapes(data):
-        if rows * cols:
-            block = np.asarray(getattr(data.form_controller, label), dtype=float).reshape(-1)
-            lines.append(f"const {real} {nm(label.upper())}[{rows * cols}] = "
-                         f"{_vector(block, precision)};")
+    packed = deviation_vector(data.form_controller)
+    lines.append(f"const {real} {nm('LINEAR')}[{nm.macro('N_LINEAR')}] = "
+                 f"{_vector(packed, precision)};")
     version_line = (
         f"{nm.lower} ({version}, design {data.fingerprint}): {_settings_string(data, precision)}"
     )
-    form_fields = []
-    for label in FORM_BLOCKS:
-        if label in ("u_op", "y_op", "r_op"):
-            size = {"u_op": data.n_inputs, "y_op": data.n_measured, "r_op": data.n_references}[label]
-            const = {"u_op": "U0", "y_op": "Y0", "r_op": "R0"}[label]
-            form_fields.append(nm(const) if size else "NULL")
-        else:
-            rows, cols = next((r, c) for lb, r, c in _form_shapes(data) if lb == label)
-            form_fields.append(nm(label.upper()) if rows * cols else "NULL")
-    sizes = f"{data.n_z}, {data.n_measured}, {data.n_references}, {data.n_inputs}, {data.n_states}"
-    zvar = "s->z" if data.n_z else "NULL"
+    sizes = {"nz": data.n_z, "ny": data.n_measured, "nr": data.n_references,
+             "m": data.n_inputs, "n": data.n_states}
     lines += [
         "",
-        f"#define EQ_REAL {real}",
-        LINEAR_C,
-        f"static const eq_linear_form {nm('form')} = {{",
-        f"    {sizes},",
-        "    " + ", ".join(form_fields),
-        "};",
-        "",
+        "#include <stdint.h>",
+        linear_c(sizes, precision),
         f"static const char {nm('version_text')}[] = {_c_string(version_line)};",
         "",
         f"const char *{nm('version')}(void)",
@@ -371,12 +364,20 @@ def source(data: ControllerData, *, precision: str, version: str) -> str:
     ]
     if data.n_z:
         lines.append(f"    {real} z_next[{nm.macro('N_Z')}];")
-    if not data.n_references:
-        lines.append("    r = NULL;  /* no references: nothing to read */")
+    zarg = f"s->z, {nm.macro('N_Z')}" if data.n_z else "NULL, 0"
+    lin = f"({real} *){nm('LINEAR')}, {nm.macro('N_LINEAR')}"
+    if data.n_references:
+        # No references given: held at the operating ones (a zero deviation).
+        lines.append(f"    {real} *rr = ({real} *)(r != NULL ? r : {nm('R0')});")
+        rarg = f"rr, {NR}"
+    else:
+        lines.append("    (void)r;  /* no references: nothing to read */")
+        rarg = "NULL, 0"
+    yarg = f"({real} *)y, {P}"
     lines += [
         "    /* The estimate behind the command, and the command. */",
-        f"    eq_linear_estimate(&{nm('form')}, {zvar}, y, s->xhat);",
-        f"    eq_linear_output(&{nm('form')}, {zvar}, y, r, u);",
+        f"    eq_linear_estimate(0.0, {zarg}, {yarg}, {rarg}, {lin}, s->xhat, {N});",
+        f"    eq_linear_output(0.0, {zarg}, {yarg}, {rarg}, {lin}, u, {M});",
         "    /* Saturated to the input limits. */",
         f"    for (i = 0; i < {M}; ++i) {{",
         f"        {real} v = u[i];",
@@ -393,7 +394,8 @@ def source(data: ControllerData, *, precision: str, version: str) -> str:
     ]
     lines += [
         "    /* The next controller state, with the input actually applied. */",
-        f"    eq_linear_update(&{nm('form')}, {zvar}, y, r, s->u, {'z_next' if data.n_z else 'NULL'});",
+        f"    eq_linear_update(0.0, {zarg}, {yarg}, {rarg}, s->u, {M}, {lin}, "
+        + (f"z_next, {nm.macro('N_Z')});" if data.n_z else "NULL, 0);"),
     ]
     if data.n_z:
         lines += [

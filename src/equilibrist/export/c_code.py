@@ -4,11 +4,10 @@ Every function here is pure: it takes a :class:`~equilibrist.export.data.Control
 (and, for the test vectors, a recorded run) and returns the text of one
 file. Writing them is :mod:`equilibrist.export.writer`'s job.
 
-The step function is the fixed C code of the linear controller form
-(:data:`equilibrist.export.linear_c.LINEAR_C`), the transcription of the
-simulation core's compiled controller operation for operation, plus the
-generated constants of the design's form: in double precision the C
-controller and the simulated one agree to the last bit.
+The step function runs the linear controller's library translated from its Python source
+(:func:`equilibrist.export.linear_c.linear_c`, the simulation core's own translation of
+``LINEAR_SOURCE`` for the controller's sizes) on the design's packed form: in double
+precision the C controller and the simulated one agree to the last bit.
 
 The functions live in :mod:`equilibrist.export._c_library` (the header and the
 source), :mod:`equilibrist.export._c_programs` (the test vectors and program, the
