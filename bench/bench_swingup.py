@@ -32,7 +32,7 @@ import numpy as np
 from equilibrist import get_system
 from equilibrist.control.controller import LinearController
 from equilibrist.control.design import design
-from equilibrist.control.swingup import LAWS, Z, python_namespace, swingup
+from equilibrist.control.swingup import Z, python_namespace, swingup, swingup_laws
 from equilibrist.sim.batch import simulate_batch
 from equilibrist.sim.noise import Noise
 from equilibrist.tasks import get_task
@@ -46,7 +46,8 @@ def swing_times(ctrl: object, batch: object, n_out: int, m: int) -> np.ndarray:
     The controller's own compiled functions replay each run's recorded
     measurements and applied inputs, so the mode is the one the batch had.
     """
-    fns = python_namespace(compiled=True)  # the law compiled to C, as the core runs it
+    # The law compiled to C, as the core runs it.
+    fns = python_namespace(str(ctrl.settings["law"]), compiled=True)  # type: ignore[attr-defined]
     output, update = fns["output"], fns["update"]
     traj = batch.trajectories  # type: ignore[attr-defined]
     n = len(batch.state_names)  # type: ignore[attr-defined]
@@ -132,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=1000)
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--systems", default=",".join(LAWS))
+    ap.add_argument("--systems", default=",".join(swingup_laws()))
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--balance", choices=("lqr", "lqg"), default="lqr",
                     help="what balances after the catch (default lqr)")

@@ -85,6 +85,10 @@ def _tasks(spec: SystemSpec) -> list[str]:
             f"hanging at rest ({hang}), each hanging coordinate offset uniformly by up to "
             f"{tasks.SWINGUP_OFFSET:g} rad, ending balanced at the operating point{track}."
         )
+    if spec.swingup is not None:
+        gains = ", ".join(f"`{k}` = {_num(v)}" for k, v in spec.swingup.gains.items())
+        out.append(f"* `--controller swingup`: the `{spec.swingup.law}` energy-pumping law, "
+                   f"default gains {gains} (`equilibrist.control.swingup`).")
     return out
 
 

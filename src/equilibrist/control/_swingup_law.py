@@ -10,13 +10,9 @@ from typing import Any
 
 import numpy as np
 
-#: The systems a swing-up exists for, and the law each uses.
-LAWS = {"cartpole": 0, "reaction_wheel_pendulum": 1, "furuta": 2, "acrobot": 3}
-LAW_NAMES = ("cart", "wheel", "rotary", "acrobot")
-
 # --- layout of the parameters ``cp`` and of the state ``z`` (one place: the source,
 # the Python runtime and the C export read these) -----------------------------------
-CP_SLOTS = ("law", "T", "ke", "amax", "e0", "kx", "kv", "kp", "c_in", "c_out", "alpha",
+CP_SLOTS = ("T", "ke", "amax", "e0", "kx", "kv", "kp", "c_in", "c_out", "alpha",
             "beta", "u_min", "u_max", "u_op", "kd", "lqg", "kform")
 N_PHYS = 8
 N_STATES = 4  # every rig with a swing-up has two coordinates
@@ -74,74 +70,6 @@ def su_clip(v, lo, hi):
     if v > hi:
         return hi
     return v
-
-
-def su_energy(x0, x1, x2, x3, p):
-    law = int(p[SU_LAW])
-    ph = SU_PHYS
-    if law == 3:
-        m1 = p[ph]
-        m2 = p[ph + 1]
-        l1 = p[ph + 2]
-        lc1 = p[ph + 3]
-        lc2 = p[ph + 4]
-        i1 = p[ph + 5]
-        i2 = p[ph + 6]
-        g = p[ph + 7]
-        c2 = eq_cos(x1)
-        d1 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2
-        d2 = m2 * (lc2 * lc2 + l1 * lc2 * c2) + i2
-        d3 = m2 * lc2 * lc2 + i2
-        kin = 0.5 * (d1 * x2 * x2 + 2.0 * d2 * x2 * x3 + d3 * x3 * x3)
-        pot = -g * (m1 * lc1 * eq_cos(x0) + m2 * (l1 * eq_cos(x0) + lc2 * eq_cos(x0 + x1)))
-        return kin + pot - g * (m1 * lc1 + m2 * (l1 + lc2))
-    return 0.5 * p[ph] * x3 * x3 + p[ph + 1] * (eq_cos(x1) - 1.0)
-
-
-def su_pump(x0, x1, x2, x3, p):
-    law = int(p[SU_LAW])
-    ph = SU_PHYS
-    e = su_energy(x0, x1, x2, x3, p) - p[SU_E0]
-    ke = p[SU_KE]
-    amax = p[SU_AMAX]
-    if law == 0:
-        a = su_clip(ke * e * su_sign(x3 * eq_cos(x1)), -amax, amax)
-        a = a - p[SU_KX] * x0 - p[SU_KV] * x2
-        # The force that gives the cart the acceleration a exactly.
-        mlc = p[ph + 4] * eq_cos(x1)
-        th_dd = (p[ph + 1] * eq_sin(x1) - p[ph + 5] * x3 - mlc * a) / p[ph]
-        return (p[ph + 2] * a + mlc * th_dd - p[ph + 4] * eq_sin(x1) * x3 * x3
-                + p[ph + 3] * x2)
-    if law == 1:
-        return su_clip(ke * e * su_sign(x3), -amax, amax) - p[SU_KV] * (x2 - x3)
-    if law == 2:
-        return su_clip(ke * e * su_sign(x3 * eq_cos(x1)), -amax, amax) - p[SU_KV] * x2
-    m1 = p[ph]
-    m2 = p[ph + 1]
-    l1 = p[ph + 2]
-    lc1 = p[ph + 3]
-    lc2 = p[ph + 4]
-    i1 = p[ph + 5]
-    i2 = p[ph + 6]
-    g = p[ph + 7]
-    t2 = su_wrap(x1)
-    c2 = eq_cos(t2)
-    s2 = eq_sin(t2)
-    m11 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2
-    m12 = m2 * (lc2 * lc2 + l1 * lc2 * c2) + i2
-    m22 = m2 * lc2 * lc2 + i2
-    det = m11 * m22 - m12 * m12
-    hg2 = m2 * l1 * lc2 * s2 * x2 * x2 + m2 * lc2 * g * eq_sin(x0 + t2)
-    hg1 = (-m2 * l1 * lc2 * s2 * (2.0 * x2 * x3 + x3 * x3)
-           + (m1 * lc1 + m2 * l1) * g * eq_sin(x0) + m2 * lc2 * g * eq_sin(x0 + t2))
-    # Xin and Kaneda's energy law: V = ke (E - E0)^2 / 2 + kd x3^2 / 2 + kp t2^2 / 2
-    # falls as dV/dt = -kv x3^2 (while the motor is not saturated).
-    kd = p[SU_KD]
-    num = -(p[SU_KV] * x3 + p[SU_KP] * t2) * det + kd * (m11 * hg2 - m12 * hg1)
-    den = ke * e * det + kd * m11
-    if den == 0.0:
-        return 0.0
-    return num / den
 
 
 def su_xhat(z, y, p, i):
@@ -294,33 +222,145 @@ def estimate(t, z, y, r, p, x_out):
 """
 
 
-def controller_source() -> str:
-    """:data:`LAW_SOURCE` with the layout's constants in front."""
+#: Each law's energy and pumping term, as source (``su_energy``, ``su_pump``): the controller's
+#: source is the common part (:data:`LAW_SOURCE`) and the law its system's definition names
+#: (``spec.swingup.law``), with no branch on a law number. Its physical constants are the
+#: ``phys`` block of the parameters (:func:`equilibrist.control.swingup._physics`).
+LAW_SOURCES = {
+    "cart": """
+def su_energy(x0, x1, x2, x3, p):
+    # The pendulum's energy, from upright: J theta_dot^2 / 2 + m g l (cos theta - 1).
+    ph = SU_PHYS
+    return 0.5 * p[ph] * x3 * x3 + p[ph + 1] * (eq_cos(x1) - 1.0)
+
+
+def su_pump(x0, x1, x2, x3, p):
+    ph = SU_PHYS
+    e = su_energy(x0, x1, x2, x3, p) - p[SU_E0]
+    ke = p[SU_KE]
+    amax = p[SU_AMAX]
+    a = su_clip(ke * e * su_sign(x3 * eq_cos(x1)), -amax, amax)
+    a = a - p[SU_KX] * x0 - p[SU_KV] * x2
+    # The force that gives the cart the acceleration a exactly.
+    mlc = p[ph + 4] * eq_cos(x1)
+    th_dd = (p[ph + 1] * eq_sin(x1) - p[ph + 5] * x3 - mlc * a) / p[ph]
+    return (p[ph + 2] * a + mlc * th_dd - p[ph + 4] * eq_sin(x1) * x3 * x3
+            + p[ph + 3] * x2)
+""",
+    "wheel": """
+def su_energy(x0, x1, x2, x3, p):
+    # The pendulum's energy, from upright: J theta_dot^2 / 2 + m g l (cos theta - 1).
+    ph = SU_PHYS
+    return 0.5 * p[ph] * x3 * x3 + p[ph + 1] * (eq_cos(x1) - 1.0)
+
+
+def su_pump(x0, x1, x2, x3, p):
+    ph = SU_PHYS
+    e = su_energy(x0, x1, x2, x3, p) - p[SU_E0]
+    ke = p[SU_KE]
+    amax = p[SU_AMAX]
+    return su_clip(ke * e * su_sign(x3), -amax, amax) - p[SU_KV] * (x2 - x3)
+""",
+    "rotary": """
+def su_energy(x0, x1, x2, x3, p):
+    # The pendulum's energy, from upright: J theta_dot^2 / 2 + m g l (cos theta - 1).
+    ph = SU_PHYS
+    return 0.5 * p[ph] * x3 * x3 + p[ph + 1] * (eq_cos(x1) - 1.0)
+
+
+def su_pump(x0, x1, x2, x3, p):
+    ph = SU_PHYS
+    e = su_energy(x0, x1, x2, x3, p) - p[SU_E0]
+    ke = p[SU_KE]
+    amax = p[SU_AMAX]
+    return su_clip(ke * e * su_sign(x3 * eq_cos(x1)), -amax, amax) - p[SU_KV] * x2
+""",
+    "acrobot": """
+def su_energy(x0, x1, x2, x3, p):
+    # The acrobot's total energy, from upright.
+    ph = SU_PHYS
+    m1 = p[ph]
+    m2 = p[ph + 1]
+    l1 = p[ph + 2]
+    lc1 = p[ph + 3]
+    lc2 = p[ph + 4]
+    i1 = p[ph + 5]
+    i2 = p[ph + 6]
+    g = p[ph + 7]
+    c2 = eq_cos(x1)
+    d1 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2
+    d2 = m2 * (lc2 * lc2 + l1 * lc2 * c2) + i2
+    d3 = m2 * lc2 * lc2 + i2
+    kin = 0.5 * (d1 * x2 * x2 + 2.0 * d2 * x2 * x3 + d3 * x3 * x3)
+    pot = -g * (m1 * lc1 * eq_cos(x0) + m2 * (l1 * eq_cos(x0) + lc2 * eq_cos(x0 + x1)))
+    return kin + pot - g * (m1 * lc1 + m2 * (l1 + lc2))
+
+
+def su_pump(x0, x1, x2, x3, p):
+    ph = SU_PHYS
+    e = su_energy(x0, x1, x2, x3, p) - p[SU_E0]
+    ke = p[SU_KE]
+    amax = p[SU_AMAX]
+    m1 = p[ph]
+    m2 = p[ph + 1]
+    l1 = p[ph + 2]
+    lc1 = p[ph + 3]
+    lc2 = p[ph + 4]
+    i1 = p[ph + 5]
+    i2 = p[ph + 6]
+    g = p[ph + 7]
+    t2 = su_wrap(x1)
+    c2 = eq_cos(t2)
+    s2 = eq_sin(t2)
+    m11 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2
+    m12 = m2 * (lc2 * lc2 + l1 * lc2 * c2) + i2
+    m22 = m2 * lc2 * lc2 + i2
+    det = m11 * m22 - m12 * m12
+    hg2 = m2 * l1 * lc2 * s2 * x2 * x2 + m2 * lc2 * g * eq_sin(x0 + t2)
+    hg1 = (-m2 * l1 * lc2 * s2 * (2.0 * x2 * x3 + x3 * x3)
+           + (m1 * lc1 + m2 * l1) * g * eq_sin(x0) + m2 * lc2 * g * eq_sin(x0 + t2))
+    # Xin and Kaneda's energy law: V = ke (E - E0)^2 / 2 + kd x3^2 / 2 + kp t2^2 / 2
+    # falls as dV/dt = -kv x3^2 (while the motor is not saturated).
+    kd = p[SU_KD]
+    num = -(p[SU_KV] * x3 + p[SU_KP] * t2) * det + kd * (m11 * hg2 - m12 * hg1)
+    den = ke * e * det + kd * m11
+    if den == 0.0:
+        return 0.0
+    return num / den
+""",
+}
+LAW_NAMES = tuple(LAW_SOURCES)
+
+
+def controller_source(law: str) -> str:
+    """The swing-up's source for the law *law* (:data:`LAW_NAMES`): the layout's constants,
+    :data:`LAW_SOURCE` and the law's :data:`LAW_SOURCES`."""
     head = "\n".join(f"{k} = {v}" for k, v in layout_constants().items())
-    return head + "\n" + LAW_SOURCE
+    return head + "\n" + LAW_SOURCE + LAW_SOURCES[law]
 
 
-def python_namespace(*, compiled: bool = False) -> Any:
-    """The source's functions, as plain Python (or compiled to C, as the simulation core
-    runs them, when *compiled*: then only ``output``, ``update`` and ``estimate``)."""
+def python_namespace(law: str, *, compiled: bool = False) -> Any:
+    """The law *law*'s controller functions, as plain Python (or compiled to C, as the
+    simulation core runs them, when *compiled*: then only ``output``, ``update`` and
+    ``estimate``)."""
     if compiled:
         from equilibrist.native.ctrl import controller_functions
 
-        return controller_functions(controller_source(), ("output", "update", "estimate"))
-    key = "python"
-    if key not in _NAMESPACES:
+        return controller_functions(controller_source(law), ("output", "update", "estimate"))
+    if law not in _NAMESPACES:
         from equilibrist.control.controller import contract_namespace
 
         ns = contract_namespace()
-        exec(compile(controller_source(), "<equilibrist swing-up>", "exec"), ns)
-        _NAMESPACES[key] = ns
-    return _NAMESPACES[key]
+        exec(compile(controller_source(law), f"<equilibrist swing-up: {law}>", "exec"), ns)
+        _NAMESPACES[law] = ns
+    return _NAMESPACES[law]
 
 
 _NAMESPACES: dict[str, dict[str, Any]] = {}
 
 
-def energy(x: np.ndarray, cp: np.ndarray) -> float:
-    """The energy the law pumps (pendulum's from upright; acrobot: total from upright) at state *x*."""
+def energy(x: np.ndarray, cp: np.ndarray, law: str) -> float:
+    """The energy the law *law* pumps (pendulum's from upright; acrobot: total from upright)
+    at state *x*, with the controller's parameters *cp*."""
     x = np.asarray(x, dtype=float)
-    return float(python_namespace()["su_energy"](x[0], x[1], x[2], x[3], cp))
+    return float(python_namespace(law)["su_energy"](x[0], x[1], x[2], x[3], cp))

@@ -93,7 +93,6 @@ export writes line for line.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -111,7 +110,7 @@ from equilibrist.control._swingup_law import (
     CP_SLOTS,
     LAW_NAMES,
     LAW_SOURCE,
-    LAWS,
+    LAW_SOURCES,
     MODE_BALANCE,
     MODE_PUMP,
     N_PHYS,
@@ -185,14 +184,19 @@ class SwingUpTuning:
     k_d: float = 0.0
 
 
-#: Default tuning of each law for the catalogue's defaults.
-TUNING: Mapping[str, SwingUpTuning] = {
-    "cartpole": SwingUpTuning(k_energy=5.0, a_max=6.0, k_x=6.0, k_v=2.0),
-    "reaction_wheel_pendulum": SwingUpTuning(k_energy=0.5, a_max=0.2, catch_fraction=10.0, accel=40.0),
-    "furuta": SwingUpTuning(k_energy=40.0, a_max=0.05, catch_fraction=20.0, accel=100.0),
-    "acrobot": SwingUpTuning(k_energy=1.0, a_max=20.0, k_p=60.0, k_v=30.0, k_d=30.0,
-                             release_factor=20.0),
-}
+def swingup_laws() -> dict[str, str]:
+    """The catalogue's systems with a swing-up (``spec.swingup``), and the law of each."""
+    from equilibrist.systems.registry import all_entries
+
+    return {e.spec.name: e.spec.swingup.law for e in all_entries() if e.spec.swingup is not None}
+
+
+def default_tuning(system: System) -> SwingUpTuning:
+    """The gains *system*'s definition states (``spec.swingup.gains``)."""
+    if system.spec.swingup is None:
+        raise ControllerError(f"{system.name} has no swing-up: it exists for "
+                              f"{', '.join(swingup_laws())}")
+    return SwingUpTuning(**system.spec.swingup.gains)
 
 
 class SwingUpRuntime:
@@ -210,7 +214,7 @@ class SwingUpRuntime:
         self.rate: float | None = ctrl.rate
         self.outputs: tuple[str, ...] | None = ctrl.output_names
         self.estimate: np.ndarray | None = None
-        self._ns = python_namespace(compiled=compiled)
+        self._ns = python_namespace(str(ctrl.settings["law"]), compiled=compiled)
         self.reset()
 
     def reset(self) -> None:
@@ -293,12 +297,12 @@ def swingup(
     Parameters
     ----------
     system:
-        A bound system with a swing-up law (:data:`LAWS`).
+        A bound system whose definition states a swing-up (``spec.swingup``).
     design:
         The balancing design (a discrete one at the controller's rate);
         default ``design(system, rate=rate)``.
     tuning:
-        Gains; default :data:`TUNING` of the system.
+        Gains; default those of the system's definition (:func:`default_tuning`).
     rate:
         Sample rate [Hz]; default the design's, else the rig's ``control_rate``.
     balance:
@@ -324,11 +328,13 @@ def swingup(
 
     if balance not in BALANCES:
         raise ControllerError(f"balance {balance!r}: expected one of {', '.join(BALANCES)}")
-    if system.name not in LAWS:
-        raise ControllerError(
-            f"{system.name} has no swing-up: it exists for {', '.join(LAWS)}"
-        )
-    law = LAW_NAMES[LAWS[system.name]]
+    default = default_tuning(system)  # refuses a system whose definition states no swing-up
+    tune = tuning or default
+    assert system.spec.swingup is not None
+    law = system.spec.swingup.law
+    if law not in LAW_NAMES:
+        raise ControllerError(f"{system.name}'s swing-up law {law!r}: expected one of "
+                              f"{', '.join(LAW_NAMES)}")
     if rate is not None:
         hz = float(rate)
     elif design is not None and design.rate is not None:
@@ -341,7 +347,6 @@ def swingup(
         raise ControllerError(
             f"the swing-up needs a balancing design at {hz:g} Hz: design(system, rate={hz:g})"
         )
-    tune = tuning or TUNING[system.name]
     names = system.state_names
     nq = len(system.spec.coordinates)
     n = 2 * nq
@@ -355,7 +360,7 @@ def swingup(
     alpha, beta = tracking_gains(max(noise), tune.accel, 1.0 / hz)
     cp = np.zeros(CP["end"])
     values = {
-        "law": LAWS[system.name], "T": 1.0 / hz, "ke": tune.k_energy, "amax": tune.a_max,
+        "T": 1.0 / hz, "ke": tune.k_energy, "amax": tune.a_max,
         "e0": tune.e0, "kx": tune.k_x, "kv": tune.k_v, "kp": tune.k_p, "kd": tune.k_d, "c_in": c_in,
         "c_out": tune.release_factor * c_in, "alpha": alpha, "beta": beta,
         "u_min": lo[0], "u_max": hi[0], "u_op": u_op[0],
@@ -391,7 +396,7 @@ def swingup(
         "tuning": {k: getattr(tune, k) for k in tune.__dataclass_fields__},
     }
     return NonlinearController(
-        name="swingup", source=controller_source(), params=cp, z0=np.zeros(Z["end"]),
+        name="swingup", source=controller_source(law), params=cp, z0=np.zeros(Z["end"]),
         rate=hz, x_op=x_op, u_op=u_op, state_names=names, input_names=system.input_names,
         output_names=tuple(names[:nq]), has_estimate=True, settings=settings,
     )
@@ -410,14 +415,13 @@ __all__ = [
     "CP",
     "CP_BLOCKS",
     "CP_SLOTS",
-    "LAWS",
     "LAW_NAMES",
     "LAW_SOURCE",
+    "LAW_SOURCES",
     "MODE_BALANCE",
     "MODE_PUMP",
     "N_PHYS",
     "N_STATES",
-    "TUNING",
     "Z_SLOTS",
     "SwingUpRuntime",
     "SwingUpTuning",
@@ -426,9 +430,11 @@ __all__ = [
     "catch_level",
     "catch_region",
     "controller_source",
+    "default_tuning",
     "energy",
     "layout_constants",
     "python_namespace",
     "swingup",
+    "swingup_laws",
     "tracking_gains",
 ]

@@ -121,6 +121,20 @@ class Input:
 
 
 @dataclass(frozen=True)
+class SwingUp:
+    """The rig's energy-pumping swing-up, as its definition states it.
+
+    ``law``: which law pumps (``cart``, ``wheel``, ``rotary``, ``acrobot``: the laws of
+    :mod:`equilibrist.control.swingup`); ``gains``: its default tuning, by the names of
+    :class:`~equilibrist.control.swingup.SwingUpTuning` (``k_energy``, ``a_max`` and the
+    others it needs).
+    """
+
+    law: str
+    gains: dict[str, float]
+
+
+@dataclass(frozen=True)
 class OperatingPoint:
     """The canonical operating point.
 
@@ -192,6 +206,8 @@ class SystemSpec:
     # What a controller is asked to do lives in :mod:`equilibrist.tasks`;
     # the rig only states where it hangs.
     hanging: dict[str, float] | None = None
+    # The energy-pumping swing-up from there, if the rig has one: its law and gains.
+    swingup: SwingUp | None = None
 
     @property
     def key(self) -> str:

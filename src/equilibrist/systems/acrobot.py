@@ -65,7 +65,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from equilibrist.mechanics.spec import Input, OperatingPoint, SystemSpec
+from equilibrist.mechanics.spec import Input, OperatingPoint, SwingUp, SystemSpec
 from equilibrist.systems import _two_link
 from equilibrist.systems.registry import register
 
@@ -107,6 +107,8 @@ SPEC = SystemSpec(
     control_rate=200.0,
     # Both joints are offset at the start of a swing-up.
     hanging={"theta1": 0.0, "theta2": 0.0},
+    swingup=SwingUp("acrobot", {"k_energy": 1.0, "a_max": 20.0, "k_p": 60.0, "k_v": 30.0,
+                                "k_d": 30.0, "release_factor": 20.0}),
 )
 
 

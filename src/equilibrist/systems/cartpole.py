@@ -43,7 +43,14 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from equilibrist.mechanics.spec import Input, OperatingPoint, SystemSpec, nonnegative, positive
+from equilibrist.mechanics.spec import (
+    Input,
+    OperatingPoint,
+    SwingUp,
+    SystemSpec,
+    nonnegative,
+    positive,
+)
 from equilibrist.systems.registry import register
 
 if TYPE_CHECKING:  # sympy is imported only when the model is derived
@@ -82,6 +89,7 @@ SPEC = SystemSpec(
     sensor_noise={"x": 1.5e-3, "theta": 1.5e-3},
     process_noise={"x_dot": 0.05, "theta_dot": 0.05},
     hanging={"theta": math.pi},
+    swingup=SwingUp("cart", {"k_energy": 5.0, "a_max": 6.0, "k_x": 6.0, "k_v": 2.0}),
 )
 
 

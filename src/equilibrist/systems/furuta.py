@@ -66,7 +66,14 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from equilibrist.mechanics.spec import Input, OperatingPoint, SystemSpec, nonnegative, positive
+from equilibrist.mechanics.spec import (
+    Input,
+    OperatingPoint,
+    SwingUp,
+    SystemSpec,
+    nonnegative,
+    positive,
+)
 from equilibrist.systems.registry import register
 
 if TYPE_CHECKING:  # sympy is imported only when the model is derived
@@ -135,6 +142,8 @@ SPEC = SystemSpec(
     # The rig's control software samples its encoders and drive at 500 Hz.
     control_rate=500.0,
     hanging={"theta": math.pi},
+    swingup=SwingUp("rotary", {"k_energy": 40.0, "a_max": 0.05, "catch_fraction": 20.0,
+                               "accel": 100.0}),
 )
 
 

@@ -53,7 +53,14 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from equilibrist.mechanics.spec import Input, OperatingPoint, SystemSpec, nonnegative, positive
+from equilibrist.mechanics.spec import (
+    Input,
+    OperatingPoint,
+    SwingUp,
+    SystemSpec,
+    nonnegative,
+    positive,
+)
 from equilibrist.systems.registry import register
 
 if TYPE_CHECKING:  # sympy is imported only when the model is derived
@@ -113,6 +120,8 @@ SPEC = SystemSpec(
     sensor_noise={"phi": 1.5e-3, "theta": 7.7e-4},
     process_noise={"phi_dot": 0.5, "theta_dot": 0.1},
     hanging={"theta": math.pi},
+    swingup=SwingUp("wheel", {"k_energy": 0.5, "a_max": 0.2, "catch_fraction": 10.0,
+                              "accel": 40.0}),
 )
 
 

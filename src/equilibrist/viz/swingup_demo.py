@@ -1,7 +1,8 @@
 """The demo's swing-up: one seeded swing-up from hanging, animated, for each rig that has one.
 
 Called by the tour (:mod:`equilibrist.viz.tour`) for the systems of
-:data:`equilibrist.control.swingup.LAWS`: the swing-up controller of the
+``equilibrist.control.swingup.swingup_laws()`` (a swing-up in their definition): the
+swing-up controller of the
 system's default design, started from the task ``swingup``'s distribution
 (seed fixed), with the design's sensor and process noise, for the task's
 duration, drawn to scale.
