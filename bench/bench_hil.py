@@ -1,9 +1,11 @@
 """Hardware in the loop over a pseudo-terminal: round trips per second in lockstep, and realtime at 200 Hz.
 
-The device is the export's own C as a host program (``make hil-host``) on
-one end of a pseudo-terminal pair; ``equilibrist hil`` on the other. The two
-pseudo-terminals are joined by ``socat`` where it is installed (as a rig's
-USB serial link joins two programs), else by a relay thread in this process.
+The device is the export's own C as a host program (``make hil-host``);
+``equilibrist hil`` talks to it over a pseudo-terminal, two ways: the device's
+own (``hil_host --pty``: the host opens the path it prints, two processes, as
+with a board on a USB cable, where no third program relays the bytes), and
+two pseudo-terminals joined by ``socat`` where it is installed (else by a
+relay thread in this process), a third process on the way.
 
     .venv/bin/python bench/bench_hil.py [--duration 10]
 
@@ -56,17 +58,40 @@ def linked_ptys():
         proc.wait()
 
 
-def run_hil(host_program: Path, *argv: str) -> tuple[dict, float, str]:
-    with linked_ptys() as (paths, how):
-        device = subprocess.Popen([str(host_program), paths[0]])
-        try:
-            t0 = time.perf_counter()
-            done = subprocess.run([*CLI, "hil", "cartpole", "--port", paths[1], "--json", *argv],
-                                  capture_output=True, text=True, check=False)
-            wall = time.perf_counter() - t0
-        finally:
-            device.terminate()
-            device.wait()
+@contextmanager
+def device_pty(host_program: Path):
+    """The device on a pseudo-terminal of its own (``hil_host --pty``): the path it prints."""
+    device = subprocess.Popen([str(host_program), "--pty"], stdout=subprocess.PIPE, text=True)
+    try:
+        assert device.stdout is not None
+        yield device.stdout.readline().strip()
+    finally:
+        device.terminate()
+        device.wait()
+        if device.stdout is not None:
+            device.stdout.close()
+
+
+def run_hil(host_program: Path, link: str, *argv: str) -> tuple[dict, float, str]:
+    def command(port: str) -> tuple[subprocess.CompletedProcess[str], float]:
+        t0 = time.perf_counter()
+        done = subprocess.run([*CLI, "hil", "cartpole", "--port", port, "--json", *argv],
+                              capture_output=True, text=True, check=False)
+        return done, time.perf_counter() - t0
+
+    if link == "device":
+        how = "the device's own pseudo-terminal (hil_host --pty)"
+        with device_pty(host_program) as port:
+            done, wall = command(port)
+    else:
+        with linked_ptys() as (paths, joined):
+            how = f"two pseudo-terminals joined by {joined}"
+            device = subprocess.Popen([str(host_program), paths[0]])
+            try:
+                done, wall = command(paths[1])
+            finally:
+                device.terminate()
+                device.wait()
     if done.returncode != 0:
         sys.exit(f"hil failed: {done.stderr.strip()}")
     return json.loads(done.stdout), wall, how
@@ -84,22 +109,25 @@ def main() -> None:
         subprocess.run(["make", "-s", "-C", str(folder), "hil-host"], check=True)
         host = folder / "hil_host"
         duration = f"{args.duration:g}"
-        fig, wall, how = run_hil(host, "--duration", duration, "--x0", "theta=0.1")
-        rt = fig["round_trip_ms"]
-        # Round trips per second: the samples over the loop's own time, from the first step to
-        # the last answer (the process start and the design are not the link's).
-        steps = fig["steps"]
-        print(f"link: two pseudo-terminals joined by {how}")
-        print(f"lockstep  {steps} samples of the cart-pole's LQG: {fig['round_trips_per_s']:.0f} round "
-              f"trips/s, simulation included (goal >= 2000); round trip p50 {rt['p50']:.3f} ms, "
-              f"p99 {rt['p99']:.3f} ms, max {rt['max']:.3f} ms; whole command {wall:.1f} s")
-        fig, wall, how = run_hil(host, "--mode", "realtime", "--duration", duration,
-                                 "--x0", "theta=0.1")
-        rt = fig["round_trip_ms"]
-        print(f"realtime  200 Hz for {duration} s: late {fig['late']}, lost {fig['lost']} of "
-              f"{fig['steps']} (goal 0 late); round trip p50 {rt['p50']:.3f} ms, p99 "
-              f"{rt['p99']:.3f} ms (goal < 1), max {rt['max']:.3f} ms; device step p50 "
-              f"{fig['device_step_us']['p50']:.0f} us")
+        for link in ("device", "socat"):
+            fig, wall, how = run_hil(host, link, "--duration", duration, "--x0", "theta=0.1")
+            rt = fig["round_trip_ms"]
+            # Round trips per second: the samples over the loop's own time, from the first step
+            # to the last answer (the process start and the design are not the link's).
+            steps = fig["steps"]
+            print(f"link: {how}")
+            print(f"lockstep  {steps} samples of the cart-pole's LQG: "
+                  f"{fig['round_trips_per_s']:.0f} round trips/s, simulation included (goal >= "
+                  f"2000); round trip p50 {rt['p50']:.3f} ms, p99 {rt['p99']:.3f} ms, max "
+                  f"{rt['max']:.3f} ms; whole command {wall:.1f} s")
+            fig, wall, how = run_hil(host, link, "--mode", "realtime", "--duration", duration,
+                                     "--x0", "theta=0.1")
+            rt = fig["round_trip_ms"]
+            print(f"realtime  200 Hz for {duration} s: late {fig['late']}, lost {fig['lost']} of "
+                  f"{fig['steps']} (goal 0 late); round trip p50 {rt['p50']:.3f} ms, p99 "
+                  f"{rt['p99']:.3f} ms (goal < 1), max {rt['max']:.3f} ms; device step p50 "
+                  f"{fig['device_step_us']['p50']:.0f} us; sent after its time p99 "
+                  f"{fig['send_delay_ms']['p99']:.3f} ms, max {fig['send_delay_ms']['max']:.3f} ms")
     print(f"load average of the machine after: {os.getloadavg()[0]:.1f}")
 
 

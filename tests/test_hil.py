@@ -152,12 +152,43 @@ def test_realtime_at_200_hz_reports_its_figures(exports: dict[str, Path], tmp_pa
     # Every sample either got its answer in time or was held and counted late.
     assert fig["steps"] >= fig["late"] >= fig["lost"] >= 0
     assert fig["round_trip_ms"]["p99"] >= fig["round_trip_ms"]["p50"] > 0
+    # How late the simulator itself sent each sample after its time on the clock.
+    assert fig["send_delay_ms"]["max"] >= fig["send_delay_ms"]["p50"] >= 0
     # The log is the one identify reads.
     from equilibrist import get_system
     from equilibrist.ident.log import read_log
 
     log = read_log(get_system("cartpole"), tmp_path / "rt.csv")
     assert log.n_rows == 401 and log.output_names == ("x", "theta")
+
+
+@pytest.mark.slow
+def test_the_device_on_a_pseudo_terminal_of_its_own(exports: dict[str, Path], tmp_path: Path) -> None:
+    """``hil_host --pty`` opens a pseudo-terminal itself and prints its path: ``hil`` runs over it
+    with no relay between, equal to a run over the joined pair, and the device ends by itself
+    once the host has gone."""
+    device = subprocess.Popen([str(exports["lqg"] / "hil_host"), "--pty"], stdout=subprocess.PIPE,
+                              text=True)
+    try:
+        assert device.stdout is not None
+        port = device.stdout.readline().strip()
+        assert port.startswith("/dev/")
+        direct = _cli("hil", "cartpole", "--port", port, "--duration", "0.5", "--x0",
+                      "theta=0.05", "--json", "--out", str(tmp_path / "direct.npz"))
+        assert direct.returncode == 0, direct.stderr
+        assert device.wait(timeout=10) == 0  # the host closed the port: the device ends
+    finally:
+        if device.poll() is None:
+            device.kill()
+            device.wait()
+        assert device.stdout is not None
+        device.stdout.close()
+    joined, _ = _hil(exports["lqg"], "--duration", "0.5", "--x0", "theta=0.05", "--json",
+                     "--out", str(tmp_path / "joined.npz"))
+    assert joined.returncode == 0, joined.stderr
+    a, b = SimResult.load(tmp_path / "direct.npz"), SimResult.load(tmp_path / "joined.npz")
+    np.testing.assert_array_equal(a.states, b.states)
+    assert json.loads(direct.stdout)["send_delay_ms"]["p50"] is None  # lockstep: no clock
 
 
 # -- faults: one line, the right status, the run so far saved, the port released ---------------

@@ -45,6 +45,9 @@ class LinkStats:
 
     round_trip_s: list[float] = field(default_factory=list)
     device_step_us: list[int] = field(default_factory=list)
+    # Realtime: how long after its time on the clock each sample was sent (the simulator's own
+    # lateness, apart from the link's and the device's).
+    send_delay_s: list[float] = field(default_factory=list)
     late: int = 0
     lost: int = 0
     steps: int = 0
@@ -54,6 +57,7 @@ class LinkStats:
     def summary(self) -> dict[str, Any]:
         rt = np.asarray(self.round_trip_s) * 1e3
         us = np.asarray(self.device_step_us, dtype=float)
+        sd = np.asarray(self.send_delay_s) * 1e3
 
         def q(a: np.ndarray, p: float) -> float | None:
             return float(np.percentile(a, p)) if a.size else None
@@ -63,6 +67,7 @@ class LinkStats:
             "round_trip_ms": {"p50": q(rt, 50), "p99": q(rt, 99), "max": q(rt, 100)},
             "round_trips_per_s": self.steps / wall if wall > 0 else None,
             "device_step_us": {"p50": q(us, 50), "max": q(us, 100)},
+            "send_delay_ms": {"p50": q(sd, 50), "p99": q(sd, 99), "max": q(sd, 100)},
             "late": self.late, "lost": self.lost, "steps": self.steps,
         }
 
@@ -163,6 +168,7 @@ class DeviceController(PythonControllerBase):
             wait = self._t0 + t - now
             if wait > 0:
                 time.sleep(wait)
+            self.stats.send_delay_s.append(time.perf_counter() - (self._t0 + t))
             deadline = self._t0 + t + period
         else:
             deadline = time.perf_counter() + self.timeout
