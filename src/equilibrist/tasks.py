@@ -53,18 +53,20 @@ SWINGUP_OFFSET = 0.05
 # A track parameter bounds the cart's coordinate during a swing-up.
 TRACK_PARAMETER, TRACK_STATE = "x_max", "x"
 
-#: The arguments of a task's reward function (``reward_<task>``), all plain numbers and arrays
-#: as the environments' core holds them: the state ``x`` at the end of the period, the input
-#: ``u`` applied during it, the parameters ``p``, the operating point ``op`` (``[x_op;
-#: u_op]``), the inverse Bryson scales ``iscale`` (states, then inputs), the indices ``hang``
-#: of the coordinates that hang (``spec.hanging``, integers), ``eref`` (the energy at the
-#: operating point and at the task's nominal start), the period ``dt`` [s] and the alive
+#: The arguments of a task's reward function (``reward_<task>``) and their types, all plain
+#: numbers and arrays as the environments' core holds them: the state ``x`` at the end of the
+#: period, the input ``u`` applied during it, the parameters ``p``, the operating point ``op``
+#: (``[x_op; u_op]``), the inverse Bryson scales ``iscale`` (states, then inputs), the indices
+#: ``hang`` of the coordinates that hang (``spec.hanging``, integers), ``eref`` (the energy at
+#: the operating point and at the task's nominal start), the period ``dt`` [s] and the alive
 #: bonus ``bonus`` [1/s]. It may call ``energy(x, p)`` (the system's generated energy) and
-#: ``eq_cos``/``eq_sin`` (:mod:`equilibrist.numeric.libm`). The environments translate it to
-#: C into each system's core (:mod:`equilibrist.native.pyc`); tests run it as Python.
-REWARD_ARGUMENTS = ("x", "u", "p", "op", "iscale", "hang", "eref", "dt", "bonus")
-#: The C translation's argument types of :data:`REWARD_ARGUMENTS`.
-REWARD_TYPES = ("F1", "F1", "F1", "F1", "F1", "I1", "F1", "f", "f")
+#: ``eq_cos``/``eq_sin`` (:mod:`equilibrist.numeric.libm`). The environments translate it to C
+#: into each system's core (:mod:`equilibrist.native.pyc`); tests run it as Python.
+REWARD_ARGUMENTS = {"x": "F1", "u": "F1", "p": "F1", "op": "F1", "iscale": "F1", "hang": "I1",
+                    "eref": "F1", "dt": "f", "bonus": "f"}
+#: Their types in the C translation (:mod:`equilibrist.native.pyc`: arrays of doubles ``F1``,
+#: of integers ``I1``, doubles ``f``), in order.
+REWARD_TYPES = tuple(REWARD_ARGUMENTS.values())
 
 _BALANCE_REWARD = '''
 def reward_balance(x, u, p, op, iscale, hang, eref, dt, bonus):

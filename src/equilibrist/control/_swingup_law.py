@@ -222,64 +222,15 @@ def estimate(t, z, y, r, p, x_out):
 """
 
 
-#: Each law's energy and pumping term, as source (``su_energy``, ``su_pump``): the controller's
-#: source is the common part (:data:`LAW_SOURCE`) and the law its system's definition names
-#: (``spec.swingup.law``), with no branch on a law number. Its physical constants are the
-#: ``phys`` block of the parameters (:func:`equilibrist.control.swingup._physics`).
-LAW_SOURCES = {
-    "cart": """
+# The pieces the laws' sources share: the pendulums' energy, the acrobot's constants, and the
+# start of every pumping term (the energy's error and the gains).
+_PENDULUM_ENERGY = """
 def su_energy(x0, x1, x2, x3, p):
     # The pendulum's energy, from upright: J theta_dot^2 / 2 + m g l (cos theta - 1).
     ph = SU_PHYS
     return 0.5 * p[ph] * x3 * x3 + p[ph + 1] * (eq_cos(x1) - 1.0)
-
-
-def su_pump(x0, x1, x2, x3, p):
-    ph = SU_PHYS
-    e = su_energy(x0, x1, x2, x3, p) - p[SU_E0]
-    ke = p[SU_KE]
-    amax = p[SU_AMAX]
-    a = su_clip(ke * e * su_sign(x3 * eq_cos(x1)), -amax, amax)
-    a = a - p[SU_KX] * x0 - p[SU_KV] * x2
-    # The force that gives the cart the acceleration a exactly.
-    mlc = p[ph + 4] * eq_cos(x1)
-    th_dd = (p[ph + 1] * eq_sin(x1) - p[ph + 5] * x3 - mlc * a) / p[ph]
-    return (p[ph + 2] * a + mlc * th_dd - p[ph + 4] * eq_sin(x1) * x3 * x3
-            + p[ph + 3] * x2)
-""",
-    "wheel": """
-def su_energy(x0, x1, x2, x3, p):
-    # The pendulum's energy, from upright: J theta_dot^2 / 2 + m g l (cos theta - 1).
-    ph = SU_PHYS
-    return 0.5 * p[ph] * x3 * x3 + p[ph + 1] * (eq_cos(x1) - 1.0)
-
-
-def su_pump(x0, x1, x2, x3, p):
-    ph = SU_PHYS
-    e = su_energy(x0, x1, x2, x3, p) - p[SU_E0]
-    ke = p[SU_KE]
-    amax = p[SU_AMAX]
-    return su_clip(ke * e * su_sign(x3), -amax, amax) - p[SU_KV] * (x2 - x3)
-""",
-    "rotary": """
-def su_energy(x0, x1, x2, x3, p):
-    # The pendulum's energy, from upright: J theta_dot^2 / 2 + m g l (cos theta - 1).
-    ph = SU_PHYS
-    return 0.5 * p[ph] * x3 * x3 + p[ph + 1] * (eq_cos(x1) - 1.0)
-
-
-def su_pump(x0, x1, x2, x3, p):
-    ph = SU_PHYS
-    e = su_energy(x0, x1, x2, x3, p) - p[SU_E0]
-    ke = p[SU_KE]
-    amax = p[SU_AMAX]
-    return su_clip(ke * e * su_sign(x3 * eq_cos(x1)), -amax, amax) - p[SU_KV] * x2
-""",
-    "acrobot": """
-def su_energy(x0, x1, x2, x3, p):
-    # The acrobot's total energy, from upright.
-    ph = SU_PHYS
-    m1 = p[ph]
+"""
+_ACROBOT_CONSTANTS = """    m1 = p[ph]
     m2 = p[ph + 1]
     l1 = p[ph + 2]
     lc1 = p[ph + 3]
@@ -287,29 +238,51 @@ def su_energy(x0, x1, x2, x3, p):
     i1 = p[ph + 5]
     i2 = p[ph + 6]
     g = p[ph + 7]
-    c2 = eq_cos(x1)
+"""
+_ACROBOT_ENERGY = """
+def su_energy(x0, x1, x2, x3, p):
+    # The acrobot's total energy, from upright.
+    ph = SU_PHYS
+""" + _ACROBOT_CONSTANTS + """    c2 = eq_cos(x1)
     d1 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2
     d2 = m2 * (lc2 * lc2 + l1 * lc2 * c2) + i2
     d3 = m2 * lc2 * lc2 + i2
     kin = 0.5 * (d1 * x2 * x2 + 2.0 * d2 * x2 * x3 + d3 * x3 * x3)
     pot = -g * (m1 * lc1 * eq_cos(x0) + m2 * (l1 * eq_cos(x0) + lc2 * eq_cos(x0 + x1)))
     return kin + pot - g * (m1 * lc1 + m2 * (l1 + lc2))
+"""
 
+
+def _pump(body: str) -> str:
+    """``su_pump`` with *body* after the shared start (``ph``, ``e``, ``ke``, ``amax``)."""
+    return """
 
 def su_pump(x0, x1, x2, x3, p):
     ph = SU_PHYS
     e = su_energy(x0, x1, x2, x3, p) - p[SU_E0]
     ke = p[SU_KE]
     amax = p[SU_AMAX]
-    m1 = p[ph]
-    m2 = p[ph + 1]
-    l1 = p[ph + 2]
-    lc1 = p[ph + 3]
-    lc2 = p[ph + 4]
-    i1 = p[ph + 5]
-    i2 = p[ph + 6]
-    g = p[ph + 7]
-    t2 = su_wrap(x1)
+""" + body
+
+
+#: Each law's energy and pumping term, as source (``su_energy``, ``su_pump``): the controller's
+#: source is the common part (:data:`LAW_SOURCE`) and the law its system's definition names
+#: (``spec.swingup.law``), with no branch on a law number. Its physical constants are the
+#: ``phys`` block of the parameters (:func:`equilibrist.control.swingup._physics`).
+LAW_SOURCES = {
+    "cart": _PENDULUM_ENERGY + _pump("""    a = su_clip(ke * e * su_sign(x3 * eq_cos(x1)), -amax, amax)
+    a = a - p[SU_KX] * x0 - p[SU_KV] * x2
+    # The force that gives the cart the acceleration a exactly.
+    mlc = p[ph + 4] * eq_cos(x1)
+    th_dd = (p[ph + 1] * eq_sin(x1) - p[ph + 5] * x3 - mlc * a) / p[ph]
+    return (p[ph + 2] * a + mlc * th_dd - p[ph + 4] * eq_sin(x1) * x3 * x3
+            + p[ph + 3] * x2)
+"""),
+    "wheel": _PENDULUM_ENERGY + _pump("""    return su_clip(ke * e * su_sign(x3), -amax, amax) - p[SU_KV] * (x2 - x3)
+"""),
+    "rotary": _PENDULUM_ENERGY + _pump("""    return su_clip(ke * e * su_sign(x3 * eq_cos(x1)), -amax, amax) - p[SU_KV] * x2
+"""),
+    "acrobot": _ACROBOT_ENERGY + _pump(_ACROBOT_CONSTANTS + """    t2 = su_wrap(x1)
     c2 = eq_cos(t2)
     s2 = eq_sin(t2)
     m11 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2
@@ -327,7 +300,7 @@ def su_pump(x0, x1, x2, x3, p):
     if den == 0.0:
         return 0.0
     return num / den
-""",
+"""),
 }
 LAW_NAMES = tuple(LAW_SOURCES)
 

@@ -130,6 +130,7 @@ from equilibrist.control.controller import (
 
 if TYPE_CHECKING:
     from equilibrist.control.design import Design
+    from equilibrist.mechanics.spec import SwingUp
     from equilibrist.numeric.system import System
 
 
@@ -191,12 +192,17 @@ def swingup_laws() -> dict[str, str]:
     return {e.spec.name: e.spec.swingup.law for e in all_entries() if e.spec.swingup is not None}
 
 
-def default_tuning(system: System) -> SwingUpTuning:
-    """The gains *system*'s definition states (``spec.swingup.gains``)."""
+def _stated(system: System) -> SwingUp:
+    """*system*'s swing-up as its definition states it; refused if it states none."""
     if system.spec.swingup is None:
         raise ControllerError(f"{system.name} has no swing-up: it exists for "
                               f"{', '.join(swingup_laws())}")
-    return SwingUpTuning(**system.spec.swingup.gains)
+    return system.spec.swingup
+
+
+def default_tuning(system: System) -> SwingUpTuning:
+    """The gains *system*'s definition states (``spec.swingup.gains``)."""
+    return SwingUpTuning(**_stated(system).gains)
 
 
 class SwingUpRuntime:
@@ -328,10 +334,8 @@ def swingup(
 
     if balance not in BALANCES:
         raise ControllerError(f"balance {balance!r}: expected one of {', '.join(BALANCES)}")
-    default = default_tuning(system)  # refuses a system whose definition states no swing-up
-    tune = tuning or default
-    assert system.spec.swingup is not None
-    law = system.spec.swingup.law
+    law = _stated(system).law
+    tune = tuning or default_tuning(system)
     if law not in LAW_NAMES:
         raise ControllerError(f"{system.name}'s swing-up law {law!r}: expected one of "
                               f"{', '.join(LAW_NAMES)}")
