@@ -154,6 +154,13 @@ def test_realtime_at_200_hz_reports_its_figures(exports: dict[str, Path], tmp_pa
     assert fig["round_trip_ms"]["p99"] >= fig["round_trip_ms"]["p50"] > 0
     # How late the simulator itself sent each sample after its time on the clock.
     assert fig["send_delay_ms"]["max"] >= fig["send_delay_ms"]["p50"] >= 0
+    # The scheduling the run had: real-time where the system grants it (CI runs as root).
+    import os
+
+    if os.geteuid() == 0:
+        assert fig["scheduling"] == "SCHED_FIFO 20"
+    else:
+        assert fig["scheduling"].startswith(("SCHED_FIFO", "normal ("))
     # The log is the one identify reads.
     from equilibrist import get_system
     from equilibrist.ident.log import read_log
@@ -247,3 +254,27 @@ def test_a_start_that_cannot_be_made_is_refused_with_status_2(tmp_path: Path,
         assert main(["hil", "cartpole", "--port", port]) == 2
         err = capsys.readouterr().err.strip()
         assert words in err and len(err.splitlines()) == 1
+
+
+def test_realtime_priority_is_held_only_inside_and_a_refusal_is_said(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The simulator's thread runs under SCHED_FIFO inside a realtime run and gets its own
+    scheduling back after; a system that refuses leaves the run at normal priority, said so."""
+    import os
+
+    from equilibrist.hil import run as hil_run
+
+    policy = os.sched_getscheduler(0)
+    if os.geteuid() == 0:
+        with hil_run.realtime_priority() as granted:
+            assert granted == f"SCHED_FIFO {hil_run.RT_PRIORITY}"
+            assert os.sched_getscheduler(0) == os.SCHED_FIFO
+            assert os.sched_getparam(0).sched_priority == hil_run.RT_PRIORITY
+        assert os.sched_getscheduler(0) == policy
+
+    def refuse(*_: object) -> None:
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "sched_setscheduler", refuse)
+    with hil_run.realtime_priority() as granted:
+        assert granted == "normal (the system refused real-time priority: Operation not permitted)"
+        assert os.sched_getscheduler(0) == policy

@@ -36,8 +36,8 @@ class PtyLink:
             self._slaves.append(slave)
             self.paths.append(os.ttyname(slave))
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._relay, daemon=True)
-        self._thread.start()
+        self.relay = threading.Thread(target=self._relay, daemon=True)
+        self.relay.start()
 
     def _relay(self) -> None:
         a, b = self._masters
@@ -61,7 +61,7 @@ class PtyLink:
         if self._stop.is_set():
             return
         self._stop.set()
-        self._thread.join(timeout=2)
+        self.relay.join(timeout=2)
         for fd in self._masters + self._slaves:
             with suppress(OSError):
                 os.close(fd)

@@ -10,13 +10,20 @@ for sample, and equals it to the payload's rounding.
 
 ``lockstep`` waits for every answer. ``realtime`` paces the plant on the
 wall clock at the rig's rate: an answer that is not back before the next
-sample is late, and the previous input is held.
+sample is late, and the previous input is held. While it runs, the
+simulator's thread asks the system for real-time scheduling (``SCHED_FIFO``),
+as a rig's control computer would: a wake-up held back by other programs is a
+late sample that is the machine's, not the device's. Where the system refuses
+(no privilege), the run goes on at normal priority and its summary says so
+(``scheduling``).
 """
 
 from __future__ import annotations
 
+import os
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
@@ -33,6 +40,28 @@ from equilibrist.sim.signals import as_signal
 MODES = ("lockstep", "realtime")
 #: How long the host waits for the device's hello answer [s].
 HELLO_TIMEOUT = 3.0
+#: The real-time priority a realtime run asks for: above every normal program, below the
+#: kernel's own real-time threads (50), as the usual control-loop priority.
+RT_PRIORITY = 20
+
+
+@contextmanager
+def realtime_priority() -> Iterator[str]:
+    """Run the calling thread under ``SCHED_FIFO`` while inside; yield what was granted."""
+    setter = getattr(os, "sched_setscheduler", None)
+    if setter is None:
+        yield "normal (this system has no real-time scheduling)"
+        return
+    before = os.sched_getscheduler(0), os.sched_getparam(0)
+    try:
+        setter(0, os.SCHED_FIFO, os.sched_param(RT_PRIORITY))
+    except OSError as exc:
+        yield f"normal (the system refused real-time priority: {exc.strerror})"
+        return
+    try:
+        yield f"SCHED_FIFO {RT_PRIORITY}"
+    finally:
+        setter(0, before[0], before[1])
 
 
 class HILRefused(HILError):
@@ -284,9 +313,11 @@ class HILRun:
     port: str
     fault: str | None
     device: Hello
+    scheduling: str = "normal"
 
     def summary(self) -> dict[str, Any]:
         return {"mode": self.mode, "port": self.port, "fault": self.fault,
+                "scheduling": self.scheduling,
                 "controller_id": self.device.controller_id,
                 "payload": "float64" if self.device.real_size == 8 else "float32",
                 **self.stats.summary()}
@@ -304,13 +335,19 @@ def run_hil(system: Any, controller: DeviceController, *, x0: Mapping[str, float
 
     if controller.device is None:
         controller.connect()
-    result = simulate(system, controller, x0=x0, **options)
+    scheduling = "normal"
+    if controller.mode == "realtime":
+        with realtime_priority() as scheduling:
+            result = simulate(system, controller, x0=x0, **options)
+    else:
+        result = simulate(system, controller, x0=x0, **options)
     controller.finish()
     settings = dict(result.settings)
     device = controller.device
     assert device is not None
     run = HILRun(result=result, stats=controller.stats, mode=controller.mode,
-                 port=controller.link.port, fault=controller.fault, device=device)
+                 port=controller.link.port, fault=controller.fault, device=device,
+                 scheduling=scheduling)
     settings["hil"] = run.summary()
     from dataclasses import replace
 
