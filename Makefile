@@ -9,7 +9,9 @@ JOBS ?= 2
 
 .PHONY: demo test lint bench clean derived
 
-$(STAMP): pyproject.toml
+# setup.py builds DAQP's vendored sources at install: a change to them installs again.
+$(STAMP): pyproject.toml setup.py $(wildcard src/equilibrist/native/daqp/src/*.c) \
+          src/equilibrist/native/daqp_digest.c src/equilibrist/native/daqp_library.py
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "equilibrist needs Python 3.11 or newer")'
 	$(PYTHON) -m venv $(VENV)
 	@# uv installs the same packages from the same index several times faster than pip
@@ -26,12 +28,12 @@ demo: $(STAMP)
 	$(VENV)/bin/equilibrist demo
 
 test: $(STAMP)
-	$(VENV)/bin/ruff check src tests bench examples
+	$(VENV)/bin/ruff check src tests bench examples setup.py
 	$(VENV)/bin/mypy src/equilibrist
 	$(PY) -m pytest -n $(JOBS) -q --durations=15
 
 lint: $(STAMP)
-	$(VENV)/bin/ruff check src tests bench examples
+	$(VENV)/bin/ruff check src tests bench examples setup.py
 	$(VENV)/bin/mypy src/equilibrist
 
 bench: $(STAMP)

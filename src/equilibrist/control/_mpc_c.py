@@ -14,6 +14,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from equilibrist.errors import ExportError
+from equilibrist.native import daqp_library
+from equilibrist.native.daqp_library import DAQP_SOURCES
 
 if TYPE_CHECKING:
     from equilibrist.control.controller import LinearController
@@ -25,8 +27,6 @@ if TYPE_CHECKING:
 #: and a start from an empty set spent an iteration on each of them: 91 iterations instead
 #: of 31 on the cart-pole at N = 30 after a push).
 COLD_SLACK = 3
-#: DAQP's C sources, shipped with the package.
-DAQP_SOURCES = Path(__file__).parent.parent / "native" / "daqp"
 
 
 def _array(name: str, values: np.ndarray, *, const: bool = True) -> str:
@@ -108,7 +108,8 @@ def filter_form(ctrl: MPC) -> LinearController:
         form=ctrl.form, state_names=ctrl.state_names)
 
 
-#: DAQP's files the MPC's least-distance problem runs, built at ``-O1`` in the simulated MPC's
+#: Where the install built no DAQP library (:mod:`equilibrist.native.daqp_library`): DAQP's
+#: files the MPC's least-distance problem runs, built at ``-O1`` in the simulated MPC's
 #: build (``-O2`` saved nothing measurable per sample, 7.5 against 7.3 us, and cost 1.1 s more
 #: CPU to compile on a first run); the others (equality elimination, branch and bound,
 #: hierarchies, proximal iterations, AVI, presolve) are linked but never entered, and built at
@@ -122,20 +123,26 @@ def daqp_objects() -> list[Path]:
     from equilibrist.native import build
 
     return build.objects([(p, "-O1" if p.stem in DAQP_HOT else "-O0")
-                          for p in sorted((DAQP_SOURCES / "src").glob("*.c"))],
+                          for p in daqp_library.c_sources()],
                          "daqp", DAQP_SOURCES / "include")
 
 
 def compiled_library(ctrl: MPC, *, shortcut: bool = True, iter_limit: int | None = None) -> Path:
     """The MPC's library (:func:`library_files`, symbols ``mpc_*``) compiled as a shared
-    library on this machine, cached by content (:mod:`equilibrist.native.build`): DAQP's
-    objects once per cache folder, the driver once per controller (double precision)."""
+    library on this machine, cached by content (:mod:`equilibrist.native.build`), once per
+    controller (double precision). It links the DAQP library the install built
+    (:func:`~equilibrist.native.daqp_library.installed`), else DAQP's objects, compiled once
+    per cache folder (:func:`daqp_objects`)."""
     from equilibrist.native import build
 
     files = library_files(ctrl, shortcut=shortcut, iter_limit=iter_limit)
-    objects = daqp_objects()
     unit = files["mpc.c"].replace('#include "mpc.h"', files["mpc.h"])
-    _, path = build.load(unit, "mpc", link=objects, openmp=False,
+    installed = daqp_library.installed()
+    if installed is not None:
+        # The library's sources name the driver too: another DAQP, another driver.
+        unit = f"/* DAQP: the installed library, built from {daqp_library.digest()} */\n{unit}"
+    link = [installed] if installed is not None else daqp_objects()
+    _, path = build.load(unit, "mpc", link=link, openmp=False,
                          flags=[f"-I{DAQP_SOURCES / 'include'}", "-fvisibility=default"])
     return path
 

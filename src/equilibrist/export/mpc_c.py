@@ -83,7 +83,6 @@ import numpy as np
 # The module was split in three; every name stays importable from here. The names marked
 # F401 are not used here: imported so that they stay importable from this module.
 from equilibrist.control._mpc_c import (
-    DAQP_SOURCES,
     _array,  # noqa: F401
     _daqp_c_files,  # noqa: F401
     _daqp_files,  # noqa: F401
@@ -93,6 +92,7 @@ from equilibrist.errors import ExportError
 from equilibrist.export._check import ControllerExport, Described, Steps
 from equilibrist.export._mpc_c_native import _HEAP_PROGRAM, footprint  # noqa: F401
 from equilibrist.export.writer import register_exporter
+from equilibrist.native.daqp_library import DAQP_SOURCES
 
 if TYPE_CHECKING:
     from equilibrist.control.mpc import MPC, MPCRuntime
