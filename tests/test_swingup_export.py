@@ -279,14 +279,3 @@ def test_two_exports_link_into_one_program(tmp_path: Path) -> None:
                           capture_output=True, text=True, check=False)
     assert proc.returncode == 0, proc.stderr
     assert subprocess.run([str(tmp_path / "main")], check=False).returncode == 0
-
-
-def test_a_registered_kind_finds_the_generic_exporter() -> None:
-    from equilibrist.export import nonlinear_c
-    from equilibrist.export.writer import EXPORTERS, load_exporter
-
-    try:
-        nonlinear_c.register_nonlinear_exporter("demo_kind_for_test")
-        assert load_exporter("demo_kind_for_test") is nonlinear_c.export_files
-    finally:
-        EXPORTERS.pop("demo_kind_for_test", None)

@@ -20,6 +20,7 @@ from equilibrist.control._controller_python import PythonControllerBase
 from equilibrist.errors import ControllerError, DesignError, DimensionError
 
 if TYPE_CHECKING:
+    from equilibrist.control._controller_nonlinear import NonlinearController
     from equilibrist.control.design import Design
 
 
@@ -271,6 +272,25 @@ class LinearController:
         dx = np.asarray(x_estimate, dtype=float).reshape(self.n_states) - self.x_op
         return _replace(self, z0=self.state_map @ dx)
 
+    def as_nonlinear(self) -> NonlinearController:
+        """This controller as a :class:`NonlinearController` whose source calls the linear
+        library on :meth:`packed`: the same sums in the same order, so it runs (in the core, in
+        Python, and in the C that :mod:`equilibrist.export.nonlinear_c` writes from it) to the
+        bit as this one. A linear controller of any making exports this way."""
+        from equilibrist.control._controller_nonlinear import NonlinearController
+
+        if self.rate is None:
+            raise ControllerError("the linear controller has no rate: a digital controller's "
+                                  "source needs one (give rate=...)")
+        roles = ("output", "update") + (("estimate",) if self.has_estimate else ())
+        source = "\n\n".join(_AS_NONLINEAR[role] for role in roles) + "\n"
+        return NonlinearController(
+            name=self.kind, source=source, params=self.packed(), z0=self.z0, rate=self.rate,
+            x_op=self.x_op, u_op=self.u_op, state_names=self.state_names,
+            input_names=self.input_names, output_names=self.output_names,
+            tracked_names=self.tracked_names, has_estimate=self.has_estimate,
+            settings={"linear": self.describe()})
+
     def describe(self) -> dict[str, object]:
         """The controller as JSON-able data (recorded with every result)."""
         out: dict[str, object] = {"kind": self.kind, "rate": self.rate,
@@ -478,6 +498,16 @@ class LinearController:
             input_names=plant.input_names, Kc=kc, tracked=tracked, u_min=u_min, u_max=u_max,
             design=design,
         )
+
+
+#: :meth:`LinearController.as_nonlinear`'s source, by role: the contract's functions, each
+#: the linear library's on the controller's packed vector.
+_AS_NONLINEAR = {
+    "output": "def output(t, z, y, r, p, u_out):\n    linear_output(t, z, y, r, p, u_out)",
+    "update": "def update(t, z, y, r, u_applied, p, z_out):\n"
+              "    linear_update(t, z, y, r, u_applied, p, z_out)",
+    "estimate": "def estimate(t, z, y, r, p, x_out):\n    linear_estimate(t, z, y, r, p, x_out)",
+}
 
 
 def _replace(ctrl: LinearController, **changes: Any) -> LinearController:

@@ -193,7 +193,11 @@ class ControllerKind:
     export:
         ``export(request, out, *, system, precision, duration, seed,
         force)`` -> the export's report; None: the built controller is
-        exported as the value it is (:func:`equilibrist.export.writer.export_controller`).
+        exported as the value it is (:func:`equilibrist.export.writer.export_controller`,
+        which chooses the exporter by the value's type).
+    check_export:
+        ``check_export(request)``: refuses, before anything is built, a request
+        the export cannot hold (the MPC's horizon); None: nothing to check.
     order:
         Where it is listed (the project's kinds 10..90, others 100).
     """
@@ -210,6 +214,7 @@ class ControllerKind:
     linear: bool = False
     open_loop: bool = False
     export: Callable[..., ExportReport] | None = None
+    check_export: Callable[[ControllerRequest], None] | None = None
     order: int = 100
 
     def __post_init__(self) -> None:
@@ -240,6 +245,8 @@ class ControllerKind:
         if self.open_loop:
             raise KindError(f"--controller {self.name} is the open loop: there is no controller "
                             "to export")
+        if self.check_export is not None:
+            self.check_export(request)
         if self.export is not None:  # it builds through make(), which asks applies()
             return self.export(request, out, **options)
         from equilibrist.export.writer import export_controller
@@ -256,25 +263,6 @@ def linear_builder(kind: str) -> Callable[[ControllerRequest], Any]:
         return LinearController.from_design(request.design(), kind=kind, tracking=request.tracking)
 
     return build
-
-
-def registered_exporter(name: str, check: Callable[[ControllerRequest], None] | None = None
-                        ) -> Callable[..., ExportReport]:
-    """``export`` of a kind whose exporter a module registers under *name*
-    (:func:`equilibrist.export.writer.register_exporter`): *check* the request first (before
-    anything is built), then export the kind's controller for it."""
-
-    def export(request: ControllerRequest, out: Any, **options: Any) -> ExportReport:
-        from equilibrist.export.writer import load_exporter
-
-        if check is not None:
-            check(request)
-        exporter = load_exporter(name)
-        if exporter is None:
-            raise KindError(f"the {name} controller has no C exporter in this installation")
-        return exporter(get(name).make(request), out, system=request.system, **options)
-
-    return export
 
 
 _KINDS: dict[str, ControllerKind] = {}
@@ -375,4 +363,4 @@ def build(name: str, request: ControllerRequest) -> Any:
 
 __all__ = ["ENTRY_POINTS", "PACKAGE", "SURFACES", "ControllerKind", "ControllerRequest",
            "KindError", "Option", "all_kinds", "build", "get", "linear_builder", "names",
-           "options", "owners", "register", "registered_exporter", "unregister"]
+           "options", "owners", "register", "unregister"]

@@ -297,7 +297,7 @@ def swingup(
     tuning: SwingUpTuning | None = None,
     rate: float | None = None,
     balance: str = "lqr",
-) -> NonlinearController:
+) -> SwingUpController:
     """The swing-up controller of *system* (cart-pole, reaction wheel, rotary pendulum, acrobot).
 
     Parameters
@@ -399,11 +399,17 @@ def swingup(
         "alpha": alpha, "beta": beta,
         "tuning": {k: getattr(tune, k) for k in tune.__dataclass_fields__},
     }
-    return NonlinearController(
+    return SwingUpController(
         name="swingup", source=controller_source(law), params=cp, z0=np.zeros(Z["end"]),
         rate=hz, x_op=x_op, u_op=u_op, state_names=names, input_names=system.input_names,
         output_names=tuple(names[:nq]), has_estimate=True, settings=settings,
     )
+
+
+class SwingUpController(NonlinearController):
+    """The swing-up with its supervisor: a :class:`NonlinearController` whose C export keeps
+    the swing-up's own API (no time: the law does not read it; :mod:`equilibrist.export.swingup_c`),
+    chosen by the value's type (:func:`equilibrist.export.writer.export_controller`)."""
 
 
 def balance_design(system: System, rate: float | None = None) -> Design:
@@ -427,6 +433,7 @@ __all__ = [
     "N_PHYS",
     "N_STATES",
     "Z_SLOTS",
+    "SwingUpController",
     "SwingUpRuntime",
     "SwingUpTuning",
     "Z",

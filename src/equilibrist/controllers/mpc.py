@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from equilibrist.control.kinds import ControllerKind, ControllerRequest, Option, registered_exporter
+from equilibrist.control.kinds import ControllerKind, ControllerRequest, Option
 
 if TYPE_CHECKING:
     from equilibrist.control.mpc import MPCRuntime
@@ -43,5 +43,5 @@ KIND = ControllerKind(
     build=build,
     options=(Option("--horizon", "prediction horizon of --controller mpc [samples] (default 30)",
                     parse=_horizon, expected="a whole number of samples >= 1", metavar="N"),),
-    export=registered_exporter("mpc", check_export), order=40,
+    check_export=check_export, order=40,
 )

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from equilibrist.control.kinds import ControllerKind, ControllerRequest, Option, registered_exporter
+from equilibrist.control.kinds import ControllerKind, ControllerRequest, Option
 
 if TYPE_CHECKING:
     from equilibrist.control.controller import NonlinearController
@@ -38,5 +38,5 @@ KIND = ControllerKind(
     build=build,
     options=(Option("--balance", "what balances after --controller swingup's catch (default lqr)",
                     choices=BALANCES),),
-    applies=applies, task="swingup", export=registered_exporter("swingup"), order=30,
+    applies=applies, task="swingup", order=30,
 )

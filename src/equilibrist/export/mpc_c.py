@@ -91,7 +91,6 @@ from equilibrist.control._mpc_c import (
 from equilibrist.errors import ExportError
 from equilibrist.export._check import ControllerExport, Described, Steps
 from equilibrist.export._mpc_c_native import _HEAP_PROGRAM, footprint  # noqa: F401
-from equilibrist.export.writer import register_exporter
 from equilibrist.native.daqp_library import DAQP_SOURCES
 
 if TYPE_CHECKING:
@@ -356,7 +355,6 @@ def iteration_counts(ctrl: MPC, recorded: Mapping[str, np.ndarray], *,
             "iter_limit": ITER_LIMIT}
 
 
-@register_exporter("mpc")
 def export_files(built: MPCRuntime, out: str | Path, *, system: System, precision: str = "double",
                  duration: float | None = None, seed: int = 0, force: bool = False) -> MPCExport:
     """``equilibrist export SYSTEM --controller mpc``: DAQP's sources, the driver, ``make check``,

@@ -32,9 +32,9 @@ and ``x`` are zeroed before the controller's function writes them and
 ``update`` writes into a zeroed state that replaces the old one.
 
 :func:`export_files` is the exporter (library, recorded test vectors,
-``make check``, hardware in the loop) of any such controller;
-:func:`register_nonlinear_exporter` registers it for a controller kind of
-the registry, as :mod:`equilibrist.export.swingup_c` registers the swing-up's.
+``make check``, hardware in the loop) of any such controller, and of any
+linear controller (:meth:`LinearController.as_nonlinear`): the export
+chooses it by the value's type (:func:`equilibrist.export.writer.exporter_of`).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ import ctypes
 import hashlib
 import re
 import tempfile
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -55,7 +55,6 @@ from equilibrist.export._check import ControllerExport, Described, Steps
 
 if TYPE_CHECKING:
     from equilibrist.control.controller import NonlinearController
-    from equilibrist.export.writer import ExportReport
     from equilibrist.hil.firmware import Adapter
     from equilibrist.numeric.system import System
 
@@ -484,15 +483,6 @@ def export_files(ctrl: NonlinearController, out: str | Path, *, system: System,
                             vectors=Steps(len(vec["y"])), footprint=footprint, size_note=why)
 
 
-def register_nonlinear_exporter(kind: str) -> Callable[..., ExportReport]:
-    """Export the registry's controller *kind* (a :class:`NonlinearController`) with
-    :func:`export_files`: ``equilibrist export --controller KIND`` and the web app's
-    downloads then find it (:func:`equilibrist.export.writer.load_exporter`)."""
-    from equilibrist.export.writer import register_exporter
-
-    return register_exporter(kind)(export_files)
-
-
 # -- the exported library in the simulation ---------------------------------------------------
 class CompiledNonlinear:
     """An exported controller compiled into a shared library and called through ctypes.
@@ -579,4 +569,4 @@ class CompiledNonlinear:
 __all__ = ["C_MATH", "CompiledNonlinear", "Interface", "Translation",
            "check_files", "default_start", "design_id", "export_files", "hil_adapter",
            "interface_of", "library_files", "math_functions", "nonlinear_files",
-           "recorded_vectors", "register_nonlinear_exporter", "translate"]
+           "recorded_vectors", "translate"]

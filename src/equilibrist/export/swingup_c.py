@@ -45,7 +45,6 @@ from equilibrist.errors import ExportError
 from equilibrist.export._check import ControllerExport, Described, Steps
 from equilibrist.export.nonlinear_c import CompiledNonlinear, Interface, library_files
 from equilibrist.export.nonlinear_c import design_id as _design_id
-from equilibrist.export.writer import register_exporter
 
 if TYPE_CHECKING:
     from equilibrist.control.controller import NonlinearController
@@ -144,7 +143,6 @@ def export_swingup(ctrl: NonlinearController, system: System, folder: str | Path
 SwingUpExport = ControllerExport
 
 
-@register_exporter("swingup")
 def export_files(ctrl: NonlinearController, out: str | Path, *, system: System,
                  precision: str = "double", duration: float | None = None, seed: int = 0,
                  force: bool = False) -> SwingUpExport:

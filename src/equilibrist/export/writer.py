@@ -14,13 +14,16 @@ import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
 
 from equilibrist.errors import ExportError
 from equilibrist.export import c_code
 from equilibrist.export.data import ControllerData, check_controller, check_precision, from_design
 
 if TYPE_CHECKING:
+    from equilibrist.control.controller import LinearController
     from equilibrist.control.design import Design
     from equilibrist.export._size import Footprint
     from equilibrist.hil.firmware import Adapter
@@ -321,61 +324,115 @@ class ExportReport(Protocol):
     def vectors(self) -> ExportedVectors: ...
 
 
-#: Exporters of the controllers the registry builds beyond LQR and LQG (``--controller
-#: swingup``...): name -> ``exporter(controller, out, *, system, precision, duration, seed,
-#: force) -> Export``. A module adds one with :func:`register_exporter`.
-EXPORTERS: dict[str, Callable[..., ExportReport]] = {}
+#: Exporters by the type of the controller value, beyond the project's own
+#: (:func:`exporter_of`): a module that defines a controller type of its own adds one with
+#: :func:`register_exporter`. ``exporter(controller, out, *, system, precision, duration,
+#: seed, force) -> report``.
+EXPORTERS: dict[type, Callable[..., ExportReport]] = {}
 
 
-#: Modules that register an exporter when first asked (name -> module).
-EXPORTER_MODULES = {"swingup": "equilibrist.export.swingup_c", "mpc": "equilibrist.export.mpc_c"}
-
-
-def load_exporter(name: str) -> Callable[..., ExportReport] | None:
-    """The exporter of controller *name*, importing its module when needed (None: none)."""
-    if name not in EXPORTERS and name in EXPORTER_MODULES:
-        import importlib
-
-        importlib.import_module(EXPORTER_MODULES[name])
-    return EXPORTERS.get(name)
-
-
-def register_exporter(name: str) -> Callable[[Callable[..., ExportReport]], Callable[..., ExportReport]]:
-    """Decorator: *exporter* writes the C code of the registry's controller *name*."""
+def register_exporter(kind: type) -> Callable[[Callable[..., ExportReport]], Callable[..., ExportReport]]:
+    """Decorator: *exporter* writes the C code of controller values of type *kind* (and of
+    its subclasses that have none of their own)."""
 
     def add(exporter: Callable[..., ExportReport]) -> Callable[..., ExportReport]:
-        EXPORTERS[name] = exporter
+        EXPORTERS[kind] = exporter
         return exporter
 
     return add
 
 
+def exporter_of(ctrl: object) -> Callable[..., ExportReport]:
+    """The exporter of the controller value *ctrl*, chosen by its type (the most derived one
+    that has an exporter): the MPC's library with DAQP, the swing-up's library, an LQR or LQG
+    design's library, any other linear controller or :class:`NonlinearController` translated
+    from its source. Other values are refused in one line."""
+    from equilibrist.control._mpc_runtime import MPCRuntime
+    from equilibrist.control.controller import LinearController, NonlinearController
+    from equilibrist.control.swingup import SwingUpController
+
+    def mpc(*args: Any, **kwargs: Any) -> ExportReport:
+        from equilibrist.export.mpc_c import export_files
+
+        return export_files(*args, **kwargs)
+
+    def swing(*args: Any, **kwargs: Any) -> ExportReport:
+        from equilibrist.export.swingup_c import export_files
+
+        return export_files(*args, **kwargs)
+
+    def nonlinear(*args: Any, **kwargs: Any) -> ExportReport:
+        from equilibrist.export.nonlinear_c import export_files
+
+        return export_files(*args, **kwargs)
+
+    known: dict[type, Callable[..., ExportReport]] = {
+        MPCRuntime: mpc, SwingUpController: swing, NonlinearController: nonlinear,
+        LinearController: _export_linear, **EXPORTERS}
+    for cls in type(ctrl).__mro__:
+        if cls in known:
+            return known[cls]
+    if ctrl is None:
+        raise ExportError("the open loop has no controller to export")
+    raise ExportError(f"a {type(ctrl).__name__} has no C export: the export takes a "
+                      "LinearController, a NonlinearController, the swing-up or the MPC")
+
+
 def export_controller(ctrl: object, out: str | os.PathLike[str], *, system: System,
                       precision: str = "double", duration: float | None = None, seed: int = 0,
                       force: bool = False) -> ExportReport:
-    """Write the C export of the controller value *ctrl*, whatever made it.
+    """Write the C export of the controller value *ctrl*, whatever made it (:func:`exporter_of`).
 
     A :class:`~equilibrist.control.controller.LinearController` of an LQR or
-    LQG design is the design's library (:func:`export_c`); any
+    LQG design is the design's library (:func:`export_c`); any other linear
+    controller, a hand-built one included, and any
     :class:`~equilibrist.control.controller.NonlinearController` (a kind of
     one's own, the time-varying LQR...) is its source translated to C
     (:mod:`equilibrist.export.nonlinear_c`), tested bit for bit against the
-    Python controller. Other values are refused in one line.
+    Python controller; the swing-up and the MPC have libraries of their own.
     """
-    from equilibrist.control.controller import LinearController, NonlinearController
+    return exporter_of(ctrl)(ctrl, out, system=system, precision=precision, duration=duration,
+                             seed=seed, force=force)
 
-    if isinstance(ctrl, LinearController) and ctrl.kind in ("lqr", "lqg") and ctrl.design is not None:
-        return export_c(ctrl.design, out, controller=ctrl.kind, precision=precision,
-                        duration=duration, seed=seed, system=system, force=force)
-    if isinstance(ctrl, NonlinearController):
-        from equilibrist.export.nonlinear_c import export_files
 
-        return export_files(ctrl, Path(out), system=system, precision=precision, duration=duration,
-                            seed=seed, force=force)
-    if ctrl is None:
-        raise ExportError("the open loop has no controller to export")
-    raise ExportError(f"a {type(ctrl).__name__} has no C export: the export takes an LQR or LQG "
-                      "LinearController or a NonlinearController")
+def _export_linear(ctrl: LinearController, out: str | os.PathLike[str], *, system: System,
+                   **options: Any) -> ExportReport:
+    """An LQR or LQG design's controller: the design's library (its matrices, the Kalman form,
+    the recorded run); any other linear controller: the linear library on its packed vector,
+    through the nonlinear export (:meth:`LinearController.as_nonlinear`)."""
+    form = _design_form(ctrl)
+    if form is not None:
+        return export_c(ctrl.design, out, controller=form, system=system, **options)
+    from equilibrist.export.nonlinear_c import export_files
+
+    return export_files(ctrl.as_nonlinear(), Path(out), system=system, **options)
+
+
+def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    return a is b if a is None or b is None else bool(np.array_equal(a, b))
+
+
+def _design_form(ctrl: LinearController) -> str | None:
+    """``"lqr"`` or ``"lqg"`` where *ctrl* is its discrete design's controller of that form as
+    the design makes it (the same numbers, names, limits and start), else None: a controller
+    changed after (started elsewhere, other gains or limits) is exported as the value it is."""
+    from equilibrist.control.controller import ControllerError, LinearController
+    from equilibrist.control.design import Design
+
+    design = ctrl.design
+    if not isinstance(design, Design) or design.discrete is None or not design.rate:
+        return None
+    for form in ("lqr", "lqg"):
+        for tracking in (False, True):
+            try:
+                made = LinearController.from_design(design, kind=form, tracking=tracking)
+            except ControllerError:
+                continue
+            if (made.fingerprint == ctrl.fingerprint and made.rate == ctrl.rate
+                    and np.array_equal(made.z0, ctrl.z0)
+                    and _same(made.u_min, ctrl.u_min) and _same(made.u_max, ctrl.u_max)):
+                return form
+    return None
 
 
 def export_c(

@@ -334,6 +334,7 @@ def build_runner(kind: str, system: System, design: Design) -> Runner:
     from equilibrist.control import kinds
     from equilibrist.control.controller import NonlinearController
     from equilibrist.control.mpc import MPCRuntime
+    from equilibrist.control.swingup import SwingUpController
 
     record = kinds.get(kind, "playground")
     request = kinds.ControllerRequest.of_design(system, design)  # the page's own, tuned there
@@ -342,7 +343,7 @@ def build_runner(kind: str, system: System, design: Design) -> Runner:
     if isinstance(built, MPCRuntime):
         return MPCRunner(built, system, time.perf_counter() - began, kind)
     if isinstance(built, NonlinearController):
-        if built.name == "swingup":
+        if isinstance(built, SwingUpController):
             return SwingUpRunner(built, system, kind)
         return NonlinearRunner(built, system, kind)
     raise EquilibristError(f"the {kind} controller is a {type(built).__name__}: the playground "
@@ -350,19 +351,12 @@ def build_runner(kind: str, system: System, design: Design) -> Runner:
 
 
 def export_folder(runner: Runner, system: System, folder: str) -> Mapping[str, str]:
-    """Write the C export of *runner*'s controller into *folder* (as ``equilibrist export`` does)."""
-    from equilibrist.export.writer import export_controller, load_exporter
+    """Write the C export of *runner*'s controller into *folder* (as ``equilibrist export`` does:
+    the exporter of the value's type)."""
+    from equilibrist.export.writer import export_controller
 
-    exporter = load_exporter(runner.kind)
-    if isinstance(runner, MPCRunner):
-        if exporter is None:
-            raise EquilibristError(f"the {runner.kind} controller has no C export in this "
-                                   "installation")
-        done = exporter(runner.runtime, folder, system=system, precision="double")
-    elif exporter is not None:
-        done = exporter(runner.ctrl, folder, system=system, precision="double")
-    else:
-        done = export_controller(runner.ctrl, folder, system=system, precision="double")
+    value = runner.runtime if isinstance(runner, MPCRunner) else runner.ctrl
+    done = export_controller(value, folder, system=system, precision="double")
     return dict(done.files)
 
 

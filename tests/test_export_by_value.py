@@ -1,0 +1,117 @@
+"""The export takes a controller value and chooses its exporter by the value's type, with no
+kind name: a hand-built linear controller exports (as the linear library on its packed vector,
+``make check`` bit for bit), a design's LQR/LQG as the design's library, a design's controller
+changed after as the value it is, and a type of one's own with the exporter it registers."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from equilibrist import get_system
+from equilibrist.control.controller import LinearController, NonlinearController
+from equilibrist.control.design import Design, design
+from equilibrist.errors import ExportError
+from equilibrist.export import writer
+from equilibrist.numeric.system import System
+from equilibrist.sim.run import simulate
+from support import require
+
+
+@pytest.fixture(scope="module")
+def cart() -> tuple[System, Design]:
+    system = get_system("cartpole")
+    return system, design(system, rate=200.0)
+
+
+def _hand_built(d: Design) -> LinearController:
+    """The design's LQG assembled from its matrices by hand: no design attached."""
+    plant = d.plant
+    return LinearController.lqg(
+        d.K, Ad=d.discrete.A, Bd=d.discrete.B, Kf=d.Kf,
+        outputs=plant.output_names, x_op=plant.x0, u_op=plant.u0, rate=200.0,
+        form=d.kalman_form, state_names=plant.state_names,
+        input_names=plant.input_names, u_min=[-30.0], u_max=[30.0])
+
+
+def _make_check(folder: Path) -> str:
+    require("cc")
+    require("make")
+    done = subprocess.run(["make", "-s", "-C", str(folder), "check"], capture_output=True,
+                          text=True, check=False)
+    assert done.returncode == 0, done.stdout + done.stderr
+    return done.stdout
+
+
+def test_as_nonlinear_runs_to_the_bit_as_the_linear_controller(cart: tuple[System, Design]) -> None:
+    system, d = cart
+    lin = _hand_built(d)
+    nonlinear = lin.as_nonlinear()
+    assert isinstance(nonlinear, NonlinearController) and nonlinear.has_estimate
+    a = simulate(system, lin, duration=3.0, x0={"theta": 0.1}, seed=4)
+    b = simulate(system, nonlinear, duration=3.0, x0={"theta": 0.1}, seed=4)
+    assert np.array_equal(a.states, b.states) and np.array_equal(a.applied, b.applied)
+    assert np.abs(a.states[-1, 1]) < 0.01  # it balances: a run that means something
+    # Without a rate there is no digital controller to write.
+    gain = LinearController.state_feedback(d.K, x_op=np.zeros(4), u_op=[0.0])
+    with pytest.raises(Exception, match="has no rate"):
+        gain.as_nonlinear()
+
+
+def test_a_hand_built_linear_controller_exports_and_checks_bit_for_bit(
+        cart: tuple[System, Design], tmp_path: Path) -> None:
+    system, d = cart
+    lin = _hand_built(d)
+    assert writer.exporter_of(lin) is writer._export_linear
+    report = writer.export_controller(lin, tmp_path / "hand", system=system)
+    assert (tmp_path / "hand" / "lqg.c").exists() and "hil_host.c" in report.files
+    assert " 0 mismatches" in _make_check(tmp_path / "hand")
+
+
+def test_a_design_controller_is_the_design_library_until_it_is_changed(
+        cart: tuple[System, Design], tmp_path: Path) -> None:
+    system, d = cart
+    as_made = LinearController.from_design(d, kind="lqg")
+    writer.export_controller(as_made, tmp_path / "design", system=system)
+    assert (tmp_path / "design" / "cartpole_lqg.h").exists()  # the design's documented library
+    moved = as_made.start_at(np.array([0.1, 0.05, 0.0, 0.0]))  # started elsewhere: another value
+    assert writer._design_form(moved) is None and writer._design_form(as_made) == "lqg"
+    writer.export_controller(moved, tmp_path / "moved", system=system)
+    assert not (tmp_path / "moved" / "cartpole_lqg.h").exists()
+    assert " 0 mismatches" in _make_check(tmp_path / "moved")
+
+
+def test_the_exporter_follows_the_type(cart: tuple[System, Design]) -> None:
+    system, d = cart
+    from equilibrist.control.mpc import MPCRuntime, mpc
+    from equilibrist.control.swingup import SwingUpController, swingup
+
+    sw = swingup(system, design=d)
+    assert isinstance(sw, SwingUpController)
+    rt = mpc(system, design=d, horizon=5).runtime()
+    assert isinstance(rt, MPCRuntime)
+    chosen = {type(v).__name__: writer.exporter_of(v).__name__
+              for v in (sw, rt, sw.__class__.__mro__[1](**{  # a plain NonlinearController
+                  f: getattr(sw, f) for f in sw.__dataclass_fields__}))}
+    assert chosen == {"SwingUpController": "swing", "MPCRuntime": "mpc",
+                      "NonlinearController": "nonlinear"}
+
+    class Mine(NonlinearController):
+        pass
+
+    def mine_exporter(*args: object, **kwargs: object) -> None:
+        raise AssertionError("not called here")
+
+    try:
+        writer.register_exporter(Mine)(mine_exporter)
+        value = Mine(**{f: getattr(sw, f) for f in sw.__dataclass_fields__})
+        assert writer.exporter_of(value) is mine_exporter
+    finally:
+        writer.EXPORTERS.pop(Mine, None)
+    with pytest.raises(ExportError, match="open loop"):
+        writer.exporter_of(None)
+    with pytest.raises(ExportError, match="a dict has no C export"):
+        writer.exporter_of({})
