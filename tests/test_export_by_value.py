@@ -6,6 +6,7 @@ changed after as the value it is, and a type of one's own with the exporter it r
 from __future__ import annotations
 
 import subprocess
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -95,8 +96,9 @@ def test_the_exporter_follows_the_type(cart: tuple[System, Design]) -> None:
     assert isinstance(rt, MPCRuntime)
     chosen = {type(v).__name__: writer.exporter_of(v).__name__
               for v in (sw, rt, sw.__class__.__mro__[1](**{  # a plain NonlinearController
-                  f: getattr(sw, f) for f in sw.__dataclass_fields__}))}
-    assert chosen == {"SwingUpController": "swing", "MPCRuntime": "mpc",
+                  f.name: getattr(sw, f.name) for f in fields(sw)}))}
+    # The swing-up is a NonlinearController: the generic library, with no time in its API.
+    assert chosen == {"SwingUpController": "nonlinear", "MPCRuntime": "mpc",
                       "NonlinearController": "nonlinear"}
 
     class Mine(NonlinearController):
@@ -107,7 +109,7 @@ def test_the_exporter_follows_the_type(cart: tuple[System, Design]) -> None:
 
     try:
         writer.register_exporter(Mine)(mine_exporter)
-        value = Mine(**{f: getattr(sw, f) for f in sw.__dataclass_fields__})
+        value = Mine(**{f.name: getattr(sw, f.name) for f in fields(sw)})
         assert writer.exporter_of(value) is mine_exporter
     finally:
         writer.EXPORTERS.pop(Mine, None)
@@ -115,3 +117,21 @@ def test_the_exporter_follows_the_type(cart: tuple[System, Design]) -> None:
         writer.exporter_of(None)
     with pytest.raises(ExportError, match="a dict has no C export"):
         writer.exporter_of({})
+
+
+def test_a_type_that_is_handed_no_time_refuses_a_source_that_reads_it(
+        cart: tuple[System, Design]) -> None:
+    """The swing-up's C API takes no time (its law never reads it): a swing-up whose source
+    reads ``t`` would be handed 0 there, and is refused in one line."""
+    from equilibrist.control.swingup import SwingUpController, swingup
+    from equilibrist.errors import ControllerError
+
+    system, d = cart
+    sw = swingup(system, design=d)
+    head = "def output(t, z, y, r, p, u_out):\n"
+    assert head in sw.source
+    values = {f.name: getattr(sw, f.name) for f in fields(sw)}
+    values["source"] = sw.source.replace(head, head + "    late = t + 0.0\n", 1)
+    with pytest.raises(ControllerError, match="reads the time t, which a SwingUpController"):
+        SwingUpController(**values)
+    NonlinearController(**values)  # a plain one is handed the time: accepted

@@ -11,7 +11,7 @@ import hashlib
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -25,6 +25,9 @@ from equilibrist.control._controller_layout import (
 from equilibrist.control._controller_linear import _frozen
 from equilibrist.control._controller_python import PythonControllerBase
 from equilibrist.errors import ControllerError
+
+if TYPE_CHECKING:
+    from equilibrist.numeric.system import System
 
 # -- nonlinear controllers, compiled into the simulation core ---------------------------------
 #: The functions a nonlinear controller's source defines (estimate only with has_estimate).
@@ -73,6 +76,9 @@ class NonlinearController:
     tracked_names: tuple[str, ...] = ()
     has_estimate: bool = False
     settings: Mapping[str, Any] = field(default_factory=dict)
+    #: Whether the source reads the time ``t`` (a type whose functions never do says so: its C
+    #: export's functions then take no time, and a source that reads it is refused).
+    reads_time: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         n, m = len(self.state_names), len(self.input_names)
@@ -90,6 +96,18 @@ class NonlinearController:
         if missing:
             raise ControllerError(f"measured or tracked output(s) {', '.join(missing)} are not states")
         check_source(self.source, has_estimate=self.has_estimate)
+        if not self.reads_time and source_reads_time(self.source):
+            raise ControllerError(f"the {self.name} controller's source reads the time t, which "
+                                  f"a {type(self).__name__} is not handed")
+
+    def title(self) -> str:
+        """What the controller is, in a few words (its C export's header and README)."""
+        return f"the {self.name} controller"
+
+    def record_start(self, system: System, seed: int) -> np.ndarray | None:
+        """Where the run its C export records starts (absolute state), or None: the export's
+        default (:func:`equilibrist.export.nonlinear_c.default_start`)."""
+        return None
 
     @property
     def n_z(self) -> int:
@@ -177,6 +195,16 @@ def check_source(source: str, *, has_estimate: bool) -> tuple[str, ...]:
         raise ControllerError("the controller's source: " + "; ".join(problems))
     _translate(source, wanted)
     return tuple(names)
+
+
+def source_reads_time(source: str) -> bool:
+    """Whether one of the contract's functions in *source* reads its time argument."""
+    for node in ast.parse(source).body:
+        if isinstance(node, ast.FunctionDef) and node.name in NONLINEAR_FUNCTIONS and node.args.args:
+            t = node.args.args[0].arg
+            if any(isinstance(n, ast.Name) and n.id == t for b in node.body for n in ast.walk(b)):
+                return True
+    return False
 
 
 #: The argument types of the contract's functions in the C translation (``t`` a float,

@@ -407,9 +407,22 @@ def swingup(
 
 
 class SwingUpController(NonlinearController):
-    """The swing-up with its supervisor: a :class:`NonlinearController` whose C export keeps
-    the swing-up's own API (no time: the law does not read it; :mod:`equilibrist.export.swingup_c`),
-    chosen by the value's type (:func:`equilibrist.export.writer.export_controller`)."""
+    """The swing-up with its supervisor: a :class:`NonlinearController` whose law never reads
+    the time (so its C export's functions take none), and whose export records a swing-up
+    from hanging, as its task starts one."""
+
+    reads_time = False
+
+    def title(self) -> str:
+        law = self.settings.get("law", "")
+        balance = str(self.settings.get("balance", "lqr")).upper()
+        return f"swing-up with supervisor ({law} law, balanced by the {balance})"
+
+    def record_start(self, system: System, seed: int) -> np.ndarray:
+        from equilibrist.tasks import get_task
+
+        return np.asarray(get_task(system, "swingup").draw_initial(np.random.default_rng(seed)),
+                          dtype=float)
 
 
 def balance_design(system: System, rate: float | None = None) -> Design:

@@ -17,8 +17,8 @@
     every export's Makefile shares); ``make clean``.
 
 :class:`ControllerExport` is what those exports return (the fields the
-command line reports). Used by the swing-up's and the MPC's exports (:mod:`equilibrist.export.swingup_c`,
-:mod:`equilibrist.export.mpc_c`).
+command line reports). Used by the nonlinear controllers' and the MPC's exports
+(:mod:`equilibrist.export.nonlinear_c`, :mod:`equilibrist.export.mpc_c`).
 """
 
 from __future__ import annotations

@@ -344,20 +344,14 @@ def register_exporter(kind: type) -> Callable[[Callable[..., ExportReport]], Cal
 
 def exporter_of(ctrl: object) -> Callable[..., ExportReport]:
     """The exporter of the controller value *ctrl*, chosen by its type (the most derived one
-    that has an exporter): the MPC's library with DAQP, the swing-up's library, an LQR or LQG
-    design's library, any other linear controller or :class:`NonlinearController` translated
-    from its source. Other values are refused in one line."""
+    that has an exporter): the MPC's library with DAQP, an LQR or LQG
+    design's library, any other linear controller or :class:`NonlinearController` (the
+    swing-up too) translated from its source. Other values are refused in one line."""
     from equilibrist.control._mpc_runtime import MPCRuntime
     from equilibrist.control.controller import LinearController, NonlinearController
-    from equilibrist.control.swingup import SwingUpController
 
     def mpc(*args: Any, **kwargs: Any) -> ExportReport:
         from equilibrist.export.mpc_c import export_files
-
-        return export_files(*args, **kwargs)
-
-    def swing(*args: Any, **kwargs: Any) -> ExportReport:
-        from equilibrist.export.swingup_c import export_files
 
         return export_files(*args, **kwargs)
 
@@ -367,7 +361,7 @@ def exporter_of(ctrl: object) -> Callable[..., ExportReport]:
         return export_files(*args, **kwargs)
 
     known: dict[type, Callable[..., ExportReport]] = {
-        MPCRuntime: mpc, SwingUpController: swing, NonlinearController: nonlinear,
+        MPCRuntime: mpc, NonlinearController: nonlinear,
         LinearController: _export_linear, **EXPORTERS}
     for cls in type(ctrl).__mro__:
         if cls in known:
@@ -375,7 +369,7 @@ def exporter_of(ctrl: object) -> Callable[..., ExportReport]:
     if ctrl is None:
         raise ExportError("the open loop has no controller to export")
     raise ExportError(f"a {type(ctrl).__name__} has no C export: the export takes a "
-                      "LinearController, a NonlinearController, the swing-up or the MPC")
+                      "LinearController, a NonlinearController or the MPC")
 
 
 def export_controller(ctrl: object, out: str | os.PathLike[str], *, system: System,
@@ -389,7 +383,7 @@ def export_controller(ctrl: object, out: str | os.PathLike[str], *, system: Syst
     :class:`~equilibrist.control.controller.NonlinearController` (a kind of
     one's own, the time-varying LQR...) is its source translated to C
     (:mod:`equilibrist.export.nonlinear_c`), tested bit for bit against the
-    Python controller; the swing-up and the MPC have libraries of their own.
+    Python controller; the MPC has a library of its own (DAQP and its driver).
     """
     return exporter_of(ctrl)(ctrl, out, system=system, precision=precision, duration=duration,
                              seed=seed, force=force)
