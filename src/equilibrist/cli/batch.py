@@ -7,7 +7,6 @@ option of ``equilibrist simulate`` (a contract with outside scripts).
 from __future__ import annotations
 
 import argparse
-from typing import Any
 
 from equilibrist.cli import common
 from equilibrist.cli.simulate import _seed, add_run_options, build_run, check_out, show_progress
@@ -88,16 +87,16 @@ def run(args: argparse.Namespace) -> int:
     batch = simulate_batch(system, runs=runs, x0=x0s, params=params, workers=workers,
                            record=args.trajectories, progress=show_progress(args), **options)
     saved = batch.save(args.out) if args.out is not None else None
-    summary: dict[str, Any] = batch.summary()
+    summary = batch.summary()
     summary["seed"] = _seed(args.seed)
     if args.json:
         if saved is not None:
             summary["saved"] = str(saved)
         common.print_json(summary)
         return 0
-    print(f"{system.key}: {summary['stayed_up']} of {runs} runs stayed up "
-          f"({100 * summary['fraction_up']:.1f} %), "
-          f"{summary['steps_per_second'] / 1e6:.1f} M steps/s")
+    print(f"{system.key}: {batch.stayed_up} of {runs} runs stayed up "
+          f"({100 * batch.fraction_up:.1f} %), "
+          f"{batch.steps_per_second / 1e6:.1f} M steps/s")
     if saved is not None:
         print(f"saved {saved}")
     return 0

@@ -7,7 +7,7 @@ import json
 import math
 import sys
 from collections.abc import Iterable, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
@@ -189,7 +189,7 @@ def named_system(name: str | None) -> System | None:
     return get_system(name)
 
 
-def to_jsonable(obj: Any) -> Any:
+def to_jsonable(obj: object) -> object:
     """numpy arrays and scalars to lists and floats; NaN and infinities to None."""
     if isinstance(obj, dict):
         return {str(k): to_jsonable(v) for k, v in obj.items()}
@@ -211,7 +211,7 @@ def to_jsonable(obj: Any) -> Any:
     return obj
 
 
-def print_json(obj: Any) -> None:
+def print_json(obj: object) -> None:
     json.dump(to_jsonable(obj), sys.stdout, indent=2)
     sys.stdout.write("\n")
 
@@ -298,14 +298,14 @@ def add_controller(parser: argparse.ArgumentParser, surface: str, *, default: st
                             dest=opt.key, help=opt.help)
 
 
-def controller_options(args: argparse.Namespace, kind: str, surface: str) -> dict[str, Any]:
+def controller_options(args: argparse.Namespace, kind: str, surface: str) -> dict[str, object]:
     """The options of the kind *kind* given on the command line (parsed); an option of
     another kind is refused in one line."""
     from equilibrist.control import kinds
 
     record = kinds.get(kind, surface)
     own = {o.flag for o in record.options}
-    out: dict[str, Any] = {}
+    out: dict[str, object] = {}
     for opt in kinds.options(surface):
         text = getattr(args, opt.key, None)
         if text is None:
@@ -320,7 +320,20 @@ def controller_options(args: argparse.Namespace, kind: str, surface: str) -> dic
     return out
 
 
-def design_options(args: argparse.Namespace) -> dict[str, Any]:
+class DesignOptions(TypedDict, total=False):
+    """Keyword arguments of :func:`equilibrist.control.design.design` (:func:`design_options`)."""
+
+    q: list[float] | None
+    r: list[float] | None
+    qn: list[float] | None
+    rn: list[float] | None
+    outputs: tuple[str, ...] | None
+    discretization: str
+    kalman_form: str
+    at: dict[str, float] | None
+
+
+def design_options(args: argparse.Namespace) -> DesignOptions:
     """Keyword arguments of :func:`equilibrist.control.design.design` from the options."""
     return {
         "q": parse_vector(args.q, "--q"),

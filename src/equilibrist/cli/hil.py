@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-from typing import Any
 
 from equilibrist.cli import common
 
@@ -58,7 +57,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.set_defaults(func=run)
 
 
-def design_id(kind: str, controller: Any) -> str:
+def design_id(kind: str, controller: object) -> str:
     """The design id the export of *controller* carries (what the device reports): by the
     value's form, as the export writes it (an LQR/LQG design's library, the MPC, any
     nonlinear controller translated to C)."""
@@ -134,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
             summary["saved"] = str(saved)
         common.print_json(summary)
     else:
-        link_figures = done.summary()
+        link_figures = done.stats.summary()
         rt = link_figures["round_trip_ms"]
         print(f"{system.key} with the device on {args.port} ({args.mode}): "
               + ("fell at " + f"{result.fell_at:g} s" if result.fell else "stayed up"))

@@ -115,12 +115,14 @@ def interrupted_status() -> int:
     return 128 + signal.SIGTERM if _received == signal.SIGTERM else 130
 
 
-def _quiet_interrupts(previous: Callable[[Any], object]) -> Callable[[Any], object]:
+def _quiet_interrupts(
+    previous: Callable[[sys.UnraisableHookArgs], object],
+) -> Callable[[sys.UnraisableHookArgs], object]:
     """*previous* (a ``sys.unraisablehook``), except for a recorded interrupt that
     landed in a finalizer: Python would print it as "Exception ignored" with a
     traceback; recorded, it stops the work at its next check instead."""
 
-    def hook(unraisable: Any) -> object:
+    def hook(unraisable: sys.UnraisableHookArgs) -> object:
         from equilibrist import interrupt
 
         if issubclass(unraisable.exc_type, KeyboardInterrupt) and interrupt.requested():

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from equilibrist.cli import common
 
@@ -164,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
 
         noise = (Noise.from_design(request.design()) if kind.noise == "design"
                  else Noise.from_spec(system, outputs=measured_outputs(controller), rate=rate))
-    options: dict[str, Any] = {"duration": duration, "rate": rate, "noise": noise}
+    options: dict[str, object] = {"duration": duration, "rate": rate, "noise": noise}
     if args.physics_step is not None:
         step = common.parse_number(args.physics_step, "--physics-step")
         if not (math.isfinite(step) and step > 0):

@@ -17,9 +17,12 @@ from typing import TYPE_CHECKING, Any
 from equilibrist.cli import common
 
 if TYPE_CHECKING:
+    from collections.abc import Mapping
+
     from equilibrist.control.controller import AnyController
     from equilibrist.numeric.system import System
     from equilibrist.sim.events import Event
+    from equilibrist.sim.result import SimResult
     from equilibrist.sim.signals import PRBS, Chirp
 
 
@@ -306,7 +309,7 @@ def _tasks(system: System) -> tuple[str, ...]:
     return task_names(system)
 
 
-def start_of(options: dict[str, Any], x0: dict[str, float]) -> dict[str, float]:
+def start_of(options: Mapping[str, object], x0: dict[str, float]) -> dict[str, float]:
     """The run's start: --x0, else where the controller's plan starts (a tracked trajectory)."""
     if x0:
         return x0
@@ -315,7 +318,7 @@ def start_of(options: dict[str, Any], x0: dict[str, float]) -> dict[str, float]:
     return dict(start) if isinstance(start, dict) else x0
 
 
-def _fmt(v: Any) -> str:
+def _fmt(v: object) -> str:
     if v is None:
         return "-"
     if isinstance(v, float):
@@ -325,7 +328,7 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
-def run_metrics(result: Any) -> dict[str, Any]:
+def run_metrics(result: SimResult) -> dict[str, object]:
     """The run's metrics: ``peak_command`` (before the actuator's limits) beside
     ``peak_input`` (the largest input that acted), each named for what it is."""
     return dict(result.metrics())

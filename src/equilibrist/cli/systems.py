@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
+from typing import TYPE_CHECKING, NotRequired, TypedDict
 
 from equilibrist.cli import common
+
+if TYPE_CHECKING:
+    from equilibrist.mechanics.spec import SystemSpec
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -18,7 +21,37 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.set_defaults(func=run)
 
 
-def describe(spec: Any) -> dict[str, Any]:
+class ParameterEntry(TypedDict):
+    """One parameter of :func:`describe`."""
+
+    default: float
+    unit: str
+    meaning: str
+    range: list[float]
+    range_text: str
+
+
+class SystemEntry(TypedDict):
+    """One spec as plain data (:func:`describe`); a family's entry in :func:`catalogue`
+    adds its variants."""
+
+    name: str
+    title: str
+    description: str
+    variant: dict[str, str] | None
+    states: list[str]
+    state_units: list[str]
+    inputs: list[str]
+    input_units: list[str]
+    outputs: list[str]
+    parameters: dict[str, ParameterEntry]
+    operating_point: dict[str, object] | None
+    source: str
+    variant_option: NotRequired[str]
+    variants: NotRequired[dict[str, SystemEntry]]
+
+
+def describe(spec: SystemSpec) -> SystemEntry:
     """One spec as plain data (the JSON of ``systems`` and of reports)."""
     return {
         "name": spec.name,
@@ -51,11 +84,11 @@ def describe(spec: Any) -> dict[str, Any]:
     }
 
 
-def catalogue() -> dict[str, Any]:
+def catalogue() -> dict[str, SystemEntry]:
     """Every system keyed by name; a family lists its variants under ``variants``."""
     from equilibrist.systems import registry
 
-    out: dict[str, Any] = {}
+    out: dict[str, SystemEntry] = {}
     for name in registry.family_names():
         option = registry.variant_option(name)
         if option is None:

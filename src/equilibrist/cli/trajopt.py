@@ -12,11 +12,15 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from equilibrist.cli import common
+
+if TYPE_CHECKING:
+    from equilibrist.control.trajopt import Trajectory
+    from equilibrist.numeric.system import System
 
 _EPILOG = """\
 By default the system's swing-up task (where it has one): from hanging at
@@ -82,7 +86,7 @@ def _count(text: str, option: str, low: int, high: int) -> int:
     return v
 
 
-def _states(system: Any, text: str, option: str, base: np.ndarray) -> np.ndarray:
+def _states(system: System, text: str, option: str, base: np.ndarray) -> np.ndarray:
     x = base.copy()
     items = [t for t in text.split(",") if t.strip()]
     if not items:
@@ -121,9 +125,9 @@ def run(args: argparse.Namespace) -> int:
     system = common.load_system(args)
     if system.n_inputs == 0:
         raise common.UsageError(f"{system.key} has no input: there is no motion to plan")
-    guess: Any = args.guess
-    if guess not in ("random", "straight"):
-        guess = load_trajectory(guess)
+    guess: str | Trajectory = args.guess
+    if args.guess not in ("random", "straight"):
+        guess = load_trajectory(args.guess)
         if guess.state_names != system.state_names or guess.input_names != system.input_names:
             raise common.UsageError(f"--guess {args.guess}: a trajectory of other states or inputs")
     x_op = system.operating_point().x
@@ -167,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _pictures(args: argparse.Namespace, system: Any, traj: Any) -> None:
+def _pictures(args: argparse.Namespace, system: System, traj: Trajectory) -> None:
     if args.plot is None and args.animate is None:
         return
     t = np.linspace(traj.times[0], traj.times[-1], max(200, 10 * traj.knots + 1))

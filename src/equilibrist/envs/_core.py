@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -29,6 +29,9 @@ from equilibrist.numeric.system import System, get_system
 from equilibrist.sim import layout
 from equilibrist.sim.noise import Noise, square_root
 from equilibrist.tasks import TASK_NAMES, Task, check_point, get_task
+
+if TYPE_CHECKING:
+    from equilibrist.native.simcore import NativeCore
 
 OBSERVE = ("outputs", "state")
 ACTION_UNITS = ("normalized", "physical")
@@ -129,7 +132,7 @@ class Core:
     randomize: Mapping[str, float]
     alive_bonus: float
     at: Mapping[str, float] | None
-    kernel: Any
+    kernel: NativeCore
     c_idx: np.ndarray
     lv: np.ndarray
     lw: np.ndarray

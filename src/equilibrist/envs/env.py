@@ -22,6 +22,9 @@ from equilibrist.native.steps import EnvSteps
 from equilibrist.sim.noise import generator_state
 
 if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+    from matplotlib.image import AxesImage
+
     from equilibrist.viz.frames import FrameRenderer
 
 # Backends of matplotlib that draw to files only.
@@ -103,7 +106,7 @@ class Renderer:
         self.core = core
         self.mode = mode
         self._frames: FrameRenderer | None = None
-        self._window: Any = None
+        self._window: tuple[Figure, AxesImage] | None = None
 
     def _extent_states(self) -> np.ndarray:
         core = self.core
@@ -196,7 +199,7 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         task: str = "balance",
         *,
         render_mode: str | None = None,
-        **options: Any,
+        **options: object,
     ) -> None:
         core, modes = open_core(system, task, options, render_mode, ("rgb_array", "human"),
                                 "an environment")
@@ -217,7 +220,7 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         self._ashape = (m,)
         self._n = n
         self._renderer = Renderer(core, render_mode) if render_mode is not None else None
-        self._step_fn: Any = None
+        self._step_fn: object = None
 
     # -- the episode --------------------------------------------------------------
     @property
@@ -275,7 +278,7 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         self._u[:] = core.task.u_op
         obs = self._steps.begin_one()
         self._ready = True
-        info: dict[str, Any] = {"state": self._x.copy(), "noise_seed": noise_seed}
+        info: dict[str, object] = {"state": self._x.copy(), "noise_seed": noise_seed}
         if core.randomize:
             names = core.system.spec.parameter_names
             info["params"] = {names[i]: float(self._p[i]) for i in core.rnd_idx}

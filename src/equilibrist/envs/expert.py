@@ -23,11 +23,15 @@ environment's saturation applied).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from equilibrist.errors import EquilibristError
+
+if TYPE_CHECKING:
+    from equilibrist.control.controller import AnyController, PythonController
+    from equilibrist.envs._core import Core
 
 
 class ExpertError(EquilibristError, ValueError):
@@ -37,7 +41,7 @@ class ExpertError(EquilibristError, ValueError):
 class Expert:
     """A controller acting through an environment's observations and actions."""
 
-    def __init__(self, core: Any, controller: Any, kind: str) -> None:
+    def __init__(self, core: Core, controller: AnyController, kind: str) -> None:
         from equilibrist.control.controller import (
             LinearController,
             NonlinearController,
@@ -49,7 +53,7 @@ class Expert:
         self.kind = kind
         self.controller = controller
         if isinstance(controller, LinearController | NonlinearController):
-            self.runtime: Any = controller.runtime()
+            self.runtime: PythonController = controller.runtime()
         else:
             self.runtime = as_python_controller(controller)
         reads = tuple(measured_outputs(controller) or ())
@@ -80,8 +84,8 @@ class Expert:
         return action
 
 
-def expert(env: Any, kind: str = "lqg", *, options: Mapping[str, Any] | None = None,
-           design_options: Mapping[str, Any] | None = None) -> Expert:
+def expert(env: object, kind: str = "lqg", *, options: Mapping[str, object] | None = None,
+           design_options: Mapping[str, object] | None = None) -> Expert:
     """The controller *kind* as a policy of *env* (an equilibrist environment, wrapped or not).
 
     The kind is built for the environment's system at its rate, measuring
@@ -96,7 +100,8 @@ def expert(env: Any, kind: str = "lqg", *, options: Mapping[str, Any] | None = N
         raise ExpertError(f"{type(env).__name__} is not an equilibrist environment")
     observed = tuple(core.observation_names)
     # The Kalman filter measures what the agent observes; the whole state is the LQR's own.
-    design: dict[str, Any] = {} if observed == tuple(core.system.state_names) else {"outputs": observed}
+    design: dict[str, object] = ({} if observed == tuple(core.system.state_names)
+                                 else {"outputs": observed})
     if core.at:  # the environment's operating point (its option at=)
         design["at"] = dict(core.at)
     design.update(design_options or {})

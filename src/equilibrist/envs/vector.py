@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -102,7 +102,7 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         task: str = "balance",
         *,
         render_mode: str | None = None,
-        **options: Any,
+        **options: object,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
             raise EnvError(f"num_envs must be a whole number >= 1, got {num_envs!r}")
@@ -129,7 +129,8 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._steps = EnvSteps(core.kernel, self._fs, self._us, self._cf, self._ci, core.n_obs)
         steps = self._steps
         #: The two ways of a step: one thread, all (each returns the count of bad actions).
-        self._ways: list[Any] = [lambda: steps.step_many(1), lambda: steps.step_many(chunks)]
+        self._ways: list[Callable[[], int]] = [lambda: steps.step_many(1),
+                                               lambda: steps.step_many(chunks)]
         self._mode = int(self.parallel)
         self._cost = [math.inf, math.inf]  # seconds per step, moving averages
         self._countdown = 0  # steps before the next probe
@@ -140,7 +141,7 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._interval = PROBE_EVERY  # steps between probes, doubled while they confirm the way
         self._at_probe = math.inf  # the way in use's time per step at the last probe
         self._probe_left = 0  # steps left of the probe under way
-        self._step_fn: Any = None
+        self._step_fn: list[Callable[[], int]] | None = None
         self._ashape = (N, m)
         self._obs_shape = (N, core.n_obs)
         self._flags_shape = (2, N)
@@ -305,7 +306,7 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             for i in range(self.num_envs)
         )
 
-    def close_extras(self, **kwargs: Any) -> None:
+    def close_extras(self, **kwargs: object) -> None:
         if self._renderer is not None:
             self._renderer.close()
 

@@ -22,11 +22,11 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Any
+from typing import TYPE_CHECKING, Any, NoReturn, TypedDict, TypeVar
 
 import numpy as np
 
@@ -36,6 +36,12 @@ from equilibrist.hil.link import DeviceGone, SerialLink
 from equilibrist.hil.protocol import Hello, HILError, ProtocolError
 from equilibrist.sim.run import StopRun
 from equilibrist.sim.signals import as_signal
+
+if TYPE_CHECKING:
+    from equilibrist.numeric.system import System
+    from equilibrist.sim.result import SimResult
+
+_T = TypeVar("_T")
 
 MODES = ("lockstep", "realtime")
 #: How long the host waits for the device's hello answer [s].
@@ -68,6 +74,18 @@ class HILRefused(HILError):
     """The device could not be started: no answer, or another controller (exit status 2)."""
 
 
+class LinkSummary(TypedDict):
+    """The link's figures (:meth:`LinkStats.summary`): milliseconds, microseconds, counts."""
+
+    round_trip_ms: dict[str, float | None]
+    round_trips_per_s: float | None
+    device_step_us: dict[str, float | None]
+    send_delay_ms: dict[str, float | None]
+    late: int
+    lost: int
+    steps: int
+
+
 @dataclass
 class LinkStats:
     """What the link did: round trips, the device's own step times, late and lost answers."""
@@ -83,7 +101,7 @@ class LinkStats:
     started: float | None = None  # time.perf_counter() at the first step
     ended: float | None = None  # ... at the last answer
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> LinkSummary:
         rt = np.asarray(self.round_trip_s) * 1e3
         us = np.asarray(self.device_step_us, dtype=float)
         sd = np.asarray(self.send_delay_s) * 1e3
@@ -112,7 +130,7 @@ class DeviceController(PythonControllerBase):
 
     def __init__(self, link: SerialLink, host: Hello, *, outputs: tuple[str, ...],
                  u_op: np.ndarray, mode: str = "lockstep", timeout: float = 1.0,
-                 excitation: Any = None) -> None:
+                 excitation: object = None) -> None:
         if mode not in MODES:
             raise HILError(f"--mode {mode!r}: expected one of {', '.join(MODES)}")
         self.link = link
@@ -267,7 +285,7 @@ class DeviceController(PythonControllerBase):
         except (ProtocolError, DeviceGone) as exc:
             raise HILRefused(f"{exc} ({when})") from None
 
-    def _guard(self, call: Any, t: float) -> Any:
+    def _guard(self, call: Callable[[], _T], t: float) -> _T:
         try:
             return call()
         except ProtocolError as exc:
@@ -290,7 +308,7 @@ class DeviceController(PythonControllerBase):
         self._stop(f"the device answered a message of type 0x{f.kind:02x} at t = {t:.4g} s, "
                    "expected a step answer")
 
-    def _stop(self, why: str) -> Any:
+    def _stop(self, why: str) -> NoReturn:
         self.fault = why
         raise StopRun(why)
 
@@ -307,7 +325,7 @@ def _what(f: proto.Frame) -> str:
 class HILRun:
     """A hardware-in-the-loop run: the simulation's result, the link's figures, a fault if any."""
 
-    result: Any  # equilibrist.sim.SimResult
+    result: SimResult
     stats: LinkStats
     mode: str
     port: str
@@ -315,7 +333,7 @@ class HILRun:
     device: Hello
     scheduling: str = "normal"
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> dict[str, object]:
         return {"mode": self.mode, "port": self.port, "fault": self.fault,
                 "scheduling": self.scheduling,
                 "controller_id": self.device.controller_id,
@@ -323,7 +341,7 @@ class HILRun:
                 **self.stats.summary()}
 
 
-def run_hil(system: Any, controller: DeviceController, *, x0: Mapping[str, float] | None = None,
+def run_hil(system: System, controller: DeviceController, *, x0: Mapping[str, float] | None = None,
             **options: Any) -> HILRun:
     """Simulate *system* with the device behind *controller* closing the loop.
 

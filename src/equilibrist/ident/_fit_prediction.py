@@ -7,7 +7,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
@@ -35,7 +34,9 @@ class _Predictor(_Unknowns):
     filter: Callable[..., None]
     step: np.ndarray = field(default_factory=lambda: np.zeros(0))  # the least difference step
     weight: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-    memo: dict[tuple[Any, ...], Any] = field(default_factory=dict)
+    # (K, S) by (p, q, q_factor, sigma_y), and (A_d, Q_d) by (p, q): see gain()
+    memo: dict[tuple[bytes | float, ...], tuple[np.ndarray, np.ndarray]] = field(
+        default_factory=dict)
 
     def split(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return self.head(z)

@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
@@ -102,9 +101,9 @@ class Identification:
     replayed: np.ndarray
     segment_starts: np.ndarray
     initial_state: Mapping[str, float]
-    method: Mapping[str, Any]
+    method: Mapping[str, object]
     source: str = ""
-    noise: Mapping[str, Any] = field(default_factory=dict)
+    noise: Mapping[str, object] = field(default_factory=dict)
 
     def estimate(self, name: str) -> Estimate:
         for e in self.estimates:
@@ -112,7 +111,7 @@ class Identification:
                 return e
         raise IdentificationError(f"no estimate {name!r}: {nearest(name, [e.name for e in self.estimates])}")
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         """Everything as JSON-able data (``--json``)."""
         names = [e.name for e in self.estimates]
         return {
@@ -142,7 +141,7 @@ class Identification:
             "params": dict(self.params),
         }
 
-    def params_document(self) -> dict[str, Any]:
+    def params_document(self) -> dict[str, object]:
         """What ``--out params.json`` holds (read back by ``--params``)."""
         return {
             "format": FORMAT,

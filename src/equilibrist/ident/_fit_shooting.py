@@ -121,7 +121,7 @@ class _Problem(_Unknowns):
     shoot: ShootFunction
     step_theta: np.ndarray
     step_x: np.ndarray
-    cache: dict[str, Any] = field(default_factory=dict)
+    cache: dict[str, object] = field(default_factory=dict)
 
     @property
     def n_seg(self) -> int:

@@ -12,18 +12,21 @@ cache) when an integrator is first asked for.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from equilibrist.numeric.system import System
 
+if TYPE_CHECKING:
+    from pathlib import Path
 
-def _f64(a: Any) -> np.ndarray:
+
+def _f64(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float64)
 
 
-def _i64(a: Any) -> np.ndarray:
+def _i64(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.int64)
 
 
@@ -36,8 +39,9 @@ class Shooting:
         self.system = system
         self.core = load_core(system)
 
-    def shoot_many(self, P: Any, XS: Any, bounds: Any, t: Any, u: Any, n_sub: Any, c_idx: Any,
-                   yhat: np.ndarray, xend: np.ndarray) -> None:
+    def shoot_many(self, P: np.ndarray, XS: np.ndarray, bounds: np.ndarray, t: np.ndarray,
+                   u: np.ndarray, n_sub: np.ndarray, c_idx: np.ndarray, yhat: np.ndarray,
+                   xend: np.ndarray) -> None:
         """Run every segment for each of ``K`` cases: ``P`` (K, n_p) parameter vectors,
         ``XS`` (K, n_seg, n) segment initial states; writes ``yhat`` (K, n_rows, ny) and
         ``xend`` (K, n_seg, n)."""
@@ -47,15 +51,16 @@ class Shooting:
         bounds, n_sub, c_idx = _i64(bounds), _i64(n_sub), _i64(c_idx)
         self.core.shoot_many(P, XS, bounds, t, u, n_sub, c_idx, yhat, xend)
 
-    def innovations(self, p: Any, x0: Any, t: Any, u: Any, n_sub: Any, c_idx: Any, gain: Any,
-                    y: Any, off: Any, e: np.ndarray) -> None:
+    def innovations(self, p: np.ndarray, x0: np.ndarray, t: np.ndarray, u: np.ndarray,
+                    n_sub: np.ndarray, c_idx: np.ndarray, gain: np.ndarray, y: np.ndarray,
+                    off: np.ndarray, e: np.ndarray) -> None:
         """One-step prediction errors of a Kalman filter with the fixed *gain* (n, ny)."""
         self.core._out(e, np.float64, "e")
         self.core.innovations(_f64(p), _f64(x0), _f64(t), _f64(u), _i64(n_sub), _i64(c_idx),
                               _f64(gain), _f64(y), _f64(off), e)
 
 
-_LOADED: dict[Any, Shooting] = {}
+_LOADED: dict[Path, Shooting] = {}
 
 
 def load_shooting(system: System) -> Shooting:

@@ -14,7 +14,6 @@ import os
 import tempfile
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
 from equilibrist.ident.log import IdentificationError
 
@@ -79,7 +78,7 @@ def read_params(path: str | Path, system: str | None = None) -> dict[str, float]
     return out
 
 
-def write_params(document: Mapping[str, Any], path: str | Path) -> Path:
+def write_params(document: Mapping[str, object], path: str | Path) -> Path:
     """Write *document* (``Identification.params_document()``) atomically."""
     p = Path(path)
     if p.suffix != ".json":

@@ -67,7 +67,7 @@ def one_line(message: str) -> str:
     return f"{what}{where}"
 
 
-def _name(model: Any, obj: Any, index: int) -> str:
+def _name(model: mujoco.MjModel, obj: mujoco.mjtObj, index: int) -> str:
     mujoco = load_mujoco()
     return mujoco.mj_id2name(model, obj, index) or ""
 
@@ -107,7 +107,7 @@ _FINITE = (
 )
 
 
-def _not_finite(model: Any, mujoco: Any) -> list[str]:
+def _not_finite(model: mujoco.MjModel, mujoco: Any) -> list[str]:
     """Values of the compiled model that are not finite numbers (NaN, inf), and
     damping, stiffness or armature below zero: each one named."""
     problems = []
@@ -142,7 +142,7 @@ def _not_finite(model: Any, mujoco: Any) -> list[str]:
     return problems
 
 
-def _model_name(model: Any, file: Path) -> str:
+def _model_name(model: mujoco.MjModel, file: Path) -> str:
     # The model's name is the first entry of its names buffer.
     raw = bytes(model.names)
     name = raw.split(b"\0", 1)[0].decode(errors="replace")

@@ -3,13 +3,15 @@ equilibrium nearest the file's pose, and the motors' authority there."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from equilibrist.importers._mujoco import load_mujoco
 
 if TYPE_CHECKING:
+    import mujoco
+
     from equilibrist.importers.tree import ActuatorData
 
 
@@ -19,7 +21,8 @@ if TYPE_CHECKING:
 MAX_MOVE = 0.1
 
 
-def _holds(model: Any, data: Any, qpos: np.ndarray, qvel: np.ndarray, ctrl: np.ndarray) -> bool:
+def _holds(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, qvel: np.ndarray,
+           ctrl: np.ndarray) -> bool:
     """Whether *qpos*, *qvel* with the controls *ctrl* is an equilibrium (qacc = 0)."""
     mujoco = load_mujoco()
     data.qpos[:], data.qvel[:] = qpos, qvel
@@ -30,8 +33,8 @@ def _holds(model: Any, data: Any, qpos: np.ndarray, qvel: np.ndarray, ctrl: np.n
 
 
 def _nearest_equilibrium(
-    model: Any, data: Any, qpos: np.ndarray, qvel: np.ndarray, ctrl: np.ndarray,
-    actuators: tuple[ActuatorData, ...], order: list[int], names: list[str],
+    model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray, qvel: np.ndarray,
+    ctrl: np.ndarray, actuators: tuple[ActuatorData, ...], order: list[int], names: list[str],
 ) -> tuple[np.ndarray, np.ndarray, list[tuple[str, float]]]:
     """The equilibrium nearest the file's pose, by MuJoCo's inverse dynamics.
 
@@ -86,8 +89,8 @@ def _nearest_equilibrium(
     return q, new_ctrl, moved
 
 
-def _authority(model: Any, data: Any, qpos: np.ndarray, actuators: tuple[ActuatorData, ...],
-               order: list[int]) -> tuple[float, ...]:
+def _authority(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray,
+               actuators: tuple[ActuatorData, ...], order: list[int]) -> tuple[float, ...]:
     """Per joint (in *order*), ``sum_a |M^-1[j, a]| * |gain_a| * (high_a - low_a) / 2``."""
     mujoco = load_mujoco()
     data.qpos[:] = qpos
@@ -102,8 +105,9 @@ def _authority(model: Any, data: Any, qpos: np.ndarray, actuators: tuple[Actuato
     return tuple(float(reach[int(model.jnt_dofadr[j])]) for j in order)
 
 
-def _linearization(model: Any, data: Any, qpos: np.ndarray, qvel: np.ndarray, ctrl: np.ndarray,
-                   actuators: tuple[ActuatorData, ...], order: list[int]
+def _linearization(model: mujoco.MjModel, data: mujoco.MjData, qpos: np.ndarray,
+                   qvel: np.ndarray, ctrl: np.ndarray, actuators: tuple[ActuatorData, ...],
+                   order: list[int]
                    ) -> tuple[tuple[tuple[float, ...], ...], tuple[tuple[float, ...], ...]]:
     """``(A, B)`` of ``x_dot = f(x, u)`` at the operating point, by MuJoCo's forward
     dynamics (central differences): ``x`` the joints' positions then their rates (in

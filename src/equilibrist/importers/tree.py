@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -40,6 +40,9 @@ from equilibrist.importers._tree_equilibrium import (
     _linearization,
     _nearest_equilibrium,
 )
+
+if TYPE_CHECKING:
+    import mujoco
 
 Vector3 = tuple[float, float, float]
 Matrix3 = tuple[Vector3, Vector3, Vector3]
@@ -136,7 +139,7 @@ def _quat_matrix(q: np.ndarray) -> np.ndarray:
     ])
 
 
-def _vec(v: Any) -> Vector3:
+def _vec(v: np.ndarray) -> Vector3:
     return (float(v[0]), float(v[1]), float(v[2]))
 
 
@@ -370,7 +373,8 @@ def read_tree(
     )
 
 
-def _motors(model: Any, file: Path, position: dict[int, int]) -> tuple[ActuatorData, ...]:
+def _motors(model: mujoco.MjModel, file: Path,
+            position: dict[int, int]) -> tuple[ActuatorData, ...]:
     """The compiled model's actuators, each a motor on one joint."""
     mujoco = load_mujoco()
     T = mujoco.mjtObj

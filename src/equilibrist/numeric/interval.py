@@ -46,13 +46,13 @@ _EPS = 2.0**-52
 _TINY = float(np.finfo(float).smallest_subnormal)
 
 
-def _down(x: Any) -> np.ndarray:
+def _down(x: np.ndarray | float) -> np.ndarray:
     with np.errstate(invalid="ignore", over="ignore"):
         out: np.ndarray = x - (np.abs(x) * _EPS + _TINY)
     return out
 
 
-def _up(x: Any) -> np.ndarray:
+def _up(x: np.ndarray | float) -> np.ndarray:
     with np.errstate(invalid="ignore", over="ignore"):
         out: np.ndarray = x + (np.abs(x) * _EPS + _TINY)
     return out
@@ -63,13 +63,17 @@ def _slack(x: np.ndarray) -> np.ndarray:
     return out
 
 
+#: An index of the arrays of an interval (numpy's basic and advanced indexing).
+Index = int | slice | np.ndarray | tuple[int | slice | np.ndarray, ...]
+
+
 class Interval:
     """Elementwise intervals ``[lo, hi]`` (arrays of one shape, or scalars)."""
 
     __slots__ = ("hi", "lo")
     __array_priority__ = 1000  # numpy scalars defer to Interval's operators
 
-    def __init__(self, lo: Any, hi: Any | None = None) -> None:
+    def __init__(self, lo: float | np.ndarray, hi: float | np.ndarray | None = None) -> None:
         lo_a = np.asarray(lo, dtype=float)
         hi_a = lo_a if hi is None else np.asarray(hi, dtype=float)
         bad = np.isnan(lo_a) | np.isnan(hi_a)
@@ -80,7 +84,7 @@ class Interval:
 
     # -- construction -------------------------------------------------------------
     @staticmethod
-    def of(value: Any) -> Interval:
+    def of(value: Operand) -> Interval:
         return value if isinstance(value, Interval) else Interval(value)
 
     @staticmethod
@@ -102,7 +106,7 @@ class Interval:
         w: np.ndarray = self.hi - self.lo
         return w
 
-    def __getitem__(self, key: Any) -> Interval:
+    def __getitem__(self, key: Index) -> Interval:
         return Interval(self.lo[key], self.hi[key])
 
     def __repr__(self) -> str:
@@ -115,20 +119,20 @@ class Interval:
     def __pos__(self) -> Interval:
         return self
 
-    def __add__(self, other: Any) -> Interval:
+    def __add__(self, other: Operand) -> Interval:
         o = Interval.of(other)
         return Interval(_down(self.lo + o.lo), _up(self.hi + o.hi))
 
     __radd__ = __add__
 
-    def __sub__(self, other: Any) -> Interval:
+    def __sub__(self, other: Operand) -> Interval:
         o = Interval.of(other)
         return Interval(_down(self.lo - o.hi), _up(self.hi - o.lo))
 
-    def __rsub__(self, other: Any) -> Interval:
+    def __rsub__(self, other: Operand) -> Interval:
         return Interval.of(other) - self
 
-    def __mul__(self, other: Any) -> Interval:
+    def __mul__(self, other: Operand) -> Interval:
         o = Interval.of(other)
         with np.errstate(invalid="ignore", over="ignore"):
             if o.lo is o.hi and o.lo.ndim == 0:  # times a number
@@ -151,7 +155,7 @@ class Interval:
             hi = np.where(holds_zero, np.inf, _up(1.0 / self.lo))
         return Interval(lo, hi)
 
-    def __truediv__(self, other: Any) -> Interval:
+    def __truediv__(self, other: Operand) -> Interval:
         o = Interval.of(other)
         if not np.any((o.lo <= 0.0) & (o.hi >= 0.0)):
             with np.errstate(invalid="ignore", over="ignore"):
@@ -162,7 +166,7 @@ class Interval:
             return Interval(_down(lo), _up(hi))
         return self * o.reciprocal()
 
-    def __rtruediv__(self, other: Any) -> Interval:
+    def __rtruediv__(self, other: Operand) -> Interval:
         return Interval.of(other) / self
 
     def square(self) -> Interval:
@@ -172,7 +176,7 @@ class Interval:
         lo = np.where(holds_zero, 0.0, _down(np.minimum(a, b) ** 2))
         return Interval(lo, _up(np.maximum(a, b) ** 2))
 
-    def __pow__(self, k: Any) -> Interval:
+    def __pow__(self, k: Interval | float) -> Interval:
         if isinstance(k, Interval):
             if np.all(k.lo == k.hi) and np.unique(k.lo).size == 1:
                 k = float(np.ravel(k.lo)[0])
@@ -219,6 +223,11 @@ class Interval:
         return Interval(np.maximum(self.lo, other.lo), np.minimum(self.hi, other.hi))
 
 
+#: An operand of the interval operations: an interval, or numbers (a scalar or an array,
+#: each a point interval).
+Operand = Interval | float | np.ndarray
+
+
 def _periodic(x: Interval, phase: float, fn: Callable[[np.ndarray], np.ndarray]) -> Interval:
     """``fn`` (sin or cos) on intervals: the ends, and 1 or -1 where a crest or a trough lies
     inside (``phase``: where the function has its crest, modulo a turn)."""
@@ -239,46 +248,46 @@ def _periodic(x: Interval, phase: float, fn: Callable[[np.ndarray], np.ndarray])
     return Interval(lo, hi)
 
 
-def sin(x: Any) -> Interval:
+def sin(x: Operand) -> Interval:
     return _periodic(Interval.of(x), 0.5 * math.pi, np.sin)
 
 
-def cos(x: Any) -> Interval:
+def cos(x: Operand) -> Interval:
     return _periodic(Interval.of(x), 0.0, np.cos)
 
 
-def _monotone(x: Any, fn: Callable[[np.ndarray], np.ndarray]) -> Interval:
+def _monotone(x: Operand, fn: Callable[[np.ndarray], np.ndarray]) -> Interval:
     v = Interval.of(x)
     with np.errstate(over="ignore"):
         lo, hi = fn(v.lo), fn(v.hi)
     return Interval(lo - _slack(lo), hi + _slack(hi))
 
 
-def exp(x: Any) -> Interval:
+def exp(x: Operand) -> Interval:
     out = _monotone(x, np.exp)
     return Interval(np.maximum(out.lo, 0.0), out.hi)
 
 
-def tanh(x: Any) -> Interval:
+def tanh(x: Operand) -> Interval:
     out = _monotone(x, np.tanh)
     return Interval(np.maximum(out.lo, -1.0), np.minimum(out.hi, 1.0))
 
 
-def sqrt(x: Any) -> Interval:
+def sqrt(x: Operand) -> Interval:
     return Interval.of(x).sqrt()
 
 
-def _abs(x: Any) -> Interval:
+def _abs(x: Operand) -> Interval:
     return Interval.of(x).abs()
 
 
 def _unsupported(name: str) -> Callable[..., Interval]:
-    def refuse(*_args: Any) -> Interval:
+    def refuse(*_args: object) -> Interval:
         raise UnsupportedError(f"{name} has no enclosure here")
     return refuse
 
 
-NAMESPACE: dict[str, Any] = {
+NAMESPACE: dict[str, object] = {
     "math": SimpleNamespace(sin=sin, cos=cos, exp=exp, tanh=tanh, sqrt=sqrt),
     "sin": sin, "cos": cos, "exp": exp, "tanh": tanh, "sqrt": sqrt, "Abs": _abs, "abs": _abs,
     "_rational": Interval.rational, "Interval": Interval,

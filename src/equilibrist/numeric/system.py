@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import math
 import types
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from functools import cached_property
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -228,7 +228,8 @@ class System:
                 f"{self.key} is singular at {coords} (mass matrix not invertible){why}"
             )
 
-    def _evaluate(self, what: str, x: np.ndarray, call: Any, *outputs: np.ndarray) -> None:
+    def _evaluate(self, what: str, x: np.ndarray, call: Callable[[], object],
+                  *outputs: np.ndarray) -> None:
         """Run a generated function; overflow or a result that is not finite is an error.
 
         Finite but huge states or parameters (``1e200``) overflow in the

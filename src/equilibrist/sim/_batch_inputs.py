@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
@@ -32,7 +31,7 @@ def _floats(value: object, what: str) -> np.ndarray:
         raise SimulationError(f"{what} = {value!r}: expected numbers") from None
 
 
-def _mapping(value: object, what: str, expected: str) -> Mapping[Any, Any]:
+def _mapping(value: object, what: str, expected: str) -> Mapping[object, object]:
     if not isinstance(value, Mapping):
         raise SimulationError(f"{what} = {value!r}: expected a mapping {expected}")
     return value
@@ -43,7 +42,7 @@ def child_seed(base: np.random.SeedSequence, index: int) -> np.random.SeedSequen
     return np.random.SeedSequence(base.entropy, spawn_key=(*base.spawn_key, int(index)))
 
 
-def child_descriptions(base: np.random.SeedSequence, runs: int) -> list[dict[str, Any]]:
+def child_descriptions(base: np.random.SeedSequence, runs: int) -> list[dict[str, object]]:
     """``describe_seed(child_seed(base, i))`` for ``i < runs``, without making the children
     (a batch whose runs draw nothing needs their names only: some 40 us a run saved)."""
     entropy = describe_seed(base)["entropy"]

@@ -74,7 +74,7 @@ class BatchResult:
     peak_deviation: np.ndarray
     estimation_error_rms: np.ndarray | None
     rows: np.ndarray
-    seeds: tuple[dict[str, Any] | None, ...]
+    seeds: tuple[dict[str, object] | None, ...]
     settings: Mapping[str, Any]
     elapsed: float = 0.0
     steps: int = 0
@@ -269,7 +269,7 @@ _BATCH_ARRAYS = ("x0", "params", "fell", "fell_at", "fell_code", "fell_x", "fina
                  "rows")
 
 
-def _check_batch_file(p: Path, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+def _check_batch_file(p: Path, meta: dict[str, object], arrays: dict[str, np.ndarray]) -> None:
     """Refuse a batch file whose contents are not what :meth:`BatchResult.save` writes."""
     bad = f"{p} is not a valid saved batch"
     for key in ("state_names", "input_names", "parameter_names"):
@@ -301,7 +301,7 @@ def _balanced_since(last_out: np.ndarray, fell: np.ndarray, rows: np.ndarray,
 
 
 def _batch_result(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
-                  seeds: Sequence[dict[str, Any] | None], statuses: np.ndarray,
+                  seeds: Sequence[dict[str, object] | None], statuses: np.ndarray,
                   accs: np.ndarray, fell_xs: np.ndarray, x_ends: np.ndarray,
                   recs: np.ndarray | None, elapsed: float) -> BatchResult:
     """The batch's result; *seeds*: each run's :func:`~equilibrist.sim.noise.describe_seed`."""

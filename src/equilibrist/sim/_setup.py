@@ -13,8 +13,7 @@ are in :mod:`equilibrist.sim._setup_steps`, the checks of single settings in
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Hashable, Mapping, Sequence
 
 import numpy as np
 
@@ -51,7 +50,8 @@ from equilibrist.sim.noise import Noise
 # initial state (immutable values only: the system, a compiled controller, the noise,
 # by identity; the other settings by value). A run asked again with another initial
 # state only checks and replaces that state.
-_BUILT: dict[tuple[Any, ...], tuple[object, object, Setup]] = {}  # key -> (controller, noise, setup)
+# key -> (controller, noise, setup)
+_BUILT: dict[tuple[Hashable, ...], tuple[object, object, Setup]] = {}
 _BUILT_MAX = 8
 _IMMUTABLE_CONTROLLERS = (StateFeedback, LQG, LinearController, NonlinearController)
 
@@ -60,7 +60,8 @@ def _scalar(value: object) -> bool:
     return value is None or isinstance(value, bool | int | float | str)
 
 
-def _built_key(system: System, controller: object, settings: dict[str, Any]) -> tuple[Any, ...] | None:
+def _built_key(system: System, controller: object,
+               settings: dict[str, object]) -> tuple[Hashable, ...] | None:
     """The key of :data:`_BUILT` for these settings, or None when they are not all immutable."""
     if controller is not None and not isinstance(controller, _IMMUTABLE_CONTROLLERS):
         return None
@@ -135,7 +136,7 @@ def build(
     initial state) are not validated and packed again: only the initial
     state is.
     """
-    settings: dict[str, Any] = dict(duration=duration, rate=rate, physics_step=physics_step,
+    settings: dict[str, object] = dict(duration=duration, rate=rate, physics_step=physics_step,
                     integrator=integrator, rtol=rtol, atol=atol, plant=plant, x0=x0,
                     delay=delay, noise=noise, reference=reference, events=events,
                     outputs=outputs, region=region, excitation=excitation,

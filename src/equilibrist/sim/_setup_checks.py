@@ -7,7 +7,6 @@ from __future__ import annotations
 import math
 import weakref
 from collections.abc import Mapping, Sequence
-from typing import Any
 
 import numpy as np
 
@@ -115,11 +114,11 @@ def _names(value: object) -> bool:
 # What is known of a system (it is immutable): whether it has a canonical
 # operating point, and initial states checked regular. Solving the point
 # and the mass matrix's condition number cost more than a short run.
-_KNOWN: weakref.WeakKeyDictionary[System, dict[Any, bool]] = weakref.WeakKeyDictionary()
+_KNOWN: weakref.WeakKeyDictionary[System, dict[str | bytes, bool]] = weakref.WeakKeyDictionary()
 _KNOWN_MAX = 256
 
 
-def _known(system: System) -> dict[Any, bool]:
+def _known(system: System) -> dict[str | bytes, bool]:
     known = _KNOWN.get(system)
     if known is None or len(known) > _KNOWN_MAX:
         known = _KNOWN[system] = {}
@@ -148,7 +147,7 @@ def _check_regular(system: System, x: np.ndarray) -> None:
         known[key] = True
 
 
-def operating_point(system: System, controller: Any) -> tuple[np.ndarray, np.ndarray]:
+def operating_point(system: System, controller: object) -> tuple[np.ndarray, np.ndarray]:
     """The controller's operating point; the system's canonical one for others.
 
     A system without a canonical point (the zxz gyroscope) runs open loop

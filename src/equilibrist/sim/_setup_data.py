@@ -4,15 +4,18 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.control.controller import NonlinearController
+from equilibrist.control.controller import LinearController, NonlinearController, PythonController
 from equilibrist.numeric.system import System
 from equilibrist.sim import events as ev
 from equilibrist.sim import layout
 from equilibrist.sim.noise import Noise
+
+if TYPE_CHECKING:
+    from equilibrist.sim.signals import Signal
 
 
 @dataclass(frozen=True, eq=False)
@@ -20,10 +23,10 @@ class Setup:
     """Everything a run needs, validated, with the core's packed arrays."""
 
     system: System
-    controller: Any
+    controller: LinearController | NonlinearController | PythonController
     compiled: bool
     estimates: bool
-    description: dict[str, Any]
+    description: dict[str, object]
     cp: np.ndarray
     z0: np.ndarray
     rate: float
@@ -59,8 +62,8 @@ class Setup:
     region: np.ndarray
     region_spec: dict[str, tuple[float, float]]
     duration: float
-    reference: Any
-    excitation: Any = None
+    reference: Signal | None
+    excitation: Signal | None = None
 
     @property
     def n_rows(self) -> int:
@@ -152,7 +155,7 @@ class Setup:
             out[j, :, 2 * n + m] = f0
         return out
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> dict[str, object]:
         """The settings as JSON-able data (recorded with every result)."""
         return {
             "system": self.system.key,

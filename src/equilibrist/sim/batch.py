@@ -156,7 +156,7 @@ def simulate_batch(
     # each run's seed is only named (the same names, without making 10^5 SeedSequences).
     draws = setup.lv.shape[0] > 0 or (setup.lw.ndim == 2 and setup.lw.shape[1] > 0)
     seqs: list[np.random.SeedSequence | None] = [None] * runs
-    seeds: Sequence[dict[str, Any] | None] = [None] * runs
+    seeds: Sequence[dict[str, object] | None] = [None] * runs
     rngs = np.zeros((runs, 4), dtype=np.uint64)
     if base_seq is not None and (draws or not setup.compiled):
         children = [child_seed(base_seq, i) for i in range(runs)]
@@ -182,13 +182,14 @@ def simulate_batch(
     fell_xs = np.zeros((runs, n))
     x_ends = np.zeros((runs, n))
     stop = np.zeros(1, dtype=np.int64)
+    core = kernel.core(setup.cp)
     shared = dict(
         iopts=setup.iopts(record=record), fopts=setup.fopts, z0=setup.z0, op=setup.op,
         c_idx=setup.c_idx, cp=setup.cp, ref=setup.ref, uff=setup.uff, lv=setup.lv, lw=setup.lw,
         p_switch=setup.p_switch, region=setup.region, kicks=setup.kicks,
         kick_value=setup.kick_value, pulses=setup.pulses, pulse_value=setup.pulse_value,
         rec_cols=setup.rec_cols, acc_cols=setup.acc_cols, stop=stop,
-        core=kernel.core(setup.cp), bal=np.ascontiguousarray(balance_box(system)),
+        bal=np.ascontiguousarray(balance_box(system)),
     )
 
     def run_arrays(sl: slice) -> dict[str, np.ndarray]:
@@ -199,7 +200,7 @@ def simulate_batch(
     if not kernel.compiled(setup.cp):
         # Load (or compile) the core here, outside the timing (steps_per_second is the
         # runs' speed) and where Ctrl-C reaches it.
-        kernel.run_many(**shared, **run_arrays(slice(0, 0)))
+        kernel.run_many(core=core, **shared, **run_arrays(slice(0, 0)))
     timing: list[float] = []
 
     def work() -> None:
@@ -209,7 +210,7 @@ def simulate_batch(
         set_workers(workers)
         t0 = time.perf_counter()
         try:
-            kernel.run_many(**shared, **run_arrays(slice(0, runs)))
+            kernel.run_many(core=core, **shared, **run_arrays(slice(0, runs)))
         finally:
             timing.append(time.perf_counter() - t0)
 

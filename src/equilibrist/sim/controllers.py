@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -44,7 +44,12 @@ from equilibrist.control.controller import (
 from equilibrist.control.design import Design
 from equilibrist.errors import DimensionError, EquilibristError, SimulationError
 from equilibrist.numeric.system import System
-from equilibrist.sim.signals import Signal, as_signal
+from equilibrist.sim.signals import Signal, Value, as_signal
+
+#: What an open loop's inputs follow (see :class:`OpenLoop`).
+_InputSignal = Signal | Callable[[float], Value] | float | Sequence[float] | None
+#: The plant a description was made a ``LinearController`` for: its state and input names.
+_FormKey = tuple[tuple[str, ...], tuple[str, ...] | None]
 
 
 @runtime_checkable
@@ -72,7 +77,7 @@ class OpenLoop:
     function of time, or a constant.
     """
 
-    signal: Signal | Callable[[float], Any] | float | Sequence[float] | None = None
+    signal: _InputSignal = None
 
     kind = "none"
 
@@ -96,9 +101,9 @@ class StateFeedback:
     Kc: np.ndarray | None = None
     tracked: tuple[str, ...] = ()
     rate: float | None = None
-    design: Any = field(default=None, repr=False)
-    _forms: dict[Any, LinearController] = field(default_factory=dict, init=False, repr=False,
-                                                compare=False)
+    design: Design | None = field(default=None, repr=False)
+    _forms: dict[_FormKey, LinearController] = field(default_factory=dict, init=False,
+                                                     repr=False, compare=False)
 
     kind = "lqr"
 
@@ -170,9 +175,9 @@ class LQG:
     Kc: np.ndarray | None = None
     tracked: tuple[str, ...] = ()
     x_hat0: np.ndarray | None = None
-    design: Any = field(default=None, repr=False)
-    _forms: dict[Any, LinearController] = field(default_factory=dict, init=False, repr=False,
-                                                compare=False)
+    design: Design | None = field(default=None, repr=False)
+    _forms: dict[_FormKey, LinearController] = field(default_factory=dict, init=False,
+                                                     repr=False, compare=False)
 
     kind = "lqg"
 
@@ -262,7 +267,7 @@ def _design_kc(design: Design) -> np.ndarray:
     return np.asarray(kc, dtype=float)
 
 
-def _check_tracking(ctrl: Any, m: int) -> None:
+def _check_tracking(ctrl: StateFeedback | LQG, m: int) -> None:
     if ctrl.Kc is None:
         if ctrl.tracked:
             raise SimulationError("tracked outputs given without a reference gain K_c")
@@ -286,7 +291,7 @@ class Resolved:
     """
 
     controller: LinearController | NonlinearController | PythonController
-    signal: Any
+    signal: _InputSignal
     description: dict[str, object]
 
     @property
@@ -353,7 +358,8 @@ def _command(raw: object, name: str, t: float) -> np.ndarray:
 class _CheckedCommand:
     """A user's ``step(t, y, r)`` (or function) whose command is checked to be real numbers."""
 
-    def __init__(self, call: Callable[..., Any], name: str) -> None:
+    def __init__(self, call: Callable[[float, np.ndarray, np.ndarray], object],
+                 name: str) -> None:
         self.call = call
         self.name = name
 

@@ -32,7 +32,9 @@ Importing this module does no work; a library is built or loaded on first use.
 from __future__ import annotations
 
 import os
-from typing import Any
+from typing import TYPE_CHECKING
+
+import numpy as np
 
 from equilibrist.control._controller_layout import linear_pattern
 from equilibrist.control.controller import (
@@ -40,6 +42,9 @@ from equilibrist.control.controller import (
     linear_sizes,
 )
 from equilibrist.numeric.system import System
+
+if TYPE_CHECKING:
+    from equilibrist.native.simcore import NativeCore
 
 #: What the linear library of a core is specialized to: a controller's sizes
 #: ``(nz, ny, nr, m, n)`` (its loops with literal trip counts), or its
@@ -49,7 +54,7 @@ Linear = tuple[int, int, int, int, int] | bytes
 _KEYS: dict[bytes, Linear | None] = {}  # packed controller -> what its core is made for
 
 
-def _linear_key(cp: Any) -> Linear | None:
+def _linear_key(cp: np.ndarray) -> Linear | None:
     """The pattern (or the sizes) the core of packed linear controller *cp* is made for."""
     raw = cp.tobytes()
     if raw in _KEYS:
@@ -65,7 +70,7 @@ def _linear_key(cp: Any) -> Linear | None:
     return key
 
 
-def load_kernel(system: System) -> Any:
+def load_kernel(system: System) -> NativeCore:
     """The core of *system* with the generic linear library: the entries that run no
     controller of their own (``rk4_steps``, ``normals``, ``f``, the environments')."""
     from equilibrist.native.simcore import load_core
@@ -84,7 +89,7 @@ class Kernel:
         self.system = system
         self.controller = controller
 
-    def core(self, cp: Any) -> Any:
+    def core(self, cp: np.ndarray) -> NativeCore:
         """The library whose ``run_one``/``run_many`` run controller parameters *cp*."""
         from equilibrist.native.simcore import load_core
 
@@ -93,10 +98,10 @@ class Kernel:
         return load_core(self.system, _linear_key(cp))
 
     @property
-    def generic(self) -> Any:
+    def generic(self) -> NativeCore:
         return load_kernel(self.system)
 
-    def compiled(self, cp: Any) -> bool:
+    def compiled(self, cp: np.ndarray) -> bool:
         """Whether the library for controller parameters *cp* is loaded in this process."""
         from equilibrist.native.simcore import loaded
 
@@ -104,12 +109,15 @@ class Kernel:
             return loaded(self.system, None, self.controller)
         return loaded(self.system, _linear_key(cp))
 
-    def run_one(self, *, k_start: int, k_end: int, iopts: Any, fopts: Any, x: Any, z: Any,
-                u_prev: Any, rng: Any, op: Any, c_idx: Any, cp: Any, ref: Any, uff: Any,
-                lv: Any, lw: Any, p_sets: Any, p_switch: Any, lin_s: Any, region: Any,
-                kicks: Any, kick_value: Any, pulses: Any, pulse_value: Any, rec_cols: Any,
-                acc_cols: Any, rec: Any, acc: Any, status: Any, fell_x: Any,
-                stop: Any, core: Any = None) -> None:
+    def run_one(self, *, k_start: int, k_end: int, iopts: np.ndarray, fopts: np.ndarray,
+                x: np.ndarray, z: np.ndarray, u_prev: np.ndarray, rng: np.ndarray,
+                op: np.ndarray, c_idx: np.ndarray, cp: np.ndarray, ref: np.ndarray,
+                uff: np.ndarray, lv: np.ndarray, lw: np.ndarray, p_sets: np.ndarray,
+                p_switch: np.ndarray, lin_s: np.ndarray, region: np.ndarray,
+                kicks: np.ndarray, kick_value: np.ndarray, pulses: np.ndarray,
+                pulse_value: np.ndarray, rec_cols: np.ndarray, acc_cols: np.ndarray,
+                rec: np.ndarray, acc: np.ndarray, status: np.ndarray, fell_x: np.ndarray,
+                stop: np.ndarray, core: NativeCore | None = None) -> None:
         """One run, or samples ``k_start .. k_end - 1`` of one (*core*: :meth:`core` of *cp*,
         if the caller has it already)."""
         (core or self.core(cp)).run_one(
@@ -118,12 +126,16 @@ class Kernel:
             rec_cols, acc_cols, rec, acc, status, fell_x, stop,
         )
 
-    def run_many(self, *, iopts: Any, fopts: Any, x0s: Any, z0: Any, rngs: Any, op: Any,
-                 c_idx: Any, cp: Any, ref: Any, uff: Any, lv: Any, lw: Any, p_sets_r: Any,
-                 p_switch: Any, lin_r: Any, region: Any, kicks: Any, kick_value: Any,
-                 pulses: Any, pulse_value: Any, rec_cols: Any, acc_cols: Any, recs: Any,
-                 accs: Any, statuses: Any, fell_xs: Any, x_ends: Any, stop: Any,
-                 core: Any = None, bal: Any = None) -> None:
+    def run_many(self, *, iopts: np.ndarray, fopts: np.ndarray, x0s: np.ndarray,
+                 z0: np.ndarray, rngs: np.ndarray, op: np.ndarray, c_idx: np.ndarray,
+                 cp: np.ndarray, ref: np.ndarray, uff: np.ndarray, lv: np.ndarray,
+                 lw: np.ndarray, p_sets_r: np.ndarray, p_switch: np.ndarray,
+                 lin_r: np.ndarray, region: np.ndarray, kicks: np.ndarray,
+                 kick_value: np.ndarray, pulses: np.ndarray, pulse_value: np.ndarray,
+                 rec_cols: np.ndarray, acc_cols: np.ndarray, recs: np.ndarray,
+                 accs: np.ndarray, statuses: np.ndarray, fell_xs: np.ndarray,
+                 x_ends: np.ndarray, stop: np.ndarray, core: NativeCore | None = None,
+                 bal: np.ndarray | None = None) -> None:
         """Independent runs, on :func:`thread_count` threads (*bal*: the balance box whose
         last exit the accumulators keep, :func:`equilibrist.tasks.balance_box`)."""
         (core or self.core(cp)).run_many(
@@ -132,10 +144,11 @@ class Kernel:
             accs, statuses, fell_xs, x_ends, stop, threads=_THREADS[0], bal=bal,
         )
 
-    def scratch(self, *, p_len: int, ny: int, nw: int) -> Any:
+    def scratch(self, *, p_len: int, ny: int, nw: int) -> np.ndarray:
         return self.generic.scratch(p_len, ny, nw)
 
-    def rk4_steps(self, *, x: Any, u: Any, p: Any, h: float, n_steps: int) -> None:
+    def rk4_steps(self, *, x: np.ndarray, u: np.ndarray, p: np.ndarray, h: float,
+                  n_steps: int) -> None:
         self.generic.rk4_steps(x, u, p, h, n_steps)
 
 

@@ -284,7 +284,7 @@ class SimResult:
             np.savez(tmp, meta=np.array(json.dumps(meta)), **arrays)
         return p
 
-    def _meta(self) -> dict[str, Any]:
+    def _meta(self) -> dict[str, object]:
         return {
             "format": FORMAT,
             "system": self.system,
@@ -536,7 +536,7 @@ def _checked(cls: type[SimResult], meta: object, arrays: dict[str, np.ndarray], 
     )
 
 
-def digest_field(meta: Mapping[str, Any], bad: str) -> str | None:
+def digest_field(meta: Mapping[str, object], bad: str) -> str | None:
     """The recorded ``system_digest`` of a file's metadata (a SHA-256 in hex), or ``None``."""
     v = meta.get("system_digest")
     if v is None:

@@ -123,7 +123,7 @@ def outcomes(system: System, controller: object, x0s: np.ndarray, options: Mappi
 def estimate_slice(system: System, controller: object, states: tuple[str, str],
                    bounds: tuple[tuple[float, float], tuple[float, float]], *, x_op: np.ndarray,
                    grid: int = 24, max_samples: int = 100_000, seed: int = 0,
-                   **options: Any) -> SliceEstimate:
+                   **options: object) -> SliceEstimate:
     """The slice *states* over *bounds*, refined along the boundary up to *max_samples* runs.
 
     A first ``(grid + 1)^2`` grid; then each cell whose corners disagree
@@ -180,7 +180,7 @@ def estimate_slice(system: System, controller: object, states: tuple[str, str],
 
 
 def _largest(system: System, controller: object, start: np.ndarray, direction: np.ndarray,
-             limit: float, options: Mapping[str, Any], seed: int, rounds: int = 3,
+             limit: float, options: Mapping[str, object], seed: int, rounds: int = 3,
              per_round: int = 32) -> tuple[float, list[np.ndarray], list[bool]]:
     """The largest ``a`` in ``[0, limit]`` with every sampled ``start + s direction``,
     ``0 <= s <= a``, caught: a grid of *per_round* values, then the same inside the bracket
@@ -204,7 +204,7 @@ def _largest(system: System, controller: object, start: np.ndarray, direction: n
 
 def max_tilt(system: System, controller: object, state: str, limit: float, *,
              x_op: np.ndarray, seed: int = 0,
-             **options: Any) -> tuple[float, float, list[np.ndarray], list[bool]]:
+             **options: object) -> tuple[float, float, list[np.ndarray], list[bool]]:
     """``(down, up)``: the largest deviation of *state* below and above the operating point
     recovered from rest (every sampled smaller one recovered too), and the starts run."""
     i = system.state_names.index(state)
@@ -218,7 +218,7 @@ def max_tilt(system: System, controller: object, state: str, limit: float, *,
 
 def max_push(system: System, controller: object, limit: float, *, x_op: np.ndarray,
              u_op: np.ndarray, seed: int = 0,
-             **options: Any) -> tuple[float, float, list[np.ndarray], list[bool]]:
+             **options: object) -> tuple[float, float, list[np.ndarray], list[bool]]:
     """``(negative, positive)``: the largest impulse on the first input [its unit x s]
     recovered from rest at the operating point, each way, and the starts run."""
     lm = system.linearize(np.asarray(x_op, dtype=float), np.asarray(u_op, dtype=float))

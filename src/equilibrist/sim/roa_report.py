@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -30,6 +30,10 @@ from equilibrist.sim.roa import (
     slice_coverage,
 )
 
+if TYPE_CHECKING:
+    from equilibrist.control.certify import Certificate
+    from equilibrist.control.design import Design
+
 
 @dataclass(frozen=True, eq=False)
 class RoaReport:
@@ -42,7 +46,7 @@ class RoaReport:
     caught: np.ndarray
     x_op: np.ndarray
     S: np.ndarray | None
-    cert: Any
+    cert: Certificate | None
     figures: dict[str, Any]
 
     @property
@@ -51,7 +55,7 @@ class RoaReport:
         return float(self.figures["rho"]) if self.figures["certified"] else None
 
 
-def analyse(system: System, controller: Any, *, states: tuple[str, str],
+def analyse(system: System, controller: object, *, states: tuple[str, str],
             bounds: tuple[tuple[float, float], tuple[float, float]], x_op: np.ndarray,
             u_op: np.ndarray, samples: int, boxes: int | None, falsify: int, seed: int,
             options: Mapping[str, Any], name: str) -> RoaReport:
@@ -74,7 +78,7 @@ def analyse(system: System, controller: Any, *, states: tuple[str, str],
     design = getattr(controller, "design", None)
     S = getattr(design, "S", None)
     cert, note = None, None
-    if S is not None and boxes is not None:
+    if design is not None and S is not None and boxes is not None:
         cert, note, extra = _certify(system, design, x_op, u_op, boxes, falsify, controller,
                                      opts, seed)
         if extra is not None:
@@ -102,9 +106,9 @@ def analyse(system: System, controller: Any, *, states: tuple[str, str],
                      figures=figures)
 
 
-def _certify(system: System, design: Any, x_op: np.ndarray, u_op: np.ndarray, boxes: int,
-             falsify: int, controller: object, options: dict[str, Any],
-             seed: int) -> tuple[Any, str | None, tuple[np.ndarray, np.ndarray] | None]:
+def _certify(system: System, design: Design, x_op: np.ndarray, u_op: np.ndarray, boxes: int,
+             falsify: int, controller: object, options: dict[str, object], seed: int
+             ) -> tuple[Certificate | None, str | None, tuple[np.ndarray, np.ndarray] | None]:
     """The certificate and the runs started inside it (or why there is none)."""
     from equilibrist.control.certify import CertificateUnavailable, certify
 
@@ -118,11 +122,11 @@ def _certify(system: System, design: Any, x_op: np.ndarray, u_op: np.ndarray, bo
     return cert, None, (starts, outcomes(system, controller, starts, options, seed + 77))
 
 
-def _checked(cert: Any, note: str | None, system: System, S: Any, x_op: np.ndarray,
-             x0s: np.ndarray, caught: np.ndarray, est: SliceEstimate,
-             states: tuple[str, str]) -> dict[str, Any]:
+def _checked(cert: Certificate | None, note: str | None, system: System, S: np.ndarray | None,
+             x_op: np.ndarray, x0s: np.ndarray, caught: np.ndarray, est: SliceEstimate,
+             states: tuple[str, str]) -> dict[str, object]:
     """The certificate's JSON keys, checked against every run that started inside it."""
-    if cert is None:
+    if cert is None or S is None:  # S is None only without a certificate
         return {"rho": None, "certified": False, "method": None, "counterexamples": None,
                 "coverage": None, "falsify_runs": 0, "certificate": None,
                 "certificate_note": note}

@@ -33,6 +33,7 @@ from typing import Any, TypeVar
 import numpy as np
 
 from equilibrist import interrupt
+from equilibrist.control.controller import LinearController, NonlinearController
 from equilibrist.errors import SimulationError
 from equilibrist.numeric.system import System
 from equilibrist.sim import _setup, layout
@@ -241,16 +242,15 @@ def _run_compiled(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
         kicks=setup.kicks, kick_value=setup.kick_value, pulses=setup.pulses,
         pulse_value=setup.pulse_value, rec_cols=setup.rec_cols, acc_cols=setup.acc_cols,
         rec=rec, acc=np.zeros(setup.acc_len), status=status, fell_x=fell_x, stop=stop,
-        core=core,
     )
     total = setup.n_rows
     rows, fell = layout.STATUS["rows"], layout.STATUS["fell"]
     if setup.integrator != "adaptive" and setup.n_samples * setup.n_sub <= _FIRST_CHUNK_STEPS:
-        kernel.run_one(k_start=0, k_end=total, **arrays)
+        kernel.run_one(k_start=0, k_end=total, core=core, **arrays)
         return _result(setup, rec, int(status[rows]), status, fell_x, x, seq,
                        estimates=setup.estimates)
     if not kernel.compiled(setup.cp):  # compiled (or loaded) here: Ctrl-C can stop that
-        kernel.run_one(k_start=0, k_end=0, **arrays)
+        kernel.run_one(k_start=0, k_end=0, core=core, **arrays)
 
     def pieces() -> None:
         # Calls that grow to about CHUNK_SECONDS: the run resumes at any sample.
@@ -259,7 +259,7 @@ def _run_compiled(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
         while k < total and not stop[0]:
             k_end = min(total, k + chunk)
             t0 = time.perf_counter()
-            kernel.run_one(k_start=k, k_end=k_end, **arrays)
+            kernel.run_one(k_start=k, k_end=k_end, core=core, **arrays)
             chunk = next_chunk(k_end - k, time.perf_counter() - t0)
             if status[fell] or status[rows] < k_end:
                 break
@@ -293,6 +293,7 @@ def _run_python(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
     """A run of a :class:`~equilibrist.control.controller.PythonController`: the core
     measures and advances the plant, the controller is called in between."""
     ctrl = setup.controller
+    assert not isinstance(ctrl, LinearController | NonlinearController)  # those run compiled
     sysm = setup.system
     n, m = sysm.n_states, sysm.n_inputs
     ny = len(setup.outputs)

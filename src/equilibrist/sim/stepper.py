@@ -9,13 +9,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from equilibrist.errors import DimensionError, SimulationError
 from equilibrist.numeric.system import System
 from equilibrist.sim.kernel import load_kernel
+
+if TYPE_CHECKING:
+    from equilibrist.native.simcore import NativeCore
 
 
 @dataclass(frozen=True, eq=False)
@@ -30,7 +33,7 @@ class Stepper:
 
     system: System
     physics_step: float = 1e-3
-    _kernel: Any = field(default=None, init=False, repr=False)
+    _kernel: NativeCore = field(init=False, repr=False)  # set in __post_init__
     _p: np.ndarray = field(init=False, repr=False)  # set in __post_init__
 
     def __post_init__(self) -> None:

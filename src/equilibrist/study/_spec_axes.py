@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -17,9 +17,13 @@ from equilibrist.study._spec_study import (
     MAX_ROA_STATES,
     SPECIAL,
     Axis,
+    AxisValue,
     _does_not_apply,
     controllers,
 )
+
+if TYPE_CHECKING:
+    from equilibrist.numeric.system import System
 
 # -- building and checking ---------------------------------------------------------------
 
@@ -55,7 +59,7 @@ def _whole(value: object, what: str, problems: list[str], *, minimum: int = 1) -
 
 
 def _parse_values(name: str, value: object, sampled: bool, problems: list[str]
-                  ) -> tuple[tuple[Any, ...], float | None, float | None, bool] | None:
+                  ) -> tuple[tuple[object, ...], float | None, float | None, bool] | None:
     """``(values, low, high, log)`` of an axis from its text, list or table."""
     what = f"--vary {name}"
     if isinstance(value, Mapping):  # TOML {low = .., high = .., n = .., log = ..}
@@ -123,7 +127,8 @@ def _parse_values(name: str, value: object, sampled: bool, problems: list[str]
     return tuple(float(v) for v in grid), lo, hi, log
 
 
-def _axis(system: Any, name: str, value: object, sampled: bool, problems: list[str]) -> Axis | None:
+def _axis(system: System, name: str, value: object, sampled: bool,
+          problems: list[str]) -> Axis | None:
     spec = system.spec
     params = {p.name: p for p in spec.all_parameters}
     if name in params:
@@ -149,7 +154,7 @@ def _axis(system: Any, name: str, value: object, sampled: bool, problems: list[s
         return None
     raw, low, high, log = parsed
     before = len(problems)
-    values: list[Any] = []
+    values: list[AxisValue] = []
     if kind == "controller":
         for v in raw:
             text = str(v).strip().lower()
@@ -173,8 +178,9 @@ def _axis(system: Any, name: str, value: object, sampled: bool, problems: list[s
         if low is not None:
             problems.append("--vary delay: expected a list of 0 and 1")
     else:
-        values = [_number(v, f"--vary {name}", problems) for v in raw]
-        checked = [v for v in values if v is not None]
+        numbers = [_number(v, f"--vary {name}", problems) for v in raw]
+        checked = [v for v in numbers if v is not None]
+        values = list(checked)  # every value: one that is not a number is a problem (below)
         if low is not None and high is not None:
             checked += [low, high]
         for v in sorted(set(checked)):
@@ -200,7 +206,7 @@ def _axis(system: Any, name: str, value: object, sampled: bool, problems: list[s
     return Axis(name, kind, tuple(values), low, high, log)
 
 
-def _ranges(system: Any, given: Mapping[str, object], option: str, problems: list[str], *,
+def _ranges(system: System, given: Mapping[str, object], option: str, problems: list[str], *,
             counted: bool) -> dict[str, tuple[float, ...]]:
     out: dict[str, tuple[float, ...]] = {}
     form = "LOW:HIGH:N" if counted else "LOW:HIGH"

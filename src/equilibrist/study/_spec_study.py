@@ -10,22 +10,27 @@ import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from equilibrist.errors import EquilibristError
 
+if TYPE_CHECKING:
+    from equilibrist.numeric.system import System
+
 FORMAT = "equilibrist-study-1"
+#: A value of an axis: a number, a controller kind (text) or a delay (bool).
+AxisValue = float | str | bool
 
 
-def _does_not_apply(kind: str, system: Any) -> str | None:
+def _does_not_apply(kind: str, system: System) -> str | None:
     from equilibrist.control import kinds
 
     return kinds.get(kind).applies(system)
 
 
-def kind_options(kind: str, options: Mapping[str, str]) -> dict[str, Any]:
+def kind_options(kind: str, options: Mapping[str, str]) -> dict[str, object]:
     """The options of *options* that the kind *kind* takes, parsed (its request's options)."""
     from equilibrist.control import kinds
 
@@ -77,7 +82,7 @@ class Axis:
 
     name: str
     kind: str
-    values: tuple[Any, ...]
+    values: tuple[AxisValue, ...]
     low: float | None = None
     high: float | None = None
     log: bool = False
@@ -91,7 +96,7 @@ class Axis:
     def is_text(self) -> bool:
         return self.kind == "controller"
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         return {"name": self.name, "kind": self.kind, "values": list(self.values),
                 "low": self.low, "high": self.high, "log": self.log}
 
@@ -106,7 +111,7 @@ class Study:
     """
 
     system: str
-    settings: Mapping[str, Any]
+    settings: Mapping[str, object]
     axes: tuple[Axis, ...]
     sample: int | None
     runs: int
@@ -137,7 +142,7 @@ class Study:
     def total_runs(self) -> int:
         return self.n_points * self.runs
 
-    def point(self, index: int) -> dict[str, Any]:
+    def point(self, index: int) -> dict[str, AxisValue]:
         """The varied quantities' values at point *index* (in axis order)."""
         if not 0 <= index < self.n_points:
             raise StudyError(f"point {index} out of range 0..{self.n_points - 1}")
@@ -146,7 +151,7 @@ class Study:
             idx = np.unravel_index(index, shape) if shape else ()
             return {a.name: a.values[int(i)] for a, i in zip(self.axes, idx, strict=True)}
         gen = np.random.default_rng(self.point_seed(index, 0))
-        out: dict[str, Any] = {}
+        out: dict[str, AxisValue] = {}
         for a in self.axes:
             if a.values:
                 out[a.name] = a.values[int(gen.integers(len(a.values)))]
@@ -162,7 +167,7 @@ class Study:
         return np.random.SeedSequence(self.seed, spawn_key=(int(index), *map(int, key)))
 
     # -- description ----------------------------------------------------------------
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         # The controllers' options only when given: a study without them keeps its digest.
         extra = ({"controller_options": dict(self.controller_options)}
                  if self.controller_options else {})

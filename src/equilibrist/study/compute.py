@@ -36,13 +36,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, NotRequired, TypedDict
 
 import numpy as np
 
 from equilibrist.errors import EquilibristError
 from equilibrist.study._spec_study import kind_options
 from equilibrist.study.spec import Study
+
+if TYPE_CHECKING:
+    from equilibrist.numeric.system import System
+    from equilibrist.sim.noise import Noise
 
 SETTLE_FRACTION = 0.02
 
@@ -93,14 +97,14 @@ def settling_times(states: np.ndarray, times: np.ndarray, watched: Sequence[int]
     return np.where(settled, t, np.inf)
 
 
-def _bryson_weights(system: Any, names: Sequence[str]) -> np.ndarray | None:
+def _bryson_weights(system: System, names: Sequence[str]) -> np.ndarray | None:
     scales = system.spec.design_scales
     if not all(scales.get(n, 0) > 0 for n in names):
         return None
     return np.array([1.0 / float(scales[n]) ** 2 for n in names])
 
 
-def _start(system: Any, controller: Any, x_op: np.ndarray) -> np.ndarray:
+def _start(system: System, controller: object, x_op: np.ndarray) -> np.ndarray:
     """Where the states the study's ``x0`` leaves out start: where the controller's plan
     starts (a tracked trajectory's ``settings["start"]``), else the operating point."""
     settings = getattr(controller, "settings", None)
@@ -114,7 +118,18 @@ def _start(system: Any, controller: Any, x_op: np.ndarray) -> np.ndarray:
     return start
 
 
-def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> dict[str, Any]:
+class _RunOptions(TypedDict):
+    """What every batch of a point (and its region of attraction) is run with."""
+
+    duration: float
+    rate: float
+    delay: bool
+    noise: Noise | None
+    region: NotRequired[dict[str, tuple[float, float]]]
+
+
+def evaluate_point(study: Study, index: int, *,
+                   threads: int | None = None) -> dict[str, object]:
     """The table row of point *index* (a mapping column -> value)."""
     from equilibrist.control import kinds as registry
     from equilibrist.control.controller import measured_outputs
@@ -128,12 +143,12 @@ def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> d
     values = study.point(index)
     nominal = get_system(study.system, **study.settings)
     inputs = nominal.input_names
-    row: dict[str, Any] = {"point": index, **values}
+    row: dict[str, object] = {"point": index, **values}
     row.update(dict.fromkeys(metric_names(inputs), math.nan))
     row.update({"runs": 0, "stayed_up": 0, "steps": 0, "status": "ok", "error": None})
     kinds = {a.name: a for a in study.axes}
 
-    def failed(status: str, exc: Exception) -> dict[str, Any]:
+    def failed(status: str, exc: Exception) -> dict[str, object]:
         row["status"] = status
         row["error"] = str(exc).replace("\n", " ")
         return row
@@ -194,8 +209,8 @@ def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> d
         steps = 0
         qw = _bryson_weights(nominal, nominal.state_names)
         rw = _bryson_weights(nominal, inputs)
-        options: dict[str, Any] = {"duration": study.duration, "rate": rate, "delay": delay,
-                                   "noise": noise}
+        options: _RunOptions = {"duration": study.duration, "rate": rate, "delay": delay,
+                                "noise": noise}
         if record.task is not None and record.task in task_names(plant):
             # A swing-up starts hanging: only the task's region (the cart's track) ends it,
             # as simulate and batch run it.
@@ -215,6 +230,7 @@ def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> d
             saturated[sl] = batch.time_saturated
             if full and batch.trajectories is not None:
                 setup = batch._setup
+                assert setup is not None  # a batch that recorded its runs keeps its setup
                 n, m = plant.n_states, plant.n_inputs
                 up = ~batch.fell
                 traj = batch.trajectories[up]
@@ -268,14 +284,15 @@ def evaluate_point(study: Study, index: int, *, threads: int | None = None) -> d
 
 
 def evaluate_chunk(study: Study, chunk: int, chunk_size: int, *,
-                   threads: int | None = None) -> list[dict[str, Any]]:
+                   threads: int | None = None) -> list[dict[str, object]]:
     """The rows of points ``chunk * chunk_size`` up to the next chunk."""
     start = chunk * chunk_size
     stop = min(study.n_points, start + chunk_size)
     return [evaluate_point(study, i, threads=threads) for i in range(start, stop)]
 
 
-def chunk_task(study_json: str, chunk: int, chunk_size: int, threads: int) -> list[dict[str, Any]]:
+def chunk_task(study_json: str, chunk: int, chunk_size: int,
+               threads: int) -> list[dict[str, object]]:
     """A chunk as a cluster task: plain arguments in, plain rows out.
 
     The worker rebuilds the study from its description, loads the compiled

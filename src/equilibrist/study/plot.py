@@ -14,20 +14,23 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from equilibrist.errors import nearest
 from equilibrist.study.spec import Study, StudyError
 
-AGGREGATIONS: dict[str, Callable[[np.ndarray], Any]] = {
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+AGGREGATIONS: dict[str, Callable[[np.ndarray], float]] = {
     "mean": np.mean, "median": np.median, "min": np.min, "max": np.max}
 # More distinct values than this along an axis: a random sample, drawn as points.
 _GRID_LIMIT = 60
 
 
-def _column(table: Any, name: str) -> np.ndarray:
+def _column(table: pa.Table, name: str) -> np.ndarray:
     values = table.column(name).to_pylist()
     if values and isinstance(values[0], str):
         return np.array(values, dtype=object)
@@ -35,7 +38,7 @@ def _column(table: Any, name: str) -> np.ndarray:
                     isinstance(values[0] if values else 0.0, bool) else bool)
 
 
-def _matches(value: Any, text: str, kind: str) -> bool:
+def _matches(value: float | str | bool, text: str, kind: str) -> bool:
     if kind == "controller":
         return str(value) == text.lower()
     if kind == "delay":
@@ -46,14 +49,14 @@ def _matches(value: Any, text: str, kind: str) -> bool:
         return False
 
 
-def _label(value: Any) -> str:
+def _label(value: object) -> str:
     if isinstance(value, (float, np.floating)):
         return f"{float(value):.4g}"
     return str(value)
 
 
 def plot_study(
-    table: Any,
+    table: pa.Table,
     study: Study,
     path: str | Path,
     *,
@@ -207,7 +210,7 @@ def _unique(col: np.ndarray) -> np.ndarray:
     return np.unique(col)
 
 
-def _eq(col: np.ndarray, value: Any) -> np.ndarray:
+def _eq(col: np.ndarray, value: object) -> np.ndarray:
     if col.dtype == object:
         return np.array([c == value for c in col], dtype=bool)
     mask: np.ndarray = col == value

@@ -27,11 +27,18 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 from equilibrist.study.compute import chunk_task, evaluate_chunk
 from equilibrist.study.spec import Study, StudyError
 from equilibrist.study.store import Store, check_out, require_pyarrow
+
+if TYPE_CHECKING:  # Dask and tqdm are imported when a study runs
+    # A distributed.Client is Any where its methods are called: close() and cancel() are
+    # unannotated (untyped calls under --strict).
+    from distributed import Client
+    from tqdm import tqdm
 
 ChunkCallback = Callable[[int, int], None]
 
@@ -50,7 +57,7 @@ class StudyRun:
     elapsed: float
     where: str
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         return {
             "out": str(self.out), "points": self.points, "runs": self.runs,
             "chunks": self.chunks, "computed_chunks": self.computed_chunks,
@@ -96,7 +103,7 @@ def run_study(
     chunk_size: int | None = None,
     progress: bool = False,
     on_chunk: ChunkCallback | None = None,
-    client: Any = None,
+    client: Client | None = None,
     force: bool = False,
 ) -> StudyRun:
     """Run *study* and write its table to *out* (Parquet).
@@ -166,7 +173,7 @@ def run_study(
         bar.update(done_points)
     written = [store.n_chunks - len(todo)]
 
-    def finished(chunk: int, rows: list[dict[str, Any]]) -> None:
+    def finished(chunk: int, rows: list[dict[str, object]]) -> None:
         store.write(chunk, rows)
         written[0] += 1
         if bar is not None:
@@ -237,7 +244,7 @@ def _failed(path: Path) -> int:
     return int(pc.sum(pc.not_equal(status, "ok")).as_py() or 0)
 
 
-def _bar(total: int, show: bool) -> Any:
+def _bar(total: int, show: bool) -> tqdm | None:
     if not show:
         return None
     from tqdm import tqdm
@@ -245,7 +252,7 @@ def _bar(total: int, show: bool) -> Any:
     return tqdm(total=total, unit="point", desc="study", dynamic_ncols=True, leave=False)
 
 
-def _distributed() -> Any:
+def _distributed() -> ModuleType:
     try:
         import distributed
     except ImportError:
@@ -257,7 +264,7 @@ class _local_cluster:
     def __init__(self, workers: int) -> None:
         self.workers = workers
 
-    def __enter__(self) -> Any:
+    def __enter__(self) -> Any:  # the distributed.Client
         import logging
 
         distributed = _distributed()
@@ -281,7 +288,7 @@ class _connect:
     def __init__(self, address: str) -> None:
         self.address = address
 
-    def __enter__(self) -> Any:
+    def __enter__(self) -> Any:  # the distributed.Client
         distributed = _distributed()
         try:
             self.client = distributed.Client(self.address, timeout="20s")
@@ -294,7 +301,7 @@ class _connect:
 
 
 def _run_on(client: Any, study: Study, store: Store, todo: list[int], threads: int,
-            finished: Callable[[int, list[dict[str, Any]]], None]) -> None:
+            finished: Callable[[int, list[dict[str, object]]], None]) -> None:
     distributed = _distributed()
     if not todo:
         return

@@ -225,7 +225,7 @@ def make_study(
                          "(split it, or draw a random sample)")
     if batch_size is None:
         rates = [rate_v] + [float(v) for a in axes if a.kind == "rate"
-                            for v in (a.values or (a.high,))]
+                            for v in (a.values or (a.high,)) if v is not None]
         rows = int(dur * max(rates)) + 2
         width = 2 * sysm.n_states + len(sysm.output_names) + 3 * sysm.n_inputs
         batch_size = max(8, min(1024, BATCH_CELLS // (rows * width)))

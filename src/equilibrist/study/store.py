@@ -38,7 +38,7 @@ _MANIFEST = "study.json"
 _PART = re.compile(r"chunk-\d{6,}\.parquet")
 
 
-def require_pyarrow() -> Any:
+def require_pyarrow() -> Any:  # the pyarrow module (untyped)
     try:
         import pyarrow
         import pyarrow.parquet
@@ -81,7 +81,7 @@ def schema(study: Study) -> pa.Schema:
     return pa.schema(fields, metadata=meta)
 
 
-def rows_to_table(rows: list[dict[str, Any]], sch: pa.Schema) -> pa.Table:
+def rows_to_table(rows: list[dict[str, object]], sch: pa.Schema) -> pa.Table:
     pa = require_pyarrow()
     columns = {f.name: [r[f.name] for r in rows] for f in sch}
     return pa.Table.from_pydict(columns, schema=sch)
@@ -183,7 +183,7 @@ class Store:
                              "'equilibrist sweep'): move it out of the parts folder, then resume")
         return True
 
-    def write(self, chunk: int, rows: list[dict[str, Any]]) -> None:
+    def write(self, chunk: int, rows: list[dict[str, object]]) -> None:
         _atomic_parquet(rows_to_table(rows, self.schema), self.part(chunk))
 
     def assemble(self) -> Path:

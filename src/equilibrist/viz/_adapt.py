@@ -32,7 +32,7 @@ def system_of(key: str, params: Mapping[str, float] | None = None, *, digest: st
     return system_for_data(key, params, digest=digest, system=system, source=source)
 
 
-def _label(settings: Any) -> str:
+def _label(settings: Mapping[str, Any]) -> str:
     ctrl = dict(settings.get("controller") or {})
     kind = str(ctrl.get("kind", "")).replace("_", " ")
     bits = []

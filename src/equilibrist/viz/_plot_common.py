@@ -7,20 +7,37 @@ import math
 import textwrap
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
 
 from equilibrist.viz.output import save_figure
 
+if TYPE_CHECKING:  # matplotlib is imported when a figure is made
+    from matplotlib.artist import Artist
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+
+class LineStyle(TypedDict, total=False):
+    """Keyword arguments of a matplotlib line (``ax.plot(t, y, **TRUE)``)."""
+
+    color: str
+    lw: float
+    ls: str
+    marker: str
+    ms: float
+    alpha: float
+
+
 # Line styles shared by the plots.
-TRUE = {"color": "#1f5fa8", "lw": 1.5}
-ESTIMATE = {"color": "#e8871e", "lw": 1.2, "ls": "--"}
-MEASURED = {"color": "#888888", "ls": "none", "marker": ".", "ms": 1.5, "alpha": 0.6}
-REFERENCE = {"color": "#111111", "lw": 1.0, "ls": "-."}
-APPLIED = {"color": "#2e9e4f", "lw": 1.5}
-COMMAND = {"color": "#9b30c8", "lw": 1.0, "ls": ":"}
-LIMIT = {"color": "#d1263b", "lw": 1.0, "ls": "--"}
-OPERATING = {"color": "#999999", "lw": 0.8, "ls": ":"}
-EVENT = {"color": "#d1263b", "lw": 0.8, "ls": "-", "alpha": 0.5}
+TRUE: LineStyle = {"color": "#1f5fa8", "lw": 1.5}
+ESTIMATE: LineStyle = {"color": "#e8871e", "lw": 1.2, "ls": "--"}
+MEASURED: LineStyle = {"color": "#888888", "ls": "none", "marker": ".", "ms": 1.5, "alpha": 0.6}
+REFERENCE: LineStyle = {"color": "#111111", "lw": 1.0, "ls": "-."}
+APPLIED: LineStyle = {"color": "#2e9e4f", "lw": 1.5}
+COMMAND: LineStyle = {"color": "#9b30c8", "lw": 1.0, "ls": ":"}
+LIMIT: LineStyle = {"color": "#d1263b", "lw": 1.0, "ls": "--"}
+OPERATING: LineStyle = {"color": "#999999", "lw": 0.8, "ls": ":"}
+EVENT: LineStyle = {"color": "#d1263b", "lw": 0.8, "ls": "-", "alpha": 0.5}
 
 
 def display_unit(unit: str, *, degrees: bool = True) -> tuple[float, str]:
@@ -38,7 +55,7 @@ def axis_label(name: str, unit: str) -> str:
     return f"{name} [{unit}]" if unit and unit != "1" else name
 
 
-def _figure(width: float, height: float, dpi: float = 100.0) -> Any:
+def _figure(width: float, height: float, dpi: float = 100.0) -> Figure:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -47,18 +64,18 @@ def _figure(width: float, height: float, dpi: float = 100.0) -> Any:
     return fig
 
 
-def _wrap(fig: Any, text: str, points: float = 10.0) -> str:
+def _wrap(fig: Figure, text: str, points: float = 10.0) -> str:
     """*text* broken into lines that fit the figure's width (a long title
     would otherwise run off both sides of a centred suptitle)."""
     chars = max(20, int(fig.get_figwidth() * 72.0 / (0.55 * points)))
     return "\n".join(textwrap.fill(line, chars) for line in text.splitlines() or [""])
 
 
-def _title(fig: Any, text: str) -> None:
+def _title(fig: Figure, text: str) -> None:
     fig.suptitle(_wrap(fig, text), fontsize="medium")
 
 
-def _finish(fig: Any, path: str | Path | None) -> Any:
+def _finish(fig: Figure, path: str | Path | None) -> Figure:
     if path is not None:
         save_figure(fig, path)
     return fig
@@ -81,9 +98,9 @@ def _state_pairs(state_names: Sequence[str]) -> list[tuple[str, str | None]]:
     return pairs + [(n, None) for n in state_names if n not in used]
 
 
-def _legend(fig: Any, axes: Sequence[Any]) -> None:
+def _legend(fig: Figure, axes: Sequence[Axes]) -> None:
     """One legend for the figure, with each label once."""
-    seen: dict[str, Any] = {}
+    seen: dict[str, Artist] = {}
     for ax in axes:
         for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
             if lab and not lab.startswith("_") and lab not in seen:

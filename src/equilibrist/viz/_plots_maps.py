@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -19,6 +19,14 @@ from equilibrist.viz._plot_common import (
     display_unit,
 )
 from equilibrist.viz.output import VizError
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+    from numpy.typing import ArrayLike
+
+    from equilibrist.control.design import Design
+    from equilibrist.sim.roa_report import RoaReport
 
 
 def plot_region_of_attraction(
@@ -36,7 +44,7 @@ def plot_region_of_attraction(
     width: float = 5.5,
     height: float = 4.5,
     dpi: float = 100.0,
-) -> Any:
+) -> Figure:
     """Map of the initial conditions from which the controller recovers.
 
     Parameters
@@ -86,7 +94,7 @@ def plot_regions_side_by_side(
     width: float = 9.5,
     height: float = 4.3,
     dpi: float = 100.0,
-) -> Any:
+) -> Figure:
     """Regions of attraction of several controllers over the same starts, side by side.
 
     Parameters
@@ -115,7 +123,7 @@ def plot_regions_side_by_side(
     return _finish(fig, path)
 
 
-def _region_axes(fig: Any, ax: Any, x_values: Sequence[float] | np.ndarray,
+def _region_axes(fig: Figure, ax: Axes, x_values: Sequence[float] | np.ndarray,
                  y_values: Sequence[float] | np.ndarray, stayed_up: Sequence[bool] | np.ndarray,
                  *, x_name: str, y_name: str, x_unit: str, y_unit: str, degrees: bool,
                  title: str) -> None:
@@ -159,7 +167,7 @@ def _edges(centres: np.ndarray) -> np.ndarray:
                            [centres[-1] + (centres[-1] - mid[-1])]])
 
 
-def _z_plane(ax: Any, xlim: tuple[float, float], ylim: tuple[float, float]) -> None:
+def _z_plane(ax: Axes, xlim: tuple[float, float], ylim: tuple[float, float]) -> None:
     s = np.linspace(0, 2 * math.pi, 2000)
     ax.plot(np.cos(s), np.sin(s), color="#999999", lw=0.8, label="unit circle (stability limit)")
     ax.set_xlim(*xlim)
@@ -170,7 +178,7 @@ def _z_plane(ax: Any, xlim: tuple[float, float], ylim: tuple[float, float]) -> N
 
 
 def plot_poles(
-    source: Any,
+    source: Design | Mapping[str, ArrayLike],
     path: str | Path | None = None,
     *,
     discrete: bool | None = None,
@@ -178,7 +186,7 @@ def plot_poles(
     width: float = 5.5,
     height: float = 4.5,
     dpi: float = 100.0,
-) -> Any:
+) -> Figure:
     """Pole map: open loop, state feedback and estimator.
 
     Parameters
@@ -267,8 +275,8 @@ def plot_poles(
     return _finish(fig, path)
 
 
-def plot_roa_slice(report: Any, path: str | Path | None = None, *,
-                   title: str | None = None) -> Any:
+def plot_roa_slice(report: RoaReport, path: str | Path | None = None, *,
+                   title: str | None = None) -> Figure:
     """The slice of an ``equilibrist roa`` analysis (:class:`~equilibrist.sim.roa_report.RoaReport`):
     each run caught or not, the level of ``dx' S dx`` no run falsifies (dashed) and the
     certified one (solid), cut by the slice (the other states at the operating point)."""

@@ -4,7 +4,7 @@ fan of many runs."""
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -33,8 +33,10 @@ from equilibrist.viz.runs import Run, as_run
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
     from equilibrist.numeric.system import System
+    from equilibrist.sim.result import SimResult
 
 
 def _operating_point(run: Run) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -57,7 +59,7 @@ def _saturated(run: Run) -> np.ndarray | None:
     return saturated
 
 
-def _events(ax: Any, run: Run) -> None:
+def _events(ax: Axes, run: Run) -> None:
     for when, what in run.events:
         ax.axvline(when, **EVENT)
         ax.annotate(what, (when, 1.0), xycoords=("data", "axes fraction"), xytext=(2, -2),
@@ -65,6 +67,7 @@ def _events(ax: Any, run: Run) -> None:
 
 
 def plot_response(
+    # SimResult | Run; Any while equilibrist.cli.plot passes its SimResult | BatchResult.
     result: Any,
     path: str | Path | None = None,
     *,
@@ -76,7 +79,7 @@ def plot_response(
     row_height: float = 1.7,
     dpi: float = 100.0,
     system: System | None = None,
-) -> Any:
+) -> Figure:
     """Time response of one run: states, estimates vs truth, inputs.
 
     Each coordinate has a row (its rate beside it): the true state, the
@@ -188,6 +191,7 @@ def _run_title(run: Run) -> str:
 
 
 def plot_comparison(
+    # Results or Runs; Any while equilibrist.cli.plot passes its SimResult | BatchResult.
     results: Sequence[Any] | Mapping[str, Any],
     path: str | Path | None = None,
     *,
@@ -199,7 +203,7 @@ def plot_comparison(
     row_height: float = 1.7,
     dpi: float = 100.0,
     system: System | None = None,
-) -> Any:
+) -> Figure:
     """Several runs of the same system overlaid, one colour per run.
 
     For comparisons such as linear vs nonlinear plant, LQR vs LQG, nominal
@@ -278,7 +282,7 @@ def _colors(n: int) -> list[str]:
 
 
 def plot_fan(
-    results: Iterable[Any],
+    results: Iterable[SimResult | Run],
     path: str | Path | None = None,
     *,
     states: Sequence[str] | None = None,
@@ -289,7 +293,7 @@ def plot_fan(
     width: float = 8.0,
     row_height: float = 1.7,
     dpi: float = 100.0,
-) -> Any:
+) -> Figure:
     """Monte-Carlo fan: the spread of many runs over time.
 
     For each state shown, the median, the 25-75 % and 5-95 % bands over the
@@ -334,21 +338,25 @@ def plot_fan(
     fig = _figure(width, max(2.0, row_height * rows + 0.6), dpi)
     axes = fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
 
-    def stack(get: Any) -> np.ndarray:
+    def stack(get: Callable[[Run], np.ndarray], col: int) -> np.ndarray:
         out = np.full((len(runs), len(t)), np.nan)
         for k, r in enumerate(runs):
-            v = get(r)
+            v = get(r)[:, col]
             inside = t <= r.t[-1] + 1e-12
             out[k, inside] = np.interp(t[inside], r.t, v)
         return out
+
+    def applied(r: Run) -> np.ndarray:
+        assert r.u is not None  # inputs are shown only when every run has them
+        return r.u
 
     series = []
     for name in names:
         i = first.state_names.index(name)
         f, unit = display_unit(first.state_units[i], degrees=degrees)
-        series.append((name, unit, f * stack(lambda r, i=i: r.x[:, i])))
+        series.append((name, unit, f * stack(lambda r: r.x, i)))
     for j in range(n_in):
-        series.append((first.input_names[j], first.input_units[j], stack(lambda r, j=j: r.u[:, j])))
+        series.append((first.input_names[j], first.input_units[j], stack(applied, j)))
     fell = [bool(r.fell) for r in runs]
     pick = np.unique(np.linspace(0, len(runs) - 1, min(len(runs), max_traces)).round().astype(int))
     for ax, (name, unit, data) in zip(axes, series, strict=True):

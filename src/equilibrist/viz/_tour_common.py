@@ -7,9 +7,13 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from equilibrist.viz.report import Section
+
+if TYPE_CHECKING:
+    from equilibrist.numeric.system import System
+    from equilibrist.sim.controllers import StateFeedback
 
 #: Seed of the noise of every demo run (the report is reproducible).
 SEED = 2024
@@ -89,7 +93,7 @@ GYRO_SPIN = 250.0
 GYRO_DURATION = 2.0
 
 
-def default_scenario(system: Any, controller: Any = None) -> Scenario:
+def default_scenario(system: System, controller: StateFeedback | None = None) -> Scenario:
     """A scenario from the spec alone: start at half a design scale off the operating point
     on the first angle, a push on the first input for 0.1 s.
 
@@ -157,7 +161,7 @@ def _say(log: Callable[[str], None] | None, text: str) -> None:
         log(text)
 
 
-def _label(system: Any) -> str:
+def _label(system: System) -> str:
     """How the report names a system: its key, or a user's file by its own name."""
     key = str(system.key)
     if key == system.spec.key:

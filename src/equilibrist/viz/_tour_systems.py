@@ -8,7 +8,7 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
@@ -27,11 +27,27 @@ from equilibrist.viz._tour_common import (
 )
 from equilibrist.viz.report import Image, Section
 
+if TYPE_CHECKING:
+    from equilibrist.control.design import Design
+    from equilibrist.numeric.system import System
+    from equilibrist.sim.events import Pulse
+    from equilibrist.sim.result import SimResult
+    from equilibrist.sim.signals import Step
+
 # -- one controlled system -----------------------------------------------------
 
 
+class _RunOptions(TypedDict):
+    """What the realistic and the ideal run of :func:`tour_controlled` share."""
+
+    duration: float
+    x0: np.ndarray
+    reference: Step | None
+    events: list[Pulse]
+
+
 def tour_controlled(
-    system: Any,
+    system: System,
     folder: Path,
     *,
     scenario: Scenario | None = None,
@@ -93,8 +109,8 @@ def tour_controlled(
         reference = Step(value=r1, at=sc.step_at, initial=r0)
     push_at = sc.duration / 2
     events = [Pulse(time=push_at, value=sc.push, duration=sc.push_duration)] if sc.push else []
-    common: dict[str, Any] = {"duration": sc.duration, "x0": x0, "reference": reference,
-                              "events": events}
+    common: _RunOptions = {"duration": sc.duration, "x0": x0, "reference": reference,
+                           "events": events}
     lqg = LQG.from_design(d, tracking=tracking)
     main = simulate(system, lqg, noise=Noise.from_design(d), seed=SEED, progress=progress, **common)
     ideal = simulate(system, StateFeedback.from_design(d, tracking=tracking), **common)
@@ -197,7 +213,7 @@ def tour_controlled(
 ROA_SYSTEMS = ("cartpole", "furuta", "reaction_wheel_pendulum")
 
 
-def _roa(system: Any, d: Any, sub: Path, slug: str) -> tuple[Image, tuple[str, str]]:
+def _roa(system: System, d: Design, sub: Path, slug: str) -> tuple[Image, tuple[str, str]]:
     """The LQR's region of attraction as ``equilibrist roa`` finds it (its default slice, a
     smaller budget): the slice, the largest tilt and push, the certified level."""
     from equilibrist.control.controller import LinearController
@@ -209,6 +225,7 @@ def _roa(system: Any, d: Any, sub: Path, slug: str) -> tuple[Image, tuple[str, s
     x_op, u_op = np.asarray(d.plant.x0, float), np.asarray(d.plant.u0, float)  # the design's point
     states = default_slice(system)
     assert states is not None  # the systems of ROA_SYSTEMS have a fall region
+    assert d.rate is not None  # the tour designs at the rig's control rate
     bounds = default_bounds(system, states, x_op)
     report = analyse(system, ctrl, states=states, bounds=(bounds[states[0]], bounds[states[1]]),
                      x_op=x_op, u_op=u_op, samples=1500, boxes=ROA_BOXES, falsify=300,
@@ -237,7 +254,7 @@ def _roa(system: Any, d: Any, sub: Path, slug: str) -> tuple[Image, tuple[str, s
 ROA_BOXES = 250_000
 
 
-def watched_outputs(system: Any, result: Any) -> list[str]:
+def watched_outputs(system: System, result: SimResult) -> list[str]:
     """The outputs that say how well a run went: the tracked ones, then the
     states whose range defines falling (the balance), else the measured ones."""
     names = list(result.reference_names)
@@ -245,13 +262,13 @@ def watched_outputs(system: Any, result: Any) -> list[str]:
     return names or list(result.output_names) or list(system.state_names)
 
 
-def balance_outputs(system: Any, result: Any) -> list[str]:
+def balance_outputs(system: System, result: SimResult) -> list[str]:
     """The states whose range decides a fall (the balance), else the watched outputs."""
     names = [n for n in system.spec.region if n in system.state_names]
     return names or watched_outputs(system, result)
 
 
-def _errors(result: Any, names: Sequence[str]) -> np.ndarray:
+def _errors(result: SimResult, names: Sequence[str]) -> np.ndarray:
     """Each watched output minus its target (its reference, else the operating point)."""
     cols = []
     for n in names:
@@ -261,7 +278,7 @@ def _errors(result: Any, names: Sequence[str]) -> np.ndarray:
     return np.column_stack(cols) if cols else np.zeros((result.n_rows, 0))
 
 
-def recovery_time(result: Any, names: Sequence[str], push_at: float) -> float | None:
+def recovery_time(result: SimResult, names: Sequence[str], push_at: float) -> float | None:
     """Seconds after *push_at* until the watched outputs are back for good.
 
     "Back" is within the larger of 1.5 times their excursion in the second
@@ -286,7 +303,8 @@ def recovery_time(result: Any, names: Sequence[str], push_at: float) -> float | 
     return float(t[last + 1] - push_at)
 
 
-def final_error(result: Any, names: Sequence[str], *, window: float = 1.0) -> dict[str, float]:
+def final_error(result: SimResult, names: Sequence[str], *,
+                window: float = 1.0) -> dict[str, float]:
     """Mean of each watched output's error over the last *window* seconds."""
     if not result.n_rows:
         return {}
@@ -295,7 +313,8 @@ def final_error(result: Any, names: Sequence[str], *, window: float = 1.0) -> di
     return {n: float(e[tail, j].mean()) for j, n in enumerate(names)}
 
 
-def _story(system: Any, d: Any, sc: Scenario, run: Any, m: dict[str, Any], *, push_at: float,
+def _story(system: System, d: Design, sc: Scenario, run: SimResult, m: Mapping[str, object], *,
+           push_at: float,
            tracking: bool, peak: float, full: float, after: float | None) -> list[str]:
     unit = system.input_units[0]
     start = ", ".join(f"{k} = {_fmt(v, run.unit(k))}" for k, v in sc.start.items())
@@ -323,7 +342,7 @@ def _story(system: Any, d: Any, sc: Scenario, run: Any, m: dict[str, Any], *, pu
     return [system.spec.description, first, second]
 
 
-def _section(system: Any, slug: str, story: list[str], images: list[Image],
+def _section(system: System, slug: str, story: list[str], images: list[Image],
              facts: list[tuple[str, str]], notes: list[str]) -> Section:
     from equilibrist.mechanics.printing import equations_latex, equations_text
 
@@ -341,7 +360,8 @@ def _section(system: Any, slug: str, story: list[str], images: list[Image],
     )
 
 
-def _extras(system: Any, d: Any, sub: Path, slug: str, sc: Scenario, *, progress: bool) -> list[Image]:
+def _extras(system: System, d: Design, sub: Path, slug: str, sc: Scenario, *,
+            progress: bool) -> list[Image]:
     """The Monte-Carlo fan (the cart-pole's tour)."""
     from equilibrist.sim import LQG, Noise, monte_carlo
     from equilibrist.viz.plots import plot_fan
@@ -371,7 +391,7 @@ def _extras(system: Any, d: Any, sub: Path, slug: str, sc: Scenario, *, progress
 
 
 def tour_gyroscope(
-    system: Any,
+    system: System,
     folder: Path,
     *,
     size: tuple[int, int] = (400, 300),

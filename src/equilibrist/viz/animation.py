@@ -14,12 +14,17 @@ import math
 import subprocess
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from equilibrist.atomic import atomic_path
 from equilibrist.viz.output import ANIMATION_FORMATS, VizError, check_suffix, ffmpeg_path
+
+if TYPE_CHECKING:
+    from equilibrist.numeric.system import System
+    from equilibrist.sim.result import SimResult
+    from equilibrist.viz.runs import Run
 
 #: Default frame rate and cap on the number of frames.
 DEFAULT_FPS = 20.0
@@ -64,7 +69,7 @@ def _sample_index(t: np.ndarray, times: np.ndarray) -> np.ndarray:
 
 
 def render_frames(
-    system: Any,
+    system: System,
     t: np.ndarray,
     states: np.ndarray,
     *,
@@ -226,7 +231,7 @@ def write_mp4(frames: Sequence[np.ndarray], path: str | Path, *, fps: float) -> 
 
 
 def animate(
-    system: Any,
+    system: System,
     t: np.ndarray,
     states: np.ndarray,
     path: str | Path,
@@ -271,8 +276,8 @@ def animate(
     return write_gif(frames, p, frame_seconds=step)
 
 
-def animate_result(result: Any, path: str | Path, *, system: Any = None, estimates: bool = False,
-                   **options: Any) -> Path:
+def animate_result(result: SimResult | Run, path: str | Path, *, system: System | None = None,
+                   estimates: bool = False, **options: Any) -> Path:
     """Animate a simulation result to a GIF or MP4.
 
     Parameters

@@ -12,7 +12,7 @@ import argparse
 import math
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from equilibrist.viz.output import (
     ANIMATION_FORMATS,
@@ -21,6 +21,10 @@ from equilibrist.viz.output import (
     check_suffix,
     ffmpeg_path,
 )
+
+if TYPE_CHECKING:
+    from equilibrist.numeric.system import System
+    from equilibrist.sim.result import SimResult
 
 
 def _figure_path(text: str) -> Path:
@@ -107,7 +111,8 @@ def add_output_options(parser: argparse.ArgumentParser) -> None:
     add_animation_options(group)  # type: ignore[arg-type]
 
 
-def handle_outputs(args: argparse.Namespace, result: Any, *, system: Any = None) -> list[Path]:
+def handle_outputs(args: argparse.Namespace, result: SimResult, *,
+                   system: System | None = None) -> list[Path]:
     """Write the pictures that *args* asks for of *result*.
 
     Parameters

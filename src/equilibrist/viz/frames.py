@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, TypedDict, Unpack
 
 import numpy as np
 
@@ -22,11 +22,37 @@ from equilibrist.viz.output import VizError, save_figure
 from equilibrist.viz.scenes import COLORS, Scene, Shape, scene_for
 
 if TYPE_CHECKING:
+    from matplotlib.artist import Artist
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Rectangle
+    from matplotlib.text import Text
+
     from equilibrist.numeric.system import System
 
 # Colour of an input gauge within limits, and when the command saturates.
 _GAUGE = "#9b30c8"
 _SATURATED = "#d1263b"
+
+
+class _Gauge(TypedDict):
+    """The artists and the scale of one input's gauge."""
+
+    bar: Rectangle
+    cmd: Line2D
+    value: Text
+    lo: float
+    hi: float
+    unit: str
+
+
+class _DrawOptions(TypedDict, total=False):
+    """The keyword arguments of :meth:`FrameRenderer.draw` after the state and input."""
+
+    command: np.ndarray | None
+    t: float | None
+    trail: np.ndarray | None
+    speed: float
+    note: str
 
 
 class FrameRenderer:
@@ -52,7 +78,7 @@ class FrameRenderer:
 
     def __init__(
         self,
-        system: Any,
+        system: System,
         *,
         extent: tuple[float, float, float, float] | None = None,
         states: np.ndarray | None = None,
@@ -109,8 +135,8 @@ class FrameRenderer:
         # What is happening now (a push), in red under the captions.
         self.note_text = self.figure.text(0.01, 0.995 - 2.1 * line, "", ha="left", va="top",
                                           fontsize=self.font, color="#d1263b", weight="bold")
-        self._artists: dict[str, Any] = {}
-        self._background: Any = None
+        self._artists: dict[str, Artist] = {}
+        self._background: object = None  # the Agg canvas's BufferRegion (untyped)
         self._fitted_speed: str | None = None
         self._gauges = [
             self._make_gauge(i, 0.01 + 1.2 * line + gauge_step * (n_in - 1 - i), gauge_h)
@@ -157,7 +183,7 @@ class FrameRenderer:
             if caption.x1 + gap > speed.x0:
                 self.speed_text.set_y(self._speed_y - self._line)
 
-    def _make_gauge(self, i: int, y: float, h: float) -> dict[str, Any]:
+    def _make_gauge(self, i: int, y: float, h: float) -> _Gauge:
         name = self.scene.input_names[i]
         unit = self.system.input_units[i]
         lo, hi = float(self.scene.input_low[i]), float(self.scene.input_high[i])
@@ -286,13 +312,14 @@ class FrameRenderer:
             text = f"{val:+.3g} {g['unit']}".rstrip() if uu is not None else "-"
             g["value"].set_text(text + (" sat." if saturated else ""))
 
-    def _dynamic(self) -> list[Any]:
+    def _dynamic(self) -> list[Artist]:
         """The artists that change from frame to frame, in drawing order."""
         scene = sorted(self._artists.values(), key=lambda a: a.get_zorder())
         gauges = [a for g in self._gauges for a in (g["bar"], g["cmd"], g["value"])]
         return [*scene, self.time_text, self.speed_text, self.note_text, *gauges]
 
-    def frame(self, x: np.ndarray, u: np.ndarray | None = None, **kwargs: Any) -> np.ndarray:
+    def frame(self, x: np.ndarray, u: np.ndarray | None = None,
+              **kwargs: Unpack[_DrawOptions]) -> np.ndarray:
         """Draw state *x* (see :meth:`draw`) and return the picture as an
         ``(height, width, 3)`` ``uint8`` array.
 
@@ -342,7 +369,7 @@ def _title(system: System) -> str:
 
 
 def draw_state(
-    system: Any,
+    system: System,
     x: np.ndarray,
     path: str | Path,
     *,

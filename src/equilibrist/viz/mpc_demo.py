@@ -20,11 +20,19 @@ the same figure as ``docs/images/mpc_roa.png``.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from equilibrist.viz.report import Image
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from equilibrist.control.controller import LinearController
+    from equilibrist.control.mpc import MPC
+    from equilibrist.numeric.system import System
+    from equilibrist.sim.result import SimResult
 
 #: Sample rate [Hz] and horizon [samples] of the demonstration.
 RATE, HORIZON = 50.0, 40
@@ -38,7 +46,7 @@ CASE = {"x": 0.0, "x_dot": 2.0, "theta": 0.0}
 DURATION = 4.0
 
 
-def controllers(system: Any) -> tuple[Any, Any]:
+def controllers(system: System) -> tuple[LinearController, MPC]:
     """The clipped LQR and the MPC (a value: ``.runtime()`` runs it) of the demonstration."""
     from equilibrist.control.controller import LinearController
     from equilibrist.control.design import design
@@ -49,7 +57,7 @@ def controllers(system: Any) -> tuple[Any, Any]:
     return lqr, mpc(system, design=d, horizon=HORIZON, estimator="state", constraints=TRACK)
 
 
-def track_case(system: Any) -> dict[str, Any]:
+def track_case(system: System) -> dict[str, SimResult]:
     """The two runs from :data:`CASE`, labelled for a comparison plot."""
     from equilibrist.sim.run import simulate
 
@@ -60,7 +68,7 @@ def track_case(system: Any) -> dict[str, Any]:
     return runs
 
 
-def regions(system: Any, grid: int = 9) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+def regions(system: System, grid: int = 9) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """``speeds, angles, kept``: which starts (cart at the centre, ``grid`` cart speeds
     in +-3 m/s by ``grid`` pole angles in +-0.6 rad) each controller keeps up and on
     the track; ``kept[label]`` is a ``(angles, speeds)`` array of booleans."""
@@ -80,8 +88,8 @@ def regions(system: Any, grid: int = 9) -> tuple[np.ndarray, np.ndarray, dict[st
     return speeds, angles, kept
 
 
-def plot_regions(system: Any, speeds: np.ndarray, angles: np.ndarray,
-                 kept: dict[str, np.ndarray], path: str | Path) -> Any:
+def plot_regions(system: System, speeds: np.ndarray, angles: np.ndarray,
+                 kept: dict[str, np.ndarray], path: str | Path) -> Figure:
     """Both regions of attraction side by side."""
     from equilibrist.viz.plots import plot_regions_side_by_side
 
@@ -94,14 +102,14 @@ def plot_regions(system: Any, speeds: np.ndarray, angles: np.ndarray,
               "green starts stay up and on it")
 
 
-def mpc_images(system: Any, folder: Path, slug: str, *, grid: int = 9) -> list[Image]:
+def mpc_images(system: System, folder: Path, slug: str, *, grid: int = 9) -> list[Image]:
     """The report's MPC figures for the cart-pole: the track case and both regions."""
     from equilibrist.viz.plots import plot_comparison
 
     runs = track_case(system)
     (l_label, l_run), (m_label, m_run) = runs.items()
 
-    def outcome(run: Any) -> str:
+    def outcome(run: SimResult) -> str:
         if run.fell:
             return f"left the region at t = {run.fell_at:.2f} s ({run.fell_state})"
         return f"stayed up, the cart within {np.max(np.abs(run.states[:, 0])):.2f} m"

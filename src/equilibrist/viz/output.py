@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import shutil
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from equilibrist.atomic import atomic_path
 from equilibrist.errors import EquilibristError
+
+if TYPE_CHECKING:  # matplotlib is imported when a figure is made
+    from matplotlib.figure import Figure
 
 #: Suffixes a figure can be saved as.
 FIGURE_FORMATS = (".png", ".svg")
@@ -31,7 +34,7 @@ def check_suffix(path: str | Path, allowed: tuple[str, ...], what: str) -> Path:
     return p
 
 
-def save_figure(figure: Any, path: str | Path, *, dpi: float | None = None) -> Path:
+def save_figure(figure: Figure, path: str | Path, *, dpi: float | None = None) -> Path:
     """Save a matplotlib *figure* as PNG or SVG (by suffix), creating the folder.
 
     Parameters
@@ -49,13 +52,11 @@ def save_figure(figure: Any, path: str | Path, *, dpi: float | None = None) -> P
         The file written.
     """
     p = check_suffix(path, FIGURE_FORMATS, "figure")
-    kwargs: dict[str, Any] = {"format": p.suffix.lower()[1:]}
-    if p.suffix.lower() == ".svg":
-        kwargs["metadata"] = {"Date": None}  # reproducible files
-    else:
-        kwargs["metadata"] = {"Software": None}
+    # Reproducible files: no date in an SVG, no software version in a PNG.
+    metadata: dict[str, None] = {"Date": None} if p.suffix.lower() == ".svg" else {"Software": None}
     with atomic_path(p) as tmp:
-        figure.savefig(tmp, dpi=dpi or figure.dpi, facecolor="white", **kwargs)
+        figure.savefig(tmp, dpi=dpi or figure.dpi, facecolor="white",
+                       format=p.suffix.lower()[1:], metadata=metadata)
     return p
 
 

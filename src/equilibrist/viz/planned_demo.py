@@ -22,11 +22,17 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from equilibrist.viz.report import Image
+
+if TYPE_CHECKING:
+    from equilibrist.control.controller import NonlinearController
+    from equilibrist.control.trajopt import Trajectory
+    from equilibrist.numeric.system import System
+    from equilibrist.sim.result import SimResult
 
 #: Seed of the hanging start: the energy-shaping demo's (the same start).
 SEED = 7
@@ -43,16 +49,16 @@ RUN_SECONDS = 6.0
 class PlannedRun:
     """The plan, its tracker, the tracked run and the energy-shaping run of the same start."""
 
-    trajectory: Any  # equilibrist.control.trajopt.Trajectory
-    controller: Any  # the tvlqr NonlinearController
-    tracked: Any  # SimResult
-    energy: Any  # SimResult of the energy-shaping swing-up
+    trajectory: Trajectory
+    controller: NonlinearController  # the tvlqr
+    tracked: SimResult
+    energy: SimResult  # of the energy-shaping swing-up
     plan_seconds: float  # wall time of the plan (the solve and its setup)
     balanced_at: float | None  # tracked run: balanced from then to the end [s]
     energy_balanced_at: float | None
 
 
-def balanced_from(system: Any, run: Any) -> float | None:
+def balanced_from(system: System, run: SimResult) -> float | None:
     """The time from which *run* stays balanced to its end (the batch's criterion:
     :func:`equilibrist.tasks.balance_box`), None when it does not end balanced."""
     from equilibrist.tasks import balance_box, in_box
@@ -66,8 +72,8 @@ def balanced_from(system: Any, run: Any) -> float | None:
     return float(run.time[0] if out.size == 0 else run.time[min(out[-1] + 1, run.n_rows - 1)])
 
 
-def planned_run(system: Any, *, duration: float | None = None,
-                energy: Any = None) -> PlannedRun:
+def planned_run(system: System, *, duration: float | None = None,
+                energy: SimResult | None = None) -> PlannedRun:
     """Plan, track and compare (see the module docstring) with *energy*, the energy-shaping
     demo's run (:func:`equilibrist.viz.swingup_demo.energy_run`, made here when not given);
     raises ``DesignError`` without CasADi or when the plan does not converge."""
@@ -103,7 +109,7 @@ def planned_run(system: Any, *, duration: float | None = None,
                       balanced_from(system, energy))
 
 
-def plot_planned(system: Any, pr: PlannedRun, path: str | Path) -> Path:
+def plot_planned(system: System, pr: PlannedRun, path: str | Path) -> Path:
     """The plan (dashed) against the tracked run: each coordinate and each input over time."""
     from equilibrist.control.tvlqr import plan_samples
     from equilibrist.viz._plot_common import (
@@ -146,13 +152,13 @@ def plot_planned(system: Any, pr: PlannedRun, path: str | Path) -> Path:
     return Path(path)
 
 
-def _when(t: float | None, run: Any) -> str:
+def _when(t: float | None, run: SimResult) -> str:
     if t is not None:
         return f"balanced from {t:.2f} s"
     return f"not balanced at the end of its {round(float(run.time[-1])):d} s run"
 
 
-def caption(system: Any, pr: PlannedRun) -> str:
+def caption(system: System, pr: PlannedRun) -> str:
     """The caption of the two pictures: plan duration, solve time, times to balance."""
     from equilibrist.tasks import get_task
 
@@ -168,10 +174,10 @@ def caption(system: Any, pr: PlannedRun) -> str:
             "every angle within 0.1 rad of upright and its rate under 0.5 rad/s, to the end).")
 
 
-def planned_images(system: Any, folder: Path, slug: str, notes: list[str], *, width: int,
+def planned_images(system: System, folder: Path, slug: str, notes: list[str], *, width: int,
                    height: int, fps: float, max_frames: int | None = None,
                    progress: bool = False, duration: float | None = None,
-                   energy: Any = None) -> list[Image]:
+                   energy: SimResult | None = None) -> list[Image]:
     """The planned swing-up's animation and plot (``folder/planned_swingup.gif`` and
     ``.png``) as the report's images; none, and a line in *notes*, without CasADi or
     when the plan fails."""

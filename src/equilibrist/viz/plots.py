@@ -17,7 +17,7 @@ importable from here.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -47,11 +47,14 @@ from equilibrist.viz._plots_runs import plot_comparison, plot_fan, plot_response
 from equilibrist.viz.output import VizError
 
 if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
     from equilibrist.numeric.system import System
 
 
-def plot_batch(batch: Any, path: str | Path | None = None, *, degrees: bool = True,
-               title: str | None = None, dpi: float = 100.0, system: System | None = None) -> Any:
+def plot_batch(batch: object, path: str | Path | None = None, *, degrees: bool = True,
+               title: str | None = None, dpi: float = 100.0,
+               system: System | None = None) -> Figure:
     """The picture of a batch of runs (``equilibrist.sim.BatchResult``).
 
     With the runs' trajectories (a batch run with ``record=True``): the

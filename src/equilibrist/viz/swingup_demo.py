@@ -11,9 +11,14 @@ duration, drawn to scale.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from equilibrist.control.swingup import SwingUpController
+    from equilibrist.numeric.system import System
+    from equilibrist.sim.result import SimResult
 
 SEED = 7
 
@@ -22,7 +27,8 @@ SEED = 7
 SECONDS = 8.0
 
 
-def energy_run(system: Any, *, duration: float | None = None) -> tuple[Any, Any]:
+def energy_run(system: System, *,
+               duration: float | None = None) -> tuple[SimResult, SwingUpController]:
     """The demo's energy-shaping swing-up of *system*: its default design's swing-up from the
     task ``swingup``'s seeded hanging start, with the design's noise (the SimResult and the
     controller)."""
@@ -41,9 +47,9 @@ def energy_run(system: Any, *, duration: float | None = None) -> tuple[Any, Any]
     return run, ctrl
 
 
-def swingup_animation(system: Any, folder: Path, *, width: int, height: int, fps: float,
+def swingup_animation(system: System, folder: Path, *, width: int, height: int, fps: float,
                       max_frames: int | None = None, progress: bool = False,
-                      duration: float | None = None) -> tuple[Path, str, Any]:
+                      duration: float | None = None) -> tuple[Path, str, SimResult]:
     """Simulate (:func:`energy_run`) and animate a swing-up of *system* into
     ``folder/swingup.gif``.
 

@@ -29,7 +29,7 @@ import shutil
 import tempfile
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, TypedDict
 
 from equilibrist.viz._tour_common import (
     GYRO_DURATION,
@@ -54,11 +54,16 @@ from equilibrist.viz._tour_systems import (
 from equilibrist.viz.output import VizError
 from equilibrist.viz.report import write_index
 
+if TYPE_CHECKING:
+    from concurrent.futures import ProcessPoolExecutor
+
+    from equilibrist.numeric.system import System
+
 # -- the whole tour ------------------------------------------------------------
 
 
 def tour_one(
-    system: Any,
+    system: System,
     folder: Path,
     *,
     size: tuple[int, int] = (400, 300),
@@ -81,8 +86,18 @@ def tour_one(
                           progress=progress)
 
 
+class _TourOptions(TypedDict):
+    """The options of :func:`tour_one` that the tour gives every system."""
+
+    size: tuple[int, int]
+    fps: float
+    max_frames: int
+    extras: tuple[str, ...]
+    at: dict[str, float] | None
+
+
 def _tour_in_worker(key: str, params: dict[str, float], digest: str | None, folder: str,
-                    options: dict[str, Any]) -> Outcome:
+                    options: _TourOptions) -> Outcome:
     """:func:`tour_one` in a worker process (the system the user named, rebuilt from its key;
     *options* those of :func:`tour_one`, the operating point ``at`` among them)."""
     from equilibrist.numeric.system import rebuild_system
@@ -91,7 +106,7 @@ def _tour_in_worker(key: str, params: dict[str, float], digest: str | None, fold
 
 
 def run_tour(
-    systems: Sequence[Any],
+    systems: Sequence[System],
     folder: str | Path,
     *,
     size: tuple[int, int] = (400, 300),
@@ -192,7 +207,7 @@ def _put_in_place(staged: Path, target: Path) -> None:
 
 
 def _tour_into(
-    systems: Sequence[Any],
+    systems: Sequence[System],
     folder: Path,
     *,
     size: tuple[int, int],
@@ -206,8 +221,8 @@ def _tour_into(
 ) -> list[Outcome]:
     from tqdm.auto import tqdm
 
-    options: dict[str, Any] = {"size": size, "fps": fps, "max_frames": max_frames,
-                               "extras": tuple(extras), "at": dict(at) if at else None}
+    options: _TourOptions = {"size": size, "fps": fps, "max_frames": max_frames,
+                             "extras": tuple(extras), "at": dict(at) if at else None}
     bar = tqdm(total=len(systems), desc="demo", unit="system", disable=not progress, leave=False)
     done: dict[int, Outcome] = {}
 
@@ -251,7 +266,7 @@ def _tour_into(
     return outcomes
 
 
-def _stop_workers(pool: Any) -> None:
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
     """End a process pool's workers at once, their queued work dropped."""
     workers = list((getattr(pool, "_processes", None) or {}).values())  # the pool's own map
     for proc in workers:

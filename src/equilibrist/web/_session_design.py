@@ -9,16 +9,17 @@ import time
 import types
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from equilibrist.errors import DesignError, EquilibristError
-from equilibrist.web.protocol import kind_name
+from equilibrist.web.protocol import MessageFields, kind_name
 from equilibrist.web.runners import PLANNED, Runner, build_plan_runner, build_runner, runner_kinds
 
 if TYPE_CHECKING:
     from equilibrist.control.design import Design
+    from equilibrist.control.trajopt import Trajectory
     from equilibrist.numeric.system import System
 
 
@@ -105,7 +106,7 @@ class Settings:
     scales: Mapping[str, float]
     params: Mapping[str, float]
 
-    def changed(self, fields: Mapping[str, Any]) -> Settings:
+    def changed(self, fields: MessageFields) -> Settings:
         scales = dict(self.scales)
         scales.update(fields.get("scales", {}))
         params = dict(self.params)
@@ -119,7 +120,7 @@ class Settings:
             params=types.MappingProxyType(params),
         )
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         return {"controller": self.controller, "rate": self.rate, "noise": self.noise,
                 "limit": self.limit, "scales": dict(self.scales), "params": dict(self.params)}
 
@@ -152,7 +153,8 @@ def make_design(system: System, settings: Settings) -> Design:
 
 
 def describe_design(d: Design, controller: str, seconds: float,
-                    runner: Runner | None = None, controller_seconds: float = 0.0) -> dict[str, Any]:
+                    runner: Runner | None = None,
+                    controller_seconds: float = 0.0) -> dict[str, object]:
     """The ``design`` frame: gains, poles, margins (JSON-ready).
 
     *seconds* is the time of the LQG design, *controller_seconds* the time
@@ -200,7 +202,7 @@ def design_for(system: System, settings: Settings) -> tuple[Design | None, float
     return d, seconds, None
 
 
-def redesign(system: System, settings: Settings, plan: Any = None
+def redesign(system: System, settings: Settings, plan: Trajectory | None = None
              ) -> tuple[Design | None, float, str | None, Runner | None, float]:
     """Design for *settings*, and build the swing-up or MPC on the design when it is asked for.
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import io
 import math
 import zipfile
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,6 +18,8 @@ from equilibrist.web._session_loop import _Loop, _Record
 from equilibrist.web.runners import Runner
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from equilibrist.numeric.system import System
     from equilibrist.sim.result import SimResult
     from equilibrist.viz.scenes import Scene
@@ -55,22 +57,22 @@ class _SessionOutput:
     frame_no: int
     seen: int | None
     paused: bool
-    fell: dict[str, Any] | None
+    fell: dict[str, float | str] | None
     mode: str | None
     mode_since: float
     hanging: bool
     push_value: float
     pushes: int
     push_seq: int | None
-    messages: list[dict[str, Any]]
-    sent_shapes: dict[str, tuple[Any, ...]]
+    messages: list[dict[str, object]]
+    sent_shapes: dict[str, tuple[object, ...]]
     chart_t: list[float]
     chart_x: list[list[float]]
     chart_xhat: list[list[float]]
     chart_u: list[list[float]]
 
     # -- output ---------------------------------------------------------------------------------
-    def margin(self) -> dict[str, Any] | None:
+    def margin(self) -> dict[str, object] | None:
         """How far the state is from leaving its region: ``1`` at the centre, ``0`` at the edge."""
         if not self.region_idx.size:
             return None
@@ -96,7 +98,7 @@ class _SessionOutput:
             del self.chart_t[:cut], self.chart_x[:cut], self.chart_xhat[:cut], self.chart_u[:cut]
         return True
 
-    def frame(self) -> dict[str, Any]:
+    def frame(self) -> dict[str, object]:
         """The ``frame`` message for the page (and clears the chart samples sent)."""
         shapes = []
         for s in self.scene.shapes(self.x, self.u_app):
@@ -140,7 +142,7 @@ class _SessionOutput:
         self.chart_t, self.chart_x, self.chart_xhat, self.chart_u = [], [], [], []
         return out
 
-    def take_messages(self) -> list[dict[str, Any]]:
+    def take_messages(self) -> list[dict[str, object]]:
         out, self.messages = self.messages, []
         return out
 
@@ -237,7 +239,7 @@ class _SessionOutput:
             return _zip_folder(folder, top)
 
 
-def _zip_folder(folder: Any, top: str) -> bytes:
+def _zip_folder(folder: Path, top: str) -> bytes:
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as zf:
         for path in sorted(folder.rglob("*")):

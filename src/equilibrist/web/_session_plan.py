@@ -28,7 +28,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -41,6 +41,8 @@ from equilibrist.web.runners import PLANNED, PlanRunner, Runner
 
 if TYPE_CHECKING:
     from equilibrist.control.design import Design
+    from equilibrist.control.trajopt import Trajectory
+    from equilibrist.native.steps import PlantSteps
     from equilibrist.numeric.system import System
 
 #: Collocation intervals of the plan.
@@ -49,6 +51,8 @@ KNOTS = 60
 DEFAULT_DURATION = 5.0
 #: Plans kept per session (by plant and start).
 CACHE = 4
+#: What a kept plan is looked up by: the plant's parameters, the start, the duration.
+PlanKey = tuple[tuple[tuple[str, float], ...], tuple[float, ...], float]
 
 
 class PlanStale(Exception):
@@ -73,7 +77,7 @@ class PlanJob:
     goal: np.ndarray
     bounds: dict[str, tuple[float, float]]
     duration: float
-    cache: dict[Any, Any]
+    cache: dict[PlanKey, Trajectory]
     alive: Callable[[], bool]
 
     def check(self) -> None:
@@ -81,10 +85,10 @@ class PlanJob:
             raise PlanStale(self.id)
 
     @property
-    def key(self) -> tuple[Any, ...]:
+    def key(self) -> PlanKey:
         return (plant_key(self.system), tuple(np.round(self.start, 12).tolist()), self.duration)
 
-    def run(self) -> tuple[Any, PlanRunner, float]:
+    def run(self) -> tuple[Trajectory, PlanRunner, float]:
         """The trajectory, its tracker and the seconds the plan took (in a worker thread)."""
         from equilibrist.control.trajopt import plan
         from equilibrist.web.runners import build_plan_runner
@@ -118,15 +122,15 @@ class _SessionPlan(_SessionOutput):
 
     # What these methods read of the session (set by Session).
     rng: np.random.Generator
-    design_message: dict[str, Any]
+    design_message: dict[str, object]
     hang_start: np.ndarray | None
-    plant: Any
+    plant: PlantSteps | None
 
     plan_epoch = 0  # bumped by every change that makes a plan under way another loop's
     plan_ids = 0
     plan_running: PlanJob | None = None
     plan_shown = False  # a plan frame went out since the last clear
-    _plan_cache: dict[Any, Any] | None = None
+    _plan_cache: dict[PlanKey, Trajectory] | None = None
 
     def reset(self, kick: float = 0.0, *, hang: bool = False) -> None:  # Session's
         raise NotImplementedError
@@ -154,14 +158,15 @@ class _SessionPlan(_SessionOutput):
         if not (isinstance(runner, PlanRunner) and previous is None):
             self.plan_clear()
 
-    def plan_for(self, system: System, settings: Settings) -> Any:
+    def plan_for(self, system: System, settings: Settings) -> Trajectory | None:
         """The trajectory a redesign for *settings* builds the tracker on: the one in force
         when the planned kind stays and the plant is the same (None: plan first)."""
         runner = self.loop.runner
         if (settings.controller in PLANNED and self.settings.controller == settings.controller
                 and isinstance(runner, PlanRunner) and runner.kind == settings.controller
                 and plant_key(system) == plant_key(self.system)):
-            return runner.trajectory
+            traj: Trajectory = runner.trajectory
+            return traj
         return None
 
     def plan_job(self) -> PlanJob | None:
@@ -196,7 +201,7 @@ class _SessionPlan(_SessionOutput):
                               "start": job.start.tolist()})
         return job
 
-    def plan_deliver(self, job: PlanJob, result: tuple[Any, PlanRunner, float] | None,
+    def plan_deliver(self, job: PlanJob, result: tuple[Trajectory, PlanRunner, float] | None,
                      error: str | None) -> bool:
         """Put *job*'s tracker in force and start the run at the plan's start, or say why
         there is none (the controller is then off); False when the job was superseded."""
@@ -233,7 +238,7 @@ class _SessionPlan(_SessionOutput):
         return True
 
     # -- the ghost ---------------------------------------------------------------------------
-    def ghost(self) -> tuple[list[dict[str, Any]], float] | None:
+    def ghost(self) -> tuple[list[dict[str, object]], float] | None:
         """The drawing's moving shapes at the plan's state at the plan's time, and that time
         (None when no plan runs)."""
         runner = self.loop.runner
@@ -261,7 +266,7 @@ class _SessionPlan(_SessionOutput):
                         "points": [None if math.isnan(v) else v for v in pts]})
         return out, runner.tau
 
-    def frame(self) -> dict[str, Any]:
+    def frame(self) -> dict[str, object]:
         out = super().frame()
         ghost = self.ghost()
         out["plan"] = "planning" if self.plan_holding else (None if ghost is None else "tracking")

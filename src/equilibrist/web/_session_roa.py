@@ -20,7 +20,8 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from functools import partial
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 
@@ -33,6 +34,8 @@ if TYPE_CHECKING:
     from equilibrist.control.design import Design
     from equilibrist.numeric.system import System
     from equilibrist.sim.roa import SliceEstimate
+
+_T = TypeVar("_T")
 
 #: The slice's first grid (``(GRID + 1)^2`` runs), its most runs, and seconds per run.
 GRID = 16
@@ -70,7 +73,7 @@ class RoaJob:
     bounds: tuple[tuple[float, float], tuple[float, float]]
     alive: Callable[[], bool]
     est: SliceEstimate | None = None
-    sent: list[dict[str, Any]] = field(default_factory=list)
+    sent: list[dict[str, object]] = field(default_factory=list)
 
     @property
     def certifies(self) -> bool:
@@ -82,14 +85,14 @@ class RoaJob:
         if not self.alive():
             raise RoaStale(self.id)
 
-    def _controller(self) -> Any:
+    def _controller(self) -> object:
         from equilibrist.control import kinds
 
         record = kinds.get(kind_name(self.controller))
         request = kinds.ControllerRequest.of_design(self.system, self.design)  # the page's own
         return record.make(request)
 
-    def run_slice(self) -> dict[str, Any]:
+    def run_slice(self) -> dict[str, object]:
         """The ``roa`` frame of the slice (runs in a worker thread)."""
         from equilibrist.control.controller import LinearController, NonlinearController
         from equilibrist.sim.roa import estimate_slice
@@ -122,7 +125,7 @@ class RoaJob:
             "certificate": "computing" if self.certifies else None,
         }
 
-    def run_certificate(self) -> dict[str, Any]:
+    def run_certificate(self) -> dict[str, object]:
         """The ``roa`` frame of the certificate (runs in a worker thread, after the slice)."""
         from equilibrist.control.certify import CertificateUnavailable, certify
         from equilibrist.sim.roa import levels_of
@@ -130,8 +133,8 @@ class RoaJob:
         self.check()
         d = self.design
         S = np.asarray(d.S, dtype=float)
-        out: dict[str, Any] = {"type": "roa", "status": "certificate", "id": self.id,
-                               "certificate": None, "note": None}
+        out: dict[str, object] = {"type": "roa", "status": "certificate", "id": self.id,
+                                  "certificate": None, "note": None}
         try:
             cert = certify(self.system, d.K, S, x_op=self.x_op, u_op=self.u_op,
                            max_boxes=MAX_BOXES, progress=self.check)
@@ -162,13 +165,13 @@ class _SessionRoa:
     system: System
     settings: Settings
     loop: _Loop
-    messages: list[dict[str, Any]]
+    messages: list[dict[str, object]]
 
     roa_epoch = 0  # bumped by every change that makes a slice another loop's
     roa_ids = 0  # requests made
     roa_shown = False  # whether the page asked for the view since the last change
     roa_running: RoaJob | None = None
-    roa_done: list[dict[str, Any]] | None = None  # the frames of the slice in force
+    roa_done: list[dict[str, object]] | None = None  # the frames of the slice in force
 
     def roa_clear(self) -> None:
         """Another system, controller or setting: a slice shown or under way is dropped."""
@@ -217,7 +220,7 @@ class _SessionRoa:
                               "states": list(states)})
         return job
 
-    def roa_deliver(self, job: RoaJob, message: dict[str, Any], last: bool) -> bool:
+    def roa_deliver(self, job: RoaJob, message: dict[str, object], last: bool) -> bool:
         """Queue *job*'s *message* for the page, unless the job was superseded (False)."""
         if job.epoch != self.roa_epoch:
             return False
@@ -237,30 +240,30 @@ _SLICE_LOCK = threading.Lock()
 _CERTIFICATE_LOCK = threading.Lock()
 
 
-async def _in_thread(fn: Callable[[], Any], lock: threading.Lock) -> Any:
+async def _in_thread(fn: Callable[[], _T], lock: threading.Lock) -> _T:
     """``fn()`` in a thread of its own, after the computations before it that hold *lock*.
 
     A daemon thread: a computation under way does not hold up the server's
     exit (its page is gone; the job stops at its next check anyway).
     """
     loop = asyncio.get_running_loop()
-    future: asyncio.Future[Any] = loop.create_future()
+    future: asyncio.Future[_T] = loop.create_future()
 
-    def settle(ok: bool, value: Any) -> None:
+    def settle(outcome: Callable[[], None]) -> None:
         if not future.done():
-            if ok:
-                future.set_result(value)
-            else:
-                future.set_exception(value)
+            outcome()  # the future's set_result or set_exception
 
     def run() -> None:
+        outcome: Callable[[], None]
         with lock:
             try:
-                ok, value = True, fn()
+                value = fn()
             except Exception as exc:
-                ok, value = False, exc
+                outcome = partial(future.set_exception, exc)
+            else:
+                outcome = partial(future.set_result, value)
         with contextlib.suppress(RuntimeError):  # the server's loop closed meanwhile
-            loop.call_soon_threadsafe(settle, ok, value)
+            loop.call_soon_threadsafe(settle, outcome)
 
     threading.Thread(target=run, name="equilibrist-roa", daemon=True).start()
     return await future

@@ -33,16 +33,20 @@ import ipaddress
 import json
 import math
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 from equilibrist.errors import EquilibristError
 from equilibrist.web._session_plan import compute_plan
 from equilibrist.web._session_roa import compute_roa
 from equilibrist.web.protocol import ProtocolError, parse
 from equilibrist.web.session import Catalogue, Session, redesign
+
+if TYPE_CHECKING:
+    from starlette.applications import Starlette
+    from starlette.types import ASGIApp, Receive, Scope, Send
+    from starlette.websockets import WebSocket
 
 #: Frames per second streamed to each page.
 FPS = 40.0
@@ -207,10 +211,10 @@ class _Guard:
     """ASGI middleware: refuses a request whose ``Host`` (or a socket whose ``Origin``)
     is not one of the :class:`HostCheck`'s, before any route sees it."""
 
-    def __init__(self, app: Callable[..., Any], check: HostCheck) -> None:
+    def __init__(self, app: ASGIApp, check: HostCheck) -> None:
         self.app, self.check = app, check
 
-    async def __call__(self, scope: dict[str, Any], receive: Any, send: Any) -> None:
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         kind = scope["type"]
         if kind not in ("http", "websocket"):
             await self.app(scope, receive, send)
@@ -243,7 +247,7 @@ def create_app(
     seed: int | None = None,
     host: str = "127.0.0.1",
     port: int | None = None,
-) -> Any:
+) -> Starlette:
     """The playground application (a Starlette app).
 
     Parameters
@@ -271,7 +275,7 @@ def create_app(
     from starlette.responses import FileResponse, JSONResponse, Response
     from starlette.routing import Mount, Route, WebSocketRoute
     from starlette.staticfiles import StaticFiles
-    from starlette.websockets import WebSocket, WebSocketDisconnect
+    from starlette.websockets import WebSocketDisconnect
 
     cat = catalogue if catalogue is not None else Catalogue.default()
     first = system or ("cartpole" if "cartpole" in cat.names else cat.names[0])
@@ -363,7 +367,7 @@ def create_app(
     return app
 
 
-async def _send(ws: Any, message: dict[str, Any]) -> None:
+async def _send(ws: WebSocket, message: dict[str, object]) -> None:
     from starlette.websockets import WebSocketDisconnect
 
     try:
@@ -376,7 +380,7 @@ async def _send(ws: Any, message: dict[str, Any]) -> None:
         raise WebSocketDisconnect(1006) from None
 
 
-def _plain(obj: Any) -> Any:
+def _plain(obj: object) -> object:
     import numpy as np
 
     if isinstance(obj, np.ndarray):
@@ -386,7 +390,7 @@ def _plain(obj: Any) -> Any:
     raise TypeError(type(obj).__name__)
 
 
-def _clean(obj: Any) -> Any:
+def _clean(obj: object) -> object:
     """Non-finite floats as None (JSON has no NaN)."""
     if isinstance(obj, float):
         return obj if math.isfinite(obj) else None
@@ -397,7 +401,7 @@ def _clean(obj: Any) -> Any:
     return obj
 
 
-async def _stream(ws: Any, session: Session) -> None:
+async def _stream(ws: WebSocket, session: Session) -> None:
     """Advance the session to the wall clock and send a frame, FPS times a second."""
     loop = asyncio.get_running_loop()
     period = 1.0 / FPS
@@ -418,7 +422,7 @@ async def _stream(ws: Any, session: Session) -> None:
         await asyncio.sleep(max(0.0, deadline - now))
 
 
-async def _receive(ws: Any, session: Session) -> None:
+async def _receive(ws: WebSocket, session: Session) -> None:
     """Take the session's messages until its socket closes.
 
     A reader takes every message as it arrives (the rate limit counts them
@@ -445,7 +449,7 @@ async def _receive(ws: Any, session: Session) -> None:
             raise result
 
 
-async def _read(ws: Any, inbox: asyncio.Queue[str | bytes]) -> None:
+async def _read(ws: WebSocket, inbox: asyncio.Queue[str | bytes]) -> None:
     """Queue the socket's messages for the worker, within the message rate."""
     from starlette.websockets import WebSocketDisconnect
 
@@ -467,7 +471,7 @@ async def _read(ws: Any, inbox: asyncio.Queue[str | bytes]) -> None:
         inbox.put_nowait(payload)
 
 
-async def _work(ws: Any, session: Session, inbox: asyncio.Queue[str | bytes]) -> None:
+async def _work(ws: WebSocket, session: Session, inbox: asyncio.Queue[str | bytes]) -> None:
     """Check and carry out the queued messages, one at a time.
 
     Each is checked against the limits in force when its turn comes (a

@@ -17,7 +17,7 @@ import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TypedDict
 
 from equilibrist.errors import EquilibristError
 
@@ -109,12 +109,30 @@ class Limits:
     hanging: str | None = None
 
 
+class MessageFields(TypedDict, total=False):
+    """The checked fields of a client message (each type has its own, see :data:`FIELDS`)."""
+
+    system: str
+    controller: str
+    rate: float
+    noise: float
+    limit: float
+    scales: dict[str, float]
+    params: dict[str, float]
+    size: float
+    duration: float
+    angle: float
+    kick: float
+    paused: bool
+    frame: int
+
+
 @dataclass(frozen=True)
 class Message:
     """A checked client message: its ``type``, its fields, its sequence number."""
 
     type: str
-    fields: Mapping[str, Any]
+    fields: MessageFields
     seq: int | None = None
 
 
@@ -206,7 +224,7 @@ def parse(text: str | bytes, limits: Limits) -> Message:
     return Message(kind, fields, seq)
 
 
-def _select(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+def _select(data: dict[str, object], limits: Limits) -> MessageFields:
     name = data["system"]
     if not isinstance(name, str) or name not in limits.systems:
         raise ProtocolError(
@@ -215,8 +233,8 @@ def _select(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
     return {"system": name}
 
 
-def _tune(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
-    out: dict[str, Any] = {}
+def _tune(data: dict[str, object], limits: Limits) -> MessageFields:
+    out: MessageFields = {}
     if len(data) - ("seq" in data) <= 1:
         raise ProtocolError(
             "tune message changes nothing: give controller, rate, noise, limit, scales or params"
@@ -244,45 +262,45 @@ def _tune(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
     return out
 
 
-def _push(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
-    out = {"size": _number(data["size"], "size", *PUSH_RANGE)}
+def _push(data: dict[str, object], limits: Limits) -> MessageFields:
+    out: MessageFields = {"size": _number(data["size"], "size", *PUSH_RANGE)}
     if "duration" in data:
         out["duration"] = _number(data["duration"], "duration", *PUSH_DURATION_RANGE)
     return out
 
 
-def _kick(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+def _kick(data: dict[str, object], limits: Limits) -> MessageFields:
     return {"angle": _number(data["angle"], "angle", *KICK_RANGE)}
 
 
-def _reset(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+def _reset(data: dict[str, object], limits: Limits) -> MessageFields:
     if "kick" in data:
         return {"kick": _number(data["kick"], "kick", *KICK_RANGE)}
     return {}
 
 
-def _hang(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+def _hang(data: dict[str, object], limits: Limits) -> MessageFields:
     if limits.hanging is not None:
         raise ProtocolError(f"hang is refused: {limits.hanging}")
     return {}
 
 
-def _pause(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+def _pause(data: dict[str, object], limits: Limits) -> MessageFields:
     value = data["paused"]
     if not isinstance(value, bool):
         raise ProtocolError(f"paused must be true or false, got {_short(value)}")
     return {"paused": value}
 
 
-def _full(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+def _full(data: dict[str, object], limits: Limits) -> MessageFields:
     return {}
 
 
-def _roa(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+def _roa(data: dict[str, object], limits: Limits) -> MessageFields:
     return {}
 
 
-def _seen(data: dict[str, Any], limits: Limits) -> dict[str, Any]:
+def _seen(data: dict[str, object], limits: Limits) -> MessageFields:
     raw = data["frame"]
     if isinstance(raw, bool) or not isinstance(raw, int) or not SEQ_RANGE[0] <= raw <= SEQ_RANGE[1]:
         raise ProtocolError(f"frame must be an integer from 0 to 2^53, got {_short(raw)}")

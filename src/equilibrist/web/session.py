@@ -51,7 +51,7 @@ import math
 import secrets
 import time
 import types
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -88,6 +88,8 @@ from equilibrist.web.runners import Runner, hanging_refusal, unavailable
 
 if TYPE_CHECKING:
     from equilibrist.control.design import Design
+    from equilibrist.mechanics.spec import Parameter
+    from equilibrist.native.steps import PlantSteps
     from equilibrist.numeric.system import System
     from equilibrist.viz.scenes import Scene
 
@@ -136,14 +138,14 @@ class Session(_SessionPlan, _SessionRoa):
         from equilibrist.sim.noise import generator_state, seed_sequence
 
         self.core_rng = generator_state(seed_sequence(seed))
-        self.plant: Any = None  # the core's plant steps, rebuilt after any change
+        self.plant: PlantSteps | None = None  # the core's plant steps, rebuilt after any change
         self.paused = False
         self.busy = False  # True while another thread rebuilds the session
         self.frame_no = 0  # frames made
         self.run = 0  # runs started (each reset, hang or new system starts one)
         self.seen: int | None = None  # the last frame the page said it drew
         self.pending_design = 0  # id of the latest design asked for
-        self.messages: list[dict[str, Any]] = []  # frames to send besides the next frame
+        self.messages: list[dict[str, object]] = []  # frames to send besides the next frame
         self.load(system)
 
     # -- setup --------------------------------------------------------------------------
@@ -190,7 +192,7 @@ class Session(_SessionPlan, _SessionRoa):
         self.plant = self._plant_steps()
 
     @staticmethod
-    def _param_specs(base: System) -> list[Any]:
+    def _param_specs(base: System) -> list[Parameter]:
         picked = [p for p in base.spec.parameters if float(base.params[p.name]) > 0
                   and p.name not in ("g",)]
         return picked[:MAX_PARAM_SLIDERS]
@@ -276,7 +278,7 @@ class Session(_SessionPlan, _SessionRoa):
         self.u_app = self.u_sat.copy()
         self.y = self.x[self.loop.out_idx].copy()
         self.plant = None
-        self.fell: dict[str, Any] | None = None
+        self.fell: dict[str, float | str] | None = None
         self.push_value = 0.0
         self.push_left = 0
         self.push_seq: int | None = None
@@ -286,11 +288,11 @@ class Session(_SessionPlan, _SessionRoa):
         self.chart_x: list[list[float]] = []
         self.chart_xhat: list[list[float]] = []
         self.chart_u: list[list[float]] = []
-        self.sent_shapes: dict[str, tuple[Any, ...]] = {}
+        self.sent_shapes: dict[str, tuple[object, ...]] = {}
         self._anchor(None)
 
     # -- description ----------------------------------------------------------------------
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> dict[str, object]:
         """The ``system`` frame: names, units, slider ranges, the view."""
         system, base, spec = self.system, self.base, self.system.spec
         op = self.loop.x_op
@@ -489,7 +491,7 @@ class Session(_SessionPlan, _SessionRoa):
                         + ": lower the control rate"),
         })
 
-    def _plant_steps(self) -> Any:
+    def _plant_steps(self) -> PlantSteps:
         """The core's plant for the settings in force: the sensor noise of ``simulate``
         (the rig's standard deviations times the ``noise`` setting) and its process
         noise (the spec's, white over the period, held over each physics step)."""
@@ -502,8 +504,10 @@ class Session(_SessionPlan, _SessionRoa):
         lv = np.zeros((0, 0))
         if self.settings.noise > 0 and np.any(self.sigma_y > 0):
             lv = square_root(noise.measurement_covariance, "the sensor noise") * self.settings.noise
-        return self.kernel.plant(x=self.x, p=self.p, rate=self.settings.rate, n_sub=self.n_sub,
-                                 lw=lw, outputs=loop.out_idx, lv=lv, rng=self.core_rng)
+        steps: PlantSteps = self.kernel.plant(x=self.x, p=self.p, rate=self.settings.rate,
+                                              n_sub=self.n_sub, lw=lw, outputs=loop.out_idx,
+                                              lv=lv, rng=self.core_rng)
+        return steps
 
     def _sample(self) -> None:
         loop, x = self.loop, self.x
