@@ -47,7 +47,7 @@ def swing_times(ctrl: object, batch: object, n_out: int, m: int) -> np.ndarray:
     measurements and applied inputs, so the mode is the one the batch had.
     """
     # The law compiled to C, as the core runs it.
-    fns = python_namespace(str(ctrl.settings["law"]), compiled=True)  # type: ignore[attr-defined]
+    fns = python_namespace(ctrl.source, compiled=True)  # type: ignore[attr-defined]
     output, update = fns["output"], fns["update"]
     traj = batch.trajectories  # type: ignore[attr-defined]
     n = len(batch.state_names)  # type: ignore[attr-defined]

@@ -6,19 +6,23 @@ place for the source, the Python and the C export), the energy-shaping law itsel
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from equilibrist.control.controller import NonlinearController
 
 # --- layout of the parameters ``cp`` and of the state ``z`` (one place: the source,
 # the Python runtime and the C export read these) -----------------------------------
 CP_SLOTS = ("T", "ke", "amax", "e0", "kx", "kv", "kp", "c_in", "c_out", "alpha",
-            "beta", "u_min", "u_max", "u_op", "kd", "lqg", "kform")
-N_PHYS = 8
+            "beta", "u_min", "u_max", "u_op", "kd", "lqg", "kform", "e_up")
 N_STATES = 4  # every rig with a swing-up has two coordinates
-CP_BLOCKS = (("phys", N_PHYS), ("x_op", N_STATES), ("K", N_STATES), ("S", N_STATES * N_STATES),
+#: The blocks after the slots; the last, ``phys``, is the system's own parameter vector (as
+#: long as the system has parameters), which the system's generated functions read.
+CP_BLOCKS = (("x_op", N_STATES), ("K", N_STATES), ("S", N_STATES * N_STATES),
              ("wrap", N_STATES), ("free", N_STATES), ("Ad", N_STATES * N_STATES),
-             ("Bd", N_STATES), ("Kf", N_STATES * 2))
+             ("Bd", N_STATES), ("Kf", N_STATES * 2), ("phys", 0))
 Z_SLOTS = (("init", 1), ("mode", 1), ("xhat", N_STATES), ("ref", N_STATES), ("kz", N_STATES))
 
 #: The balancing controllers the supervisor can hand over to (``balance=``).
@@ -222,34 +226,22 @@ def estimate(t, z, y, r, p, x_out):
 """
 
 
-# The pieces the laws' sources share: the pendulums' energy, the acrobot's constants, and the
-# start of every pumping term (the energy's error and the gains).
+# The pieces the laws' sources share: the energies and the start of every pumping term (the
+# energy's error and the gains). The physics is the system's own: its generated functions
+# (``scalar_energy``, ``scalar_mass``, ``scalar_qdd`` of :mod:`equilibrist.numeric.codegen`),
+# copied into the controller's source, on its parameters (the ``phys`` block).
 _PENDULUM_ENERGY = """
 def su_energy(x0, x1, x2, x3, p):
-    # The pendulum's energy, from upright: J theta_dot^2 / 2 + m g l (cos theta - 1).
-    ph = SU_PHYS
-    return 0.5 * p[ph] * x3 * x3 + p[ph + 1] * (eq_cos(x1) - 1.0)
+    # The pendulum's energy from upright: its inertia (the mass matrix's entry of the
+    # pendulum's coordinate) times its rate squared over two, and the rig's energy at rest.
+    o = SU_PHYS
+    kin = 0.5 * scalar_mass(1, 1, x0, x1, x2, x3, p, o) * x3 * x3
+    return kin + scalar_energy(x0, x1, 0.0, 0.0, p, o) - p[SU_E_UP]
 """
-_ACROBOT_CONSTANTS = """    m1 = p[ph]
-    m2 = p[ph + 1]
-    l1 = p[ph + 2]
-    lc1 = p[ph + 3]
-    lc2 = p[ph + 4]
-    i1 = p[ph + 5]
-    i2 = p[ph + 6]
-    g = p[ph + 7]
-"""
-_ACROBOT_ENERGY = """
+_TOTAL_ENERGY = """
 def su_energy(x0, x1, x2, x3, p):
-    # The acrobot's total energy, from upright.
-    ph = SU_PHYS
-""" + _ACROBOT_CONSTANTS + """    c2 = eq_cos(x1)
-    d1 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2
-    d2 = m2 * (lc2 * lc2 + l1 * lc2 * c2) + i2
-    d3 = m2 * lc2 * lc2 + i2
-    kin = 0.5 * (d1 * x2 * x2 + 2.0 * d2 * x2 * x3 + d3 * x3 * x3)
-    pot = -g * (m1 * lc1 * eq_cos(x0) + m2 * (l1 * eq_cos(x0) + lc2 * eq_cos(x0 + x1)))
-    return kin + pot - g * (m1 * lc1 + m2 * (l1 + lc2))
+    # The rig's total energy, from upright.
+    return scalar_energy(x0, x1, x2, x3, p, SU_PHYS) - p[SU_E_UP]
 """
 
 
@@ -266,32 +258,33 @@ def su_pump(x0, x1, x2, x3, p):
 
 
 #: Each law's energy and pumping term, as source (``su_energy``, ``su_pump``): the controller's
-#: source is the common part (:data:`LAW_SOURCE`) and the law its system's definition names
-#: (``spec.swingup.law``), with no branch on a law number. Its physical constants are the
-#: ``phys`` block of the parameters (:func:`equilibrist.control.swingup._physics`).
+#: source is the common part (:data:`LAW_SOURCE`), the law its system's definition names
+#: (``spec.swingup.law``), with no branch on a law number, and the system's generated functions
+#: the law calls (:func:`physics_source`).
 LAW_SOURCES = {
     "cart": _PENDULUM_ENERGY + _pump("""    a = su_clip(ke * e * su_sign(x3 * eq_cos(x1)), -amax, amax)
     a = a - p[SU_KX] * x0 - p[SU_KV] * x2
-    # The force that gives the cart the acceleration a exactly.
-    mlc = p[ph + 4] * eq_cos(x1)
-    th_dd = (p[ph + 1] * eq_sin(x1) - p[ph + 5] * x3 - mlc * a) / p[ph]
-    return (p[ph + 2] * a + mlc * th_dd - p[ph + 4] * eq_sin(x1) * x3 * x3
-            + p[ph + 3] * x2)
+    # The force that gives the cart the acceleration a exactly: the cart's acceleration is
+    # affine in the force.
+    free = scalar_qdd(0, x0, x1, x2, x3, 0.0, p, ph)
+    per_newton = scalar_qdd(0, x0, x1, x2, x3, 1.0, p, ph) - free
+    return (a - free) / per_newton
 """),
     "wheel": _PENDULUM_ENERGY + _pump("""    return su_clip(ke * e * su_sign(x3), -amax, amax) - p[SU_KV] * (x2 - x3)
 """),
     "rotary": _PENDULUM_ENERGY + _pump("""    return su_clip(ke * e * su_sign(x3 * eq_cos(x1)), -amax, amax) - p[SU_KV] * x2
 """),
-    "acrobot": _ACROBOT_ENERGY + _pump(_ACROBOT_CONSTANTS + """    t2 = su_wrap(x1)
-    c2 = eq_cos(t2)
-    s2 = eq_sin(t2)
-    m11 = m1 * lc1 * lc1 + m2 * (l1 * l1 + lc2 * lc2 + 2.0 * l1 * lc2 * c2) + i1 + i2
-    m12 = m2 * (lc2 * lc2 + l1 * lc2 * c2) + i2
-    m22 = m2 * lc2 * lc2 + i2
+    "acrobot": _TOTAL_ENERGY + _pump("""    t2 = su_wrap(x1)
+    m11 = scalar_mass(0, 0, x0, t2, x2, x3, p, ph)
+    m12 = scalar_mass(0, 1, x0, t2, x2, x3, p, ph)
+    m22 = scalar_mass(1, 1, x0, t2, x2, x3, p, ph)
     det = m11 * m22 - m12 * m12
-    hg2 = m2 * l1 * lc2 * s2 * x2 * x2 + m2 * lc2 * g * eq_sin(x0 + t2)
-    hg1 = (-m2 * l1 * lc2 * s2 * (2.0 * x2 * x3 + x3 * x3)
-           + (m1 * lc1 + m2 * l1) * g * eq_sin(x0) + m2 * lc2 * g * eq_sin(x0 + t2))
+    # The bias and gravity terms hg of M q_ddot + hg = B tau: minus M times the accelerations
+    # without torque.
+    a1 = scalar_qdd(0, x0, t2, x2, x3, 0.0, p, ph)
+    a2 = scalar_qdd(1, x0, t2, x2, x3, 0.0, p, ph)
+    hg1 = -(m11 * a1 + m12 * a2)
+    hg2 = -(m12 * a1 + m22 * a2)
     # Xin and Kaneda's energy law: V = ke (E - E0)^2 / 2 + kd x3^2 / 2 + kp t2^2 / 2
     # falls as dV/dt = -kv x3^2 (while the motor is not saturated).
     kd = p[SU_KD]
@@ -305,35 +298,57 @@ LAW_SOURCES = {
 LAW_NAMES = tuple(LAW_SOURCES)
 
 
-def controller_source(law: str) -> str:
-    """The swing-up's source for the law *law* (:data:`LAW_NAMES`): the layout's constants,
-    :data:`LAW_SOURCE` and the law's :data:`LAW_SOURCES`."""
+#: The system's generated functions a law calls (:mod:`equilibrist.numeric.codegen`).
+PHYSICS_FUNCTIONS = ("scalar_qdd", "scalar_mass", "scalar_energy")
+
+
+def physics_source(system: Any) -> str:
+    """The source of *system*'s generated functions the laws call (:data:`PHYSICS_FUNCTIONS`),
+    as its derived module holds them: the system's own physics, no sympy at run time."""
+    import inspect
+
+    module = system.functions
+    missing = [name for name in PHYSICS_FUNCTIONS if not hasattr(module, name)]
+    if missing:
+        from equilibrist.control.controller import ControllerError
+
+        raise ControllerError(f"{system.name}'s model has no {', '.join(missing)}: the swing-up "
+                              "needs a mechanical model (a mass matrix)")
+    return "\n\n".join(inspect.getsource(getattr(module, name)) for name in PHYSICS_FUNCTIONS)
+
+
+def controller_source(law: str, physics: str) -> str:
+    """The swing-up's source for the law *law* (:data:`LAW_NAMES`) on a system's *physics*
+    (:func:`physics_source`): the layout's constants, :data:`LAW_SOURCE`, the law's
+    :data:`LAW_SOURCES` and the physics."""
     head = "\n".join(f"{k} = {v}" for k, v in layout_constants().items())
-    return head + "\n" + LAW_SOURCE + LAW_SOURCES[law]
+    return head + "\n" + LAW_SOURCE + LAW_SOURCES[law] + "\n\n" + physics
 
 
-def python_namespace(law: str, *, compiled: bool = False) -> Any:
-    """The law *law*'s controller functions, as plain Python (or compiled to C, as the
-    simulation core runs them, when *compiled*: then only ``output``, ``update`` and
+def python_namespace(source: str, *, compiled: bool = False) -> Any:
+    """A swing-up's controller functions from its *source*, as plain Python (or compiled to C,
+    as the simulation core runs them, when *compiled*: then only ``output``, ``update`` and
     ``estimate``)."""
     if compiled:
         from equilibrist.native.ctrl import controller_functions
 
-        return controller_functions(controller_source(law), ("output", "update", "estimate"))
-    if law not in _NAMESPACES:
+        return controller_functions(source, ("output", "update", "estimate"))
+    if source not in _NAMESPACES:
         from equilibrist.control.controller import contract_namespace
 
         ns = contract_namespace()
-        exec(compile(controller_source(law), f"<equilibrist swing-up: {law}>", "exec"), ns)
-        _NAMESPACES[law] = ns
-    return _NAMESPACES[law]
+        exec(compile(source, "<equilibrist swing-up>", "exec"), ns)
+        if len(_NAMESPACES) > 32:
+            _NAMESPACES.clear()
+        _NAMESPACES[source] = ns
+    return _NAMESPACES[source]
 
 
 _NAMESPACES: dict[str, dict[str, Any]] = {}
 
 
-def energy(x: np.ndarray, cp: np.ndarray, law: str) -> float:
-    """The energy the law *law* pumps (pendulum's from upright; acrobot: total from upright)
-    at state *x*, with the controller's parameters *cp*."""
+def energy(x: np.ndarray, ctrl: NonlinearController) -> float:
+    """The energy the swing-up *ctrl* pumps (the pendulum's, or the acrobot's total), from
+    upright, at state *x*."""
     x = np.asarray(x, dtype=float)
-    return float(python_namespace(law)["su_energy"](x[0], x[1], x[2], x[3], cp))
+    return float(python_namespace(ctrl.source)["su_energy"](x[0], x[1], x[2], x[3], ctrl.params))

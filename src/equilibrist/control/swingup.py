@@ -113,14 +113,15 @@ from equilibrist.control._swingup_law import (
     LAW_SOURCES,
     MODE_BALANCE,
     MODE_PUMP,
-    N_PHYS,
     N_STATES,
+    PHYSICS_FUNCTIONS,
     Z_SLOTS,
     Z,
     _offsets,  # noqa: F401
     controller_source,
     energy,
     layout_constants,
+    physics_source,
     python_namespace,
 )
 from equilibrist.control.controller import (
@@ -220,7 +221,7 @@ class SwingUpRuntime:
         self.rate: float | None = ctrl.rate
         self.outputs: tuple[str, ...] | None = ctrl.output_names
         self.estimate: np.ndarray | None = None
-        self._ns = python_namespace(str(ctrl.settings["law"]), compiled=compiled)
+        self._ns = python_namespace(ctrl.source, compiled=compiled)
         self.reset()
 
     def reset(self) -> None:
@@ -250,22 +251,6 @@ class SwingUpRuntime:
 
 
 # --- building it -------------------------------------------------------------------
-
-
-def _physics(system: System, law: str) -> list[float]:
-    p = system.params
-    if law == "cart":
-        j = p["I_p"] + p["m_p"] * p["l"] ** 2
-        vals = [j, p["m_p"] * p["g"] * p["l"], p["m_c"] + p["m_p"], p["b_c"], p["m_p"] * p["l"],
-                p["b_p"]]
-    elif law == "wheel":
-        j = p["I"] + p["m"] * p["L"] ** 2 + p["m_w"] * p["L_w"] ** 2
-        vals = [j, (p["m"] * p["L"] + p["m_w"] * p["L_w"]) * p["g"]]
-    elif law == "rotary":
-        vals = [p["I_p"] + p["m_p"] * p["l_p"] ** 2, p["m_p"] * p["g"] * p["l_p"]]
-    else:
-        vals = [p[k] for k in ("m1", "m2", "l1", "lc1", "lc2", "I1", "I2", "g")]
-    return vals + [0.0] * (N_PHYS - len(vals))
 
 
 def catch_level(K: np.ndarray, S: np.ndarray, u_room: np.ndarray) -> float:
@@ -362,7 +347,8 @@ def swingup(
     c_in = tune.catch_fraction * catch_region(system, K, S, u_op)
     noise = [float(system.spec.sensor_noise.get(c, 1e-3)) for c in system.spec.coordinates]
     alpha, beta = tracking_gains(max(noise), tune.accel, 1.0 / hz)
-    cp = np.zeros(CP["end"])
+    phys = np.asarray(system.p, dtype=float)
+    cp = np.zeros(CP["end"] + phys.size)
     values = {
         "T": 1.0 / hz, "ke": tune.k_energy, "amax": tune.a_max,
         "e0": tune.e0, "kx": tune.k_x, "kv": tune.k_v, "kp": tune.k_p, "kd": tune.k_d, "c_in": c_in,
@@ -373,7 +359,7 @@ def swingup(
     }
     for key, value in values.items():
         cp[CP[key]] = value
-    cp[CP["phys"]:CP["phys"] + N_PHYS] = _physics(system, law)
+    cp[CP["phys"]:] = phys  # the system's own parameters, which its generated functions read
     cp[CP["x_op"]:CP["x_op"] + n] = x_op
     cp[CP["K"]:CP["K"] + n] = K[0]
     cp[CP["S"]:CP["S"] + n * n] = S.reshape(-1)
@@ -399,8 +385,11 @@ def swingup(
         "alpha": alpha, "beta": beta,
         "tuning": {k: getattr(tune, k) for k in tune.__dataclass_fields__},
     }
+    source = controller_source(law, physics_source(system))
+    # The energy measured from upright: the law's own at the operating point, at rest.
+    cp[CP["e_up"]] = python_namespace(source)["su_energy"](*x_op[:N_STATES], cp)
     return SwingUpController(
-        name="swingup", source=controller_source(law), params=cp, z0=np.zeros(Z["end"]),
+        name="swingup", source=source, params=cp, z0=np.zeros(Z["end"]),
         rate=hz, x_op=x_op, u_op=u_op, state_names=names, input_names=system.input_names,
         output_names=tuple(names[:nq]), has_estimate=True, settings=settings,
     )
@@ -443,8 +432,8 @@ __all__ = [
     "LAW_SOURCES",
     "MODE_BALANCE",
     "MODE_PUMP",
-    "N_PHYS",
     "N_STATES",
+    "PHYSICS_FUNCTIONS",
     "Z_SLOTS",
     "SwingUpController",
     "SwingUpRuntime",
@@ -457,6 +446,7 @@ __all__ = [
     "default_tuning",
     "energy",
     "layout_constants",
+    "physics_source",
     "python_namespace",
     "swingup",
     "swingup_laws",

@@ -28,6 +28,18 @@ in the order of the spec's states, inputs and parameters):
     (joint anchors, centres of mass) for a generic drawing; ``LINKS`` holds
     the index pairs joined by a link. Both are empty when the derivation
     records no points.
+
+For a mechanical model, the same physics with scalar arguments, which a
+controller's source may copy and call (a controller's locals are scalars:
+:mod:`equilibrist.native.pyc`), its parameters read from ``p[o + k]`` (the
+model's vector at offset ``o`` of the controller's own):
+
+``scalar_qdd(i, x0, ..., u0, ..., p, o)``
+    ``q_ddot[i]`` (``f``'s row ``N_Q + i``).
+``scalar_mass(i, j, x0, ..., p, o)``
+    ``M[i, j]``.
+``scalar_energy(x0, ..., p, o)``
+    ``energy``.
 """
 
 from __future__ import annotations
@@ -153,7 +165,40 @@ def generate_source(model: SymbolicModel) -> str:
     targets = [f"out[{k}, {j}]" for k in range(len(model.points)) for j in range(3)]
     out += _body(coords, targets, subs, printer)
     out += ["    return None", ""]
+    if model.M is not None:
+        out += _scalar_functions(model, subs, printer)
     return "\n".join(out)
+
+
+def _scalar_functions(model: SymbolicModel, subs: dict[sp.Symbol, sp.Symbol],
+                      printer: _Printer) -> list[str]:
+    """``scalar_qdd``, ``scalar_mass`` and ``scalar_energy`` (see the module's docstring)."""
+    assert model.M is not None
+    nq, n = model.n_q, len(model.states)
+    xs = [f"x{k}" for k in range(n)]
+    us = [f"u{k}" for k in range(len(model.inputs))]
+    qdd = [model.f[nq + i] for i in range(nq)]
+    mass = [model.M[i, j] for i in range(nq) for j in range(nq)]
+    energy = sp.nan if model.energy is None else model.energy
+    out: list[str] = []
+    for name, args, exprs, tests in (
+        ("scalar_qdd", ["i", *xs, *us], qdd, [f"i == {i}" for i in range(nq)]),
+        ("scalar_mass", ["i", "j", *xs], mass,
+         [f"i == {i} and j == {j}" for i in range(nq) for j in range(nq)]),
+        ("scalar_energy", xs, [energy], ["True"]),
+    ):
+        out += ["", f"def {name}({', '.join([*args, 'p', 'o'])}):"]
+        used = _free(exprs)
+        out += [f"    s_{s.name} = x{k}" for k, s in enumerate(model.states) if s in used]
+        out += [f"    i_{s.name} = u{k}" for k, s in enumerate(model.inputs) if s in used]
+        out += [f"    p_{s.name} = p[o + {k}]" for k, s in enumerate(model.params) if s in used]
+        values = [f"r{k}" for k in range(len(exprs))]
+        out += _body(exprs, values, subs, printer)
+        for test, value in zip(tests[:-1], values[:-1], strict=True):
+            out += [f"    if {test}:", f"        return {value}"]
+        out += [f"    return {values[-1]}"]
+    out.append("")
+    return out
 
 
 def _link_indices(model: SymbolicModel) -> tuple[tuple[int, int], ...]:
