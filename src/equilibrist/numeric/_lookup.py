@@ -184,6 +184,45 @@ def rebuild_system(key: str, params: Mapping[str, float], digest: str | None) ->
     return system
 
 
+def portable(system: System) -> tuple[object, ...]:
+    """What *system* pickles as (:meth:`System.__reduce__`): its definition's content and its
+    parameter values, so another process (a batch's worker, a Dask worker, a later session
+    reading a pickle) rebuilds the same system.
+
+    A catalogue system travels as its key, a model or system file as its path and the digest
+    of its bytes (checked there), a system defined in a script or a notebook
+    (:meth:`System.from_definition`) as its spec, its derivation's code by value (cloudpickle:
+    the function and the helpers of its module it calls) and the content its cache key and
+    digest come from.
+    """
+    from equilibrist.systems import files
+
+    entry = system.compiled.entry
+    params = dict(system.params)
+    if entry.content is not None and entry.origin is None and files.defined(entry.spec.key) is entry:
+        import cloudpickle
+
+        return ("definition", entry.spec, cloudpickle.dumps(entry.derive), entry.content, params)
+    return ("key", system.key, system.digest, params)
+
+
+def unpickle_system(kind: str, *args: object) -> System:
+    """The system :func:`portable` describes, rebuilt in this process."""
+    import pickle
+
+    from equilibrist.systems import files
+
+    if kind == "definition":
+        spec, blob, content, params = args
+        assert isinstance(spec, SystemSpec) and isinstance(blob, bytes)
+        assert isinstance(content, bytes) and isinstance(params, dict)
+        return _bind(files.adopt(spec, pickle.loads(blob), content), params)
+    key, digest, params = args
+    assert isinstance(key, str) and isinstance(params, dict)
+    assert digest is None or isinstance(digest, str)
+    return rebuild_system(key, params, digest)
+
+
 def _check_same(system: System, key: str, digest: str | None, source: str, *, named: bool) -> None:
     """Refuse *system* for data recorded from another definition.
 

@@ -108,6 +108,14 @@ class System:
 
         return files.digest_of(self.compiled.entry)
 
+    def __reduce__(self) -> tuple[Callable[..., System], tuple[object, ...]]:
+        """A system pickles as its definition's content and its parameter values
+        (:func:`~equilibrist.numeric._lookup.portable`), not as the compiled objects of this
+        process: a worker or a later session rebuilds it, from its cache when it has it."""
+        from equilibrist.numeric._lookup import portable, unpickle_system
+
+        return unpickle_system, portable(self)
+
     @classmethod
     def from_definition(cls, spec: SystemSpec, derive: registry.DeriveFunction, **params: object) -> System:
         """A system built from a spec and its derivation, with no registration.

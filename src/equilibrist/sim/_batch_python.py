@@ -65,11 +65,10 @@ def _python_batch(setup: _setup.Setup, x0s: np.ndarray, pmat: np.ndarray,
 
 
 def _portable(setup: _setup.Setup) -> bytes:
-    """*setup* pickled for a worker process (the system as its key and parameters)."""
-    fields = {k: v for k, v in setup.__dict__.items() if k != "system"}
+    """*setup* pickled for a worker process (the system as its definition's content and its
+    parameters: :meth:`~equilibrist.numeric.system.System.__reduce__`)."""
     try:
-        return pickle.dumps((setup.system.key, dict(setup.system.params), setup.system.digest,
-                             fields))
+        return pickle.dumps(dict(setup.__dict__))
     except (pickle.PicklingError, TypeError, AttributeError) as exc:
         name = (python_controller_name(setup.controller)
                 if isinstance(setup.controller, PythonController) else type(setup.controller).__name__)
@@ -83,10 +82,7 @@ def _portable(setup: _setup.Setup) -> bytes:
 def _python_worker(payload: bytes, x0s: np.ndarray, pmat: np.ndarray,
                    seqs: list[np.random.SeedSequence | None], record: bool
                    ) -> tuple[np.ndarray, ...]:
-    from equilibrist.numeric.system import rebuild_system
-
-    key, params, digest, fields = pickle.loads(payload)
-    setup = _setup.Setup(system=rebuild_system(key, params, digest), **fields)
+    setup = _setup.Setup(**pickle.loads(payload))
     return _python_runs(setup, x0s, pmat, seqs, record)
 
 

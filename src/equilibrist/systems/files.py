@@ -172,15 +172,50 @@ def _where(exc: BaseException, origin: str) -> str:
 
 
 def _function_content(derive: DeriveFunction) -> bytes:
-    try:
-        return inspect.getsource(derive).encode()
-    except (OSError, TypeError):  # defined where no source is kept (an exec'd string)
-        code = getattr(derive, "__code__", None)
-        if code is None:
-            raise DefinitionError(
-                f"the derivation {derive!r} must be a Python function (got {type(derive).__name__})"
-            ) from None
-        return marshal.dumps(code)
+    """What shapes the derivation *derive*: its source, and those of the functions and classes
+    of its own module it uses (by name, at any depth), and the values of that module's
+    constants it reads; a helper's change is a new definition."""
+    seen: set[int] = set()
+    parts: list[bytes] = []
+
+    def add(obj: object) -> None:
+        if id(obj) in seen:
+            return
+        seen.add(id(obj))
+        try:
+            parts.append(inspect.getsource(obj).encode())  # type: ignore[arg-type]
+        except (OSError, TypeError):  # defined where no source is kept (an exec'd string)
+            code = getattr(obj, "__code__", None)
+            if code is None:
+                raise DefinitionError(
+                    f"the derivation {obj!r} must be a Python function (got {type(obj).__name__})"
+                ) from None
+            parts.append(marshal.dumps(code))
+        module = getattr(obj, "__module__", None)
+        scope = getattr(obj, "__globals__", None)
+        code = getattr(obj, "__code__", None)
+        if scope is None or code is None:
+            return
+        for name in sorted(_names_used(code)):
+            value = scope.get(name)
+            if inspect.isfunction(value) or inspect.isclass(value):
+                if getattr(value, "__module__", None) == module:
+                    add(value)
+            elif isinstance(value, int | float | str | bytes | tuple | frozenset) and \
+                    not isinstance(value, bool):
+                parts.append(f"{name} = {value!r}".encode())
+
+    add(derive)
+    return b"\n\0".join(parts)
+
+
+def _names_used(code: object) -> set[str]:
+    """The global names a code object and the code nested in it read."""
+    names = set(getattr(code, "co_names", ()))
+    for const in getattr(code, "co_consts", ()):
+        if inspect.iscode(const):
+            names |= _names_used(const)
+    return names
 
 
 def from_definition(spec: SystemSpec, derive: DeriveFunction) -> Entry:
@@ -198,6 +233,19 @@ def from_definition(spec: SystemSpec, derive: DeriveFunction) -> Entry:
     if previous is not None and previous.content == content:
         return previous
     entry = Entry(spec, derive, getattr(derive, "__module__", "__main__") or "__main__", content=content)
+    _DEFINED[spec.key] = entry
+    return entry
+
+
+def adopt(spec: SystemSpec, derive: DeriveFunction, content: bytes) -> Entry:
+    """The definition another process handed over by value (a pickled :class:`System`): its
+    spec, its derivation and the content it was known by there (so the same derived model,
+    and the same digest, wherever its source can or cannot be read)."""
+    previous = _DEFINED.get(spec.key)
+    if previous is not None and previous.content == content:
+        return previous
+    entry = Entry(spec, derive, getattr(derive, "__module__", "__main__") or "__main__",
+                  content=content)
     _DEFINED[spec.key] = entry
     return entry
 
