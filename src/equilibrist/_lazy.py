@@ -9,16 +9,15 @@ command needs.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Mapping
-from typing import Any
+from collections.abc import Callable, Mapping, MutableMapping
 
 
-def exports(package: str, where: Mapping[str, str], namespace: dict[str, Any]
-            ) -> Callable[[str], Any]:
+def exports(package: str, where: Mapping[str, str], namespace: MutableMapping[str, object]
+            ) -> Callable[[str], object]:
     """The ``__getattr__`` of *package*: name -> the attribute of module ``where[name]``,
     kept in *namespace* (the package's globals) once imported."""
 
-    def __getattr__(name: str) -> Any:
+    def __getattr__(name: str) -> object:
         module = where.get(name)
         if module is None:
             raise AttributeError(f"module {package!r} has no attribute {name!r}")

@@ -7,7 +7,7 @@ run as plain Python (split from :mod:`equilibrist.control.controller`, which re-
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -238,25 +238,25 @@ def linear_estimate(t, z, y, r, p, x_out):
 #: Names the linear library defines (a nonlinear controller's source may call them).
 LINEAR_FUNCTIONS = ("linear_output", "linear_update", "linear_estimate")
 
-_PY_LINEAR: dict[str, Any] = {}
+_PY_LINEAR: dict[str, Callable[..., None]] = {}
 #: The library written out per pattern (:func:`python_linear`), as Python.
-_PY_UNROLLED: dict[bytes, dict[str, Any]] = {}
+_PY_UNROLLED: dict[bytes, dict[str, Callable[..., None]]] = {}
 
 
-def _exec_linear(source: str) -> dict[str, Any]:
+def _exec_linear(source: str) -> dict[str, Callable[..., None]]:
     namespace: dict[str, Any] = {"math": math, "np": np, **linear_constants()}
     exec(compile(source, "<equilibrist linear controller>", "exec"), namespace)
     return {name: namespace[name] for name in LINEAR_FUNCTIONS}
 
 
-def _python_linear() -> dict[str, Any]:
+def _python_linear() -> dict[str, Callable[..., None]]:
     """:data:`LINEAR_SOURCE` executed as plain Python (the reference the core is checked on)."""
     if not _PY_LINEAR:
         _PY_LINEAR.update(_exec_linear(linear_layout_source() + LINEAR_SOURCE))
     return _PY_LINEAR
 
 
-def python_linear(p: np.ndarray) -> dict[str, Any]:
+def python_linear(p: np.ndarray) -> dict[str, Callable[..., None]]:
     """The linear library for the packed vector *p* as plain Python: written out for its
     pattern (:func:`linear_unrolled_source`, the core's own form of it), or the generic loops
     where it is too large to write out; the same sums either way. Fast on lists."""

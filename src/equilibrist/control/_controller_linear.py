@@ -132,7 +132,7 @@ class LinearController:
     kind: str = "linear"
     form: str = ""
     has_estimate: bool = True
-    design: Any = field(default=None, repr=False, compare=False)
+    design: Design | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         n, m = len(self.state_names), len(self.input_names)
@@ -159,7 +159,7 @@ class LinearController:
                 f"({', '.join(self.state_names)})"
             )
 
-    def __getstate__(self) -> dict[str, Any]:
+    def __getstate__(self) -> dict[str, object]:
         # The design stays behind when the controller goes to another process.
         state = {**self.__dict__, "design": None}
         state.pop("_packed", None)
@@ -325,7 +325,7 @@ class LinearController:
         rate: float | None = None,
         u_min: object | None = None,
         u_max: object | None = None,
-        design: Any = None,
+        design: Design | None = None,
     ) -> LinearController:
         """LQR: ``u = u_op - K (x - x_op) + Kc (r - r_op)`` on the measured full state.
 
@@ -377,7 +377,7 @@ class LinearController:
         x_hat0: object | None = None,
         u_min: object | None = None,
         u_max: object | None = None,
-        design: Any = None,
+        design: Design | None = None,
     ) -> LinearController:
         """Discrete LQG: Kalman filter on the measured states *outputs*, feedback on its estimate.
 

@@ -27,6 +27,7 @@ from equilibrist.control._controller_python import PythonControllerBase
 from equilibrist.errors import ControllerError
 
 if TYPE_CHECKING:
+    from equilibrist.native.pyc import Function, Module
     from equilibrist.numeric.system import System
 
 # -- nonlinear controllers, compiled into the simulation core ---------------------------------
@@ -129,7 +130,7 @@ class NonlinearController:
     def source_hash(self) -> str:
         return hashlib.sha256(self.source.encode()).hexdigest()[:12]
 
-    def python_functions(self) -> dict[str, Callable[..., Any]]:
+    def python_functions(self) -> dict[str, Callable[..., object]]:
         """The source executed as plain Python (slow; for checks against the compiled core)."""
         namespace = contract_namespace()
         exec(compile(self.source, f"<controller {self.name}>", "exec"), namespace)
@@ -218,7 +219,7 @@ _TRANSLATED: dict[str, None] = {}
 
 
 def translate_controller(source: str, roles: Mapping[str, str], *, prefix: str = "ctrl_",
-                         library: str | None = None) -> tuple[Any, dict[str, Any]]:
+                         library: str | None = None) -> tuple[Module, dict[str, Function]]:
     """A controller's functions translated to C (:mod:`equilibrist.native.pyc`).
 
     *roles* maps each role of the contract (``output``, ``update``,

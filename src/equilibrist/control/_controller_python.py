@@ -76,7 +76,8 @@ class StepAdapter(PythonControllerBase):
     def __init__(self, target: Any) -> None:
         self.target = target
         is_function = not (hasattr(target, "step") and callable(target.step))
-        self._step: Callable[..., Any] = target if is_function else target.step
+        self._step: Callable[[float, np.ndarray, np.ndarray], object] = (
+            target if is_function else target.step)
         self._reset = None if is_function else getattr(target, "reset", None)
         self._applied = None if is_function else getattr(target, "applied", None)
         self.rate = None if is_function else getattr(target, "rate", None)

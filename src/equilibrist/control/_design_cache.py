@@ -7,11 +7,13 @@ from __future__ import annotations
 
 import types
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from equilibrist.control._design_record import Design
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from equilibrist.numeric.system import System
 
 
@@ -64,7 +66,7 @@ def _cache_key(system: System, args: tuple[object, ...]) -> str | None:
     return h.hexdigest()[:24]
 
 
-def _design_folder() -> Any:
+def _design_folder() -> Path:
     from equilibrist.numeric.cache import cache_dir
 
     folder = cache_dir() / "designs"
@@ -80,7 +82,7 @@ def _kept_on_disk(make: Callable[..., Design]) -> Callable[..., Design]:
     signature = inspect.signature(make)
 
     @functools.wraps(make)
-    def design(system: System, **options: Any) -> Design:
+    def design(system: System, **options: object) -> Design:
         try:
             bound = signature.bind(system, **options)
         except TypeError:

@@ -9,7 +9,6 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
 
 import numpy as np
 
@@ -195,7 +194,7 @@ class Design:
         )
 
     # -- reports --------------------------------------------------------------------
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         """Everything as plain JSON-ready values.
 
         Matrices are lists of rows; poles are lists of ``{"re", "im"}``
@@ -203,7 +202,7 @@ class Design:
         constant, an undefined damping ratio) is ``None``.
         """
         disc = self.discrete
-        out: dict[str, Any] = {
+        out: dict[str, object] = {
             "system": self.system_key,
             "params": dict(self.params),
             "rate": self.rate,
@@ -249,8 +248,7 @@ class Design:
             "observability": self.observability.to_dict(),
             "notes": list(self.notes),
         }
-        plain: dict[str, Any] = _plain(out)
-        return plain
+        return {key: _plain(value) for key, value in out.items()}
 
     def summary(self) -> str:
         """A readable report of the design."""
@@ -341,7 +339,7 @@ def _complex_list(values: np.ndarray) -> list[dict[str, float]]:
     return [{"re": float(v.real), "im": float(v.imag)} for v in np.asarray(values, dtype=complex)]
 
 
-def _plain(obj: Any) -> Any:
+def _plain(obj: object) -> object:
     if isinstance(obj, dict):
         return {str(k): _plain(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):

@@ -101,9 +101,11 @@ def filter_form(ctrl: MPC) -> LinearController:
 
     if ctrl.estimator == "state" or ctrl.Kf is None or ctrl.design is None:
         raise ControllerError("the MPC measures the full state: it has no Kalman filter")
+    disc = ctrl.design.discrete
+    assert disc is not None  # mpc() takes a discrete design only
     return LinearController.lqg(
-        ctrl.problem.K, Ad=np.asarray(ctrl.design.discrete.A, dtype=float),
-        Bd=np.asarray(ctrl.design.discrete.B, dtype=float), Kf=ctrl.Kf,
+        ctrl.problem.K, Ad=np.asarray(disc.A, dtype=float),
+        Bd=np.asarray(disc.B, dtype=float), Kf=ctrl.Kf,
         outputs=ctrl.output_names, x_op=ctrl.x_op, u_op=ctrl.u_op, rate=ctrl.rate,
         form=ctrl.form, state_names=ctrl.state_names)
 

@@ -62,8 +62,8 @@ class MPCRuntime:
         prob = ctrl.problem
         n, m, ny = prob.n, prob.m, len(ctrl.output_names)
         self._kalman = ctrl.estimator == "kalman"
-        lib: Any = private(compiled_library(ctrl, shortcut=exact_unconstrained,
-                                            iter_limit=iter_limit))
+        lib = private(compiled_library(ctrl, shortcut=exact_unconstrained,
+                                       iter_limit=iter_limit))
         self._lib = lib
         entries = {"setup": 0, "step": 2, "move": 2, "iterations": 0}
         if self._kalman:
@@ -81,7 +81,7 @@ class MPCRuntime:
                    for k in ("x", "y", "ua", "du", "u", "xhat", "z")}
         self.reset()
 
-    def __reduce__(self) -> tuple[Any, ...]:
+    def __reduce__(self) -> tuple[functools.partial[MPCRuntime], tuple[MPC]]:
         # The library's workspace does not pickle: a copy sent to a batch's worker is a new
         # runtime of the same MPC, fresh as a run starts (the batch resets each run's
         # controller).

@@ -6,12 +6,14 @@ place for the source, the Python and the C export), the energy-shaping law itsel
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 if TYPE_CHECKING:
     from equilibrist.control.controller import NonlinearController
+    from equilibrist.numeric.system import System
 
 # --- layout of the parameters ``cp`` and of the state ``z`` (one place: the source,
 # the Python runtime and the C export read these) -----------------------------------
@@ -302,7 +304,7 @@ LAW_NAMES = tuple(LAW_SOURCES)
 PHYSICS_FUNCTIONS = ("scalar_qdd", "scalar_mass", "scalar_energy")
 
 
-def physics_source(system: Any) -> str:
+def physics_source(system: System) -> str:
     """The source of *system*'s generated functions the laws call (:data:`PHYSICS_FUNCTIONS`),
     as its derived module holds them: the system's own physics, no sympy at run time."""
     import inspect
@@ -325,7 +327,15 @@ def controller_source(law: str, physics: str) -> str:
     return head + "\n" + LAW_SOURCE + LAW_SOURCES[law] + "\n\n" + physics
 
 
-def python_namespace(source: str, *, compiled: bool = False) -> Any:
+class ControllerNamespace(Protocol):
+    """A controller's functions by name (:func:`python_namespace`): the namespace its source
+    ran in as Python, or its functions compiled to C
+    (:class:`~equilibrist.native.ctrl.ControllerFunctions`)."""
+
+    def __getitem__(self, name: str, /) -> Callable[..., Any]: ...
+
+
+def python_namespace(source: str, *, compiled: bool = False) -> ControllerNamespace:
     """A swing-up's controller functions from its *source*, as plain Python (or compiled to C,
     as the simulation core runs them, when *compiled*: then only ``output``, ``update`` and
     ``estimate``)."""
@@ -344,7 +354,7 @@ def python_namespace(source: str, *, compiled: bool = False) -> Any:
     return _NAMESPACES[source]
 
 
-_NAMESPACES: dict[str, dict[str, Any]] = {}
+_NAMESPACES: dict[str, ControllerNamespace] = {}
 
 
 def energy(x: np.ndarray, ctrl: NonlinearController) -> float:

@@ -42,13 +42,16 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.numeric.interval import Interval, UnsupportedError, lambdify
+from equilibrist.numeric.interval import Interval, Operand, UnsupportedError, lambdify
+
+if TYPE_CHECKING:
+    from equilibrist.numeric.system import System
 
 METHOD = "interval branch-and-bound on the exact dynamics"
 ASSUMES = ("continuous-time state feedback u = sat(u_op - K (x - x_op)) with the design's K "
@@ -87,7 +90,7 @@ class Certificate:
     seconds: float
     violation: list[float] | None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, object]:
         return {"rho": self.rho, "method": self.method, "assumes": self.assumes,
                 "limited_by": self.limited_by, "rho_region": self.rho_region,
                 "inner_level": self.inner, "inner_floor": self.inner_floor,
@@ -120,7 +123,7 @@ def _transpose(a: list[list[Interval]]) -> list[list[Interval]]:
 class _Loop:
     """The closed loop's ``dV/dt`` and its gradient in ``z``, on batches of boxes."""
 
-    def __init__(self, system: Any, K: np.ndarray, S: np.ndarray, x_op: np.ndarray,
+    def __init__(self, system: System, K: np.ndarray, S: np.ndarray, x_op: np.ndarray,
                  u_op: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
         model = system.symbolic
         if model.f is None or len(model.states) != S.shape[0]:
@@ -377,12 +380,12 @@ def _first(a: np.ndarray) -> float:
     return float(np.ravel(a)[0])
 
 
-def _row(f: Any, i: int) -> Interval:
+def _row(f: Sequence[Operand | list[Operand]], i: int) -> Interval:
     v = f[i]
     return Interval.of(v[0] if isinstance(v, list) else v)
 
 
-def _cell(a: Any, i: int, j: int) -> Interval:
+def _cell(a: Sequence[Sequence[Operand]], i: int, j: int) -> Interval:
     return Interval.of(a[i][j])
 
 
@@ -448,9 +451,9 @@ def region_level(S: np.ndarray, x_op: np.ndarray, names: tuple[str, ...],
     return best
 
 
-def certify(system: Any, K: Any, S: Any, *, x_op: Any, u_op: Any,
-            rho_max: float | None = None, max_boxes: int = 1_000_000, min_width: float = 1 / 256,
-            grid: int | None = None, chunk: int = 20_000,
+def certify(system: System, K: np.ndarray, S: np.ndarray, *, x_op: np.ndarray,
+            u_op: np.ndarray, rho_max: float | None = None, max_boxes: int = 1_000_000,
+            min_width: float = 1 / 256, grid: int | None = None, chunk: int = 20_000,
             progress: Callable[[str], None] | None = None) -> Certificate:
     """The largest level ``rho`` of ``dx' S dx`` proven to shrink (see the module).
 

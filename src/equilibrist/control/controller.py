@@ -60,7 +60,7 @@ from __future__ import annotations
 
 import types
 from collections.abc import Callable
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, TypeVar, runtime_checkable
 
 # The module was split in four; every name stays importable from here. The names marked
 # F401 are not used here: imported so that they stay importable from this module.
@@ -94,7 +94,12 @@ from equilibrist.control._controller_python import (
 )
 from equilibrist.errors import ControllerError
 
+if TYPE_CHECKING:
+    from equilibrist.control.kinds import ControllerRequest
+
 AnyController = LinearController | NonlinearController | PythonController
+#: A kind's ``build``: request -> its controller (None: the open loop).
+_Builder = TypeVar("_Builder", bound="Callable[[ControllerRequest], AnyController | None]")
 
 
 @runtime_checkable
@@ -148,7 +153,7 @@ def as_python_controller(obj: object) -> PythonController:
 # -- the registry of controller kinds lives in equilibrist.control.kinds ---------------------
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> type[ControllerRequest]:
     if name == "ControllerRequest":  # moved to equilibrist.control.kinds
         from equilibrist.control.kinds import ControllerRequest
 
@@ -156,11 +161,11 @@ def __getattr__(name: str) -> Any:
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def register_controller(name: str) -> Callable[[Callable[[Any], Any]], Callable[[Any], Any]]:
+def register_controller(name: str) -> Callable[[_Builder], _Builder]:
     """Decorator: *builder* (request -> controller) as the kind *name* in this process; a
     kind of its own module (:class:`equilibrist.control.kinds.ControllerKind`) says more."""
 
-    def add(builder: Callable[[Any], Any]) -> Callable[[Any], Any]:
+    def add(builder: _Builder) -> _Builder:
         from equilibrist.control.kinds import ControllerKind, register
 
         register(ControllerKind(name=name, label=name, help=name, build=builder))
@@ -176,7 +181,8 @@ def registered_controllers() -> tuple[str, ...]:
     return names()
 
 
-def build_controller(name: str, request: Any) -> LinearController | NonlinearController | PythonController | None:
+def build_controller(name: str, request: ControllerRequest
+                     ) -> LinearController | NonlinearController | PythonController | None:
     """The controller of kind *name* for *request* (:func:`equilibrist.control.kinds.build`).
 
     Raises

@@ -11,7 +11,7 @@ zero).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -60,7 +60,7 @@ def to_statespace(
 
 
 def from_statespace(
-    ss: Any,
+    ss: control.StateSpace,
     *,
     x0: Sequence[float] | None = None,
     u0: Sequence[float] | None = None,

@@ -38,6 +38,7 @@ from equilibrist.errors import ControllerError
 if TYPE_CHECKING:
     from pathlib import Path
 
+    from equilibrist.control.controller import AnyController, LinearController
     from equilibrist.control.design import Design
     from equilibrist.export.writer import ExportReport
     from equilibrist.numeric.system import System
@@ -77,7 +78,7 @@ class Option:
 
     flag: str
     help: str
-    parse: Callable[[str], Any] = str
+    parse: Callable[[str], object] = str
     expected: str = "a value"
     metavar: str | None = None
     choices: tuple[str, ...] | None = None
@@ -86,7 +87,7 @@ class Option:
     def key(self) -> str:
         return self.flag.lstrip("-").replace("-", "_")
 
-    def value(self, text: str) -> Any:
+    def value(self, text: str) -> object:
         """*text* parsed, or a :class:`KindError` naming the flag and what was expected."""
         if self.choices is not None and text not in self.choices:
             raise KindError(f"{self.flag} {text!r}: expected one of {', '.join(self.choices)}")
@@ -205,7 +206,7 @@ class ControllerKind:
     name: str
     label: str
     help: str
-    build: Callable[[ControllerRequest], Any]
+    build: Callable[[ControllerRequest], AnyController | None]
     options: tuple[Option, ...] = ()
     applies: Callable[[System], str | None] = _applies_always
     surfaces: frozenset[str] = SURFACES
@@ -229,7 +230,7 @@ class ControllerKind:
             raise KindError(f"controller kind {self.name!r}: noise {self.noise!r} "
                             "(expected 'design' or 'spec')")
 
-    def make(self, request: ControllerRequest) -> Any:
+    def make(self, request: ControllerRequest) -> AnyController | None:
         """The controller for *request*: refused in one line when the kind does not apply."""
         why = self.applies(request.system)
         if why is not None:
@@ -254,10 +255,10 @@ class ControllerKind:
         return export_controller(self.make(request), out, system=request.system, **options)
 
 
-def linear_builder(kind: str) -> Callable[[ControllerRequest], Any]:
+def linear_builder(kind: str) -> Callable[[ControllerRequest], LinearController]:
     """``build`` of an LQR/LQG kind: the request's design as a ``LinearController``."""
 
-    def build(request: ControllerRequest) -> Any:
+    def build(request: ControllerRequest) -> LinearController:
         from equilibrist.control.controller import LinearController
 
         return LinearController.from_design(request.design(), kind=kind, tracking=request.tracking)
@@ -356,7 +357,7 @@ def owners(flag: str, surface: str | None = None) -> tuple[str, ...]:
     return tuple(k.name for k in all_kinds(surface) if any(o.flag == flag for o in k.options))
 
 
-def build(name: str, request: ControllerRequest) -> Any:
+def build(name: str, request: ControllerRequest) -> AnyController | None:
     """The controller of kind *name* for *request*."""
     return get(name).make(request)
 

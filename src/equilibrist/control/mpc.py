@@ -84,7 +84,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -146,7 +146,7 @@ class MPC:
     Kf: np.ndarray | None
     form: str
     K: np.ndarray
-    design: Any = field(default=None, repr=False)
+    design: Design | None = field(default=None, repr=False)
 
     kind = "mpc"
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import threading
 import time
+import types
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,7 +36,7 @@ MINIMIZE = ("effort", "time")
 FORMAT = "equilibrist-trajectory-1"
 
 
-def require_casadi() -> Any:
+def require_casadi() -> types.ModuleType:
     try:
         import casadi
     except ImportError:
@@ -67,7 +68,7 @@ class Trajectory:
     solve_time: float
     iterations: int
     solver: str
-    settings: Mapping[str, Any] = field(default_factory=dict)
+    settings: Mapping[str, object] = field(default_factory=dict)
     system_digest: str | None = None
 
     @property
@@ -94,7 +95,7 @@ class Trajectory:
                            + (2 * s * (s - 0.5)) * u1)
         return out if np.ndim(t) else out[0]
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> dict[str, object]:
         return {"converged": self.converged, "duration": self.duration, "cost": self.cost,
                 "peak_input": self.peak_input, "max_defect": self.max_defect,
                 "solve_time": self.solve_time, "iterations": self.iterations,
@@ -159,7 +160,7 @@ IPOPT_OPTIONS = {"print_time": False, "expand": True}
 IPOPT_SETTINGS = {"print_level": 0, "sb": "yes", "tol": 1e-8, "constr_viol_tol": 1e-8,
                   "mu_strategy": "adaptive"}
 #: Problems built, by what shapes them (a plan from another start or guess reuses one).
-_PROBLEMS: dict[tuple[Any, ...], _Problem] = {}
+_PROBLEMS: dict[tuple[object, ...], _Problem] = {}
 _PROBLEMS_LOCK = threading.Lock()
 
 

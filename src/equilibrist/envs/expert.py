@@ -110,7 +110,10 @@ def expert(env: object, kind: str = "lqg", *, options: Mapping[str, object] | No
     record = kinds.get(kind)
     if record.open_loop:
         raise ExpertError(f"--controller {kind} is the open loop: it is no expert")
-    return Expert(core, record.make(request), kind)
+    built = record.make(request)
+    if built is None:
+        raise ExpertError(f"--controller {kind} builds no controller: it is no expert")
+    return Expert(core, built, kind)
 
 
 __all__ = ["Expert", "ExpertError", "expert"]

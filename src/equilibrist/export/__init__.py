@@ -16,7 +16,7 @@ Importing this package does no work; the submodules load on first use.
 from __future__ import annotations
 
 import importlib
-from typing import Any
+from typing import TYPE_CHECKING
 
 _LAZY = {
     "export_c": "equilibrist.export.writer",
@@ -29,6 +29,13 @@ _LAZY = {
     "c_controller": "equilibrist.export.vectors",
     "CController": "equilibrist.export.vectors",
 }
+
+if TYPE_CHECKING:
+    from equilibrist.export.c_code import Vectors
+    from equilibrist.export.data import ControllerData
+    from equilibrist.export.native import CompiledController, compile_controller
+    from equilibrist.export.vectors import CController, c_controller
+    from equilibrist.export.writer import Export, controller_data, export_c
 
 __all__ = [
     "CController",
@@ -43,7 +50,7 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> object:
     module = _LAZY.get(name)
     if module is None:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

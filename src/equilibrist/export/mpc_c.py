@@ -94,6 +94,7 @@ from equilibrist.export._mpc_c_native import _HEAP_PROGRAM, footprint  # noqa: F
 from equilibrist.native.daqp_library import DAQP_SOURCES
 
 if TYPE_CHECKING:
+    from equilibrist.control.design import Design
     from equilibrist.control.mpc import MPC, MPCRuntime
     from equilibrist.hil.firmware import Adapter
     from equilibrist.numeric.system import System
@@ -102,6 +103,13 @@ if TYPE_CHECKING:
 #: How far the default recorded run's first LQR move reaches beyond the input limit.
 OVERDRIVE = 1.5
 
+
+def _design_of(ctrl: MPC) -> Design:
+    """The design *ctrl* was made from (its system, noise and scales); refused without one."""
+    if ctrl.design is None:
+        raise ExportError("the MPC carries no design: the export records its run on the "
+                          "design's system (build it with mpc(system, design=...))")
+    return ctrl.design
 
 def default_start(ctrl: MPC, system: System) -> dict[str, float]:
     """The recorded run's default start: one that asks for more than the input allows.
@@ -148,7 +156,7 @@ def record(ctrl: MPC, *, x0: Mapping[str, float] | None = None, duration: float 
     from equilibrist.sim.noise import Noise
     from equilibrist.sim.run import simulate
 
-    design = ctrl.design
+    design = _design_of(ctrl)
     system = system_from_key(design.system_key, dict(design.params))
     start = default_start(ctrl, system) if x0 is None else dict(x0)
     run = simulate(system, MPCRuntime(ctrl), duration=duration, x0=start,
@@ -337,7 +345,7 @@ def iteration_counts(ctrl: MPC, recorded: Mapping[str, np.ndarray], *,
     from equilibrist.control.mpc import ITER_LIMIT, MPCRuntime
     from equilibrist.numeric.system import system_from_key
 
-    design = ctrl.design
+    design = _design_of(ctrl)
     scales = system_from_key(design.system_key, dict(design.params)).spec.design_scales
     span = np.array([float(scales.get(k) or 0.0) for k in ctrl.state_names])
     rng = np.random.default_rng(seed)

@@ -18,7 +18,7 @@ import subprocess
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -105,7 +105,7 @@ class CompiledController:
         self.precision = check_precision(precision)
         self._ctype = ctypes.c_double if precision == "double" else ctypes.c_float
         self._dtype = np.float64 if precision == "double" else np.float32
-        self._lib: Any = ctypes.CDLL(str(library))
+        self._lib: ctypes.CDLL | None = ctypes.CDLL(str(library))
         name = data.name
         real_p = ctypes.POINTER(self._ctype)
         self._init = getattr(self._lib, f"{name}_init")
@@ -133,7 +133,7 @@ class CompiledController:
         self.saturated = 0
         self.reset()
 
-    def _ptr(self, arr: np.ndarray) -> Any:
+    def _ptr(self, arr: np.ndarray) -> object:
         return arr.ctypes.data_as(ctypes.POINTER(self._ctype))
 
     @property

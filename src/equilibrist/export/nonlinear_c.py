@@ -512,7 +512,7 @@ class CompiledNonlinear:
             (folder / fname).write_text(text)
         lib = build_shared_library([folder / f"{lib_name}.c"], folder / f"lib{lib_name}.so",
                                    include=folder, extra_flags=("-lm",))
-        self._lib: Any = ctypes.CDLL(str(lib))
+        self._lib = ctypes.CDLL(str(lib))
         dp = ctypes.POINTER(ctypes.c_double)
         rest = ([ctypes.c_double] if self.interface.time else []) + [dp] * (
             2 + self.interface.references)
@@ -531,11 +531,11 @@ class CompiledNonlinear:
         self.reset()
 
     @staticmethod
-    def _ptr(a: np.ndarray) -> Any:
+    def _ptr(a: np.ndarray) -> object:
         return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
-    def _args(self, t: float, y: np.ndarray, r: np.ndarray) -> list[Any]:
-        args: list[Any] = [self._ptr(self._z)]
+    def _args(self, t: float, y: np.ndarray, r: np.ndarray) -> list[object]:
+        args: list[object] = [self._ptr(self._z)]
         if self.interface.time:
             args.append(float(t))
         args.append(self._ptr(np.ascontiguousarray(y, dtype=np.float64)))

@@ -20,7 +20,7 @@ from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
@@ -32,7 +32,21 @@ from equilibrist.export.data import ControllerData, check_controller, check_prec
 from equilibrist.numeric.system import System
 
 if TYPE_CHECKING:
+    from typing import TypedDict
+
     from equilibrist.export.native import CompiledController
+    from equilibrist.sim.noise import Noise
+    from equilibrist.sim.signals import Step
+
+    class _Scenario(TypedDict):
+        """:func:`scenario`: keyword arguments of :func:`~equilibrist.sim.run.simulate`."""
+
+        duration: float
+        rate: float
+        x0: np.ndarray
+        noise: Noise
+        reference: Step | None
+
 
 # Fractions of the input's activity accepted by the shipped test program.
 RELATIVE_TOLERANCE = {"double": 1e-9, "float": 1e-4}
@@ -193,7 +207,8 @@ def c_controller(design: Design, *, controller: str = "lqg", precision: str = "d
 
 
 def scenario(design: Design, system: System, *, duration: float | None = None,
-             start: Mapping[str, float] | None = None, fraction: float = START_FRACTION) -> dict[str, Any]:
+             start: Mapping[str, float] | None = None,
+             fraction: float = START_FRACTION) -> _Scenario:
     """The settings of the recorded run: start, reference step, noise, rate.
 
     The run starts with each coordinate that has a design scale displaced by

@@ -14,7 +14,7 @@ import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -23,11 +23,23 @@ from equilibrist.export import c_code
 from equilibrist.export.data import ControllerData, check_controller, check_precision, from_design
 
 if TYPE_CHECKING:
-    from equilibrist.control.controller import LinearController
+    from typing import TypedDict, Unpack
+
+    from equilibrist.control._mpc_runtime import MPCRuntime
+    from equilibrist.control.controller import LinearController, NonlinearController
     from equilibrist.control.design import Design
     from equilibrist.export._size import Footprint
     from equilibrist.hil.firmware import Adapter
     from equilibrist.numeric.system import System
+
+    class _Options(TypedDict, total=False):
+        """What an exporter takes besides the controller, the folder and the system."""
+
+        precision: str
+        duration: float | None
+        seed: int
+        force: bool
+
 
 ARDUINO_FOLDER = "example_arduino"
 
@@ -350,15 +362,17 @@ def exporter_of(ctrl: object) -> Callable[..., ExportReport]:
     from equilibrist.control._mpc_runtime import MPCRuntime
     from equilibrist.control.controller import LinearController, NonlinearController
 
-    def mpc(*args: Any, **kwargs: Any) -> ExportReport:
+    def mpc(built: MPCRuntime, out: str | Path, *, system: System,
+            **options: Unpack[_Options]) -> ExportReport:
         from equilibrist.export.mpc_c import export_files
 
-        return export_files(*args, **kwargs)
+        return export_files(built, out, system=system, **options)
 
-    def nonlinear(*args: Any, **kwargs: Any) -> ExportReport:
+    def nonlinear(ctrl: NonlinearController, out: str | Path, *, system: System,
+                  **options: Unpack[_Options]) -> ExportReport:
         from equilibrist.export.nonlinear_c import export_files
 
-        return export_files(*args, **kwargs)
+        return export_files(ctrl, out, system=system, **options)
 
     known: dict[type, Callable[..., ExportReport]] = {
         MPCRuntime: mpc, NonlinearController: nonlinear,
@@ -390,12 +404,12 @@ def export_controller(ctrl: object, out: str | os.PathLike[str], *, system: Syst
 
 
 def _export_linear(ctrl: LinearController, out: str | os.PathLike[str], *, system: System,
-                   **options: Any) -> ExportReport:
+                   **options: Unpack[_Options]) -> ExportReport:
     """An LQR or LQG design's controller: the design's library (its matrices, the Kalman form,
     the recorded run); any other linear controller: the linear library on its packed vector,
     through the nonlinear export (:meth:`LinearController.as_nonlinear`)."""
     form = _design_form(ctrl)
-    if form is not None:
+    if form is not None and ctrl.design is not None:
         return export_c(ctrl.design, out, controller=form, system=system, **options)
     from equilibrist.export.nonlinear_c import export_files
 

@@ -12,6 +12,7 @@ studies of single runs) runs the compiled arithmetic of the simulation core.
 from __future__ import annotations
 
 import ctypes
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -47,18 +48,18 @@ class ControllerFunctions:
         self.fns: dict[str, Any] = {}
         for name in names:
             fn = getattr(self.lib, f"eq_{name}")
-            argtypes: list[Any] = []
+            argtypes: list[type[ctypes.c_double | ctypes.c_void_p | ctypes.c_int64]] = []
             for t in _TYPES[name]:
                 argtypes += [ctypes.c_double] if t == "f" else [ctypes.c_void_p, ctypes.c_int64]
             fn.argtypes = argtypes
             fn.restype = None
             self.fns[name] = fn
 
-    def __getitem__(self, name: str) -> Any:
+    def __getitem__(self, name: str) -> Callable[..., None]:
         fn = self.fns[name]
 
         def call(t: float, *arrays: np.ndarray) -> None:
-            args: list[Any] = [float(t)]
+            args: list[float | int | None] = [float(t)]
             for a in arrays:
                 if a.dtype != np.float64 or not a.flags.c_contiguous:
                     raise TypeError("the compiled controller takes C-contiguous float64 arrays")

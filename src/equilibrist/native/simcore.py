@@ -24,7 +24,7 @@ from __future__ import annotations
 import ctypes
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -42,6 +42,9 @@ from equilibrist.native import build, pyc
 from equilibrist.numeric import libm
 from equilibrist.numeric.system import System
 from equilibrist.sim import layout
+
+if TYPE_CHECKING:
+    from equilibrist.native.steps import PlantSteps
 
 #: Bumped when the generated unit changes in a way its source text does not show.
 GENERATOR = 1
@@ -62,8 +65,9 @@ FIELDS: tuple[tuple[str, str], ...] = (
 )
 _C_TYPES = {"i": "int64_t", "pi": "int64_t *", "pf": "double *", "pu": "uint64_t *",
             "vi": "volatile int64_t *"}
-_CTYPES: dict[str, Any] = {"i": ctypes.c_int64, "pi": ctypes.c_void_p, "pf": ctypes.c_void_p,
-           "pu": ctypes.c_void_p, "vi": ctypes.c_void_p}
+_CTYPES: dict[str, type[ctypes.c_int64 | ctypes.c_void_p]] = {
+    "i": ctypes.c_int64, "pi": ctypes.c_void_p, "pf": ctypes.c_void_p, "pu": ctypes.c_void_p,
+    "vi": ctypes.c_void_p}
 
 
 class RunArgs(ctypes.Structure):
@@ -330,16 +334,18 @@ class NativeCore:
         return args, keep
 
     @staticmethod
-    def _out(arr: np.ndarray, dtype: Any, what: str) -> np.ndarray:
+    def _out(arr: np.ndarray, dtype: type[np.generic], what: str) -> np.ndarray:
         if arr.dtype != dtype or not arr.flags.c_contiguous or not arr.flags.writeable:
             raise TypeError(f"the core writes {what}: it must be a writable C-contiguous "
                             f"{np.dtype(dtype).name} array")
         return arr
 
-    def _common(self, *, op: Any, c_idx: Any, cp: Any, ref: Any, uff: Any, lv: Any, lw: Any,
-                p_switch: Any, region: Any, kicks: Any, kick_value: Any, pulses: Any,
-                pulse_value: Any, rec_cols: Any, acc_cols: Any, iopts: Any,
-                fopts: Any, bal: Any = None) -> dict[str, Any]:
+    def _common(self, *, op: np.ndarray, c_idx: np.ndarray, cp: np.ndarray, ref: np.ndarray,
+                uff: np.ndarray, lv: np.ndarray, lw: np.ndarray, p_switch: np.ndarray,
+                region: np.ndarray, kicks: np.ndarray, kick_value: np.ndarray,
+                pulses: np.ndarray, pulse_value: np.ndarray, rec_cols: np.ndarray,
+                acc_cols: np.ndarray, iopts: np.ndarray, fopts: np.ndarray,
+                bal: np.ndarray | None = None) -> dict[str, object]:
         ref = np.asarray(ref, dtype=float)
         lv = np.asarray(lv, dtype=float)
         lw = np.asarray(lw, dtype=float)
@@ -353,12 +359,15 @@ class NativeCore:
             bal=bal, nbal=0 if bal is None else 1,
         )
 
-    def run_one(self, k_start: int, k_end: int, iopts: Any, fopts: Any, x: Any, z: Any,
-                u_prev: Any, rng: Any, op: Any, c_idx: Any, cp: Any, ref: Any, uff: Any,
-                lv: Any, lw: Any, p_sets: Any, p_switch: Any, lin_s: Any, region: Any,
-                kicks: Any, kick_value: Any, pulses: Any, pulse_value: Any, rec_cols: Any,
-                acc_cols: Any, rec: Any, acc: Any, status: Any, fell_x: Any,
-                stop: Any) -> None:
+    def run_one(self, k_start: int, k_end: int, iopts: np.ndarray, fopts: np.ndarray,
+                x: np.ndarray, z: np.ndarray, u_prev: np.ndarray, rng: np.ndarray,
+                op: np.ndarray, c_idx: np.ndarray, cp: np.ndarray, ref: np.ndarray,
+                uff: np.ndarray, lv: np.ndarray, lw: np.ndarray, p_sets: np.ndarray,
+                p_switch: np.ndarray, lin_s: np.ndarray, region: np.ndarray,
+                kicks: np.ndarray, kick_value: np.ndarray, pulses: np.ndarray,
+                pulse_value: np.ndarray, rec_cols: np.ndarray, acc_cols: np.ndarray,
+                rec: np.ndarray, acc: np.ndarray, status: np.ndarray, fell_x: np.ndarray,
+                stop: np.ndarray) -> None:
         """The numba core's ``run_one``, argument for argument."""
         values = self._common(op=op, c_idx=c_idx, cp=cp, ref=ref, uff=uff, lv=lv, lw=lw,
                               p_switch=p_switch, region=region, kicks=kicks,
@@ -380,12 +389,16 @@ class NativeCore:
             raise MemoryError("the simulation core ran out of memory")
         del keep
 
-    def run_many(self, iopts: Any, fopts: Any, x0s: Any, z0: Any, rngs: Any, op: Any,
-                 c_idx: Any, cp: Any, ref: Any, uff: Any, lv: Any, lw: Any, p_sets_r: Any,
-                 p_switch: Any, lin_r: Any, region: Any, kicks: Any, kick_value: Any,
-                 pulses: Any, pulse_value: Any, rec_cols: Any, acc_cols: Any, recs: Any,
-                 accs: Any, statuses: Any, fell_xs: Any, x_ends: Any, stop: Any,
-                 threads: int = 1, bal: Any = None) -> None:
+    def run_many(self, iopts: np.ndarray, fopts: np.ndarray, x0s: np.ndarray,
+                 z0: np.ndarray, rngs: np.ndarray, op: np.ndarray, c_idx: np.ndarray,
+                 cp: np.ndarray, ref: np.ndarray, uff: np.ndarray, lv: np.ndarray,
+                 lw: np.ndarray, p_sets_r: np.ndarray, p_switch: np.ndarray,
+                 lin_r: np.ndarray, region: np.ndarray, kicks: np.ndarray,
+                 kick_value: np.ndarray, pulses: np.ndarray, pulse_value: np.ndarray,
+                 rec_cols: np.ndarray, acc_cols: np.ndarray, recs: np.ndarray,
+                 accs: np.ndarray, statuses: np.ndarray, fell_xs: np.ndarray,
+                 x_ends: np.ndarray, stop: np.ndarray, threads: int = 1,
+                 bal: np.ndarray | None = None) -> None:
         """The numba core's ``run_many``, argument for argument (plus the thread count, and
         the balance box whose last exit each run's accumulators keep)."""
         values = self._common(op=op, c_idx=c_idx, cp=cp, ref=ref, uff=uff, lv=lv, lw=lw,
@@ -414,7 +427,7 @@ class NativeCore:
             raise MemoryError("the simulation core ran out of memory")
         del keep
 
-    def measurer(self, *, x: np.ndarray, c_idx: Any, lv: Any, rng: np.ndarray,
+    def measurer(self, *, x: np.ndarray, c_idx: np.ndarray, lv: np.ndarray, rng: np.ndarray,
                  y: np.ndarray) -> Callable[[], None]:
         """``measure()``: the sensors of *x* into *y*, with the noise ``lv z`` drawn from
         *rng* (the arrays kept by reference, their addresses taken once)."""
@@ -428,7 +441,7 @@ class NativeCore:
                 _ptr(rng), _ptr(y))
         held = (x, c_idx, lv, rng, y)
 
-        def measure(_held: tuple[Any, ...] = held) -> None:  # the arrays live as long as it
+        def measure(_held: tuple[np.ndarray, ...] = held) -> None:  # the arrays live as long as it
             fn(*args)
 
         return measure
@@ -437,10 +450,12 @@ class NativeCore:
         width = int(self.lib.eq_scratch_width(p_len, ny, nw))
         return np.zeros((layout.constants()["_SCR_ROWS"], width))
 
-    def advancer(self, *, x: np.ndarray, u_app: np.ndarray, op: Any, p_sets: Any,
-                 p_switch: Any, lin_s: Any, region: Any, kicks: Any, kick_value: Any,
-                 pulses: Any, pulse_value: Any, lw: Any, rng: np.ndarray, iopts: Any,
-                 fopts: Any, status: np.ndarray, scr: np.ndarray) -> Callable[[int], bool]:
+    def advancer(self, *, x: np.ndarray, u_app: np.ndarray, op: np.ndarray,
+                 p_sets: np.ndarray, p_switch: np.ndarray, lin_s: np.ndarray | None,
+                 region: np.ndarray, kicks: np.ndarray, kick_value: np.ndarray,
+                 pulses: np.ndarray, pulse_value: np.ndarray, lw: np.ndarray, rng: np.ndarray,
+                 iopts: np.ndarray, fopts: np.ndarray, status: np.ndarray,
+                 scr: np.ndarray) -> Callable[[int], bool]:
         """``advance(k)``: the physics steps after sample *k* with the input in *u_app* held
         (True if the state left its region). The arrays are kept by reference and their
         addresses taken once: write the input into *u_app* before each call."""
@@ -461,14 +476,14 @@ class NativeCore:
         pargs, u, sc = ctypes.byref(args), _ptr(u_app), _ptr(scr)
         held = (args, keep, u_app, scr)
 
-        def advance(k: int, _held: tuple[Any, ...] = held) -> bool:  # the arrays live as long as it
+        def advance(k: int, _held: object = held) -> bool:  # the arrays live as long as it
             return bool(fn(pargs, k, u, sc))
 
         return advance
 
     def plant(self, *, x: np.ndarray, p: np.ndarray, rate: float, n_sub: int,
               lw: np.ndarray, outputs: np.ndarray, lv: np.ndarray,
-              rng: np.ndarray) -> Any:
+              rng: np.ndarray) -> PlantSteps:
         """The plant alone, sample by sample, as ``simulate`` advances it around a controller
         written in Python: see :class:`PlantSteps`."""
         from equilibrist.native.steps import PlantSteps
@@ -476,18 +491,19 @@ class NativeCore:
         return PlantSteps(self, x=x, p=p, rate=rate, n_sub=n_sub, lw=lw, outputs=outputs, lv=lv,
                           rng=rng)
 
-    def rk4_steps(self, x: Any, u: Any, p: Any, h: float, n_steps: int) -> None:
+    def rk4_steps(self, x: np.ndarray, u: np.ndarray, p: np.ndarray, h: float,
+                  n_steps: int) -> None:
         self._out(x, np.float64, "x")
         u = np.ascontiguousarray(u, dtype=float)
         p = np.ascontiguousarray(p, dtype=float)
         self.lib.eq_rk4_steps(_ptr(x), _ptr(u), _ptr(p), float(h), int(n_steps))
 
-    def normals(self, rng: Any, out: Any) -> None:
+    def normals(self, rng: np.ndarray, out: np.ndarray) -> None:
         self._out(rng, np.uint64, "rng")
         self._out(out, np.float64, "out")
         self.lib.eq_normals_into(_ptr(rng), _ptr(out), len(out))
 
-    def f(self, x: Any, u: Any, p: Any, out: Any) -> None:
+    def f(self, x: np.ndarray, u: np.ndarray, p: np.ndarray, out: np.ndarray) -> None:
         self._out(out, np.float64, "out")
         x, u, p = (np.ascontiguousarray(a, dtype=float) for a in (x, u, p))
         self.lib.eq_f_one(_ptr(x), _ptr(u), _ptr(p), _ptr(out))
@@ -513,7 +529,7 @@ class NativeCore:
                                 _ptr(e))
 
 
-_CORES: dict[tuple[Path, Any, str | None], NativeCore] = {}
+_CORES: dict[tuple[Path, bytes | tuple[int, ...] | None, str | None], NativeCore] = {}
 
 
 def loaded(system: System, key: bytes | tuple[int, ...] | None = None,
