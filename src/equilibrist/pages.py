@@ -87,8 +87,9 @@ def _tasks(spec: SystemSpec) -> list[str]:
         )
     if spec.swingup is not None:
         gains = ", ".join(f"`{k}` = {_num(v)}" for k, v in spec.swingup.gains.items())
+        free = "".join(f", catching `{c}` where it is" for c in spec.swingup.free)
         out.append(f"* `--controller swingup`: the `{spec.swingup.law}` energy-pumping law, "
-                   f"default gains {gains} (`equilibrist.control.swingup`).")
+                   f"default gains {gains}{free} (`equilibrist.control.swingup`).")
     return out
 
 

@@ -195,10 +195,15 @@ def swingup_laws() -> dict[str, str]:
 
 def _stated(system: System) -> SwingUp:
     """*system*'s swing-up as its definition states it; refused if it states none."""
-    if system.spec.swingup is None:
+    stated = system.spec.swingup
+    if stated is None:
         raise ControllerError(f"{system.name} has no swing-up: it exists for "
                               f"{', '.join(swingup_laws())}")
-    return system.spec.swingup
+    unknown = [c for c in stated.free if c not in system.spec.coordinates]
+    if unknown:
+        raise ControllerError(f"{system.name}'s swing-up frees {', '.join(unknown)}: expected "
+                              f"coordinates ({', '.join(system.spec.coordinates)})")
+    return stated
 
 
 def default_tuning(system: System) -> SwingUpTuning:
@@ -365,8 +370,9 @@ def swingup(
     cp[CP["S"]:CP["S"] + n * n] = S.reshape(-1)
     for i in range(nq):
         cp[CP["wrap"] + i] = 1.0 if system.state_units[i] == "rad" else 0.0
-    if law in ("wheel", "rotary"):
-        cp[CP["free"]] = 1.0
+    stated = _stated(system)
+    for i, coordinate in enumerate(system.spec.coordinates):
+        cp[CP["free"] + i] = 1.0 if coordinate in stated.free else 0.0
     # The design's Kalman filter: Ad, Bd, and its gain with one column per coordinate
     # (zero for a coordinate the design does not measure).
     disc = design.discrete

@@ -127,11 +127,13 @@ class SwingUp:
     ``law``: which law pumps (``cart``, ``wheel``, ``rotary``, ``acrobot``: the laws of
     :mod:`equilibrist.control.swingup`); ``gains``: its default tuning, by the names of
     :class:`~equilibrist.control.swingup.SwingUpTuning` (``k_energy``, ``a_max`` and the
-    others it needs).
+    others it needs); ``free``: the coordinates whose value does not matter (a reaction
+    wheel's angle, a rotary arm's), which the balance catches where they are.
     """
 
     law: str
     gains: dict[str, float]
+    free: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -143,7 +143,8 @@ SPEC = SystemSpec(
     control_rate=500.0,
     hanging={"theta": math.pi},
     swingup=SwingUp("rotary", {"k_energy": 40.0, "a_max": 0.05, "catch_fraction": 20.0,
-                               "accel": 100.0}),
+                               "accel": 100.0},
+                    free=("phi",)),
 )
 
 

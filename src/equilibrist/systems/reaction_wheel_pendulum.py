@@ -121,7 +121,8 @@ SPEC = SystemSpec(
     process_noise={"phi_dot": 0.5, "theta_dot": 0.1},
     hanging={"theta": math.pi},
     swingup=SwingUp("wheel", {"k_energy": 0.5, "a_max": 0.2, "catch_fraction": 10.0,
-                              "accel": 40.0}),
+                              "accel": 40.0},
+                    free=("phi",)),
 )
 
 

@@ -96,13 +96,11 @@ class _TourOptions(TypedDict):
     at: dict[str, float] | None
 
 
-def _tour_in_worker(key: str, params: dict[str, float], digest: str | None, folder: str,
-                    options: _TourOptions) -> Outcome:
-    """:func:`tour_one` in a worker process (the system the user named, rebuilt from its key;
-    *options* those of :func:`tour_one`, the operating point ``at`` among them)."""
-    from equilibrist.numeric.system import rebuild_system
-
-    return tour_one(rebuild_system(key, params, digest), Path(folder), progress=False, **options)
+def _tour_in_worker(system: System, folder: str, options: _TourOptions) -> Outcome:
+    """:func:`tour_one` in a worker process (the system the user named, pickled as its
+    definition's content; *options* those of :func:`tour_one`, the operating point ``at``
+    among them)."""
+    return tour_one(system, Path(folder), progress=False, **options)
 
 
 def run_tour(
@@ -249,8 +247,7 @@ def _tour_into(
             pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context)
             try:
                 futures = {
-                    pool.submit(_tour_in_worker, system.key, dict(system.params), system.digest,
-                                str(folder), options): k
+                    pool.submit(_tour_in_worker, system, str(folder), options): k
                     for k, system in enumerate(systems)
                 }
                 for future in as_completed(futures):
