@@ -35,6 +35,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
+from equilibrist.hil.protocol import RT_PRIORITY  # noqa: E402
+
 CLI = [sys.executable, "-m", "equilibrist.cli.main"]
 
 
@@ -42,7 +44,7 @@ def realtime(tid: int) -> None:
     """Give the relay the real-time priority the two ends take (``hil``, ``hil_host``), where
     the system grants it: the joined pair then measures the link, not the relay's wake-ups."""
     with suppress(OSError):
-        os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(20))
+        os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(RT_PRIORITY))
 
 
 @contextmanager

@@ -78,9 +78,10 @@ def test_the_stop_flag_ends_the_core_from_another_thread() -> None:
         rec=np.empty((setup.n_rows, setup.record_width)), acc=np.zeros(setup.acc_len),
         status=status, fell_x=np.zeros(4), stop=stop,
     )
-    kernel.run_one(k_start=0, k_end=2, **arrays)  # compiled, and two samples made
-    helper = threading.Thread(target=lambda: kernel.run_one(k_start=2, k_end=setup.n_rows,
-                                                            **arrays))
+    core = kernel.core(setup.cp)
+    core.run_one(k_start=0, k_end=2, **arrays)  # compiled, and two samples made
+    helper = threading.Thread(target=lambda: core.run_one(k_start=2, k_end=setup.n_rows,
+                                                          **arrays))
     helper.start()
     while status[layout.STATUS["rows"]] < 20:  # the helper is in the loop
         time.sleep(0.01)

@@ -324,7 +324,8 @@ def swingup(
 
     if balance not in BALANCES:
         raise ControllerError(f"balance {balance!r}: expected one of {', '.join(BALANCES)}")
-    law = _stated(system).law
+    stated = _stated(system)
+    law = stated.law
     tune = tuning or default_tuning(system)
     if law not in LAW_NAMES:
         raise ControllerError(f"{system.name}'s swing-up law {law!r}: expected one of "
@@ -370,7 +371,6 @@ def swingup(
     cp[CP["S"]:CP["S"] + n * n] = S.reshape(-1)
     for i in range(nq):
         cp[CP["wrap"] + i] = 1.0 if system.state_units[i] == "rad" else 0.0
-    stated = _stated(system)
     for i, coordinate in enumerate(system.spec.coordinates):
         cp[CP["free"] + i] = 1.0 if coordinate in stated.free else 0.0
     # The design's Kalman filter: Ad, Bd, and its gain with one column per coordinate

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from equilibrist.hil.protocol import ID_BYTES, MAX_PAYLOAD, VERSION
+from equilibrist.hil.protocol import ID_BYTES, MAX_PAYLOAD, RT_PRIORITY, VERSION
 
 HEADER = "hil_proto.h"
 SOURCE = "hil_proto.c"
@@ -421,7 +421,7 @@ int main(int argc, char **argv)
          * at normal priority. */
         struct sched_param sp;
         memset(&sp, 0, sizeof sp);
-        sp.sched_priority = 20;
+        sp.sched_priority = @RT_PRIORITY@;
         (void)sched_setscheduler(0, SCHED_FIFO, &sp);
         (void)mlockall(MCL_CURRENT | MCL_FUTURE);
     }
@@ -467,7 +467,8 @@ void loop()
 def files(adapter: Adapter) -> dict[str, str]:
     """The protocol, the adapter and the host program: relative path -> text."""
     return {HEADER: PROTO_HEADER, SOURCE: PROTO_SOURCE, CTRL_HEADER: ctrl_header(adapter),
-            CTRL_SOURCE: ctrl_source(adapter), HOST: HOST_SOURCE}
+            CTRL_SOURCE: ctrl_source(adapter),
+            HOST: HOST_SOURCE.replace("@RT_PRIORITY@", str(RT_PRIORITY))}
 
 
 def makefile_rules(adapter: Adapter) -> str:

@@ -23,6 +23,9 @@ import numpy as np
 from equilibrist.errors import EquilibristError
 
 VERSION = 1
+#: The real-time priority (``SCHED_FIFO``) both ends of a realtime run ask for, the simulator
+#: and ``hil_host``: above every normal program, below the kernel's own real-time threads (50).
+RT_PRIORITY = 20
 SYNC = b"\xeb\x90"
 HEAD = struct.Struct("<BHH")  # type, seq, length
 CRC = struct.Struct("<H")

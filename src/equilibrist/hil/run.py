@@ -33,7 +33,7 @@ import numpy as np
 from equilibrist.control.controller import PythonControllerBase
 from equilibrist.hil import protocol as proto
 from equilibrist.hil.link import DeviceGone, SerialLink
-from equilibrist.hil.protocol import Hello, HILError, ProtocolError
+from equilibrist.hil.protocol import RT_PRIORITY, Hello, HILError, ProtocolError
 from equilibrist.sim.run import StopRun
 from equilibrist.sim.signals import as_signal
 
@@ -46,9 +46,6 @@ _T = TypeVar("_T")
 MODES = ("lockstep", "realtime")
 #: How long the host waits for the device's hello answer [s].
 HELLO_TIMEOUT = 3.0
-#: The real-time priority a realtime run asks for: above every normal program, below the
-#: kernel's own real-time threads (50), as the usual control-loop priority.
-RT_PRIORITY = 20
 
 
 @contextmanager

@@ -45,7 +45,7 @@ from equilibrist.sim._batch_python import _python_batch
 from equilibrist.sim._batch_result import FORMAT, BatchResult, _batch_result
 from equilibrist.sim._setup_checks import _has_operating_point
 from equilibrist.sim.events import Event
-from equilibrist.sim.kernel import Kernel, set_workers
+from equilibrist.sim.kernel import Kernel, set_workers, thread_count
 from equilibrist.sim.noise import Noise, SeedLike, describe_seed, generator_state, seed_sequence
 from equilibrist.sim.run import _progress_bar, call_interruptibly
 from equilibrist.tasks import balance_box
@@ -200,7 +200,7 @@ def simulate_batch(
     if not kernel.compiled(setup.cp):
         # Load (or compile) the core here, outside the timing (steps_per_second is the
         # runs' speed) and where Ctrl-C reaches it.
-        kernel.run_many(core=core, **shared, **run_arrays(slice(0, 0)))
+        core.run_many(**shared, **run_arrays(slice(0, 0)), threads=thread_count())
     timing: list[float] = []
 
     def work() -> None:
@@ -210,7 +210,7 @@ def simulate_batch(
         set_workers(workers)
         t0 = time.perf_counter()
         try:
-            kernel.run_many(core=core, **shared, **run_arrays(slice(0, runs)))
+            core.run_many(**shared, **run_arrays(slice(0, runs)), threads=thread_count())
         finally:
             timing.append(time.perf_counter() - t0)
 

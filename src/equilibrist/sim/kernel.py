@@ -4,9 +4,10 @@ The core is C generated per system and controller
 (:mod:`equilibrist.native.simcore`): the system's dynamics and the
 controller translated from their one Python definition, the loops written
 once in ``equilibrist/native/core.c``, compiled by the machine's C compiler
-and cached by content. :class:`Kernel` picks the library for a run and
-passes the arrays by keyword; it is the one place that knows the entries'
-argument order.
+and cached by content. :class:`Kernel` picks the library for a run
+(:meth:`Kernel.core`); the callers pass its entries the arrays by keyword,
+and the library (:class:`~equilibrist.native.simcore.NativeCore`) is the one
+place that knows the entries' argument order.
 
 The entries (see ``core.c`` for the array conventions):
 
@@ -81,7 +82,8 @@ def load_kernel(system: System) -> NativeCore:
 class Kernel:
     """The cores of one system (and nonlinear controller), called with keyword arguments.
 
-    ``run_one`` and ``run_many`` release the GIL and return early when
+    The library's ``run_one`` and ``run_many`` (:meth:`core`; ``run_many`` on
+    :func:`thread_count` threads) release the GIL and return early when
     ``stop[0]`` (a one-element ``int64`` array) is set, from another thread.
     """
 
@@ -108,41 +110,6 @@ class Kernel:
         if self.controller is not None:
             return loaded(self.system, None, self.controller)
         return loaded(self.system, _linear_key(cp))
-
-    def run_one(self, *, k_start: int, k_end: int, iopts: np.ndarray, fopts: np.ndarray,
-                x: np.ndarray, z: np.ndarray, u_prev: np.ndarray, rng: np.ndarray,
-                op: np.ndarray, c_idx: np.ndarray, cp: np.ndarray, ref: np.ndarray,
-                uff: np.ndarray, lv: np.ndarray, lw: np.ndarray, p_sets: np.ndarray,
-                p_switch: np.ndarray, lin_s: np.ndarray, region: np.ndarray,
-                kicks: np.ndarray, kick_value: np.ndarray, pulses: np.ndarray,
-                pulse_value: np.ndarray, rec_cols: np.ndarray, acc_cols: np.ndarray,
-                rec: np.ndarray, acc: np.ndarray, status: np.ndarray, fell_x: np.ndarray,
-                stop: np.ndarray, core: NativeCore | None = None) -> None:
-        """One run, or samples ``k_start .. k_end - 1`` of one (*core*: :meth:`core` of *cp*,
-        if the caller has it already)."""
-        (core or self.core(cp)).run_one(
-            k_start, k_end, iopts, fopts, x, z, u_prev, rng, op, c_idx, cp, ref, uff, lv, lw,
-            p_sets, p_switch, lin_s, region, kicks, kick_value, pulses, pulse_value,
-            rec_cols, acc_cols, rec, acc, status, fell_x, stop,
-        )
-
-    def run_many(self, *, iopts: np.ndarray, fopts: np.ndarray, x0s: np.ndarray,
-                 z0: np.ndarray, rngs: np.ndarray, op: np.ndarray, c_idx: np.ndarray,
-                 cp: np.ndarray, ref: np.ndarray, uff: np.ndarray, lv: np.ndarray,
-                 lw: np.ndarray, p_sets_r: np.ndarray, p_switch: np.ndarray,
-                 lin_r: np.ndarray, region: np.ndarray, kicks: np.ndarray,
-                 kick_value: np.ndarray, pulses: np.ndarray, pulse_value: np.ndarray,
-                 rec_cols: np.ndarray, acc_cols: np.ndarray, recs: np.ndarray,
-                 accs: np.ndarray, statuses: np.ndarray, fell_xs: np.ndarray,
-                 x_ends: np.ndarray, stop: np.ndarray, core: NativeCore | None = None,
-                 bal: np.ndarray | None = None) -> None:
-        """Independent runs, on :func:`thread_count` threads (*bal*: the balance box whose
-        last exit the accumulators keep, :func:`equilibrist.tasks.balance_box`)."""
-        (core or self.core(cp)).run_many(
-            iopts, fopts, x0s, z0, rngs, op, c_idx, cp, ref, uff, lv, lw, p_sets_r, p_switch,
-            lin_r, region, kicks, kick_value, pulses, pulse_value, rec_cols, acc_cols, recs,
-            accs, statuses, fell_xs, x_ends, stop, threads=_THREADS[0], bal=bal,
-        )
 
     def scratch(self, *, p_len: int, ny: int, nw: int) -> np.ndarray:
         return self.generic.scratch(p_len, ny, nw)

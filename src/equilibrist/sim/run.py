@@ -246,11 +246,11 @@ def _run_compiled(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
     total = setup.n_rows
     rows, fell = layout.STATUS["rows"], layout.STATUS["fell"]
     if setup.integrator != "adaptive" and setup.n_samples * setup.n_sub <= _FIRST_CHUNK_STEPS:
-        kernel.run_one(k_start=0, k_end=total, core=core, **arrays)
+        core.run_one(k_start=0, k_end=total, **arrays)
         return _result(setup, rec, int(status[rows]), status, fell_x, x, seq,
                        estimates=setup.estimates)
     if not kernel.compiled(setup.cp):  # compiled (or loaded) here: Ctrl-C can stop that
-        kernel.run_one(k_start=0, k_end=0, core=core, **arrays)
+        core.run_one(k_start=0, k_end=0, **arrays)
 
     def pieces() -> None:
         # Calls that grow to about CHUNK_SECONDS: the run resumes at any sample.
@@ -259,7 +259,7 @@ def _run_compiled(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
         while k < total and not stop[0]:
             k_end = min(total, k + chunk)
             t0 = time.perf_counter()
-            kernel.run_one(k_start=k, k_end=k_end, core=core, **arrays)
+            core.run_one(k_start=k, k_end=k_end, **arrays)
             chunk = next_chunk(k_end - k, time.perf_counter() - t0)
             if status[fell] or status[rows] < k_end:
                 break

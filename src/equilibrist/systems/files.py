@@ -228,19 +228,14 @@ def from_definition(spec: SystemSpec, derive: DeriveFunction) -> Entry:
         raise DefinitionError(
             f"the name {spec.name!r} belongs to the catalogue: give your system another name"
         )
-    content = _function_content(derive) + repr(spec).encode()
-    previous = _DEFINED.get(spec.key)
-    if previous is not None and previous.content == content:
-        return previous
-    entry = Entry(spec, derive, getattr(derive, "__module__", "__main__") or "__main__", content=content)
-    _DEFINED[spec.key] = entry
-    return entry
+    return adopt(spec, derive, _function_content(derive) + repr(spec).encode())
 
 
 def adopt(spec: SystemSpec, derive: DeriveFunction, content: bytes) -> Entry:
-    """The definition another process handed over by value (a pickled :class:`System`): its
-    spec, its derivation and the content it was known by there (so the same derived model,
-    and the same digest, wherever its source can or cannot be read)."""
+    """The definition of *spec* and *derive* known by *content* in this process: the one
+    :func:`from_definition` makes, or one another process handed over by value (a pickled
+    :class:`System`), with the content it was known by there (so the same derived model, and
+    the same digest, wherever its source can or cannot be read)."""
     previous = _DEFINED.get(spec.key)
     if previous is not None and previous.content == content:
         return previous
