@@ -23,22 +23,15 @@ from equilibrist.systems import registry
 ENTRIES = registry.all_entries()
 IDS = [e.spec.key for e in ENTRIES]
 
-# The dissipative parameters of each system, read from SYSTEMS.md (not from
-# the code under test): zeroed for the energy test.
-FRICTIONS = {
-    "seesaw": ("b", "mu_c"),
-    "cartpole": ("b_c", "b_p"),
-    "double_cartpole": ("b_c", "b1", "b2"),
-    "wheeled_pendulum": ("b_r", "b_m"),
-    "reaction_wheel_pendulum": ("b_a", "b_m"),
-    "ball_beam": ("b",),
-    "ball_beam_servo": ("b",),
-    "gyroscope": (),
-    "cmg_robot": ("B_w",),
-    "furuta": ("b_a", "b_p"),
-    "acrobot": ("b1", "b2"),
-    "pendubot": ("b1", "b2"),
-}
+
+
+def frictions(entry: registry.Entry) -> tuple[str, ...]:
+    """The parameters the definition marks dissipative (``friction(...)``): zeroed for the
+    energy test, which fails if one is missing; each alone must take energy out
+    (``test_each_friction_dissipates``), which fails if one is marked wrongly."""
+    return tuple(p.name for p in entry.spec.parameters if p.dissipative)
+
+
 # Reduced first-order models have no energy to conserve (SYSTEMS.md: the
 # servo model drops the beam's dynamics); listed here, not skipped silently.
 NO_ENERGY = {"ball_beam_servo"}
@@ -62,9 +55,16 @@ def reference_point(system) -> tuple[np.ndarray, np.ndarray]:
     return eq.x, eq.u
 
 
-def test_catalogue_is_complete() -> None:
-    expected = set(FRICTIONS)
-    assert set(registry.family_names()) == expected
+def test_every_system_module_registers_a_system() -> None:
+    # Found in the package, with no list to edit: a module that declares nothing is an error.
+    import pkgutil
+
+    import equilibrist.systems as pkg
+
+    modules = {f"{pkg.__name__}.{m.name}" for m in pkgutil.iter_modules(pkg.__path__)
+               if not m.name.startswith("_") and m.name not in {"registry", "files"}}
+    assert {e.module for e in ENTRIES} == modules
+    assert len(registry.family_names()) == len({e.spec.name for e in ENTRIES})
     assert set(registry.variants("gyroscope")) == {"zxz", "xyz"}
     assert registry.default_variant("gyroscope") == "zxz"
 
@@ -92,7 +92,6 @@ def test_spec_metadata(entry: registry.Entry) -> None:
         assert set(spec.sensor_noise) >= set(spec.outputs)
         for i in spec.inputs:
             assert i.low < i.high
-    assert set(FRICTIONS[spec.name]) <= set(names)
 
 
 @pytest.mark.parametrize("entry", ENTRIES, ids=IDS)
@@ -133,10 +132,10 @@ def _fd_jacobians(system, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.
 def test_jacobians_equal_finite_differences(entry: registry.Entry, seed: int) -> None:
     # Non-zero frictions so that their derivatives are exercised too.
     system = system_for(entry)
-    frictions = {k: 0.05 for k in FRICTIONS[entry.spec.name]}
+    lossy = {k: 0.05 for k in frictions(entry)}
     if "eps" in system.params:
-        frictions["eps"] = 0.5  # keep tanh smooth on the finite-difference scale
-    system = system.with_params(**frictions)
+        lossy["eps"] = 0.5  # keep tanh smooth on the finite-difference scale
+    system = system.with_params(**lossy)
     rng = np.random.default_rng(seed)
     x0, u0 = reference_point(system)
     x = x0 + rng.uniform(-0.4, 0.4, system.n_states)
@@ -149,15 +148,8 @@ def test_jacobians_equal_finite_differences(entry: registry.Entry, seed: int) ->
         assert np.allclose(B, B_fd, rtol=1e-5, atol=1e-6 * (1.0 + np.abs(B_fd).max()))
 
 
-@pytest.mark.parametrize("entry", ENTRIES, ids=IDS)
-def test_energy_conserved_without_friction_and_input(entry: registry.Entry) -> None:
-    if entry.spec.name in NO_ENERGY:
-        assert math.isnan(system_for(entry).energy(reference_point(system_for(entry))[0]))
-        return
-    system = system_for(entry, **{k: 0.0 for k in FRICTIONS[entry.spec.name]})
-    x0, _ = reference_point(system)
-    rng = np.random.default_rng(7)
-    x_start = x0 + rng.uniform(-0.3, 0.3, system.n_states)
+def _unforced(system, x_start: np.ndarray, t_end: float, *, rtol: float):
+    """The motion from *x_start* with no input (DOP853, tight tolerances), and its energies."""
     u = np.zeros(system.n_inputs)
     fn, p = system.functions.f, system.p
     buf = np.empty(system.n_states)
@@ -166,11 +158,41 @@ def test_energy_conserved_without_friction_and_input(entry: registry.Entry) -> N
         fn(x, u, p, buf)
         return buf.copy()
 
-    sol = solve_ivp(rhs, (0.0, 1.5), x_start, method="DOP853", rtol=1e-11, atol=1e-12, dense_output=False)
+    sol = solve_ivp(rhs, (0.0, t_end), x_start, method="DOP853", rtol=rtol, atol=1e-12)
     assert sol.success
-    energies = np.array([system.energy(xk) for xk in sol.y.T])
+    return sol, np.array([system.energy(xk) for xk in sol.y.T])
+
+
+@pytest.mark.parametrize("entry", ENTRIES, ids=IDS)
+def test_energy_conserved_without_friction_and_input(entry: registry.Entry) -> None:
+    if entry.spec.name in NO_ENERGY:
+        assert math.isnan(system_for(entry).energy(reference_point(system_for(entry))[0]))
+        return
+    system = system_for(entry, **{k: 0.0 for k in frictions(entry)})
+    x0, _ = reference_point(system)
+    rng = np.random.default_rng(7)
+    x_start = x0 + rng.uniform(-0.3, 0.3, system.n_states)
+    sol, energies = _unforced(system, x_start, 1.5, rtol=1e-11)
     # The motion must actually exchange energy between kinds for the test to mean anything.
     moved = np.ptp(sol.y, axis=1).max()
     assert moved > 1e-3
     scale = max(abs(energies[0]), 1e-3 * (1 + np.abs(energies).max()))
     assert np.ptp(energies) / scale < 1e-7, f"energy drifts by {np.ptp(energies):.3g}"
+
+
+@pytest.mark.parametrize("entry", [e for e in ENTRIES if frictions(e) and e.spec.name not in NO_ENERGY],
+                         ids=lambda e: e.spec.key)
+def test_each_friction_dissipates(entry: registry.Entry) -> None:
+    # Each parameter marked dissipative, alone at a positive value with no input, takes energy
+    # out: the energy never rises and ends lower (a parameter marked wrongly, a spring or a
+    # mass, fails one of the two).
+    rng = np.random.default_rng(11)
+    for name in frictions(entry):
+        system = system_for(entry, **{k: (0.05 if k == name else 0.0) for k in frictions(entry)})
+        x0, _ = reference_point(system)
+        x_start = x0 + rng.uniform(-0.3, 0.3, system.n_states)
+        x_start[len(x_start) // 2:] += 0.5  # moving, so that every friction acts
+        _, energies = _unforced(system, x_start, 1.0, rtol=1e-10)
+        scale = 1.0 + np.abs(energies).max()
+        assert np.diff(energies).max() < 1e-8 * scale, f"{name}: the energy rises"
+        assert energies[-1] < energies[0] - 1e-6 * scale, f"{name}: takes no energy out"

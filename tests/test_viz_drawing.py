@@ -18,7 +18,7 @@ from equilibrist.numeric.system import get_system
 from equilibrist.systems import registry
 from equilibrist.viz.frames import FrameRenderer, draw_state
 from equilibrist.viz.output import VizError
-from equilibrist.viz.scenes import COLORS, SCENES, scene_for
+from equilibrist.viz.scenes import COLORS, Scene, drawing_class, scene_for
 
 ENTRIES = registry.all_entries()
 IDS = [e.spec.key for e in ENTRIES]
@@ -62,8 +62,21 @@ def _state(system, **values) -> np.ndarray:
     return x
 
 
-def test_every_system_of_the_catalogue_has_a_drawing():
-    assert set(registry.family_names()) <= set(SCENES)
+@pytest.mark.parametrize("entry", ENTRIES, ids=IDS)
+def test_every_system_of_the_catalogue_names_its_drawing(entry):
+    cls = drawing_class(entry.spec)
+    assert isinstance(cls, type) and issubclass(cls, Scene)
+    assert isinstance(scene_for(_system(entry)), cls)
+
+
+def test_a_drawing_that_cannot_be_imported_is_one_line():
+    import dataclasses
+
+    from equilibrist.errors import DefinitionError
+
+    spec = dataclasses.replace(ENTRIES[0].spec, drawing="equilibrist.viz.scenes:NoSuchScene")
+    with pytest.raises(DefinitionError, match=r"NoSuchScene.*expected 'module:Class'"):
+        drawing_class(spec)
 
 
 @pytest.mark.parametrize("entry", ENTRIES, ids=IDS)
@@ -256,7 +269,10 @@ def test_time_stamp_changes_the_frame_and_nothing_else_moves():
 
 
 def test_unknown_system_and_tiny_frames_are_refused():
-    class Fake:
+    import dataclasses
+
+    class Fake:  # a definition that names no drawing, and no model to draw from
+        spec = dataclasses.replace(ENTRIES[0].spec, name="nope", drawing=None)
         name = "nope"
 
     with pytest.raises(UnknownNameError, match="no drawing for system 'nope'"):

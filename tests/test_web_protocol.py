@@ -11,6 +11,7 @@ import os
 import shutil
 import signal
 import subprocess
+import textwrap
 import sys
 import zipfile
 from pathlib import Path
@@ -609,6 +610,59 @@ def test_play_command_serves_and_stops_cleanly():
         _out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130
     assert err.splitlines() == ["equilibrist: interrupted"], err
+
+
+def test_a_script_plays_its_own_system(tmp_path):
+    """A system defined in a script (System.from_definition, known only to that process) is
+    offered by the playground the script serves, with the script's parameter values, and a
+    page plays it: its design comes and its state moves."""
+    import asyncio
+
+    import websockets
+
+    example = Path(__file__).parents[1] / "examples" / "my_cartpole.py"
+    script = tmp_path / "play_mine.py"
+    script.write_text(textwrap.dedent(f"""
+        import dataclasses
+        from equilibrist.numeric.system import System
+        from equilibrist.web import play
+
+        namespace = {{"__name__": "definition"}}
+        exec(open({str(example)!r}).read(), namespace)
+        spec = dataclasses.replace(namespace["SPEC"], name="scripted_cartpole")
+        mine = System.from_definition(spec, namespace["derive"], m_c=10.0, m_p=0.7, l=0.5,
+                                      I_p=0.06, b_c=0.1, b_p=0.0, g=9.8)
+        play(mine, port=0, browser=False)
+    """))
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env)
+    line = proc.stdout.readline()
+
+    async def a_page() -> tuple[dict, list[float], list[float]]:
+        url = line.split()[3]
+        async with websockets.connect(url.replace("http://", "ws://") + "ws") as ws:
+            hello = None
+            states = []
+            while len(states) < 20:
+                msg = json.loads(await ws.recv())
+                assert msg["type"] != "error", msg
+                if msg["type"] == "system":
+                    hello = msg
+                if msg["type"] == "frame":
+                    states.append(msg)
+            return hello, states[0], states[-1]
+
+    try:
+        assert line.startswith("equilibrist playground at http://127.0.0.1:"), (line, proc.stderr)
+        hello, first, last = asyncio.run(a_page())
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=60)
+    assert hello["key"] == "scripted_cartpole" and hello["systems"] == ["scripted_cartpole"]
+    params = {p["name"]: p["default"] for p in hello["params"]}
+    assert params["m_p"] == 0.7 and params["I_p"] == 0.06
+    assert first["t"] < last["t"]
 
 
 def test_ctrl_c_while_redesigning_ends_with_one_line_and_frees_the_port():

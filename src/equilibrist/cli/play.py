@@ -19,8 +19,12 @@ import ipaddress
 import socket
 import sys
 import threading
+from typing import TYPE_CHECKING
 
 from equilibrist.cli import common
+
+if TYPE_CHECKING:
+    from equilibrist.web.session import Catalogue
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -101,35 +105,46 @@ def run(args: argparse.Namespace) -> int:
     from equilibrist.web import require
 
     require()
-    import uvicorn
-
-    from equilibrist.web.app import create_app
     from equilibrist.web.session import Catalogue
 
     port = _port(args.port)
     extra = () if args.system is None else (args.system,)
-    catalogue = Catalogue.default(extra)
-    first = args.system
+    serve(Catalogue.default(extra), first=args.system, host=args.host, port=port,
+          browser=not args.no_browser)
+    return 0
+
+
+def serve(catalogue: Catalogue, *, first: str | None = None, host: str = "127.0.0.1",
+          port: int = 8050, browser: bool = True) -> None:
+    """Serve the playground for *catalogue* until Ctrl-C (the command's work, and
+    :func:`equilibrist.web.play`'s): bind, warm the first system up, print the address.
+
+    *first*: the system a new page starts with (default: the cart-pole, else the first).
+    """
+    import uvicorn
+
+    from equilibrist.web.app import create_app
+
     if first is not None:
         catalogue.check(first)  # a system that cannot be played is one line, before the port
-    sock = bind(args.host, port)  # a port that cannot be had is said at once, before the warm-up
+    sock = bind(host, port)  # a port that cannot be had is said at once, before the warm-up
     bound_port = sock.getsockname()[1]
     try:
         # Requests must name this server (its loopback names, or --host): no DNS rebinding.
-        app = create_app(catalogue, system=first, host=args.host, port=bound_port)
+        app = create_app(catalogue, system=first, host=host, port=bound_port)
     except BaseException:
         sock.close()
         raise
-    shown = f"[{args.host}]" if ":" in args.host else args.host
+    shown = f"[{host}]" if ":" in host else host
     url = f"http://{shown}:{bound_port}/"
-    if not is_loopback(args.host):
-        print(f"equilibrist: warning: the playground is bound to {args.host}: anyone who can "
+    if not is_loopback(host):
+        print(f"equilibrist: warning: the playground is bound to {host}: anyone who can "
               "reach this machine can use it (it has no login)", file=sys.stderr)
     print(f"equilibrist playground at {url}  (Ctrl-C to stop)", flush=True)
     config = uvicorn.Config(app, log_level="warning", ws_max_size=4 * 1024 * 1024,
                             lifespan="off", timeout_graceful_shutdown=2)
     server = uvicorn.Server(config)
-    if not args.no_browser:
+    if browser:
         threading.Thread(target=_open_browser, args=(url, server), daemon=True).start()
     # uvicorn shuts down on Ctrl-C (closing every socket and the port), then raises the
     # signal again: the command line's own handler ends it with its one line (exit 130).
@@ -138,7 +153,6 @@ def run(args: argparse.Namespace) -> int:
     finally:
         sock.close()
     print("equilibrist: playground stopped", file=sys.stderr)
-    return 0
 
 
 def _open_browser(url: str, server: object) -> None:

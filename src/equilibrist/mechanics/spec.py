@@ -25,6 +25,9 @@ class Parameter:
 
     ``low``/``high`` bound the valid range; ``low_open``/``high_open`` say
     whether the bound itself is excluded (a mass must be > 0, a friction >= 0).
+    ``dissipative``: the parameter only takes energy out of the system (a
+    friction): with every dissipative parameter at zero and no input, the
+    system's energy is conserved (the contract test checks both ways).
     """
 
     name: str
@@ -36,6 +39,7 @@ class Parameter:
     low_open: bool = False
     high_open: bool = False
     note: str = ""
+    dissipative: bool = False
 
     def __post_init__(self) -> None:
         # A spec is refused where it is written: a default outside its own
@@ -91,6 +95,11 @@ def nonnegative(name: str, default: float, unit: str, meaning: str, note: str = 
     return Parameter(name, default, unit, meaning, low=0.0, note=note)
 
 
+def friction(name: str, default: float, unit: str, meaning: str, note: str = "") -> Parameter:
+    """A friction: non-negative, and dissipative (see :class:`Parameter`)."""
+    return Parameter(name, default, unit, meaning, low=0.0, note=note, dissipative=True)
+
+
 @dataclass(frozen=True)
 class Input:
     """One actuator input with its default saturation limits."""
@@ -137,6 +146,42 @@ class SwingUp:
 
 
 @dataclass(frozen=True)
+class Scenario:
+    """What the demo does to the rig (``equilibrist demo``): its start, a push, a reference step.
+
+    Attributes
+    ----------
+    duration : float
+        Seconds simulated.
+    start : dict
+        Initial offsets from the operating point, by state name (state units).
+    push : float
+        A push added to the first input's channel (beside the actuator, which
+        does not limit it) at half the duration, in the input's unit.
+    push_duration : float
+        How long the push lasts [s].
+    step : dict
+        Offsets of the tracked outputs' reference from the operating point,
+        from ``step_at`` seconds on (empty: no reference change).
+    step_at : float
+        When the reference steps [s].
+    push_name : str
+        What the push is, in words ("a 40 N shove on the cart").
+    note : str
+        What the reader should know to read the run (shown in the report).
+    """
+
+    duration: float = 8.0
+    start: dict[str, float] = field(default_factory=dict)
+    push: float = 0.0
+    push_duration: float = 0.1
+    step: dict[str, float] = field(default_factory=dict)
+    step_at: float = 1.0
+    push_name: str = "a push"
+    note: str = ""
+
+
+@dataclass(frozen=True)
 class OperatingPoint:
     """The canonical operating point.
 
@@ -171,6 +216,17 @@ class SystemSpec:
         Unit of each coordinate (rates get ``/s``).
     region:
         Bounds per state outside which a balancing run counts as fallen.
+    drawing:
+        The class that draws the rig, as ``"module:Class"`` (a
+        :class:`~equilibrist.viz.scenes.Scene` taking the bound system),
+        imported only when a picture is made; None: drawn from the derivation's
+        recorded points where it records them (model files), else not drawn.
+    scenario:
+        What the demo does to the rig; None: a scenario from the design
+        scales and the input's limit (``viz.tour.default_scenario``).
+    position:
+        Where the catalogue lists the rig (and the demo's tour visits it),
+        lower first; None: after the numbered ones, by name.
     """
 
     name: str
@@ -210,6 +266,9 @@ class SystemSpec:
     hanging: dict[str, float] | None = None
     # The energy-pumping swing-up from there, if the rig has one: its law and gains.
     swingup: SwingUp | None = None
+    drawing: str | None = None
+    scenario: Scenario | None = None
+    position: int | None = None
 
     @property
     def key(self) -> str:

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from equilibrist.mechanics.spec import Parameter, nonnegative, positive
+from equilibrist.mechanics.spec import Parameter, friction, nonnegative, positive
 
 _GYM = "Gymnasium Acrobot-v1"
 
@@ -31,11 +31,11 @@ def parameters() -> tuple[Parameter, ...]:
         positive("m2", 1.0, "kg", "link 2 mass", note=_GYM + " LINK_MASS_2"),
         nonnegative("I1", 1.0, "kg*m^2", "link 1 inertia about its centre of mass", note=_GYM + " LINK_MOI"),
         nonnegative("I2", 1.0, "kg*m^2", "link 2 inertia about its centre of mass", note=_GYM + " LINK_MOI"),
-        nonnegative(
+        friction(
             "b1", 0.0, "N*m*s/rad", "shoulder viscous friction (torque -b1 theta1_dot on link 1)",
             note=_GYM + " has none",
         ),
-        nonnegative(
+        friction(
             "b2", 0.0, "N*m*s/rad",
             "elbow viscous friction (torque -b2 theta2_dot on link 2, the opposite on link 1)",
             note=_GYM + " has none",

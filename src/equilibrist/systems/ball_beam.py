@@ -79,8 +79,9 @@ from equilibrist.mechanics.spec import (
     Input,
     OperatingPoint,
     Parameter,
+    Scenario,
     SystemSpec,
-    nonnegative,
+    friction,
     positive,
 )
 from equilibrist.systems.registry import register
@@ -103,7 +104,7 @@ SPEC = SystemSpec(
                       "plus its hub"),
         Parameter("d", 0.0, "m", "height of the ball centre above the pivot line along the beam",
                   note="SYSTEMS.md: default 0 (the seed's section without offset)"),
-        nonnegative("b", 0.005, "N*s/m", "rolling friction along the beam",
+        friction("b", 0.005, "N*s/m", "rolling friction along the beam",
                     note="estimate for a steel ball in an aluminium channel"),
         positive("g", 9.81, "m/s^2", "gravitational acceleration", note="standard gravity"),
         Parameter("R_d", 0.0, "m", "ball position of the operating point",
@@ -135,6 +136,11 @@ SPEC = SystemSpec(
     sensor_noise={"R": 1e-3, "theta": 1.5e-3},
     # Motor torque ripple on the beam; surface roughness under the ball.
     process_noise={"theta_dot": 0.1, "R_dot": 0.05},
+    drawing="equilibrist.viz._scenes_planar:BallBeamScene",
+    scenario=Scenario(duration=8.0, start={"R": -0.05}, push=0.2, push_duration=0.1,
+        step={"R": 0.05}, step_at=1.0,
+        push_name="a torque kick of 0.2 N m on the beam for 0.1 s"),
+    position=7,
 )
 
 

@@ -46,8 +46,10 @@ from typing import TYPE_CHECKING
 from equilibrist.mechanics.spec import (
     Input,
     OperatingPoint,
+    Scenario,
     SwingUp,
     SystemSpec,
+    friction,
     nonnegative,
     positive,
 )
@@ -67,8 +69,8 @@ SPEC = SystemSpec(
         positive("m_p", 1.0, "kg", "pole mass", note="seed 001 table"),
         positive("l", 0.5, "m", "pivot to pole centre of mass", note="seed 001 table"),
         nonnegative("I_p", 0.08333, "kg*m^2", "pole inertia about its centre of mass", note="seed 001 table"),
-        nonnegative("b_c", 0.0, "N*s/m", "cart viscous friction"),
-        nonnegative("b_p", 0.0, "N*m*s/rad", "pivot viscous friction"),
+        friction("b_c", 0.0, "N*s/m", "cart viscous friction"),
+        friction("b_p", 0.0, "N*m*s/rad", "pivot viscous friction"),
         positive("g", 9.8, "m/s^2", "gravitational acceleration", note="seed 001 table"),
         positive("x_max", 1.0, "m", "half length of the track (the swing-up task's bound on x)",
                  note="SYSTEMS.md, Tasks"),
@@ -90,6 +92,11 @@ SPEC = SystemSpec(
     process_noise={"x_dot": 0.05, "theta_dot": 0.05},
     hanging={"theta": math.pi},
     swingup=SwingUp("cart", {"k_energy": 5.0, "a_max": 6.0, "k_x": 6.0, "k_v": 2.0}),
+    drawing="equilibrist.viz._scenes_planar:CartpoleScene",
+    scenario=Scenario(duration=12.0, start={"theta": 0.1}, push=120.0, push_duration=0.1,
+        step={"x": 0.3}, step_at=1.0,
+        push_name="a shove of 120 N on the cart for 0.1 s"),
+    position=2,
 )
 
 

@@ -92,7 +92,9 @@ from equilibrist.mechanics.spec import (
     Input,
     OperatingPoint,
     Parameter,
+    Scenario,
     SystemSpec,
+    friction,
     nonnegative,
     positive,
 )
@@ -126,7 +128,7 @@ SPEC = SystemSpec(
                     note="SYSTEMS.md: default 0, as the seed"),
         Parameter("Omega", 314.0, "rad/s", "flywheel spin rate (each, about its z axis)",
                   note="desktop rig: 3000 rpm"),
-        nonnegative("B_w", 1e-4, "N*m*s/rad", "gimbal friction",
+        friction("B_w", 1e-4, "N*m*s/rad", "gimbal friction",
                     note="estimate for ball-bearing gimbals with a servo gearbox backdriven"),
         positive("g", 9.81, "m/s^2", "gravitational acceleration", note="standard gravity"),
     ),
@@ -156,6 +158,10 @@ SPEC = SystemSpec(
     sensor_noise={"phi": 1.5e-3, "theta": 2e-3},
     # Flywheel imbalance shakes the body; servo torque ripple on the gimbal.
     process_noise={"theta_dot": 0.2, "phi_dot": 2.0},
+    drawing="equilibrist.viz._scenes_3d:CmgRobotScene",
+    scenario=Scenario(duration=8.0, start={"theta": 0.03}, push=0.15, push_duration=0.1,
+        push_name="a kick of 0.15 N m on the gimbals for 0.1 s"),
+    position=10,
 )
 
 

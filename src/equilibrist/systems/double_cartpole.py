@@ -65,7 +65,15 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from equilibrist.mechanics.spec import Input, OperatingPoint, SystemSpec, nonnegative, positive
+from equilibrist.mechanics.spec import (
+    Input,
+    OperatingPoint,
+    Scenario,
+    SystemSpec,
+    friction,
+    nonnegative,
+    positive,
+)
 from equilibrist.systems.registry import register
 
 if TYPE_CHECKING:  # sympy is imported only when the model is derived
@@ -93,15 +101,15 @@ SPEC = SystemSpec(
             "I2", 0.00075, "kg*m^2", "link 2 inertia about its centre of mass",
             note="thin rod m2 l2^2 / 12 with the defaults",
         ),
-        nonnegative(
+        friction(
             "b_c", 0.2, "N*s/m", "cart viscous friction",
             note="ballpark of a linear-bearing carriage on a belt; not from the seed",
         ),
-        nonnegative(
+        friction(
             "b1", 5e-4, "N*m*s/rad", "joint-1 viscous friction",
             note="ballpark of a ball-bearing joint with an encoder; the seed gives none",
         ),
-        nonnegative(
+        friction(
             "b2", 5e-4, "N*m*s/rad", "joint-2 viscous friction (between the links)",
             note="ballpark of a ball-bearing joint with an encoder; the seed gives none",
         ),
@@ -134,6 +142,11 @@ SPEC = SystemSpec(
     # joints (1.5 mrad quantization), as the cart-pole.
     sensor_noise={"x": 5e-5, "theta1": 1.5e-3, "theta2": 1.5e-3},
     process_noise={"x_dot": 0.05, "theta1_dot": 0.1, "theta2_dot": 0.1},
+    drawing="equilibrist.viz._scenes_planar:DoubleCartpoleScene",
+    scenario=Scenario(duration=10.0, start={"theta1": 0.04, "theta2": -0.03}, push=8.0,
+        push_duration=0.1, step={"x": 0.15}, step_at=1.0,
+        push_name="a shove of 8 N on the cart for 0.1 s"),
+    position=3,
 )
 
 

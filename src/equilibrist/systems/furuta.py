@@ -71,6 +71,7 @@ from equilibrist.mechanics.spec import (
     OperatingPoint,
     SwingUp,
     SystemSpec,
+    friction,
     nonnegative,
     positive,
 )
@@ -108,11 +109,11 @@ SPEC = SystemSpec(
             "pendulum inertia about its centre of mass, transverse (slender rod)",
             note="uniform rod m_p (2 l_p)^2 / 12 with the defaults",
         ),
-        nonnegative(
+        friction(
             "b_a", 5e-4, "N*m*s/rad", "arm viscous friction (motor and bearing)",
             note=_RIG + ": ballpark of its motor's viscous loss",
         ),
-        nonnegative(
+        friction(
             "b_p", 1e-5, "N*m*s/rad", "pendulum joint viscous friction",
             note=_RIG + ": ballpark of a ball-bearing encoder shaft",
         ),
@@ -145,6 +146,8 @@ SPEC = SystemSpec(
     swingup=SwingUp("rotary", {"k_energy": 40.0, "a_max": 0.05, "catch_fraction": 20.0,
                                "accel": 100.0},
                     free=("phi",)),
+    drawing="equilibrist.viz._scenes_3d:FurutaScene",
+    position=6,
 )
 
 

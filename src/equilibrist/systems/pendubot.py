@@ -98,6 +98,8 @@ SPEC = SystemSpec(
     # few degrees about upright.
     process_noise={"theta1_dot": 0.01, "theta2_dot": 0.01},
     control_rate=200.0,
+    drawing="equilibrist.viz._scenes_planar:TwoLinkScene",
+    position=12,
 )
 
 

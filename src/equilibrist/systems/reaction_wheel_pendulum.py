@@ -56,8 +56,10 @@ from typing import TYPE_CHECKING
 from equilibrist.mechanics.spec import (
     Input,
     OperatingPoint,
+    Scenario,
     SwingUp,
     SystemSpec,
+    friction,
     nonnegative,
     positive,
 )
@@ -87,11 +89,11 @@ SPEC = SystemSpec(
             "I_w", 2.7e-4, "kg*m^2", "wheel inertia about its axle",
             note="disc m_w r^2 / 2 with r = 6 cm",
         ),
-        nonnegative(
+        friction(
             "b_a", 1e-4, "N*m*s/rad", "pivot viscous friction",
             note="ballpark of a ball-bearing pivot; the seed gives none",
         ),
-        nonnegative(
+        friction(
             "b_m", 5e-5, "N*m*s/rad", "motor viscous friction (between wheel and pendulum)",
             note="ballpark of a brushless gimbal motor; the seed gives none",
         ),
@@ -123,6 +125,11 @@ SPEC = SystemSpec(
     swingup=SwingUp("wheel", {"k_energy": 0.5, "a_max": 0.2, "catch_fraction": 10.0,
                               "accel": 40.0},
                     free=("phi",)),
+    drawing="equilibrist.viz._scenes_planar:ReactionWheelScene",
+    scenario=Scenario(duration=8.0, start={"theta": 0.08}, push=0.1,
+        push_duration=0.1,
+        push_name="a torque kick of 0.1 N m for 0.1 s"),
+    position=5,
 )
 
 

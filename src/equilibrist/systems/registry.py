@@ -2,19 +2,22 @@
 
 A system module declares its :class:`~equilibrist.mechanics.spec.SystemSpec`
 and decorates its derivation with :func:`register`; adding a system is adding
-one file to this package. Families of parameterizations (the gyroscope's
+one file to this package, or one module of one's own named by an entry point
+of the group ``equilibrist.systems`` (``pointcart = my_rigs.pointcart``): it
+joins the catalogue as the shipped ones do (names, ids, workers, studies). Families of parameterizations (the gyroscope's
 ``euler = zxz | xyz``) register one spec per variant under one name.
 """
 
 from __future__ import annotations
 
 import importlib
+import math
 import pkgutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from equilibrist.errors import UnknownNameError
+from equilibrist.errors import DefinitionError, UnknownNameError
 from equilibrist.mechanics.spec import SystemSpec
 
 if TYPE_CHECKING:  # sympy is imported only when a model is derived
@@ -52,6 +55,10 @@ _DEFAULT_VARIANT: dict[str, str] = {}
 _LOADED = False
 # Modules of this package that are machinery, not systems.
 _NOT_SYSTEMS = frozenset({"registry", "files"})
+#: The entry-point group of systems of one's own (a module declaring one or more systems).
+ENTRY_POINTS = "equilibrist.systems"
+# Modules named by those entry points: their decorated derivations join the catalogue.
+_PLUGIN_MODULES: set[str] = set()
 
 
 # The attribute by which a decorated derivation carries its spec, so that a
@@ -62,27 +69,37 @@ SPEC_ATTRIBUTE = "__equilibrist_spec__"
 def register(spec: SystemSpec, *, default: bool = False) -> Callable[[DeriveFunction], DeriveFunction]:
     """Declare the decorated function as the derivation of *spec*.
 
-    In a module of this package the pair joins the catalogue; anywhere else
+    In a module of this package, or one named by an entry point of the group
+    ``equilibrist.systems``, the pair joins the catalogue; anywhere else
     (a user's file, a script) the function only carries its spec, and
     :func:`equilibrist.get_system` builds the system from the file.
     """
 
     def decorate(fn: DeriveFunction) -> DeriveFunction:
         setattr(fn, SPEC_ATTRIBUTE, spec)
-        if not (getattr(fn, "__module__", None) or "").startswith("equilibrist.systems."):
-            return fn
-        family = _FAMILIES.setdefault(spec.name, {})
-        value = None if spec.variant is None else spec.variant[1]
-        if value in family:
-            raise RuntimeError(f"system {spec.key} registered twice")
-        family[value] = Entry(spec, fn, fn.__module__)
-        if spec.variant is not None:
-            _VARIANT_OPTION[spec.name] = spec.variant[0]
-            if default or spec.name not in _DEFAULT_VARIANT:
-                _DEFAULT_VARIANT[spec.name] = spec.variant[1]
+        module = getattr(fn, "__module__", None) or ""
+        if module.startswith("equilibrist.systems.") or module in _PLUGIN_MODULES:
+            _add(spec, fn, default=default)
         return fn
 
     return decorate
+
+
+def _add(spec: SystemSpec, fn: DeriveFunction, *, default: bool = False) -> None:
+    family = _FAMILIES.setdefault(spec.name, {})
+    value = None if spec.variant is None else spec.variant[1]
+    if value in family:
+        raise DefinitionError(f"system {spec.key} is registered twice ({family[value].module} and "
+                              f"{fn.__module__}): expected one definition per name")
+    family[value] = Entry(spec, fn, fn.__module__)
+    if spec.variant is not None:
+        _VARIANT_OPTION[spec.name] = spec.variant[0]
+        if default or spec.name not in _DEFAULT_VARIANT:
+            _DEFAULT_VARIANT[spec.name] = spec.variant[1]
+
+
+def _registered(module: str) -> bool:
+    return any(e.module == module for f in _FAMILIES.values() for e in f.values())
 
 
 def _load_all() -> None:
@@ -95,29 +112,37 @@ def _load_all() -> None:
         if info.name not in _NOT_SYSTEMS and not info.name.startswith("_"):
             importlib.import_module(f"{pkg.__name__}.{info.name}")
     _LOADED = True
+    from importlib.metadata import entry_points
 
-
-_ORDER = (
-    "seesaw",
-    "cartpole",
-    "double_cartpole",
-    "wheeled_pendulum",
-    "reaction_wheel_pendulum",
-    "furuta",
-    "ball_beam",
-    "ball_beam_servo",
-    "gyroscope",
-    "cmg_robot",
-    "acrobot",
-    "pendubot",
-)
+    for ep in entry_points(group=ENTRY_POINTS):
+        _PLUGIN_MODULES.add(ep.module)
+        try:
+            module = importlib.import_module(ep.module)
+        except DefinitionError:
+            raise
+        except Exception as exc:  # a broken plugin is named in one line
+            raise DefinitionError(f"the system module {ep.module!r} (entry point {ep.name!r}) cannot "
+                                  f"be loaded: {type(exc).__name__}: {exc}") from None
+        if not _registered(ep.module):  # imported before the registry knew it was a plugin
+            for fn in list(vars(module).values()):
+                spec = getattr(fn, SPEC_ATTRIBUTE, None)
+                if isinstance(spec, SystemSpec) and getattr(fn, "__module__", None) == ep.module:
+                    _add(spec, fn)
+        if not _registered(ep.module):
+            raise DefinitionError(f"the system module {ep.module!r} (entry point {ep.name!r}) "
+                                  "registers no system: expected a derivation decorated with @register(SPEC)")
 
 
 def family_names() -> list[str]:
-    """Registered system names, in the catalogue's order."""
+    """Registered system names, in the catalogue's order: by each spec's ``position``, then
+    those without one by name."""
     _load_all()
-    known = [n for n in _ORDER if n in _FAMILIES]
-    return known + sorted(n for n in _FAMILIES if n not in _ORDER)
+
+    def place(name: str) -> tuple[float, str]:
+        position = next(iter(_FAMILIES[name].values())).spec.position
+        return (math.inf if position is None else float(position), name)
+
+    return sorted(_FAMILIES, key=place)
 
 
 def variant_option(name: str) -> str | None:

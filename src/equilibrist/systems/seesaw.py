@@ -73,7 +73,15 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from equilibrist.mechanics.spec import Input, OperatingPoint, SystemSpec, nonnegative, positive
+from equilibrist.mechanics.spec import (
+    Input,
+    OperatingPoint,
+    Scenario,
+    SystemSpec,
+    friction,
+    nonnegative,
+    positive,
+)
 from equilibrist.systems.registry import register
 
 if TYPE_CHECKING:  # sympy is imported only when the model is derived
@@ -97,9 +105,9 @@ SPEC = SystemSpec(
                     note="desktop rig: counterweight; m1 <= m2 so that F_min = 0 can hold the beam level"),
         nonnegative("m2", 0.1, "kg", "point mass at the right end, motor and propeller included",
                     note="desktop rig: 2204-class motor, 5-inch propeller and mount"),
-        nonnegative("b", 1e-3, "N*m*s/rad", "pivot viscous friction",
+        friction("b", 1e-3, "N*m*s/rad", "pivot viscous friction",
                     note="estimate for a ball-bearing pivot"),
-        nonnegative("mu_c", 0.005, "1", "pivot Coulomb friction coefficient",
+        friction("mu_c", 0.005, "1", "pivot Coulomb friction coefficient",
                     note="typical rolling-bearing friction coefficient 0.001-0.005"),
         positive("eps", 0.05, "rad/s", "rate scale of the tanh smoothing of sgn(theta_dot)",
                  note="seed 000 asks for a small positive constant; 0.05 rad/s keeps the "
@@ -131,6 +139,11 @@ SPEC = SystemSpec(
     sensor_noise={"theta": 1.5e-3},
     # Propeller wash and thrust ripple: about 0.5 rad/s^2 of angular acceleration.
     process_noise={"theta_dot": 0.5},
+    drawing="equilibrist.viz._scenes_planar:SeesawScene",
+    scenario=Scenario(duration=8.0, start={"theta": -0.15}, push=-2.0, push_duration=0.15,
+        step={"theta": 0.1}, step_at=1.5,
+        push_name="a downward tap of 2 N on the motor end for 0.15 s"),
+    position=1,
 )
 
 

@@ -55,7 +55,15 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from equilibrist.mechanics.spec import Input, OperatingPoint, SystemSpec, nonnegative, positive
+from equilibrist.mechanics.spec import (
+    Input,
+    OperatingPoint,
+    Scenario,
+    SystemSpec,
+    friction,
+    nonnegative,
+    positive,
+)
 from equilibrist.systems.registry import register
 
 if TYPE_CHECKING:  # sympy is imported only when the model is derived
@@ -82,11 +90,11 @@ SPEC = SystemSpec(
             "I_w", 8e-5, "kg*m^2", "wheel inertia about its axle (both wheels)",
             note="uniform discs m_w R^2 / 2 with the defaults",
         ),
-        nonnegative(
+        friction(
             "b_r", 1e-4, "N*m*s/rad", "wheel-floor (rolling) friction",
             note="ballpark for rubber tyres on a hard floor; the seed gives none",
         ),
-        nonnegative(
+        friction(
             "b_m", 1e-3, "N*m*s/rad", "motor friction between wheel and body",
             note="ballpark for a small geared DC motor; the seed gives none",
         ),
@@ -115,6 +123,11 @@ SPEC = SystemSpec(
     # complementary filter: about 2 mrad.
     sensor_noise={"phi": 4.8e-3, "theta": 2e-3},
     process_noise={"phi_dot": 0.5, "theta_dot": 0.1},
+    drawing="equilibrist.viz._scenes_planar:WheeledPendulumScene",
+    scenario=Scenario(duration=8.0, start={"theta": 0.08}, push=0.12, push_duration=0.1,
+        step={"phi": 5.0}, step_at=1.0,
+        push_name="a torque kick of 0.12 N m on the wheel for 0.1 s"),
+    position=4,
 )
 
 

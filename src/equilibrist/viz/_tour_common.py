@@ -1,14 +1,15 @@
-"""What the tour's steps share: the scenarios (what the demo does to each system),
+"""What the tour's steps share: the default scenario (a rig's definition states its own),
 the gyroscope's demo settings, the outcome of one system, and formatting helpers."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from equilibrist.mechanics.spec import Scenario
 from equilibrist.viz.report import Section
 
 if TYPE_CHECKING:
@@ -18,74 +19,6 @@ if TYPE_CHECKING:
 #: Seed of the noise of every demo run (the report is reproducible).
 SEED = 2024
 
-
-@dataclass(frozen=True)
-class Scenario:
-    """What the demo does to one system.
-
-    Attributes
-    ----------
-    duration : float
-        Seconds simulated.
-    start : dict
-        Initial offsets from the operating point, by state name (state units).
-    push : float
-        A push added to the first input's channel (beside the actuator, which
-        does not limit it) at half the duration, in the input's unit.
-    push_duration : float
-        How long the push lasts [s].
-    step : dict
-        Offsets of the tracked outputs' reference from the operating point,
-        from ``step_at`` seconds on (empty: no reference change).
-    step_at : float
-        When the reference steps [s].
-    push_name : str
-        What the push is, in words ("a 40 N shove on the cart").
-    note : str
-        What the reader should know to read the run (shown in the report).
-    """
-
-    duration: float = 8.0
-    start: dict[str, float] = field(default_factory=dict)
-    push: float = 0.0
-    push_duration: float = 0.1
-    step: dict[str, float] = field(default_factory=dict)
-    step_at: float = 1.0
-    push_name: str = "a push"
-    note: str = ""
-
-
-SCENARIOS: dict[str, Scenario] = {
-    "seesaw": Scenario(duration=8.0, start={"theta": -0.15}, push=-2.0, push_duration=0.15,
-                       step={"theta": 0.1}, step_at=1.5,
-                       push_name="a downward tap of 2 N on the motor end for 0.15 s"),
-    "cartpole": Scenario(duration=12.0, start={"theta": 0.1}, push=120.0, push_duration=0.1,
-                         step={"x": 0.3}, step_at=1.0,
-                         push_name="a shove of 120 N on the cart for 0.1 s"),
-    "double_cartpole": Scenario(duration=10.0, start={"theta1": 0.04, "theta2": -0.03}, push=8.0,
-                                push_duration=0.1, step={"x": 0.15}, step_at=1.0,
-                                push_name="a shove of 8 N on the cart for 0.1 s"),
-    "wheeled_pendulum": Scenario(duration=8.0, start={"theta": 0.08}, push=0.12, push_duration=0.1,
-                                 step={"phi": 5.0}, step_at=1.0,
-                                 push_name="a torque kick of 0.12 N m on the wheel for 0.1 s"),
-    "reaction_wheel_pendulum": Scenario(duration=8.0, start={"theta": 0.08}, push=0.1,
-                                        push_duration=0.1,
-                                        push_name="a torque kick of 0.1 N m for 0.1 s"),
-    "ball_beam": Scenario(duration=8.0, start={"R": -0.05}, push=0.2, push_duration=0.1,
-                          step={"R": 0.05}, step_at=1.0,
-                          push_name="a torque kick of 0.2 N m on the beam for 0.1 s"),
-    "ball_beam_servo": Scenario(duration=8.0, start={"R": -0.05}, push=2.0, push_duration=0.1,
-                                step={"R": 0.05}, step_at=1.0,
-                                push_name="a jolt of 2 rad/s on the beam's rate for 0.1 s",
-                                note="The jolt acts on the servo's rate, which this model takes "
-                                "as exact: the design gives the beam angle almost no process "
-                                "noise (only a floor), so the Kalman filter trusts its "
-                                "prediction over the encoder and its estimate of theta (dashed) "
-                                "takes seconds to rejoin the truth; the ball recovers as "
-                                "slowly."),
-    "cmg_robot": Scenario(duration=8.0, start={"theta": 0.03}, push=0.15, push_duration=0.1,
-                          push_name="a kick of 0.15 N m on the gimbals for 0.1 s"),
-}
 
 #: The gyroscope's demo: nutation angle, spin and duration.
 GYRO_THETA = 0.6

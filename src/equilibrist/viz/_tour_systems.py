@@ -12,14 +12,13 @@ from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
+from equilibrist.mechanics.spec import Scenario
 from equilibrist.viz._tour_common import (
     GYRO_DURATION,
     GYRO_SPIN,
     GYRO_THETA,
-    SCENARIOS,
     SEED,
     Outcome,
-    Scenario,
     _fmt,
     _label,
     _slug,
@@ -67,7 +66,7 @@ def tour_controlled(
     folder : pathlib.Path
         The report folder; this system's files go into ``folder / <slug>``.
     scenario : Scenario, optional
-        What to do (default: :data:`SCENARIOS` or :func:`default_scenario`).
+        What to do (default: the rig's own, ``SystemSpec.scenario``, or :func:`default_scenario`).
     size : (int, int)
         Animation frame size in pixels.
     fps, max_frames : float, int
@@ -92,7 +91,7 @@ def tour_controlled(
 
     began = time.perf_counter()
     d = design(system, rate=system.spec.control_rate, at=at)
-    sc = scenario or SCENARIOS.get(system.name) or default_scenario(
+    sc = scenario or system.spec.scenario or default_scenario(
         system, StateFeedback.from_design(d))
     slug = _slug(_label(system))
     sub = folder / slug

@@ -15,8 +15,9 @@ A wheel's radius comes from its inertia as a uniform disc,
 ``r = sqrt(2 I / m)``.
 
 :func:`scene_for` returns the scene of a bound
-:class:`~equilibrist.numeric.system.System`; :data:`SCENES` maps each
-system name to its scene class.
+:class:`~equilibrist.numeric.system.System`: the class its definition names
+(``SystemSpec.drawing``, imported when a picture is made), or a drawing of
+its kinematic tree.
 
 The scenes are in :mod:`equilibrist.viz._scenes_planar` and
 :mod:`equilibrist.viz._scenes_3d`, what they draw with (:class:`Shape`,
@@ -26,9 +27,12 @@ importable from here.
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
+from typing import cast
 
-from equilibrist.errors import UnknownNameError
+from equilibrist.errors import DefinitionError, UnknownNameError
+from equilibrist.mechanics.spec import SystemSpec
 from equilibrist.viz._drawing import (
     COLORS,
     Scene,
@@ -54,20 +58,28 @@ from equilibrist.viz._scenes_planar import (
     WheeledPendulumScene,
 )
 
-SCENES: dict[str, Callable[[object], Scene]] = {
-    "seesaw": SeesawScene,
-    "cartpole": CartpoleScene,
-    "double_cartpole": DoubleCartpoleScene,
-    "wheeled_pendulum": WheeledPendulumScene,
-    "reaction_wheel_pendulum": ReactionWheelScene,
-    "ball_beam": BallBeamScene,
-    "ball_beam_servo": BallBeamScene,
-    "gyroscope": GyroscopeScene,
-    "cmg_robot": CmgRobotScene,
-    "furuta": FurutaScene,
-    "acrobot": AcrobotScene,
-    "pendubot": TwoLinkScene,
-}
+
+def drawing_class(spec: SystemSpec) -> Callable[[object], Scene] | None:
+    """The class a system's definition names to draw it (``SystemSpec.drawing``,
+    ``"module:Class"``), imported now; None when the definition names none.
+
+    Raises
+    ------
+    DefinitionError
+        When the named module or class does not exist.
+    """
+    ref = spec.drawing
+    if ref is None:
+        return None
+    module_name, _, attr = ref.partition(":")
+    try:
+        cls = getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError, ValueError) as e:
+        raise DefinitionError(
+            f"system {spec.key}: its drawing {ref!r} cannot be imported ({e}): "
+            "expected 'module:Class' naming a Scene"
+        ) from None
+    return cast("Callable[[object], Scene]", cls)
 
 
 def scene_for(system: object) -> Scene:
@@ -83,22 +95,22 @@ def scene_for(system: object) -> Scene:
         When no drawing exists for the system (a system added to the
         catalogue without one).
     """
-    name = system.name  # type: ignore[attr-defined]
-    if name in SCENES:
-        return SCENES[name](system)
+    spec = system.spec  # type: ignore[attr-defined]
+    cls = drawing_class(spec)
+    if cls is not None:
+        return cls(system)
     from equilibrist.viz.generic import GenericScene, can_draw
 
     if can_draw(system):
         return GenericScene(system)
     raise UnknownNameError(
-        f"no drawing for system {name!r}: drawings exist for {', '.join(SCENES)} and for "
-        "systems whose derivation records its points (model files do)"
+        f"no drawing for system {spec.key!r}: its definition names none (SystemSpec.drawing), "
+        "and its derivation records no points to draw it from (model files do)"
     )
 
 
 __all__ = [
     "COLORS",
-    "SCENES",
     "AcrobotScene",
     "BallBeamScene",
     "CartpoleScene",
@@ -117,6 +129,7 @@ __all__ = [
     "bar",
     "circle",
     "disc_radius",
+    "drawing_class",
     "lean",
     "rect",
     "rotate",

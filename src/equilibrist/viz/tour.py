@@ -14,10 +14,10 @@ and certified (as ``equilibrist roa`` finds it), and the cart-pole a
 Monte-Carlo fan over uncertain parameters.
 
 The scenarios (how far off upright a run starts, how hard the push is) are
-in :data:`SCENARIOS`, one per system, in the units of its states and
-inputs; a system not listed gets :func:`default_scenario`.
+part of each rig's definition (``SystemSpec.scenario``), in the units of its
+states and inputs; a rig that states none gets :func:`default_scenario`.
 
-The scenarios and what the steps share are in :mod:`equilibrist.viz._tour_common`,
+The default scenario and what the steps share are in :mod:`equilibrist.viz._tour_common`,
 the tour of one system in :mod:`equilibrist.viz._tour_systems`; this module runs
 the whole tour and writes the report. Their public names are importable from here.
 """
@@ -31,15 +31,14 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TypedDict
 
+from equilibrist.mechanics.spec import Scenario
 from equilibrist.viz._tour_common import (
     GYRO_DURATION,
     GYRO_SPIN,
     GYRO_THETA,
-    SCENARIOS,
     SEED,
     SUMMARY_HEADER,
     Outcome,
-    Scenario,
     _say,
     default_scenario,
 )
@@ -313,7 +312,6 @@ __all__ = [
     "GYRO_SPIN",
     "GYRO_THETA",
     "REPORT_MARKER",
-    "SCENARIOS",
     "SEED",
     "SUMMARY_HEADER",
     "Outcome",

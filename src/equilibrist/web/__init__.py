@@ -9,6 +9,9 @@ canvas, with the vendored uPlot for the strip charts; it needs no network
 beyond the server. The message protocol is in ``docs/playground.md`` and
 :mod:`equilibrist.web.protocol`.
 
+:func:`play` serves it from a script, for systems given as values (a
+script's own definition among them).
+
 Importing this package does no work; the server's libraries are imported
 when an app is made, with an error naming the extra to install when missing.
 """
@@ -16,8 +19,12 @@ when an app is made, with an error naming the extra to install when missing.
 from __future__ import annotations
 
 import importlib.util
+from typing import TYPE_CHECKING
 
 from equilibrist.errors import EquilibristError
+
+if TYPE_CHECKING:
+    from equilibrist.numeric.system import System
 
 
 class MissingExtraError(EquilibristError, ImportError):
@@ -33,4 +40,21 @@ def require() -> None:
         )
 
 
-__all__ = ["MissingExtraError", "require"]
+def play(*systems: System, first: str | None = None, host: str = "127.0.0.1", port: int = 8050,
+         browser: bool = True) -> None:
+    """Serve the playground for *systems* until Ctrl-C, as ``equilibrist play`` does.
+
+    The systems are values: a script's own (``System.from_definition``, which a
+    command in another process could not rebuild), a file's or the
+    catalogue's, each with its parameter values; none given offers the
+    catalogue. ``port=0`` takes any free port (the address is printed).
+    """
+    require()
+    from equilibrist.cli.play import serve
+    from equilibrist.web.session import Catalogue
+
+    catalogue = Catalogue.of(systems) if systems else Catalogue.default()
+    serve(catalogue, first=first, host=host, port=port, browser=browser)
+
+
+__all__ = ["MissingExtraError", "play", "require"]

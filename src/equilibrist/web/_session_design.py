@@ -46,7 +46,9 @@ class Catalogue:
     """The systems a server offers, each built once and shared by the sessions.
 
     *names* are catalogue names or a user's model file given on the command
-    line; the page can only pick among them.
+    line; the page can only pick among them. :meth:`of` offers systems given as
+    values (a script's own, defined with ``System.from_definition``, with its
+    parameter values): the server runs in the script's process, which knows them.
     """
 
     names: tuple[str, ...]
@@ -56,18 +58,26 @@ class Catalogue:
     def default(cls, extra: Sequence[str] = ()) -> Catalogue:
         """Every system of the catalogue with an input, an operating point and a drawing, plus *extra*."""
         from equilibrist.systems import registry
-        from equilibrist.viz.scenes import SCENES
-
         names: list[str] = []
         for entry in registry.all_entries():
             spec = entry.spec
-            drawn = spec.name in SCENES
+            drawn = spec.drawing is not None
             if drawn and spec.inputs and spec.operating_point is not None and spec.name not in names:
                 names.append(spec.name)
         for e in extra:
             if e not in names:
                 names.insert(0, e)
         return cls(tuple(names))
+
+    @classmethod
+    def of(cls, systems: Sequence[System]) -> Catalogue:
+        """The systems given, offered by their keys in their order, with their parameter values."""
+        if not systems:
+            raise SessionError("no system to offer: expected at least one")
+        offered = {s.key: s for s in systems}
+        if len(offered) != len(systems):
+            raise SessionError("a system is given twice: expected each once")
+        return cls(tuple(offered), dict(offered))
 
     def system(self, name: str) -> System:
         """The system *name* with its default parameters (built on first use)."""
