@@ -154,9 +154,9 @@ def python_control(horizon: int = 30, steps: int = 3) -> dict[str, object]:
 
 
 def regions(grid: int, figure: bool) -> dict[str, object]:
-    """Both regions of attraction (equilibrist.viz.mpc_demo, the report's own figure)."""
-    from equilibrist.viz.mpc_demo import plot_regions
-    from equilibrist.viz.mpc_demo import regions as kept_starts
+    """Both regions of attraction (equilibrist.apps.mpc_demo, the report's own figure)."""
+    from equilibrist.apps.mpc_demo import plot_regions
+    from equilibrist.apps.mpc_demo import regions as kept_starts
 
     system = get_system("cartpole")
     speeds, angles, kept = kept_starts(system, grid)

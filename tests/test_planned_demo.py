@@ -8,10 +8,10 @@ import pytest
 from PIL import Image as PILImage
 
 from equilibrist import get_system
+from equilibrist.apps import planned_demo
 from equilibrist.control.tvlqr import plan_samples
 from equilibrist.errors import DesignError
 from equilibrist.tasks import get_task
-from equilibrist.viz import planned_demo
 
 
 @pytest.fixture(scope="module")

@@ -189,7 +189,7 @@ def test_demo_animates_a_swing_up(tmp_path: object) -> None:
 
     from PIL import Image
 
-    from equilibrist.viz.swingup_demo import swingup_animation
+    from equilibrist.apps.swingup_demo import swingup_animation
 
     path, caption, _run = swingup_animation(get_system("cartpole"), Path(str(tmp_path)), width=160,
                                       height=120, fps=5, max_frames=6, duration=4.0)

@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
+from equilibrist.apps.tour import default_scenario
 from equilibrist.control.design import design
 from equilibrist.numeric.system import get_system
 from equilibrist.sim import Pulse, StateFeedback, simulate
-from equilibrist.viz.tour import default_scenario
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 

@@ -155,7 +155,7 @@ def test_demo_of_one_system_writes_its_report(name, tmp_path, capsys):
 
 @pytest.mark.slow
 def test_tour_in_parallel_keeps_the_catalogue_order(tmp_path):
-    from equilibrist.viz.tour import run_tour
+    from equilibrist.apps.tour import run_tour
 
     # Two systems without a swing-up or a region of attraction in their tour (the cart-pole's
     # demo test covers those): what is tested here is the order of parallel results.

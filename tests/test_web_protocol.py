@@ -11,8 +11,8 @@ import os
 import shutil
 import signal
 import subprocess
-import textwrap
 import sys
+import textwrap
 import zipfile
 from pathlib import Path
 

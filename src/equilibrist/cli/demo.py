@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     began = time.perf_counter()
     progress = sys.stderr.isatty()
-    from equilibrist.viz.tour import SUMMARY_HEADER, run_tour
+    from equilibrist.apps.tour import SUMMARY_HEADER, run_tour
 
     outcomes = run_tour(systems, out, size=size, jobs=jobs, progress=progress,
                         log=lambda line: print(line, file=sys.stderr), at=at)

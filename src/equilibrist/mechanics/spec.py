@@ -223,7 +223,7 @@ class SystemSpec:
         recorded points where it records them (model files), else not drawn.
     scenario:
         What the demo does to the rig; None: a scenario from the design
-        scales and the input's limit (``viz.tour.default_scenario``).
+        scales and the input's limit (``apps.tour.default_scenario``).
     position:
         Where the catalogue lists the rig (and the demo's tour visits it),
         lower first; None: after the numbered ones, by name.

@@ -226,11 +226,12 @@ def redesign(system: System, settings: Settings, plan: Trajectory | None = None
     d, seconds, error = design_for(system, settings)
     if d is None or settings.controller not in runner_kinds():
         return d, seconds, error, None, 0.0
-    if settings.controller in PLANNED and plan is None:
+    planned = settings.controller in PLANNED
+    if planned and plan is None:
         return d, seconds, error, None, 0.0
     began = time.perf_counter()
     try:
-        if settings.controller in PLANNED:
+        if planned and plan is not None:
             runner: Runner = build_plan_runner(settings.controller, system, d, plan)
         else:
             runner = build_runner(settings.controller, system, d)

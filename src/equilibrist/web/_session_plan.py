@@ -9,7 +9,7 @@ When the time-varying LQR is picked, the session goes to the hanging start (that
 run in force when it started hanging, else a new one drawn from the swing-up task) and holds
 there while the plan is made (``plan`` frame ``planning``): Hermite-Simpson collocation
 solved by IPOPT (:func:`equilibrist.control.trajopt.plan`, :data:`KNOTS` intervals over the
-system's duration of :data:`equilibrist.viz.planned_demo.PLANNED`, within the task's state
+system's duration of :data:`equilibrist.apps.planned_demo.PLANNED`, within the task's state
 bounds less their margin), then the tracker on the page's design. The run then starts at the
 plan's start (``plan`` frame ``ready``) and each frame carries ``ghost``: the drawing's moving
 shapes at the plan's state at the plan's time, until the plan ends and the balancing LQR
@@ -172,8 +172,8 @@ class _SessionPlan(_SessionOutput):
     def plan_job(self) -> PlanJob | None:
         """The plan the kind in force needs (None: none needed, or one is under way). Goes
         to the hanging start and holds there until it comes."""
+        from equilibrist.apps.planned_demo import PLANNED as DURATIONS
         from equilibrist.tasks import get_task, planning_bounds
-        from equilibrist.viz.planned_demo import PLANNED as DURATIONS
 
         kind, system = self.settings.controller, self.system
         if kind not in PLANNED or self.loop.runner is not None or self.plan_holding:

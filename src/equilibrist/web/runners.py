@@ -48,6 +48,7 @@ if TYPE_CHECKING:
     from equilibrist.control.controller import NonlinearController, NonlinearRuntime
     from equilibrist.control.design import Design
     from equilibrist.control.mpc import MPCRuntime
+    from equilibrist.control.trajopt import Trajectory
     from equilibrist.numeric.system import System
 
 
@@ -173,7 +174,7 @@ class PlanRunner(NonlinearRunner):
     """
 
     def __init__(self, ctrl: NonlinearController, system: System, kind: str,
-                 trajectory: Any, scales: np.ndarray) -> None:
+                 trajectory: Trajectory, scales: np.ndarray) -> None:
         super().__init__(ctrl, system, kind)
         from equilibrist.control.tvlqr import plan_samples
 
@@ -235,7 +236,7 @@ class PlanRunner(NonlinearRunner):
                 "balance": "lqr"}
 
 
-def build_plan_runner(kind: str, system: System, design: Design, trajectory: Any) -> PlanRunner:
+def build_plan_runner(kind: str, system: System, design: Design, trajectory: Trajectory) -> PlanRunner:
     """The time-varying LQR of *kind* along *trajectory* on the page's *design* (its weights,
     its rate, its balancing LQR at the end)."""
     from equilibrist.control.tvlqr import tvlqr

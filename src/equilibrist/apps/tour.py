@@ -17,8 +17,8 @@ The scenarios (how far off upright a run starts, how hard the push is) are
 part of each rig's definition (``SystemSpec.scenario``), in the units of its
 states and inputs; a rig that states none gets :func:`default_scenario`.
 
-The default scenario and what the steps share are in :mod:`equilibrist.viz._tour_common`,
-the tour of one system in :mod:`equilibrist.viz._tour_systems`; this module runs
+The default scenario and what the steps share are in :mod:`equilibrist.apps._tour_common`,
+the tour of one system in :mod:`equilibrist.apps._tour_systems`; this module runs
 the whole tour and writes the report. Their public names are importable from here.
 """
 
@@ -31,8 +31,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TypedDict
 
-from equilibrist.mechanics.spec import Scenario
-from equilibrist.viz._tour_common import (
+from equilibrist.apps._tour_common import (
     GYRO_DURATION,
     GYRO_SPIN,
     GYRO_THETA,
@@ -42,7 +41,7 @@ from equilibrist.viz._tour_common import (
     _say,
     default_scenario,
 )
-from equilibrist.viz._tour_systems import (
+from equilibrist.apps._tour_systems import (
     balance_outputs,
     final_error,
     recovery_time,
@@ -50,6 +49,7 @@ from equilibrist.viz._tour_systems import (
     tour_gyroscope,
     watched_outputs,
 )
+from equilibrist.mechanics.spec import Scenario
 from equilibrist.viz.output import VizError
 from equilibrist.viz.report import write_index
 

@@ -12,8 +12,7 @@ from typing import TYPE_CHECKING, TypedDict
 
 import numpy as np
 
-from equilibrist.mechanics.spec import Scenario
-from equilibrist.viz._tour_common import (
+from equilibrist.apps._tour_common import (
     GYRO_DURATION,
     GYRO_SPIN,
     GYRO_THETA,
@@ -24,6 +23,7 @@ from equilibrist.viz._tour_common import (
     _slug,
     default_scenario,
 )
+from equilibrist.mechanics.spec import Scenario
 from equilibrist.viz.report import Image, Section
 
 if TYPE_CHECKING:
@@ -140,13 +140,13 @@ def tour_controlled(
     ]
     notes: list[str] = [*([sc.note] if sc.note else []), *getattr(d, "notes", ())]
     if system.name in ("cartpole", "reaction_wheel_pendulum", "furuta", "acrobot"):
-        from equilibrist.viz.swingup_demo import swingup_animation
+        from equilibrist.apps.swingup_demo import swingup_animation
 
         _gif, caption, energy = swingup_animation(system, sub, width=size[0], height=size[1],
                                                   fps=fps, max_frames=max_frames,
                                                   progress=progress)
         images.insert(1, Image(f"{slug}/swingup.gif", caption))
-        from equilibrist.viz.planned_demo import planned_images
+        from equilibrist.apps.planned_demo import planned_images
 
         images[2:2] = planned_images(system, sub, slug, notes, width=size[0], height=size[1],
                                      fps=fps, max_frames=max_frames, progress=progress,
@@ -158,7 +158,7 @@ def tour_controlled(
     if extras:
         images += _extras(system, d, sub, slug, sc, progress=progress)
         if system.name == "cartpole":
-            from equilibrist.viz.mpc_demo import mpc_images
+            from equilibrist.apps.mpc_demo import mpc_images
 
             images += mpc_images(system, sub, slug)
 

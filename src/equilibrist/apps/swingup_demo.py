@@ -1,6 +1,6 @@
 """The demo's swing-up: one seeded swing-up from hanging, animated, for each rig that has one.
 
-Called by the tour (:mod:`equilibrist.viz.tour`) for the systems of
+Called by the tour (:mod:`equilibrist.apps.tour`) for the systems of
 ``equilibrist.control.swingup.swingup_laws()`` (a swing-up in their definition): the
 swing-up controller of the
 system's default design, started from the task ``swingup``'s distribution

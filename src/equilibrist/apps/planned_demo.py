@@ -1,7 +1,7 @@
 """The demo's planned swing-up: planned by trajectory optimization, tracked by the time-varying LQR.
 
-Called by the tour (:mod:`equilibrist.viz.tour`) beside the energy-shaping
-swing-up (:mod:`equilibrist.viz.swingup_demo`) for the systems of
+Called by the tour (:mod:`equilibrist.apps.tour`) beside the energy-shaping
+swing-up (:mod:`equilibrist.apps.swingup_demo`) for the systems of
 :data:`PLANNED`: from the same hanging start (the task ``swingup``'s
 distribution, the same seed), the swing-up is planned as ``equilibrist
 trajopt`` plans it (Hermite-Simpson collocation, IPOPT; :data:`KNOTS`
@@ -75,7 +75,7 @@ def balanced_from(system: System, run: SimResult) -> float | None:
 def planned_run(system: System, *, duration: float | None = None,
                 energy: SimResult | None = None) -> PlannedRun:
     """Plan, track and compare (see the module docstring) with *energy*, the energy-shaping
-    demo's run (:func:`equilibrist.viz.swingup_demo.energy_run`, made here when not given);
+    demo's run (:func:`equilibrist.apps.swingup_demo.energy_run`, made here when not given);
     raises ``DesignError`` without CasADi or when the plan does not converge."""
     from equilibrist.control.design import design
     from equilibrist.control.trajopt import plan
@@ -102,7 +102,7 @@ def planned_run(system: System, *, duration: float | None = None,
     tracked = simulate(system, ctrl, duration=seconds, x0=x0, region=task.region, noise=noise,
                        seed=SEED)
     if energy is None:  # the energy-shaping run of the demo beside it (the same start, seed)
-        from equilibrist.viz.swingup_demo import energy_run
+        from equilibrist.apps.swingup_demo import energy_run
 
         energy, _ctrl = energy_run(system, duration=duration)
     return PlannedRun(traj, ctrl, tracked, energy, plan_seconds, balanced_from(system, tracked),

@@ -12,7 +12,7 @@ construction.
 * :func:`regions`: a grid of starts (cart at the centre, initial cart speed
   by pole angle), which each controller keeps up and on the track.
 
-The tour (:mod:`equilibrist.viz.tour`) puts both into the cart-pole's
+The tour (:mod:`equilibrist.apps.tour`) puts both into the cart-pole's
 section of the report; ``bench/bench_mpc.py`` prints the counts and saves
 the same figure as ``docs/images/mpc_roa.png``.
 """
