@@ -237,8 +237,10 @@ def build_core(
     action_units: str = "normalized",
     alive_bonus: float = ALIVE_BONUS,
     at: Mapping[str, object] | None = None,
+    lanes: bool = False,
 ) -> Core:
-    """Validate an environment's options (every problem at once) and pack them."""
+    """Validate an environment's options (every problem at once) and pack them. *lanes*:
+    the core steps copies eight at a time (a vector environment's; the same bits)."""
     sysm = bind_system(system, params)
     if not sysm.n_inputs:
         raise EnvError(f"{sysm.key} has no input: there is nothing for an agent to do")
@@ -368,7 +370,7 @@ def build_core(
         observation_names=tuple(names) if observe == "state" else outputs,
         action_units=action_units, noise=spec_noise, randomize=dict(rnd), alive_bonus=bonus,
         at=point,
-        kernel=load_core(sysm), c_idx=c_idx, lv=np.ascontiguousarray(lv),
+        kernel=load_core(sysm, lanes=lanes), c_idx=c_idx, lv=np.ascontiguousarray(lv),
         lw=np.ascontiguousarray(lw), region=region,
         op=op, sc=sc, hang=hang, p_nom=p_nom, rnd_idx=rnd_idx, rnd_spread=rnd_spread,
         ci=ci, cf=cf,

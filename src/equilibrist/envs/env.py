@@ -67,7 +67,7 @@ def _spaces(core: Core) -> tuple[spaces.Box, spaces.Box]:
 
 
 def open_core(system: object, task: str, options: Mapping[str, Any], render_mode: str | None,
-              modes: tuple[str, ...], what: str) -> tuple[Core, list[str]]:
+              modes: tuple[str, ...], what: str, *, lanes: bool = False) -> tuple[Core, list[str]]:
     """The core of an environment's options, and the render modes it offers.
 
     The single and the vector environment both start here. *modes* are the
@@ -86,7 +86,7 @@ def open_core(system: object, task: str, options: Mapping[str, Any], render_mode
         raise EnvError("; ".join(
             f"unknown option {k!r} ({nearest(k, known)})" for k in unknown
         ))
-    core = build_core(system, task, **{**OPTION_DEFAULTS, **options})
+    core = build_core(system, task, **{**OPTION_DEFAULTS, **options}, lanes=lanes)
     no_drawing = drawing_problem(core)
     no_window = display_problem() if "human" in modes else None
     if render_mode is not None and no_drawing is not None:

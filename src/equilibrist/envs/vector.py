@@ -106,8 +106,9 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or num_envs < 1:
             raise EnvError(f"num_envs must be a whole number >= 1, got {num_envs!r}")
+        # Copies are stepped eight at a time where there are eight (native/lanes.py).
         core, modes = open_core(system, task, options, render_mode, ("rgb_array",),
-                                "a vector environment")
+                                "a vector environment", lanes=num_envs >= 8)
         self.core = core
         self.num_envs = int(num_envs)
         self.render_mode = render_mode

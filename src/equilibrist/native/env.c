@@ -185,6 +185,21 @@ static void eq_env_draw(int64_t r, double *fs, uint64_t *us, const double *cf,
     }
 }
 
+/* The end of copy r's period, its physics done (code: the region's, -1 inside): the step
+ * count, the observation, the reward, and *status. */
+static double eq_env_finish(double *row, const double *u, uint64_t *urow, double *orow,
+                            const eq_env *S, double *zbuf, int64_t code, int *status)
+{
+    const int64_t k = (int64_t)urow[EQ_US_K] + 1;
+    double reward;
+    urow[EQ_US_K] = (uint64_t)k;
+    eq_env_observe(row, urow, orow, S, zbuf);
+    reward = eq_env_reward(row, u, row + EQ_N, row + EQ_N + S->np, S);
+    *status = code != -1 ? 1 : (k >= S->n_samples ? 2 : 0);
+    if (*status != 0 && S->autoreset != 0) urow[EQ_US_AUTO] = 1;
+    return reward;
+}
+
 /* One control period of copy r with action a: the reward, and *status. A copy whose
  * episode ended at its previous step (autoreset due) is reset instead: its action is
  * ignored, its reward is 0. scr: EQ_ENV_SCR rows of `width`. */
@@ -198,25 +213,164 @@ static double eq_env_step_copy(int64_t r, const double *a, double *fs, uint64_t 
     double *xt = scr + 7 * width, *xprev = scr + 8 * width;
     double *row = fs + r * fw;
     uint64_t *urow = us + r * EQ_US_WIDTH;
-    double *x = row, *p = row + EQ_N;
-    int64_t code, k;
-    double reward;
+    int64_t code;
     if (urow[EQ_US_AUTO] != 0) {
         eq_env_draw(r, fs, us, cf, ci);
         eq_env_begin(r, fs, us, orow, cf, ci, zbuf);
         *status = 0;
         return 0.0;
     }
-    eq_env_input(a, p, S->np, S->physical, u);
-    code = eq_env_physics(x, u, p, urow, S, w, zbuf, k1, k2, k3, k4, xt, xprev);
-    k = (int64_t)urow[EQ_US_K] + 1;
-    urow[EQ_US_K] = (uint64_t)k;
-    eq_env_observe(x, urow, orow, S, zbuf);
-    reward = eq_env_reward(x, u, p, row + EQ_N + S->np, S);
-    *status = code != -1 ? 1 : (k >= S->n_samples ? 2 : 0);
-    if (*status != 0 && S->autoreset != 0) urow[EQ_US_AUTO] = 1;
-    return reward;
+    eq_env_input(a, row + EQ_N, S->np, S->physical, u);
+    code = eq_env_physics(row, u, row + EQ_N, urow, S, w, zbuf, k1, k2, k3, k4, xt, xprev);
+    return eq_env_finish(row, u, urow, orow, S, zbuf, code, status);
 }
+
+#ifdef EQ_LANES
+EQ_LANES_PUSH
+/* eq_rk4 and eq_rk4_free on EQ_LANES copies at once, the same operations lane by lane. */
+EQ_INLINE void eqv_rk4(eqv *x, eqv *u, eqv *p, const eqv *w, int noise, double h)
+{
+    eqv k1[EQ_N], k2[EQ_N], k3[EQ_N], k4[EQ_N], xt[EQ_N];
+    int i;
+    EQ_F_LANES(x, u, p, k1);
+    if (noise) {
+        for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * (k1[i] + w[i]);
+        EQ_F_LANES(xt, u, p, k2);
+        for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * (k2[i] + w[i]);
+        EQ_F_LANES(xt, u, p, k3);
+        for (i = 0; i < EQ_N; i++) xt[i] = x[i] + h * (k3[i] + w[i]);
+        EQ_F_LANES(xt, u, p, k4);
+        for (i = 0; i < EQ_N; i++) {
+            x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i] + 6.0 * w[i]);
+        }
+        return;
+    }
+    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * k1[i];
+    EQ_F_LANES(xt, u, p, k2);
+    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * k2[i];
+    EQ_F_LANES(xt, u, p, k3);
+    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + h * k3[i];
+    EQ_F_LANES(xt, u, p, k4);
+    for (i = 0; i < EQ_N; i++) {
+        x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    }
+}
+
+/* One control period of the EQ_LANES copies from r0, their physics in lanes: the same
+ * numbers as eq_env_step_copy on each (its noise drawn from each copy's generator, its
+ * substeps stopped at its fall). A copy whose autoreset is due is reset, as there. Lanes
+ * that do not step (fallen, reset) compute on a stepping lane's numbers, which are
+ * dropped: an angle past pi/4 in a fallen copy would send the sines lane by lane. */
+static void eq_env_block(int64_t r0, const double *actions, double *fs,
+                                          uint64_t *us, double *obs, int64_t n_obs,
+                                          double *rewards, uint8_t *flags, int64_t n_copies,
+                                          const double *cf, const int64_t *ci, const eq_env *S,
+                                          double *scr, int64_t width)
+{
+    const int64_t fw = eq_env_fs_width(ci);
+    double *zbuf = scr + 2 * width, *k1 = scr + 3 * width, *k2 = scr + 4 * width;
+    double *k3 = scr + 5 * width, *k4 = scr + 6 * width, *xt = scr + 7 * width;
+    eqv x[EQ_N], xprev[EQ_N], u[EQ_M], p[EQ_NP], w[EQ_N];
+    double uu[EQ_LANES][EQ_M > 0 ? EQ_M : 1], xl[EQ_N], wl[EQ_N];
+    const eqv zero = {0.0};
+    int64_t code[EQ_LANES];
+    eqvi inside;
+    int stepping[EQ_LANES], reset[EQ_LANES], l, i, j, c, s, lead = -1;
+    for (l = 0; l < EQ_LANES; l++) {
+        const int64_t r = r0 + l;
+        double *row = fs + r * fw;
+        code[l] = -1;
+        reset[l] = us[r * EQ_US_WIDTH + EQ_US_AUTO] != 0;
+        stepping[l] = !reset[l];
+        if (reset[l]) {
+            int st;
+            rewards[r] = eq_env_step_copy(r, actions + r * EQ_M, fs, us, obs + r * n_obs, cf,
+                                          ci, S, scr, width, &st);
+            flags[r] = 0;
+            flags[n_copies + r] = 0;
+            continue;
+        }
+        if (lead < 0) lead = l;
+        eq_env_input(actions + r * EQ_M, row + EQ_N, S->np, S->physical, uu[l]);
+        for (i = 0; i < EQ_N; i++) x[i][l] = row[i];
+        for (j = 0; j < EQ_NP; j++) p[j][l] = row[EQ_N + j];
+        for (j = 0; j < EQ_M; j++) u[j][l] = uu[l][j];
+    }
+    for (s = 0; s < S->n_sub && lead >= 0; s++) {
+        int plain = 1;
+        for (l = 0; l < EQ_LANES; l++) {
+            if (stepping[l]) continue;
+            for (i = 0; i < EQ_N; i++) x[i][l] = x[i][lead];
+            for (j = 0; j < EQ_NP; j++) p[j][l] = p[j][lead];
+            for (j = 0; j < EQ_M; j++) u[j][l] = u[j][lead];
+        }
+        for (i = 0; i < EQ_N; i++) w[i] = zero;
+        if (S->nw > 0) {
+            for (l = 0; l < EQ_LANES; l++) {
+                if (!stepping[l]) continue;
+                eq_normals(us + (r0 + l) * EQ_US_WIDTH, zbuf, S->nw);
+                for (i = 0; i < EQ_N; i++) {
+                    double v = 0.0;
+                    for (c = 0; c < S->nw; c++) v += S->lw[i * S->nw + c] * zbuf[c];
+                    w[i][l] = v;
+                }
+            }
+        } else {
+            eqvi negative_zero = (eqvi)x[0] == INT64_MIN;
+            for (i = 1; i < EQ_N; i++) negative_zero |= (eqvi)x[i] == INT64_MIN;
+            plain = !eqv_any(negative_zero);
+        }
+        for (i = 0; i < EQ_N; i++) xprev[i] = x[i];
+        eqv_rk4(x, u, p, w, S->nw > 0, S->h);
+        for (l = 0; l < EQ_LANES && !plain; l++) {
+            /* A -0.0 in the state: eq_rk4_step takes eq_rk4 with its zero noise there. */
+            double ul[EQ_M > 0 ? EQ_M : 1], pl[EQ_NP];
+            for (i = 0; i < EQ_N; i++) xl[i] = xprev[i][l];
+            if (eq_no_negative_zero(xl)) continue;
+            for (i = 0; i < EQ_N; i++) wl[i] = 0.0;
+            for (j = 0; j < EQ_M; j++) ul[j] = u[j][l];
+            for (j = 0; j < EQ_NP; j++) pl[j] = p[j][l];
+            eq_rk4(xl, ul, pl, wl, S->h, k1, k2, k3, k4, xt);
+            for (i = 0; i < EQ_N; i++) x[i][l] = xl[i];
+        }
+        lead = -1;
+        inside = (x[0] > S->region[0]) & (x[0] < S->region[EQ_N]);
+        for (i = 1; i < EQ_N; i++) inside &= (x[i] > S->region[i]) & (x[i] < S->region[EQ_N + i]);
+        for (l = 0; l < EQ_LANES; l++) {
+            double *row = fs + (r0 + l) * fw;
+            int64_t at;
+            if (!stepping[l]) continue;
+            if (inside[l]) { /* eq_outside's first pass, on every lane at once */
+                if (lead < 0) lead = l;
+                continue;
+            }
+            for (i = 0; i < EQ_N; i++) xl[i] = x[i][l];
+            at = eq_outside(xl, S->region);
+            if (at == -1) {
+                if (lead < 0) lead = l;
+                continue;
+            }
+            for (i = 0; i < EQ_N; i++) row[i] = at == -2 ? xprev[i][l] : xl[i];
+            code[l] = at;
+            stepping[l] = 0;
+        }
+    }
+    for (l = 0; l < EQ_LANES; l++) {
+        const int64_t r = r0 + l;
+        double *row = fs + r * fw;
+        int st;
+        if (reset[l]) continue;
+        if (stepping[l]) {
+            for (i = 0; i < EQ_N; i++) row[i] = x[i][l];
+        }
+        rewards[r] = eq_env_finish(row, uu[l], us + r * EQ_US_WIDTH, obs + r * n_obs, S, zbuf,
+                                   code[l], &st);
+        flags[r] = st == 1;
+        flags[n_copies + r] = st == 2;
+    }
+}
+EQ_LANES_POP
+#endif
 
 /* How many actions are not finite numbers (then no copy is stepped). */
 static int64_t eq_env_bad_actions(const double *actions, int64_t count)
@@ -234,9 +388,17 @@ static void eq_env_step_range(int64_t lo, int64_t hi, const double *actions, dou
                               const int64_t *ci, double *scr, int64_t width)
 {
     eq_env S;
-    int64_t r;
+    int64_t r = lo;
     eq_env_settings(cf, ci, &S);
-    for (r = lo; r < hi; r++) {
+#ifdef EQ_LANES
+    if (S.np == EQ_NP && eq_lanes_usable()) {
+        for (; r + EQ_LANES <= hi; r += EQ_LANES) {
+            eq_env_block(r, actions, fs, us, obs, n_obs, rewards, flags, n_copies, cf, ci, &S, scr,
+                         width);
+        }
+    }
+#endif
+    for (; r < hi; r++) {
         int status;
         rewards[r] = eq_env_step_copy(r, actions + r * EQ_M, fs, us, obs + r * n_obs, cf, ci,
                                       &S, scr, width, &status);
@@ -273,6 +435,15 @@ EQ_EXPORT int64_t eq_env_step_many(const double *actions, double *fs, uint64_t *
     }
     free(scrs);
     return 0;
+}
+
+/* How many copies the vector environment's step runs at once on this CPU (1: one at a time). */
+EQ_EXPORT int64_t eq_env_lanes(void)
+{
+#ifdef EQ_LANES
+    if (eq_lanes_usable()) return EQ_LANES;
+#endif
+    return 1;
 }
 
 /* One control period of the single environment in row 0: the reward, and *status (3 when

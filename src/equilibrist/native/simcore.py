@@ -39,6 +39,7 @@ from equilibrist.control.controller import (
     translate_controller,
 )
 from equilibrist.native import build, pyc
+from equilibrist.native.lanes import source as lanes_section
 from equilibrist.numeric import libm
 from equilibrist.numeric.system import System
 from equilibrist.sim import layout
@@ -172,13 +173,15 @@ def controller_module(key: bytes | tuple[int, ...] | None = None,
 
 
 def unit_source(system: System, key: bytes | tuple[int, ...] | None = None,
-                controller: NonlinearController | None = None) -> str:
+                controller: NonlinearController | None = None, *, lanes: bool = False) -> str:
     """The C translation unit of *system*'s core with a linear controller made for *key*,
     or with the nonlinear *controller*.
 
     The system's own core (no *key*, no *controller*: the generic linear library) also
     holds the environments' steps and the identification's shooting; a core made for a
-    controller holds the closed loop only (less to compile, about a quarter).
+    controller holds the closed loop only (less to compile, about a quarter). With *lanes*
+    (the vector environment's), its environment steps copies eight at a time
+    (:mod:`equilibrist.native.lanes`), the same bits.
     """
     system.compiled.functions  # noqa: B018  # a damaged generated module is rebuilt first
     with_env = key is None and controller is None
@@ -210,6 +213,8 @@ def unit_source(system: System, key: bytes | tuple[int, ...] | None = None,
         _body(),
     ]
     if with_env:
+        if lanes:
+            parts.append(lanes_section(f))
         parts += [(Path(__file__).parent / "env.c").read_text(),
                   (Path(__file__).parent / "shoot.c").read_text()]
     return "".join(parts)
@@ -217,7 +222,8 @@ def unit_source(system: System, key: bytes | tuple[int, ...] | None = None,
 
 # What the generator reads besides the system's module and the controller: a change in
 # any of them makes a new unit (and so a new library name).
-_GENERATOR_FILES = ("core.c", "integrators.c", "env.c", "shoot.c", "pyc.py", "simcore.py")
+_GENERATOR_FILES = ("core.c", "integrators.c", "env.c", "shoot.c", "pyc.py", "simcore.py",
+                    "lanes.py")
 _GENERATOR_MODULES = ("equilibrist.numeric.libm", "equilibrist.sim.layout",
                       "equilibrist.control.controller", "equilibrist.tasks")
 _GENERATOR: list[str] = []
@@ -241,7 +247,7 @@ def _generator_digest() -> str:
 
 
 def unit_inputs(system: System, key: bytes | tuple[int, ...] | None = None,
-                controller: NonlinearController | None = None) -> str:
+                controller: NonlinearController | None = None, *, lanes: bool = False) -> str:
     """A text that determines :func:`unit_source` of the same arguments entirely, cheap to
     make: the digests of the system's generated module and of the generator's sources, and
     what the controller is (its pattern, sizes or source)."""
@@ -255,7 +261,7 @@ def unit_inputs(system: System, key: bytes | tuple[int, ...] | None = None,
         what = "pattern:" + key.hex()
     else:
         what = "sizes:" + repr(key)
-    return "\n".join((module, _generator_digest(), what))
+    return "\n".join((module, _generator_digest(), what, "lanes" if lanes else "one"))
 
 
 def _ptr(a: np.ndarray | None) -> int | None:
@@ -270,13 +276,16 @@ class NativeCore:
     """
 
     def __init__(self, system: System, key: bytes | tuple[int, ...] | None,
-                 controller: NonlinearController | None = None) -> None:
+                 controller: NonlinearController | None = None, *, lanes: bool = False) -> None:
         self.system = system
         self.key = key
+        #: Copies the vector environment's step runs at once here (native/lanes.py).
+        self.lanes = 1
         stem = f"{system.compiled.module_path.stem}_core"
         system.compiled.functions  # noqa: B018  # a damaged generated module is rebuilt first
-        self.lib, self.path = build.load(lambda: unit_source(system, key, controller), stem,
-                                         inputs=unit_inputs(system, key, controller))
+        self.lib, self.path = build.load(
+            lambda: unit_source(system, key, controller, lanes=lanes), stem,
+            inputs=unit_inputs(system, key, controller, lanes=lanes))
         lib = self.lib
         args_p = ctypes.POINTER(RunArgs)
         lib.eq_run_one.argtypes = [args_p]
@@ -298,6 +307,9 @@ class NativeCore:
         lib.eq_f_one.restype = None
         if not hasattr(lib, "eq_env_step_many"):
             return  # a core made for one controller: the closed loop only
+        lib.eq_env_lanes.argtypes = []
+        lib.eq_env_lanes.restype = i64
+        self.lanes = int(lib.eq_env_lanes())
         lib.eq_env_step_many.argtypes = [vp, vp, vp, vp, i64, vp, vp, i64, vp, vp, i64]
         lib.eq_env_step_many.restype = i64
         lib.eq_env_step_one.argtypes = [vp, vp, vp, vp, vp, vp, vp]
@@ -529,26 +541,35 @@ class NativeCore:
                                 _ptr(e))
 
 
-_CORES: dict[tuple[Path, bytes | tuple[int, ...] | None, str | None], NativeCore] = {}
+_CORES: dict[tuple[Path, bytes | tuple[int, ...] | None, str | None, bool], NativeCore] = {}
 
 
 def loaded(system: System, key: bytes | tuple[int, ...] | None = None,
            controller: NonlinearController | None = None) -> bool:
     """Whether :func:`load_core` of these has been called in this process."""
     source = None if controller is None else controller.source + repr(controller.has_estimate)
-    return (system.compiled.module_path, key if controller is None else None, source) in _CORES
+    return (system.compiled.module_path, key if controller is None else None, source, False) in _CORES
 
 
 def load_core(system: System, key: bytes | tuple[int, ...] | None = None,
-              controller: NonlinearController | None = None) -> NativeCore:
+              controller: NonlinearController | None = None, *, lanes: bool = False) -> NativeCore:
     """The compiled core of *system* for a linear controller made for *key*, or for the
     nonlinear *controller* (built once; raises :class:`~equilibrist.native.pyc.TranslationError`
-    when the controller's source uses what the C translation does not know)."""
+    when the controller's source uses what the C translation does not know). *lanes*: the
+    system's own core with its environment stepped in lanes (the vector environment's)."""
     source = None if controller is None else controller.source + repr(controller.has_estimate)
-    cache_key = (system.compiled.module_path, key if controller is None else None, source)
+    cache_key = (system.compiled.module_path, key if controller is None else None, source, lanes)
     core = _CORES.get(cache_key)
     if core is None:
-        core = _CORES[cache_key] = NativeCore(system, key, controller)
+        try:
+            core = NativeCore(system, key, controller, lanes=lanes)
+        except build.BuildError:
+            if not lanes:
+                raise
+            # A compiler that does not know x86-64-v4 (GCC before 11): one copy at a time,
+            # the same bits (the core says so: lanes == 1).
+            core = load_core(system, key, controller)
+        _CORES[cache_key] = core
     return core
 
 
