@@ -35,6 +35,8 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
+from _busy import busy  # noqa: E402
+
 from equilibrist.hil.protocol import RT_PRIORITY  # noqa: E402
 
 CLI = [sys.executable, "-m", "equilibrist.cli.main"]
@@ -118,13 +120,8 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=10.0)
     ap.add_argument("--busy", type=int, default=0, help="busy programs running alongside")
     args = ap.parse_args()
-    busy = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
-    try:
+    with busy(args.busy):
         measure(args)
-    finally:
-        for proc in busy:
-            proc.kill()
-            proc.wait()
 
 
 def measure(args: argparse.Namespace) -> None:

@@ -46,6 +46,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+from _busy import busy  # noqa: E402
 
 ENV_ID = "equilibrist/cartpole-balance-v0"
 OPTIONS = {"rate": 50.0, "physics_step": 0.02, "noise": False}
@@ -289,8 +290,17 @@ def main() -> int:
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--only", choices=("mpc", "envs"), default=None)
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--busy", type=int, default=0,
+                    help="busy programs running alongside (the loaded machine's case)")
     args = ap.parse_args()
-    out: dict[str, Any] = {"load_before": os.getloadavg()}
+    with busy(args.busy):
+        return measure(args)
+
+
+def measure(args: argparse.Namespace) -> int:
+    out: dict[str, Any] = {"load_before": os.getloadavg(), "busy": args.busy}
+    if args.busy:
+        print(f"{args.busy} busy programs alongside")
     print(f"load average before: {load()} (1/5/15 min), {os.cpu_count()} cores")
     if args.only != "envs":
         out["mpc"] = mpc_table(args.passes, args.c_passes)

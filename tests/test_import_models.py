@@ -129,6 +129,36 @@ def test_f_equals_mujoco_forward_dynamics(path: Path) -> None:
 
 
 @pytest.mark.parametrize("path", ALL, ids=lambda p: p.name)
+def test_jacobians_equal_central_differences_of_f(path: Path) -> None:
+    # Trees of up to three joints form df/dx from M and F (codegen's mass form), larger
+    # ones from f's own derivative: both against central differences of f (which the test
+    # above holds to MuJoCo's forward dynamics).
+    rng = np.random.default_rng(abs(hash(path.name)) % 2**32 + 1)
+    system = get_system(str(path))
+    n, m = system.n_states, system.n_inputs
+    for _ in range(4):
+        k = len(system.spec.coordinates)
+        x = np.concatenate([rng.uniform(-1.5, 1.5, k), rng.uniform(-3.0, 3.0, k)])
+        low, high = system.input_limits
+        u = rng.uniform(low, high) if m else np.zeros(0)
+        A, B = system.jacobians(x, u)
+        A_fd, B_fd = np.zeros((n, n)), np.zeros((n, m))
+        for j in range(n):
+            h = 1e-6 * max(1.0, abs(x[j]))
+            e = np.zeros(n)
+            e[j] = h
+            A_fd[:, j] = (system.f(x + e, u) - system.f(x - e, u)) / (2 * h)
+        for j in range(m):
+            h = 1e-6 * max(1.0, abs(u[j]))
+            e = np.zeros(m)
+            e[j] = h
+            B_fd[:, j] = (system.f(x, u + e) - system.f(x, u - e)) / (2 * h)
+        assert np.allclose(A, A_fd, rtol=1e-5, atol=1e-6 * (1.0 + np.abs(A_fd).max()))
+        if m:
+            assert np.allclose(B, B_fd, rtol=1e-5, atol=1e-6 * (1.0 + np.abs(B_fd).max()))
+
+
+@pytest.mark.parametrize("path", ALL, ids=lambda p: p.name)
 def test_energy_is_conserved_without_damping_and_input(path: Path) -> None:
     base = get_system(str(path))
     free = base.with_params(**{p.name: 0.0 for p in base.spec.parameters if p.name.endswith("_damping")})

@@ -198,4 +198,5 @@ def derive_tree(tree: Tree, d: Derivation) -> SymbolicModel:
         armature=armature,
         points=points,
         links=links,
+        jacobian_form="mass",
     )

@@ -47,6 +47,11 @@ class SymbolicModel:
     # them joined by a link: what a generic drawing of the system shows.
     points: dict[str, sp.Matrix] = field(default_factory=dict)
     links: tuple[tuple[str, str], ...] = ()
+    # How the generated code forms df/dx and df/du: "symbolic" (the derivative of f's
+    # expressions, ``A`` and ``B`` below) or "mass" (from M and F: dq_ddot/dx =
+    # M^-1 (dF/dx - dM/dx q_ddot), with q_ddot computed first; far cheaper to derive for
+    # an imported tree, whose f is a large quotient).
+    jacobian_form: str = "symbolic"
 
     @property
     def n_q(self) -> int:
@@ -156,6 +161,7 @@ class Derivation:
         armature: dict[str, sp.Expr] | None = None,
         points: dict[str, me.Point] | None = None,
         links: Sequence[tuple[str, str]] = (),
+        jacobian_form: str = "symbolic",
     ) -> SymbolicModel:
         """Equations of motion by Kane's method, with the speeds ``u_i = q_i'``.
 
@@ -167,7 +173,8 @@ class Derivation:
         *armature* adds an inertia to the diagonal of ``M`` for the named
         coordinates (a rotor's reflected inertia, as MuJoCo's ``armature``).
         *points* (positions relative to ``O``) and *links* (pairs of point
-        names) describe the mechanism for a generic drawing.
+        names) describe the mechanism for a generic drawing. *jacobian_form*: see
+        :class:`SymbolicModel`.
         """
         speeds = [me.dynamicsymbols(f"{c}_u") for c in self.spec.coordinates]
         kd = [qd - s for qd, s in zip(self.qd, speeds, strict=True)]
@@ -186,6 +193,10 @@ class Derivation:
                 k = self.spec.coordinates.index(name)
                 mass[k, k] += value
         model = self._finish("Kane", mass, forcing, energy, conserved, extras)
+        if jacobian_form != model.jacobian_form:
+            from dataclasses import replace
+
+            model = replace(model, jacobian_form=jacobian_form)
         if points:
             model = self.with_points(model, points, links)
         return model

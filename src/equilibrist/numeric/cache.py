@@ -214,7 +214,8 @@ def _build(entry: Entry, module_path: Path, pickle_path: Path, *,
     """Derive *entry* and write its cache files (the pickle only, without *module*);
     returns the symbolic model."""
     model = derive(entry)
-    _ = model.A, model.B  # computed once, stored with the model
+    if model.jacobian_form == "symbolic":
+        _ = model.A, model.B  # computed once, stored with the model (the code uses them)
     _atomic_write(pickle_path, pickle.dumps(model, protocol=pickle.HIGHEST_PROTOCOL))
     if module:
         from equilibrist.numeric.codegen import generate_source

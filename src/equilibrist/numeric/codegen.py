@@ -136,16 +136,19 @@ def generate_source(model: SymbolicModel) -> str:
     out += _body(fx, [f"out[{i}]" for i in range(n)], subs, printer)
     out += ["", "", "def jac(x, u, p, A, B):"]
     out += ["    A[:, :] = 0.0", "    B[:, :] = 0.0"]
-    entries: list[sp.Expr] = []
-    targets: list[str] = []
-    for (i, j), val in _nonzero(model.A):
-        entries.append(val)
-        targets.append(f"A[{i}, {j}]")
-    for (i, j), val in _nonzero(model.B):
-        entries.append(val)
-        targets.append(f"B[{i}, {j}]")
-    out += _unpack(model, with_inputs=True, used=_free(entries))
-    out += _body(entries, targets, subs, printer)
+    if model.jacobian_form == "mass" and model.M is not None and 0 < model.n_q <= 3:
+        out += _jac_from_mass(model, subs, printer)
+    else:
+        entries: list[sp.Expr] = []
+        targets: list[str] = []
+        for (i, j), val in _nonzero(model.A):
+            entries.append(val)
+            targets.append(f"A[{i}, {j}]")
+        for (i, j), val in _nonzero(model.B):
+            entries.append(val)
+            targets.append(f"B[{i}, {j}]")
+        out += _unpack(model, with_inputs=True, used=_free(entries))
+        out += _body(entries, targets, subs, printer)
     out += ["", "", "def mass_matrix(x, p, out):"]
     nq = model.n_q
     mass = [] if model.M is None else [model.M[i, j] for i in range(nq) for j in range(nq)]
@@ -168,6 +171,44 @@ def generate_source(model: SymbolicModel) -> str:
     if model.M is not None:
         out += _scalar_functions(model, subs, printer)
     return "\n".join(out)
+
+
+def _jac_from_mass(model: SymbolicModel, subs: dict[sp.Symbol, sp.Symbol],
+                   printer: _Printer) -> list[str]:
+    """``jac``'s body from ``M`` and ``F``: ``q_ddot`` first (as ``f`` forms it), then each
+    column ``M^-1 (dF/dx_j - dM/dx_j q_ddot)`` (``dF/du_k`` for ``B``) with ``M^-1`` as
+    its adjugate over its determinant: derivatives of ``M`` and ``F``, not of the quotient
+    ``f``, which for an imported tree cost seconds to take."""
+    assert model.M is not None and model.F is not None
+    nq = model.n_q
+    qdd = [model.f[nq + i] for i in range(nq)]
+    held = [sp.Symbol(f"jq_{i}", real=True) for i in range(nq)]
+    M, F = model.M, model.F
+    det = sp.factor_terms(M.det(method="berkowitz"))
+    adj = M.adjugate(method="berkowitz")
+    entries: list[sp.Expr] = []
+    targets: list[str] = []
+    for i in range(nq):
+        entries.append(sp.Integer(1))
+        targets.append(f"A[{i}, {nq + i}]")
+
+    def column(rhs: sp.Matrix, target: str) -> None:
+        solved = adj * rhs
+        for i in range(nq):
+            if solved[i] != 0:
+                entries.append(solved[i] / det)
+                targets.append(target.format(nq + i))
+
+    qdd_vec = sp.Matrix(held)
+    for j, s in enumerate(model.states):
+        dM = M.diff(s)
+        column(F.diff(s) - dM * qdd_vec, f"A[{{}}, {j}]")
+    for k, s in enumerate(model.inputs):
+        column(F.diff(s), f"B[{{}}, {k}]")
+    lines = _unpack(model, with_inputs=True, used=_free(qdd + entries))
+    lines += _body(qdd, [str(h) for h in held], subs, printer)
+    lines += _body(entries, targets, subs, printer)
+    return lines
 
 
 def _scalar_functions(model: SymbolicModel, subs: dict[sp.Symbol, sp.Symbol],
