@@ -348,7 +348,7 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
         where += " moved to the nearest equilibrium (" + ", ".join(
             f"{j} {v:+.3g} {units[j]}" for j, v in tree.key_moved) + ")"
     notes = [
-        f"imported from the {kind} file {origin} through MuJoCo's compiler; derived by Kane's method",
+        f"imported from the {kind} file {origin} through MuJoCo's compiler; derived by Lagrange's equations of the tree",
         *tree.notes,
         *scales,
         f"operating point: {where}"

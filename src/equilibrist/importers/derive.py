@@ -13,12 +13,15 @@ rotations, expanded after every product, so that positions, angular
 velocities and the inertia tensor in the world are short polynomials in
 the sines and cosines of the joint angles. (Chaining sympy frames by
 constant rotations instead nests the direction cosines and makes even a
-two-joint tree take minutes to derive.) The bodies, their velocities and
-the loads then go to Kane's method: gravity at each centre of mass; joint
-damping, springs and motors as a torque about the joint's axis on the
-joint's relative rotation (a force along the axis for a slide), which is
-the torque on the child body and its reaction on the parent summed;
-armature on the diagonal of the mass matrix.
+two-joint tree take minutes to derive.) Lagrange's equations are then
+written out from them (:func:`_lagrange_of_tree`), in plain matrices rather
+than through sympy's vectors and Kane's method, which took most of a first
+run's seconds: the mass matrix from each body's centre-of-mass and
+angular-velocity Jacobians and its inertia in the world, the Coriolis and
+centrifugal terms from the mass matrix's derivatives, gravity from its
+potential; joint damping, springs and motors are each joint's generalized
+force (the torque on the child body and its reaction on the parent, summed,
+work only through the joint's own rate); armature on the diagonal.
 
 Numbers from the file enter as sympy Floats holding the exact binary value,
 so the derived ``f`` agrees with MuJoCo's to round-off.
@@ -96,19 +99,17 @@ def _in_world(N: me.ReferenceFrame, v: sp.Matrix) -> me.Vector:
 def derive_tree(tree: Tree, d: Derivation) -> SymbolicModel:
     """The symbolic model of *tree* in the derivation context *d*."""
     import sympy as sp
-    from sympy.physics import mechanics as me
 
-    N, O, t = d.N, d.O, d.t
+    N, O = d.N, d.O
     rotations: list[sp.Matrix] = []  # world orientation of each body's frame
     origins: list[sp.Matrix] = []  # world position of each body's frame origin
     spins: list[sp.Matrix] = []  # world angular velocity of each body
     joint_axes: dict[int, sp.Matrix] = {}  # world axis of each joint
     positions: dict[str, sp.Matrix] = {"world": sp.zeros(3, 1)}
     links: list[tuple[str, str]] = []
-    bodies: list[me.RigidBody] = []
-    loads: list[tuple[object, me.Vector]] = []
-    potential = sp.Integer(0)
-    kinetic = sp.Integer(0)
+    inertias: list[tuple[sp.Expr, sp.Matrix, sp.Matrix, sp.Matrix]] = []
+    potential = sp.Integer(0)  # the joints' springs
+    gravity = sp.Integer(0)  # the gravity's potential
     armature: dict[str, sp.Expr] = {}
     g = d.p["g"]
     g_dir = np.asarray(tree.gravity, float)
@@ -141,7 +142,6 @@ def derive_tree(tree: Tree, d: Derivation) -> SymbolicModel:
             links.append((parent_point if n == 0 else tree.joints[body.joints[n - 1]].name, joint.name))
             if joint.armature:
                 armature[joint.name] = _float(joint.armature)
-                kinetic += _float(joint.armature) * d.qd[j] ** 2 / 2
         rotations.append(rot)
         origins.append(origin)
         spins.append(spin)
@@ -151,22 +151,13 @@ def derive_tree(tree: Tree, d: Derivation) -> SymbolicModel:
         mass = d.p[f"{body.name}_mass"]
         scale = mass / _float(body.mass)
         tensor = _expand(rot * _matrix(np.asarray(body.inertia, float)) * rot.T)
-        point = O.locatenew(f"{body.name}_com", _in_world(N, com))
-        point.set_vel(N, _in_world(N, _expand(com.diff(t))))
-        frame = me.ReferenceFrame(f"{body.name}_frame")
-        frame.set_ang_vel(N, _in_world(N, spin))
-        dyadic = sum(
-            (scale * tensor[r, c] * (N_axis | M_axis)
-             for r, N_axis in enumerate((N.x, N.y, N.z)) for c, M_axis in enumerate((N.x, N.y, N.z))
-             if tensor[r, c] != 0),
-            me.Dyadic(0),
-        )
-        bodies.append(me.RigidBody(body.name, point, frame, mass, (dyadic, point)))
-        loads.append((point, mass * g * _in_world(N, g_vec)))
-        potential -= mass * g * (com.T * g_vec)[0]
+        inertias.append((mass, com, spin, scale * tensor))
+        gravity -= mass * g * (com.T * g_vec)[0]
     # Joint forces: damping, spring and motors act on the child body and, in
     # reaction, on the parent; summed, they do work only through the joint's
-    # relative motion, a rotation (or translation) at q_dot along the axis.
+    # relative motion, a rotation (or translation) at q_dot along the axis: each is
+    # its joint's generalized force.
+    forces = []
     for j, joint in enumerate(tree.joints):
         q = d.q[j]
         generalized = -d.p[f"{joint.name}_damping"] * d.qd[j]
@@ -178,25 +169,52 @@ def derive_tree(tree: Tree, d: Derivation) -> SymbolicModel:
                 # The input is the motor's generalized force itself (gear
                 # times MuJoCo's ctrl): the spec names it input_names[k].
                 generalized += d.u[d.spec.input_names[k]]
-        axis = _in_world(N, joint_axes[j])
-        if joint.kind == "hinge":
-            relative = me.ReferenceFrame(f"{joint.name}_relative")
-            relative.set_ang_vel(N, d.qd[j] * axis)
-            loads.append((relative, generalized * axis))
-        else:
-            sliding = me.Point(f"{joint.name}_relative")
-            sliding.set_vel(N, d.qd[j] * axis)
-            loads.append((sliding, generalized * axis))
-    kinetic += sum((b.kinetic_energy(N) for b in bodies), sp.Integer(0))
+        forces.append(generalized)
+    mass_matrix, forcing, kinetic = _lagrange_of_tree(d, inertias, armature, gravity, forces)
     points = {}
     for name, r in positions.items():
         points[name] = O.locatenew(f"{name}_point", _in_world(N, r))
-    return d.kane(
-        bodies=bodies,
-        loads=loads,
-        energy=kinetic + potential,
-        armature=armature,
+    return d.from_mass_matrix(
+        "Lagrange (tree)",
+        mass_matrix,
+        forcing,
+        energy=kinetic + potential + gravity,
         points=points,
         links=links,
         jacobian_form="mass",
     )
+
+
+def _lagrange_of_tree(d: Derivation, inertias: list[tuple[sp.Expr, sp.Matrix, sp.Matrix, sp.Matrix]],
+                      armature: dict[str, sp.Expr], gravity: sp.Expr,
+                      forces: list[sp.Expr]) -> tuple[sp.Matrix, sp.Matrix, sp.Expr]:
+    """``M``, ``F`` and the kinetic energy of a tree, in plain symbols: Lagrange's equations
+    written out. ``M = sum m Jv^T Jv + Jw^T I Jw`` over the bodies (``Jv`` the centre of
+    mass's Jacobian, ``Jw`` the angular velocity's, ``I`` the inertia in the world) plus
+    the armatures; ``F = Q - dV/dq - h`` with the joints' generalized forces ``Q``, the
+    gravity's potential ``V`` and ``h_i = sum_jk (dM_ij/dq_k - dM_jk/dq_i / 2) qd_j qd_k``."""
+    import sympy as sp
+
+    plain = d._plain()
+    qs = [plain[qi] for qi in d.q]
+    qds = [plain[qdi] for qdi in d.qd]
+    n = len(qs)
+    mass = sp.zeros(n, n)
+    for m, com, spin, tensor in inertias:
+        jv = sp.Matrix(d.plain(com)).jacobian(qs)
+        jw = sp.Matrix(d.plain(spin)).jacobian(qds)
+        mass += m * (jv.T * jv) + jw.T * sp.Matrix(d.plain(tensor)) * jw
+    for name, value in armature.items():
+        k = d.spec.coordinates.index(name)
+        mass[k, k] += value
+    mass = mass.applyfunc(sp.expand)
+    rates = sp.Matrix(qds)
+    dmass = [mass.diff(qk) for qk in qs]
+    bias = sp.zeros(n, 1)
+    for i in range(n):
+        bias[i] = sum(((dmass[k][i, :] * rates)[0] * qds[k] for k in range(n)), sp.Integer(0)) \
+            - (rates.T * dmass[i] * rates)[0] / 2
+    potential = d.plain(gravity)
+    forcing = sp.Matrix([d.plain(forces[i]) - sp.diff(potential, qs[i]) - bias[i] for i in range(n)])
+    kinetic = (rates.T * mass * rates)[0] / 2
+    return mass, forcing, kinetic

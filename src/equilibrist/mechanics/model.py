@@ -201,6 +201,25 @@ class Derivation:
             model = self.with_points(model, points, links)
         return model
 
+    def from_mass_matrix(
+        self,
+        method: str,
+        mass: sp.Matrix,
+        forcing: sp.Matrix,
+        *,
+        energy: sp.Expr | None = None,
+        points: dict[str, me.Point] | None = None,
+        links: Sequence[tuple[str, str]] = (),
+        jacobian_form: str = "symbolic",
+    ) -> SymbolicModel:
+        """The model of ``M(q) q_ddot = F`` formed by the caller (an imported tree writes
+        Lagrange's equations out), finished as :meth:`kane` finishes its own."""
+        from dataclasses import replace
+
+        model = replace(self._finish(method, mass, forcing, energy, None, None),
+                        jacobian_form=jacobian_form)
+        return self.with_points(model, points, links) if points else model
+
     def with_points(
         self, model: SymbolicModel, points: dict[str, me.Point], links: Sequence[tuple[str, str]] = ()
     ) -> SymbolicModel:
