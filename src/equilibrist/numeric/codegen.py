@@ -175,39 +175,61 @@ def generate_source(model: SymbolicModel) -> str:
 
 def _jac_from_mass(model: SymbolicModel, subs: dict[sp.Symbol, sp.Symbol],
                    printer: _Printer) -> list[str]:
-    """``jac``'s body from ``M`` and ``F``: ``q_ddot`` first (as ``f`` forms it), then each
-    column ``M^-1 (dF/dx_j - dM/dx_j q_ddot)`` (``dF/du_k`` for ``B``) with ``M^-1`` as
-    its adjugate over its determinant: derivatives of ``M`` and ``F``, not of the quotient
-    ``f``, which for an imported tree cost seconds to take."""
+    """``jac``'s body from ``M`` and ``F``: ``q_ddot`` first (as ``f`` forms it), then
+    ``det M``, the adjugate and the derivatives of ``M`` and ``F`` as values, and each column
+    ``M^-1 (dF/dx_j - dM/dx_j q_ddot)`` (``dF/du_k`` for ``B``) written out as arithmetic on
+    them: derivatives of ``M`` and ``F``, not of the quotient ``f``, and no symbolic product,
+    which for an imported tree cost seconds to form."""
     assert model.M is not None and model.F is not None
     nq = model.n_q
-    qdd = [model.f[nq + i] for i in range(nq)]
-    held = [sp.Symbol(f"jq_{i}", real=True) for i in range(nq)]
     M, F = model.M, model.F
-    det = sp.factor_terms(M.det(method="berkowitz"))
+    qdd = [model.f[nq + i] for i in range(nq)]
+    values: list[sp.Expr] = [sp.factor_terms(M.det(method="berkowitz"))]
+    names = ["jd"]
     adj = M.adjugate(method="berkowitz")
-    entries: list[sp.Expr] = []
-    targets: list[str] = []
     for i in range(nq):
-        entries.append(sp.Integer(1))
-        targets.append(f"A[{i}, {nq + i}]")
-
-    def column(rhs: sp.Matrix, target: str) -> None:
-        solved = adj * rhs
-        for i in range(nq):
-            if solved[i] != 0:
-                entries.append(solved[i] / det)
-                targets.append(target.format(nq + i))
-
-    qdd_vec = sp.Matrix(held)
+        for k in range(nq):
+            values.append(adj[i, k])
+            names.append(f"ja_{i}_{k}")
+    columns: list[tuple[str, list[str]]] = []  # (target format, the rhs of each row)
     for j, s in enumerate(model.states):
-        dM = M.diff(s)
-        column(F.diff(s) - dM * qdd_vec, f"A[{{}}, {j}]")
+        dF, dM = F.diff(s), M.diff(s)
+        rhs = []
+        for r in range(nq):
+            terms = []
+            if dF[r] != 0:
+                values.append(dF[r])
+                names.append(f"jf_{r}_{j}")
+                terms.append(f"jf_{r}_{j}")
+            for c in range(nq):
+                if dM[r, c] != 0:
+                    values.append(dM[r, c])
+                    names.append(f"jm_{r}_{c}_{j}")
+                    terms.append(f"- jm_{r}_{c}_{j} * jq_{c}")
+            rhs.append(" ".join(terms) if terms else "0.0")
+        columns.append((f"A[{{}}, {j}]", rhs))
     for k, s in enumerate(model.inputs):
-        column(F.diff(s), f"B[{{}}, {k}]")
-    lines = _unpack(model, with_inputs=True, used=_free(qdd + entries))
-    lines += _body(qdd, [str(h) for h in held], subs, printer)
-    lines += _body(entries, targets, subs, printer)
+        dF = F.diff(s)
+        rhs = []
+        for r in range(nq):
+            if dF[r] != 0:
+                values.append(dF[r])
+                names.append(f"jb_{r}_{k}")
+                rhs.append(f"jb_{r}_{k}")
+            else:
+                rhs.append("0.0")
+        columns.append((f"B[{{}}, {k}]", rhs))
+    lines = _unpack(model, with_inputs=True, used=_free(qdd + values))
+    lines += _body(qdd, [f"jq_{i}" for i in range(nq)], subs, printer)
+    lines += _body(values, names, subs, printer)
+    lines += [f"    A[{i}, {nq + i}] = 1.0" for i in range(nq)]
+    for target, rhs in columns:
+        if all(r == "0.0" for r in rhs):
+            continue
+        lines += [f"    jr_{r} = {text}" for r, text in enumerate(rhs)]
+        for i in range(nq):
+            total = " + ".join(f"ja_{i}_{k} * jr_{k}" for k in range(nq))
+            lines.append(f"    {target.format(nq + i)} = ({total}) / jd")
     return lines
 
 
