@@ -76,7 +76,7 @@ class NonlinearController:
     output_names: tuple[str, ...]
     tracked_names: tuple[str, ...] = ()
     has_estimate: bool = False
-    settings: Mapping[str, Any] = field(default_factory=dict)
+    settings: Mapping[str, object] = field(default_factory=dict)
     #: Whether the source reads the time ``t`` (a type whose functions never do says so: its C
     #: export's functions then take no time, and a source that reads it is refused).
     reads_time: ClassVar[bool] = True

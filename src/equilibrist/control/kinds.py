@@ -119,7 +119,7 @@ class ControllerRequest:
 
     system: System
     rate: float | None
-    design_options: Mapping[str, Any] = field(default_factory=dict)
+    design_options: Mapping[str, object] = field(default_factory=dict)
     tracking: bool = False
     options: Mapping[str, Any] = field(default_factory=dict)
     _designs: dict[str, Design] = field(default_factory=dict, repr=False, compare=False)

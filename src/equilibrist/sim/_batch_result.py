@@ -11,7 +11,6 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
 
 import numpy as np
 
@@ -75,13 +74,13 @@ class BatchResult:
     estimation_error_rms: np.ndarray | None
     rows: np.ndarray
     seeds: tuple[dict[str, object] | None, ...]
-    settings: Mapping[str, Any]
+    settings: Mapping[str, object]
     elapsed: float = 0.0
     steps: int = 0
     trajectories: np.ndarray | None = None
     system_digest: str | None = None
     balanced_since: np.ndarray | None = None
-    _setup: Any = field(default=None, repr=False)
+    _setup: _setup.Setup | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         for name in ("x0", "params", "fell", "fell_at", "fell_code", "fell_x", "final_state",
@@ -171,9 +170,12 @@ class BatchResult:
                        np.asarray(self.fell_x[index]), np.asarray(self.final_state[index]), seq,
                        estimates=setup.estimates)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> dict[str, object]:
         """``runs``, ``stayed_up``, ``fraction_up``, ``steps_per_second`` and friends."""
         fell_at = self.fell_at[self.fell]
+        criterion = self.settings.get("balanced", {})
+        if not isinstance(criterion, Mapping):
+            raise SimulationError(f"the batch's balanced criterion should be a mapping, found {criterion!r}")
         return {
             "system": self.system,
             "runs": self.runs,
@@ -193,7 +195,7 @@ class BatchResult:
             "fraction_balanced": self.fraction_balanced,
             "time_to_balance_median": self.time_to_balance(0.5),
             "time_to_balance_p90": self.time_to_balance(0.9),
-            "balanced_criterion": dict(self.settings.get("balanced", {})),
+            "balanced_criterion": dict(criterion),
         }
 
     def save(self, path: str | Path) -> Path:
@@ -260,7 +262,7 @@ class BatchResult:
             estimation_error_rms=arrays.pop("estimation_error_rms", None),
             seeds=tuple(meta["seeds"]), settings=meta["settings"], elapsed=meta["elapsed"],
             steps=meta["steps"], system_digest=digest_field(meta, f"{p} is not a valid saved batch"),
-            **arrays,
+            _setup=None, **arrays,
         )
 
 

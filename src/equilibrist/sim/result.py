@@ -26,7 +26,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
-from typing import Any
+from typing import SupportsFloat, TypedDict
 
 import numpy as np
 
@@ -45,6 +45,27 @@ def _names(label: str, names: tuple[str, ...], name: str) -> int:
             raise UnknownNameError(f"the run has no {label}s (asked for {name!r})")
         raise UnknownNameError(f"no {label} {name!r}: {nearest(name, names)}")
     return names.index(name)
+
+
+class RunMetrics(TypedDict):
+    """What :meth:`SimResult.metrics` returns (see there)."""
+
+    system: str
+    fell: bool
+    fell_at: float | None
+    fell_state: str | None
+    stayed_up: bool
+    duration: float
+    settling_time: float | None
+    overshoot: dict[str, float | None]
+    peak_command: dict[str, float]
+    peak_input: dict[str, float]
+    rms_input: dict[str, float]
+    time_saturated: float
+    final_error: dict[str, float]
+    estimation_error_rms: dict[str, float] | None
+    peak_deviation: dict[str, float]
+    seed: object
 
 
 @dataclass(frozen=True, eq=False)
@@ -104,7 +125,7 @@ class SimResult:
     fell_state: str | None
     fell_x: np.ndarray | None
     final_state: np.ndarray
-    settings: Mapping[str, Any] = field(default_factory=dict)
+    settings: Mapping[str, object] = field(default_factory=dict)
     system_digest: str | None = None
 
     def __post_init__(self) -> None:
@@ -134,7 +155,10 @@ class SimResult:
     @property
     def dt(self) -> float:
         """The control period [s]."""
-        return 1.0 / float(self.settings["rate"])
+        rate = self.settings["rate"]
+        if not isinstance(rate, SupportsFloat | str):
+            raise SimulationError(f"the run's rate {rate!r} is not a number")
+        return 1.0 / float(rate)
 
     @property
     def output_units(self) -> tuple[str, ...]:
@@ -181,7 +205,7 @@ class SimResult:
         return not self.fell
 
     # -- metrics ------------------------------------------------------------
-    def metrics(self, *, settle_fraction: float = 0.02) -> dict[str, Any]:
+    def metrics(self, *, settle_fraction: float = 0.02) -> RunMetrics:
         """Summary metrics of the run.
 
         ``settling_time``: the time after which every watched output stays

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, SupportsFloat
 
 import numpy as np
 
@@ -32,15 +32,29 @@ def system_of(key: str, params: Mapping[str, float] | None = None, *, digest: st
     return system_for_data(key, params, digest=digest, system=system, source=source)
 
 
-def _label(settings: Mapping[str, Any]) -> str:
-    ctrl = dict(settings.get("controller") or {})
+def _number(value: object) -> float:
+    """*value* of a result's settings as a float (a :class:`VizError` when it is none)."""
+    if not isinstance(value, SupportsFloat | str):
+        raise VizError(f"the result's settings hold {value!r} where a number belongs")
+    return float(value)
+
+
+def _mapping(value: object, what: str) -> Mapping[str, object]:
+    """*value* of a result's settings as the mapping it should be (a :class:`VizError` when not)."""
+    if not isinstance(value, Mapping):
+        raise VizError(f"the result's settings hold {value!r} as {what}, expected a mapping")
+    return value
+
+
+def _label(settings: Mapping[str, object]) -> str:
+    ctrl = dict(_mapping(settings.get("controller") or {}, "the controller"))
     kind = str(ctrl.get("kind", "")).replace("_", " ")
     bits = []
     if kind and kind != "open loop":
         bits.append(kind if kind.isupper() else kind.replace("lqg", "LQG").replace("state feedback", "LQR"))
     rate = settings.get("rate")
     if rate:
-        bits.append(f"{float(rate):g} Hz")
+        bits.append(f"{_number(rate):g} Hz")
     if settings.get("plant") == "linear":
         bits.append("linear plant")
     return ", ".join(bits)
@@ -58,18 +72,22 @@ def run_from_result(result: SimResult, *, system: System | None = None, label: s
     system = system_of(result.system, result.params, digest=result.system_digest, system=system)
     settings = dict(result.settings)
     events = []
-    for e in settings.get("events") or ():
+    listed = settings.get("events") or ()
+    if not isinstance(listed, list | tuple):
+        raise VizError(f"the result's settings hold {listed!r} as the events, expected a list")
+    for entry in listed:
+        e = _mapping(entry, "an event")
         kind = str(e.get("kind", ""))
         what = _EVENT_NAMES.get(kind, kind.replace("_", " "))
         if kind in ("pulse", "impulse") and "value" in e and system.input_names:
-            name = e.get("input") or system.input_names[0]
+            name = str(e.get("input") or system.input_names[0])
             unit = system.input_units[list(system.input_names).index(name)]
             unit = f"{unit}*s" if kind == "impulse" else unit
-            what = f"push {float(e['value']):+g} {unit}"
+            what = f"push {_number(e['value']):+g} {unit}"
         elif kind == "kick" and "state" in e:
-            unit = system.state_units[list(system.state_names).index(e["state"])]
-            what = f"kick {e['state']} {float(e['value']):+g} {unit}"
-        events.append((float(e["time"]), what))
+            unit = system.state_units[list(system.state_names).index(str(e["state"]))]
+            what = f"kick {e['state']} {_number(e['value']):+g} {unit}"
+        events.append((_number(e["time"]), what))
     if result.fell and result.fell_at is not None:
         events.append((float(result.fell_at), f"fell ({result.fell_state})"))
     has_reference = result.reference.ndim == 2 and result.reference.shape[1] > 0

@@ -38,7 +38,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -136,10 +136,10 @@ class NonlinearRunner:
     def update(self, t: float, y: np.ndarray, u_applied: np.ndarray) -> None:
         self.runtime.update(t, y, _EMPTY, u_applied)
 
-    def solve_stats(self) -> dict[str, Any] | None:
+    def solve_stats(self) -> dict[str, object] | None:
         return None
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> dict[str, object]:
         return {"kind": self.kind, **dict(self.ctrl.settings)}
 
 
@@ -158,10 +158,11 @@ class SwingUpRunner(NonlinearRunner):
         """``"balancing"`` or ``"pumping"``: the supervisor's choice for the next sample."""
         return "balancing" if self.runtime.z[self._mode_slot] == self._balance else "pumping"
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> dict[str, object]:
         s = self.ctrl.settings
+        tuning = s.get("tuning", {})
         return {"kind": "swingup", "law": s.get("law"), "c_in": s.get("c_in"), "c_out": s.get("c_out"),
-                "tuning": dict(s.get("tuning", {}))}
+                "tuning": dict(tuning) if isinstance(tuning, Mapping) else tuning}
 
 
 class PlanRunner(NonlinearRunner):
@@ -229,7 +230,7 @@ class PlanRunner(NonlinearRunner):
     def update(self, t: float, y: np.ndarray, u_applied: np.ndarray) -> None:
         super().update(t - (self.t0 or 0.0), y, u_applied)
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> dict[str, object]:
         traj = self.trajectory
         return {"kind": self.kind, "plan_duration": self.duration, "knots": traj.knots,
                 "solve_time": traj.solve_time, "samples": int(self.ctrl.params[0]),
@@ -304,7 +305,7 @@ class MPCRunner:
     def update(self, t: float, y: np.ndarray, u_applied: np.ndarray) -> None:
         self.runtime.update(t, y, _EMPTY, u_applied)
 
-    def solve_stats(self) -> dict[str, Any] | None:
+    def solve_stats(self) -> dict[str, object] | None:
         """Median and worst time of a sample's solve over the last samples [ms]."""
         if not self.times:
             return None
@@ -314,7 +315,7 @@ class MPCRunner:
                 "samples": int(arr.size), "qp_samples": self.solved,
                 "status": self.runtime.last_status}
 
-    def describe(self) -> dict[str, Any]:
+    def describe(self) -> dict[str, object]:
         d = dict(self.ctrl.describe())
         d["setup_milliseconds"] = round(self.setup_seconds * 1e3, 2)
         return d
