@@ -15,6 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
+from tests.support.jacobians import central_differences
 
 from equilibrist.errors import NoEquilibriumError
 from equilibrist.numeric.system import get_system
@@ -110,22 +111,6 @@ def test_operating_point_is_equilibrium(entry: registry.Entry) -> None:
     assert lm.C.shape == (len(system.output_names), system.n_states)
 
 
-def _fd_jacobians(system, x: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    n, m = system.n_states, system.n_inputs
-    A, B = np.zeros((n, n)), np.zeros((n, m))
-    for j in range(n):
-        h = 1e-6 * max(1.0, abs(x[j]))
-        e = np.zeros(n)
-        e[j] = h
-        A[:, j] = (system.f(x + e, u) - system.f(x - e, u)) / (2 * h)
-    for j in range(m):
-        h = 1e-6 * max(1.0, abs(u[j]))
-        e = np.zeros(m)
-        e[j] = h
-        B[:, j] = (system.f(x, u + e) - system.f(x, u - e)) / (2 * h)
-    return A, B
-
-
 @pytest.mark.parametrize("entry", ENTRIES, ids=IDS)
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
@@ -141,7 +126,7 @@ def test_jacobians_equal_finite_differences(entry: registry.Entry, seed: int) ->
     x = x0 + rng.uniform(-0.4, 0.4, system.n_states)
     u = u0 + rng.uniform(-1.0, 1.0, system.n_inputs)
     A, B = system.jacobians(x, u)
-    A_fd, B_fd = _fd_jacobians(system, x, u)
+    A_fd, B_fd = central_differences(system, x, u)
     scale = 1.0 + np.abs(A_fd).max()
     assert np.allclose(A, A_fd, rtol=1e-5, atol=1e-6 * scale)
     if system.n_inputs:

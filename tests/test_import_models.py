@@ -17,6 +17,7 @@ import mujoco
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+from tests.support.jacobians import central_differences
 
 from equilibrist.numeric.system import System, get_system
 
@@ -135,24 +136,14 @@ def test_jacobians_equal_central_differences_of_f(path: Path) -> None:
     # above holds to MuJoCo's forward dynamics).
     rng = np.random.default_rng(abs(hash(path.name)) % 2**32 + 1)
     system = get_system(str(path))
-    n, m = system.n_states, system.n_inputs
+    m = system.n_inputs
     for _ in range(4):
         k = len(system.spec.coordinates)
         x = np.concatenate([rng.uniform(-1.5, 1.5, k), rng.uniform(-3.0, 3.0, k)])
         low, high = system.input_limits
         u = rng.uniform(low, high) if m else np.zeros(0)
         A, B = system.jacobians(x, u)
-        A_fd, B_fd = np.zeros((n, n)), np.zeros((n, m))
-        for j in range(n):
-            h = 1e-6 * max(1.0, abs(x[j]))
-            e = np.zeros(n)
-            e[j] = h
-            A_fd[:, j] = (system.f(x + e, u) - system.f(x - e, u)) / (2 * h)
-        for j in range(m):
-            h = 1e-6 * max(1.0, abs(u[j]))
-            e = np.zeros(m)
-            e[j] = h
-            B_fd[:, j] = (system.f(x, u + e) - system.f(x, u - e)) / (2 * h)
+        A_fd, B_fd = central_differences(system, x, u)
         assert np.allclose(A, A_fd, rtol=1e-5, atol=1e-6 * (1.0 + np.abs(A_fd).max()))
         if m:
             assert np.allclose(B, B_fd, rtol=1e-5, atol=1e-6 * (1.0 + np.abs(B_fd).max()))

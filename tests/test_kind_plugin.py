@@ -9,13 +9,13 @@ The kind (``softlqr``): the design's LQR gain through a ``tanh`` of width ``--so
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 import textwrap
 from pathlib import Path
 
 import pytest
+from tests.support.plugins import cli, install
 
 KIND_MODULE = '''
 """A controller kind of one's own: the LQR through a tanh of width --softness."""
@@ -82,59 +82,47 @@ KIND = ControllerKind(
 
 @pytest.fixture(scope="module")
 def plugin(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
-    folder = tmp_path_factory.mktemp("kind")
-    (folder / "softlqr_kind.py").write_text(KIND_MODULE)
-    info = folder / "softlqr_kind-1.0.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: softlqr-kind\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text("[equilibrist.controllers]\nsoftlqr = softlqr_kind:KIND\n")
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(folder), env.get("PYTHONPATH")]))
-    return env
-
-
-def _cli(env: dict[str, str], *args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "equilibrist.cli.main", *args], env=env, cwd=cwd,
-                          capture_output=True, text=True, timeout=600, check=False)
+    return install(tmp_path_factory.mktemp("kind"), "softlqr_kind", KIND_MODULE,
+                   "equilibrist.controllers", "softlqr", "softlqr_kind:KIND")
 
 
 def test_simulate_offers_it_takes_its_option_and_a_wide_one_runs_as_the_lqr(plugin) -> None:
-    helped = _cli(plugin, "simulate", "--help")
+    helped = cli(plugin, "simulate", "--help")
     assert "softlqr" in helped.stdout and "--softness" in helped.stdout
     common = ["--duration", "2", "--x0", "theta=0.15", "--noise", "off", "--json"]
-    soft = _cli(plugin, "simulate", "cartpole", "--controller", "softlqr", "--softness", "1e9",
+    soft = cli(plugin, "simulate", "cartpole", "--controller", "softlqr", "--softness", "1e9",
                 *common)
     assert soft.returncode == 0, soft.stderr
-    lqr = _cli(plugin, "simulate", "cartpole", "--controller", "lqr", *common)
+    lqr = cli(plugin, "simulate", "cartpole", "--controller", "lqr", *common)
     a, b = json.loads(soft.stdout), json.loads(lqr.stdout)
     assert a["fell"] is False
     assert a["rms_input"] == pytest.approx(b["rms_input"], rel=1e-9)
     assert a["peak_command"] == pytest.approx(b["peak_command"], rel=1e-9)
     # A narrow tanh bends the command: the peak is bounded by the width.
-    narrow = json.loads(_cli(plugin, "simulate", "cartpole", "--controller", "softlqr",
+    narrow = json.loads(cli(plugin, "simulate", "cartpole", "--controller", "softlqr",
                              "--softness", "5", *common).stdout)
     assert narrow["peak_command"]["F"] <= 5.0 + 1e-9 < b["peak_command"]["F"]
 
 
 def test_its_options_and_where_it_applies_are_refused_in_one_line(plugin) -> None:
-    bad = _cli(plugin, "simulate", "cartpole", "--controller", "softlqr", "--softness", "abc")
+    bad = cli(plugin, "simulate", "cartpole", "--controller", "softlqr", "--softness", "abc")
     assert bad.returncode == 2
     assert bad.stderr.strip().splitlines() == [
         "equilibrist: error: --softness 'abc': expected a positive number"]
-    other = _cli(plugin, "simulate", "cartpole", "--controller", "lqr", "--softness", "3")
+    other = cli(plugin, "simulate", "cartpole", "--controller", "lqr", "--softness", "3")
     assert other.returncode == 2 and "the lqr controller takes none" in other.stderr
-    two = _cli(plugin, "simulate", "double_cartpole", "--controller", "softlqr")
+    two = cli(plugin, "simulate", "double_cartpole", "--controller", "softlqr")
     assert two.returncode == 2 and "softlqr drives one input of a four-state" in two.stderr
     assert "Traceback" not in bad.stderr + other.stderr + two.stderr
 
 
 def test_batch_and_a_study_run_it_in_worker_processes(plugin, tmp_path: Path) -> None:
-    batch = _cli(plugin, "batch", "cartpole", "--controller", "softlqr", "--runs", "6",
+    batch = cli(plugin, "batch", "cartpole", "--controller", "softlqr", "--runs", "6",
                  "--duration", "1", "--workers", "2", "--json")
     assert batch.returncode == 0, batch.stderr
     assert json.loads(batch.stdout)["stayed_up"] == 6
     out = tmp_path / "study.parquet"
-    study = _cli(plugin, "sweep", "cartpole", "--vary", "controller=lqr,softlqr", "--runs", "4",
+    study = cli(plugin, "sweep", "cartpole", "--vary", "controller=lqr,softlqr", "--runs", "4",
                  "--duration", "1", "--out", str(out))
     assert study.returncode == 0, study.stderr
     import pyarrow.parquet as pq
@@ -171,7 +159,7 @@ def test_it_exports_as_c_that_make_check_proves_bit_for_bit(plugin, tmp_path: Pa
     import shutil
 
     out = tmp_path / "soft"
-    done = _cli(plugin, "export", "cartpole", "--controller", "softlqr", "--softness", "8",
+    done = cli(plugin, "export", "cartpole", "--controller", "softlqr", "--softness", "8",
                 "--duration", "1", "--out", str(out), "--json")
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout)["controller"] == "softlqr"

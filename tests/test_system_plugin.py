@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import shutil
 import subprocess
 import sys
@@ -19,6 +18,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from tests.support.plugins import cli, install
 
 RIG_MODULE = '''
 """A rig of one's own, in one file: a cart with a bob on a massless rod, its drawing and its
@@ -107,20 +107,8 @@ def derive(d):
 
 @pytest.fixture(scope="module")
 def plugin(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
-    folder = tmp_path_factory.mktemp("rig")
-    (folder / "pointcart_rig.py").write_text(RIG_MODULE)
-    info = folder / "pointcart_rig-1.0.dist-info"
-    info.mkdir()
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: pointcart-rig\nVersion: 1.0\n")
-    (info / "entry_points.txt").write_text("[equilibrist.systems]\npointcart = pointcart_rig\n")
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(folder), env.get("PYTHONPATH")]))
-    return env
-
-
-def _cli(env: dict[str, str], *args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "equilibrist.cli.main", *args], env=env,
-                          capture_output=True, text=True, timeout=600, check=False)
+    return install(tmp_path_factory.mktemp("rig"), "pointcart_rig", RIG_MODULE,
+                   "equilibrist.systems", "pointcart")
 
 
 def _python(env: dict[str, str], script: str) -> str:
@@ -131,7 +119,7 @@ def _python(env: dict[str, str], script: str) -> str:
 
 
 def test_it_joins_the_catalogue_with_the_cartpoles_dynamics(plugin) -> None:
-    listed = json.loads(_cli(plugin, "systems", "--json").stdout)
+    listed = json.loads(cli(plugin, "systems", "--json").stdout)
     assert list(listed)[-1] == "pointcart"  # no position stated: after the numbered ones
     out = _python(plugin, """
         import numpy as np
@@ -149,10 +137,10 @@ def test_it_joins_the_catalogue_with_the_cartpoles_dynamics(plugin) -> None:
 
 
 def test_simulate_balances_it_and_swings_it_up(plugin) -> None:
-    run = _cli(plugin, "simulate", "pointcart", "--duration", "3", "--x0", "theta=0.1", "--json")
+    run = cli(plugin, "simulate", "pointcart", "--duration", "3", "--x0", "theta=0.1", "--json")
     assert run.returncode == 0, run.stderr
     assert json.loads(run.stdout)["stayed_up"] is True
-    up = _cli(plugin, "simulate", "pointcart", "--controller", "swingup", "--x0", "theta=3.14",
+    up = cli(plugin, "simulate", "pointcart", "--controller", "swingup", "--x0", "theta=3.14",
               "--duration", "10", "--json")
     assert up.returncode == 0, up.stderr
     result = json.loads(up.stdout)
@@ -161,12 +149,12 @@ def test_simulate_balances_it_and_swings_it_up(plugin) -> None:
 
 
 def test_batch_and_a_study_run_it_in_worker_processes(plugin, tmp_path: Path) -> None:
-    batch = _cli(plugin, "batch", "pointcart", "--runs", "6", "--duration", "1", "--workers", "2",
+    batch = cli(plugin, "batch", "pointcart", "--runs", "6", "--duration", "1", "--workers", "2",
                  "--json")
     assert batch.returncode == 0, batch.stderr
     assert json.loads(batch.stdout)["stayed_up"] == 6
     out = tmp_path / "study.parquet"
-    study = _cli(plugin, "sweep", "pointcart", "--vary", "m=0.3,0.6", "--runs", "4",
+    study = cli(plugin, "sweep", "pointcart", "--vary", "m=0.3,0.6", "--runs", "4",
                  "--duration", "1", "--out", str(out))
     assert study.returncode == 0, study.stderr
     import pyarrow.parquet as pq
@@ -195,7 +183,7 @@ def test_its_environment_and_its_own_drawing(plugin, tmp_path: Path) -> None:
 
 def test_it_exports_as_c_that_make_check_proves_bit_for_bit(plugin, tmp_path: Path) -> None:
     out = tmp_path / "rig"
-    done = _cli(plugin, "export", "pointcart", "--duration", "1", "--out", str(out), "--json")
+    done = cli(plugin, "export", "pointcart", "--duration", "1", "--out", str(out), "--json")
     assert done.returncode == 0, done.stderr
     if shutil.which("make") is None or shutil.which("cc") is None:
         pytest.fail("make and a C compiler are needed (CI installs them)")
