@@ -43,8 +43,10 @@ PARALLEL_MIN = 256
 # From PARALLEL_MIN copies up, a step now and then runs the other way (one
 # thread or all: a probe), and the faster of the two steps the others: the
 # way in use by the moving average of its times per step (weight SMOOTHING
-# for the newest, a time counted at most OUTLIER times the average), the
-# other by its last probe. A probe is PROBE_STEPS steps, the best of all but
+# for the newest, every time counted whole: on a busy machine a parallel
+# step is fast most of the time and now and then waits a whole time slice
+# for a descheduled thread, and its cost is the mean of both), the other by
+# its last probe. A probe is PROBE_STEPS steps, the best of all but
 # the first counted (the first wakes threads that went to sleep; one step
 # can be slowed by a moment's interruption). On a machine whose other
 # cores are taken, the parallel step waits for descheduled threads and can
@@ -57,8 +59,12 @@ PARALLEL_MIN = 256
 # waits PROBE_SHARE times the whole last probe (every one of its steps, the
 # first too: on a busy machine a parallel step that waits for a descheduled
 # thread takes a whole time slice, some milliseconds), in steps of the way
-# in use, and so does a probe that a slower step calls early. Of the steps
-# between probes, one in TIME_EVERY is timed.
+# in use, and so does a probe that a slower step calls early. A way taken at
+# a probe's word that proves slower in use than the way it left (the probe's
+# few steps missed its slow ones) is left, and the next probe waits twice as
+# long as after the last such one (up to PROBE_EVERY_MAX), until a way so
+# taken holds that long. Of the steps between probes, one in TIME_EVERY is
+# timed.
 TIME_EVERY = 4
 # A probe whose first step takes PROBE_GIVE_UP times a step of the way in use, and at
 # least PROBE_GIVE_UP_S seconds, ends there (that step is its time): waking the other
@@ -71,7 +77,6 @@ RESLOWED = 1.5
 PROBE_STEPS = 3
 PROBE_SHARE = 20.0
 SMOOTHING = 0.25
-OUTLIER = 3.0
 # Looked up once: a step of few copies takes a few microseconds in all.
 _copyto = np.copyto
 
@@ -141,6 +146,9 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._probe_wait = PROBE_EVERY  # steps the last probe's cost asks to wait
         self._interval = PROBE_EVERY  # steps between probes, doubled while they confirm the way
         self._at_probe = math.inf  # the way in use's time per step at the last probe
+        self._probed_in = False  # whether the way in use was taken at a probe's word
+        self._misled = PROBE_EVERY  # steps before probing again after a probe misled us
+        self._held = 0  # steps the way taken at a probe's word has held
         self._probe_left = 0  # steps left of the probe under way
         self._step_fn: list[Callable[[], int]] | None = None
         self._ashape = (N, m)
@@ -234,12 +242,13 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             # next TIME_EVERY - 1 are not (timing costs about a microsecond of
             # Python, 5 % of a step of 256 copies).
             self._countdown -= TIME_EVERY
+            self._held += TIME_EVERY
             self._untimed = TIME_EVERY - 1
             start = time.perf_counter()
             bad = self._ways[mode]()
             spent = time.perf_counter() - start
             average = cost[mode]
-            average = SMOOTHING * min(spent, OUTLIER * average) + (1.0 - SMOOTHING) * average
+            average = SMOOTHING * spent + (1.0 - SMOOTHING) * average
             cost[mode] = average
             if average > RESLOWED * self._at_probe or average > cost[1 - mode]:
                 self._changed(mode)
@@ -271,6 +280,11 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             return int(bad)
         before = self._mode
         self._mode = 0 if cost[0] < cost[1] else 1
+        if self._mode != before:
+            self._probed_in, self._held = True, 0  # on trial
+        elif self._probed_in and self._held >= self._misled:
+            # The way a probe chose held as long as the last misleading one took to unmask.
+            self._probed_in, self._misled = False, PROBE_EVERY
         self._interval = min(2 * self._interval, PROBE_EVERY_MAX) \
             if self._mode == before else PROBE_EVERY
         self._at_probe = cost[self._mode]
@@ -283,12 +297,24 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         """The way in use got slower than at the last probe, or than the other way
         was then: switch if the other way was faster, and probe again soon."""
         cost = self._cost
+        misled = False
         if cost[mode] > cost[1 - mode]:
+            # Taken at a probe's word and found slower in use than the way it left: the
+            # probe's few steps missed what this way costs on the whole (on a busy machine,
+            # fast steps and, now and then, a whole time slice waiting for a thread).
+            misled = self._probed_in
             self._mode = 1 - mode
+        self._probed_in = False
+        self._at_probe = math.inf
+        if misled:
+            # Not soon: each time a probe misleads, twice as long before the next.
+            self._misled = min(2 * self._misled, PROBE_EVERY_MAX)
+            self._interval = self._misled
+            self._countdown = max(self._misled, self._probe_wait)
+            return
         self._interval = PROBE_EVERY
         # Soon, but not sooner than the last probe's cost allows.
         self._countdown = min(self._countdown, max(PROBE_EVERY, self._probe_wait))
-        self._at_probe = math.inf
 
     @property
     def threads_in_use(self) -> int:
