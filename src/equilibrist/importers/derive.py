@@ -200,16 +200,20 @@ def _lagrange_of_tree(d: Derivation, inertias: list[tuple[sp.Expr, sp.Matrix, sp
     qds = [plain[qdi] for qdi in d.qd]
     n = len(qs)
     mass = sp.zeros(n, n)
+    def jacobian(v: sp.Matrix, by: list[sp.Symbol]) -> sp.Matrix:
+        # Element by element: sympy's Matrix.jacobian and Matrix.diff take tens of times as long.
+        return sp.Matrix(len(v), len(by), [e.diff(b) for e in v for b in by])
+
     for m, com, spin, tensor in inertias:
-        jv = sp.Matrix(d.plain(com)).jacobian(qs)
-        jw = sp.Matrix(d.plain(spin)).jacobian(qds)
+        jv = jacobian(sp.Matrix(d.plain(com)), qs)
+        jw = jacobian(sp.Matrix(d.plain(spin)), qds)
         mass += m * (jv.T * jv) + jw.T * sp.Matrix(d.plain(tensor)) * jw
     for name, value in armature.items():
         k = d.spec.coordinates.index(name)
         mass[k, k] += value
     mass = mass.applyfunc(sp.expand)
     rates = sp.Matrix(qds)
-    dmass = [mass.diff(qk) for qk in qs]
+    dmass = [mass.applyfunc(lambda e, qk=qk: e.diff(qk)) for qk in qs]
     bias = sp.zeros(n, 1)
     for i in range(n):
         bias[i] = sum(((dmass[k][i, :] * rates)[0] * qds[k] for k in range(n)), sp.Integer(0)) \

@@ -193,7 +193,8 @@ def _jac_from_mass(model: SymbolicModel, subs: dict[sp.Symbol, sp.Symbol],
             names.append(f"ja_{i}_{k}")
     columns: list[tuple[str, list[str]]] = []  # (target format, the rhs of each row)
     for j, s in enumerate(model.states):
-        dF, dM = F.diff(s), M.diff(s)
+        # Element by element: sympy's Matrix.diff takes some 40 times as long here.
+        dF, dM = F.applyfunc(lambda e, s=s: e.diff(s)), M.applyfunc(lambda e, s=s: e.diff(s))
         rhs = []
         for r in range(nq):
             terms = []
@@ -209,7 +210,7 @@ def _jac_from_mass(model: SymbolicModel, subs: dict[sp.Symbol, sp.Symbol],
             rhs.append(" ".join(terms) if terms else "0.0")
         columns.append((f"A[{{}}, {j}]", rhs))
     for k, s in enumerate(model.inputs):
-        dF = F.diff(s)
+        dF = F.applyfunc(lambda e, s=s: e.diff(s))
         rhs = []
         for r in range(nq):
             if dF[r] != 0:
