@@ -181,6 +181,23 @@ def _time_ours(made: tuple[Any, Any], seconds: float) -> float:
     return (time.perf_counter() - t0) / count
 
 
+def _paired(choice: tuple[Any, Any], one: tuple[Any, Any], seconds: float) -> float:
+    """Its choice of threads against one thread, step by step: the two environments step in
+    turn (the order alternating), so a busy machine's load, which comes and goes, falls on
+    both alike; the ratio of their total times over about *seconds* (one thread's / the
+    choice's: above 1, the choice is faster)."""
+    spent = [0.0, 0.0]
+    pair = (choice, one)
+    count = max(200, int(seconds / max(_time_ours(one, 0.05), 1e-9)))
+    for k in range(count):
+        for i in ((0, 1) if k % 2 == 0 else (1, 0)):
+            env, actions = pair[i]
+            t0 = time.perf_counter()
+            env.step(actions)
+            spent[i] += time.perf_counter() - t0
+    return spent[1] / spent[0]
+
+
 def _best_step(made: tuple[Any, Any], count: int = 200) -> float:
     env, actions = made
     best = float("inf")
@@ -222,6 +239,10 @@ def env_table(python: str | None, seconds: float, repeats: int) -> dict[str, Any
                         first[(k, n)] = a
                     else:
                         times[(k, n)].append(float(a["per_step"]))
+    # The choice against one thread, stepped in turn: the medians above take each way's
+    # timings apart in time, which under load differ by tens of per cent between two
+    # identical copies.
+    paired = {n: _paired(made[("auto", n)], made[("one", n)], 20 * seconds) for n in SIZES}
     chosen = {n: int(made[("auto", n)][0].unwrapped.threads_in_use) for n in SIZES}
     # The best single step of each way: what it costs when the machine leaves it alone.
     best = {f"{k}@{n}": _best_step(made[(k, n)]) for n in SIZES for k in ("one", "all")}
@@ -229,7 +250,7 @@ def env_table(python: str | None, seconds: float, repeats: int) -> dict[str, Any
         peer.close()
     rate = {f"{k}@{n}": n / statistics.median(v) for (k, n), v in times.items() if v}
     return {"threads": thread_count(), "versions": versions, "usable": usable, "rate": rate,
-            "best_step": best,
+            "best_step": best, "paired": paired,
             "first": {f"{k}@{n}": v for (k, n), v in first.items()}, "chosen": chosen}
 
 
@@ -265,6 +286,8 @@ def print_envs(r: dict[str, Any]) -> None:
                            + (f", all threads {full / one:.2f}x" if full else "")
                            + (f" (another one-thread copy {twin / one:.2f}x)" if twin else ""))
     print("threads: " + "; ".join(verdict))
+    print("its choice against one thread, stepped in turn (one thread's time / the choice's): "
+          + "; ".join(f"N = {n}: {r['paired'][n]:.3f}x" for n in SIZES))
     b = r["best_step"]
     print("best single step of 200, one thread / all threads (ms): " + "; ".join(
         f"N = {n}: {1e3 * b[f'one@{n}']:.3f} / {1e3 * b[f'all@{n}']:.3f} "
