@@ -342,6 +342,13 @@ class System:
     def _solve(
         self, x: np.ndarray, u: np.ndarray, free: tuple[str, ...], fixed: Mapping[str, float]
     ) -> tuple[np.ndarray, np.ndarray]:
+        out = np.empty(self.n_states)
+        self.functions.f(x, u, self.p, out)
+        if not out.any():
+            # Already exactly an equilibrium (an imported model's keyframe, upright with no
+            # input): where least_squares would stop at once, without importing scipy's
+            # optimize (half a second of a first run).
+            return x.copy(), u.copy()
         from scipy.optimize import least_squares
 
         sx = [self.state_names.index(c) for c in free if c in self.state_names]
