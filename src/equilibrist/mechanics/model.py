@@ -161,7 +161,6 @@ class Derivation:
         armature: dict[str, sp.Expr] | None = None,
         points: dict[str, me.Point] | None = None,
         links: Sequence[tuple[str, str]] = (),
-        jacobian_form: str = "symbolic",
     ) -> SymbolicModel:
         """Equations of motion by Kane's method, with the speeds ``u_i = q_i'``.
 
@@ -173,8 +172,7 @@ class Derivation:
         *armature* adds an inertia to the diagonal of ``M`` for the named
         coordinates (a rotor's reflected inertia, as MuJoCo's ``armature``).
         *points* (positions relative to ``O``) and *links* (pairs of point
-        names) describe the mechanism for a generic drawing. *jacobian_form*: see
-        :class:`SymbolicModel`.
+        names) describe the mechanism for a generic drawing.
         """
         speeds = [me.dynamicsymbols(f"{c}_u") for c in self.spec.coordinates]
         kd = [qd - s for qd, s in zip(self.qd, speeds, strict=True)]
@@ -193,10 +191,6 @@ class Derivation:
                 k = self.spec.coordinates.index(name)
                 mass[k, k] += value
         model = self._finish("Kane", mass, forcing, energy, conserved, extras)
-        if jacobian_form != model.jacobian_form:
-            from dataclasses import replace
-
-            model = replace(model, jacobian_form=jacobian_form)
         if points:
             model = self.with_points(model, points, links)
         return model

@@ -227,32 +227,23 @@ static double eq_env_step_copy(int64_t r, const double *a, double *fs, uint64_t 
 
 #ifdef EQ_LANES
 EQ_LANES_PUSH
-/* eq_rk4 and eq_rk4_free on EQ_LANES copies at once, the same operations lane by lane. */
-EQ_INLINE void eqv_rk4(eqv *x, eqv *u, eqv *p, const eqv *w, int noise, double h)
+/* eq_rk4 on EQ_LANES copies at once, the same operations lane by lane. It also gives
+ * eq_rk4_free's bits where the scalar step takes that one (no noise, no -0.0 in the state):
+ * adding the zero noise changes only the sign of a zero sum, and a zero sum then added to a
+ * state component that is not -0.0 gives the same bits either way. */
+EQ_INLINE void eqv_rk4(eqv *x, eqv *u, eqv *p, const eqv *w, double h)
 {
     eqv k1[EQ_N], k2[EQ_N], k3[EQ_N], k4[EQ_N], xt[EQ_N];
     int i;
     EQ_F_LANES(x, u, p, k1);
-    if (noise) {
-        for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * (k1[i] + w[i]);
-        EQ_F_LANES(xt, u, p, k2);
-        for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * (k2[i] + w[i]);
-        EQ_F_LANES(xt, u, p, k3);
-        for (i = 0; i < EQ_N; i++) xt[i] = x[i] + h * (k3[i] + w[i]);
-        EQ_F_LANES(xt, u, p, k4);
-        for (i = 0; i < EQ_N; i++) {
-            x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i] + 6.0 * w[i]);
-        }
-        return;
-    }
-    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * k1[i];
+    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * (k1[i] + w[i]);
     EQ_F_LANES(xt, u, p, k2);
-    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * k2[i];
+    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + 0.5 * h * (k2[i] + w[i]);
     EQ_F_LANES(xt, u, p, k3);
-    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + h * k3[i];
+    for (i = 0; i < EQ_N; i++) xt[i] = x[i] + h * (k3[i] + w[i]);
     EQ_F_LANES(xt, u, p, k4);
     for (i = 0; i < EQ_N; i++) {
-        x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+        x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i] + 6.0 * w[i]);
     }
 }
 
@@ -261,17 +252,15 @@ EQ_INLINE void eqv_rk4(eqv *x, eqv *u, eqv *p, const eqv *w, int noise, double h
  * substeps stopped at its fall). A copy whose autoreset is due is reset, as there. Lanes
  * that do not step (fallen, reset) compute on a stepping lane's numbers, which are
  * dropped: an angle past pi/4 in a fallen copy would send the sines lane by lane. */
-static void eq_env_block(int64_t r0, const double *actions, double *fs,
-                                          uint64_t *us, double *obs, int64_t n_obs,
-                                          double *rewards, uint8_t *flags, int64_t n_copies,
-                                          const double *cf, const int64_t *ci, const eq_env *S,
-                                          double *scr, int64_t width)
+static void eq_env_block(int64_t r0, const double *actions, double *fs, uint64_t *us,
+                         double *obs, int64_t n_obs, double *rewards, uint8_t *flags,
+                         int64_t n_copies, const double *cf, const int64_t *ci, const eq_env *S,
+                         double *scr, int64_t width)
 {
     const int64_t fw = eq_env_fs_width(ci);
-    double *zbuf = scr + 2 * width, *k1 = scr + 3 * width, *k2 = scr + 4 * width;
-    double *k3 = scr + 5 * width, *k4 = scr + 6 * width, *xt = scr + 7 * width;
+    double *zbuf = scr + 2 * width;
     eqv x[EQ_N], xprev[EQ_N], u[EQ_M], p[EQ_NP], w[EQ_N];
-    double uu[EQ_LANES][EQ_M > 0 ? EQ_M : 1], xl[EQ_N], wl[EQ_N];
+    double uu[EQ_LANES][EQ_M > 0 ? EQ_M : 1], xl[EQ_N];
     const eqv zero = {0.0};
     int64_t code[EQ_LANES];
     eqvi inside;
@@ -297,7 +286,6 @@ static void eq_env_block(int64_t r0, const double *actions, double *fs,
         for (j = 0; j < EQ_M; j++) u[j][l] = uu[l][j];
     }
     for (s = 0; s < S->n_sub && lead >= 0; s++) {
-        int plain = 1;
         for (l = 0; l < EQ_LANES; l++) {
             if (stepping[l]) continue;
             for (i = 0; i < EQ_N; i++) x[i][l] = x[i][lead];
@@ -305,34 +293,17 @@ static void eq_env_block(int64_t r0, const double *actions, double *fs,
             for (j = 0; j < EQ_M; j++) u[j][l] = u[j][lead];
         }
         for (i = 0; i < EQ_N; i++) w[i] = zero;
-        if (S->nw > 0) {
-            for (l = 0; l < EQ_LANES; l++) {
-                if (!stepping[l]) continue;
-                eq_normals(us + (r0 + l) * EQ_US_WIDTH, zbuf, S->nw);
-                for (i = 0; i < EQ_N; i++) {
-                    double v = 0.0;
-                    for (c = 0; c < S->nw; c++) v += S->lw[i * S->nw + c] * zbuf[c];
-                    w[i][l] = v;
-                }
+        for (l = 0; l < EQ_LANES && S->nw > 0; l++) {
+            if (!stepping[l]) continue;
+            eq_normals(us + (r0 + l) * EQ_US_WIDTH, zbuf, S->nw);
+            for (i = 0; i < EQ_N; i++) {
+                double v = 0.0;
+                for (c = 0; c < S->nw; c++) v += S->lw[i * S->nw + c] * zbuf[c];
+                w[i][l] = v;
             }
-        } else {
-            eqvi negative_zero = (eqvi)x[0] == INT64_MIN;
-            for (i = 1; i < EQ_N; i++) negative_zero |= (eqvi)x[i] == INT64_MIN;
-            plain = !eqv_any(negative_zero);
         }
         for (i = 0; i < EQ_N; i++) xprev[i] = x[i];
-        eqv_rk4(x, u, p, w, S->nw > 0, S->h);
-        for (l = 0; l < EQ_LANES && !plain; l++) {
-            /* A -0.0 in the state: eq_rk4_step takes eq_rk4 with its zero noise there. */
-            double ul[EQ_M > 0 ? EQ_M : 1], pl[EQ_NP];
-            for (i = 0; i < EQ_N; i++) xl[i] = xprev[i][l];
-            if (eq_no_negative_zero(xl)) continue;
-            for (i = 0; i < EQ_N; i++) wl[i] = 0.0;
-            for (j = 0; j < EQ_M; j++) ul[j] = u[j][l];
-            for (j = 0; j < EQ_NP; j++) pl[j] = p[j][l];
-            eq_rk4(xl, ul, pl, wl, S->h, k1, k2, k3, k4, xt);
-            for (i = 0; i < EQ_N; i++) x[i][l] = xl[i];
-        }
+        eqv_rk4(x, u, p, w, S->h);
         lead = -1;
         inside = (x[0] > S->region[0]) & (x[0] < S->region[EQ_N]);
         for (i = 1; i < EQ_N; i++) inside &= (x[i] > S->region[i]) & (x[i] < S->region[EQ_N + i]);

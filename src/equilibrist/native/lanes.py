@@ -193,16 +193,15 @@ def widen(function: pyc.Function) -> str | None:
     params = head.group(2).replace("double *", "eqv *")
     body = []
     for line in lines[2:-1]:
-        text = line.replace("(double)INT64_C(", "(SCALAR)INT64_C(")
-        text = re.sub(r"^(\s*)double (v_\w+) = 0;$", r"\1eqv \2 = {0.0};", text)
+        text = re.sub(r"^(\s*)double (v_\w+) = 0;$", r"\1eqv \2 = {0.0};", line)
         text = re.sub(r"^(\s*)const double ", r"\1const eqv ", text)
         text = text.replace("eq_sin(", "eqv_sin(").replace("eq_cos(", "eqv_cos(")
-        if "double" in text or re.search(r"\b(if|for|while|return|switch|goto)\b", text):
+        rest = text.replace("(double)INT64_C(", "INT64_C(")  # integer literals stay scalars
+        if "double" in rest or re.search(r"\b(if|for|while|return|switch|goto)\b", rest):
             return None
-        if any(name not in _ALLOWED_CALLS for name in _CALL.findall(text)
-               if name not in ("void", "SCALAR")):
+        if any(name not in _ALLOWED_CALLS for name in _CALL.findall(rest)):
             return None
-        body.append(text.replace("(SCALAR)INT64_C(", "(double)INT64_C("))
+        body.append(text)
     return "\n".join([f"EQ_INLINE void {head.group(1)}_lanes({params})", "{", *_shared(body),
                       "}"])
 
