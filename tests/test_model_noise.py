@@ -77,3 +77,37 @@ def test_qn_sets_the_noise_and_the_kalman_filter_follows(capsys) -> None:
     assert main(["simulate", str(ACROBOT), "--qn", "0,0,0.0025,0.0025", "--duration", "4",
                  "--no-progress"]) == 0
     assert not _stayed_up(capsys.readouterr().out)
+
+
+def test_the_rules_solvers_match_scipys() -> None:
+    # The rule solves its Riccati and Lyapunov equations with numpy alone (scipy.linalg's
+    # import is a tenth of a first run); scipy's Schur-based solvers are the reference.
+    from scipy.linalg import solve_continuous_are, solve_continuous_lyapunov
+
+    from equilibrist.importers import _care, _lyapunov
+    from equilibrist.importers.tree import read_tree
+
+    rng = np.random.default_rng(3)
+    cases = []
+    for path in (ACROBOT, ROOT / "tests" / "models" / "leaning_cartpole.xml", ROOT / "examples" / "furuta.xml",
+                 ROOT / "tests" / "models" / "cartpole.xml"):
+        a, b = (np.array(m, float) for m in read_tree(path).linear)
+        assert np.max(np.linalg.eigvals(a).real) > 0.5  # upright: unstable
+        cases.append((a, b))
+    for n in (2, 4, 6):
+        cases.append((rng.normal(size=(n, n)), rng.normal(size=(n, 2))))
+    for a, b in cases:
+        n, m = a.shape[0], b.shape[1]
+        q = np.diag(rng.uniform(0.5, 400.0, n))
+        r = np.diag(rng.uniform(0.05, 4.0, m))
+        expected = solve_continuous_are(a, b, q, r)
+        got = _care(a, b, q, r)
+        np.testing.assert_allclose(got, expected, rtol=1e-7, atol=1e-9 * np.abs(expected).max())
+        closed = a - b @ np.linalg.solve(r, b.T @ got)
+        w = rng.normal(size=(n, n))
+        noise = -(w @ w.T)
+        np.testing.assert_allclose(_lyapunov(closed, noise), solve_continuous_lyapunov(closed, noise),
+                                   rtol=1e-8, atol=1e-10)
+    # No stabilizing solution (an unweighted, uncontrollable integrator): refused, as scipy.
+    with pytest.raises(np.linalg.LinAlgError):
+        _care(np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)), np.eye(1))

@@ -4,8 +4,8 @@ The model file is the only input. MuJoCo's own compiler reads it (MJCF and
 URDF alike, with defaults classes, the angle unit, euler sequences,
 ``fullinertia`` and inertia inferred from geoms, fixed joints merged);
 equilibrist takes the compiled kinematic tree (:mod:`.tree`) and derives the
-symbolic equations of motion from it with sympy.physics.mechanics by Kane's
-method (:mod:`.derive`). A URDF's ``<transmission>`` elements, which MuJoCo
+symbolic equations of motion from it by Lagrange's equations written out in
+matrices (:mod:`.derive`). A URDF's ``<transmission>`` elements, which MuJoCo
 ignores, are read with :mod:`xml.etree` (:mod:`.urdf`).
 
 The system that results is an ordinary :class:`~equilibrist.numeric.system.System`:
@@ -49,6 +49,8 @@ from equilibrist.mechanics.spec import (
 from equilibrist.systems.registry import Entry
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from equilibrist.mechanics.model import Derivation, SymbolicModel
 
 # Defaults that make design and simulation work with nothing but the file
@@ -176,7 +178,6 @@ def _input_share(tree: Tree, scales: Sequence[float], ranges: Sequence[float]) -
     default LQR spends on process noise of unit intensity on every rate (None: no motor,
     or no stabilizing LQR)."""
     import numpy as np
-    from scipy.linalg import solve_continuous_are, solve_continuous_lyapunov
 
     a, b = (np.array(m, dtype=float) for m in tree.linear)
     if not tree.actuators or b.size == 0:
@@ -185,18 +186,47 @@ def _input_share(tree: Tree, scales: Sequence[float], ranges: Sequence[float]) -
     half = np.asarray(ranges, dtype=float)
     try:
         with np.errstate(all="ignore"):
-            s = solve_continuous_are(a, b, np.diag(1.0 / np.asarray(scales, float) ** 2),
-                                     np.diag(1.0 / half**2))
+            s = _care(a, b, np.diag(1.0 / np.asarray(scales, float) ** 2), np.diag(1.0 / half**2))
             k = np.linalg.solve(np.diag(1.0 / half**2), b.T @ s)
             closed = a - b @ k
             if not np.all(np.linalg.eigvals(closed).real < 0):
                 return None
             g = np.vstack([np.zeros((n, n)), np.eye(n)])
-            x = solve_continuous_lyapunov(closed, -g @ g.T)
+            x = _lyapunov(closed, -g @ g.T)
         share = float(np.max(np.sqrt(np.clip(np.diag(k @ x @ k.T), 0.0, None)) / half))
     except (np.linalg.LinAlgError, ValueError):
         return None
     return share if math.isfinite(share) and share > 0 else None
+
+
+# The two small solves of the process-noise rule with numpy alone: scipy.linalg's import
+# (0.2 s) is a tenth of an imported model's first run, and nothing else on that path needs
+# it. A rule rounded to two digits needs neither Schur's accuracy nor speed at this size;
+# the tests hold both to scipy.linalg's solvers.
+def _care(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The stabilizing solution of ``A'X + XA - XBR^-1B'X + Q = 0`` from the stable
+    invariant subspace of the Hamiltonian matrix (MacFarlane and Potter's method)."""
+    import numpy as np
+
+    n = a.shape[0]
+    hamiltonian = np.block([[a, -b @ np.linalg.solve(r, b.T)], [-q, -a.T]])
+    values, vectors = np.linalg.eig(hamiltonian)
+    stable = vectors[:, values.real < 0]
+    if stable.shape[1] != n:
+        raise np.linalg.LinAlgError("the Hamiltonian matrix has eigenvalues on the imaginary axis")
+    x = np.linalg.solve(stable[:n].T, stable[n:].T).T.real
+    symmetric: np.ndarray = (x + x.T) / 2
+    return symmetric
+
+
+def _lyapunov(a: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The solution of ``AX + XA' = Q``, by its Kronecker form (a few dozen states at most)."""
+    import numpy as np
+
+    n = a.shape[0]
+    eye = np.eye(n)
+    x = np.linalg.solve(np.kron(eye, a) + np.kron(a, eye), q.reshape(-1, order="F"))
+    return x.reshape(n, n, order="F")
 
 
 def _check_numbers(file: Path, content: bytes, depth: int = 0) -> None:

@@ -1,4 +1,4 @@
-"""Equations of motion of a kinematic tree, derived with sympy.physics.mechanics.
+"""Equations of motion of a kinematic tree, derived by Lagrange's equations in matrices.
 
 Each body's pose follows MuJoCo's forward kinematics: the frame is placed
 in its parent's by the body's constant position and orientation, then each
@@ -14,9 +14,10 @@ velocities and the inertia tensor in the world are short polynomials in
 the sines and cosines of the joint angles. (Chaining sympy frames by
 constant rotations instead nests the direction cosines and makes even a
 two-joint tree take minutes to derive.) Lagrange's equations are then
-written out from them (:func:`_lagrange_of_tree`), in plain matrices rather
-than through sympy's vectors and Kane's method, which took most of a first
-run's seconds: the mass matrix from each body's centre-of-mass and
+written out from them (:func:`_lagrange_of_tree`), in plain matrices and
+plain symbols rather than through sympy.physics' vectors and Kane's method,
+which took most of a first run's seconds (importing sympy.physics alone, a
+quarter of a second, for its units): the mass matrix from each body's centre-of-mass and
 angular-velocity Jacobians and its inertia in the world, the Coriolis and
 centrifugal terms from the mass matrix's derivatives, gravity from its
 potential; joint damping, springs and motors are each joint's generalized
@@ -37,7 +38,6 @@ from equilibrist.importers.tree import Tree
 
 if TYPE_CHECKING:
     import sympy as sp
-    from sympy.physics import mechanics as me
 
     from equilibrist.mechanics.model import Derivation, SymbolicModel
 
@@ -92,15 +92,11 @@ def _rotation(axis: tuple[float, float, float], angle: sp.Expr) -> sp.Matrix:
     return _matrix(outer) + c * _matrix(np.eye(3) - outer) + s * _matrix(cross)
 
 
-def _in_world(N: me.ReferenceFrame, v: sp.Matrix) -> me.Vector:
-    return v[0] * N.x + v[1] * N.y + v[2] * N.z
-
-
 def derive_tree(tree: Tree, d: Derivation) -> SymbolicModel:
     """The symbolic model of *tree* in the derivation context *d*."""
     import sympy as sp
 
-    N, O = d.N, d.O
+    qs, qds = d.coordinates()
     rotations: list[sp.Matrix] = []  # world orientation of each body's frame
     origins: list[sp.Matrix] = []  # world position of each body's frame origin
     spins: list[sp.Matrix] = []  # world angular velocity of each body
@@ -126,14 +122,14 @@ def derive_tree(tree: Tree, d: Derivation) -> SymbolicModel:
         rot = _expand(rot * _matrix(_quat_matrix(body.quat)))
         for n, j in enumerate(body.joints):
             joint = tree.joints[j]
-            q = d.q[j] - _float(joint.ref)
+            q = qs[j] - _float(joint.ref)
             axis = _expand(rot * _column(joint.axis))
             joint_axes[j] = axis
             anchor = _expand(origin + rot * _column(joint.pos))
             if joint.kind == "hinge":
                 rot = _expand(rot * _rotation(joint.axis, q))
                 origin = _expand(anchor - rot * _column(joint.pos))
-                spin = spin + d.qd[j] * axis
+                spin = spin + qds[j] * axis
             else:
                 # The anchor stays where the slide starts (on the parent), as
                 # MuJoCo's xanchor: the link drawn from it shows the extension.
@@ -159,8 +155,8 @@ def derive_tree(tree: Tree, d: Derivation) -> SymbolicModel:
     # its joint's generalized force.
     forces = []
     for j, joint in enumerate(tree.joints):
-        q = d.q[j]
-        generalized = -d.p[f"{joint.name}_damping"] * d.qd[j]
+        q = qs[j]
+        generalized = -d.p[f"{joint.name}_damping"] * qds[j]
         if joint.stiffness:
             generalized -= _float(joint.stiffness) * (q - _float(joint.spring_ref))
             potential += _float(joint.stiffness) * (q - _float(joint.spring_ref)) ** 2 / 2
@@ -170,34 +166,29 @@ def derive_tree(tree: Tree, d: Derivation) -> SymbolicModel:
                 # times MuJoCo's ctrl): the spec names it input_names[k].
                 generalized += d.u[d.spec.input_names[k]]
         forces.append(generalized)
-    mass_matrix, forcing, kinetic = _lagrange_of_tree(d, inertias, armature, gravity, forces)
-    points = {}
-    for name, r in positions.items():
-        points[name] = O.locatenew(f"{name}_point", _in_world(N, r))
+    mass_matrix, forcing, kinetic = _lagrange_of_tree(d, qs, qds, inertias, armature, gravity, forces)
     return d.from_mass_matrix(
         "Lagrange (tree)",
         mass_matrix,
         forcing,
         energy=kinetic + potential + gravity,
-        points=points,
+        points=positions,
         links=links,
         jacobian_form="mass",
     )
 
 
-def _lagrange_of_tree(d: Derivation, inertias: list[tuple[sp.Expr, sp.Matrix, sp.Matrix, sp.Matrix]],
+def _lagrange_of_tree(d: Derivation, qs: list[sp.Symbol], qds: list[sp.Symbol], inertias: list[tuple[sp.Expr, sp.Matrix, sp.Matrix, sp.Matrix]],
                       armature: dict[str, sp.Expr], gravity: sp.Expr,
                       forces: list[sp.Expr]) -> tuple[sp.Matrix, sp.Matrix, sp.Expr]:
-    """``M``, ``F`` and the kinetic energy of a tree, in plain symbols: Lagrange's equations
+    """``M``, ``F`` and the kinetic energy of a tree in the coordinates *qs* and rates *qds*
+    (plain symbols): Lagrange's equations
     written out. ``M = sum m Jv^T Jv + Jw^T I Jw`` over the bodies (``Jv`` the centre of
     mass's Jacobian, ``Jw`` the angular velocity's, ``I`` the inertia in the world) plus
     the armatures; ``F = Q - dV/dq - h`` with the joints' generalized forces ``Q``, the
     gravity's potential ``V`` and ``h_i = sum_jk (dM_ij/dq_k - dM_jk/dq_i / 2) qd_j qd_k``."""
     import sympy as sp
 
-    plain = d._plain()
-    qs = [plain[qi] for qi in d.q]
-    qds = [plain[qdi] for qdi in d.qd]
     n = len(qs)
     mass = sp.zeros(n, n)
     def jacobian(v: sp.Matrix, by: list[sp.Symbol]) -> sp.Matrix:
@@ -205,9 +196,9 @@ def _lagrange_of_tree(d: Derivation, inertias: list[tuple[sp.Expr, sp.Matrix, sp
         return sp.Matrix(len(v), len(by), [e.diff(b) for e in v for b in by])
 
     for m, com, spin, tensor in inertias:
-        jv = jacobian(sp.Matrix(d.plain(com)), qs)
-        jw = jacobian(sp.Matrix(d.plain(spin)), qds)
-        mass += m * (jv.T * jv) + jw.T * sp.Matrix(d.plain(tensor)) * jw
+        jv = jacobian(com, qs)
+        jw = jacobian(spin, qds)
+        mass += m * (jv.T * jv) + jw.T * tensor * jw
     for name, value in armature.items():
         k = d.spec.coordinates.index(name)
         mass[k, k] += value
@@ -218,7 +209,6 @@ def _lagrange_of_tree(d: Derivation, inertias: list[tuple[sp.Expr, sp.Matrix, sp
     for i in range(n):
         bias[i] = sum(((dmass[k][i, :] * rates)[0] * qds[k] for k in range(n)), sp.Integer(0)) \
             - (rates.T * dmass[i] * rates)[0] / 2
-    potential = d.plain(gravity)
-    forcing = sp.Matrix([d.plain(forces[i]) - sp.diff(potential, qs[i]) - bias[i] for i in range(n)])
+    forcing = sp.Matrix([forces[i] - sp.diff(gravity, qs[i]) - bias[i] for i in range(n)])
     kinetic = (rates.T * mass * rates)[0] / 2
     return mass, forcing, kinetic

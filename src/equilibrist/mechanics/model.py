@@ -16,11 +16,14 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import sympy as sp
-from sympy.physics import mechanics as me
 
 from equilibrist.mechanics.spec import SystemSpec
+
+if TYPE_CHECKING:
+    from sympy.physics import mechanics as me
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,18 +99,52 @@ class Derivation:
         Parameter symbols by name.
     N, O:
         A Newtonian frame and its origin, for convenience.
+
+    The time functions, the frame and the point are made on first use, so a
+    derivation written in plain symbols (an imported tree's, :meth:`coordinates`)
+    does not import sympy.physics (a quarter of a second, for its units).
     """
 
     def __init__(self, spec: SystemSpec) -> None:
         self.spec = spec
-        self.t = me.dynamicsymbols._t
-        self.q = [me.dynamicsymbols(c) for c in spec.coordinates]
-        self.qd = [qi.diff(self.t) for qi in self.q]
         self.u = {i.name: sp.Symbol(i.name, real=True) for i in spec.inputs}
         self.p = {p.name: sp.Symbol(p.name, real=True) for p in spec.all_parameters}
-        self.N = me.ReferenceFrame("N")
-        self.O = me.Point("O")
-        self.O.set_vel(self.N, 0)
+
+    @cached_property
+    def t(self) -> sp.Symbol:
+        from sympy.physics import mechanics as me
+
+        return me.dynamicsymbols._t
+
+    @cached_property
+    def q(self) -> list[sp.Function]:
+        from sympy.physics import mechanics as me
+
+        return [me.dynamicsymbols(c) for c in self.spec.coordinates]
+
+    @cached_property
+    def qd(self) -> list[sp.Expr]:
+        return [qi.diff(self.t) for qi in self.q]
+
+    @cached_property
+    def N(self) -> me.ReferenceFrame:
+        from sympy.physics import mechanics as me
+
+        return me.ReferenceFrame("N")
+
+    @cached_property
+    def O(self) -> me.Point:  # noqa: E743 (the origin's conventional name)
+        from sympy.physics import mechanics as me
+
+        origin = me.Point("O")
+        origin.set_vel(self.N, 0)
+        return origin
+
+    def coordinates(self) -> tuple[list[sp.Symbol], list[sp.Symbol]]:
+        """The coordinates and their rates as plain symbols (``theta``, ``theta_dot``), the
+        names a model's states have: for a derivation that needs no time functions."""
+        return ([sp.Symbol(c, real=True) for c in self.spec.coordinates],
+                [sp.Symbol(f"{c}_dot", real=True) for c in self.spec.coordinates])
 
     # -- helpers shared by the systems ------------------------------------
     def coord(self, name: str) -> sp.Function:
@@ -128,6 +165,8 @@ class Derivation:
 
     def plain(self, expr: sp.Expr | sp.Matrix) -> sp.Expr | sp.Matrix:
         """*expr* with ``q(t)``, ``q'(t)``, ``q''(t)`` replaced by plain symbols."""
+        from sympy.physics import mechanics as me
+
         return me.msubs(expr, self._plain())
 
     # -- finishing a derivation --------------------------------------------
@@ -146,6 +185,8 @@ class Derivation:
         torques on frames, as :class:`sympy.physics.mechanics.LagrangesMethod`
         takes them (generalized forces come from their virtual work).
         """
+        from sympy.physics import mechanics as me
+
         lm = me.LagrangesMethod(lagrangian, self.q, forcelist=list(loads), frame=self.N)
         lm.form_lagranges_equations()
         return self._finish("Lagrange", lm.mass_matrix, lm.forcing, energy, conserved, extras)
@@ -174,6 +215,8 @@ class Derivation:
         *points* (positions relative to ``O``) and *links* (pairs of point
         names) describe the mechanism for a generic drawing.
         """
+        from sympy.physics import mechanics as me
+
         speeds = [me.dynamicsymbols(f"{c}_u") for c in self.spec.coordinates]
         kd = [qd - s for qd, s in zip(self.qd, speeds, strict=True)]
         km = me.KanesMethod(self.N, q_ind=self.q, u_ind=speeds, kd_eqs=kd)
@@ -202,28 +245,35 @@ class Derivation:
         forcing: sp.Matrix,
         *,
         energy: sp.Expr | None = None,
-        points: dict[str, me.Point] | None = None,
+        points: dict[str, sp.Matrix] | None = None,
         links: Sequence[tuple[str, str]] = (),
         jacobian_form: str = "symbolic",
     ) -> SymbolicModel:
-        """The model of ``M(q) q_ddot = F`` formed by the caller (an imported tree writes
-        Lagrange's equations out), finished as :meth:`kane` finishes its own."""
+        """The model of ``M(q) q_ddot = F`` formed by the caller in plain symbols
+        (:meth:`coordinates`; an imported tree writes Lagrange's equations out), with its
+        named *points* as ``(x, y, z)`` columns in the world, finished as :meth:`kane`
+        finishes its own."""
         from dataclasses import replace
 
-        model = replace(self._finish(method, mass, forcing, energy, None, None),
+        model = replace(self._finish(method, mass, forcing, energy, None, None, plain=True),
                         jacobian_form=jacobian_form)
-        return self.with_points(model, points, links) if points else model
+        return self._record_points(model, points or {}, links)
 
     def with_points(
         self, model: SymbolicModel, points: dict[str, me.Point], links: Sequence[tuple[str, str]] = ()
     ) -> SymbolicModel:
         """*model* with named *points* (positions from ``O`` in ``N``) and *links* recorded."""
-        from dataclasses import replace
-
         recorded: dict[str, sp.Matrix] = {}
         for name, point in points.items():
             r = point.pos_from(self.O)
             recorded[name] = sp.Matrix(self.plain(sp.Matrix([r.dot(self.N.x), r.dot(self.N.y), r.dot(self.N.z)])))
+        return self._record_points(model, recorded, links)
+
+    @staticmethod
+    def _record_points(model: SymbolicModel, recorded: dict[str, sp.Matrix],
+                       links: Sequence[tuple[str, str]]) -> SymbolicModel:
+        from dataclasses import replace
+
         for a, b in links:
             if a not in recorded or b not in recorded:
                 raise ValueError(f"link ({a}, {b}) joins a point that is not recorded")
@@ -263,9 +313,17 @@ class Derivation:
         energy: sp.Expr | None,
         conserved: dict[str, sp.Expr] | None,
         extras: dict[str, sp.Expr] | None,
+        *,
+        plain: bool = False,
     ) -> SymbolicModel:
-        M = sp.Matrix(self.plain(mass)).applyfunc(sp.expand_trig).applyfunc(sp.factor_terms)
-        F = sp.Matrix(self.plain(forcing)).applyfunc(sp.expand).applyfunc(sp.collect_const)
+        """The model of ``M q_ddot = F``; *plain*: the expressions are in plain symbols already."""
+        if not plain:
+            mass, forcing = self.plain(mass), self.plain(forcing)
+            energy = None if energy is None else self.plain(energy)
+            conserved = {k: self.plain(v) for k, v in (conserved or {}).items()}
+            extras = {k: self.plain(v) for k, v in (extras or {}).items()}
+        M = sp.Matrix(mass).applyfunc(sp.expand_trig).applyfunc(sp.factor_terms)
+        F = sp.Matrix(forcing).applyfunc(sp.expand).applyfunc(sp.collect_const)
         qdd = _solve_linear(M, F)
         q_rates = sp.Matrix([sp.Symbol(f"{c}_dot", real=True) for c in self.spec.coordinates])
         f = sp.Matrix.vstack(q_rates, qdd)
@@ -279,9 +337,9 @@ class Derivation:
             f=f,
             M=M,
             F=F,
-            energy=None if energy is None else sp.sympify(self.plain(energy)),
-            conserved={k: sp.sympify(self.plain(v)) for k, v in (conserved or {}).items()},
-            extras={k: sp.sympify(self.plain(v)) for k, v in (extras or {}).items()},
+            energy=None if energy is None else sp.sympify(energy),
+            conserved={k: sp.sympify(v) for k, v in (conserved or {}).items()},
+            extras={k: sp.sympify(v) for k, v in (extras or {}).items()},
         )
 
 
