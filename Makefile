@@ -27,10 +27,15 @@ $(STAMP): pyproject.toml setup.py $(wildcard src/equilibrist/native/daqp/src/*.c
 demo: $(STAMP)
 	$(VENV)/bin/equilibrist demo
 
+# The type check (half a minute of one core from a fresh clone) runs beside the tests, in
+# the cores' idle moments (the tests' subprocesses, browser and serial links wait); its
+# report follows theirs, and either failing fails the target.
 test: $(STAMP)
 	$(VENV)/bin/ruff check src tests bench examples setup.py
-	$(VENV)/bin/mypy src/equilibrist
-	$(PY) -m pytest -n $(JOBS) -q --durations=15
+	@$(VENV)/bin/mypy src/equilibrist > $(VENV)/mypy.log 2>&1 & types=$$!; \
+	$(PY) -m pytest -n $(JOBS) -q --durations=15; tests=$$?; \
+	wait $$types; typed=$$?; echo "mypy src/equilibrist:"; cat $(VENV)/mypy.log; \
+	exit $$(( tests != 0 ? tests : typed ))
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests bench examples setup.py

@@ -355,7 +355,10 @@ EQ_EXPORT int eq_run_one(const eq_args *a)
 }
 
 /* Independent runs over the per-run arrays, in parallel: x0s, rngs, p_sets (n_runs stacked
- * sets), lin_s, rec, acc, status, fell_x and x_ends hold one block per run. */
+ * sets), lin_s, rec, acc, status, fell_x and x_ends hold one block per run. A run's
+ * accumulators and status, written at every sample, are kept in its own memory while it
+ * runs and copied back at its end: neighbouring runs' blocks share cache lines, and two
+ * threads writing one line at every sample ran the batch at 1.2 times one thread's speed. */
 EQ_EXPORT int eq_run_many(const eq_args *a)
 {
     const int64_t n_rows = a->iopts[EQ_IO_N_SAMPLES] + 1;
@@ -370,8 +373,10 @@ EQ_EXPORT int eq_run_many(const eq_args *a)
     for (r = 0; r < a->n_runs; r++) {
         int64_t width, i;
         double *scr = eq_scratch(a, &width);
-        double *x = (double *)malloc(sizeof(double) * (EQ_N + EQ_M + (a->nz > 0 ? a->nz : 1)));
+        const int64_t nz1 = a->nz > 0 ? a->nz : 1;
+        double *x = (double *)malloc(sizeof(double) * (EQ_N + EQ_M + nz1 + a->acc_w));
         uint64_t rng[4];
+        int64_t status[4];
         if (scr == NULL || x == NULL) {
             free(scr);
             free(x);
@@ -381,19 +386,24 @@ EQ_EXPORT int eq_run_many(const eq_args *a)
         {
             double *u_prev = x + EQ_N;
             double *z = u_prev + EQ_M;
+            double *acc = z + nz1;
             for (i = 0; i < EQ_N; i++) x[i] = a->x0s[r * EQ_N + i];
             for (i = 0; i < a->nz; i++) z[i] = a->z[i];
             for (i = 0; i < EQ_M; i++) u_prev[i] = 0.0;
             for (i = 0; i < 4; i++) rng[i] = a->rngs[r * 4 + i];
+            for (i = 0; i < a->acc_w; i++) acc[i] = a->acc[r * a->acc_w + i];
+            for (i = 0; i < 4; i++) status[i] = a->status[r * 4 + i];
             (plain ? eq_run_plain : eq_run)(
                 a, 0, n_rows, x, z, u_prev, rng, a->p_sets + r * a->n_sets * a->p_len,
                 a->lin_s == NULL ? NULL : a->lin_s + r * lin_size,
                 a->rec == NULL ? NULL : a->rec + r * n_rows * a->rec_w,
-                a->acc + r * a->acc_w, a->status + r * 4, scr, width);
+                acc, status, scr, width);
             for (i = 0; i < EQ_N; i++) {
                 a->x_ends[r * EQ_N + i] = x[i];
                 a->fell_x[r * EQ_N + i] = EQ_ROW(scr, width, EQ_S_FELL_X)[i];
             }
+            for (i = 0; i < a->acc_w; i++) a->acc[r * a->acc_w + i] = acc[i];
+            for (i = 0; i < 4; i++) a->status[r * 4 + i] = status[i];
         }
         free(scr);
         free(x);
