@@ -17,8 +17,8 @@ two-joint tree take minutes to derive.) Lagrange's equations are then
 written out from them (:func:`_lagrange_of_tree`), in plain matrices and
 plain symbols rather than through sympy.physics' vectors and Kane's method,
 which took most of a first run's seconds (importing sympy.physics alone, a
-quarter of a second, for its units): the mass matrix from each body's centre-of-mass and
-angular-velocity Jacobians and its inertia in the world, the Coriolis and
+quarter of a second, for its units): the mass matrix from each body's
+centre-of-mass and angular-velocity Jacobians and its inertia in the world, the Coriolis and
 centrifugal terms from the mass matrix's derivatives, gravity from its
 potential; joint damping, springs and motors are each joint's generalized
 force (the torque on the child body and its reaction on the parent, summed,
@@ -178,12 +178,12 @@ def derive_tree(tree: Tree, d: Derivation) -> SymbolicModel:
     )
 
 
-def _lagrange_of_tree(d: Derivation, qs: list[sp.Symbol], qds: list[sp.Symbol], inertias: list[tuple[sp.Expr, sp.Matrix, sp.Matrix, sp.Matrix]],
+def _lagrange_of_tree(d: Derivation, qs: list[sp.Symbol], qds: list[sp.Symbol],
+                      inertias: list[tuple[sp.Expr, sp.Matrix, sp.Matrix, sp.Matrix]],
                       armature: dict[str, sp.Expr], gravity: sp.Expr,
                       forces: list[sp.Expr]) -> tuple[sp.Matrix, sp.Matrix, sp.Expr]:
     """``M``, ``F`` and the kinetic energy of a tree in the coordinates *qs* and rates *qds*
-    (plain symbols): Lagrange's equations
-    written out. ``M = sum m Jv^T Jv + Jw^T I Jw`` over the bodies (``Jv`` the centre of
+    (plain symbols): Lagrange's equations written out. ``M = sum m Jv^T Jv + Jw^T I Jw`` over the bodies (``Jv`` the centre of
     mass's Jacobian, ``Jw`` the angular velocity's, ``I`` the inertia in the world) plus
     the armatures; ``F = Q - dV/dq - h`` with the joints' generalized forces ``Q``, the
     gravity's potential ``V`` and ``h_i = sum_jk (dM_ij/dq_k - dM_jk/dq_i / 2) qd_j qd_k``."""
