@@ -50,7 +50,10 @@ def environment(cache: Path) -> dict[str, str]:
 
 @contextmanager
 def cached_cc(cache: Path) -> Iterator[None]:
-    """``CC`` this front within the block (for the in-process compiles of the MPC export)."""
+    """``CC`` this front within the block (for the in-process compiles of the MPC export).
+
+    Not around a command that builds a simulation core: the core's builder remembers the
+    compiler it found first (:func:`cached_measure` is for an export command)."""
     names = ("CC", "EQUILIBRIST_TEST_REAL_CC", "EQUILIBRIST_TEST_CC_CACHE")
     saved = {k: os.environ.get(k) for k in names}
     os.environ.update({k: environment(cache)[k] for k in names})
@@ -126,3 +129,23 @@ def main(args: list[str]) -> int:
 
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))
+
+
+@contextmanager
+def cached_measure(cache: Path) -> Iterator[None]:
+    """An export's measurement at export (``make size`` of its files, in
+    :func:`equilibrist.export._size.measure`) through this front within the block, and
+    nothing else: the commands' other compiles (the cores) keep the real compiler."""
+    from equilibrist.export import _size
+
+    original = _size.measure
+
+    def measure(files: object) -> object:
+        with cached_cc(cache):
+            return original(files)  # type: ignore[arg-type]
+
+    _size.measure = measure  # type: ignore[assignment]
+    try:
+        yield
+    finally:
+        _size.measure = original
