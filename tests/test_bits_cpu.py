@@ -362,12 +362,13 @@ def test_a_study_on_workers_with_different_cpu_settings_gives_the_local_table(tm
         assert all(n > 0 for n in done.values()), f"a worker ran nothing: {done}"
         assert out.read_bytes() == local.read_bytes()
     finally:
+        # The workers leave first, while their scheduler is there to hear it: a worker whose
+        # scheduler has gone waits on it (once in a few runs, until the deadline: 20 s).
+        deadline = time.monotonic() + 20
         for p in reversed(procs):
             p.terminate()
-        deadline = time.monotonic() + 20
-        for p in procs:
             try:
                 p.wait(timeout=max(0.1, deadline - time.monotonic()))
-            except subprocess.TimeoutExpired:  # a worker that does not leave on SIGTERM
+            except subprocess.TimeoutExpired:  # a process that does not leave on SIGTERM
                 p.kill()
                 p.wait(timeout=10)  # reaped, so no process is left running
