@@ -29,6 +29,7 @@ from __future__ import annotations
 import re
 
 from equilibrist.native import pyc
+from equilibrist.numeric.libm import kernel_c
 
 #: Copies stepped at once (eight doubles: one AVX-512 register).
 LANES = 8
@@ -69,30 +70,19 @@ typedef int64_t eqvi __attribute__((vector_size({LANES * 8})));
 /* libm's eq_ksin(x, 0.0, 0) and eq_kcos(x, y), lane by lane. */
 EQ_INLINE eqv eqv_ksin0(eqv x)
 {{
-    eqv z = x * x;
-    eqv w = z * z;
-    eqv r = EQ_S2 + z * (EQ_S3 + z * EQ_S4) + z * w * (EQ_S5 + z * EQ_S6);
-    eqv v = z * x;
-    return x + v * (EQ_S1 + z * r);
+{kernel_c("sin_poly", "eqv")}
+    return {kernel_c("sin_small")};
 }}
 
 EQ_INLINE eqv eqv_kcos(eqv x, eqv y)
 {{
-    eqv z = x * x;
-    eqv w = z * z;
-    eqv r = z * (EQ_C1 + z * (EQ_C2 + z * EQ_C3)) + w * w * (EQ_C4 + z * (EQ_C5 + z * EQ_C6));
-    eqv hz = 0.5 * z;
-    w = 1.0 - hz;
-    return w + (((1.0 - w) - hz) + (z * r - x * y));
+{kernel_c("cos", "eqv")}
 }}
 
 EQ_INLINE eqv eqv_ksin(eqv x, eqv y)
 {{
-    eqv z = x * x;
-    eqv w = z * z;
-    eqv r = EQ_S2 + z * (EQ_S3 + z * EQ_S4) + z * w * (EQ_S5 + z * EQ_S6);
-    eqv v = z * x;
-    return x - ((z * (0.5 * y - v * r) - y) - v * EQ_S1);
+{kernel_c("sin_poly", "eqv")}
+    return {kernel_c("sin_tail")};
 }}
 
 EQ_INLINE eqv eqv_pick(eqvi m, eqv a, eqv b) {{ return (eqv)(((eqvi)a & m) | ((eqvi)b & ~m)); }}

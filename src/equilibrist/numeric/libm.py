@@ -297,6 +297,33 @@ def _c_constants() -> str:
     return "\n".join(f"#define {n} ({float(g[n])!r})" for n in names)
 
 
+# fdlibm's kernels in C, for the scalar functions below and the vector environment's lanes
+# (equilibrist.native.lanes), which run the same operations on eight doubles at a time.
+_KERNELS_C = {
+    # __kernel_sin's polynomial (x, y: the reduced argument's head and tail) ...
+    "sin_poly": """    {t} z = x * x;
+    {t} w = z * z;
+    {t} r = EQ_S2 + z * (EQ_S3 + z * EQ_S4) + z * w * (EQ_S5 + z * EQ_S6);
+    {t} v = z * x;""",
+    # ... its value with no tail (iy == 0), and with one:
+    "sin_small": "x + v * (EQ_S1 + z * r)",
+    "sin_tail": "x - ((z * (0.5 * y - v * r) - y) - v * EQ_S1)",
+    # __kernel_cos, whole:
+    "cos": """    {t} z = x * x;
+    {t} w = z * z;
+    {t} r = z * (EQ_C1 + z * (EQ_C2 + z * EQ_C3)) + w * w * (EQ_C4 + z * (EQ_C5 + z * EQ_C6));
+    {t} hz = 0.5 * z;
+    w = 1.0 - hz;
+    return w + (((1.0 - w) - hz) + (z * r - x * y));""",
+}
+
+
+def kernel_c(part: str, type_name: str = "double") -> str:
+    """A part of fdlibm's sine or cosine kernel in C (:data:`_KERNELS_C`), its variables of
+    the C type *type_name* (``double``, or a GCC vector of doubles)."""
+    return _KERNELS_C[part].format(t=type_name)
+
+
 def c_source(prefix: str = "", *, log: bool = False, exp: bool = False) -> str:
     """The same functions in C99, operation for operation (``static``; needs ``<math.h>``
     for ``fabs`` and ``frexp``, both exact).
@@ -310,24 +337,16 @@ def c_source(prefix: str = "", *, log: bool = False, exp: bool = False) -> str:
     body = f"""
 static double {p}eq_ksin(double x, double y, int iy)
 {{
-    double z = x * x;
-    double w = z * z;
-    double r = EQ_S2 + z * (EQ_S3 + z * EQ_S4) + z * w * (EQ_S5 + z * EQ_S6);
-    double v = z * x;
+{kernel_c("sin_poly", "double")}
     if (iy == 0) {{
-        return x + v * (EQ_S1 + z * r);
+        return {kernel_c("sin_small")};
     }}
-    return x - ((z * (0.5 * y - v * r) - y) - v * EQ_S1);
+    return {kernel_c("sin_tail")};
 }}
 
 static double {p}eq_kcos(double x, double y)
 {{
-    double z = x * x;
-    double w = z * z;
-    double r = z * (EQ_C1 + z * (EQ_C2 + z * EQ_C3)) + w * w * (EQ_C4 + z * (EQ_C5 + z * EQ_C6));
-    double hz = 0.5 * z;
-    w = 1.0 - hz;
-    return w + (((1.0 - w) - hz) + (z * r - x * y));
+{kernel_c("cos", "double")}
 }}
 
 static int {p}eq_rem_pio2(double x, double *y)
