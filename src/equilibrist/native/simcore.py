@@ -544,11 +544,17 @@ class NativeCore:
 _CORES: dict[tuple[Path, bytes | tuple[int, ...] | None, str | None, bool], NativeCore] = {}
 
 
+def _cache_key(system: System, key: bytes | tuple[int, ...] | None,
+               controller: NonlinearController | None,
+               lanes: bool) -> tuple[Path, bytes | tuple[int, ...] | None, str | None, bool]:
+    source = None if controller is None else controller.source + repr(controller.has_estimate)
+    return (system.compiled.module_path, key if controller is None else None, source, lanes)
+
+
 def loaded(system: System, key: bytes | tuple[int, ...] | None = None,
            controller: NonlinearController | None = None) -> bool:
-    """Whether :func:`load_core` of these has been called in this process."""
-    source = None if controller is None else controller.source + repr(controller.has_estimate)
-    return (system.compiled.module_path, key if controller is None else None, source, False) in _CORES
+    """Whether :func:`load_core` of these (without lanes) has been called in this process."""
+    return _cache_key(system, key, controller, False) in _CORES
 
 
 def load_core(system: System, key: bytes | tuple[int, ...] | None = None,
@@ -557,8 +563,7 @@ def load_core(system: System, key: bytes | tuple[int, ...] | None = None,
     nonlinear *controller* (built once; raises :class:`~equilibrist.native.pyc.TranslationError`
     when the controller's source uses what the C translation does not know). *lanes*: the
     system's own core with its environment stepped in lanes (the vector environment's)."""
-    source = None if controller is None else controller.source + repr(controller.has_estimate)
-    cache_key = (system.compiled.module_path, key if controller is None else None, source, lanes)
+    cache_key = _cache_key(system, key, controller, lanes)
     core = _CORES.get(cache_key)
     if core is None:
         try:

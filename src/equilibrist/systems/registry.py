@@ -4,8 +4,9 @@ A system module declares its :class:`~equilibrist.mechanics.spec.SystemSpec`
 and decorates its derivation with :func:`register`; adding a system is adding
 one file to this package, or one module of one's own named by an entry point
 of the group ``equilibrist.systems`` (``pointcart = my_rigs.pointcart``): it
-joins the catalogue as the shipped ones do (names, ids, workers, studies). Families of parameterizations (the gyroscope's
-``euler = zxz | xyz``) register one spec per variant under one name.
+joins the catalogue as the shipped ones do (names, ids, workers, studies).
+Families of parameterizations (the gyroscope's ``euler = zxz | xyz``) register
+one spec per variant under one name.
 """
 
 from __future__ import annotations
