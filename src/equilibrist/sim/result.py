@@ -228,6 +228,8 @@ class SimResult:
         """
         if not 0 < settle_fraction < 1:
             raise SimulationError(f"settle_fraction must be in (0, 1), got {settle_fraction}")
+        if not self.n_rows:  # ended before its first sample (a device's fault): no figures
+            return self._no_metrics()
         dt = self.dt
         watched, errors = self._watched_errors()
         overshoot: dict[str, float | None] = {}
@@ -282,6 +284,15 @@ class SimResult:
             "peak_deviation": dict(zip(self.state_names, np.abs(self.states - self.x_op).max(axis=0).tolist(), strict=True)),
             "seed": self.settings.get("seed"),
         }
+
+    def _no_metrics(self) -> RunMetrics:
+        """:meth:`metrics` of a run with no sample: no figure per output, input or state."""
+        return {"system": self.system, "fell": bool(self.fell), "fell_at": self.fell_at,
+                "fell_state": self.fell_state, "stayed_up": not self.fell, "duration": 0.0,
+                "settling_time": None, "overshoot": {}, "peak_command": {}, "peak_input": {},
+                "rms_input": {}, "time_saturated": 0.0, "final_error": {},
+                "estimation_error_rms": None, "peak_deviation": {},
+                "seed": self.settings.get("seed")}
 
     def _watched_errors(self) -> tuple[tuple[str, ...], np.ndarray]:
         if self.reference_names:
