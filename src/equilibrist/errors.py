@@ -85,3 +85,55 @@ def finite_number(name: str, value: object) -> float:
     if not math.isfinite(v):
         raise ParameterError(f"{name} = {v} is not a finite number")
     return v
+
+
+def quote_outside(text: object, *, limit: int | None = 200) -> str:
+    """*text* that comes from outside (a device, a file, a plug-in) as it may be printed.
+
+    Every control character (C0, DEL, C1), format character (the bidi overrides,
+    zero-width marks) and line or paragraph separator is shown as a visible
+    escape (``\\x1b``, ``\\n``, ``\\u202e``), so that no outside text can move
+    the cursor, retitle or clear a terminal, or reorder the line it is shown in;
+    the rest (backslashes included) is left as it is, so quoting twice changes
+    nothing. The result is at most *limit* characters and ``...`` (None: no
+    limit). *text* that is not a string is shown by ``str`` (an exception: its
+    message).
+    """
+    if not isinstance(text, str):
+        try:
+            text = str(text)
+        except Exception:  # an outside object's own __str__ may fail
+            return f"(a {type(text).__name__} that cannot be shown)"
+    if limit is not None:
+        text = text[: limit + 1]  # every character shows as one or more
+    out: list[str] = []
+    size = 0
+    for ch in text:
+        piece = _visible(ch)
+        if limit is not None and size + len(piece) > limit:
+            out.append("...")
+            break
+        out.append(piece)
+        size += len(piece)
+    return "".join(out)
+
+
+def quote_exception(exc: BaseException, *, limit: int | None = 200) -> str:
+    """``Type: message`` of an outside exception (a plug-in's), quoted by :func:`quote_outside`."""
+    return f"{quote_outside(type(exc).__name__, limit=60)}: {quote_outside(exc, limit=limit)}"
+
+
+_NAMED = {"\n": "\\n", "\r": "\\r", "\t": "\\t"}
+
+
+def _visible(ch: str) -> str:
+    if ch.isprintable() or ch == " ":
+        return ch
+    import unicodedata
+
+    if unicodedata.category(ch) not in ("Cc", "Cf", "Cs", "Zl", "Zp"):
+        return ch  # a space of another width, an unassigned or private character: harmless
+    if ch in _NAMED:
+        return _NAMED[ch]
+    code = ord(ch)
+    return f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}" if code < 0x10000 else f"\\U{code:08x}"

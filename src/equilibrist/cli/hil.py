@@ -123,11 +123,13 @@ def run(args: argparse.Namespace) -> int:
         x0 = start_of({"controller": simulated}, parse_x0(args.x0))  # a plan starts the run
         done = run_hil(system, device, x0=x0, **options)
     result = done.result
-    saved = result.save(args.out) if args.out is not None else None
-    from equilibrist.viz.cli_hooks import handle_outputs
-
-    handle_outputs(args, result, system=system)
     summary = {**run_metrics(result), **done.summary()}
+    # A fault before the first answer leaves no run: nothing to save or draw.
+    saved = result.save(args.out) if args.out is not None and result.n_rows else None
+    if result.n_rows:
+        from equilibrist.viz.cli_hooks import handle_outputs
+
+        handle_outputs(args, result, system=system)
     if args.json:
         if saved is not None:
             summary["saved"] = str(saved)
@@ -136,14 +138,17 @@ def run(args: argparse.Namespace) -> int:
         link_figures = done.stats.summary()
         rt = link_figures["round_trip_ms"]
         print(f"{system.key} with the device on {args.port} ({args.mode}): "
-              + ("fell at " + f"{result.fell_at:g} s" if result.fell else "stayed up"))
+              + ("ended before its first sample" if not result.n_rows else
+                 "fell at " + f"{result.fell_at:g} s" if result.fell else "stayed up"))
         if rt["p50"] is not None:
             print(f"round trip p50 {rt['p50']:.3f} ms, p99 {rt['p99']:.3f} ms, max {rt['max']:.3f} ms; "
                   f"late {link_figures['late']}, lost {link_figures['lost']}")
         if saved is not None:
             print(f"saved {saved}")
     if done.fault is not None:
-        print(f"equilibrist: {done.fault}" + (f"; the run so far is in {saved}" if saved else ""),
-              file=sys.stderr)
+        kept = (f"; the run so far is in {saved}" if saved else
+                "; the run ended before its first sample, nothing was saved" if not result.n_rows
+                else "")
+        print(f"equilibrist: {done.fault}{kept}", file=sys.stderr)
         return 1
     return 0

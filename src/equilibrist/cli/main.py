@@ -22,7 +22,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from equilibrist import __version__
-from equilibrist.errors import EquilibristError
+from equilibrist.errors import EquilibristError, quote_outside
 
 # Order of the subcommands in --help; modules not listed come after.
 _ORDER = ("systems", "show", "dynamics", "linearize", "linkage", "design", "simulate", "batch", "sweep", "identify",
@@ -167,7 +167,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return interrupted_status()
         return code
     except (EquilibristError, _UsageError) as exc:
-        message = str(exc).replace("\n", " ")
+        message = _one_line(str(exc))
         prefix = "" if message.startswith("equilibrist") else "equilibrist: error: "
         print(f"{prefix}{message}", file=sys.stderr)
         return 2
@@ -176,12 +176,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as exc:
         # A file the user named that cannot be read or written.
         where = f" {exc.filename}" if exc.filename else ""
-        print(f"equilibrist: error: cannot use{where}: {exc.strerror or exc}", file=sys.stderr)
+        print(_one_line(f"equilibrist: error: cannot use{where}: {exc.strerror or exc}"),
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("equilibrist: interrupted", file=sys.stderr)
         _end_interrupted(argv)
         return interrupted_status()
+
+
+def _one_line(message: str) -> str:
+    """*message* as the one line printed for it: its own line breaks as spaces, any other
+    control character (outside text that reached it unquoted) as a visible escape."""
+    return quote_outside(message.replace("\r\n", " ").replace("\n", " "), limit=None)
 
 
 def _end_interrupted(argv: Sequence[str] | None) -> None:

@@ -12,7 +12,10 @@ record lives in one module:
 * an installed package adds kinds through the entry-point group
   ``equilibrist.controllers`` (``name = "module:KIND"``), so a kind written
   in a folder of one's own works in every process that has it on its path
-  (the batch's and the study's workers, the playground).
+  (the batch's and the study's workers, the playground). Such a module is
+  imported with its printing sent to stderr; a failure to load it, or of its
+  kind's own ``build``, ``applies`` or ``export``, is a :data:`KindError` of
+  one line naming it, its text quoted (:func:`~equilibrist.errors.quote_outside`).
 
 The command line's ``--controller`` choices and help, each kind's own
 flags (``--horizon``, ``--balance``, ``--trajectory``...), ``design``,
@@ -26,14 +29,17 @@ module keeps its heavy imports inside ``build``.
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import importlib
 import pkgutil
 import re
+import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from equilibrist.errors import ControllerError
+from equilibrist.errors import ControllerError, EquilibristError, quote_exception, quote_outside
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -282,12 +288,45 @@ def _load() -> None:
     from importlib.metadata import entry_points
 
     for ep in entry_points(group=ENTRY_POINTS):
+        where = f"the controller kind '{quote_outside(ep.name, limit=60)}' " \
+                f"({quote_outside(ep.value, limit=120)})"
         try:
-            obj = ep.load()
-        except Exception as exc:  # a broken plugin is named, the others still work
-            raise KindError(f"the controller kind {ep.name!r} ({ep.value}) cannot be loaded: "
-                            f"{type(exc).__name__}: {exc}") from None
-        _add(obj.KIND if hasattr(obj, "KIND") else obj, ep.value)
+            # What the module prints is not the command's output (stdout may be its JSON).
+            with contextlib.redirect_stdout(sys.stderr):
+                obj = ep.load()
+        except KeyboardInterrupt:
+            raise
+        except BaseException as exc:  # SystemExit too: a broken plugin is named in one line
+            raise KindError(f"{where} cannot be loaded: {quote_exception(exc)}") from None
+        kind = obj.KIND if hasattr(obj, "KIND") else obj
+        _add(_guarded(kind, where) if isinstance(kind, ControllerKind) else kind, ep.value)
+
+
+class _Guard:
+    """A plug-in's callable (its kind's ``build``, ``applies``...): a failure other than an
+    ``EquilibristError`` is a :class:`KindError` of one line naming the plug-in, and the
+    reason ``applies`` gives is quoted (:func:`~equilibrist.errors.quote_outside`)."""
+
+    def __init__(self, fn: Callable[..., Any], where: str, what: str) -> None:
+        self.fn, self.where, self.what = fn, where, what
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        try:
+            out = self.fn(*args, **kwargs)
+        except (EquilibristError, KeyboardInterrupt):
+            raise
+        except BaseException as exc:
+            raise KindError(f"{self.where} failed in its {self.what}: {quote_exception(exc)}") \
+                from None
+        return quote_outside(out, limit=300) if self.what == "applies" and out is not None else out
+
+
+def _guarded(kind: ControllerKind, where: str) -> ControllerKind:
+    """*kind* (a plug-in's) with its own code behind a :class:`_Guard` each."""
+    own: dict[str, Any] = {
+        name: _Guard(fn, where, name) for name in ("build", "applies", "export", "check_export")
+        if (fn := getattr(kind, name)) is not None and not isinstance(fn, _Guard)}
+    return dataclasses.replace(kind, **own)
 
 
 def _add_from(module: object, where: str) -> None:

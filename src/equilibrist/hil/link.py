@@ -8,6 +8,7 @@ import stat
 import time
 from typing import Any
 
+from equilibrist.errors import quote_outside
 from equilibrist.hil.protocol import Frame, FrameReader, HILError, ProtocolError, frame
 
 
@@ -110,4 +111,4 @@ class SerialLink:
 
 def _reason(exc: BaseException) -> str:
     text = str(exc).strip() or type(exc).__name__
-    return text.splitlines()[0][:200]
+    return quote_outside(text.splitlines()[0])

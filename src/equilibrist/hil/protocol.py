@@ -15,12 +15,13 @@ the C side (:mod:`equilibrist.hil.firmware`) implements the same.
 from __future__ import annotations
 
 import binascii
+import math
 import struct
 from dataclasses import dataclass
 
 import numpy as np
 
-from equilibrist.errors import EquilibristError
+from equilibrist.errors import EquilibristError, quote_outside
 
 VERSION = 1
 #: The real-time priority (``SCHED_FIFO``) both ends of a realtime run ask for, the simulator
@@ -149,10 +150,11 @@ class Hello:
                 return f"{getattr(device, field_)} {what}, expected {getattr(self, field_)}"
         if self.references > device.references:
             return f"{device.references} references, expected at least {self.references}"
-        if abs(device.rate - self.rate) > 1e-9 * self.rate:
+        if not math.isfinite(device.rate) or abs(device.rate - self.rate) > 1e-9 * self.rate:
             return f"a rate of {device.rate:g} Hz, expected {self.rate:g} Hz"
         if device.controller_id != self.controller_id:
-            return (f"controller {device.controller_id!r}, expected {self.controller_id!r} "
+            return (f"controller '{quote_outside(device.controller_id, limit=40)}', expected "
+                    f"{self.controller_id!r} "
                     "(export the same design and flash it again)")
         return None
 

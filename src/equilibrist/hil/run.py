@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any, NoReturn, TypedDict, TypeVar
 import numpy as np
 
 from equilibrist.control.controller import PythonControllerBase
+from equilibrist.errors import quote_outside
 from equilibrist.hil import protocol as proto
 from equilibrist.hil.link import DeviceGone, SerialLink
 from equilibrist.hil.protocol import RT_PRIORITY, Hello, HILError, ProtocolError
@@ -311,7 +312,8 @@ class DeviceController(PythonControllerBase):
 
 
 def _text(payload: bytes) -> str:
-    return payload.decode("ascii", "replace")[:200] or "(no text)"
+    """A device's text (an error frame's), as it may be printed: escaped and bounded."""
+    return quote_outside(payload.decode("utf-8", "backslashreplace")) or "(no text)"
 
 
 def _what(f: proto.Frame) -> str:
@@ -333,7 +335,7 @@ class HILRun:
     def summary(self) -> dict[str, object]:
         return {"mode": self.mode, "port": self.port, "fault": self.fault,
                 "scheduling": self.scheduling,
-                "controller_id": self.device.controller_id,
+                "controller_id": quote_outside(self.device.controller_id),
                 "payload": "float64" if self.device.real_size == 8 else "float32",
                 **self.stats.summary()}
 

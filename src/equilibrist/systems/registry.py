@@ -11,14 +11,16 @@ one spec per variant under one name.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import math
 import pkgutil
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from equilibrist.errors import DefinitionError, UnknownNameError
+from equilibrist.errors import DefinitionError, UnknownNameError, quote_exception, quote_outside
 from equilibrist.mechanics.spec import SystemSpec
 
 if TYPE_CHECKING:  # sympy is imported only when a model is derived
@@ -117,21 +119,24 @@ def _load_all() -> None:
 
     for ep in entry_points(group=ENTRY_POINTS):
         _PLUGIN_MODULES.add(ep.module)
+        where = (f"the system module '{quote_outside(ep.module, limit=120)}' "
+                 f"(entry point '{quote_outside(ep.name, limit=60)}')")
         try:
-            module = importlib.import_module(ep.module)
-        except DefinitionError:
+            # What the module prints is not the command's output (stdout may be its JSON).
+            with contextlib.redirect_stdout(sys.stderr):
+                module = importlib.import_module(ep.module)
+        except (DefinitionError, KeyboardInterrupt):
             raise
-        except Exception as exc:  # a broken plugin is named in one line
-            raise DefinitionError(f"the system module {ep.module!r} (entry point {ep.name!r}) cannot "
-                                  f"be loaded: {type(exc).__name__}: {exc}") from None
+        except BaseException as exc:  # SystemExit too: a broken plugin is named in one line
+            raise DefinitionError(f"{where} cannot be loaded: {quote_exception(exc)}") from None
         if not _registered(ep.module):  # imported before the registry knew it was a plugin
             for fn in list(vars(module).values()):
                 spec = getattr(fn, SPEC_ATTRIBUTE, None)
                 if isinstance(spec, SystemSpec) and getattr(fn, "__module__", None) == ep.module:
                     _add(spec, fn)
         if not _registered(ep.module):
-            raise DefinitionError(f"the system module {ep.module!r} (entry point {ep.name!r}) "
-                                  "registers no system: expected a derivation decorated with @register(SPEC)")
+            raise DefinitionError(f"{where} registers no system: expected a derivation decorated "
+                                  "with @register(SPEC)")
 
 
 def family_names() -> list[str]:
