@@ -59,15 +59,16 @@ def run(args: argparse.Namespace) -> int:
             "inputs": list(lm.input_names),
             "outputs": list(lm.output_names),
             "params": dict(system.params),
-            "x0": lm.x0,
-            "u0": lm.u0,
-            "A": lm.A,
-            "B": lm.B,
-            "C": lm.C,
-            "D": lm.D,
+            # Zeros without their sign, as the text prints them.
+            "x0": unsigned(lm.x0),
+            "u0": unsigned(lm.u0),
+            "A": unsigned(lm.A),
+            "B": unsigned(lm.B),
+            "C": unsigned(lm.C),
+            "D": unsigned(lm.D),
             "residual": lm.residual,
             # Always {"re", "im"}, as in 'design --json', whether or not any is complex.
-            "poles": [{"re": float(p.real), "im": float(p.imag)} for p in lm.poles],
+            "poles": [{"re": _real(p.real), "im": _real(p.imag)} for p in lm.poles],
         })
         return 0
     print(render(system, lm))
@@ -77,9 +78,11 @@ def run(args: argparse.Namespace) -> int:
 def render(system: System, lm: LinearModel) -> str:
     """Readable text of a linearization."""
     lines = [f"{system.key}: linearization at"]
-    lines.append("  x0: " + ", ".join(f"{n} = {v:.6g}" for n, v in zip(lm.state_names, lm.x0, strict=True)))
+    lines.append("  x0: " + ", ".join(f"{n} = {_real(v):.6g}"
+                                      for n, v in zip(lm.state_names, lm.x0, strict=True)))
     if lm.n_inputs:
-        lines.append("  u0: " + ", ".join(f"{n} = {v:.6g}" for n, v in zip(lm.input_names, lm.u0, strict=True)))
+        lines.append("  u0: " + ", ".join(f"{n} = {_real(v):.6g}"
+                                          for n, v in zip(lm.input_names, lm.u0, strict=True)))
     status = "an equilibrium" if lm.residual < 1e-9 else "NOT an equilibrium"
     lines.append(f"  residual |f(x0, u0)| = {lm.residual:.3g} ({status})")
     # Where a model file's operating point came from, when it was moved from the file's pose.
@@ -98,12 +101,25 @@ def render(system: System, lm: LinearModel) -> str:
     return "\n".join(lines)
 
 
+def unsigned(values: object) -> np.ndarray:
+    """*values* as floats, a negative zero (``-0.0``, which prints as ``-0``) made ``0.0``:
+    a linearization's exact zeros carry the sign of the products they came from, which
+    means nothing."""
+    out: np.ndarray = np.asarray(values, dtype=float) + 0.0  # -0.0 + 0.0 is 0.0
+    return out
+
+
+def _real(v: float) -> float:
+    return float(v) + 0.0  # a negative zero made 0.0, as in unsigned()
+
+
 def _matrix(mat: np.ndarray, rows: tuple[str, ...], cols: tuple[str, ...]) -> str:
     """A labelled matrix whose columns stay apart however long their names are."""
-    return common.format_matrix(mat, rows, cols, width=max([11, *(len(c) + 2 for c in cols)]))
+    return common.format_matrix(unsigned(mat), rows, cols,
+                                width=max([11, *(len(c) + 2 for c in cols)]))
 
 
 def _fmt_pole(p: complex) -> str:
     if abs(p.imag) < 1e-12:
-        return f"{p.real:.4g}"
-    return f"{p.real:.4g}{p.imag:+.4g}j"
+        return f"{_real(p.real):.4g}"
+    return f"{_real(p.real):.4g}{_real(p.imag):+.4g}j"
