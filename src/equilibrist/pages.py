@@ -180,10 +180,37 @@ def pages() -> dict[str, str]:
     return out
 
 
-def write_pages(folder: str | Path) -> list[Path]:
-    """Write every page into *folder* (created); the paths written."""
-    from equilibrist.atomic import write_text
+def write_pages(folder: str | Path, *, force: bool = False) -> list[Path]:
+    """Write every page into *folder*; the paths written.
 
-    root = Path(folder)
-    root.mkdir(parents=True, exist_ok=True)
-    return [write_text(root / name, text) for name, text in pages().items()]
+    The folder is created when missing, its parent never (:func:`equilibrist.atomic.check_output`).
+    Pages replace the files of their names, other files are left as they are; a file of a
+    page's name that equilibrist did not generate (it lacks the pages' first line) is refused
+    (:class:`~equilibrist.atomic.OutputError`, naming it), unless *force*.
+    """
+    from equilibrist.atomic import OutputError, check_output, write_text
+
+    root = check_output(folder, what="--out")
+    if root.exists() and not root.is_dir():
+        raise OutputError(f"--out {root} is a file: name the folder to write the pages into")
+    texts = pages()
+    if not force and root.is_dir():
+        theirs = sorted(name for name in texts if (root / name).exists()
+                        and not _generated(root / name))
+        if theirs:
+            shown = ", ".join(theirs[:4]) + (f" and {len(theirs) - 4} more" if len(theirs) > 4
+                                             else "")
+            raise OutputError(f"--out {root} holds {shown}, which equilibrist did not generate: "
+                              "writing the pages would replace them; give --force to replace "
+                              "them, or name another folder")
+    root.mkdir(exist_ok=True)
+    return [write_text(root / name, text) for name, text in texts.items()]
+
+
+def _generated(path: Path) -> bool:
+    """Whether *path* is a page equilibrist generated (it begins with the pages' first line)."""
+    try:
+        with path.open("rb") as fh:
+            return fh.read(len(_GENERATED.encode())) == _GENERATED.encode()
+    except OSError:
+        return False

@@ -62,13 +62,25 @@ def default_scenario(system: System, controller: StateFeedback | None = None) ->
 
 @dataclass(frozen=True)
 class Outcome:
-    """What the tour found for one system: a row of the summary table and a report section."""
+    """What the tour found for one system: a row of the summary table and a report section.
+
+    ``seconds`` is the wall time the system's tour took (designs, runs, plots and
+    animation); ``simulated`` the simulated length of its main run [s]."""
 
     key: str
     row: tuple[str, ...]
     section: Section
     stayed_up: bool
     seconds: float
+    simulated: float = math.nan
+
+    def progress_line(self) -> str:
+        """The line the demo prints when the system is done: the outcome of its run over
+        the simulated time, and the wall time its tour took, each named."""
+        span = f"the {self.simulated:g} s simulated" if math.isfinite(self.simulated) \
+            else "its simulated run"
+        outcome = f"stayed up for {span}" if self.stayed_up else f"FELL within {span}"
+        return f"{self.key}: {outcome} (its tour took {self.seconds:.1f} s of wall time)"
 
 
 SUMMARY_HEADER = ("system", "controller", "settling after push", "peak input", "final error",

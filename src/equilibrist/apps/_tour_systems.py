@@ -205,6 +205,7 @@ def tour_controlled(
         section=_section(system, slug, story, images, facts, notes),
         stayed_up=not main.fell,
         seconds=time.perf_counter() - began,
+        simulated=sc.duration,
     )
 
 
@@ -465,7 +466,8 @@ def tour_gyroscope(
     ]
     return Outcome(key=system.key, row=row,
                    section=_section(system, slug, [system.spec.description, *story], images, facts, []),
-                   stayed_up=not fell, seconds=time.perf_counter() - began)
+                   stayed_up=not fell, seconds=time.perf_counter() - began,
+                   simulated=GYRO_DURATION)
 
 
 def _relative_drift(values: Sequence[float]) -> float:

@@ -26,8 +26,7 @@ from __future__ import annotations
 
 import os
 import shutil
-import tempfile
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TypedDict
 
@@ -38,7 +37,9 @@ from equilibrist.apps._tour_common import (
     SEED,
     SUMMARY_HEADER,
     Outcome,
+    _label,
     _say,
+    _slug,
     default_scenario,
 )
 from equilibrist.apps._tour_systems import (
@@ -49,6 +50,7 @@ from equilibrist.apps._tour_systems import (
     tour_gyroscope,
     watched_outputs,
 )
+from equilibrist.atomic import check_output, make_folder, write_text
 from equilibrist.mechanics.spec import Scenario
 from equilibrist.viz.output import VizError
 from equilibrist.viz.report import write_index
@@ -114,6 +116,9 @@ def run_tour(
     progress: bool = False,
     log: Callable[[str], None] | None = None,
     at: Mapping[str, float] | None = None,
+    force: bool = False,
+    then: Callable[[Path], object] | None = None,
+    then_writes: Sequence[str] = (),
 ) -> list[Outcome]:
     """Run the demo on *systems* and write the report folder.
 
@@ -122,7 +127,9 @@ def run_tour(
     systems : sequence of System
         The bound systems to show, in order.
     folder : str or pathlib.Path
-        The report folder (``index.html`` and one sub-folder per system).
+        The report folder (``index.html`` and one sub-folder per system). Its
+        parent must exist; an existing folder is replaced only as
+        :func:`check_report_folder` allows.
     size, fps, max_frames :
         Animation frame size, rate and cap.
     extras : sequence of str
@@ -139,6 +146,13 @@ def run_tour(
     at : mapping, optional
         ``{state: value}``: design at the equilibrium with these states and run each
         scenario about it (``equilibrist demo SYSTEM --at``; one system's states).
+    force : bool
+        Replace an existing folder whatever it holds.
+    then : callable, optional
+        Called with the finished report's (staged) folder before it is put in
+        place: the demo adds its study there.
+    then_writes : sequence of str
+        The names *then* adds at the top of the folder.
 
     Returns
     -------
@@ -146,45 +160,112 @@ def run_tour(
         In the order of *systems*.
     """
     target = Path(folder)
-    check_report_folder(target)
+    writes = {"index.html", *(_slug(_label(s)) for s in systems), *then_writes}
+    check_report_folder(target, writes=writes, force=force)
     # The report is built in a staging folder beside the target and moved
     # into place whole: a failure or Ctrl-C part-way leaves nothing behind.
-    target.parent.mkdir(parents=True, exist_ok=True)
-    folder = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.partial-"))
+    staged = make_folder(target.parent, prefix=f".{target.name}.partial-")
     try:
-        outcomes = _tour_into(systems, folder, size=size, fps=fps, max_frames=max_frames,
+        outcomes = _tour_into(systems, staged, size=size, fps=fps, max_frames=max_frames,
                               extras=extras, jobs=jobs, progress=progress, log=log, at=at)
-        (folder / REPORT_MARKER).write_text("written by equilibrist demo\n")
-        _put_in_place(folder, target)
+        if then is not None:
+            then(staged)
+        write_manifest(staged)
+        _put_in_place(staged, target)
     finally:
-        shutil.rmtree(folder, ignore_errors=True)
+        shutil.rmtree(staged, ignore_errors=True)
     return outcomes
 
 
-# A report folder holds this file: a folder without it is the user's, never replaced.
+# A report folder holds this file, the manifest of what was written: a folder without it
+# is the user's, never replaced without force.
 REPORT_MARKER = ".equilibrist-report"
 
 
-def check_report_folder(target: Path) -> None:
-    """Refuse a report folder that would replace something equilibrist did not write."""
-    if target.exists() and not target.is_dir():
-        raise VizError(f"the report folder {str(target)!r} is a file: name a folder")
-    if target.is_dir() and any(target.iterdir()) and not _is_report(target):
-        raise VizError(
-            f"the report folder {str(target)!r} holds files that equilibrist did not write: "
-            "name a new or empty folder"
-        )
+def _files(folder: Path) -> list[str]:
+    """Every file under *folder* (links as files), as sorted POSIX paths relative to it."""
+    out = []
+    for root, dirs, names in os.walk(folder):
+        here = Path(root)
+        out += [(here / n).relative_to(folder).as_posix()
+                for n in [*names, *(d for d in dirs if (here / d).is_symlink())]]
+    return sorted(n for n in out if n != REPORT_MARKER)
 
 
-def _is_report(folder: Path) -> bool:
-    if (folder / REPORT_MARKER).exists():
-        return True
-    # Reports of earlier versions have no marker; their index says who made them.
+def write_manifest(folder: Path) -> Path:
+    """The marker of a report folder: JSON naming its maker and listing every file written."""
+    import json
+
+    from equilibrist import __version__
+
+    doc = {"written_by": "equilibrist demo", "version": __version__, "files": _files(folder)}
+    return write_text(folder / REPORT_MARKER, json.dumps(doc, indent=1) + "\n")
+
+
+def report_files(folder: Path) -> set[str] | None:
+    """The files the marker of *folder* lists; an empty set for a report of an earlier version
+    (a marker without a list, or no marker and an ``index.html`` made by the demo); None for
+    a folder equilibrist did not write."""
+    import json
+
+    marker = folder / REPORT_MARKER
+    if marker.is_file():
+        try:
+            doc = json.loads(marker.read_text(errors="replace"))
+        except (OSError, ValueError):
+            doc = None
+        listed = doc.get("files") if isinstance(doc, dict) else None
+        if isinstance(listed, list) and all(isinstance(n, str) for n in listed):
+            return set(listed)
+        return set()
     index = folder / "index.html"
     try:
-        return index.is_file() and "Made by 'equilibrist demo'" in index.read_text(errors="replace")
+        made = index.is_file() and "Made by 'equilibrist demo'" in index.read_text(errors="replace")
     except OSError:
-        return False
+        made = False
+    return set() if made else None
+
+
+def _some(names: Sequence[str], limit: int = 4) -> str:
+    shown = ", ".join(names[:limit])
+    return shown + (f" and {len(names) - limit} more" if len(names) > limit else "")
+
+
+def _them(names: Sequence[str]) -> str:
+    return "it" if len(names) == 1 else "them"
+
+
+def check_report_folder(target: Path, *, writes: Collection[str] | None = None,
+                        force: bool = False) -> None:
+    """Refuse (:class:`VizError`, one line) a report folder whose replacement would lose
+    something, unless *force*: a folder equilibrist did not write (no marker) that is not
+    empty, files in a report that its marker does not list (the user's), or entries of an
+    earlier report that this one does not write (*writes*: the names at the top of the new
+    report). Its parent must exist, and a file of its name is never replaced."""
+    check_output(target, what="the report folder")
+    if target.exists() and not target.is_dir():
+        raise VizError(f"the report folder {str(target)!r} is a file: name a folder")
+    if force or not target.is_dir():
+        return
+    present = sorted(p.name for p in target.iterdir() if p.name != REPORT_MARKER)
+    listed = report_files(target)
+    redo = "give --force to replace it, or name another folder"
+    if listed is None:
+        if present:
+            raise VizError(f"the report folder {str(target)!r} holds {_some(present)}, which "
+                           f"equilibrist did not write: replacing it would lose {_them(present)}; "
+                           f"{redo}")
+        return
+    foreign = [n for n in _files(target) if n not in listed] if listed else []
+    if foreign:
+        raise VizError(f"the report folder {str(target)!r} holds {_some(foreign)} beside the "
+                       f"report, which equilibrist did not write: replacing it would lose "
+                       f"{_them(foreign)}; {redo}")
+    lost = [n for n in present if writes is not None and n not in writes]
+    if lost:
+        raise VizError(f"the report folder {str(target)!r} holds an earlier report with "
+                       f"{_some(lost)}, which this one ({_some(sorted(writes or ()))}) does "
+                       f"not write: replacing it would lose {_them(lost)}; {redo}")
 
 
 def _put_in_place(staged: Path, target: Path) -> None:
@@ -226,7 +307,7 @@ def _tour_into(
     def finished(k: int, out: Outcome) -> None:
         done[k] = out
         bar.update()
-        _say(log, f"{out.key}: {'stayed up' if out.stayed_up else 'FELL'} ({out.seconds:.1f} s)")
+        _say(log, out.progress_line())
 
     with bar:
         if jobs <= 1 or len(systems) <= 1:
@@ -321,10 +402,12 @@ __all__ = [
     "default_scenario",
     "final_error",
     "recovery_time",
+    "report_files",
     "run_tour",
     "tour_controlled",
     "tour_gyroscope",
     "tour_one",
     "watched_outputs",
+    "write_manifest",
     "write_report",
 ]

@@ -8,6 +8,7 @@ import math
 import re
 import sys
 from collections.abc import Iterable, Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
@@ -219,6 +220,21 @@ def to_jsonable(obj: object) -> object:
     if isinstance(obj, np.bool_):
         return bool(obj)
     return obj
+
+
+def check_output_path(text: str, option: str) -> Path:
+    """The output file *text* of *option* (``--out``, ``--plot``) as a Path, checked before
+    any work: a name is given, it is not a folder, and its folder exists (equilibrist creates
+    no missing folder; :func:`equilibrist.atomic.check_output`). Each refusal is one line
+    naming the option and the path (:class:`~equilibrist.atomic.OutputError`, exit status 2)."""
+    from equilibrist.atomic import OutputError, check_output
+
+    if not text.strip():
+        raise UsageError(f"{option} {text!r}: expected a file name")
+    path = check_output(text, what=option)
+    if path.is_dir():
+        raise OutputError(f"{option} {path} is a folder: name a file")
+    return path
 
 
 def print_json(obj: object) -> None:

@@ -30,7 +30,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                      help="design at the equilibrium with these states (the others solved) and "
                      "run the scenario about it; one SYSTEM only (default: its canonical point)")
     p.add_argument("--out", default="report", metavar="DIR",
-                   help="report folder (default: ./report)")
+                   help="report folder (default: ./report); its parent folder must exist, and "
+                   "an existing folder is replaced only when it holds an earlier report and "
+                   "nothing this one would lose")
+    p.add_argument("--force", action="store_true",
+                   help="replace the --out folder whatever it holds")
     p.add_argument("--size", default="400x300", metavar="WxH",
                    help="animation frame size in pixels (default 400x300)")
     p.add_argument("--jobs", default=None, metavar="N",
@@ -71,17 +75,25 @@ def run(args: argparse.Namespace) -> int:
             jobs = 0
         if jobs < 1:
             raise common.UsageError(f"--jobs {args.jobs!r}: expected a whole number >= 1")
+    if not args.out.strip():
+        raise common.UsageError("--out '': expected the report folder")
     out = Path(args.out)
     began = time.perf_counter()
     progress = sys.stderr.isatty()
     from equilibrist.apps.tour import SUMMARY_HEADER, run_tour
 
-    outcomes = run_tour(systems, out, size=size, jobs=jobs, progress=progress,
-                        log=lambda line: print(line, file=sys.stderr), at=at)
-    if any(s.key == "cartpole" for s in systems):
+    def say(line: str) -> None:
+        print(line, file=sys.stderr)
+
+    def study(folder: Path) -> None:
         from equilibrist.study.demo import add_study_to_report
 
-        add_study_to_report(out, log=lambda line: print(line, file=sys.stderr))
+        add_study_to_report(folder, log=say)
+
+    with_study = any(s.key == "cartpole" for s in systems)
+    outcomes = run_tour(systems, out, size=size, jobs=jobs, progress=progress, log=say, at=at,
+                        force=args.force, then=study if with_study else None,
+                        then_writes=("study",) if with_study else ())
     print("Each system balanced by its default digital LQG controller (a Kalman filter on its")
     print("sensors, LQR feedback at the rig's sample rate) on the nonlinear model, with sensor")
     print("and process noise, actuator limits and a push halfway through the run:")
@@ -92,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     print("operating point; peak input: largest force or torque applied (share of its limit);")
     print("final error: the measured outputs at the end of the run, from their targets.")
     print(f"report with plots, animations and equations: {out / 'index.html'} "
-          f"({time.perf_counter() - began:.0f} s)")
+          f"(made in {time.perf_counter() - began:.0f} s of wall time)")
     return 0
 
 

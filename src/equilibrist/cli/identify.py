@@ -134,10 +134,12 @@ def run(args: argparse.Namespace) -> int:
         raise IdentificationError(f"--out {args.out}: the parameters are written as .json")
     if args.out is not None:
         _check_out(args.out, args.force)
+        common.check_output_path(args.out, "--out")  # its folder exists: none is created
     if args.plot is not None:
         from equilibrist.viz.output import FIGURE_FORMATS, check_suffix
 
         check_suffix(args.plot, FIGURE_FORMATS, "--plot")
+        common.check_output_path(args.plot, "--plot")  # its folder exists: none is created
     system = common.load_system(args)
     log = read_log(system, args.log)
     for name in sensor:

@@ -137,6 +137,7 @@ def check_out(args: argparse.Namespace, what: str) -> None:
     if not args.out.strip():
         raise common.UsageError(f"--out {args.out!r}: expected a file name (NAME.npz or NAME.csv)")
     check_result_path(Path(args.out), what)
+    common.check_output_path(args.out, "--out")  # its folder exists: none is created
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

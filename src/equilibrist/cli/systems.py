@@ -18,6 +18,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="every system's specification page in Markdown (as docs/systems/ holds)")
     p.add_argument("--out", metavar="DIR",
                    help="with --markdown: write one page per system and an index into DIR")
+    p.add_argument("--force", action="store_true",
+                   help="with --out: replace files of the pages' names that equilibrist did "
+                   "not generate")
     p.set_defaults(func=run)
 
 
@@ -113,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
         if args.out is not None:
             if not args.out.strip():
                 raise common.UsageError("--out '': expected the folder to write the pages into")
-            written = pages.write_pages(args.out)
+            written = pages.write_pages(args.out, force=args.force)
             print(f"wrote {len(written)} pages to {args.out}")
             return 0
         texts = pages.pages()

@@ -89,7 +89,8 @@ EXPORT_MARKER = ".made-by-equilibrist"
 
 
 def check_folder(out: object, *, force: bool = False) -> Path:
-    """The output folder, if it can be written (existing or creatable), else :class:`ExportError`.
+    """The output folder, if it can be written (existing, or new in an existing folder: no
+    missing parent is created), else :class:`ExportError`.
 
     An existing folder that holds files and is not an earlier export is the
     user's: it is refused unless *force* (its files of the export's names
@@ -112,8 +113,9 @@ def check_folder(out: object, *, force: bool = False) -> Path:
             )
         return path
     ancestor = path.parent
-    while not ancestor.exists():
-        ancestor = ancestor.parent
+    if not ancestor.exists():
+        raise ExportError(f"cannot create output folder {path}: the folder {ancestor} does not "
+                          "exist (equilibrist creates no missing folder: create it first)")
     if not ancestor.is_dir():
         raise ExportError(f"cannot create output folder {path}: {ancestor} is not a folder")
     if not os.access(ancestor, os.W_OK | os.X_OK):

@@ -10,11 +10,10 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
+from equilibrist.atomic import write_text
 from equilibrist.ident.log import IdentificationError
 
 FORMAT = "equilibrist-params-1"
@@ -84,14 +83,7 @@ def write_params(document: Mapping[str, object], path: str | Path) -> Path:
     if p.suffix != ".json":
         raise IdentificationError(f"--out {p}: a parameter file is written as .json")
     text = json.dumps(document, indent=2) + "\n"
-    fd, tmp = tempfile.mkstemp(dir=p.parent if str(p.parent) else ".", prefix=p.name + ".")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, p)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text(p, text)  # whole or not at all, with the umask's mode
     return p
 
 

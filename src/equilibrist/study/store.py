@@ -24,10 +24,10 @@ import json
 import os
 import platform
 import re
-import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from equilibrist.atomic import create_file
 from equilibrist.study.compute import metric_names
 from equilibrist.study.spec import FORMAT, Study, StudyError
 
@@ -90,21 +90,14 @@ def rows_to_table(rows: list[dict[str, object]], sch: pa.Schema) -> pa.Table:
 def _atomic_parquet(table: pa.Table, path: Path) -> None:
     import pyarrow.parquet as pq
 
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    fd, tmp = create_file(path.parent, prefix=f".{path.name}.", suffix=".tmp")  # umask's mode
     os.close(fd)
     try:
-        os.chmod(tmp, 0o666 & ~_umask())
         pq.write_table(table, tmp, compression="zstd")
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
 
 
 def parts_dir(out: Path) -> Path:
@@ -154,7 +147,7 @@ class Store:
             return [c for c in range(self.n_chunks) if not self._complete(c)]
         self.dir.mkdir(parents=True)
         text = json.dumps(manifest, sort_keys=True, indent=1)
-        fd, tmp = tempfile.mkstemp(dir=self.dir, prefix=".study.", suffix=".tmp")
+        fd, tmp = create_file(self.dir, prefix=".study.", suffix=".tmp")  # the umask's mode
         with os.fdopen(fd, "w") as fh:
             fh.write(text)
         os.replace(tmp, self.dir / _MANIFEST)

@@ -179,7 +179,6 @@ def write_gif(frames: Sequence[np.ndarray], path: str | Path, *, frame_seconds: 
     if not frames:
         raise VizError("no frames to write")
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
     # One palette for the whole animation, from a few frames spread over it:
     # colours stay steady from frame to frame, and it is ten times faster
     # than a palette per frame.
@@ -214,7 +213,6 @@ def write_mp4(frames: Sequence[np.ndarray], path: str | Path, *, fps: float) -> 
     if not frames:
         raise VizError("no frames to write")
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
     h, w = frames[0].shape[:2]
     cmd = [
         exe, "-y", "-loglevel", "error", "-f", "rawvideo", "-pix_fmt", "rgb24",

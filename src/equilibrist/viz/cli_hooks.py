@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from equilibrist.atomic import OutputError, check_output
 from equilibrist.viz.output import (
     ANIMATION_FORMATS,
     FIGURE_FORMATS,
@@ -29,15 +30,15 @@ if TYPE_CHECKING:
 
 def _figure_path(text: str) -> Path:
     try:
-        return check_suffix(text, FIGURE_FORMATS, "figure")
-    except VizError as exc:
+        return check_output(check_suffix(text, FIGURE_FORMATS, "figure"))
+    except (VizError, OutputError) as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _animation_path(text: str) -> Path:
     try:
-        path = check_suffix(text, ANIMATION_FORMATS, "animation")
-    except VizError as exc:
+        path = check_output(check_suffix(text, ANIMATION_FORMATS, "animation"))
+    except (VizError, OutputError) as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
     if path.suffix.lower() == ".mp4" and ffmpeg_path() is None:
         raise argparse.ArgumentTypeError(

@@ -35,7 +35,7 @@ def check_suffix(path: str | Path, allowed: tuple[str, ...], what: str) -> Path:
 
 
 def save_figure(figure: Figure, path: str | Path, *, dpi: float | None = None) -> Path:
-    """Save a matplotlib *figure* as PNG or SVG (by suffix), creating the folder.
+    """Save a matplotlib *figure* as PNG or SVG (by suffix); its folder must exist.
 
     Parameters
     ----------
