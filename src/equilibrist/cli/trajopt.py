@@ -10,6 +10,7 @@ solved by IPOPT through CasADi with exact derivatives
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -32,12 +33,18 @@ the least effort (integral of (u / scale)^2, the inputs' Bryson scales).
 --to NAME=VALUE,... plans a transfer to the operating point with those
 components changed (from --from, by default the operating point).
 --duration-max S frees the final time (up to S); --minimize time needs it.
---guess random (seeded by --seed) | straight | FILE.npz (an earlier plan).
-A plan that does not converge is one line on stderr and exit status 1
-(nothing written). --out FILE.npz writes the trajectory (times, states,
-inputs at the knots and midpoints, the system, its parameters and the
-settings); a reader names its system and never runs a Python system file it
-names (docs/trajopt.md).
+--guess random (seeded by --seed) | straight | FILE.npz (an earlier plan; with
+--duration-max its duration must be within [0.05, 1] x that bound).
+--max-time S stops IPOPT after S seconds of wall-clock time (default 120,
+the solver's set-up included). A plan that does not converge, or that
+reaches --max-time, is one line on stderr and exit status 1 (nothing
+written); Ctrl-C or SIGTERM stops it at IPOPT's next iteration ("equilibrist:
+interrupted", exit status 130 or 143). Every output (--out, --plot,
+--animate) is checked before the plan is solved. --out FILE.npz writes the
+trajectory (times, states, inputs at the knots and midpoints, the system,
+its parameters and the settings); a reader names its system and never runs
+a Python system file it names, and refuses an array of more than 2,000,000
+numbers before reading it (docs/trajopt.md).
 """
 
 
@@ -68,6 +75,9 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--seed", default="0", metavar="S", help="seed of a random guess (default 0)")
     p.add_argument("--guess", default="straight", metavar="random|straight|FILE",
                    help="the initial guess (default straight)")
+    p.add_argument("--max-time", metavar="S", default="120",
+                   help="wall-clock seconds the solve may take (default 120): a plan that "
+                   "reaches it is not converged (exit status 1)")
     p.add_argument("--out", metavar="FILE.npz", help="write the trajectory")
     common.add_set(p)
     common.add_params(p)
@@ -100,14 +110,36 @@ def _states(system: System, text: str, option: str, base: np.ndarray) -> np.ndar
     return x
 
 
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Every output named (--out, --plot, --animate), before any work: a file name whose
+    folder exists and takes new files (:func:`common.check_output_path`), not a folder."""
+    if args.out is not None and (not args.out.strip() or Path(args.out).suffix.lower() != ".npz"):
+        raise common.UsageError(f"--out {args.out!r}: expected a trajectory file NAME.npz")
+    for option, value in (("--out", args.out), ("--plot", args.plot), ("--animate", args.animate)):
+        if value is None:
+            continue
+        path = common.check_output_path(str(value), option)
+        folder = path.parent
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise common.UsageError(f"{option} {path}: the folder {folder} is not writable")
+
+
 def run(args: argparse.Namespace) -> int:
-    from equilibrist.control.trajopt import load_trajectory, plan, require_casadi
+    from equilibrist.control.trajopt import (
+        TIMED_OUT,
+        check_guess,
+        load_trajectory,
+        plan,
+        require_casadi,
+    )
 
     require_casadi()
     knots = _count(args.knots, "--knots", 4, 2000)
     seed = _count(args.seed, "--seed", 0, 2**63 - 1)
-    if args.out is not None and (not args.out.strip() or Path(args.out).suffix.lower() != ".npz"):
-        raise common.UsageError(f"--out {args.out!r}: expected a trajectory file NAME.npz")
+    max_time = common.parse_number(args.max_time, "--max-time")
+    if not 0 < max_time <= 1e6:
+        raise common.UsageError(f"--max-time {args.max_time}: expected seconds in (0, 1000000]")
+    _check_outputs(args)
     if args.minimize == "time" and args.duration_max is None:
         raise common.UsageError("--minimize time needs a free final time: give --duration-max S")
     if args.start is not None and args.to is None:
@@ -130,6 +162,8 @@ def run(args: argparse.Namespace) -> int:
         guess = load_trajectory(args.guess)
         if guess.state_names != system.state_names or guess.input_names != system.input_names:
             raise common.UsageError(f"--guess {args.guess}: a trajectory of other states or inputs")
+        check_guess(guess, n=system.n_states, m=system.n_inputs, duration_max=duration_max,
+                    what=f"--guess {args.guess}", bound="--duration-max")
     x_op = system.operating_point().x
     if args.to is not None:
         start = x_op if args.start is None else _states(system, args.start, "--from", x_op)
@@ -150,10 +184,15 @@ def run(args: argparse.Namespace) -> int:
         start, goal, bounds = task.start, task.x_op, planning_bounds(task, margin)
     traj = plan(system, start=start, goal=goal, knots=knots, duration=duration,
                 duration_max=duration_max, minimize=args.minimize, guess=guess, seed=seed,
-                bounds=bounds)
+                bounds=bounds, max_time=max_time)
     summary = traj.summary()
     if args.json:
         common.print_json(summary)
+    if traj.status == TIMED_OUT:
+        print(f"equilibrist: the plan reached --max-time {max_time:g} s before it converged "
+              f"({traj.iterations} iterations, largest defect {traj.max_defect:.3g}): give a "
+              "larger --max-time, fewer --knots or another --guess", file=sys.stderr)
+        return 1
     if not traj.converged:
         print(f"equilibrist: the plan did not converge ({traj.iterations} iterations, largest "
               f"defect {traj.max_defect:.3g}): try more --knots, a longer --duration or another "

@@ -17,11 +17,12 @@ of time. Needs CasADi: ``pip install 'equilibrist[trajopt]'``.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 import time
 import types
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -34,6 +35,10 @@ from equilibrist.numeric.system import System
 GUESSES = ("random", "straight")
 MINIMIZE = ("effort", "time")
 FORMAT = "equilibrist-trajectory-1"
+#: The wall-clock seconds a solve may take by default (``plan(max_time=...)``, ``--max-time``).
+MAX_TIME = 120.0
+#: The ``status`` of a plan whose solve reached its ``max_time`` (IPOPT's own word for it).
+TIMED_OUT = "Maximum_WallTime_Exceeded"
 
 
 def require_casadi() -> types.ModuleType:
@@ -70,6 +75,9 @@ class Trajectory:
     solver: str
     settings: Mapping[str, object] = field(default_factory=dict)
     system_digest: str | None = None
+    #: IPOPT's return status (``Solve_Succeeded``...), :data:`TIMED_OUT` where the solve
+    #: reached its ``max_time``; empty for a trajectory read from a file.
+    status: str = ""
 
     @property
     def duration(self) -> float:
@@ -178,6 +186,7 @@ class _Problem:
     goal: Any
     lock: threading.Lock = field(default_factory=threading.Lock)
     max_iterations: int = -1
+    stopper: Any = None  # IPOPT's iteration callback (_stopper), made with the solver
 
 
 def _problem(system: System, N: int, duration: float | None, duration_max: float | None,
@@ -236,7 +245,7 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
          duration: float | None = None, duration_max: float | None = None,
          minimize: str = "effort", guess: str | Trajectory = "straight", seed: int = 0,
          bounds: Mapping[str, tuple[float, float]] | None = None,
-         max_iterations: int = 3000) -> Trajectory:
+         max_iterations: int = 3000, max_time: float | None = MAX_TIME) -> Trajectory:
     """Plan a motion of *system* from *start* to *goal* (absolute states).
 
     Parameters
@@ -244,15 +253,28 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
     knots : int
         Collocation intervals ``N``.
     duration, duration_max : float
-        A fixed final time, or a free one in ``(0, duration_max]`` (one of the two).
+        A fixed final time, or a free one in ``[0.05 duration_max, duration_max]`` (one
+        of the two).
     minimize : ``"effort"`` or ``"time"``
         ``integral of sum (u_i / scale_i)^2 dt`` (scales: the Bryson scales of the
         inputs) or the final time.
     guess : ``"straight"``, ``"random"`` or a :class:`Trajectory`
         The initial guess: the straight line from start to goal with zero
-        input; a seeded random one (*seed*); or a trajectory (interpolated).
+        input; a seeded random one (*seed*); or a trajectory (interpolated,
+        checked by :func:`check_guess`).
     bounds : mapping
         ``{state: (low, high)}`` the motion must keep (the task's region).
+    max_iterations : int
+        IPOPT's iterations at most.
+    max_time : float or None
+        Wall-clock seconds the solve may take, the solver's set-up for a new shape of
+        problem included (default :data:`MAX_TIME`, 120; None: no limit). A solve
+        stopped there is not converged, its ``status`` :data:`TIMED_OUT`.
+
+    The plan's first and last knots are *start* and *goal* exactly (IPOPT meets them
+    to its tolerance; its round-off, such as a cart at ``-1e-32`` m, is not kept).
+    Ctrl-C (on the command line SIGTERM too) stops IPOPT at its next iteration and
+    is raised as ``KeyboardInterrupt``.
     """
     require_casadi()
     if minimize not in MINIMIZE:
@@ -264,6 +286,8 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
     for name, v in (("duration", duration), ("duration_max", duration_max)):
         if v is not None and not (math.isfinite(v) and 0 < v <= 1e4):
             raise DesignError(f"{name} = {v!r}: expected seconds in (0, 10000]")
+    if max_time is not None and not (math.isfinite(max_time) and 0 < max_time <= 1e6):
+        raise DesignError(f"max_time = {max_time!r}: expected seconds in (0, 1000000], or None")
     if minimize == "time" and duration is not None:
         raise DesignError("minimize time needs a free final time: give duration_max, not duration")
     n, m = system.n_states, system.n_inputs
@@ -274,14 +298,79 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
     N = knots
     lo = np.array([float(system.params[f"{i}_min"]) for i in system.input_names])
     hi = np.array([float(system.params[f"{i}_max"]) for i in system.input_names])
-    t_max = duration if duration is not None else duration_max  # one of the two is given
-    assert t_max is not None
+    xg, ug, t_guess = _initial_guess(system, guess, start=start, goal=goal, N=N, seed=seed,
+                                     duration=duration, duration_max=duration_max, lo=lo, hi=hi)
     problem = _problem(system, N, duration, duration_max, minimize, bounds or {}, lo, hi)
     f, opti, X, U, Um, T = problem.f, problem.opti, problem.X, problem.U, problem.Um, problem.T
-    # The initial guess.
+    with problem.lock:
+        opti.set_value(problem.start, start)
+        opti.set_value(problem.goal, goal)
+        opti.set_initial(X, xg.T)
+        opti.set_initial(U, ug.T)
+        opti.set_initial(Um, 0.5 * (ug[:-1] + ug[1:]).T)
+        if duration is None:
+            opti.set_initial(T, t_guess)
+        t0 = time.process_time()
+        value, stats, converged, status = _solve(problem, max_iterations=max_iterations,
+                                                 max_time=max_time)
+        solve_time = time.process_time() - t0
+        Tv = float(value(T)) if duration is None else float(duration)
+        xs = np.asarray(value(X), dtype=float).T.reshape(N + 1, n)
+        us = np.asarray(value(U), dtype=float).T.reshape(N + 1, m)
+        ums = np.asarray(value(Um), dtype=float).T.reshape(N, m)
+        cost = float(value(opti.f))
+    # The ends exactly where they were asked: the defects below measure the plan so pinned.
+    xs[0], xs[-1] = start, goal
+    defect = _max_defect(f, xs, us, ums, Tv / N, start, goal)
+    return Trajectory(
+        system=system.key, params=dict(system.params), state_names=system.state_names,
+        input_names=system.input_names, times=np.linspace(0.0, Tv, N + 1), states=xs,
+        inputs=us, mid_inputs=ums, converged=converged and defect < 1e-6,
+        cost=cost, max_defect=defect, solve_time=solve_time,
+        iterations=int(stats.get("iter_count", 0)), solver="ipopt (CasADi, exact Hessian)",
+        settings={"knots": N, "minimize": minimize,
+                  "guess": guess if isinstance(guess, str) else "file", "seed": seed,
+                  "duration": duration, "duration_max": duration_max,
+                  "bounds": {k: list(v) for k, v in (bounds or {}).items()},
+                  "start": start.tolist(), "goal": goal.tolist()},
+        system_digest=system.digest, status=status,
+    )
+
+
+def check_guess(guess: Trajectory, *, n: int, m: int, duration_max: float | None,
+                what: str = "the guess", bound: str = "duration_max") -> None:
+    """Refuse a trajectory as a guess (:class:`DesignError`, one line that begins with
+    *what*) unless it has *n* states and *m* inputs, finite values, strictly increasing
+    finite times and, for a free final time, a duration within the final time's range
+    ``[0.05 duration_max, duration_max]`` (*bound* names ``duration_max`` there)."""
+    times = np.asarray(guess.times, dtype=float)
+    if (np.shape(guess.states) != (times.size, n) or np.shape(guess.inputs) != (times.size, m)
+            or np.shape(guess.mid_inputs) != (times.size - 1, m)):
+        raise DesignError(f"{what}: its arrays are not those of a plan of {n} states and "
+                          f"{m} inputs")
+    if (times.size < 2 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0)
+            or not all(np.all(np.isfinite(a)) for a in (guess.states, guess.inputs,
+                                                         guess.mid_inputs))):
+        raise DesignError(f"{what}: expected finite values at strictly increasing finite times")
+    d = float(times[-1] - times[0])
+    if duration_max is not None and not (0.05 * duration_max <= d <= duration_max):
+        raise DesignError(f"{what}: its duration {d:.6g} s is outside the free final time's "
+                          f"range [{0.05 * duration_max:g}, {duration_max:g}] s ({bound} "
+                          f"{duration_max:g}): expected a plan of a duration within it")
+
+
+def _initial_guess(system: System, guess: str | Trajectory, *, start: np.ndarray,
+                   goal: np.ndarray, N: int, seed: int, duration: float | None,
+                   duration_max: float | None, lo: np.ndarray,
+                   hi: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """The initial guess's states, inputs at the knots and final time."""
+    n, m = system.n_states, system.n_inputs
+    t_max = duration if duration is not None else duration_max  # one of the two is given
+    assert t_max is not None
     t_guess = t_max if duration is not None else 0.5 * t_max
     s = np.linspace(0.0, 1.0, N + 1)
     if isinstance(guess, Trajectory):
+        check_guess(guess, n=n, m=m, duration_max=duration_max)
         tt = s * guess.duration
         xg = np.column_stack([np.interp(tt, guess.times - guess.times[0], guess.states[:, i])
                               for i in range(n)])
@@ -299,47 +388,109 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
         ug = rng.uniform(lo, hi, (N + 1, m))
     else:
         raise DesignError(f"guess = {guess!r}: expected random, straight or a trajectory file")
-    with problem.lock:
-        opti.set_value(problem.start, start)
-        opti.set_value(problem.goal, goal)
-        opti.set_initial(X, xg.T)
-        opti.set_initial(U, ug.T)
-        opti.set_initial(Um, 0.5 * (ug[:-1] + ug[1:]).T)
-        if duration is None:
-            opti.set_initial(T, t_guess)
-        if problem.max_iterations != int(max_iterations):
-            opti.solver("ipopt", IPOPT_OPTIONS, {**IPOPT_SETTINGS, "max_iter": int(max_iterations)})
-            problem.max_iterations = int(max_iterations)
-        t0 = time.process_time()
+    return xg, ug, t_guess
+
+
+def _stopper(problem: _Problem) -> Any:
+    """IPOPT's iteration callback for *problem*: it stops the solve (returns 1) once a
+    signal was noted in its ``signals``, an interrupt was recorded
+    (:mod:`equilibrist.interrupt`) or its ``deadline`` (``time.monotonic``) has passed,
+    saying which in its ``reason`` (``"interrupt"``, ``"time"``)."""
+    ca = require_casadi()
+    from equilibrist import interrupt
+
+    nx, ng, npar = int(problem.opti.nx), int(problem.opti.ng), int(problem.opti.np)
+    callback: Any = ca.Callback
+
+    class Stopper(callback):  # type: ignore[misc]  # CasADi ships no types
+        def __init__(self) -> None:
+            ca.Callback.__init__(self)
+            self.signals: list[int] = []
+            self.deadline = math.inf
+            self.reason = ""
+            self.construct("equilibrist_stop", {})
+
+        def get_n_in(self) -> int:
+            return int(ca.nlpsol_n_out())
+
+        def get_n_out(self) -> int:
+            return 1
+
+        def get_name_in(self, i: int) -> str:
+            return str(ca.nlpsol_out(i))
+
+        def get_name_out(self, i: int) -> str:
+            return "stop"
+
+        def get_sparsity_in(self, i: int) -> Any:
+            size = {"f": 1, "x": nx, "lam_x": nx, "g": ng, "lam_g": ng}.get(ca.nlpsol_out(i), npar)
+            return ca.Sparsity.dense(size, 1)
+
+        def eval(self, arg: object) -> list[int]:
+            if self.signals or interrupt.requested():
+                self.reason = "interrupt"
+            elif time.monotonic() >= self.deadline:
+                self.reason = "time"
+            return [1 if self.reason else 0]
+
+    return Stopper()
+
+
+@contextlib.contextmanager
+def _signals_noted(noted: list[int]) -> Iterator[None]:
+    """Within the block, Ctrl-C and SIGTERM are only noted in *noted* (a signal handler
+    that raises inside IPOPT's callbacks would end the solve as a failure, with CasADi's
+    warning); after it, the handlers are restored and the first signal noted is raised
+    again (:func:`signal.raise_signal`), so that it acts as if it came then. Only the
+    main thread handles signals: elsewhere this does nothing. A signal the process
+    ignores stays ignored."""
+    import signal
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    previous = {s: h for s, h in previous.items() if h not in (None, signal.SIG_IGN)}
+
+    def note(signum: int, _frame: object) -> None:
+        noted.append(signum)
+
+    for s in previous:
+        signal.signal(s, note)
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+        if noted:
+            signal.raise_signal(noted[0])
+
+
+def _solve(problem: _Problem, *, max_iterations: int,
+           max_time: float | None) -> tuple[Any, Mapping[str, Any], bool, str]:
+    """Solve *problem* from its guess: the values' reader, IPOPT's statistics, its success
+    and its return status (:data:`TIMED_OUT` where *max_time* stopped it). An interrupt
+    stops IPOPT at its next iteration and is raised."""
+    opti = problem.opti
+    if problem.stopper is None:
+        problem.stopper = _stopper(problem)
+    if problem.max_iterations != int(max_iterations):
+        opti.solver("ipopt", {**IPOPT_OPTIONS, "iteration_callback": problem.stopper},
+                    {**IPOPT_SETTINGS, "max_iter": int(max_iterations)})
+        problem.max_iterations = int(max_iterations)
+    stop = problem.stopper
+    stop.signals, stop.reason = [], ""
+    stop.deadline = math.inf if max_time is None else time.monotonic() + max_time
+    with _signals_noted(stop.signals):
         try:
             sol = opti.solve()
-            stats = sol.stats()
-            value = sol.value
-            converged = bool(stats.get("success"))
+            stats, value, converged = sol.stats(), sol.value, bool(sol.stats().get("success"))
         except RuntimeError:  # not converged: the debug values are the last iterate
-            stats = opti.stats()
-            value = opti.debug.value
-            converged = False
-        solve_time = time.process_time() - t0
-        Tv = float(value(T)) if duration is None else float(duration)
-        xs = np.asarray(value(X), dtype=float).T.reshape(N + 1, n)
-        us = np.asarray(value(U), dtype=float).T.reshape(N + 1, m)
-        ums = np.asarray(value(Um), dtype=float).T.reshape(N, m)
-        cost = float(value(opti.f))
-    defect = _max_defect(f, xs, us, ums, Tv / N, start, goal)
-    return Trajectory(
-        system=system.key, params=dict(system.params), state_names=system.state_names,
-        input_names=system.input_names, times=np.linspace(0.0, Tv, N + 1), states=xs,
-        inputs=us, mid_inputs=ums, converged=converged and defect < 1e-6,
-        cost=cost, max_defect=defect, solve_time=solve_time,
-        iterations=int(stats.get("iter_count", 0)), solver="ipopt (CasADi, exact Hessian)",
-        settings={"knots": N, "minimize": minimize,
-                  "guess": guess if isinstance(guess, str) else "file", "seed": seed,
-                  "duration": duration, "duration_max": duration_max,
-                  "bounds": {k: list(v) for k, v in (bounds or {}).items()},
-                  "start": start.tolist(), "goal": goal.tolist()},
-        system_digest=system.digest,
-    )
+            stats, value, converged = opti.stats(), opti.debug.value, False
+    if stop.reason == "interrupt" and not stop.signals:
+        raise KeyboardInterrupt  # recorded by the command line's handlers before the solve
+    status = TIMED_OUT if stop.reason == "time" else str(stats.get("return_status", ""))
+    return value, stats, converged, status
 
 
 def _max_defect(f: Any, xs: np.ndarray, us: np.ndarray, ums: np.ndarray, h: float,
@@ -352,36 +503,193 @@ def _max_defect(f: Any, xs: np.ndarray, us: np.ndarray, ums: np.ndarray, h: floa
     return float(max(np.max(np.abs(d)), np.max(np.abs(xs[0] - start)), np.max(np.abs(xs[-1] - goal))))
 
 
+#: The most numbers an array of a trajectory file may hold (2,000,000: 16 MB of float64, a
+#: 2000-knot plan of up to 999 states), and the most characters of its metadata. Both are
+#: read from the file's ``.npy`` headers and checked before any array is read, so that a
+#: small compressed file that claims a huge array is refused without unpacking it.
+MAX_VALUES = 2_000_000
+MAX_META_CHARS = 1_000_000
+_ARRAYS = {"times": 1, "states": 2, "inputs": 2, "mid_inputs": 2}  # name: dimensions
+_KINDS = {"c": "complex numbers", "O": "Python objects", "U": "text", "S": "bytes",
+          "V": "records", "b": "booleans", "M": "dates", "m": "time spans"}
+
+
 def load_trajectory(path: str | Path) -> Trajectory:
-    """A trajectory written by :meth:`Trajectory.save` (its system is named, never run)."""
-    import json
+    """A trajectory written by :meth:`Trajectory.save` (its system is named, never run).
+
+    Every array's size and type is checked in the file's ``.npy`` headers before any is
+    read (at most :data:`MAX_VALUES` real numbers each, the metadata at most
+    :data:`MAX_META_CHARS` characters), then every metadata field's type; anything else
+    is a :class:`DesignError` of one line naming the file and what was wrong.
+    """
     import zipfile
+    import zlib
+
+    from equilibrist.errors import quote_exception
 
     p = Path(path)
     try:
-        with np.load(p, allow_pickle=False) as data:
-            meta = json.loads(str(data["meta"]))
-            arrays = {k: np.asarray(data[k], dtype=float) for k in ("times", "states", "inputs",
-                                                                     "mid_inputs")}
+        with zipfile.ZipFile(p) as zf:
+            headers = {k: _npy_header(zf, k, p) for k in ("meta", *_ARRAYS)}
+            _check_headers(p, headers)
+            meta = _metadata(p, _read_member(zf, "meta"))
+            arrays = {k: np.asarray(_read_member(zf, k), dtype=float) for k in _ARRAYS}
     except FileNotFoundError:
         raise DesignError(f"no trajectory file {p}") from None
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
-        raise DesignError(f"{p} is not a trajectory file: {exc}") from None
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise DesignError(f"{p} is not a trajectory file (written by 'equilibrist trajopt --out')")
-    times, states, inputs, mids = (arrays[k] for k in ("times", "states", "inputs", "mid_inputs"))
-    n, m = len(meta.get("state_names", [])), len(meta.get("input_names", []))
+    except IsADirectoryError:
+        raise DesignError(f"{p} is a folder, not a trajectory file") from None
+    except (OSError, ValueError, KeyError, EOFError, RuntimeError, NotImplementedError,
+            zipfile.BadZipFile, zlib.error) as exc:
+        if isinstance(exc, DesignError):
+            raise
+        raise DesignError(f"{p} is not a trajectory file: {quote_exception(exc)}") from None
+    times, states, inputs, mids = (arrays[k] for k in _ARRAYS)
+    n, m = len(meta["state_names"]), len(meta["input_names"])
     N = times.size - 1
     if (N < 1 or states.shape != (N + 1, n) or inputs.shape != (N + 1, m) or mids.shape != (N, m)
             or not all(np.all(np.isfinite(a)) for a in arrays.values()) or np.any(np.diff(times) <= 0)):
         raise DesignError(f"{p} is not a valid trajectory file: its arrays do not fit together")
     return Trajectory(
-        system=str(meta["system"]), params=dict(meta.get("params", {})),
-        state_names=tuple(meta["state_names"]), input_names=tuple(meta["input_names"]),
-        times=times, states=states, inputs=inputs, mid_inputs=mids,
-        converged=bool(meta.get("converged")), cost=float(meta.get("cost", math.nan)),
-        max_defect=float(meta.get("max_defect", math.nan)),
-        solve_time=float(meta.get("solve_time", math.nan)),
-        iterations=int(meta.get("iterations", 0)), solver=str(meta.get("solver", "")),
-        settings=dict(meta.get("settings", {})), system_digest=meta.get("system_digest"),
+        system=meta["system"], params=meta["params"], state_names=meta["state_names"],
+        input_names=meta["input_names"], times=times, states=states, inputs=inputs,
+        mid_inputs=mids, converged=meta["converged"], cost=meta["cost"],
+        max_defect=meta["max_defect"], solve_time=meta["solve_time"],
+        iterations=meta["iterations"], solver=meta["solver"], settings=meta["settings"],
+        system_digest=meta["system_digest"],
     )
+
+
+def _npy_header(zf: Any, name: str, p: Path) -> tuple[tuple[int, ...], np.dtype[Any]]:
+    """The shape and type of the array *name* of the archive, from its ``.npy`` header only."""
+    from numpy.lib import format as npy
+
+    try:
+        member = zf.open(f"{name}.npy")
+    except KeyError:
+        raise DesignError(f"{p} is not a trajectory file: it has no {name} array") from None
+    with member as fh:
+        version = npy.read_magic(fh)
+        if version == (1, 0):
+            shape, _fortran, dtype = npy.read_array_header_1_0(fh)
+        elif version == (2, 0):
+            shape, _fortran, dtype = npy.read_array_header_2_0(fh)
+        else:
+            raise DesignError(f"{p} is not a trajectory file: its {name} array is stored in "
+                              f".npy version {version[0]}.{version[1]}, expected 1.0 or 2.0")
+    return tuple(shape), dtype
+
+
+def _check_headers(p: Path, headers: Mapping[str, tuple[tuple[int, ...], np.dtype[Any]]]) -> None:
+    """The arrays' sizes and types as their headers state them (nothing is read yet)."""
+    shape, dtype = headers["meta"]
+    if dtype.kind != "U" or shape != ():
+        raise DesignError(f"{p} is not a trajectory file: its meta is not one text")
+    if dtype.itemsize // 4 > MAX_META_CHARS:
+        raise DesignError(f"{p} is not a trajectory file equilibrist reads: its meta is "
+                          f"{dtype.itemsize // 4:,} characters, more than the "
+                          f"{MAX_META_CHARS:,} it may hold")
+    for name, ndim in _ARRAYS.items():
+        shape, dtype = headers[name]
+        if dtype.kind not in "fiu":
+            kind = _KINDS.get(dtype.kind, f"{dtype.kind!r} values")
+            raise DesignError(f"{p} is not a valid trajectory file: its {name} array holds "
+                              f"{kind}, expected real numbers")
+        if len(shape) != ndim or any(d < 0 for d in shape):
+            raise DesignError(f"{p} is not a valid trajectory file: its {name} array has "
+                              f"{len(shape)} dimensions, expected {ndim}")
+        if math.prod(shape) > MAX_VALUES:
+            size = " x ".join(str(d) for d in shape)
+            raise DesignError(f"{p} is not a trajectory file equilibrist reads: its {name} "
+                              f"array is {size} numbers, more than the {MAX_VALUES:,} an "
+                              "array may hold")
+
+
+def _read_member(zf: Any, name: str) -> np.ndarray:
+    from numpy.lib import format as npy
+
+    with zf.open(f"{name}.npy") as fh:
+        array: np.ndarray = npy.read_array(fh, allow_pickle=False)
+    return array
+
+
+def _json_kind(value: object) -> str:
+    """What a JSON value is, in JSON's words (never the value itself: it is outside text)."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return "a number"
+    if isinstance(value, str):
+        return "a text"
+    return "a list" if isinstance(value, list) else "an object"
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _is_name(value: object) -> bool:
+    return isinstance(value, str) and bool(value) and value.isprintable()
+
+
+def _metadata(p: Path, stored: np.ndarray) -> dict[str, Any]:
+    """The metadata's fields, each checked for its type (:meth:`Trajectory.save` writes them;
+    the summary's ``cost`` and the like may be absent, as in a file written by hand)."""
+    import json
+
+    try:
+        meta = json.loads(str(stored))
+    except (ValueError, RecursionError):
+        raise DesignError(f"{p} is not a trajectory file: its meta is not JSON") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise DesignError(f"{p} is not a trajectory file (written by 'equilibrist trajopt --out')")
+    out: dict[str, Any] = {}
+
+    def bad(key: str, expected: str) -> DesignError:
+        return DesignError(f"{p} is not a valid trajectory file: its {key} is "
+                           f"{_json_kind(meta.get(key))}, expected {expected}")
+
+    for key in ("system", "state_names", "input_names"):
+        if key not in meta:
+            raise DesignError(f"{p} is not a valid trajectory file: it names no {key}")
+    if not _is_name(meta["system"]):
+        raise bad("system", "a system's name (printable text)")
+    out["system"] = meta["system"]
+    for key in ("state_names", "input_names"):
+        names = meta[key]
+        if (not isinstance(names, list) or not names or not all(_is_name(v) for v in names)
+                or len(set(names)) != len(names)):
+            raise bad(key, "a list of distinct names (printable texts)")
+        out[key] = tuple(names)
+    digest = meta.get("system_digest")
+    if digest is not None and not _is_name(digest):
+        raise bad("system_digest", "a digest (printable text) or null")
+    out["system_digest"] = digest
+    params = meta.get("params", {})
+    if not isinstance(params, dict) or not all(_is_number(v) for v in params.values()):
+        raise bad("params", "an object of parameter values (numbers)")
+    out["params"] = {k: float(v) for k, v in params.items()}
+    settings = meta.get("settings", {})
+    if not isinstance(settings, dict):
+        raise bad("settings", "an object")
+    out["settings"] = settings
+    for key in ("cost", "max_defect", "solve_time"):
+        value = meta.get(key, math.nan)
+        if not _is_number(value):
+            raise bad(key, "a number")
+        out[key] = float(value)
+    iterations = meta.get("iterations", 0)
+    if not (isinstance(iterations, int) and not isinstance(iterations, bool)
+            and 0 <= iterations <= 10**9):
+        raise bad("iterations", "a whole number from 0 to 1000000000")
+    out["iterations"] = iterations
+    converged = meta.get("converged", False)
+    if not isinstance(converged, bool):
+        raise bad("converged", "true or false")
+    out["converged"] = converged
+    solver = meta.get("solver", "")
+    if not isinstance(solver, str) or not solver.isprintable():
+        raise bad("solver", "a text")
+    out["solver"] = solver
+    return out

@@ -34,6 +34,9 @@ from equilibrist.atomic import atomic_path, write_text
 from equilibrist.errors import SimulationError, UnknownNameError, nearest
 
 FORMAT = "equilibrist-simresult-1"
+#: An output's overshoot is None when its initial error is at most this share of its
+#: largest error in the run (:meth:`SimResult.metrics`): it starts as good as on target.
+OVERSHOOT_FLOOR = 1e-6
 
 _ARRAYS = ("time", "states", "estimates", "measurements", "commanded", "saturated", "applied",
            "reference")
@@ -217,7 +220,11 @@ class SimResult:
         measured outputs (target: the operating point).
         ``overshoot``: per watched output, the largest excursion past the
         target on the side opposite the initial error, as a fraction of that
-        error (None for an output that starts on target).
+        error: the size of the move the output makes to its target. None
+        for an output that starts on target or as good as on it, its initial
+        error at most :data:`OVERSHOOT_FLOOR` (one millionth) of its largest
+        error in the run (such as a cart that a swing-up starts 1e-32 m off
+        centre: a fraction of so small a move is round-off, not a measure).
         ``peak_command``: the largest ``|command|`` (the controller's, before
         the actuator's limits); ``peak_input``: the largest ``|input|``
         applied; ``rms_input``: RMS of the applied input (all absolute, per
@@ -238,7 +245,7 @@ class SimResult:
         for j, name in enumerate(watched):
             e = errors[:, j]
             e0 = e[0]
-            if abs(e0) > 0:
+            if abs(e0) > OVERSHOOT_FLOOR * float(np.abs(e).max()):
                 past = -np.sign(e0) * e
                 overshoot[name] = float(max(0.0, past.max()) / abs(e0))
             else:
