@@ -243,6 +243,7 @@ def test_to_dict_is_strict_json_and_summary_is_readable() -> None:
         "estimator_poles",
         "tracked",
         "margins",
+        "lqr_margins",
         "controllability",
         "observability",
     ):

@@ -308,12 +308,14 @@ def test_lqr_stabilizes_and_solves_the_riccati_equation(plant) -> None:
 def test_gain_margins_bound_the_stable_gains(
     name: str, variant: dict[str, str], rate: float | None
 ) -> None:
-    """Independent truth: the closed-loop eigenvalues of A - k B K at the margins."""
+    """Independent truth: the closed-loop eigenvalues of A - k B K at the margins of the state
+    feedback (``lqr_margins``; the LQG loop's, ``margins``, are tests/test_control_margins.py's)."""
     d = design(_system(name, tuple(variant.items())), rate=rate)
     if d.plant.n_inputs != 1:
         pytest.skip("margins are for single-input loops")
     A, B = d.model.A, d.model.B
-    mg = d.margins
+    mg = d.lqr_margins
+    assert d.margins_of("lqr") is mg
 
     def stable(k: float) -> bool:
         ev = np.linalg.eigvals(A - k * B @ d.K)

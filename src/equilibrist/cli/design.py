@@ -17,10 +17,18 @@ sensor and process noise.
 {"re": ..., "im": ...} (also when real); numbers that are not finite (an
 infinite time constant) are null. Keys include K, S, poles, Kf, P, Kc
 (null when the tracked output has zero DC gain; kc_note says why),
-estimator_poles, Q, R, QN, RN, G, Qd, Rd, plant, discrete, margins, and
-(with --rate) "controller": the chosen controller as the one linear form
-the simulator runs and the C export writes (kind, form, Ac, By, Br, Bu, Cc,
-Dy, Dr).
+estimator_poles, Q, R, QN, RN, G, Qd, Rd, plant, discrete, margins,
+lqr_margins, and (with --rate) "controller": the chosen controller as the
+one linear form the simulator runs and the C export writes (kind, form, Ac,
+By, Br, Bu, Cc, Dy, Dr).
+
+margins are those of the loop as implemented, broken at the plant input
+(null with several inputs): for lqg the compensator, its Kalman filter fed
+its own command, in series with the plant, in the design's timebase
+(discrete at --rate); for lqr the state feedback. lqr_margins are the state
+feedback's alone, K (sI - A)^-1 B: an LQG has no guaranteed margins and its
+loop's are usually well below them. equilibrist.control.loop_at_input(d)
+is that loop as a python-control system.
 
 --at STATE=VALUE designs at the equilibrium with those states (the others
 solved), e.g. --at theta=3.14159 for a pendulum hanging down.
@@ -82,12 +90,12 @@ def run(args: argparse.Namespace) -> int:
         return 0
     result = design(system, rate=rate, **common.design_options(args))
     if args.json:
-        out = result.to_dict()
+        out = result.to_dict(controller=kind)
         if result.rate is not None:
             from equilibrist.control.controller import LinearController
 
             out["controller"] = LinearController.from_design(result, kind=kind).describe()
         common.print_json(out)
     else:
-        print(result.summary())
+        print(result.summary(controller=kind))
     return 0

@@ -15,7 +15,9 @@ public API:
 * :func:`controllability`, :func:`observability`, :func:`pole_table`,
   :func:`loop_margins` -- analysis;
 * :func:`design` / :class:`Design` -- all of it for a system of the catalogue;
-* :func:`to_statespace`, :func:`from_statespace` -- python-control interop.
+* :func:`to_statespace`, :func:`from_statespace` -- python-control interop;
+  :func:`loop_at_input` -- a design's loop as implemented, broken at the
+  plant input (the system of :attr:`Design.margins`).
 """
 
 from equilibrist.control.analysis import (
@@ -30,7 +32,7 @@ from equilibrist.control.analysis import (
 )
 from equilibrist.control.design import Design, design
 from equilibrist.control.discretize import discrete_noise, discretize, van_loan
-from equilibrist.control.interop import from_statespace, to_statespace
+from equilibrist.control.interop import from_statespace, loop_at_input, to_statespace
 from equilibrist.control.kalman import DiscreteKalmanFilter, Estimate, KalmanRun, SteadyStateGains
 from equilibrist.control.lqg import Compensator, lqg_compensator
 from equilibrist.control.reference import discrete_reference_gain, reference_gain
@@ -57,6 +59,7 @@ __all__ = [
     "dlqe",
     "dlqr",
     "from_statespace",
+    "loop_at_input",
     "loop_margins",
     "lqe",
     "lqg_compensator",

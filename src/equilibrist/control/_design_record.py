@@ -21,6 +21,7 @@ from equilibrist.control.analysis import (
     observability,
     pole_table,
 )
+from equilibrist.control.interop import LOOP_CONTROLLERS, _loop_model
 from equilibrist.control.kalman import DiscreteKalmanFilter
 from equilibrist.control.lqg import Compensator, lqg_compensator
 from equilibrist.errors import DesignError
@@ -166,11 +167,41 @@ class Design:
 
     @cached_property
     def margins(self) -> Margins | None:
-        """Margins of the loop broken at the input (single-input plants; else None)."""
+        """Margins of the LQG loop as implemented, broken at the plant input (single-input
+        plants; else None).
+
+        The loop is the compensator (:attr:`compensator`: the Kalman filter
+        fed its own command, ``u = -K xhat``) in series with the plant, in
+        the design's timebase (the discrete plant and the compensator's
+        discrete form when the design is sampled): the system
+        :func:`~equilibrist.control.interop.loop_at_input` returns. LQG has
+        no guaranteed margins; these are usually well below
+        :attr:`lqr_margins`.
+        """
+        return self._margins("lqg")
+
+    @cached_property
+    def lqr_margins(self) -> Margins | None:
+        """Margins of the state feedback alone, ``L = K (sI - A)^-1 B`` (``z`` when sampled),
+        broken at the plant input (single-input plants; else None): the loop of an LQR on the
+        measured full state, not the LQG loop, which runs on the estimate."""
+        return self._margins("lqr")
+
+    def margins_of(self, controller: str = "lqg") -> Margins | None:
+        """The margins of *controller*'s loop as implemented: ``"lqg"`` (:attr:`margins`) or
+        ``"lqr"`` (:attr:`lqr_margins`)."""
+        if controller not in LOOP_CONTROLLERS:
+            raise DesignError(
+                f"the margins of controller {controller!r} are not a design's: expected "
+                f"{' or '.join(LOOP_CONTROLLERS)}"
+            )
+        return self.margins if controller == "lqg" else self.lqr_margins
+
+    def _margins(self, controller: str) -> Margins | None:
         if self.plant.n_inputs != 1:
             return None
-        m = self.model
-        return loop_margins(m.A, m.B, self.K, dt=self.dt)
+        loop = _loop_model(self, controller=controller)
+        return loop_margins(loop.A, loop.B, loop.C, dt=self.dt, D=float(loop.D[0, 0]))
 
     @cached_property
     def kalman_filter(self) -> DiscreteKalmanFilter:
@@ -194,13 +225,17 @@ class Design:
         )
 
     # -- reports --------------------------------------------------------------------
-    def to_dict(self) -> dict[str, object]:
+    def to_dict(self, *, controller: str = "lqg") -> dict[str, object]:
         """Everything as plain JSON-ready values.
 
         Matrices are lists of rows; poles are lists of ``{"re", "im"}``
         objects (also when real); a non-finite number (an infinite time
-        constant, an undefined damping ratio) is ``None``.
+        constant, an undefined damping ratio) is ``None``. ``margins`` are
+        those of *controller*'s loop as implemented (:meth:`margins_of`:
+        the LQG loop with its estimator by default), ``lqr_margins`` the
+        state feedback's alone (the same for ``controller="lqr"``).
         """
+        margins = self.margins_of(controller)
         disc = self.discrete
         out: dict[str, object] = {
             "system": self.system_key,
@@ -243,15 +278,18 @@ class Design:
             "open_loop_poles": _complex_list(self.open_loop_poles),
             "pole_table": [p.to_dict() for p in self.pole_table],
             "estimator_pole_table": [p.to_dict() for p in self.estimator_pole_table],
-            "margins": None if self.margins is None else self.margins.to_dict(),
+            "margins": None if margins is None else margins.to_dict(),
+            "lqr_margins": None if self.lqr_margins is None else self.lqr_margins.to_dict(),
             "controllability": self.controllability.to_dict(),
             "observability": self.observability.to_dict(),
             "notes": list(self.notes),
         }
         return {key: _plain(value) for key, value in out.items()}
 
-    def summary(self) -> str:
-        """A readable report of the design."""
+    def summary(self, *, controller: str = "lqg") -> str:
+        """A readable report of the design; its margins are *controller*'s loop's as
+        implemented (:meth:`margins_of`), then the state feedback's alone for an LQG."""
+        margins = self.margins_of(controller)
         kind = (
             f"discrete at {self.rate:g} Hz (dt = {self.dt:.4g} s, {self.discretization}, "
             f"{self.kalman_form} Kalman form)"
@@ -285,18 +323,24 @@ class Design:
             f"closed-loop poles ({var}):",
             _pole_lines(self.pole_table, self.is_discrete),
         ]
-        if self.margins is not None:
-            mg = self.margins
-            lines += [
-                "",
-                "loop broken at the input:",
-                f"  gain margins: stable for a loop gain scaled by x{_num(mg.gain_lower)} "
-                f"({_num(mg.gain_lower_db)} dB, at {_num(mg.lower_crossover)} rad/s) "
-                f"to x{_num(mg.gain_upper)} ({_num(mg.gain_upper_db)} dB, at "
-                f"{_num(mg.upper_crossover)} rad/s)",
-                f"  phase margin: {_num(mg.phase_margin)} deg at {_num(mg.gain_crossover)} rad/s",
-                f"  min |1 + L|: {_num(mg.return_difference)}",
-            ]
+        if margins is not None and self.lqr_margins is not None:
+            timebase = (
+                f"discrete at {self.rate:g} Hz" if self.rate is not None else "continuous"
+            )
+            loop = (
+                "LQG: the compensator, its Kalman filter fed its own command, in series with "
+                "the plant"
+                if controller == "lqg"
+                else "LQR: u = -K x on the measured state"
+            )
+            lines += ["", f"loop broken at the input, as implemented ({loop}; {timebase}):"]
+            lines += _margin_lines(margins)
+            if controller == "lqg":
+                lines += [
+                    "state feedback alone (LQR loop K (sI - A)^-1 B, not the loop that runs: "
+                    "LQG has no guaranteed margins):",
+                    *_margin_lines(self.lqr_margins),
+                ]
         gain_name = (
             "Kalman gain Kf"
             if not self.is_discrete
@@ -358,6 +402,17 @@ def _plain(obj: object) -> object:
 
 def _num(v: float) -> str:
     return f"{v:.4g}" if math.isfinite(v) else ("inf" if v > 0 else "-inf" if v < 0 else "n/a")
+
+
+def _margin_lines(mg: Margins) -> list[str]:
+    return [
+        f"  gain margins: stable for a loop gain scaled by x{_num(mg.gain_lower)} "
+        f"({_num(mg.gain_lower_db)} dB, at {_num(mg.lower_crossover)} rad/s) "
+        f"to x{_num(mg.gain_upper)} ({_num(mg.gain_upper_db)} dB, at "
+        f"{_num(mg.upper_crossover)} rad/s)",
+        f"  phase margin: {_num(mg.phase_margin)} deg at {_num(mg.gain_crossover)} rad/s",
+        f"  min |1 + L|: {_num(mg.return_difference)}",
+    ]
 
 
 def _numbers(values: np.ndarray) -> str:

@@ -8,7 +8,9 @@
   involves, which is what an error message needs to say.
 * Poles: natural frequency, damping ratio and time constant (discrete poles
   through their continuous equivalent ``s = ln(z) / dt``).
-* Margins of a state-feedback loop broken at the (single) input.
+* Margins of a single-input loop broken at the plant input (the state
+  feedback's ``K (sI - A)^-1 B``, or any loop given by its state-space
+  matrices, such as an LQG compensator in series with its plant).
 """
 
 from __future__ import annotations
@@ -336,7 +338,12 @@ def pole_table(
 
 @dataclass(frozen=True)
 class Margins:
-    """Margins of the loop ``L = K (sI - A)^-1 B`` broken at the plant input.
+    """Margins of a single-input loop ``L`` broken at the plant input.
+
+    ``L`` is in negative feedback: the loop closes as ``1 + L = 0``. For a
+    state feedback ``u = -K x`` it is ``L = K (sI - A)^-1 B``; for an LQG
+    design, the compensator (its estimator fed its own command) in series
+    with the plant (:func:`equilibrist.control.interop.loop_at_input`).
 
     Attributes
     ----------
@@ -355,9 +362,9 @@ class Margins:
     gain_crossover:
         Its frequency [rad/s].
     return_difference:
-        The smallest ``|1 + L|`` on the frequency grid (the distance of the
+        The smallest ``|1 + L|`` over the frequencies (the distance of the
         Nyquist plot from -1; at least 1 for a continuous single-input LQR
-        by Kalman's inequality).
+        by Kalman's inequality, with no such bound for an LQG loop).
     """
 
     gain_lower: float
@@ -397,13 +404,13 @@ class Margins:
 
 
 def _response(
-    A: np.ndarray, B: np.ndarray, K: np.ndarray, dt: float | None, w: np.ndarray
+    A: np.ndarray, B: np.ndarray, K: np.ndarray, D: float, dt: float | None, w: np.ndarray
 ) -> np.ndarray:
-    """``L = K (pI - A)^-1 B`` at ``p = jw`` (or ``e^{jw dt}``) for an array of ``w``."""
+    """``L = K (pI - A)^-1 B + D`` at ``p = jw`` (or ``e^{jw dt}``) for an array of ``w``."""
     n = A.shape[0]
     p = np.exp(1j * w * dt) if dt is not None else 1j * w
     X = np.linalg.solve(p[:, None, None] * np.eye(n) - A, np.broadcast_to(B, (w.size, n, 1)))
-    return (K @ X)[:, 0, 0]
+    return (K @ X)[:, 0, 0] + D
 
 
 def _roots(f: Callable[[float], float], w: np.ndarray, values: np.ndarray) -> list[float]:
@@ -416,18 +423,26 @@ def _roots(f: Callable[[float], float], w: np.ndarray, values: np.ndarray) -> li
     return out
 
 
-def loop_margins(A: object, B: object, K: object, *, dt: float | None = None) -> Margins:
-    """Gain and phase margins of a single-input state-feedback loop.
+def loop_margins(
+    A: object, B: object, K: object, *, dt: float | None = None, D: float = 0.0
+) -> Margins:
+    """Gain and phase margins of a single-input loop broken at the plant input.
 
-    The loop is broken at the plant input: ``L(s) = K (sI - A)^-1 B``
-    (``L(z)`` with ``z = e^{j w dt}`` for a discrete model, up to the
-    Nyquist frequency ``pi / dt``) in negative feedback. Crossovers are
+    The loop is ``L(s) = K (sI - A)^-1 B + D`` (``L(z)`` with
+    ``z = e^{j w dt}`` for a discrete loop, up to the Nyquist frequency
+    ``pi / dt``) in negative feedback: a state feedback ``u = -K x`` with
+    ``A, B`` the plant's, or any single-input single-output loop given by
+    its state-space matrices (``K`` its output row, ``D`` its
+    feedthrough), such as an LQG compensator in series with its plant
+    (:func:`equilibrist.control.interop.loop_at_input`). Crossovers are
     located on a dense logarithmic grid (and at ``w = 0`` and the Nyquist
-    frequency) and refined by Brent's method. python-control's
-    ``stability_margins`` agrees for continuous loops, but for sampled
-    loops its polynomial method finds spurious crossovers (it reports a
-    negative phase margin for the cart-pole's stable 50 Hz loop), hence
-    this direct computation.
+    frequency) and refined by Brent's method, the closest approach to -1
+    by a bounded minimization. python-control's ``stability_margins``
+    agrees for continuous loops, but for sampled loops with poles at
+    ``z = 1`` (the cart's position and speed) its polynomial method finds
+    spurious crossovers (it reports a negative phase margin for the
+    cart-pole's stable 50 Hz state feedback; ``method="frd"`` agrees),
+    hence this direct computation.
 
     Raises
     ------
@@ -435,6 +450,8 @@ def loop_margins(A: object, B: object, K: object, *, dt: float | None = None) ->
         For a plant with more than one input (the margins of a
         multi-input loop are not a pair of numbers).
     """
+    from scipy.optimize import minimize_scalar
+
     Am = _checks.square(A, "A")
     n = Am.shape[0]
     Bm = _checks.with_rows(B, "B", n, "one per state")
@@ -442,6 +459,9 @@ def loop_margins(A: object, B: object, K: object, *, dt: float | None = None) ->
     if m != 1:
         raise DesignError(f"loop margins need a single-input plant, this one has {m} inputs")
     Km = _checks.matrix(np.reshape(np.asarray(K, dtype=float), (1, -1)), "K", (1, n))
+    Dv = float(np.asarray(D, dtype=float).reshape(-1)[0]) if np.size(D) == 1 else math.nan
+    if not math.isfinite(Dv):
+        raise DesignError(f"the loop's feedthrough D must be one finite number, got {D!r}")
     if dt is not None:
         dt = _checks.positive_period(dt)
         top = math.pi / dt
@@ -449,10 +469,10 @@ def loop_margins(A: object, B: object, K: object, *, dt: float | None = None) ->
         top = 1e4 * max(_norm(Am), float(np.abs(Km @ Bm).max()), 1.0)
     w = np.logspace(-4, math.log10(top), 6000)
     w[-1] = top
-    L = _response(Am, Bm, Km, dt, w)
+    L = _response(Am, Bm, Km, Dv, dt, w)
 
     def at(x: float) -> complex:
-        return complex(_response(Am, Bm, Km, dt, np.array([x]))[0])
+        return complex(_response(Am, Bm, Km, Dv, dt, np.array([x]))[0])
 
     # Gain crossovers |L| = 1: phase margin 180 deg + arg L, in (-180, 180].
     gain_cross = _roots(lambda x: abs(at(x)) - 1.0, w, np.abs(L) - 1.0)
@@ -461,13 +481,16 @@ def loop_margins(A: object, B: object, K: object, *, dt: float | None = None) ->
         margin = (math.degrees(cmath.phase(at(x))) + 360.0) % 360.0 - 180.0
         if abs(margin) < abs(pm):
             pm, wgc = margin, x
-    # Phase crossovers: L real and negative (also at w = 0 and at Nyquist).
+    # Phase crossovers: L real and negative (also at w = 0, at Nyquist, and at
+    # infinity for a continuous loop with a feedthrough).
     candidates = [(x, at(x).real) for x in _roots(lambda x: at(x).imag, w, L.imag)]
     closed0 = (np.eye(n) if dt is not None else np.zeros((n, n))) - Am
     if np.linalg.cond(closed0) < 1e12:
-        candidates.append((0.0, float((Km @ np.linalg.solve(closed0, Bm))[0, 0])))
+        candidates.append((0.0, float((Km @ np.linalg.solve(closed0, Bm))[0, 0]) + Dv))
     if dt is not None:
         candidates.append((top, L[-1].real))
+    elif Dv < 0:
+        candidates.append((math.inf, Dv))
     lower, w_lower, upper, w_upper = 0.0, math.nan, math.inf, math.nan
     for x, re in candidates:
         if re >= 0:
@@ -477,4 +500,12 @@ def loop_margins(A: object, B: object, K: object, *, dt: float | None = None) ->
             lower, w_lower = factor, x
         elif 1.0 <= factor < upper:
             upper, w_upper = factor, x
-    return Margins(lower, upper, w_lower, w_upper, pm, wgc, float(np.min(np.abs(1.0 + L))))
+    # The closest approach to -1: the grid's, refined between its neighbours.
+    distance = np.abs(1.0 + L)
+    i = int(np.argmin(distance))
+    closest = float(distance[i])
+    if 0 < i < w.size - 1:
+        found = minimize_scalar(lambda x: abs(1.0 + at(x)), bounds=(w[i - 1], w[i + 1]),
+                                method="bounded", options={"xatol": 1e-12 * w[i + 1]})
+        closest = min(closest, float(found.fun))
+    return Margins(lower, upper, w_lower, w_upper, pm, wgc, closest)

@@ -5,7 +5,8 @@ the sample period (python-control writes continuous time as ``dt = 0``),
 so that ``control.interconnect`` can wire a plant and a compensator by
 name. :func:`from_statespace` goes back to a :class:`LinearModel`; the
 operating point is not part of a ``StateSpace``, so it is given (default
-zero).
+zero). :func:`loop_at_input` is a design's loop as implemented, broken at
+the plant input: the system whose margins the design reports.
 """
 
 from __future__ import annotations
@@ -22,6 +23,11 @@ from equilibrist.numeric.linear import LinearModel
 
 if TYPE_CHECKING:
     import control
+
+    from equilibrist.control.design import Design
+
+#: The controllers whose loop :func:`loop_at_input` builds from a design.
+LOOP_CONTROLLERS = ("lqg", "lqr")
 
 
 def to_statespace(
@@ -102,4 +108,104 @@ def from_statespace(
         u0=np.zeros(m) if u0 is None else _checks.matrix([u0], "u0", (1, m))[0],
         system=system,
         dt=None if not dt else float(dt),
+    )
+
+
+def loop_at_input(design: Design, *, controller: str = "lqg") -> control.StateSpace:
+    """The loop as implemented, broken at the plant input, as a python-control system.
+
+    The open loop ``L = C(s) P(s)`` from a signal injected at the plant's
+    input to the signal returned there, in **negative feedback**: the loop
+    closes as ``u = -L u`` (characteristic equation ``1 + L = 0``), so
+    ``control.stability_margins(loop_at_input(d))`` gives the margins
+    ``d.margins`` reports (python-control's gain margin is the one of
+    ``gain_lower``, ``gain_upper`` nearer to 1). Its input is the plant's
+    input (``"F"``), its output that input's return (``"F_return"``): minus
+    the command the controller computes from the plant's response. It is
+    in the design's timebase: continuous for a continuous design, discrete
+    with ``dt = 1 / rate`` for a sampled one (the discrete plant
+    ``d.discrete`` and the compensator's discrete form, the matrices the
+    simulator and the C export run).
+
+    Parameters
+    ----------
+    design:
+        A :class:`~equilibrist.control.design.Design`.
+    controller:
+        ``"lqg"`` (default): the compensator ``d.compensator`` (the Kalman
+        filter on the measured outputs, fed its own command, and ``u = -K
+        xhat``; references held at zero) in series with the plant, states
+        ``plant states + xhat_<state>``. LQG has no guaranteed margins:
+        these are usually well below the state feedback's. ``"lqr"``: the
+        state feedback on the measured full state, ``L = K (sI - A)^-1 B``
+        (``d.lqr_margins``).
+
+    Notes
+    -----
+    Continuous loops: ``control.stability_margins(loop_at_input(d))``
+    agrees with ``d.margins`` to rounding. Sampled loops: python-control's
+    polynomial method finds spurious crossovers when the plant has poles
+    at ``z = 1`` (the cart-pole's position), and its default falls back to
+    an interpolated frequency response on a coarse grid (gain and phase
+    margins good to about 1e-4, its ``|1 + L|`` minimum unreliable). On a
+    dense grid up to the Nyquist frequency it agrees to rounding::
+
+        L = loop_at_input(d)
+        w = numpy.logspace(-2, numpy.log10(numpy.pi / L.dt), 200_000)[:-1]
+        control.stability_margins(control.frd(L, w))
+
+    (see :func:`~equilibrist.control.analysis.loop_margins`).
+    """
+    return to_statespace(_loop_model(design, controller=controller), name="loop")
+
+
+def _loop_model(design: Design, *, controller: str = "lqg") -> LinearModel:
+    """:func:`loop_at_input`'s system as a :class:`LinearModel` (numpy only, no python-control).
+
+    With the plant ``x+ = A x + B v``, ``y = C x + Dp v`` and the
+    compensator ``xc+ = Ac xc + Bu u + By y``, ``u = Cc xc + Du u + Dy y``
+    (references zero) whose ``u`` input is its own command ``u``: the loop
+    has the states ``[x; xc]`` and returns ``-u``.
+    """
+    if controller not in LOOP_CONTROLLERS:
+        raise DesignError(
+            f"the loop of controller {controller!r} is not a design's: expected "
+            f"{' or '.join(LOOP_CONTROLLERS)}"
+        )
+    plant = design.model
+    m = plant.n_inputs
+    inputs = plant.input_names
+    outputs = tuple(f"{name}_return" for name in inputs)
+    if controller == "lqr":
+        A, B = plant.A, plant.B
+        C, D = np.asarray(design.K, dtype=float), np.zeros((m, m))
+        states = plant.state_names
+    else:
+        comp = design.compensator
+        p = plant.n_outputs
+        Bu, By = comp.B[:, :m], comp.B[:, m : m + p]
+        Du, Dy = comp.D[:, :m], comp.D[:, m : m + p]
+        # The command u = Cc xc + Du u + Dy y, solved for u (Du is zero in every form).
+        close = np.linalg.inv(np.eye(m) - Du)
+        Cu, Dyu = close @ comp.C, close @ Dy
+        Ac = comp.A + Bu @ Cu
+        Bc = By + Bu @ Dyu
+        n, nc = plant.n_states, comp.n_states
+        A = np.block([[plant.A, np.zeros((n, nc))], [Bc @ plant.C, Ac]])
+        B = np.vstack([plant.B, Bc @ plant.D])
+        C = -np.hstack([Dyu @ plant.C, Cu])
+        D = -Dyu @ plant.D
+        states = plant.state_names + comp.state_names
+    return LinearModel(
+        A=np.asarray(A, dtype=float),
+        B=np.asarray(B, dtype=float),
+        C=np.asarray(C, dtype=float).reshape(m, -1),
+        D=np.asarray(D, dtype=float).reshape(m, m),
+        state_names=tuple(states),
+        input_names=inputs,
+        output_names=outputs,
+        x0=np.zeros(len(states)),
+        u0=np.zeros(m),
+        system=design.system_key,
+        dt=plant.dt,
     )

@@ -168,9 +168,16 @@ def describe_design(d: Design, controller: str, seconds: float,
     """The ``design`` frame: gains, poles, margins (JSON-ready).
 
     *seconds* is the time of the LQG design, *controller_seconds* the time
-    of building the swing-up or the MPC (*runner*) on it.
+    of building the swing-up or the MPC (*runner*) on it. ``margins`` are
+    those of the loop as implemented for LQG (the Kalman filter in the loop)
+    and LQR; for another controller, the design's state feedback's alone
+    (``margins_loop`` names which: ``"lqg"`` or ``"lqr"``); ``lqr_margins``
+    are always the state feedback's.
     """
-    full = d.to_dict()
+    from equilibrist.control.interop import LOOP_CONTROLLERS
+
+    loop = controller if controller in LOOP_CONTROLLERS else "lqr"
+    full = d.to_dict(controller=loop)
     return {
         "type": "design",
         "controller": controller,
@@ -185,6 +192,8 @@ def describe_design(d: Design, controller: str, seconds: float,
         "open_loop_poles": full["open_loop_poles"],
         "pole_table": full["pole_table"],
         "margins": full["margins"],
+        "margins_loop": loop,
+        "lqr_margins": full["lqr_margins"],
         "notes": full["notes"],
         "x0": full["x0"],
         "u0": full["u0"],

@@ -222,11 +222,20 @@
     }
     info += d.notes.length ? ` — ${d.notes.join("; ")}` : "";
     $("design-info").textContent = info;
-    const m = d.margins;
+    // The margins of the loop as implemented (LQG: with its Kalman filter in the loop), and the
+    // state feedback's alone, named apart: an LQG has no guaranteed margins.
+    const m = d.margins, lqr = d.lqr_margins;
+    const loopName = d.margins_loop === "lqg" ? "LQG loop as run (Kalman filter in the loop)"
+      : d.controller === "lqr" ? "LQR loop as run (state feedback)"
+      : "the design's state feedback alone (not this controller's loop)";
     $("loop-margins").innerHTML = m ? (
+      `<tr><th colspan="2">${esc(loopName)}</th></tr>` +
       `<tr><th>gain margin</th><td>×${fmtNum(m.gain_lower)} to ×${fmtNum(m.gain_upper)}</td></tr>` +
       `<tr><th>phase margin</th><td>${fmtNum(m.phase_margin_deg)}°</td></tr>` +
-      `<tr><th>min |1 + L|</th><td>${fmtNum(m.return_difference)}</td></tr>`) : "<tr><td>(several inputs)</td></tr>";
+      `<tr><th>min |1 + L|</th><td>${fmtNum(m.return_difference)}</td></tr>` +
+      (d.margins_loop === "lqg" && lqr ?
+        `<tr><th>state feedback alone (LQR)</th><td>×${fmtNum(lqr.gain_lower)} to ×${fmtNum(lqr.gain_upper)}, ${fmtNum(lqr.phase_margin_deg)}°</td></tr>` : "")
+    ) : "<tr><td>(several inputs)</td></tr>";
     drawPoles();
   }
 
