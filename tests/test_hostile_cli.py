@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from tests.support.signals import after_cpu, signal_while_working, start
+from tests.support.signals import after_cpu, signal_while_working, start, start_held, when_held
 
 from equilibrist.cli.main import main
 
@@ -29,25 +29,31 @@ def _one_line(code: int, err: str, *words: str) -> None:
 
 SIGNALLED = {
     # Each is signalled past the start (the handlers are set before 0.3 s of CPU) and
-    # well before its end. show: 0.8 to 2 s of CPU by the machine (the imports and the
-    # printing), so it is signalled at 0.5 s.
-    "show": (["show", "double_cartpole", "--latex"], 0.5),
+    # before its end: held at a known point of its work (tests.support.signals.start_held:
+    # whatever the machine's speed, the signal comes while it works), or after some seconds
+    # of CPU of minutes of work.
+    # show: held where it writes the equations as LaTeX, its header printed.
+    "show": (["show", "double_cartpole", "--latex"],
+             "equilibrist.mechanics.printing:equations_latex"),
     # sweep: 400 points of 2000 runs each, minutes of work.
     "sweep": (["sweep", "cartpole", "--vary", "m_p=0.2:2:400", "--runs", "2000",
                "--no-progress", "--out", "s.parquet"], 4.0),
-    # export: a 50 s recorded run of the MPC (its longest), then the compiles that check and
-    # measure it: about 1.5 s of this process's own CPU (the MPC solves some 30 us a sample;
-    # the compilers' CPU, 4-5 s, is their processes'), so it is signalled at 0.9 s.
-    "export": (["export", "cartpole", "--controller", "mpc", "--duration", "50", "--out",
-                "lib"], 0.9),
+    # export: the MPC's recorded run, then the compiles that measure it, where it is held:
+    # its files made in memory, none written yet.
+    "export": (["export", "cartpole", "--controller", "mpc", "--out", "lib"],
+               "equilibrist.export._size:measure"),
 }
 
 
 @pytest.mark.parametrize("command", sorted(SIGNALLED))
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_signalled_command_exits_130_or_143(tmp_path, command, signum) -> None:
-    argv, cpu = SIGNALLED[command]
-    code, _, err, took = signal_while_working(start(argv, tmp_path), signum, after_cpu(cpu))
+    argv, when = SIGNALLED[command]
+    if isinstance(when, str):
+        proc, ready = start_held(argv, tmp_path, when), when_held
+    else:
+        proc, ready = start(argv, tmp_path), after_cpu(when)
+    code, _, err, took = signal_while_working(proc, signum, ready)
     assert code == (143 if signum == signal.SIGTERM else 130), err.decode()
     assert "Traceback" not in err.decode()
     assert err.decode().strip().splitlines()[-1].startswith("equilibrist: interrupted")

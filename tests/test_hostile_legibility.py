@@ -86,3 +86,108 @@ def test_ordinary_decimals_are_read(capsys, value) -> None:
     assert main(["linearize", "cartpole", "--at", f"theta={value}", "--json"]) == 0
     x0 = json.loads(capsys.readouterr().out)["x0"]
     assert x0[1] == 0.1
+
+
+# -- the step limit's advice names the command's own options ------------------------------
+
+def _options_of(capsys, command: str) -> set[str]:
+    with pytest.raises(SystemExit):
+        main([command, "--help"])
+    return set(re.findall(r"(?<![\w-])--[a-z][a-z-]*", capsys.readouterr().out))
+
+
+def test_roas_step_limit_names_only_options_roa_takes_and_its_advice_works(
+        capsys, monkeypatch) -> None:
+    from equilibrist.sim import batch
+
+    started: list[int] = []
+    real = batch.simulate_batch
+    monkeypatch.setattr(batch, "simulate_batch",
+                        lambda *a, **k: started.append(k["runs"]) or real(*a, **k))
+    # A physics step of a nanosecond: millions of steps a run, refused before any run.
+    code = main(["roa", "cartpole", "--physics-step", "1e-9"])
+    err = capsys.readouterr().err
+    _one_line(code, err, "physics steps")
+    assert started == []
+    named = set(re.findall(r"(?<![\w-])--[a-z][a-z-]*", err))
+    assert named and named <= _options_of(capsys, "roa"), named
+    # A small analysis under a tiny bound: refused; asked for as the advice says, it runs.
+    # (1009 runs of 3 samples of 5 steps: 15135 steps, which 1.51e+04 would not allow.)
+    argv = ["roa", "cartpole", "--samples", "100", "--duration", "0.015", "--falsify", "0",
+            "--certify", "off", "--no-progress", "--json"]
+    code = main([*argv, "--max-steps", "1000"])
+    err = capsys.readouterr().err
+    _one_line(code, err, "--max-steps")
+    asked = re.search(r"--max-steps (\S+)", err)
+    assert asked is not None and started == []
+    assert main([*argv, "--max-steps", asked.group(1)]) == 0
+    assert json.loads(capsys.readouterr().out)["system"] == "cartpole"
+    assert started
+
+
+# -- roa's progress on stderr ---------------------------------------------------------------
+
+ROA_SMALL = ["roa", "cartpole", "--samples", "100", "--duration", "0.2", "--falsify", "0",
+             "--boxes", "1000"]
+
+
+@pytest.mark.parametrize(("terminal", "extra", "shown"), [
+    (True, [], True),
+    (False, [], False),  # stderr to a file or a pipe: no bar
+    (True, ["--no-progress"], False),
+    (True, ["--json"], False),  # --json with stdout captured (not a terminal): for a script
+], ids=["terminal", "not-a-terminal", "no-progress", "json"])
+def test_roa_shows_progress_bars_on_a_terminal(capsys, monkeypatch, terminal, extra,
+                                               shown) -> None:
+    import sys
+
+    import tqdm
+
+    made: list[tuple[str | None, object]] = []
+
+    class Recorded(tqdm.tqdm):
+        def __init__(self, *args, **kwargs):
+            made.append((kwargs.get("unit"), kwargs.get("file")))
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(tqdm, "tqdm", Recorded)
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: terminal)
+    assert main([*ROA_SMALL, *extra]) == 0
+    capsys.readouterr()
+    if shown:
+        # A bar of each batch of runs and of the certificate's boxes, on stderr.
+        assert {unit for unit, _ in made} == {"runs", "boxes"}, made
+        assert all(file is sys.stderr for _, file in made)
+    else:
+        assert made == []
+
+
+# -- the README's commands run as pasted --------------------------------------------------
+
+def _readme_commands(word: str) -> list[str]:
+    from pathlib import Path
+
+    text = (Path(__file__).parent.parent / "README.md").read_text()
+    blocks = re.findall(r"```sh\n(.*?)```", text, flags=re.S)
+    return [line for block in blocks for line in block.splitlines()
+            if line.startswith("equilibrist ") and word in line]
+
+
+def test_the_readmes_gymnasium_model_command_runs_as_pasted(tmp_path) -> None:
+    import os
+    import subprocess
+    import sys
+
+    lines = _readme_commands("inverted_pendulum.xml")
+    assert len(lines) == 1, lines
+    # The shell of a user whose environment has equilibrist and Gymnasium: its python and
+    # equilibrist first on PATH; an empty folder, as after a fresh clone elsewhere.
+    bin_dir = os.path.dirname(sys.executable)
+    env = dict(os.environ, PATH=bin_dir + os.pathsep + os.environ.get("PATH", ""))
+    proc = subprocess.run(["bash", "-c", lines[0]], cwd=tmp_path, env=env, capture_output=True,
+                          text=True, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr
+    # Gymnasium's inverted pendulum: a slider (the cart) and a hinge (the pole).
+    assert "inverted_pendulum.xml: linearization at" in proc.stdout
+    assert "x0: slider = " in proc.stdout and "hinge = " in proc.stdout
+    assert "(an equilibrium)" in proc.stdout

@@ -22,6 +22,49 @@ def start(argv: list[str], folder: Path) -> subprocess.Popen[bytes]:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=folder)
 
 
+#: What a held command prints on stdout when it reaches the function it is held in.
+HELD = b"held in "
+
+# ``equilibrist ARGV`` (after the two words MODULE FUNCTION) with MODULE.FUNCTION replaced
+# by one that says so on stdout and then waits for good: the command is stopped at a known
+# point of its work, whatever the machine's speed. The command's own signal handlers are
+# those it sets itself (main() with no arguments, as the console script runs it).
+_HOLD = """\
+import importlib, sys, time
+module, name = sys.argv[1:3]
+del sys.argv[1:3]
+
+def held(*args, **kwargs):
+    print(f"held in {module}.{name}", flush=True)
+    while True:
+        time.sleep(3600)
+
+setattr(importlib.import_module(module), name, held)
+from equilibrist.cli.main import main
+sys.exit(main())
+"""
+
+
+def start_held(argv: list[str], folder: Path, at: str) -> subprocess.Popen[bytes]:
+    """``equilibrist ARGV`` in *folder* as :func:`start`, held for good where it calls *at*
+    (``"module:function"``, looked up in the module when called): it prints :data:`HELD` and
+    the name on stdout there (:func:`when_held`)."""
+    module, _, name = at.partition(":")
+    return subprocess.Popen([sys.executable, "-c", _HOLD, module, name, *argv],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=folder)
+
+
+def when_held(proc: subprocess.Popen[bytes]) -> None:
+    """Wait until a command of :func:`start_held` is held (its line on stdout); fails with
+    its stderr if it ends first."""
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        if line.startswith(HELD):
+            return
+    raise AssertionError("the command ended before it was held: "
+                         + (proc.stderr.read() if proc.stderr else b"").decode())
+
+
 def after_cpu(seconds: float) -> Callable[[subprocess.Popen[bytes]], None]:
     """Wait until the process has used *seconds* of CPU (it is working, past its start)."""
 

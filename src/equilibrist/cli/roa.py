@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+import sys
 from typing import TYPE_CHECKING
 
 from equilibrist.cli import common
@@ -41,7 +43,21 @@ counterexamples is how many of them fell (a certificate is reported only when
 it is 0), coverage the share of the slice's caught area inside it.
 --json prints the figures; --plot FILE.png draws the slice; --out FILE.parquet
 keeps every run's start and outcome.
+
+Work is bounded: when the most runs the analysis may start (the slice's --samples,
+the tilt's and the push's searches, the --falsify runs) need more than --max-steps
+physics steps (default 1e10; runs x duration x rate x physics steps per period),
+it is refused before any run, with the count and the least time it would take;
+--max-steps N (or inf) asks for it anyway. A progress bar of each batch of runs
+and of the certificate's boxes shows on a terminal's stderr (not with --json to a
+pipe, nor with --no-progress).
 """
+
+#: The runs of the tilt's and the push's searches: each both ways, 3 rounds of 32
+#: (:func:`equilibrist.sim.roa.max_tilt`, :func:`~equilibrist.sim.roa.max_push`).
+SEARCH_RUNS = 2 * 2 * 3 * 32
+#: The slice's first grid, run whatever --samples (:func:`equilibrist.sim.roa.estimate_slice`).
+FIRST_GRID_RUNS = (24 + 1) ** 2
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -72,6 +88,11 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                    help="runs started inside the certified level to check it (default 2000)")
     p.add_argument("--plot", metavar="FILE.png", help="draw the slice")
     p.add_argument("--out", metavar="FILE.parquet", help="every run's start and outcome")
+    p.add_argument("--max-steps", metavar="N",
+                   help="the most physics steps the analysis may take, over all its runs "
+                   "(default 1e+10; 'inf' for no bound): more is refused before any run, with "
+                   "the count and an estimate of the time")
+    p.add_argument("--no-progress", action="store_true", help="never show a progress bar")
     common.add_design_options(p)
     common.add_set(p)
     common.add_params(p)
@@ -124,6 +145,7 @@ def _bounds(system: System, states: tuple[str, str], x_op: np.ndarray,
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
+    from equilibrist.cli.simulate import parse_max_steps, show_progress
     from equilibrist.control import kinds
     from equilibrist.sim.noise import Noise
     from equilibrist.sim.roa_report import analyse
@@ -136,6 +158,7 @@ def run(args: argparse.Namespace) -> int:
     boxes = common.parse_whole(args.boxes, "--boxes", 1000)
     falsify = common.parse_whole(args.falsify, "--falsify", 0)
     seed = common.parse_whole(args.seed, "--seed", 0)
+    max_steps = parse_max_steps(args.max_steps)
     duration = common.parse_number(args.duration, "--duration")
     if not (math.isfinite(duration) and duration > 0):
         raise common.UsageError(f"--duration {args.duration}: expected a positive number of seconds")
@@ -164,13 +187,19 @@ def run(args: argparse.Namespace) -> int:
 
         noise = (Noise.from_design(request.design()) if kind.noise == "design"
                  else Noise.from_spec(system, outputs=measured_outputs(controller), rate=rate))
-    options: dict[str, object] = {"duration": duration, "rate": rate, "noise": noise}
+    # The batches' bound is the whole analysis's, checked here: none of them passes it.
+    options: dict[str, object] = {"duration": duration, "rate": rate, "noise": noise,
+                                  "max_steps": max_steps,
+                                  "progress": show_progress(args) and sys.stderr.isatty()}
+    step = None
     if args.physics_step is not None:
         step = common.parse_number(args.physics_step, "--physics-step")
         if not (math.isfinite(step) and step > 0):
             raise common.UsageError(f"--physics-step {args.physics_step}: expected a positive "
                                     "number of seconds")
         options["physics_step"] = step
+    runs = max(samples, FIRST_GRID_RUNS) + SEARCH_RUNS + (falsify if args.certify == "on" else 0)
+    _check_work(runs, duration=duration, rate=rate, physics_step=step, max_steps=max_steps)
     report = analyse(system, controller, states=states, bounds=bounds, x_op=x_op, u_op=u_op,
                      samples=samples, boxes=boxes if args.certify == "on" else None,
                      falsify=falsify, seed=seed, options=options, name=name)
@@ -204,6 +233,28 @@ def run(args: argparse.Namespace) -> int:
     elif figures["certificate_note"]:
         print(f"  no certificate: {figures['certificate_note']}")
     return 0
+
+
+def _check_work(runs: int, *, duration: float, rate: float, physics_step: float | None,
+                max_steps: float | None) -> None:
+    """Refuse, before any run, an analysis of at most *runs* runs that may take more than
+    *max_steps* physics steps; the advice names this command's options."""
+    from equilibrist.errors import SimulationError
+    from equilibrist.sim._budget import check_steps
+    from equilibrist.sim._setup_steps import timing
+
+    problems: list[str] = []  # a physics step that does not divide the period: the runs say so
+    _h, n_sub, n_samples = timing(rate, duration, physics_step, "rk4", runs=runs, bound=None,
+                                  threads=1, problems=problems)
+    if n_sub is None or n_samples is None:
+        return
+    too_many = check_steps(
+        float(n_samples) * n_sub * runs, f"the analysis, at most {runs} runs,", max_steps,
+        os.cpu_count() or 1,
+        advice="use a larger --physics-step, a shorter --duration or fewer --samples, or ask "
+        "for it anyway with --max-steps {steps}")
+    if too_many:
+        raise SimulationError(too_many)
 
 
 def _write_parquet(path: str, system: System, x0s: np.ndarray, caught: np.ndarray) -> None:

@@ -40,9 +40,11 @@ inside the certified set to check it (docs/roa.md).
 
 from __future__ import annotations
 
+import contextlib
 import math
+import sys
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -454,12 +456,15 @@ def region_level(S: np.ndarray, x_op: np.ndarray, names: tuple[str, ...],
 def certify(system: System, K: np.ndarray, S: np.ndarray, *, x_op: np.ndarray,
             u_op: np.ndarray, rho_max: float | None = None, max_boxes: int = 1_000_000,
             min_width: float = 1 / 256, grid: int | None = None, chunk: int = 20_000,
-            progress: Callable[[str], None] | None = None) -> Certificate:
+            progress: Callable[[str], None] | None = None,
+            counted: Callable[[int], None] | None = None) -> Certificate:
     """The largest level ``rho`` of ``dx' S dx`` proven to shrink (see the module).
 
     *rho_max* caps the search (e.g. a level sampling has already falsified); *max_boxes*
     caps the boxes evaluated (nearest first, *chunk* at a time); *min_width* is the finest box's
-    width relative to its distance from the operating point.
+    width relative to its distance from the operating point. *progress* is told each stage
+    of the search in words, *counted* the boxes evaluated so far after each round of them
+    (:func:`boxes_bar`).
     """
     t0 = time.perf_counter()
     K = np.atleast_2d(np.asarray(K, dtype=float))
@@ -534,6 +539,8 @@ def certify(system: System, K: np.ndarray, S: np.ndarray, *, x_op: np.ndarray,
         if not blo.shape[0]:
             break
         total += blo.shape[0]
+        if counted is not None:
+            counted(total)
         enclosure, smear = loop.vdot_box(blo, bhi)
         open_ = ~(enclosure.hi < 0.0)
         blo, bhi, near, smear = blo[open_], bhi[open_], near[open_], smear[open_]
@@ -579,5 +586,23 @@ def certify(system: System, K: np.ndarray, S: np.ndarray, *, x_op: np.ndarray,
                        violation=violation)
 
 
-__all__ = ["ASSUMES", "METHOD", "Certificate", "CertificateUnavailable", "certify",
+@contextlib.contextmanager
+def boxes_bar(max_boxes: int, enabled: bool) -> Iterator[Callable[[int], None] | None]:
+    """A progress bar on stderr of the boxes :func:`certify` evaluates, out of *max_boxes*
+    (its ``counted``; None when not *enabled*): shown after a second, as a batch's, and
+    gone when the block ends."""
+    if not enabled:
+        yield None
+        return
+    from tqdm import tqdm
+
+    bar = tqdm(total=max_boxes, desc="certificate", unit="boxes", file=sys.stderr, delay=1.0,
+               leave=False, dynamic_ncols=True)
+    try:
+        yield lambda total: bar.update(total - bar.n)
+    finally:
+        bar.close()
+
+
+__all__ = ["ASSUMES", "METHOD", "Certificate", "CertificateUnavailable", "boxes_bar", "certify",
            "region_level"]

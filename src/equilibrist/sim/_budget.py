@@ -13,7 +13,7 @@ from equilibrist.errors import SimulationError
 # Fraction of the available memory a run or batch may take.
 MEMORY_FRACTION = 0.5
 # The most physics steps a run (or a batch, over all its runs) may take
-# unless asked for more (``max_steps=``, ``--max-steps``): some minutes of
+# unless asked for more (``max_steps=``, the commands' ``--max-steps``): some minutes of
 # work on a fast machine, hours on a slow one. A mistyped physics step
 # (1e-12 s) asks for a million times more and is refused before anything runs.
 DEFAULT_MAX_STEPS = 10_000_000_000
@@ -29,8 +29,16 @@ def _fmt_seconds(s: float) -> str:
     return f"{s:.3g} s"
 
 
-def check_steps(steps: float, what: str, max_steps: float | None, threads: int = 1) -> str | None:
-    """The problem with a run or batch of *steps* physics steps, if more than *max_steps*.
+#: What a refused run or batch is told to do (``{steps}``: the steps it asks for, rounded
+#: up): the options of ``simulate`` and ``batch``, and the keyword of their functions.
+ADVICE = ("use a larger physics step, a shorter duration or fewer runs, or ask for it anyway "
+          "with --max-steps {steps} (max_steps={steps} in Python)")
+
+
+def check_steps(steps: float, what: str, max_steps: float | None, threads: int = 1, *,
+                advice: str = ADVICE) -> str | None:
+    """The problem with a run or batch of *steps* physics steps, if more than *max_steps*,
+    ending with *advice* (a command without ``--max-steps`` names its own options).
 
     ``max_steps=None`` (or infinite) sets no bound.
     """
@@ -40,10 +48,18 @@ def check_steps(steps: float, what: str, max_steps: float | None, threads: int =
     return (
         f"{what} asks for {steps:.3g} physics steps, more than the {max_steps:.3g} allowed "
         f"(it would take at least {_fmt_seconds(at_least)} at "
-        f"{FAST_STEPS_PER_SECOND / 1e6:.0f} M steps/s per core): use a larger physics step, a "
-        f"shorter duration or fewer runs, or ask for it anyway with --max-steps {steps:.3g} "
-        f"(max_steps={steps:.3g} in Python)"
+        f"{FAST_STEPS_PER_SECOND / 1e6:.0f} M steps/s per core): "
+        + advice.format(steps=_enough(steps))
     )
+
+
+def _enough(n: float) -> str:
+    """*n* in three significant digits, rounded up: a bound of that many steps allows it."""
+    text = f"{n:.3g}"
+    if float(text) < n:
+        unit = 10.0 ** (math.floor(math.log10(n)) - 2)
+        text = f"{(math.floor(n / unit) + 1) * unit:.3g}"
+    return text
 
 
 def check_max_steps(value: object) -> float | None:

@@ -110,10 +110,12 @@ def _certify(system: System, design: Design, x_op: np.ndarray, u_op: np.ndarray,
              falsify: int, controller: object, options: dict[str, object], seed: int
              ) -> tuple[Certificate | None, str | None, tuple[np.ndarray, np.ndarray] | None]:
     """The certificate and the runs started inside it (or why there is none)."""
-    from equilibrist.control.certify import CertificateUnavailable, certify
+    from equilibrist.control.certify import CertificateUnavailable, boxes_bar, certify
 
     try:
-        cert = certify(system, design.K, design.S, x_op=x_op, u_op=u_op, max_boxes=boxes)
+        with boxes_bar(boxes, bool(options.get("progress"))) as counted:
+            cert = certify(system, design.K, design.S, x_op=x_op, u_op=u_op, max_boxes=boxes,
+                           counted=counted)
     except CertificateUnavailable as err:
         return None, str(err), None
     if falsify == 0:

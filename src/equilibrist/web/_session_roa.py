@@ -29,6 +29,7 @@ from equilibrist.errors import EquilibristError
 from equilibrist.web._session_design import SessionError, Settings, label
 from equilibrist.web._session_loop import _Loop
 from equilibrist.web.protocol import OFF, kind_name
+from equilibrist.web.runners import PLANNED
 
 if TYPE_CHECKING:
     from equilibrist.control.design import Design
@@ -184,13 +185,21 @@ class _SessionRoa:
     def roa_job(self) -> RoaJob | None:
         """The computation a ``roa`` message asks for; None when the answer is already here
         (sent again) or under way (the page is told so). Raises :class:`SessionError` when
-        there is nothing to estimate."""
+        there is nothing to estimate (the controller off, or one that tracks a plan)."""
         from equilibrist.sim.roa import default_bounds, default_slice
 
         kind, system = self.settings.controller, self.system
         if kind == OFF:
             raise SessionError("the controller is off: the open loop catches nothing; pick a "
                                "controller to see its region of attraction")
+        if kind in PLANNED:
+            # The slice is of starts about the operating point, each run from rest there:
+            # a tracker's starts are along its plan, which the slice does not draw.
+            raise SessionError(
+                "the region of attraction shows the starts near the upright that a balancing "
+                f"controller catches; {label(kind)} follows a swing-up plan from hanging "
+                f"instead: pick {label('lqr')}, which holds the system up once the plan ends, "
+                "and press Region of attraction again")
         states = default_slice(system)
         if states is None:
             raise SessionError(f"{system.key} states no fall region: there is no slice to draw")
