@@ -125,7 +125,7 @@ def _meta_file(tmp_path: Path, cart_plan: Path, key: str, value: object) -> Path
     return _write(tmp_path / "t.npz", meta, arrays)
 
 
-@pytest.mark.parametrize(("key", "value"), META, ids=[f"{k}={v!r}" for k, v in META])
+@pytest.mark.parametrize(("key", "value"), META, ids=[f"{k}=missing" if v is DROP else f"{k}={v!r}" for k, v in META])
 def test_every_metadata_field_is_checked(tmp_path, cart_plan, key, value) -> None:
     path = _meta_file(tmp_path, cart_plan, key, value)
     with pytest.raises(DesignError) as info:
