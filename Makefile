@@ -32,6 +32,8 @@ demo: $(STAMP)
 # report follows theirs, and either failing fails the target.
 test: $(STAMP)
 	$(VENV)/bin/ruff check src tests bench examples setup.py
+	@# the layers of docs/architecture.md (pyproject.toml's [tool.importlinter])
+	$(VENV)/bin/lint-imports --no-cache
 	@$(VENV)/bin/mypy src/equilibrist > $(VENV)/mypy.log 2>&1 & types=$$!; \
 	$(PY) -m pytest -n $(JOBS) -q --durations=15; tests=$$?; \
 	wait $$types; typed=$$?; echo "mypy src/equilibrist:"; cat $(VENV)/mypy.log; \
@@ -39,6 +41,7 @@ test: $(STAMP)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests bench examples setup.py
+	$(VENV)/bin/lint-imports --no-cache
 	$(VENV)/bin/mypy src/equilibrist
 
 bench: $(STAMP)

@@ -53,8 +53,8 @@ from scipy.integrate import solve_ivp
 
 from equilibrist import get_system
 from equilibrist.control.certify import certify
-from equilibrist.control.controller import LinearController
 from equilibrist.control.design import design
+from equilibrist.control.linear import LinearController
 from equilibrist.sim.roa import outcomes, sample_level
 
 HERE = Path(__file__).resolve().parent

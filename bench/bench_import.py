@@ -51,8 +51,8 @@ def _per_call(fn, repeat: int = 20000) -> float:
 def main() -> None:
     import mujoco
 
-    from equilibrist.native.simcore import load_core
-    from equilibrist.numeric.system import get_system
+    from equilibrist.numeric.lookup import get_system
+    from equilibrist.sim.simcore import load_core
 
     print(f"{'model':16s} {'cold s':>7s} {'f py us':>8s} {'f core us':>10s} {'mj_forward us':>13s} "
           f"{'mj/py':>6s} {'mj/core':>8s}")

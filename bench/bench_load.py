@@ -25,7 +25,7 @@ import numpy as np
 CHILD = r"""
 import json, sys, time
 t0 = time.perf_counter()
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 name, variant = sys.argv[1], sys.argv[2]
 settings = {} if variant == "-" else {"euler": variant}
 s = get_system(name, **settings)
@@ -48,7 +48,7 @@ def _child(name: str, variant: str, cache: str) -> float:
 def _eval_speed(name: str, variant: str) -> tuple[float, float, float, float]:
     import sympy as sp
 
-    from equilibrist.numeric.system import get_system
+    from equilibrist.numeric.lookup import get_system
 
     settings = {} if variant == "-" else {"euler": variant}
     s = get_system(name, **settings)

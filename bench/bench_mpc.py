@@ -38,7 +38,8 @@ import numpy as np
 
 from equilibrist import get_system
 from equilibrist.control.design import design
-from equilibrist.control.mpc import MPCRuntime, mpc
+from equilibrist.control.mpc import mpc
+from equilibrist.control.mpc_runtime import MPCRuntime
 from equilibrist.sim.run import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -79,7 +80,7 @@ def solve_times(horizon: int = 30, repeat: int = 1) -> dict[str, object]:
     """Per-sample solve times only (thread CPU and wall), *repeat* passes over the starts."""
     import os
 
-    from equilibrist.control.mpc import ITER_LIMIT
+    from equilibrist.control.mpc_problem import ITER_LIMIT
 
     system = get_system("cartpole")
     d = design(system, rate=200.0)

@@ -158,7 +158,8 @@ def costs(seconds: float = 10.0) -> dict:
     import numpy as np
 
     from equilibrist.control.swingup import SwingUpRuntime
-    from equilibrist.web.session import Catalogue, Session, redesign
+    from equilibrist.web.session import Session
+    from equilibrist.web.session_design import Catalogue, redesign
 
     cat = Catalogue.default()
     out: dict = {"per_sample_us": {}, "redesign_ms": {}}

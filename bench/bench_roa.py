@@ -33,8 +33,8 @@ import numpy as np
 
 from equilibrist import get_system
 from equilibrist.control.certify import certify
-from equilibrist.control.controller import LinearController
 from equilibrist.control.design import design
+from equilibrist.control.linear import LinearController
 from equilibrist.sim.roa import outcomes, sample_level
 
 

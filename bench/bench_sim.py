@@ -93,7 +93,7 @@ def main() -> int:
     import control as ct
 
     from equilibrist.control import design
-    from equilibrist.numeric.system import get_system
+    from equilibrist.numeric.lookup import get_system
     from equilibrist.sim import LQG, Noise, StateFeedback, simulate, simulate_batch
 
     system = get_system("cartpole")

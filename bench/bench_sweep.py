@@ -79,8 +79,9 @@ def main() -> None:
     args = ap.parse_args()
 
     from equilibrist.control.design import design
-    from equilibrist.numeric.system import get_system
-    from equilibrist.sim.batch import sample_uniform, simulate_batch
+    from equilibrist.numeric.lookup import get_system
+    from equilibrist.sim.batch import simulate_batch
+    from equilibrist.sim.batch_inputs import sample_uniform
     from equilibrist.sim.controllers import LQG
     from equilibrist.sim.noise import Noise
     from equilibrist.study import make_study, run_study

@@ -30,9 +30,10 @@ import time
 import numpy as np
 
 from equilibrist import get_system
-from equilibrist.control.controller import LinearController
 from equilibrist.control.design import design
-from equilibrist.control.swingup import Z, python_namespace, swingup, swingup_laws
+from equilibrist.control.linear import LinearController
+from equilibrist.control.swingup import swingup, swingup_laws
+from equilibrist.control.swingup_law import Z, python_namespace
 from equilibrist.sim.batch import simulate_batch
 from equilibrist.sim.noise import Noise
 from equilibrist.tasks import get_task

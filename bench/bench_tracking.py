@@ -28,11 +28,11 @@ import time
 import numpy as np
 
 from equilibrist import get_system
-from equilibrist.control.controller import ControllerError
-from equilibrist.control.kinds import ControllerRequest
 from equilibrist.control.swingup import swingup
 from equilibrist.control.trajopt import plan
 from equilibrist.control.tvlqr import build_request
+from equilibrist.controllers.kinds import ControllerRequest
+from equilibrist.errors import ControllerError
 from equilibrist.sim import Noise, simulate_batch
 from equilibrist.sim.batch import monte_carlo
 from equilibrist.tasks import get_task, planning_bounds

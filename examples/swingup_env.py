@@ -18,7 +18,7 @@ import math
 import gymnasium as gym
 
 import equilibrist.envs  # noqa: F401  (registers the environments)
-from equilibrist.control.swingup import MODE_BALANCE, Z
+from equilibrist.control.swingup_law import MODE_BALANCE, Z
 from equilibrist.envs.expert import expert
 
 ENV_ID = "equilibrist/cartpole-swingup-v0"

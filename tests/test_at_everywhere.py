@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from equilibrist.cli.main import main
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.tasks import get_task
 
 TILT = 0.2  # rad: an equilibrium of the seesaw other than its canonical theta = 0

@@ -141,8 +141,8 @@ def test_the_core_gives_the_python_bits_without_fused_multiply_add() -> None:
     """The core's sin, cos and log (through its normal deviates and dynamics) are the
     Python ones, and its machine code holds no fused multiply-add."""
     require("objdump")
-    from equilibrist.native.simcore import load_core
-    from equilibrist.numeric.system import get_system
+    from equilibrist.numeric.lookup import get_system
+    from equilibrist.sim.simcore import load_core
 
     system = get_system("cartpole")
     core = load_core(system)
@@ -234,8 +234,8 @@ def test_the_other_cpu_setting_changes_the_c_librarys_results() -> None:
 _DYNAMICS = """
 import json, sys, types
 import numpy as np
-from equilibrist.native.simcore import load_core
-from equilibrist.numeric.system import get_system
+from equilibrist.sim.simcore import load_core
+from equilibrist.numeric.lookup import get_system
 system = get_system("cartpole")
 compiled = load_core(system).f
 out = []
@@ -307,7 +307,7 @@ def test_the_core_takes_nothing_from_blas() -> None:
     import sys, numpy as np
     sys.path.insert(0, {str(HERE)!r})
     from test_sim_bits import digest
-    from equilibrist.numeric.system import get_system
+    from equilibrist.numeric.lookup import get_system
     from equilibrist.sim import Noise, StateFeedback, simulate
     system = get_system("cartpole")
     k = np.array([[-3.1622776601683795, 41.27345113097491, -4.405773693733009, 7.6112546216513105]])

@@ -11,10 +11,10 @@ import textwrap
 
 CODE = textwrap.dedent("""
     import hashlib
-    from equilibrist.control.controller import LinearController
+    from equilibrist.control.linear import LinearController
     from equilibrist.control.design import design
     from equilibrist.control.swingup import swingup
-    from equilibrist.numeric.system import get_system
+    from equilibrist.numeric.lookup import get_system
     from equilibrist.sim import Noise
     h = hashlib.sha256()
     for name in ("cartpole", "furuta", "acrobot", "reaction_wheel_pendulum"):

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from equilibrist.cli.main import main
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.systems import registry
 
 

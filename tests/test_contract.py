@@ -18,7 +18,8 @@ from scipy.integrate import solve_ivp
 from tests.support.jacobians import central_differences
 
 from equilibrist.errors import NoEquilibriumError
-from equilibrist.numeric.system import get_system
+from equilibrist.mechanics.definition import Entry
+from equilibrist.numeric.lookup import get_system
 from equilibrist.systems import registry
 
 ENTRIES = registry.all_entries()
@@ -26,7 +27,7 @@ IDS = [e.spec.key for e in ENTRIES]
 
 
 
-def frictions(entry: registry.Entry) -> tuple[str, ...]:
+def frictions(entry: Entry) -> tuple[str, ...]:
     """The parameters the definition marks dissipative (``friction(...)``): zeroed for the
     energy test, which fails if one is missing; each alone must take energy out
     (``test_each_friction_dissipates``), which fails if one is marked wrongly."""
@@ -41,7 +42,7 @@ REFERENCE_STATE = {"gyroscope[euler=zxz]": {"theta": 0.8, "psi_dot": 30.0, "phi_
 SETTLE = {"gyroscope[euler=zxz]": {}, "gyroscope[euler=xyz]": {}}
 
 
-def system_for(entry: registry.Entry, **params: float):
+def system_for(entry: Entry, **params: float):
     settings_ = {} if entry.spec.variant is None else {entry.spec.variant[0]: entry.spec.variant[1]}
     return get_system(entry.spec.name, **settings_, **params)
 
@@ -71,7 +72,7 @@ def test_every_system_module_registers_a_system() -> None:
 
 
 @pytest.mark.parametrize("entry", ENTRIES, ids=IDS)
-def test_spec_metadata(entry: registry.Entry) -> None:
+def test_spec_metadata(entry: Entry) -> None:
     spec = entry.spec
     names = spec.parameter_names
     assert len(set(names)) == len(names)
@@ -96,7 +97,7 @@ def test_spec_metadata(entry: registry.Entry) -> None:
 
 
 @pytest.mark.parametrize("entry", ENTRIES, ids=IDS)
-def test_operating_point_is_equilibrium(entry: registry.Entry) -> None:
+def test_operating_point_is_equilibrium(entry: Entry) -> None:
     system = system_for(entry)
     if entry.spec.operating_point is None:
         with pytest.raises(NoEquilibriumError, match="no canonical operating point"):
@@ -114,7 +115,7 @@ def test_operating_point_is_equilibrium(entry: registry.Entry) -> None:
 @pytest.mark.parametrize("entry", ENTRIES, ids=IDS)
 @settings(max_examples=15, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
-def test_jacobians_equal_finite_differences(entry: registry.Entry, seed: int) -> None:
+def test_jacobians_equal_finite_differences(entry: Entry, seed: int) -> None:
     # Non-zero frictions so that their derivatives are exercised too.
     system = system_for(entry)
     lossy = {k: 0.05 for k in frictions(entry)}
@@ -149,7 +150,7 @@ def _unforced(system, x_start: np.ndarray, t_end: float, *, rtol: float):
 
 
 @pytest.mark.parametrize("entry", ENTRIES, ids=IDS)
-def test_energy_conserved_without_friction_and_input(entry: registry.Entry) -> None:
+def test_energy_conserved_without_friction_and_input(entry: Entry) -> None:
     if entry.spec.name in NO_ENERGY:
         assert math.isnan(system_for(entry).energy(reference_point(system_for(entry))[0]))
         return
@@ -167,7 +168,7 @@ def test_energy_conserved_without_friction_and_input(entry: registry.Entry) -> N
 
 @pytest.mark.parametrize("entry", [e for e in ENTRIES if frictions(e) and e.spec.name not in NO_ENERGY],
                          ids=lambda e: e.spec.key)
-def test_each_friction_dissipates(entry: registry.Entry) -> None:
+def test_each_friction_dissipates(entry: Entry) -> None:
     # Each parameter marked dissipative, alone at a positive value with no input, takes energy
     # out: the energy never rises and ends lower (a parameter marked wrongly, a spring or a
     # mass, fails one of the two).

@@ -12,7 +12,7 @@ from equilibrist.cli.main import main
 from equilibrist.control import design
 from equilibrist.control.discretize import METHODS
 from equilibrist.control.kalman import FORMS
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 
 
 def _json(capsys: pytest.CaptureFixture[str], *args: str) -> dict:

@@ -6,22 +6,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from equilibrist.control.controller import (
-    LINEAR_BLOCKS,
-    LINEAR_HEADER,
-    ControllerError,
-    ControllerRequest,
-    LinearController,
-    NonlinearController,
-    PythonController,
-    StepAdapter,
-    as_python_controller,
-    build_controller,
-    check_source,
-    register_controller,
-)
+from equilibrist.control.controller import as_python_controller
 from equilibrist.control.design import design
-from equilibrist.numeric.system import get_system
+from equilibrist.control.linear import LinearController
+from equilibrist.control.linear_layout import LINEAR_BLOCKS, LINEAR_HEADER
+from equilibrist.control.nonlinear import NonlinearController, check_source
+from equilibrist.control.python_controller import PythonController, StepAdapter
+from equilibrist.controllers.kinds import ControllerRequest, build_controller, register_controller
+from equilibrist.errors import ControllerError
+from equilibrist.numeric.lookup import get_system
 
 
 @pytest.fixture(scope="module")
@@ -125,7 +118,7 @@ def test_registry_builds_lqr_lqg_none_and_refuses_unknown_names():
         with pytest.raises(ControllerError, match="does not apply to cartpole"):
             build_controller("test-hold", req)
     finally:  # a kind registered in this process is offered everywhere: take it back
-        from equilibrist.control.kinds import names, unregister
+        from equilibrist.controllers.kinds import names, unregister
 
         unregister("test-hold")
     assert "test-hold" not in names()
@@ -205,11 +198,8 @@ def test_step_functions_run_through_the_adapter():
 
 
 def test_python_controller_names_what_the_user_wrote():
-    from equilibrist.control.controller import (
-        PythonControllerBase,
-        as_python_controller,
-        python_controller_name,
-    )
+    from equilibrist.control.controller import as_python_controller, python_controller_name
+    from equilibrist.control.python_controller import PythonControllerBase
 
     def hold(t, y, r):
         return np.zeros(1)

@@ -12,7 +12,8 @@ import pytest
 
 from equilibrist.control import Design, design
 from equilibrist.errors import DesignError, DimensionError, UnknownNameError
-from equilibrist.numeric.system import System, get_system
+from equilibrist.numeric.lookup import get_system
+from equilibrist.numeric.system import System
 from equilibrist.systems import registry
 
 

@@ -12,7 +12,7 @@ import scipy.signal
 
 from equilibrist.control import discrete_noise, discretize, van_loan
 from equilibrist.errors import DesignError
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.systems import registry
 
 ACTUATED = [e.spec.name for e in registry.all_entries() if e.spec.inputs and e.spec.variant is None]

@@ -18,7 +18,7 @@ import pytest
 from equilibrist.control import DiscreteKalmanFilter, Estimate, design
 from equilibrist.control.riccati import current_gain
 from equilibrist.errors import DesignError, DimensionError
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 
 RUNS = 4000
 

@@ -25,7 +25,7 @@ from equilibrist.control import (
     to_statespace,
 )
 from equilibrist.errors import DesignError, DimensionError
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 
 CASES = [(None, "current"), (100.0, "current"), (100.0, "predictor")]
 

@@ -22,9 +22,9 @@ import scipy.linalg
 
 from equilibrist.cli.main import main
 from equilibrist.control import Design, Margins, design, loop_at_input
-from equilibrist.control.controller import LinearController
+from equilibrist.control.linear import LinearController
 from equilibrist.errors import DesignError
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 
 # (rate, Kalman form, discretization): continuous, the cart-pole's 200 Hz default, and the
 # other forms of the compensator.

@@ -25,7 +25,7 @@ from equilibrist.control import (
     observability,
 )
 from equilibrist.errors import DesignError, DimensionError
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.systems import registry
 
 

@@ -21,7 +21,7 @@ import pytest
 from equilibrist import get_system
 from equilibrist.cli.main import main
 from equilibrist.errors import CodeInDataError, EquilibristError
-from equilibrist.numeric.system import system_from_key
+from equilibrist.numeric.lookup import system_from_key
 from equilibrist.sim import BatchResult, SimResult
 from equilibrist.sim.result import read_npz
 
@@ -114,7 +114,8 @@ def test_plot_of_a_crafted_batch_never_runs_the_file(
 
 def test_the_python_api_never_runs_a_file_the_data_names(evil: tuple[Path, Path], tmp_path: Path) -> None:
     from equilibrist.viz.animation import animate_result
-    from equilibrist.viz.plots import plot_batch, plot_comparison, plot_response
+    from equilibrist.viz.plots import plot_batch
+    from equilibrist.viz.plots_runs import plot_comparison, plot_response
     from equilibrist.viz.runs import as_run
 
     path, marker = evil
@@ -140,7 +141,7 @@ def test_the_python_api_never_runs_a_file_the_data_names(evil: tuple[Path, Path]
 def test_a_study_file_naming_a_python_file_is_refused(
         evil: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from equilibrist.study import load_study_file
-    from equilibrist.study.spec import StudyError
+    from equilibrist.study.record import StudyError
 
     path, marker = evil
     study = tmp_path / "study.toml"

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import equilibrist.envs  # noqa: F401  (registers the environments)
-from equilibrist.control import kinds
+from equilibrist.controllers import kinds
 from equilibrist.envs.expert import ExpertError, expert
 from equilibrist.sim import simulate
 

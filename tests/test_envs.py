@@ -303,7 +303,7 @@ def test_unknown_options_name_the_nearest() -> None:
 
 def test_compiled_slots_agree_with_the_packing() -> None:
     """The compiled core's slot constants are the ones the settings are packed by."""
-    from equilibrist.envs import _core
+    from equilibrist.envs import core as _core
 
     core = _make("equilibrist/cartpole-swingup-v0", randomize={"m_p": 0.1}).core
     unit = core.kernel.path.with_suffix(".c").read_text()

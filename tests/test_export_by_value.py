@@ -13,8 +13,10 @@ import numpy as np
 import pytest
 
 from equilibrist import get_system
-from equilibrist.control.controller import LinearController, NonlinearController
-from equilibrist.control.design import Design, design
+from equilibrist.control.design import design
+from equilibrist.control.design_record import Design
+from equilibrist.control.linear import LinearController
+from equilibrist.control.nonlinear import NonlinearController
 from equilibrist.errors import ExportError
 from equilibrist.export import writer
 from equilibrist.numeric.system import System
@@ -87,7 +89,8 @@ def test_a_design_controller_is_the_design_library_until_it_is_changed(
 
 def test_the_exporter_follows_the_type(cart: tuple[System, Design]) -> None:
     system, d = cart
-    from equilibrist.control.mpc import MPCRuntime, mpc
+    from equilibrist.control.mpc import mpc
+    from equilibrist.control.mpc_runtime import MPCRuntime
     from equilibrist.control.swingup import SwingUpController, swingup
 
     sw = swingup(system, design=d)

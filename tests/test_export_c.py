@@ -15,10 +15,10 @@ import pytest
 
 from equilibrist.control.design import design
 from equilibrist.errors import ExportError
-from equilibrist.export import c_code
+from equilibrist.export import c_library, c_programs, c_text
 from equilibrist.export.data import from_design
-from equilibrist.export.native import STRICT_FLAGS, compile_controller, compiler
-from equilibrist.numeric.system import get_system
+from equilibrist.export.shared_library import STRICT_FLAGS, compile_controller, compiler
+from equilibrist.numeric.lookup import get_system
 from support import require
 from support.export import measurements, reference_run
 
@@ -143,8 +143,8 @@ def test_named_constants_are_the_designs_numbers(designs, tmp_path, precision) -
     data = from_design(d)
     name, N = data.name, data.name.upper()
     files = {
-        f"{name}.h": c_code.header(data, precision=precision, version="test"),
-        f"{name}.c": c_code.source(data, precision=precision, version="test"),
+        f"{name}.h": c_library.header(data, precision=precision, version="test"),
+        f"{name}.c": c_library.source(data, precision=precision, version="test"),
         "show.c": PRINT_CONSTANTS.format(name=name, N=N),
     }
     exe = _build(tmp_path, files, [f"{name}.c", "show.c"], "show")
@@ -176,8 +176,8 @@ def test_the_library_needs_no_library(designs, tmp_path) -> None:
     """No symbol of the object file is left for a library to define (no libm, no libc)."""
     for controller in ("lqg", "lqr"):
         data = from_design(designs["wheeled_pendulum", "current"], controller=controller)
-        (tmp_path / f"{data.name}.h").write_text(c_code.header(data, precision="float", version="t"))
-        (tmp_path / f"{data.name}.c").write_text(c_code.source(data, precision="float", version="t"))
+        (tmp_path / f"{data.name}.h").write_text(c_library.header(data, precision="float", version="t"))
+        (tmp_path / f"{data.name}.c").write_text(c_library.source(data, precision="float", version="t"))
         obj = tmp_path / f"{data.name}.o"
         subprocess.run([*compiler(), *STRICT_FLAGS, "-O2", "-c", str(tmp_path / f"{data.name}.c"),
                         "-o", str(obj)], check=True)
@@ -189,17 +189,17 @@ def test_the_library_needs_no_library(designs, tmp_path) -> None:
 def test_literals_read_back_exactly() -> None:
     values = [0.1, -1e-300, 1.0, 123456789.0, 2.0 ** -30, -0.0, 1 / 3]
     for v in values:
-        assert float(c_code.literal(v, "double")) == v
-        text = c_code.literal(v, "float")
+        assert float(c_text.literal(v, "double")) == v
+        text = c_text.literal(v, "float")
         assert text.endswith("f") and np.float32(float(text[:-1])) == np.float32(v)
     with pytest.raises(ExportError):
-        c_code.literal(float("inf"), "double")
+        c_text.literal(float("inf"), "double")
     with pytest.raises(ExportError):
-        c_code.literal(1e300, "float")
+        c_text.literal(1e300, "float")
 
 
 def test_a_continuous_design_or_no_input_is_refused() -> None:
-    from equilibrist.export.writer import controller_data
+    from equilibrist.export.data import controller_data
 
     with pytest.raises(ExportError, match="sample rate"):
         controller_data(design(get_system("cartpole")))
@@ -211,9 +211,9 @@ def test_arduino_sketch_compiles_as_cpp(designs, tmp_path) -> None:
     """The sketch against a stand-in of the Arduino core, compiled as the IDE would (C++)."""
     cxx = require("g++", "c++")
     data = from_design(designs["seesaw", "current"])
-    (tmp_path / f"{data.name}.h").write_text(c_code.header(data, precision="float", version="t"))
-    (tmp_path / f"{data.name}.c").write_text(c_code.source(data, precision="float", version="t"))
-    (tmp_path / "sketch.cpp").write_text(c_code.arduino_sketch(data, precision="float"))
+    (tmp_path / f"{data.name}.h").write_text(c_library.header(data, precision="float", version="t"))
+    (tmp_path / f"{data.name}.c").write_text(c_library.source(data, precision="float", version="t"))
+    (tmp_path / "sketch.cpp").write_text(c_programs.arduino_sketch(data, precision="float"))
     (tmp_path / "Arduino.h").write_text(
         "struct SerialStub { void begin(long) {} void println(const char *) {} };\n"
         "static SerialStub Serial;\n"

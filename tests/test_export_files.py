@@ -19,7 +19,7 @@ from equilibrist.errors import ExportError
 from equilibrist.export.data import from_design
 from equilibrist.export.vectors import make_vectors
 from equilibrist.export.writer import export_c
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from support import require
 from support.export import measurements, reference_run
 

@@ -19,7 +19,7 @@ from equilibrist.cli.main import main
 from equilibrist.control.design import design
 from equilibrist.export.vectors import RELATIVE_TOLERANCE, c_controller, record, scenario
 from equilibrist.export.writer import export_c
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import LQG, StateFeedback, simulate
 from support import require
 

@@ -20,7 +20,7 @@ from scipy.spatial.transform import Rotation
 
 from equilibrist.errors import SingularConfigurationError, UnknownNameError
 from equilibrist.mechanics import rotations
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.systems import _gyro_tools as gt
 
 # A generic motion, away from both singularities: the axis 0.5-1.1 rad from

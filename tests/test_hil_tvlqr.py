@@ -15,7 +15,7 @@ import pytest
 
 from equilibrist.cli.main import main
 from equilibrist.control.trajopt import plan
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import SimResult
 from equilibrist.tasks import get_task
 from support import require

@@ -302,8 +302,8 @@ def test_ctrl_c_stops_a_long_run_without_a_progress_bar(tmp_path, argv) -> None:
 
 def test_a_run_made_in_many_calls_equals_the_run_in_one(monkeypatch) -> None:
     from equilibrist import get_system
-    from equilibrist.control.controller import LinearController
     from equilibrist.control.design import design
+    from equilibrist.control.linear import LinearController
     from equilibrist.sim import run as run_module
     from equilibrist.sim.events import ParameterChange, Pulse
     from equilibrist.sim.noise import Noise
@@ -383,7 +383,7 @@ def test_a_spread_that_leaves_the_valid_range_is_refused_whatever_the_draw(capsy
 def test_spreads_fail_or_not_independently_of_the_draw(rel, name) -> None:
     from equilibrist import get_system
     from equilibrist.errors import SimulationError
-    from equilibrist.sim.batch import sample_uniform
+    from equilibrist.sim.batch_inputs import sample_uniform
 
     system = get_system("cartpole")
     param = {p.name: p for p in system.spec.all_parameters}[name]

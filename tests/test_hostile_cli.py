@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 from tests.support.signals import after_cpu, signal_while_working, start, start_held, when_held
 
 from equilibrist.cli.main import main
+from equilibrist.study import store
 
 
 def _one_line(code: int, err: str, *words: str) -> None:
@@ -41,7 +42,7 @@ SIGNALLED = {
     # export: the MPC's recorded run, then the compiles that measure it, where it is held:
     # its files made in memory, none written yet.
     "export": (["export", "cartpole", "--controller", "mpc", "--out", "lib"],
-               "equilibrist.export._size:measure"),
+               "equilibrist.export.size:measure"),
 }
 
 
@@ -217,12 +218,12 @@ def test_a_region_of_attraction_grid_too_large_is_refused(tmp_path, capsys, coun
 ])
 def test_export_refuses_what_it_cannot_use_before_any_work(tmp_path, capsys, monkeypatch,
                                                            extra, words) -> None:
-    from equilibrist.control import controller
+    from equilibrist.controllers.kinds import ControllerKind
 
     def never(*args, **kwargs):
         raise AssertionError("a controller was built")
 
-    monkeypatch.setattr(controller, "build_controller", never)
+    monkeypatch.setattr(ControllerKind, "make", never)
     code = main(["export", "cartpole", "--out", str(tmp_path / "lib"), *extra])
     _one_line(code, capsys.readouterr().err, *words)
     assert list(tmp_path.iterdir()) == []
@@ -240,7 +241,7 @@ def test_the_api_bounds_the_recorded_run_too(tmp_path) -> None:
     from equilibrist.control.design import design
     from equilibrist.errors import ExportError
     from equilibrist.export import export_c
-    from equilibrist.numeric.system import get_system
+    from equilibrist.numeric.lookup import get_system
 
     result = design(get_system("cartpole"), rate=200.0)
     with pytest.raises(ExportError, match="at most 10000 samples"):
@@ -302,7 +303,7 @@ def test_a_sensor_without_noise_is_refused(capsys, cart_log, no_fit, level) -> N
 def test_the_api_refuses_a_sensor_without_noise(cart_log) -> None:
     from equilibrist.ident import identify, read_log
     from equilibrist.ident.log import IdentificationError
-    from equilibrist.numeric.system import get_system
+    from equilibrist.numeric.lookup import get_system
 
     system = get_system("cartpole")
     with pytest.raises(IdentificationError, match="> 0"):
@@ -380,12 +381,11 @@ class _Reached(Exception):
 @given(picks=st.lists(st.tuples(st.sampled_from(sorted(SWEEP_OPTIONS)), st.sampled_from(ODD)),
                       min_size=1, max_size=3))
 def test_odd_sweep_command_lines_are_one_line(tmp_path_factory, capsys, monkeypatch, picks) -> None:
-    from equilibrist.study import runner
 
     def reached(self, *, resume):
         raise _Reached
 
-    monkeypatch.setattr(runner.Store, "open", reached)
+    monkeypatch.setattr(store.Store, "open", reached)
     folder = tmp_path_factory.mktemp("sweep")
     argv = ["sweep", "cartpole", "--vary", "l=0.4,0.5", "--no-progress",
             "--out", str(folder / "t.parquet")]
@@ -421,8 +421,8 @@ def test_odd_export_command_lines_are_one_line(tmp_path_factory, capsys, monkeyp
     def reached(*args, **kwargs):
         raise _Reached
 
-    monkeypatch.setattr(importlib.import_module("equilibrist.control.controller"),
-                        "build_controller", reached)
+    monkeypatch.setattr(importlib.import_module("equilibrist.controllers.kinds").ControllerKind,
+                        "make", reached)
     monkeypatch.setattr(importlib.import_module("equilibrist.control.design"), "design", reached)
     folder = tmp_path_factory.mktemp("export")
     argv = ["export", "cartpole", "--out", str(folder / "lib")]

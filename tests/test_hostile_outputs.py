@@ -112,7 +112,7 @@ def test_the_report_guard_lets_a_same_report_be_replaced_and_force_any(tmp_path)
 def test_a_report_is_staged_with_a_manifest_and_the_umask_modes(tmp_path, monkeypatch,
                                                                  umask) -> None:
     from equilibrist.apps import tour
-    from equilibrist.numeric.system import get_system
+    from equilibrist.numeric.lookup import get_system
 
     file_mode, folder_mode = umask
 
@@ -232,7 +232,7 @@ def test_the_writer_creates_no_missing_folder(tmp_path) -> None:
 
 
 def test_the_progress_line_names_simulated_and_wall_time() -> None:
-    from equilibrist.apps.tour import Outcome
+    from equilibrist.apps.tour_common import Outcome
     from equilibrist.viz.report import Section
 
     done = Outcome(key="cartpole", row=(), section=Section("cartpole", "Cart-pole"),

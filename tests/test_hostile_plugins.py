@@ -28,7 +28,7 @@ def failing_kind(name: str, what: str) -> str:
     """A kind's module whose *what* (``build`` or ``applies``) raises with the hostile text."""
     other = "" if what == "build" else ', build=linear_builder("lqr")'
     return f'''
-from equilibrist.control.kinds import ControllerKind, linear_builder
+from equilibrist.controllers.kinds import ControllerKind, linear_builder
 
 
 def fails(_):
@@ -43,7 +43,7 @@ KIND = ControllerKind(name="{name}", label="fails", help="a kind whose {what} ra
 PRINTING_KIND = '''
 print("noise printed at import")
 
-from equilibrist.control.kinds import ControllerKind, linear_builder
+from equilibrist.controllers.kinds import ControllerKind, linear_builder
 
 KIND = ControllerKind(name="chatty", label="chatty", help="the LQR, printed at import",
                       build=linear_builder("lqr"))

@@ -222,7 +222,7 @@ def test_compiled_and_solve_ivp_replays_agree():
     run = simulate(cart.with_params(m_p=1.2), LQG.from_design(d), duration=0.5,
                    excitation=PRBS(10.0, 0.05, seed=2), x0={"theta": 0.05})
     log = Log.from_arrays(cart, run.time, run.applied, {o: run.measurement(o) for o in run.output_names})
-    from equilibrist.ident.fit import _shooter
+    from equilibrist.ident.shooting import _shooter
 
     bounds = np.array([0, 17, 34, 51, 68, 85, 100], dtype=np.int64)
     xs = run.states[bounds[:-1]][None]
@@ -252,7 +252,7 @@ def test_compiled_and_solve_ivp_filters_agree():
     run = simulate(cart.with_params(m_p=1.2), LQG.from_design(d), duration=0.5,
                    excitation=PRBS(10.0, 0.05, seed=2), x0={"theta": 0.05})
     log = Log.from_arrays(cart, run.time, run.applied, {o: run.measurement(o) for o in run.output_names})
-    from equilibrist.ident.fit import _filter
+    from equilibrist.ident.prediction import _filter
 
     p = np.array(cart.with_params(m_p=1.2).p)
     n_sub = np.full(100, 5, dtype=np.int64)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from equilibrist.cli.main import main
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 
 ROOT = Path(__file__).resolve().parent.parent
 FURUTA = str(ROOT / "examples" / "furuta.xml")

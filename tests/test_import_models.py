@@ -19,7 +19,8 @@ import pytest
 from scipy.integrate import solve_ivp
 from tests.support.jacobians import central_differences
 
-from equilibrist.numeric.system import System, get_system
+from equilibrist.numeric.lookup import get_system
+from equilibrist.numeric.system import System
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "tests" / "models"

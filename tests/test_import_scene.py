@@ -8,7 +8,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.viz.frames import FrameRenderer, draw_state
 from equilibrist.viz.generic import GenericScene
 from equilibrist.viz.scenes import scene_for

@@ -20,7 +20,7 @@ from tests.support.plugins import cli, install
 KIND_MODULE = '''
 """A controller kind of one's own: the LQR through a tanh of width --softness."""
 
-from equilibrist.control.kinds import ControllerKind, Option
+from equilibrist.controllers.kinds import ControllerKind, Option
 
 SOURCE = """
 import math
@@ -50,7 +50,7 @@ def _width(text):
 def build(request):
     import numpy as np
 
-    from equilibrist.control.controller import NonlinearController
+    from equilibrist.control.nonlinear import NonlinearController
 
     d = request.design()
     plant, system = d.plant, request.system

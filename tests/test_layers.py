@@ -1,45 +1,99 @@
-"""The applications sit above the libraries: no library module imports an application.
+"""The import graph agrees with docs/architecture.md.
 
-Applications: the demo's tour and demos (``apps``), the commands (``cli``), the
-playground (``web``), studies (``study``), the environments (``envs``). Read from the
-sources' import statements (deferred imports inside functions included)."""
+The layers themselves are import-linter's contract in pyproject.toml (``make test`` runs
+``lint-imports``; the first test here runs the same contract in the suite). The graph is
+grimp's, import-linter's engine: every import that runs, those inside functions included,
+and none under ``TYPE_CHECKING``. Within a package, modules may import each other in a
+cycle of at most three files (a translator and its two halves, say); a longer cycle is a
+knot to untie.
+"""
 
 from __future__ import annotations
 
-import ast
+import sys
 from pathlib import Path
+
+import grimp
+import pytest
 
 import equilibrist
 
-APPLICATIONS = ("apps", "cli", "web", "study", "envs")
 ROOT = Path(equilibrist.__file__).parent
+PYPROJECT = Path(__file__).resolve().parent.parent / "pyproject.toml"
+MAX_CYCLE = 3
 
 
-def _imported(path: Path) -> list[tuple[int, str]]:
-    out = []
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.ImportFrom) and node.module:
-            names = [node.module, *(f"{node.module}.{a.name}" for a in node.names)]
-        elif isinstance(node, ast.Import):
-            names = [a.name for a in node.names]
-        else:
-            continue
-        out.extend((node.lineno, n) for n in names)
-    return out
+@pytest.fixture(scope="module")
+def graph() -> grimp.ImportGraph:
+    return grimp.build_graph("equilibrist", cache_dir=None, exclude_type_checking_imports=True)
 
 
-def test_no_library_imports_an_application() -> None:
-    libraries = [p for p in ROOT.iterdir() if p.is_dir() and (p / "__init__.py").exists()
-                 and p.name not in APPLICATIONS]
-    assert {"control", "sim", "viz", "native", "export", "systems"} <= {p.name for p in libraries}
-    wrong = []
-    for package in libraries:
-        for path in package.rglob("*.py"):
-            for line, name in _imported(path):
-                parts = name.split(".")
-                if len(parts) > 1 and parts[0] == "equilibrist" and parts[1] in APPLICATIONS:
-                    wrong.append(f"{path.relative_to(ROOT)}:{line} imports {name}")
-    assert not wrong, "\n".join(wrong)
+def test_the_layer_contract_is_kept() -> None:
+    from importlinter.cli import lint_imports
+
+    assert lint_imports(config_filename=str(PYPROJECT), no_cache=True) == 0
+
+
+def test_the_contract_names_every_package(graph: grimp.ImportGraph) -> None:
+    """A new package must take its place in the layers (import-linter ignores the rest)."""
+    import tomllib
+
+    layers = tomllib.loads(PYPROJECT.read_text())["tool"]["importlinter"]["contracts"][0]["layers"]
+    named = {name.strip() for line in layers for name in line.split("|")}
+    top = set(graph.find_children("equilibrist"))
+    assert top - named == set()
+
+
+def _strongly_connected(graph: grimp.ImportGraph) -> list[list[str]]:
+    """Tarjan's components of the module graph with more than one module."""
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 10_000))
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph.find_modules_directly_imported_by(v):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for module in sorted(graph.modules):
+        if module not in index:
+            visit(module)
+    return found
+
+
+def test_no_import_cycle_is_longer_than_three_files(graph: grimp.ImportGraph) -> None:
+    long = [c for c in _strongly_connected(graph) if len(c) > MAX_CYCLE]
+    assert not long, "import cycles of more than three files:\n" + "\n".join(map(str, long))
+
+
+def test_the_cycle_finder_finds_a_planted_cycle() -> None:
+    """The check above can fail: four modules importing each other in a ring are found."""
+    graph = grimp.build_graph("equilibrist", cache_dir=None, exclude_type_checking_imports=True)
+    ring = [f"equilibrist.planted_{k}" for k in range(4)]
+    for module in ring:
+        graph.add_module(module)
+    for a, b in zip(ring, ring[1:] + ring[:1], strict=True):
+        graph.add_import(importer=a, imported=b)
+    assert sorted(ring) in _strongly_connected(graph)
 
 
 def test_the_demos_are_applications() -> None:

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from equilibrist.cli.main import main
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 
 ROOT = Path(__file__).resolve().parent.parent
 ACROBOT = ROOT / "tests" / "models" / "acrobot_named.xml"  # +-2 N m on the elbow

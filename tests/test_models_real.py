@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from equilibrist.cli.main import main
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = ROOT / "tests" / "models"

@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 
 from equilibrist import get_system
-from equilibrist.control.controller import ControllerError, ControllerRequest, build_controller
 from equilibrist.control.design import design
-from equilibrist.control.mpc import MPCRuntime, mpc
+from equilibrist.control.mpc import mpc
+from equilibrist.control.mpc_runtime import MPCRuntime
 from equilibrist.control.riccati import dlqr
+from equilibrist.controllers.kinds import ControllerRequest, build_controller
+from equilibrist.errors import ControllerError
 from equilibrist.sim.run import simulate
 
 
@@ -49,7 +51,7 @@ def test_terminal_cost_makes_any_horizon_the_lqr(cart: tuple[object, object]) ->
 
 def test_closed_loop_equals_lqr_closed_loop(cart: tuple[object, object]) -> None:
     """Same run, MPC (every sample through DAQP) and LQR: states agree to 1e-6 of each state's range."""
-    from equilibrist.control.controller import LinearController
+    from equilibrist.control.linear import LinearController
 
     system, d = cart
     lqr = LinearController.from_design(d, kind="lqr")  # type: ignore[arg-type]
@@ -74,7 +76,7 @@ def test_commands_stay_inside_the_hard_limits(cart: tuple[object, object]) -> No
 def test_keeps_the_track_where_the_clipped_lqr_leaves_it() -> None:
     """The cart at the centre moving at 2 m/s: the clipped LQR runs off the 1 m track, the MPC
     (50 Hz, 40 samples = 0.8 s ahead, track constrained to 0.95 m) stops in time and balances."""
-    from equilibrist.control.controller import LinearController
+    from equilibrist.control.linear import LinearController
 
     system = get_system("cartpole")
     d = design(system, rate=50.0)
@@ -96,7 +98,7 @@ def test_with_the_kalman_filter_in_front() -> None:
     d = design(system, rate=200.0)
     ctrl = mpc(system, design=d, horizon=10, estimator="kalman")
     assert ctrl.estimator == "kalman" and ctrl.outputs == ("x", "theta")
-    from equilibrist.control.controller import LinearController
+    from equilibrist.control.linear import LinearController
 
     lqg = LinearController.from_design(d, kind="lqg")
     x0 = {"x": 0.05, "theta": 0.02}
@@ -144,7 +146,7 @@ def test_survives_every_push_the_clipped_lqr_survives(estimator: str) -> None:
     Kalman filter in front, or the full state) stays up and ends back on the track, so does the
     MPC. The sweep includes pushes that carry the cart past the track's end (the soft bound
     violated, the case that used to run away)."""
-    from equilibrist.control.controller import LinearController
+    from equilibrist.control.linear import LinearController
     from equilibrist.sim.events import Pulse
     from equilibrist.sim.noise import Noise
 

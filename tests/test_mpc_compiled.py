@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 
 from equilibrist import get_system
-from equilibrist.control._mpc_c import compiled_library, daqp_objects
 from equilibrist.control.design import design
-from equilibrist.control.mpc import MPCRuntime, mpc
+from equilibrist.control.mpc import mpc
+from equilibrist.control.mpc_library import compiled_library, daqp_objects
+from equilibrist.control.mpc_runtime import MPCRuntime
 from equilibrist.native import daqp_library
 from support.mpc_reference import ReferenceMPC
 

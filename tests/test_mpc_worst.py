@@ -9,7 +9,8 @@ import pytest
 
 from equilibrist import get_system
 from equilibrist.control.design import design
-from equilibrist.control.mpc import MPCRuntime, mpc
+from equilibrist.control.mpc import mpc
+from equilibrist.control.mpc_runtime import MPCRuntime
 from support.mpc_reference import ReferenceMPC
 
 

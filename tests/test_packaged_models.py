@@ -16,6 +16,7 @@ import sys
 
 import pytest
 
+from equilibrist.mechanics.definition import Entry
 from equilibrist.numeric import cache
 from equilibrist.systems import registry
 
@@ -24,7 +25,7 @@ ENTRIES = registry.all_entries()
 
 @pytest.mark.slow
 @pytest.mark.parametrize("entry", ENTRIES, ids=[e.spec.key for e in ENTRIES])
-def test_the_shipped_derivation_is_todays(entry: registry.Entry) -> None:
+def test_the_shipped_derivation_is_todays(entry: Entry) -> None:
     from equilibrist.numeric.package import generated_source
 
     shipped = cache.packaged_path(entry)

@@ -17,7 +17,8 @@ import pytest
 import sympy as sp
 from scipy.integrate import solve_ivp
 
-from equilibrist.numeric.system import System, get_system
+from equilibrist.numeric.lookup import get_system
+from equilibrist.numeric.system import System
 
 RNG_SEEDS = range(8)
 

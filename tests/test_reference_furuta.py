@@ -20,7 +20,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from equilibrist.numeric.system import System, get_system
+from equilibrist.numeric.lookup import get_system
+from equilibrist.numeric.system import System
 
 
 def _draw(rng: np.random.Generator, *, friction: bool) -> System:

@@ -21,7 +21,8 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from equilibrist.numeric.system import System, get_system
+from equilibrist.numeric.lookup import get_system
+from equilibrist.numeric.system import System
 
 PENDULUMS = ("cartpole", "double_cartpole", "wheeled_pendulum", "reaction_wheel_pendulum")
 FRICTIONS = {

@@ -22,7 +22,8 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from equilibrist.numeric.system import System, get_system
+from equilibrist.numeric.lookup import get_system
+from equilibrist.numeric.system import System
 
 TWO_LINKS = ("acrobot", "pendubot")
 # Which joint the motor drives (SYSTEMS.md): 1 the shoulder, 2 the elbow.

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from equilibrist.cli.main import main
-from equilibrist.control.controller import LinearController
 from equilibrist.control.design import design
-from equilibrist.numeric.system import get_system
+from equilibrist.control.linear import LinearController
+from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import Pulse, simulate
 from equilibrist.sim.roa import estimate_slice, max_push, max_tilt
 

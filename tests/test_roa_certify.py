@@ -22,7 +22,7 @@ from equilibrist.cli.main import main
 from equilibrist.control.certify import CertificateUnavailable, certify
 from equilibrist.control.design import design
 from equilibrist.numeric import interval as iv
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.sim.roa import sample_level
 
 

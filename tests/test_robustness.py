@@ -12,7 +12,7 @@ import pytest
 from equilibrist.cli.main import main
 from equilibrist.errors import NoEquilibriumError, ParameterError
 from equilibrist.numeric import cache
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.systems import registry
 from equilibrist.systems._gyro_tools import NoSteadyPrecessionError, steady_precession_rates
 

@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from equilibrist.control.controller import LinearController
 from equilibrist.control.design import design
+from equilibrist.control.linear import LinearController
 from equilibrist.control.swingup import swingup
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import Noise, simulate_batch
 from equilibrist.tasks import BALANCED_ANGLE, BALANCED_RATE, balance_box
 

@@ -16,7 +16,8 @@ from equilibrist.sim import (
     simulate,
     simulate_batch,
 )
-from equilibrist.sim.batch import BatchResult, child_seed, sample_uniform
+from equilibrist.sim.batch_inputs import child_seed, sample_uniform
+from equilibrist.sim.batch_result import BatchResult
 from support.sim import cartpole, lqg, state_feedback
 from support.sim import cartpole_noise as _noise
 

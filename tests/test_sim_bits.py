@@ -27,9 +27,9 @@ import hashlib
 import numpy as np
 import pytest
 
-from equilibrist.control.controller import LinearController
 from equilibrist.control.design import design
-from equilibrist.numeric.system import get_system
+from equilibrist.control.linear import LinearController
+from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import (
     Impulse,
     Kick,

@@ -9,7 +9,7 @@ import pytest
 
 from equilibrist.cli.main import main
 from equilibrist.sim import SimResult
-from equilibrist.sim.batch import BatchResult
+from equilibrist.sim.batch_result import BatchResult
 
 
 def _json(capsys, argv):

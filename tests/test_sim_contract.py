@@ -7,15 +7,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from equilibrist.control.controller import (
-    LinearController,
-    NonlinearController,
-    PythonControllerBase,
-    supervisor_source,
-)
 from equilibrist.control.design import design
+from equilibrist.control.linear import LinearController
+from equilibrist.control.nonlinear import NonlinearController, supervisor_source
+from equilibrist.control.python_controller import PythonControllerBase
 from equilibrist.errors import SimulationError
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import Noise, Pulse, simulate, simulate_batch
 
 # A nonlinear controller that runs an embedded linear controller (its packed

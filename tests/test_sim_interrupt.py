@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from tests.support.signals import after_cpu, signal_while_working, start
 
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import simulate, simulate_batch
 
 # Each single run takes minutes: 2000 s of the cart-pole with a 10 us physics step is
@@ -56,7 +56,8 @@ def test_a_signal_stops_a_long_run_at_once(warm, tmp_path, argv, signum) -> None
 def test_the_stop_flag_ends_the_core_from_another_thread() -> None:
     # The core releases the GIL and reads the flag at every sample: set from this thread
     # while a helper runs a run of 2e8 steps, it ends that run where it is.
-    from equilibrist.sim import _setup, layout
+    from equilibrist.sim import layout
+    from equilibrist.sim import setup as _setup
     from equilibrist.sim.kernel import Kernel
 
     system = get_system("cartpole")
@@ -132,8 +133,8 @@ import sys
 
 import numpy as np
 
-from equilibrist.control.controller import PythonControllerBase
-from equilibrist.numeric.system import get_system
+from equilibrist.control.python_controller import PythonControllerBase
+from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import simulate_batch
 
 

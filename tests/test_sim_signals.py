@@ -9,7 +9,7 @@ import pytest
 
 from equilibrist.cli.simulate import show_progress
 from equilibrist.errors import DimensionError, SimulationError
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import Noise, Ramp, Samples, Square, Step, simulate
 from equilibrist.sim.signals import parse_signal
 from support.sim import cartpole, state_feedback

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from equilibrist.control import design
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import LQG, Noise, StateFeedback, simulate
 from equilibrist.systems import registry
 

@@ -11,8 +11,8 @@ import pytest
 
 from equilibrist.cli.main import main
 from equilibrist.control.design import design
-from equilibrist.numeric.system import get_system
-from equilibrist.sim.batch import child_seed, sample_uniform
+from equilibrist.numeric.lookup import get_system
+from equilibrist.sim.batch_inputs import child_seed, sample_uniform
 from equilibrist.sim.controllers import LQG
 from equilibrist.sim.noise import Noise
 from equilibrist.sim.run import simulate

@@ -8,24 +8,18 @@ import numpy as np
 import pytest
 
 from equilibrist import get_system
-from equilibrist.control.controller import (
-    ControllerError,
-    ControllerRequest,
-    NonlinearController,
-    build_controller,
-)
+from equilibrist.control.nonlinear import NonlinearController
 from equilibrist.control.swingup import (
-    CP,
-    MODE_BALANCE,
     SwingUpRuntime,
     SwingUpTuning,
-    Z,
     catch_level,
-    energy,
     swingup,
     swingup_laws,
     tracking_gains,
 )
+from equilibrist.control.swingup_law import CP, MODE_BALANCE, Z, energy
+from equilibrist.controllers.kinds import ControllerRequest, build_controller
+from equilibrist.errors import ControllerError
 from equilibrist.sim.run import simulate
 from equilibrist.tasks import get_task
 
@@ -230,7 +224,7 @@ def test_acrobot_law_makes_its_lyapunov_function_fall_at_the_stated_rate() -> No
     law's inertia matrix, velocity and gravity terms are checked against an
     independent derivation.
     """
-    from equilibrist.control.swingup import python_namespace
+    from equilibrist.control.swingup_law import python_namespace
 
     system = get_system("acrobot")
     ctrl = swingup(system)
@@ -260,8 +254,8 @@ def test_acrobot_law_makes_its_lyapunov_function_fall_at_the_stated_rate() -> No
 def test_lqg_balance_is_the_designs_lqg(form: str) -> None:
     """Balancing with ``balance="lqg"``, the supervisor's filter and command are the contract's
     LQG (LinearController.from_design) fed the same measurements, to round-off."""
-    from equilibrist.control.controller import LinearController
     from equilibrist.control.design import design
+    from equilibrist.control.linear import LinearController
 
     system = get_system("cartpole")
     d = design(system, rate=system.spec.control_rate, kalman_form=form)

@@ -12,7 +12,7 @@ import pytest
 
 from equilibrist import get_system
 from equilibrist.cli.main import main
-from equilibrist.control.controller import NonlinearController
+from equilibrist.control.nonlinear import NonlinearController
 from equilibrist.control.swingup import SwingUpRuntime, swingup
 from equilibrist.export.nonlinear_c import (
     CompiledNonlinear,
@@ -38,7 +38,7 @@ def test_c_commands_equal_python_exactly(name: str, balance: str, form: str) -> 
     """On recorded vectors (noisy swing-up), every C command is the Python one, bit for bit
     (and its estimate; with the LQG hand-over, the filter's state too)."""
     from equilibrist.control.design import design
-    from equilibrist.control.swingup import Z
+    from equilibrist.control.swingup_law import Z
 
     system = get_system(name)
     d = design(system, rate=system.spec.control_rate, kalman_form=form)

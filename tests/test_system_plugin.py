@@ -31,7 +31,7 @@ import numpy as np
 from equilibrist.mechanics.spec import (Input, OperatingPoint, Scenario, SwingUp, SystemSpec,
                                         friction, positive)
 from equilibrist.systems.registry import register
-from equilibrist.viz.scenes import COLORS, Scene, Shape, bar, circle, lean, rect
+from equilibrist.viz.drawing import COLORS, Scene, Shape, bar, circle, lean, rect
 
 SPEC = SystemSpec(
     name="pointcart",

@@ -25,7 +25,7 @@ EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "my_cartpole.py"
 SCRIPT = textwrap.dedent('''
     import dataclasses, pickle, sys
     import numpy as np
-    from equilibrist.control.controller import PythonControllerBase
+    from equilibrist.control.python_controller import PythonControllerBase
     from equilibrist.numeric.system import System
     from equilibrist.sim.batch import simulate_batch
 

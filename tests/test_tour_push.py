@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from equilibrist.apps.tour import default_scenario
+from equilibrist.apps.tour_common import default_scenario
 from equilibrist.control.design import design
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import Pulse, StateFeedback, simulate
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"

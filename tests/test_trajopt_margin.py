@@ -8,7 +8,7 @@ import pytest
 
 from equilibrist.cli.main import main
 from equilibrist.control.trajopt import load_trajectory
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.tasks import get_task, planning_bounds
 
 

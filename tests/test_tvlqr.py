@@ -11,8 +11,8 @@ import pytest
 
 from equilibrist import get_system
 from equilibrist.cli.main import main
-from equilibrist.control.controller import ControllerRequest, build_controller
 from equilibrist.control.trajopt import load_trajectory
+from equilibrist.controllers.kinds import ControllerRequest, build_controller
 from equilibrist.sim.run import simulate
 
 

@@ -14,9 +14,9 @@ import pytest
 
 from equilibrist import get_system
 from equilibrist.cli.main import main
-from equilibrist.control.kinds import ControllerRequest, build
 from equilibrist.control.trajopt import load_trajectory
 from equilibrist.control.tvlqr import SOURCE, kalman_along
+from equilibrist.controllers.kinds import ControllerRequest, build
 from equilibrist.sim.noise import Noise
 from equilibrist.sim.run import simulate
 

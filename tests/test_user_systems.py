@@ -19,7 +19,8 @@ from equilibrist import get_system
 from equilibrist.cli.main import main
 from equilibrist.errors import DefinitionError, EquilibristError, UnknownNameError
 from equilibrist.numeric import cache
-from equilibrist.numeric.system import System, system_from_key
+from equilibrist.numeric.lookup import system_from_key
+from equilibrist.numeric.system import System
 from equilibrist.systems import files
 
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "my_cartpole.py"

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.systems import registry
 from equilibrist.viz import animation, output
 from equilibrist.viz.animation import animate, frame_times, render_frames

@@ -14,11 +14,12 @@ import pytest
 from PIL import Image
 
 from equilibrist.errors import UnknownNameError
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.systems import registry
+from equilibrist.viz.drawing import COLORS, Scene
 from equilibrist.viz.frames import FrameRenderer, draw_state
 from equilibrist.viz.output import VizError
-from equilibrist.viz.scenes import COLORS, Scene, drawing_class, scene_for
+from equilibrist.viz.scenes import drawing_class, scene_for
 
 ENTRIES = registry.all_entries()
 IDS = [e.spec.key for e in ENTRIES]

@@ -12,16 +12,11 @@ from PIL import Image
 
 from equilibrist.control import design
 from equilibrist.errors import UnknownNameError
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.viz.output import VizError
-from equilibrist.viz.plots import (
-    display_unit,
-    plot_comparison,
-    plot_fan,
-    plot_poles,
-    plot_region_of_attraction,
-    plot_response,
-)
+from equilibrist.viz.plot_common import display_unit
+from equilibrist.viz.plots_maps import plot_poles, plot_region_of_attraction
+from equilibrist.viz.plots_runs import plot_comparison, plot_fan, plot_response
 from equilibrist.viz.runs import Run
 
 

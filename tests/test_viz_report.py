@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.viz import cli_hooks, output
 from equilibrist.viz.report import Image as ReportImage
 from equilibrist.viz.report import Section, write_index

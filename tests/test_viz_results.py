@@ -12,10 +12,11 @@ from PIL import Image
 
 from equilibrist.cli.main import main
 from equilibrist.control import design
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import LQG, Noise, Pulse, simulate, simulate_batch
 from equilibrist.viz.animation import animate_result
-from equilibrist.viz.plots import plot_batch, plot_response
+from equilibrist.viz.plots import plot_batch
+from equilibrist.viz.plots_runs import plot_response
 from equilibrist.viz.runs import as_run
 
 

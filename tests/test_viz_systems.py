@@ -11,10 +11,11 @@ import pytest
 from PIL import Image
 
 from equilibrist.control import design
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import LQG, simulate
 from equilibrist.systems import registry
-from equilibrist.viz.plots import plot_comparison, plot_poles, plot_response
+from equilibrist.viz.plots_maps import plot_poles
+from equilibrist.viz.plots_runs import plot_comparison, plot_response
 
 ENTRIES = registry.all_entries()
 IDS = [e.spec.key for e in ENTRIES]

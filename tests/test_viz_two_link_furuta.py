@@ -8,9 +8,10 @@ import math
 
 import numpy as np
 
-from equilibrist.numeric.system import get_system
+from equilibrist.numeric.lookup import get_system
+from equilibrist.viz.drawing import COLORS
 from equilibrist.viz.frames import FrameRenderer
-from equilibrist.viz.scenes import COLORS, scene_for
+from equilibrist.viz.scenes import scene_for
 
 
 def _mask(frame: np.ndarray, color: str, tol: int = 6) -> np.ndarray:

@@ -18,7 +18,8 @@ from tests.support.web import LocalClient, opening, receive_until
 
 from equilibrist.web.app import create_app
 from equilibrist.web.protocol import CONTROLLERS, Limits, ProtocolError, parse
-from equilibrist.web.session import Catalogue, Session, redesign
+from equilibrist.web.session import Session
+from equilibrist.web.session_design import Catalogue, redesign
 
 NO_HANG = "seesaw has no hanging position"
 LIMITS = Limits(("cartpole", "seesaw"), {"theta": (0.002, 20.0)}, {},

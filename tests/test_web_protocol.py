@@ -23,7 +23,7 @@ from tests.support.web import LocalClient, next_frame, opening, receive_until
 
 from equilibrist.web.app import HostCheck, create_app
 from equilibrist.web.protocol import MAX_MESSAGE_BYTES, Limits, ProtocolError, parse
-from equilibrist.web.session import Catalogue
+from equilibrist.web.session_design import Catalogue
 
 LIMITS = Limits(("cartpole", "seesaw"), {"theta": (0.002, 20.0)}, {"m_p": (0.25, 4.0)})
 
@@ -183,7 +183,7 @@ def test_region_of_attraction_is_computed_aside_and_a_bad_request_is_one_error(c
     the change superseded is never sent."""
     import time
 
-    from equilibrist.web import _session_roa
+    from equilibrist.web import session_roa as _session_roa
 
     monkeypatch.setattr(_session_roa, "MAX_BOXES", 4000)
 
@@ -672,7 +672,7 @@ def test_ctrl_c_while_redesigning_ends_with_one_line_and_frees_the_port():
 
     import websockets
 
-    from equilibrist.cli.play import bind
+    from equilibrist.web.server import bind
 
     proc, line = _start()
     url = line.split()[3]
@@ -764,8 +764,9 @@ def test_play_command_warns_off_loopback_and_refuses_bad_input():
 
 def test_session_runs_the_controller_contract_as_its_reference_does():
     """The session's numpy loop against the contract's own (numba-source) output and update."""
-    from equilibrist.control.controller import LinearController
-    from equilibrist.web.session import Session, _Linear
+    from equilibrist.control.linear import LinearController
+    from equilibrist.web.session import Session
+    from equilibrist.web.session_loop import _Linear
 
     session = Session(Catalogue.default(), "cartpole", seed=3)
     design = session.loop.design
@@ -848,7 +849,7 @@ def test_no_browser_is_started_without_a_display(monkeypatch) -> None:
     """Without a display only a console browser could start, and it would take the terminal."""
     import webbrowser
 
-    from equilibrist.cli import play
+    from equilibrist.web import server as play
 
     opened: list[str] = []
 
@@ -876,7 +877,7 @@ def test_a_session_balancing_with_its_lqg_is_simulate_to_the_bit():
     core's order, not numpy's products)."""
     import dataclasses
 
-    from equilibrist.control.controller import LinearController
+    from equilibrist.control.linear import LinearController
     from equilibrist.sim import simulate
     from equilibrist.sim.noise import Noise
     from equilibrist.web.session import Session

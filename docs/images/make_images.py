@@ -18,7 +18,7 @@ import numpy as np
 
 from equilibrist.sim import SimResult
 from equilibrist.viz.frames import FrameRenderer
-from equilibrist.viz.plots import plot_response
+from equilibrist.viz.plots_runs import plot_response
 from equilibrist.viz.runs import as_run
 
 

@@ -24,7 +24,7 @@ __all__ = ["EquilibristError", "__version__", "get_system", "list_systems"]
 
 def get_system(name: str, **options: object) -> System:  # re-exported lazily
     """Return the :class:`~equilibrist.numeric.system.System` called *name*."""
-    from equilibrist.numeric.system import get_system as _get
+    from equilibrist.numeric.lookup import get_system as _get
 
     return _get(name, **options)
 

@@ -60,6 +60,10 @@ class ControllerError(EquilibristError, ValueError):
     """A controller that does not exist, does not apply, or is not well formed."""
 
 
+class UsageError(EquilibristError, ValueError):
+    """A malformed value given on the command line or to a server's options."""
+
+
 class ExportError(EquilibristError, ValueError):
     """An export that cannot be written as asked."""
 

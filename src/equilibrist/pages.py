@@ -17,6 +17,7 @@ import inspect
 import math
 from pathlib import Path
 
+from equilibrist.mechanics.definition import Entry
 from equilibrist.mechanics.spec import SystemSpec
 from equilibrist.systems import registry
 
@@ -50,7 +51,7 @@ def _table(head: list[str], rows: list[list[str]]) -> list[str]:
     return lines
 
 
-def _docstring(entry: registry.Entry) -> str:
+def _docstring(entry: Entry) -> str:
     try:
         module = importlib.import_module(entry.module)
     except ImportError:
@@ -93,7 +94,7 @@ def _tasks(spec: SystemSpec) -> list[str]:
     return out
 
 
-def page(entry: registry.Entry) -> str:
+def page(entry: Entry) -> str:
     """The Markdown page of one definition."""
     spec = entry.spec
     lines = [_GENERATED, "", f"# {spec.title} (`{spec.key}`)", "", spec.description, ""]
@@ -153,7 +154,7 @@ def page(entry: registry.Entry) -> str:
     return "\n".join(lines) + "\n"
 
 
-def catalogue_entries() -> list[registry.Entry]:
+def catalogue_entries() -> list[Entry]:
     """Every definition of the catalogue, families by variant."""
     out = []
     for name in registry.family_names():

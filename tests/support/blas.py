@@ -19,9 +19,9 @@ def tvlqr_params_digests(options: Mapping[str, str], rate: float = 200.0) -> lis
     *options*) made in a fresh process under each of :data:`KERNELS`."""
     code = textwrap.dedent(f"""
         import hashlib
-        from equilibrist.control.kinds import ControllerRequest
+        from equilibrist.controllers.kinds import ControllerRequest
         from equilibrist.control.tvlqr import build_request
-        from equilibrist.numeric.system import get_system
+        from equilibrist.numeric.lookup import get_system
         ctrl = build_request(ControllerRequest(system=get_system("cartpole"), rate={rate!r},
                                                options={dict(options)!r}))
         print(hashlib.sha256(ctrl.params.tobytes()).hexdigest())

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from equilibrist.control._mpc_c import COLD_SLACK
-from equilibrist.control._mpc_problem import EPS, ITER_LIMIT, STATUS
 from equilibrist.control.mpc import MPC
+from equilibrist.control.mpc_library import COLD_SLACK
+from equilibrist.control.mpc_problem import EPS, ITER_LIMIT, STATUS
 
 
 class ReferenceMPC:

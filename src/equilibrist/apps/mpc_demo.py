@@ -29,7 +29,7 @@ from equilibrist.viz.report import Image
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from equilibrist.control.controller import LinearController
+    from equilibrist.control.linear import LinearController
     from equilibrist.control.mpc import MPC
     from equilibrist.numeric.system import System
     from equilibrist.sim.result import SimResult
@@ -48,8 +48,8 @@ DURATION = 4.0
 
 def controllers(system: System) -> tuple[LinearController, MPC]:
     """The clipped LQR and the MPC (a value: ``.runtime()`` runs it) of the demonstration."""
-    from equilibrist.control.controller import LinearController
     from equilibrist.control.design import design
+    from equilibrist.control.linear import LinearController
     from equilibrist.control.mpc import mpc
 
     d = design(system, rate=RATE)
@@ -91,7 +91,7 @@ def regions(system: System, grid: int = 9) -> tuple[np.ndarray, np.ndarray, dict
 def plot_regions(system: System, speeds: np.ndarray, angles: np.ndarray,
                  kept: dict[str, np.ndarray], path: str | Path) -> Figure:
     """Both regions of attraction side by side."""
-    from equilibrist.viz.plots import plot_regions_side_by_side
+    from equilibrist.viz.plots_maps import plot_regions_side_by_side
 
     vv, aa = np.meshgrid(speeds, angles)
     units = dict(zip(system.state_names, system.state_units, strict=True))
@@ -104,7 +104,7 @@ def plot_regions(system: System, speeds: np.ndarray, angles: np.ndarray,
 
 def mpc_images(system: System, folder: Path, slug: str, *, grid: int = 9) -> list[Image]:
     """The report's MPC figures for the cart-pole: the track case and both regions."""
-    from equilibrist.viz.plots import plot_comparison
+    from equilibrist.viz.plots_runs import plot_comparison
 
     runs = track_case(system)
     (l_label, l_run), (m_label, m_run) = runs.items()

@@ -29,7 +29,7 @@ import numpy as np
 from equilibrist.viz.report import Image
 
 if TYPE_CHECKING:
-    from equilibrist.control.controller import NonlinearController
+    from equilibrist.control.nonlinear import NonlinearController
     from equilibrist.control.trajopt import Trajectory
     from equilibrist.numeric.system import System
     from equilibrist.sim.result import SimResult
@@ -112,7 +112,7 @@ def planned_run(system: System, *, duration: float | None = None,
 def plot_planned(system: System, pr: PlannedRun, path: str | Path) -> Path:
     """The plan (dashed) against the tracked run: each coordinate and each input over time."""
     from equilibrist.control.tvlqr import plan_samples
-    from equilibrist.viz._plot_common import (
+    from equilibrist.viz.plot_common import (
         LIMIT,
         _figure,
         _finish,

@@ -17,8 +17,8 @@ The scenarios (how far off upright a run starts, how hard the push is) are
 part of each rig's definition (``SystemSpec.scenario``), in the units of its
 states and inputs; a rig that states none gets :func:`default_scenario`.
 
-The default scenario and what the steps share are in :mod:`equilibrist.apps._tour_common`,
-the tour of one system in :mod:`equilibrist.apps._tour_systems`; this module runs
+The default scenario and what the steps share are in :mod:`equilibrist.apps.tour_common`,
+the tour of one system in :mod:`equilibrist.apps.tour_systems`; this module runs
 the whole tour and writes the report. Their public names are importable from here.
 """
 
@@ -30,28 +30,19 @@ from collections.abc import Callable, Collection, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, TypedDict
 
-from equilibrist.apps._tour_common import (
-    GYRO_DURATION,
-    GYRO_SPIN,
-    GYRO_THETA,
+from equilibrist.apps.tour_common import (
     SEED,
     SUMMARY_HEADER,
     Outcome,
     _label,
     _say,
     _slug,
-    default_scenario,
 )
-from equilibrist.apps._tour_systems import (
-    balance_outputs,
-    final_error,
-    recovery_time,
+from equilibrist.apps.tour_systems import (
     tour_controlled,
     tour_gyroscope,
-    watched_outputs,
 )
 from equilibrist.atomic import check_output, make_folder, write_text
-from equilibrist.mechanics.spec import Scenario
 from equilibrist.viz.output import VizError
 from equilibrist.viz.report import write_index
 
@@ -389,25 +380,11 @@ def write_report(folder: Path, outcomes: Sequence[Outcome]) -> Path:
 
 
 __all__ = [
-    "GYRO_DURATION",
-    "GYRO_SPIN",
-    "GYRO_THETA",
     "REPORT_MARKER",
-    "SEED",
-    "SUMMARY_HEADER",
-    "Outcome",
-    "Scenario",
-    "balance_outputs",
     "check_report_folder",
-    "default_scenario",
-    "final_error",
-    "recovery_time",
     "report_files",
     "run_tour",
-    "tour_controlled",
-    "tour_gyroscope",
     "tour_one",
-    "watched_outputs",
     "write_manifest",
     "write_report",
 ]

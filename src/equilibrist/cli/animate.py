@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from equilibrist.cli import common
+from equilibrist.errors import UsageError
 
 _EPILOG = """\
 The animation is written beside the result with the suffix .gif unless --out
@@ -51,9 +52,9 @@ def run(args: argparse.Namespace) -> int:
     out = check_suffix(args.out, ANIMATION_FORMATS, "--out") if args.out else src.with_suffix(".gif")
     speed = common.parse_number(args.speed, "--speed")
     if speed <= 0:
-        raise common.UsageError(f"--speed must be positive, got {args.speed}")
+        raise UsageError(f"--speed must be positive, got {args.speed}")
     if args.fps <= 0 or args.max_frames < 1:
-        raise common.UsageError("--fps must be positive and --max-frames at least 1")
+        raise UsageError("--fps must be positive and --max-frames at least 1")
     result = load_result(src)
     if not isinstance(result, SimResult):
         raise VizError(f"{str(src)!r} is a batch: animate one run (save it with 'equilibrist "

@@ -10,6 +10,7 @@ import argparse
 
 from equilibrist.cli import common
 from equilibrist.cli.simulate import _seed, add_run_options, build_run, check_out, show_progress
+from equilibrist.errors import UsageError
 
 _EPILOG = """\
 Run i starts from initial states drawn uniformly from the --x0 ranges
@@ -49,9 +50,9 @@ def _count(text: str, option: str) -> int:
     try:
         v = int(text)
     except ValueError:
-        raise common.UsageError(f"{option} {text!r}: expected a whole number >= 1") from None
+        raise UsageError(f"{option} {text!r}: expected a whole number >= 1") from None
     if v < 1:
-        raise common.UsageError(f"{option} {text!r}: expected a whole number >= 1")
+        raise UsageError(f"{option} {text!r}: expected a whole number >= 1")
     return v
 
 
@@ -62,15 +63,16 @@ def _ranges(items: list[str]) -> dict[str, tuple[float, float]]:
         low = common.parse_number(lo, f"--x0 {name}")
         high = common.parse_number(hi, f"--x0 {name}") if sep else low
         if low > high:
-            raise common.UsageError(f"--x0 {name}={text}: LOW must not exceed HIGH")
+            raise UsageError(f"--x0 {name}={text}: LOW must not exceed HIGH")
         out[name] = (low, high)
     return out
 
 
 def run(args: argparse.Namespace) -> int:
-    from equilibrist.sim._setup import operating_point
-    from equilibrist.sim.batch import child_seed, sample_uniform, simulate_batch
+    from equilibrist.sim.batch import simulate_batch
+    from equilibrist.sim.batch_inputs import child_seed, sample_uniform
     from equilibrist.sim.noise import seed_sequence
+    from equilibrist.sim.setup_checks import operating_point
 
     runs = _count(args.runs, "--runs")
     workers = None if args.workers is None else _count(args.workers, "--workers")

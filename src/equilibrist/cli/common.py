@@ -13,14 +13,10 @@ from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
-from equilibrist.errors import EquilibristError, ParameterError
+from equilibrist.errors import ParameterError, UsageError
 
 if TYPE_CHECKING:
     from equilibrist.numeric.system import System
-
-
-class UsageError(EquilibristError, ValueError):
-    """A malformed command-line value."""
 
 
 STRAYS = "_stray_words"
@@ -170,7 +166,7 @@ def add_params(parser: argparse.ArgumentParser) -> None:
 
 def load_system(args: argparse.Namespace) -> System:
     """The system named on the command line with its ``--params`` and ``--set`` values."""
-    from equilibrist.numeric.system import get_system
+    from equilibrist.numeric.lookup import get_system
 
     parameter_names(args.system)  # unknown names and bad files fail before parsing values
     settings: dict[str, object] = {}
@@ -195,7 +191,7 @@ def named_system(name: str | None) -> System | None:
     """The system given by ``--system`` (run now: the user named it), or ``None``."""
     if name is None:
         return None
-    from equilibrist.numeric.system import get_system
+    from equilibrist.numeric.lookup import get_system
 
     return get_system(name)
 
@@ -312,8 +308,8 @@ def add_controller(parser: argparse.ArgumentParser, surface: str, *, default: st
                    help: str) -> None:
     """``--controller`` with the registry's kinds offered on *surface* as its choices (their
     one-line helps in the help), and each of those kinds' own options
-    (:mod:`equilibrist.control.kinds`)."""
-    from equilibrist.control import kinds
+    (:mod:`equilibrist.controllers.kinds`)."""
+    from equilibrist.controllers import kinds
 
     offered = kinds.all_kinds(surface)
     listed = "; ".join(f"{k.name}: {k.help}" for k in offered)
@@ -327,7 +323,7 @@ def add_controller(parser: argparse.ArgumentParser, surface: str, *, default: st
 def controller_options(args: argparse.Namespace, kind: str, surface: str) -> dict[str, object]:
     """The options of the kind *kind* given on the command line (parsed); an option of
     another kind is refused in one line."""
-    from equilibrist.control import kinds
+    from equilibrist.controllers import kinds
 
     record = kinds.get(kind, surface)
     own = {o.flag for o in record.options}

@@ -13,6 +13,7 @@ import sys
 import time
 
 from equilibrist.cli import common
+from equilibrist.errors import UsageError
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -45,19 +46,19 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from equilibrist.numeric.system import get_system
+    from equilibrist.numeric.lookup import get_system
     from equilibrist.systems import registry
     from equilibrist.viz.cli_hooks import frame_size
 
     try:
         size = frame_size(args.size)
     except argparse.ArgumentTypeError as exc:
-        raise common.UsageError(f"--size {exc}") from None
+        raise UsageError(f"--size {exc}") from None
     if args.system is None:
         if args.settings:
-            raise common.UsageError("--set needs a SYSTEM: parameters belong to one system")
+            raise UsageError("--set needs a SYSTEM: parameters belong to one system")
         if args.at:
-            raise common.UsageError("--at needs a SYSTEM: an operating point belongs to one system")
+            raise UsageError("--at needs a SYSTEM: an operating point belongs to one system")
         systems = [get_system(name) for name in registry.family_names()]
     else:
         systems = [common.load_system(args)]
@@ -74,13 +75,14 @@ def run(args: argparse.Namespace) -> int:
         except ValueError:
             jobs = 0
         if jobs < 1:
-            raise common.UsageError(f"--jobs {args.jobs!r}: expected a whole number >= 1")
+            raise UsageError(f"--jobs {args.jobs!r}: expected a whole number >= 1")
     if not args.out.strip():
-        raise common.UsageError("--out '': expected the report folder")
+        raise UsageError("--out '': expected the report folder")
     out = Path(args.out)
     began = time.perf_counter()
     progress = sys.stderr.isatty()
-    from equilibrist.apps.tour import SUMMARY_HEADER, run_tour
+    from equilibrist.apps.tour import run_tour
+    from equilibrist.apps.tour_common import SUMMARY_HEADER
 
     def say(line: str) -> None:
         print(line, file=sys.stderr)
@@ -115,7 +117,7 @@ def _check_point(system: object, at: dict[str, float]) -> None:
 
     assert isinstance(system, System)
     if not system.n_inputs:
-        raise common.UsageError(f"--at: {system.key} has no input, so no design to make at "
+        raise UsageError(f"--at: {system.key} has no input, so no design to make at "
                                 "another operating point")
     for name in at:
         system.state_index(name)  # an unknown state: named with the nearest ones

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from equilibrist.cli import common
+from equilibrist.errors import UsageError
 
 _EPILOG = """\
 Weights are diagonals, comma-separated: --q one value per state, --r one per
@@ -65,12 +66,12 @@ def run(args: argparse.Namespace) -> int:
 
     system = common.load_system(args)
     rate = None if args.rate is None else common.parse_number(args.rate, "--rate")
-    from equilibrist.control import kinds
+    from equilibrist.controllers import kinds
 
     kind = args.controller
     record = kinds.get(kind, "design")
     if record.open_loop:
-        raise common.UsageError(f"--controller {kind} is the open loop: there is nothing to "
+        raise UsageError(f"--controller {kind} is the open loop: there is nothing to "
                                 "design")
     options = common.controller_options(args, kind, "design")
     if not record.linear:
@@ -92,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         out = result.to_dict(controller=kind)
         if result.rate is not None:
-            from equilibrist.control.controller import LinearController
+            from equilibrist.control.linear import LinearController
 
             out["controller"] = LinearController.from_design(result, kind=kind).describe()
         common.print_json(out)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from equilibrist.cli import common
+from equilibrist.errors import UsageError
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -21,9 +22,9 @@ def run(args: argparse.Namespace) -> int:
     system = common.load_system(args)
     x = common.parse_vector(args.state, f"--state ({', '.join(system.state_names)})", system.n_states)
     if x is None:
-        raise common.UsageError("--state is required")
+        raise UsageError("--state is required")
     if system.n_inputs and args.input is None:
-        raise common.UsageError(
+        raise UsageError(
             f"{system.key} needs --input with {system.n_inputs} value(s) ({', '.join(system.input_names)})"
         )
     u = common.parse_vector(args.input, f"--input ({', '.join(system.input_names) or 'none'})",

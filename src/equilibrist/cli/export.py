@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
 
     from equilibrist.errors import ExportError
     from equilibrist.export.data import c_identifier
-    from equilibrist.export.writer import check_folder, check_rate
+    from equilibrist.export.folder import check_folder, check_rate
 
     # Everything that can be checked without designing is checked first.
     rate = None if args.rate is None else check_rate(common.parse_number(args.rate, "--rate"))
@@ -93,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
         duration = common.parse_number(args.duration, "--duration")
         if not (math.isfinite(duration) and duration > 0):
             raise ExportError(f"--duration must be a positive number of seconds, got {duration:g}")
-    from equilibrist.control import kinds
+    from equilibrist.controllers import kinds
 
     record = kinds.get(args.controller, "export")
     if record.open_loop:
@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
 def _export(args: argparse.Namespace, out: Path, rate: float | None, duration: float | None,
             start: RecordedStart) -> int:
     from equilibrist.errors import ExportError
-    from equilibrist.export.writer import check_rate
+    from equilibrist.export.folder import check_rate
 
     system = common.load_system(args)
     if system.n_inputs == 0:
@@ -126,7 +126,7 @@ def _export(args: argparse.Namespace, out: Path, rate: float | None, duration: f
 
     check_duration(duration, rate, "--duration")  # bounded before the recorded run
 
-    from equilibrist.control import kinds
+    from equilibrist.controllers import kinds
 
     request = kinds.ControllerRequest(
         system=system, rate=rate, design_options=common.design_options(args),

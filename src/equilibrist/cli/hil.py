@@ -13,6 +13,7 @@ import argparse
 import sys
 
 from equilibrist.cli import common
+from equilibrist.errors import UsageError
 
 _EPILOG = """\
 --mode lockstep (default): the simulator waits for each answer; the run equals
@@ -61,7 +62,8 @@ def design_id(kind: str, controller: object) -> str:
     """The design id the export of *controller* carries (what the device reports): by the
     value's form, as the export writes it (an LQR/LQG design's library, the MPC, any
     nonlinear controller translated to C)."""
-    from equilibrist.control.controller import LinearController, NonlinearController
+    from equilibrist.control.linear import LinearController
+    from equilibrist.control.nonlinear import NonlinearController
 
     if isinstance(controller, LinearController) and controller.design is not None:
         from equilibrist.export.data import from_design
@@ -71,13 +73,13 @@ def design_id(kind: str, controller: object) -> str:
         from equilibrist.export.nonlinear_c import design_id as nonlinear_id
 
         return nonlinear_id(controller)
-    from equilibrist.control.mpc import MPCRuntime
+    from equilibrist.control.mpc_runtime import MPCRuntime
 
     if isinstance(controller, MPCRuntime):
         from equilibrist.export.mpc_c import design_id as mpc_id
 
         return mpc_id(controller)
-    raise common.UsageError(f"--controller {kind}: there is no exported controller to run on a device")
+    raise UsageError(f"--controller {kind}: there is no exported controller to run on a device")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -97,15 +99,15 @@ def run(args: argparse.Namespace) -> int:
     check_out(args, "the run")
     timeout = common.parse_number(args.timeout, "--timeout")
     if not 0 < timeout <= 60:
-        raise common.UsageError(f"--timeout {args.timeout}: expected seconds in (0, 60]")
+        raise UsageError(f"--timeout {args.timeout}: expected seconds in (0, 60]")
     try:
         baud = int(args.baud)
     except ValueError:
-        raise common.UsageError(f"--baud {args.baud!r}: expected a whole number of bits per second") from None
+        raise UsageError(f"--baud {args.baud!r}: expected a whole number of bits per second") from None
     if not 50 <= baud <= 20_000_000:
-        raise common.UsageError(f"--baud {baud}: expected 50 to 20000000 bits per second")
+        raise UsageError(f"--baud {baud}: expected 50 to 20000000 bits per second")
     if getattr(args, "controller", None) == "none":
-        raise common.UsageError("--controller none is the open loop: there is no controller on a device")
+        raise UsageError("--controller none is the open loop: there is no controller on a device")
     system, options = build_run(args)
     kind = args.controller or "lqg"
     simulated = options.pop("controller")

@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 
 from equilibrist.cli import common
+from equilibrist.errors import UsageError
 
 _EPILOG = """\
 The log: a CSV file with a header row and one row per sample: the time t [s]
@@ -80,7 +81,7 @@ def _positive(text: str | None, option: str) -> float | None:
         return None
     v = common.parse_number(text, option)
     if not (math.isfinite(v) and v > 0):
-        raise common.UsageError(f"{option} must be positive, got {text}")
+        raise UsageError(f"{option} must be positive, got {text}")
     return v
 
 
@@ -91,7 +92,7 @@ def _levels(items: list[str], option: str, *, positive: bool = False) -> dict[st
         value = common.parse_number(v, f"{option} {k}")
         if value < 0 or (positive and value == 0):
             # A sensor without noise would have infinite weight: the fit would never end.
-            raise common.UsageError(f"{option} {k}: expected a value {'>' if positive else '>='} 0, "
+            raise UsageError(f"{option} {k}: expected a value {'>' if positive else '>='} 0, "
                                     f"got {v}")
         out[k] = value
     return out

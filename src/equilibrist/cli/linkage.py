@@ -7,6 +7,7 @@ import math
 from collections.abc import Callable
 
 from equilibrist.cli import common
+from equilibrist.errors import UsageError
 
 LENGTHS = ("a", "b", "c", "d", "e")
 
@@ -45,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     if missing:
         problems.append(f"missing {', '.join(missing)}")
     if problems:
-        raise common.UsageError(f"--geometry: {'; '.join(problems)} (expected a, b, c, d, e)")
+        raise UsageError(f"--geometry: {'; '.join(problems)} (expected a, b, c, d, e)")
     bar = FourBar(**{n: common.parse_number(raw[n], f"--geometry {n}") for n in LENGTHS})
     if args.motor_angle is not None:
         theta = common.parse_number(args.motor_angle, "--motor-angle")

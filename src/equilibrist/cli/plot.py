@@ -14,6 +14,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from equilibrist.cli import common
+from equilibrist.errors import UsageError
+from equilibrist.viz import plots_runs
 
 if TYPE_CHECKING:
     from equilibrist.sim import BatchResult, SimResult
@@ -125,14 +127,14 @@ def run(args: argparse.Namespace) -> int:
             raise VizError("plot one batch at a time (a batch file cannot be compared with others)")
         plots.plot_batch(results[0], out, degrees=degrees, system=system)
     elif len(results) == 1:
-        plots.plot_response(results[0], out, states=states, degrees=degrees, system=system)
+        plots_runs.plot_response(results[0], out, states=states, degrees=degrees, system=system)
     else:
         names = labels or [Path(f).stem for f in args.files]
         if len(names) != len(results):
-            raise common.UsageError(f"--labels gives {len(names)} labels for {len(results)} files")
+            raise UsageError(f"--labels gives {len(names)} labels for {len(results)} files")
         if len(set(names)) != len(names):
-            raise common.UsageError("the comparison needs distinct labels: give --labels")
-        plots.plot_comparison(dict(zip(names, results, strict=True)), out, states=states,
+            raise UsageError("the comparison needs distinct labels: give --labels")
+        plots_runs.plot_comparison(dict(zip(names, results, strict=True)), out, states=states,
                               degrees=degrees, system=system)
     print(f"wrote {out}")
     return 0

@@ -9,6 +9,7 @@ import sys
 from typing import TYPE_CHECKING
 
 from equilibrist.cli import common
+from equilibrist.errors import UsageError
 
 if TYPE_CHECKING:
     import numpy as np
@@ -106,15 +107,15 @@ def _slice(system: System, text: str | None) -> tuple[str, str]:
 
         pair = default_slice(system)
         if pair is None:
-            raise common.UsageError(f"{system.key} states no fall region: give --slice A,B")
+            raise UsageError(f"{system.key} states no fall region: give --slice A,B")
         return pair
     names = common.parse_names(text, "--slice")
     assert names is not None
     if len(names) != 2 or names[0] == names[1]:
-        raise common.UsageError(f"--slice {text!r}: expected two different states A,B")
+        raise UsageError(f"--slice {text!r}: expected two different states A,B")
     for n in names:
         if n not in system.state_names:
-            raise common.UsageError(f"--slice: {system.key} has no state {n!r} (its states: "
+            raise UsageError(f"--slice: {system.key} has no state {n!r} (its states: "
                                     f"{', '.join(system.state_names)})")
     return names[0], names[1]
 
@@ -127,17 +128,17 @@ def _bounds(system: System, states: tuple[str, str], x_op: np.ndarray,
     if text is not None:
         for item, value in common.parse_assignments(text.split(","), "--range").items():
             if item not in states:
-                raise common.UsageError(f"--range {item}: not a state of the slice "
+                raise UsageError(f"--range {item}: not a state of the slice "
                                         f"({', '.join(states)})")
             lo_t, sep, hi_t = value.partition(":")
             lo = common.parse_number(lo_t, f"--range {item}")
             hi = common.parse_number(hi_t, f"--range {item}") if sep else math.nan
             if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
-                raise common.UsageError(f"--range {item}={value}: expected LO:HI, LO < HI")
+                raise UsageError(f"--range {item}={value}: expected LO:HI, LO < HI")
             out[item] = (lo, hi)
     missing = [s for s in states if s not in out]
     if missing:
-        raise common.UsageError(f"--range: give the bounds of {', '.join(missing)} "
+        raise UsageError(f"--range: give the bounds of {', '.join(missing)} "
                                 "(A=LO:HI,B=LO:HI)")
     return out[states[0]], out[states[1]]
 
@@ -146,14 +147,14 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from equilibrist.cli.simulate import parse_max_steps, show_progress
-    from equilibrist.control import kinds
+    from equilibrist.controllers import kinds
     from equilibrist.sim.noise import Noise
     from equilibrist.sim.roa_report import analyse
 
     if args.out is not None and not args.out.lower().endswith(".parquet"):
-        raise common.UsageError(f"--out {args.out!r}: expected FILE.parquet")
+        raise UsageError(f"--out {args.out!r}: expected FILE.parquet")
     if args.plot is not None and not args.plot.lower().endswith(".png"):
-        raise common.UsageError(f"--plot {args.plot!r}: expected FILE.png")
+        raise UsageError(f"--plot {args.plot!r}: expected FILE.png")
     samples = common.parse_whole(args.samples, "--samples", 100)
     boxes = common.parse_whole(args.boxes, "--boxes", 1000)
     falsify = common.parse_whole(args.falsify, "--falsify", 0)
@@ -161,18 +162,18 @@ def run(args: argparse.Namespace) -> int:
     max_steps = parse_max_steps(args.max_steps)
     duration = common.parse_number(args.duration, "--duration")
     if not (math.isfinite(duration) and duration > 0):
-        raise common.UsageError(f"--duration {args.duration}: expected a positive number of seconds")
+        raise UsageError(f"--duration {args.duration}: expected a positive number of seconds")
     system = common.load_system(args)
     if system.n_inputs == 0:
-        raise common.UsageError(f"{system.key} has no input: there is no loop to catch anything")
+        raise UsageError(f"{system.key} has no input: there is no loop to catch anything")
     rate = (common.parse_number(args.rate, "--rate") if args.rate is not None
             else float(system.spec.control_rate))
     if not (math.isfinite(rate) and rate > 0):
-        raise common.UsageError(f"--rate {args.rate}: expected a positive rate in Hz")
+        raise UsageError(f"--rate {args.rate}: expected a positive rate in Hz")
     name = args.controller or "lqg"
     kind = kinds.get(name, "simulate")
     if kind.open_loop:
-        raise common.UsageError("--controller none is the open loop: it catches nothing")
+        raise UsageError("--controller none is the open loop: it catches nothing")
     request = kinds.ControllerRequest(system=system, rate=rate,
                                       design_options=common.design_options(args),
                                       options=common.controller_options(args, name, "simulate"))
@@ -195,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
     if args.physics_step is not None:
         step = common.parse_number(args.physics_step, "--physics-step")
         if not (math.isfinite(step) and step > 0):
-            raise common.UsageError(f"--physics-step {args.physics_step}: expected a positive "
+            raise UsageError(f"--physics-step {args.physics_step}: expected a positive "
                                     "number of seconds")
         options["physics_step"] = step
     runs = max(samples, FIRST_GRID_RUNS) + SEARCH_RUNS + (falsify if args.certify == "on" else 0)
@@ -209,7 +210,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         _write_parquet(args.out, system, x0s, caught)
     if args.plot is not None:
-        from equilibrist.viz.plots import plot_roa_slice
+        from equilibrist.viz.plots_maps import plot_roa_slice
 
         plot_roa_slice(report, args.plot)
     if args.json:
@@ -240,8 +241,8 @@ def _check_work(runs: int, *, duration: float, rate: float, physics_step: float 
     """Refuse, before any run, an analysis of at most *runs* runs that may take more than
     *max_steps* physics steps; the advice names this command's options."""
     from equilibrist.errors import SimulationError
-    from equilibrist.sim._budget import check_steps
-    from equilibrist.sim._setup_steps import timing
+    from equilibrist.sim.budget import check_steps
+    from equilibrist.sim.setup_steps import timing
 
     problems: list[str] = []  # a physics step that does not divide the period: the runs say so
     _h, n_sub, n_samples = timing(rate, duration, physics_step, "rk4", runs=runs, bound=None,

@@ -15,6 +15,7 @@ import sys
 from typing import TYPE_CHECKING, Any
 
 from equilibrist.cli import common
+from equilibrist.errors import UsageError
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -108,7 +109,7 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
 
 
 def _setup_default_steps() -> float:
-    from equilibrist.sim._setup import DEFAULT_MAX_STEPS
+    from equilibrist.sim.budget import DEFAULT_MAX_STEPS
 
     return float(DEFAULT_MAX_STEPS)
 
@@ -121,7 +122,7 @@ def parse_max_steps(text: str | None) -> float | None:
         return None
     v = common.parse_number(text, "--max-steps")
     if v < 1:
-        raise common.UsageError(f"--max-steps {text}: expected a number of physics steps >= 1 "
+        raise UsageError(f"--max-steps {text}: expected a number of physics steps >= 1 "
                                 "(or inf for no bound)")
     return v
 
@@ -135,7 +136,7 @@ def check_out(args: argparse.Namespace, what: str) -> None:
     from equilibrist.sim.result import check_result_path
 
     if not args.out.strip():
-        raise common.UsageError(f"--out {args.out!r}: expected a file name (NAME.npz or NAME.csv)")
+        raise UsageError(f"--out {args.out!r}: expected a file name (NAME.npz or NAME.csv)")
     check_result_path(Path(args.out), what)
     common.check_output_path(args.out, "--out")  # its folder exists: none is created
 
@@ -163,7 +164,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 def _positive(text: str, option: str) -> float:
     v = common.parse_number(text, option)
     if v <= 0:
-        raise common.UsageError(f"{option} must be positive, got {text}")
+        raise UsageError(f"{option} must be positive, got {text}")
     return v
 
 
@@ -171,19 +172,19 @@ def _seed(text: str) -> int:
     try:
         v = int(text)
     except ValueError:
-        raise common.UsageError(f"--seed {text!r}: expected a whole number >= 0") from None
+        raise UsageError(f"--seed {text!r}: expected a whole number >= 0") from None
     if v < 0:
-        raise common.UsageError(f"--seed {text!r}: expected a whole number >= 0")
+        raise UsageError(f"--seed {text!r}: expected a whole number >= 0")
     return v
 
 
 def _split_time(item: str, option: str) -> tuple[float, str]:
     t, sep, rest = item.partition(":")
     if not sep or not rest:
-        raise common.UsageError(f"{option} {item!r}: expected T:...")
+        raise UsageError(f"{option} {item!r}: expected T:...")
     time = common.parse_number(t, f"{option} time")
     if time < 0:
-        raise common.UsageError(f"{option} {item!r}: the time must be >= 0")
+        raise UsageError(f"{option} {item!r}: the time must be >= 0")
     return time, rest
 
 
@@ -196,7 +197,7 @@ def parse_events(args: argparse.Namespace, system: System) -> list[Event]:
         t, rest = _split_time(item, "--push")
         parts = rest.split(":")
         if len(parts) > 2:
-            raise common.UsageError(f"--push {item!r}: expected T:VALUE[:DURATION]")
+            raise UsageError(f"--push {item!r}: expected T:VALUE[:DURATION]")
         value = common.parse_number(parts[0], "--push value")
         duration = 0.1 if len(parts) == 1 else _positive(parts[1], "--push duration")
         events.append(Pulse(t, value, duration))
@@ -251,7 +252,7 @@ def build_run(args: argparse.Namespace) -> tuple[System, dict[str, Any]]:
             else float(system.spec.control_rate))
     step = None if args.physics_step is None else _positive(args.physics_step, "--physics-step")
     name = args.controller or ("lqg" if system.n_inputs else "none")
-    from equilibrist.control import kinds
+    from equilibrist.controllers import kinds
 
     kind = kinds.get(name, "simulate")
     reference = None if args.reference is None else parse_signal(args.reference)
@@ -267,7 +268,7 @@ def build_run(args: argparse.Namespace) -> tuple[System, dict[str, Any]]:
     if kind.open_loop:
         for flag in ("q", "r", "qn", "rn"):
             if getattr(args, flag) is not None:
-                raise common.UsageError(f"--{flag} needs a controller (--controller lqr or lqg)")
+                raise UsageError(f"--{flag} needs a controller (--controller lqr or lqg)")
         if noise_on:
             noise = Noise.from_spec(system, outputs=outputs, rate=rate)
     else:

@@ -12,9 +12,10 @@ import sys
 from typing import TYPE_CHECKING, Any
 
 from equilibrist.cli import common
+from equilibrist.errors import UsageError
 
 if TYPE_CHECKING:
-    from equilibrist.study.spec import Study
+    from equilibrist.study.record import Study
 
 _EPILOG = """\
 Varied quantities (--vary, repeatable): any physical parameter of the system
@@ -65,7 +66,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
                      help="relative spread of a parameter around the point's value")
     common.add_items(p, "--roa", marker="=", metavar="STATE=LOW:HIGH:N",
                      help="estimate the region of attraction on this grid of initial states")
-    from equilibrist.control import kinds
+    from equilibrist.controllers import kinds
 
     p.add_argument("--controller", choices=kinds.names("study"),
                    help="when not varied (default lqg): " + ", ".join(kinds.names("study")))
@@ -110,7 +111,7 @@ def _sample(text: str | None) -> int | None:
         return None
     kind, sep, n = text.partition(":")
     if kind != "random" or not sep:
-        raise common.UsageError(f"--sample {text!r}: expected random:N")
+        raise UsageError(f"--sample {text!r}: expected random:N")
     return _count(n, "--sample random:N")
 
 
@@ -120,23 +121,23 @@ def build_study(args: argparse.Namespace) -> Study:
 
     if args.study is not None:
         # SYSTEM beside --study names the study's system (a Python file is the user's to run).
-        from equilibrist.control import kinds
+        from equilibrist.controllers import kinds
 
         given = [o for o in _STUDY_OPTIONS if o != "system" and getattr(args, o) not in (None, [], False)]
         given += [o.key for o in kinds.options("study") if getattr(args, o.key, None) is not None]
         if given:
             flags = ", ".join("SYSTEM" if o == "system" else "--" + o.replace("_", "-")
                               .replace("settings", "set") for o in given)
-            raise common.UsageError(f"--study describes the whole study: drop {flags} "
+            raise UsageError(f"--study describes the whole study: drop {flags} "
                                     "(or leave out --study)")
         return load_study_file(args.study, system=args.system)
     if args.system is None:
-        raise common.UsageError("give a SYSTEM (with --vary ...) or --study FILE.toml")
+        raise UsageError("give a SYSTEM (with --vary ...) or --study FILE.toml")
     vary = []
     for item in args.vary:
         name, sep, value = item.partition("=")
         if not sep or not name.strip() or not value.strip():
-            raise common.UsageError(f"--vary {item!r}: expected NAME=VALUES")
+            raise UsageError(f"--vary {item!r}: expected NAME=VALUES")
         vary.append((name.strip(), value.strip()))
     options: dict[str, Any] = {
         "vary": vary,
@@ -147,7 +148,7 @@ def build_study(args: argparse.Namespace) -> Study:
         "settings": common.system_settings(args.system, args.settings),
         "delay": args.delay,
     }
-    from equilibrist.control import kinds
+    from equilibrist.controllers import kinds
 
     own = {o.key: getattr(args, o.key) for o in kinds.options("study")
            if getattr(args, o.key, None) is not None}

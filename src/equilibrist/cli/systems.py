@@ -6,6 +6,7 @@ import argparse
 from typing import TYPE_CHECKING, NotRequired, TypedDict
 
 from equilibrist.cli import common
+from equilibrist.errors import UsageError
 
 if TYPE_CHECKING:
     from equilibrist.mechanics.spec import SystemSpec
@@ -107,15 +108,15 @@ def catalogue() -> dict[str, SystemEntry]:
 
 def run(args: argparse.Namespace) -> int:
     if args.out is not None and not args.markdown:
-        raise common.UsageError("--out writes the Markdown pages: give --markdown too")
+        raise UsageError("--out writes the Markdown pages: give --markdown too")
     if args.markdown:
         if args.json:
-            raise common.UsageError("--markdown and --json are two formats: give one")
+            raise UsageError("--markdown and --json are two formats: give one")
         from equilibrist import pages
 
         if args.out is not None:
             if not args.out.strip():
-                raise common.UsageError("--out '': expected the folder to write the pages into")
+                raise UsageError("--out '': expected the folder to write the pages into")
             written = pages.write_pages(args.out, force=args.force)
             print(f"wrote {len(written)} pages to {args.out}")
             return 0

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from equilibrist.cli import common
+from equilibrist.errors import UsageError
 
 if TYPE_CHECKING:
     from equilibrist.control.trajopt import Trajectory
@@ -90,9 +91,9 @@ def _count(text: str, option: str, low: int, high: int) -> int:
     try:
         v = int(text)
     except ValueError:
-        raise common.UsageError(f"{option} {text!r}: expected a whole number from {low} to {high}") from None
+        raise UsageError(f"{option} {text!r}: expected a whole number from {low} to {high}") from None
     if not low <= v <= high:
-        raise common.UsageError(f"{option} {text!r}: expected a whole number from {low} to {high}")
+        raise UsageError(f"{option} {text!r}: expected a whole number from {low} to {high}")
     return v
 
 
@@ -100,12 +101,12 @@ def _states(system: System, text: str, option: str, base: np.ndarray) -> np.ndar
     x = base.copy()
     items = [t for t in text.split(",") if t.strip()]
     if not items:
-        raise common.UsageError(f"{option} {text!r}: expected NAME=VALUE,...")
+        raise UsageError(f"{option} {text!r}: expected NAME=VALUE,...")
     for name, value in common.parse_assignments(items, option).items():
         if name not in system.state_names:
             from equilibrist.errors import nearest
 
-            raise common.UsageError(f"{option}: unknown state {name!r}: {nearest(name, system.state_names)}")
+            raise UsageError(f"{option}: unknown state {name!r}: {nearest(name, system.state_names)}")
         x[system.state_index(name)] = common.parse_number(value, f"{option} {name}")
     return x
 
@@ -114,14 +115,14 @@ def _check_outputs(args: argparse.Namespace) -> None:
     """Every output named (--out, --plot, --animate), before any work: a file name whose
     folder exists and takes new files (:func:`common.check_output_path`), not a folder."""
     if args.out is not None and (not args.out.strip() or Path(args.out).suffix.lower() != ".npz"):
-        raise common.UsageError(f"--out {args.out!r}: expected a trajectory file NAME.npz")
+        raise UsageError(f"--out {args.out!r}: expected a trajectory file NAME.npz")
     for option, value in (("--out", args.out), ("--plot", args.plot), ("--animate", args.animate)):
         if value is None:
             continue
         path = common.check_output_path(str(value), option)
         folder = path.parent
         if not os.access(folder, os.W_OK | os.X_OK):
-            raise common.UsageError(f"{option} {path}: the folder {folder} is not writable")
+            raise UsageError(f"{option} {path}: the folder {folder} is not writable")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -138,14 +139,14 @@ def run(args: argparse.Namespace) -> int:
     seed = _count(args.seed, "--seed", 0, 2**63 - 1)
     max_time = common.parse_number(args.max_time, "--max-time")
     if not 0 < max_time <= 1e6:
-        raise common.UsageError(f"--max-time {args.max_time}: expected seconds in (0, 1000000]")
+        raise UsageError(f"--max-time {args.max_time}: expected seconds in (0, 1000000]")
     _check_outputs(args)
     if args.minimize == "time" and args.duration_max is None:
-        raise common.UsageError("--minimize time needs a free final time: give --duration-max S")
+        raise UsageError("--minimize time needs a free final time: give --duration-max S")
     if args.start is not None and args.to is None:
-        raise common.UsageError("--from is the start of a transfer: give --to as well")
+        raise UsageError("--from is the start of a transfer: give --to as well")
     if args.task is not None and args.to is not None:
-        raise common.UsageError("--task and --to are two kinds of plan: give one")
+        raise UsageError("--task and --to are two kinds of plan: give one")
     duration = duration_max = None
     if args.duration_max is not None:
         duration_max = common.parse_number(args.duration_max, "--duration-max")
@@ -153,15 +154,15 @@ def run(args: argparse.Namespace) -> int:
         duration = common.parse_number(args.duration or "5", "--duration")
     for name, v in (("--duration", duration), ("--duration-max", duration_max)):
         if v is not None and not 0 < v <= 1e4:
-            raise common.UsageError(f"{name} {v:g}: expected seconds in (0, 10000]")
+            raise UsageError(f"{name} {v:g}: expected seconds in (0, 10000]")
     system = common.load_system(args)
     if system.n_inputs == 0:
-        raise common.UsageError(f"{system.key} has no input: there is no motion to plan")
+        raise UsageError(f"{system.key} has no input: there is no motion to plan")
     guess: str | Trajectory = args.guess
     if args.guess not in ("random", "straight"):
         guess = load_trajectory(args.guess)
         if guess.state_names != system.state_names or guess.input_names != system.input_names:
-            raise common.UsageError(f"--guess {args.guess}: a trajectory of other states or inputs")
+            raise UsageError(f"--guess {args.guess}: a trajectory of other states or inputs")
         check_guess(guess, n=system.n_states, m=system.n_inputs, duration_max=duration_max,
                     what=f"--guess {args.guess}", bound="--duration-max")
     x_op = system.operating_point().x
@@ -173,14 +174,14 @@ def run(args: argparse.Namespace) -> int:
         from equilibrist.tasks import get_task, task_names
 
         if "swingup" not in task_names(system):
-            raise common.UsageError(f"{system.key} has no swing-up task (it states no hanging "
+            raise UsageError(f"{system.key} has no swing-up task (it states no hanging "
                                     "pose): give --to NAME=VALUE,... for a transfer")
         task = get_task(system, "swingup")
         from equilibrist.tasks import planning_bounds
 
         margin = common.parse_number(args.margin, "--margin")
         if not 0.0 <= margin < 1.0:
-            raise common.UsageError(f"--margin {args.margin}: expected a fraction in [0, 1)")
+            raise UsageError(f"--margin {args.margin}: expected a fraction in [0, 1)")
         start, goal, bounds = task.start, task.x_op, planning_bounds(task, margin)
     traj = plan(system, start=start, goal=goal, knots=knots, duration=duration,
                 duration_max=duration_max, minimize=args.minimize, guess=guess, seed=seed,
@@ -217,7 +218,7 @@ def _pictures(args: argparse.Namespace, system: System, traj: Trajectory) -> Non
     x = np.column_stack([np.interp(t, traj.times, traj.states[:, i]) for i in range(system.n_states)])
     u = traj.input_at(t).reshape(t.size, system.n_inputs)
     if args.plot is not None:
-        from equilibrist.viz.plots import plot_response
+        from equilibrist.viz.plots_runs import plot_response
         from equilibrist.viz.runs import Run
 
         run = Run.from_arrays(system, t, x, u=u, label="planned")

@@ -30,7 +30,8 @@ from equilibrist.control.analysis import (
     observability,
     pole_table,
 )
-from equilibrist.control.design import Design, design
+from equilibrist.control.design import design
+from equilibrist.control.design_record import Design
 from equilibrist.control.discretize import discrete_noise, discretize, van_loan
 from equilibrist.control.interop import from_statespace, loop_at_input, to_statespace
 from equilibrist.control.kalman import DiscreteKalmanFilter, Estimate, KalmanRun, SteadyStateGains

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from equilibrist.control import _checks
+from equilibrist.control import checks
 from equilibrist.errors import DesignError
 
 # A mode counts as uncontrollable (unobservable) when the smallest singular
@@ -236,10 +236,10 @@ def controllability(
     -------
     Structure
     """
-    Am = _checks.square(A, "A")
+    Am = checks.square(A, "A")
     n = Am.shape[0]
-    Bm = _checks.with_rows(B, "B", n, "one per state")
-    names = _checks.names(state_names, n, "state")
+    Bm = checks.with_rows(B, "B", n, "one per state")
+    names = checks.names(state_names, n, "state")
     return Structure(
         "controllability", n, _kalman_rank(Am, Bm), _pbh_modes(Am, Bm, names, discrete), discrete
     )
@@ -258,10 +258,10 @@ def observability(
     named by the states of its (right) eigenvector, the states that the
     outputs cannot see.
     """
-    Am = _checks.square(A, "A")
+    Am = checks.square(A, "A")
     n = Am.shape[0]
-    Cm = _checks.with_columns(C, "C", n, "one per state")
-    names = _checks.names(state_names, n, "state")
+    Cm = checks.with_columns(C, "C", n, "one per state")
+    names = checks.names(state_names, n, "state")
     return Structure(
         "observability",
         n,
@@ -452,18 +452,18 @@ def loop_margins(
     """
     from scipy.optimize import minimize_scalar
 
-    Am = _checks.square(A, "A")
+    Am = checks.square(A, "A")
     n = Am.shape[0]
-    Bm = _checks.with_rows(B, "B", n, "one per state")
+    Bm = checks.with_rows(B, "B", n, "one per state")
     m = Bm.shape[1]
     if m != 1:
         raise DesignError(f"loop margins need a single-input plant, this one has {m} inputs")
-    Km = _checks.matrix(np.reshape(np.asarray(K, dtype=float), (1, -1)), "K", (1, n))
+    Km = checks.matrix(np.reshape(np.asarray(K, dtype=float), (1, -1)), "K", (1, n))
     Dv = float(np.asarray(D, dtype=float).reshape(-1)[0]) if np.size(D) == 1 else math.nan
     if not math.isfinite(Dv):
         raise DesignError(f"the loop's feedthrough D must be one finite number, got {D!r}")
     if dt is not None:
-        dt = _checks.positive_period(dt)
+        dt = checks.positive_period(dt)
         top = math.pi / dt
     else:
         top = 1e4 * max(_norm(Am), float(np.abs(Km @ Bm).max()), 1.0)

@@ -51,7 +51,7 @@ A controller is one of three kinds of value:
     through :class:`StepAdapter`.
 
 The command line's ``--controller`` choices are a registry of builders
-(:func:`register_controller`, :func:`build_controller`): ``lqr``, ``lqg``
+(:func:`equilibrist.controllers.kinds.register_controller`, :func:`equilibrist.controllers.kinds.build_controller`): ``lqr``, ``lqg``
 and ``none`` are registered here; a module that registers ``swingup`` or
 ``mpc`` adds them everywhere at once.
 """
@@ -59,47 +59,22 @@ and ``none`` are registered here; a module that registers ``swingup`` or
 from __future__ import annotations
 
 import types
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Protocol, TypeVar, runtime_checkable
+from typing import Protocol, runtime_checkable
+
+from equilibrist.control.linear import LinearController
 
 # The module was split in four; every name stays importable from here. The names marked
 # F401 are not used here: imported so that they stay importable from this module.
-from equilibrist.control._controller_layout import (
-    LINEAR_BLOCKS,
-    LINEAR_FUNCTIONS,  # noqa: F401
-    LINEAR_HEADER,
-    LINEAR_SOURCE,
-    UNROLL_LIMIT,  # noqa: F401
-    linear_constants,
-    linear_layout_source,
-    linear_pattern,  # noqa: F401
-    linear_sizes,
-    linear_unrolled_source,  # noqa: F401
-)
-from equilibrist.control._controller_linear import LinearController, LinearRuntime
-from equilibrist.control._controller_nonlinear import (
-    CONTRACT_TYPES,
-    NONLINEAR_FUNCTIONS,  # noqa: F401
+from equilibrist.control.nonlinear import (
     NonlinearController,
-    NonlinearRuntime,
-    check_source,
-    contract_namespace,
-    supervisor_source,
-    translate_controller,
 )
-from equilibrist.control._controller_python import (
+from equilibrist.control.python_controller import (
     PythonController,
-    PythonControllerBase,
     StepAdapter,
 )
 from equilibrist.errors import ControllerError
 
-if TYPE_CHECKING:
-    from equilibrist.control.kinds import ControllerRequest
-
 AnyController = LinearController | NonlinearController | PythonController
-#: A kind's ``build``: request -> its controller (None: the open loop).
-_Builder = TypeVar("_Builder", bound="Callable[[ControllerRequest], AnyController | None]")
 
 
 @runtime_checkable
@@ -150,82 +125,7 @@ def as_python_controller(obj: object) -> PythonController:
     )
 
 
-# -- the registry of controller kinds lives in equilibrist.control.kinds ---------------------
-
-
-def __getattr__(name: str) -> type[ControllerRequest]:
-    if name == "ControllerRequest":  # moved to equilibrist.control.kinds
-        from equilibrist.control.kinds import ControllerRequest
-
-        return ControllerRequest
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def register_controller(name: str) -> Callable[[_Builder], _Builder]:
-    """Decorator: *builder* (request -> controller) as the kind *name* in this process; a
-    kind of its own module (:class:`equilibrist.control.kinds.ControllerKind`) says more."""
-
-    def add(builder: _Builder) -> _Builder:
-        from equilibrist.control.kinds import ControllerKind, register
-
-        register(ControllerKind(name=name, label=name, help=name, build=builder))
-        return builder
-
-    return add
-
-
-def registered_controllers() -> tuple[str, ...]:
-    """The names of every controller kind (:func:`equilibrist.control.kinds.names`)."""
-    from equilibrist.control.kinds import names
-
-    return names()
-
-
-def build_controller(name: str, request: ControllerRequest
-                     ) -> LinearController | NonlinearController | PythonController | None:
-    """The controller of kind *name* for *request* (:func:`equilibrist.control.kinds.build`).
-
-    Raises
-    ------
-    ControllerError
-        An unknown name or one that does not apply to the system (one line).
-    """
-    from equilibrist.control.kinds import KindError, get
-
-    try:
-        kind = get(name)
-    except KindError:
-        from equilibrist.control.kinds import names
-
-        raise ControllerError(f"controller {name!r} is unknown for {request.system.key}: "
-                              f"expected one of {', '.join(names())}") from None
-    result: LinearController | NonlinearController | PythonController | None = kind.make(request)
-    return result
-
-
 __all__ = [
-    "CONTRACT_TYPES",
-    "LINEAR_BLOCKS",
-    "LINEAR_HEADER",
-    "LINEAR_SOURCE",
     "AnyController",
-    "ControllerError",
-    "LinearController",
-    "LinearRuntime",
-    "NonlinearController",
-    "NonlinearRuntime",
-    "PythonController",
-    "PythonControllerBase",
-    "StepAdapter",
     "as_python_controller",
-    "build_controller",
-    "check_source",
-    "contract_namespace",
-    "linear_constants",
-    "linear_layout_source",
-    "linear_sizes",
-    "register_controller",
-    "registered_controllers",
-    "supervisor_source",
-    "translate_controller",
 ]

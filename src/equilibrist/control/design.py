@@ -46,30 +46,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.control import _checks
+from equilibrist.control import checks
 
 # The module was split in four; every name stays importable from here. The names marked
 # F401 are not used here: imported so that they stay importable from this module.
-from equilibrist.control._design_cache import (
-    _DESIGN_SOURCES,  # noqa: F401
-    _SOURCES_DIGEST,  # noqa: F401
-    _cache_key,  # noqa: F401
-    _cached,  # noqa: F401
-    _design_folder,  # noqa: F401
-    _keep,  # noqa: F401
+from equilibrist.control.design_cache import (
     _kept_on_disk,
-    _register_pickling,  # noqa: F401
-    _sources_digest,  # noqa: F401
-    read_only,
 )
-from equilibrist.control._design_record import Design, _sorted
-from equilibrist.control._design_weights import (
-    MAX_RATE,
-    NOISE_FLOOR,
-    _bryson,
-    _default_process_noise,
-    _weight,
-)
+from equilibrist.control.design_record import Design, _sorted
 from equilibrist.control.discretize import METHODS, discrete_noise, discretize
 from equilibrist.control.kalman import FORMS
 from equilibrist.control.reference import discrete_reference_gain, reference_gain
@@ -79,6 +63,12 @@ from equilibrist.control.riccati import (
     dlqr,
     lqe,
     lqr,
+)
+from equilibrist.control.weights import (
+    MAX_RATE,
+    _bryson,
+    _default_process_noise,
+    _weight,
 )
 from equilibrist.errors import DesignError
 
@@ -197,7 +187,7 @@ def design(
                 problems.append(
                     f"rate must be a positive number of samples per second (Hz), got {rate_hz:g}"
                 )
-    _checks.raise_if(problems)
+    checks.raise_if(problems)
     if system.n_inputs == 0:
         raise DesignError(f"{system.key} has no input: there is no controller to design")
 
@@ -287,7 +277,7 @@ def design(
         Gm = np.eye(n)
         noise_labels: tuple[str, ...] = states
     else:
-        Gm = _checks.with_rows(G, "G", n, "one per state")
+        Gm = checks.with_rows(G, "G", n, "one per state")
         noise_labels = tuple(f"noise input {j}" for j in range(Gm.shape[1]))
     if qn is None:
         if G is not None and Gm.shape[1] != n:
@@ -300,7 +290,7 @@ def design(
             QN = np.eye(n)
     else:
         QN = _weight(qn, "qn", noise_labels, definite=False, problems=problems)
-    _checks.raise_if(problems)
+    checks.raise_if(problems)
 
     tracked = names[:m] if len(names) >= m else ()
     Cr = plant.C[:m] if tracked else None
@@ -365,4 +355,6 @@ def design(
     )
 
 
-__all__ = ["MAX_RATE", "NOISE_FLOOR", "Design", "design", "read_only"]
+__all__ = [
+    "design",
+]

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from equilibrist.control import _checks, fixed
+from equilibrist.control import checks, fixed
 from equilibrist.errors import DesignError
 from equilibrist.numeric.linear import LinearModel
 
@@ -42,10 +42,10 @@ def discrete_matrices(
     """``(Ad, Bd)`` of ``x_dot = A x + B u`` sampled every *dt* seconds (the exponential in
     a fixed order of operations: :func:`equilibrist.control.fixed.expm`)."""
     _method(method)
-    T = _checks.positive_period(dt)
-    Am = _checks.square(A, "A")
+    T = checks.positive_period(dt)
+    Am = checks.square(A, "A")
     n = Am.shape[0]
-    Bm = _checks.with_rows(B, "B", n, "one per state")
+    Bm = checks.with_rows(B, "B", n, "one per state")
     m = Bm.shape[1]
     if method == "euler":
         return np.eye(n) + Am * T, Bm * T
@@ -123,17 +123,17 @@ def van_loan(A: object, W: object, dt: float) -> np.ndarray:
 def sampled_noise(A: object, W: object, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """``(F, Qd)``: ``F = e^{A T}`` and Van Loan's ``Qd`` (:func:`van_loan`), both from the
     one exponential."""
-    T = _checks.positive_period(dt)
-    Am = _checks.square(A, "A")
+    T = checks.positive_period(dt)
+    Am = checks.square(A, "A")
     n = Am.shape[0]
-    Wm = _checks.matrix(W, "G QN G'", (n, n), "one row and column per state")
+    Wm = checks.matrix(W, "G QN G'", (n, n), "one row and column per state")
     block = np.zeros((2 * n, 2 * n))
     block[:n, :n] = -Am * T
     block[:n, n:] = Wm * T
     block[n:, n:] = Am.T * T
     E = fixed.expm(block)
     F = E[n:, n:].T
-    return F, _checks.symmetric(fixed.matmul(F, E[:n, n:]))
+    return F, checks.symmetric(fixed.matmul(F, E[:n, n:]))
 
 
 def discrete_noise(
@@ -151,13 +151,13 @@ def discrete_noise(
     ``"euler"``; ``Rd = RN / T`` for both.
     """
     _method(method)
-    T = _checks.positive_period(dt)
-    Am = _checks.square(A, "A")
+    T = checks.positive_period(dt)
+    Am = checks.square(A, "A")
     n = Am.shape[0]
-    Gm = _checks.with_rows(G, "G", n, "one per state")
+    Gm = checks.with_rows(G, "G", n, "one per state")
     k = Gm.shape[1]
-    QNm = _checks.matrix(QN, "QN", (k, k), f"one row and column per noise input, {k} of them")
-    RNm = _checks.square(RN, "RN")
-    W = _checks.symmetric(fixed.mm(Gm, QNm, Gm.T))
+    QNm = checks.matrix(QN, "QN", (k, k), f"one row and column per noise input, {k} of them")
+    RNm = checks.square(RN, "RN")
+    W = checks.symmetric(fixed.mm(Gm, QNm, Gm.T))
     Qd = W * T if method == "euler" else van_loan(Am, W, T)
     return Qd, RNm / T

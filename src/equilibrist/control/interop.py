@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.control import _checks
+from equilibrist.control import checks
 from equilibrist.control.lqg import Compensator
 from equilibrist.errors import DesignError
 from equilibrist.numeric.linear import LinearModel
@@ -24,7 +24,7 @@ from equilibrist.numeric.linear import LinearModel
 if TYPE_CHECKING:
     import control
 
-    from equilibrist.control.design import Design
+    from equilibrist.control.design_record import Design
 
 #: The controllers whose loop :func:`loop_at_input` builds from a design.
 LOOP_CONTROLLERS = ("lqg", "lqr")
@@ -104,8 +104,8 @@ def from_statespace(
         state_names=tuple(ss.state_labels),
         input_names=tuple(ss.input_labels),
         output_names=tuple(ss.output_labels),
-        x0=np.zeros(n) if x0 is None else _checks.matrix([x0], "x0", (1, n))[0],
-        u0=np.zeros(m) if u0 is None else _checks.matrix([u0], "u0", (1, m))[0],
+        x0=np.zeros(n) if x0 is None else checks.matrix([x0], "x0", (1, n))[0],
+        u0=np.zeros(m) if u0 is None else checks.matrix([u0], "u0", (1, m))[0],
         system=system,
         dt=None if not dt else float(dt),
     )

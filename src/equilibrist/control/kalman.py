@@ -39,7 +39,7 @@ from functools import cached_property
 
 import numpy as np
 
-from equilibrist.control import _checks
+from equilibrist.control import checks
 from equilibrist.control.riccati import current_gain, dlqe
 from equilibrist.errors import DesignError, DimensionError, UnknownNameError, nearest
 from equilibrist.numeric.linear import LinearModel
@@ -151,12 +151,12 @@ class DiscreteKalmanFilter:
         )
         for name, shape, meaning in fields:
             object.__setattr__(
-                self, name, _checks.matrix(getattr(self, name), name, shape, meaning)
+                self, name, checks.matrix(getattr(self, name), name, shape, meaning)
             )
-        object.__setattr__(self, "dt", _checks.positive_period(self.dt))
-        _checks.raise_if(
-            _checks.weight_problems(self.Qd, "Qd", definite=False)
-            + _checks.weight_problems(self.Rd, "Rd", definite=True)
+        object.__setattr__(self, "dt", checks.positive_period(self.dt))
+        checks.raise_if(
+            checks.weight_problems(self.Qd, "Qd", definite=False)
+            + checks.weight_problems(self.Rd, "Rd", definite=True)
         )
         if self.form == "current" and np.any(self.D != 0):
             raise DesignError(
@@ -203,7 +203,7 @@ class DiscreteKalmanFilter:
         x = self._vec(estimate.x, self.n_states, "the estimate")
         uu = self._vec(u, len(self.input_names), "u")
         P = self.F @ estimate.P @ self.F.T + self.Qd
-        return Estimate(x @ self.F.T + uu @ self.B.T, _checks.symmetric(P))
+        return Estimate(x @ self.F.T + uu @ self.B.T, checks.symmetric(P))
 
     def gain(self, P_prior: np.ndarray) -> np.ndarray:
         """``M = P H' (H P H' + Rd)^-1`` for an a-priori covariance ``P``."""
@@ -241,7 +241,7 @@ class DiscreteKalmanFilter:
         M = self.gain(estimate.P) if gain is None else np.asarray(gain, dtype=float)
         I_MH = np.eye(self.n_states) - M @ self.H
         P = I_MH @ estimate.P @ I_MH.T + M @ self.Rd @ M.T
-        return Estimate(x + innovation @ M.T, _checks.symmetric(P))
+        return Estimate(x + innovation @ M.T, checks.symmetric(P))
 
     def step(self, estimate: Estimate, *, u: object, y: object, steady: bool = False) -> Estimate:
         """One period of the filter in its form.
@@ -272,7 +272,7 @@ class DiscreteKalmanFilter:
         )
         M = self.gain(P)
         I_MH = np.eye(self.n_states) - M @ self.H
-        post = _checks.symmetric(I_MH @ P @ I_MH.T + M @ self.Rd @ M.T)
+        post = checks.symmetric(I_MH @ P @ I_MH.T + M @ self.Rd @ M.T)
         return SteadyStateGains(P, post, M, L, E)
 
     @property
@@ -325,8 +325,8 @@ class DiscreteKalmanFilter:
         if us.shape != (ys.shape[0], m):
             raise DimensionError(f"u has shape {us.shape}, expected ({ys.shape[0]}, {m})")
         prior = Estimate(
-            np.zeros(n) if x0 is None else _checks.matrix(np.reshape(np.asarray(x0), (1, -1)), "x0", (1, n))[0],
-            self.steady_state.P_prior if P0 is None else _checks.matrix(P0, "P0", (n, n)),
+            np.zeros(n) if x0 is None else checks.matrix(np.reshape(np.asarray(x0), (1, -1)), "x0", (1, n))[0],
+            self.steady_state.P_prior if P0 is None else checks.matrix(P0, "P0", (n, n)),
         )
         steps = ys.shape[0]
         xs = np.empty((steps, n))

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from equilibrist.control import _checks, fixed
+from equilibrist.control import checks, fixed
 from equilibrist.control.kalman import check_form
 from equilibrist.errors import DesignError, DimensionError
 from equilibrist.numeric.linear import LinearModel
@@ -149,8 +149,8 @@ def lqg_compensator(
         ``"current"``); must be None (or ``"continuous"``) for a continuous one.
     """
     n, m, p = plant.n_states, plant.n_inputs, plant.n_outputs
-    Km = _checks.matrix(K, "K", (m, n), "one row per input, one column per state")
-    Lm = _checks.matrix(Kf, "Kf", (n, p), "one row per state, one column per output")
+    Km = checks.matrix(K, "K", (m, n), "one row per input, one column per state")
+    Lm = checks.matrix(Kf, "Kf", (n, p), "one row per state, one column per output")
     if plant.dt is None:
         if form not in (None, "continuous"):
             raise DesignError(f"a continuous plant has no Kalman form {form!r}")
@@ -164,7 +164,7 @@ def lqg_compensator(
         Kcm = np.zeros((m, 0))
         r0 = np.zeros(0)
     else:
-        Kcm = _checks.matrix(Kc, "Kc", (m, m), "one row and column per input")
+        Kcm = checks.matrix(Kc, "Kc", (m, m), "one row and column per input")
         if len(tracked) != m:
             raise DimensionError(
                 f"{len(tracked)} tracked outputs given, expected one per input ({m})"

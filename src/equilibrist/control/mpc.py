@@ -73,7 +73,7 @@ the LQG controller's own estimator (:func:`filter_form`), run by the linear
 controller's library.
 
 *One definition.* The runtime (:class:`MPCRuntime`) is the C library that
-``export`` writes (:mod:`equilibrist.control._mpc_c`: DAQP's sources, the
+``export`` writes (:mod:`equilibrist.control.mpc_library`: DAQP's sources, the
 generated driver and the filter), compiled once per cache folder and called
 through ctypes at every sample: the simulated MPC is the shipped one, to the
 bit. It is a :class:`~equilibrist.control.controller.PythonController`, so
@@ -88,26 +88,21 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.control._mpc_c import filter_form
-
 # The module was split in three; every name stays importable from here. The names marked
 # F401 are not used here: imported so that they stay importable from this module.
-from equilibrist.control._mpc_problem import (
+from equilibrist.control.mpc_problem import (
     EPS,
     HORIZON,
-    INF,
-    ITER_LIMIT,
     RHO_L1,
     RHO_L2,
-    STATUS,  # noqa: F401
     TRACK,
     MPCProblem,
 )
-from equilibrist.control._mpc_runtime import MPCRuntime
-from equilibrist.control.controller import ControllerError
+from equilibrist.control.mpc_runtime import MPCRuntime
+from equilibrist.errors import ControllerError
 
 if TYPE_CHECKING:
-    from equilibrist.control.design import Design
+    from equilibrist.control.design_record import Design
     from equilibrist.numeric.system import System
 
 
@@ -260,5 +255,8 @@ def mpc(
     )
 
 
-__all__ = ["EPS", "HORIZON", "INF", "ITER_LIMIT", "MPC", "MPCProblem", "MPCRuntime", "filter_form",
-           "mpc", "soft_bounds"]
+__all__ = [
+    "MPC",
+    "mpc",
+    "soft_bounds",
+]

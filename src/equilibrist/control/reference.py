@@ -19,7 +19,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from equilibrist.control import _checks, fixed
+from equilibrist.control import checks, fixed
 from equilibrist.errors import DesignError, DimensionError
 
 # A DC gain below this fraction of ||C_r|| ||(A - BK)^-1 B|| counts as zero.
@@ -76,18 +76,18 @@ def _args(
     tracked_names: Sequence[str] | None,
     input_names: Sequence[str] | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, tuple[str, ...], tuple[str, ...]]:
-    Am = _checks.square(A, "A")
+    Am = checks.square(A, "A")
     n = Am.shape[0]
-    Bm = _checks.with_rows(B, "B", n, "one per state")
+    Bm = checks.with_rows(B, "B", n, "one per state")
     m = Bm.shape[1]
-    Cr = _checks.with_columns(C_r, "C_r", n, "one per state")
+    Cr = checks.with_columns(C_r, "C_r", n, "one per state")
     if Cr.shape[0] != m:
         raise DimensionError(
             f"C_r has {Cr.shape[0]} rows, expected one tracked output per input ({m})"
         )
-    Km = _checks.matrix(K, "K", (m, n), "one row per input, one column per state")
-    tracked = _checks.names(tracked_names, m, "tracked output")
-    inputs = _checks.names(input_names, m, "input")
+    Km = checks.matrix(K, "K", (m, n), "one row per input, one column per state")
+    tracked = checks.names(tracked_names, m, "tracked output")
+    inputs = checks.names(input_names, m, "input")
     return Am, Bm, Cr, Km, tracked, inputs
 
 

@@ -32,7 +32,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from equilibrist.control import _checks, fixed
+from equilibrist.control import checks, fixed
 from equilibrist.control.analysis import (
     Mode,
     _pbh_modes,
@@ -76,7 +76,7 @@ def _boundary_modes(modes: Sequence[Mode], discrete: bool, scale: float) -> list
 
 def _sqrt_psd(mat: np.ndarray) -> np.ndarray:
     """A factor ``F`` with ``F F' = mat`` for a symmetric PSD matrix."""
-    w, v = np.linalg.eigh(_checks.symmetric(mat))
+    w, v = np.linalg.eigh(checks.symmetric(mat))
     factor: np.ndarray = v * np.sqrt(np.clip(w, 0.0, None))
     return factor
 
@@ -96,26 +96,26 @@ def _solve(
 
     For the estimator, the caller passes the dual ``(A', C', G QN G', RN)``.
     """
-    Am = _checks.square(A, "A")
+    Am = checks.square(A, "A")
     n = Am.shape[0]
     bname, qname, rname = ("C'", "G QN G'", "RN") if estimator else ("B", "Q", "R")
-    Bm = _checks.with_rows(B, bname, n, "one per state")
+    Bm = checks.with_rows(B, bname, n, "one per state")
     m = Bm.shape[1]
     if m == 0:
         what = "outputs" if estimator else "inputs"
         raise DesignError(f"there are no {what}: {bname} has no columns")
-    Qm = _checks.matrix(Q, qname, (n, n), f"one row and column per state, {n} states")
-    Rm = _checks.matrix(
+    Qm = checks.matrix(Q, qname, (n, n), f"one row and column per state, {n} states")
+    Rm = checks.matrix(
         R,
         rname,
         (m, m),
         f"one row and column per {'output' if estimator else 'input'}, {m} of them",
     )
-    _checks.raise_if(
-        _checks.weight_problems(Qm, qname, definite=False)
-        + _checks.weight_problems(Rm, rname, definite=True)
+    checks.raise_if(
+        checks.weight_problems(Qm, qname, definite=False)
+        + checks.weight_problems(Rm, rname, definite=True)
     )
-    names = _checks.names(state_names, n, "state")
+    names = checks.names(state_names, n, "state")
     scale = float(np.linalg.norm(Am, 2)) if n else 1.0
 
     # (A, B) stabilizable / (A, C) detectable.
@@ -161,7 +161,7 @@ def _solve(
         raise DesignError(
             f"the {kind} Riccati equation has no stabilizing solution: {exc}"
         ) from None
-    S = _checks.symmetric(S)
+    S = checks.symmetric(S)
     if discrete:
         K = fixed.solve(fixed.mm(Bm.T, S, Bm) + Rm, fixed.mm(Bm.T, S, Am))
     else:
@@ -240,19 +240,19 @@ def dlqr(
 def _estimator_args(
     A: object, G: object, C: object, QN: object, RN: object
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    Am = _checks.square(A, "A")
+    Am = checks.square(A, "A")
     n = Am.shape[0]
-    Cm = _checks.with_columns(C, "C", n, "one per state")
+    Cm = checks.with_columns(C, "C", n, "one per state")
     p = Cm.shape[0]
-    Gm = _checks.with_rows(G, "G", n, "one per state")
+    Gm = checks.with_rows(G, "G", n, "one per state")
     k = Gm.shape[1]
-    QNm = _checks.matrix(QN, "QN", (k, k), f"one row and column per noise input, {k} of them")
-    RNm = _checks.matrix(RN, "RN", (p, p), f"one row and column per output, {p} outputs")
-    _checks.raise_if(
-        _checks.weight_problems(QNm, "QN", definite=False)
-        + _checks.weight_problems(RNm, "RN", definite=True)
+    QNm = checks.matrix(QN, "QN", (k, k), f"one row and column per noise input, {k} of them")
+    RNm = checks.matrix(RN, "RN", (p, p), f"one row and column per output, {p} outputs")
+    checks.raise_if(
+        checks.weight_problems(QNm, "QN", definite=False)
+        + checks.weight_problems(RNm, "RN", definite=True)
     )
-    return Am, Cm, _checks.symmetric(fixed.mm(Gm, QNm, Gm.T)), RNm
+    return Am, Cm, checks.symmetric(fixed.mm(Gm, QNm, Gm.T)), RNm
 
 
 def lqe(

@@ -99,38 +99,25 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from equilibrist.control import fixed
+from equilibrist.control.nonlinear import NonlinearController
 
 # The module was split in two; every name stays importable from here. The names marked
 # F401 are not used here: imported so that they stay importable from this module.
-from equilibrist.control._swingup_law import (
-    _NAMESPACES,  # noqa: F401
+from equilibrist.control.swingup_law import (
     BALANCES,
     CP,
-    CP_BLOCKS,
-    CP_SLOTS,
     LAW_NAMES,
-    LAW_SOURCE,
-    LAW_SOURCES,
     MODE_BALANCE,
-    MODE_PUMP,
     N_STATES,
-    PHYSICS_FUNCTIONS,
-    Z_SLOTS,
     Z,
-    _offsets,  # noqa: F401
     controller_source,
-    energy,
-    layout_constants,
     physics_source,
     python_namespace,
 )
-from equilibrist.control.controller import (
-    ControllerError,
-    NonlinearController,
-)
+from equilibrist.errors import ControllerError
 
 if TYPE_CHECKING:
-    from equilibrist.control.design import Design
+    from equilibrist.control.design_record import Design
     from equilibrist.mechanics.spec import SwingUp
     from equilibrist.numeric.system import System
 
@@ -429,31 +416,13 @@ def balance_design(system: System, rate: float | None = None) -> Design:
 
 
 __all__ = [
-    "BALANCES",
-    "CP",
-    "CP_BLOCKS",
-    "CP_SLOTS",
-    "LAW_NAMES",
-    "LAW_SOURCE",
-    "LAW_SOURCES",
-    "MODE_BALANCE",
-    "MODE_PUMP",
-    "N_STATES",
-    "PHYSICS_FUNCTIONS",
-    "Z_SLOTS",
     "SwingUpController",
     "SwingUpRuntime",
     "SwingUpTuning",
-    "Z",
     "balance_design",
     "catch_level",
     "catch_region",
-    "controller_source",
     "default_tuning",
-    "energy",
-    "layout_constants",
-    "physics_source",
-    "python_namespace",
     "swingup",
     "swingup_laws",
     "tracking_gains",

@@ -55,16 +55,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from equilibrist.control import fixed, swingup
-from equilibrist.control.controller import (
-    ControllerError,
-    NonlinearController,
-)
 from equilibrist.control.discretize import discrete_matrices
+from equilibrist.control.nonlinear import NonlinearController
+from equilibrist.errors import ControllerError
 
 if TYPE_CHECKING:
-    from equilibrist.control.design import Design
-    from equilibrist.control.kinds import ControllerRequest
+    from equilibrist.control.design_record import Design
     from equilibrist.control.trajopt import Trajectory
+    from equilibrist.controllers.kinds import ControllerRequest
     from equilibrist.numeric.system import System
 
 #: The most samples a plan may span at the controller's rate (its tables are parameters).

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from equilibrist.control.kinds import ControllerKind, linear_builder
+from equilibrist.controllers.kinds import ControllerKind, linear_builder
 
 KIND = ControllerKind(
     name="lqg", label="LQG (Kalman filter + LQR)", help="Kalman filter on the measured outputs + LQR",

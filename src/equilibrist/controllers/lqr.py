@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from equilibrist.control.kinds import ControllerKind, linear_builder
+from equilibrist.controllers.kinds import ControllerKind, linear_builder
 
 KIND = ControllerKind(
     name="lqr", label="LQR (true state)", help="LQR on the full state (every state measured)",

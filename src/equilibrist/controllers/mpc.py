@@ -5,10 +5,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from equilibrist.control.kinds import ControllerKind, ControllerRequest, Option
+from equilibrist.controllers.kinds import ControllerKind, ControllerRequest, Option
 
 if TYPE_CHECKING:
-    from equilibrist.control.mpc import MPCRuntime
+    from equilibrist.control.mpc_runtime import MPCRuntime
 
 
 def _horizon(text: str) -> int:
@@ -19,7 +19,8 @@ def _horizon(text: str) -> int:
 
 
 def build(request: ControllerRequest) -> MPCRuntime:
-    from equilibrist.control.mpc import HORIZON, mpc
+    from equilibrist.control.mpc import mpc
+    from equilibrist.control.mpc_problem import HORIZON
 
     opts = dict(request.options)
     horizon = opts.get("horizon")
@@ -31,7 +32,7 @@ def build(request: ControllerRequest) -> MPCRuntime:
 
 def check_export(request: ControllerRequest) -> None:
     """The horizon the export can hold, before the QP is built."""
-    from equilibrist.control.mpc import HORIZON
+    from equilibrist.control.mpc_problem import HORIZON
     from equilibrist.export.mpc_c import check_horizon
 
     check_horizon(request.system, request.options.get("horizon", HORIZON))

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from equilibrist.control.kinds import ControllerKind, ControllerRequest
+from equilibrist.controllers.kinds import ControllerKind, ControllerRequest
 
 
 def build(request: ControllerRequest) -> None:

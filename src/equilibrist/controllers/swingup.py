@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from equilibrist.control.kinds import ControllerKind, ControllerRequest, Option
+from equilibrist.controllers.kinds import ControllerKind, ControllerRequest, Option
 
 if TYPE_CHECKING:
-    from equilibrist.control.controller import NonlinearController
+    from equilibrist.control.nonlinear import NonlinearController
     from equilibrist.numeric.system import System
 
 BALANCES = ("lqr", "lqg")

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from equilibrist.control.kinds import ControllerKind, ControllerRequest, Option
+from equilibrist.controllers.kinds import ControllerKind, ControllerRequest, Option
 
 if TYPE_CHECKING:
-    from equilibrist.control.controller import NonlinearController
+    from equilibrist.control.nonlinear import NonlinearController
 
 #: What ``--balance`` takes: the full measured state (``lqr``) or the design's outputs
 #: through a Kalman filter along the plan and the design's after it (``lqg``).

@@ -83,7 +83,7 @@ if importlib.util.find_spec("gymnasium") is None:
         "equilibrist's environments need Gymnasium: pip install 'equilibrist[envs]'"
     )
 
-from equilibrist.envs._core import EnvError  # noqa: E402
+from equilibrist.envs.core import EnvError  # noqa: E402
 from equilibrist.envs.env import EquilibristEnv  # noqa: E402
 from equilibrist.envs.registration import env_ids, register_all  # noqa: E402
 from equilibrist.envs.vector import EquilibristVectorEnv  # noqa: E402

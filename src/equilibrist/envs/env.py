@@ -15,11 +15,11 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from equilibrist.control._checks import given_text, real_array
-from equilibrist.envs._core import FINITE, OPTION_DEFAULTS, Core, EnvError, as_actions, build_core
+from equilibrist.control.checks import given_text, real_array
+from equilibrist.envs.core import FINITE, OPTION_DEFAULTS, Core, EnvError, as_actions, build_core
 from equilibrist.errors import DimensionError, nearest
-from equilibrist.native.steps import EnvSteps
 from equilibrist.sim.noise import generator_state
+from equilibrist.sim.steps import EnvSteps
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -187,7 +187,7 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         :func:`~equilibrist.envs.expert` designs there. Default: the
         canonical operating point.
 
-    The options (:data:`~equilibrist.envs._core.OPTION_DEFAULTS`) are the
+    The options (:data:`~equilibrist.envs.core.OPTION_DEFAULTS`) are the
     vector environment's too; an unknown one is an :class:`EnvError`.
     """
 

@@ -1,6 +1,6 @@
 """A controller kind as an environment's expert: a policy from observations to actions.
 
-:func:`expert` builds any kind of the registry (:mod:`equilibrist.control.kinds`:
+:func:`expert` builds any kind of the registry (:mod:`equilibrist.controllers.kinds`:
 ``lqg``, ``lqr``, ``swingup``, ``mpc``, one's own) for an environment's
 system, rate and sensors, and wraps it as a policy that sees only what an
 agent sees (the observations) and answers with the environment's actions
@@ -30,8 +30,9 @@ import numpy as np
 from equilibrist.errors import EquilibristError
 
 if TYPE_CHECKING:
-    from equilibrist.control.controller import AnyController, PythonController
-    from equilibrist.envs._core import Core
+    from equilibrist.control.controller import AnyController
+    from equilibrist.control.python_controller import PythonController
+    from equilibrist.envs.core import Core
 
 
 class ExpertError(EquilibristError, ValueError):
@@ -42,12 +43,9 @@ class Expert:
     """A controller acting through an environment's observations and actions."""
 
     def __init__(self, core: Core, controller: AnyController, kind: str) -> None:
-        from equilibrist.control.controller import (
-            LinearController,
-            NonlinearController,
-            as_python_controller,
-            measured_outputs,
-        )
+        from equilibrist.control.controller import as_python_controller, measured_outputs
+        from equilibrist.control.linear import LinearController
+        from equilibrist.control.nonlinear import NonlinearController
 
         self.core = core
         self.kind = kind
@@ -93,7 +91,7 @@ def expert(env: object, kind: str = "lqg", *, options: Mapping[str, object] | No
     the kind's own ``options`` as ``simulate`` takes them); refused in one line when it does not apply or
     reads other signals than the environment observes.
     """
-    from equilibrist.control import kinds
+    from equilibrist.controllers import kinds
 
     core = getattr(getattr(env, "unwrapped", env), "core", None)
     if core is None:

@@ -33,9 +33,9 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from equilibrist.envs._core import EnvError, as_actions
+from equilibrist.envs.core import EnvError, as_actions
 from equilibrist.envs.env import Renderer, _spaces, open_core
-from equilibrist.native.steps import EnvSteps
+from equilibrist.sim.steps import EnvSteps
 
 # Fewer copies than this step on one thread: starting a parallel region
 # (waking the other threads and waiting for them) costs more than it saves.

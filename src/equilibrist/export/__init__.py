@@ -23,19 +23,19 @@ _LAZY = {
     "Export": "equilibrist.export.writer",
     "controller_data": "equilibrist.export.writer",
     "ControllerData": "equilibrist.export.data",
-    "compile_controller": "equilibrist.export.native",
-    "CompiledController": "equilibrist.export.native",
-    "Vectors": "equilibrist.export.c_code",
+    "compile_controller": "equilibrist.export.shared_library",
+    "CompiledController": "equilibrist.export.shared_library",
+    "Vectors": "equilibrist.export.c_text",
     "c_controller": "equilibrist.export.vectors",
     "CController": "equilibrist.export.vectors",
 }
 
 if TYPE_CHECKING:
-    from equilibrist.export.c_code import Vectors
-    from equilibrist.export.data import ControllerData
-    from equilibrist.export.native import CompiledController, compile_controller
+    from equilibrist.export.c_text import Vectors
+    from equilibrist.export.data import ControllerData, controller_data
+    from equilibrist.export.shared_library import CompiledController, compile_controller
     from equilibrist.export.vectors import CController, c_controller
-    from equilibrist.export.writer import Export, controller_data, export_c
+    from equilibrist.export.writer import Export, export_c
 
 __all__ = [
     "CController",

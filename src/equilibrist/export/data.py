@@ -10,7 +10,7 @@ simulated.
 The controller is the one the simulation core runs: the design's
 :class:`~equilibrist.control.controller.LinearController` (``linear``), one
 state-space form that the C code runs with one fixed step function
-(:mod:`equilibrist.export.linear_c`). In deviation coordinates about the
+(:mod:`equilibrist.control.linear_c`). In deviation coordinates about the
 operating point ``(x0, u0)``, with ``z`` the carried prediction
 ``xhat_{k|k-1}``, it is:
 
@@ -42,8 +42,8 @@ from pathlib import PurePath
 
 import numpy as np
 
-from equilibrist.control.controller import LinearController
-from equilibrist.control.design import Design
+from equilibrist.control.design_record import Design
+from equilibrist.control.linear import LinearController
 from equilibrist.errors import EquilibristError, ExportError
 
 CONTROLLERS = ("lqg", "lqr")
@@ -396,3 +396,23 @@ def from_design(design: Design, *, controller: str = "lqg") -> ControllerData:
         settings=settings,
         linear=linear,
     )
+
+
+def controller_data(design: Design | object, *, controller: str = "lqg") -> ControllerData:
+    """:func:`~equilibrist.export.data.from_design` for a discrete design.
+
+    Raises
+    ------
+    ExportError
+        A continuous design (no rate), or anything :func:`from_design` refuses.
+    """
+    check_controller(controller)
+    if not isinstance(design, Design):
+        raise ExportError(f"design = {design!r}: expected a Design (equilibrist.control.design."
+                          f"design(system, rate=...)), not {type(design).__name__}")
+    if design.discrete is None or not design.rate:
+        raise ExportError(
+            f"the design of {design.system_key} is continuous: "
+            "a digital controller needs a sample rate (design it with rate=...)"
+        )
+    return from_design(design, controller=controller)

@@ -9,7 +9,7 @@
 ``<name>.h``, ``<name>.c``
     The QP of :attr:`~equilibrist.control.mpc.MPCProblem.condensed` as
     DAQP's least-distance problem, formed here
-    (:func:`~equilibrist.control._mpc_c.ldp_form`: the constraint
+    (:func:`~equilibrist.control.mpc_library.ldp_form`: the constraint
     rows times the Hessian's inverse factor, scaled to unit length, their
     offsets, the map back to the first move) as constants, the LQR's
     predictions ``Fu``, ``Fs``, the gain, the limits, and::
@@ -34,7 +34,7 @@
     ``<name>_iterations`` is DAQP's iteration count of the last step.
     With ``precision="float"`` the arithmetic is single precision (``c_float``
     is ``float``: every source compiled with ``-DDAQP_SINGLE_PRECISION``,
-    DAQP's tolerances :data:`~equilibrist.control._mpc_c.FLOAT_SETTINGS`);
+    DAQP's tolerances :data:`~equilibrist.control.mpc_library.FLOAT_SETTINGS`);
     the arguments stay ``double``.
 
     With the Kalman filter in front (``estimator="kalman"``, the default
@@ -48,7 +48,7 @@
     the design's discrete filter (``current`` or ``predictor`` form, as the
     simulated controller runs it) as generated constants of the linear
     controller form and its fixed, separately tested C code
-    (:func:`equilibrist.control._linear_c.linear_c`: ``eq_linear_estimate``,
+    (:func:`equilibrist.control.linear_c.linear_c`: ``eq_linear_estimate``,
     ``eq_linear_update``); ``<name>_output`` solves the QP at the filter's
     estimate. ``y`` are the measured outputs (absolute), ``u_applied`` the
     input that acted.
@@ -61,7 +61,7 @@
     (``Z_TOLERANCE`` relative); in single precision within
     :func:`command_tolerance` (:data:`FLOAT_TOLERANCE` of the widest input
     range) and ``Z_TOLERANCE_FLOAT``. ``make size`` prints the library's
-    code, static data and stack (:mod:`equilibrist.export._size`).
+    code, static data and stack (:mod:`equilibrist.export.size`).
 
 Math functions: the driver calls none; DAQP calls ``sqrt``, ``fabs`` and
 ``fmax`` from the C library's ``libm`` (linked with ``-lm``).
@@ -82,20 +82,16 @@ import numpy as np
 
 # The module was split in three; every name stays importable from here. The names marked
 # F401 are not used here: imported so that they stay importable from this module.
-from equilibrist.control._mpc_c import (
-    _array,  # noqa: F401
-    _daqp_c_files,  # noqa: F401
-    _daqp_files,  # noqa: F401
+from equilibrist.control.mpc_library import (
     library_files,
 )
 from equilibrist.errors import ExportError
-from equilibrist.export._check import ControllerExport, Described, Steps
-from equilibrist.export._mpc_c_native import _HEAP_PROGRAM, footprint  # noqa: F401
-from equilibrist.native.daqp_library import DAQP_SOURCES
+from equilibrist.export.check import ControllerExport, Described, Steps
 
 if TYPE_CHECKING:
-    from equilibrist.control.design import Design
-    from equilibrist.control.mpc import MPC, MPCRuntime
+    from equilibrist.control.design_record import Design
+    from equilibrist.control.mpc import MPC
+    from equilibrist.control.mpc_runtime import MPCRuntime
     from equilibrist.hil.firmware import Adapter
     from equilibrist.numeric.system import System
 
@@ -151,8 +147,8 @@ def record(ctrl: MPC, *, x0: Mapping[str, float] | None = None, duration: float 
     commands ``u``, filter states ``z`` (after each update) and DAQP's
     ``iterations`` (0 where the LQR's move was exact) on them.
     """
-    from equilibrist.control.mpc import MPCRuntime
-    from equilibrist.numeric.system import system_from_key
+    from equilibrist.control.mpc_runtime import MPCRuntime
+    from equilibrist.numeric.lookup import system_from_key
     from equilibrist.sim.noise import Noise
     from equilibrist.sim.run import simulate
 
@@ -222,7 +218,7 @@ def export_mpc(ctrl: MPC, folder: str | Path, *, name: str = "mpc",
     controller's [input units] (default :func:`command_tolerance` of *precision*, ``"double"``
     or ``"float"``).
     """
-    from equilibrist.export.writer import write_files
+    from equilibrist.export.folder import write_files
 
     out = Path(folder)
     write_files(out, mpc_files(ctrl, name=name, x0=x0, duration=duration, tolerance=tolerance,
@@ -239,7 +235,7 @@ def mpc_files(ctrl: MPC, *, name: str = "mpc", x0: dict[str, float] | None = Non
 
     *tolerance* defaults to :func:`command_tolerance` of *precision*; *vectors* (default
     :func:`record`) are the recorded run."""
-    from equilibrist.export._check import check_files
+    from equilibrist.export.check import check_files
 
     kalman = ctrl.estimator == "kalman"
     files = library_files(ctrl, name=name, precision=precision)
@@ -342,8 +338,9 @@ def iteration_counts(ctrl: MPC, recorded: Mapping[str, np.ndarray], *,
     operating point, each solved from an empty working set (a cold start);
     ``at_cap``: how many of those ended at the iteration cap.
     """
-    from equilibrist.control.mpc import ITER_LIMIT, MPCRuntime
-    from equilibrist.numeric.system import system_from_key
+    from equilibrist.control.mpc_problem import ITER_LIMIT
+    from equilibrist.control.mpc_runtime import MPCRuntime
+    from equilibrist.numeric.lookup import system_from_key
 
     design = _design_of(ctrl)
     scales = system_from_key(design.system_key, dict(design.params)).spec.design_scales
@@ -373,13 +370,13 @@ def export_files(built: MPCRuntime, out: str | Path, *, system: System, precisio
     *precision* ``"double"`` or ``"float"`` (DAQP in single precision, checked
     against the double controller within :func:`command_tolerance`).
     """
-    from equilibrist.export._size import controller_readme, measure
-    from equilibrist.export.writer import (
+    from equilibrist.export.folder import (
         EXPORT_MARKER,
         check_folder,
         generator_version,
         write_files,
     )
+    from equilibrist.export.size import controller_readme, measure
     from equilibrist.hil.firmware import WHAT, with_hil
 
     if precision not in ("double", "float"):
@@ -481,6 +478,18 @@ def design_id(built: MPCRuntime) -> str:
                           ).hexdigest()[:12]
 
 
-__all__ = ["DAQP_SOURCES", "FLOAT_TOLERANCE", "OVERDRIVE", "Z_TOLERANCE", "Z_TOLERANCE_FLOAT",
-           "MPCExport", "command_tolerance", "default_start", "export_files",
-           "export_mpc", "footprint", "iteration_counts", "mpc_files", "precision_flags", "record"]
+__all__ = [
+    "FLOAT_TOLERANCE",
+    "OVERDRIVE",
+    "Z_TOLERANCE",
+    "Z_TOLERANCE_FLOAT",
+    "MPCExport",
+    "command_tolerance",
+    "default_start",
+    "export_files",
+    "export_mpc",
+    "iteration_counts",
+    "mpc_files",
+    "precision_flags",
+    "record",
+]

@@ -51,10 +51,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from equilibrist.errors import ExportError
-from equilibrist.export._check import ControllerExport, Described, Steps
+from equilibrist.export.check import ControllerExport, Described, Steps
 
 if TYPE_CHECKING:
-    from equilibrist.control.controller import NonlinearController
+    from equilibrist.control.nonlinear import NonlinearController
     from equilibrist.hil.firmware import Adapter
     from equilibrist.numeric.system import System
 
@@ -123,7 +123,7 @@ class Translation:
 def translate(ctrl: NonlinearController, prefix: str) -> Translation:
     """*ctrl*'s ``output``, ``update`` (and ``estimate``) in C, every function ``static``
     and named with *prefix*, with the helpers they call."""
-    from equilibrist.control.controller import translate_controller
+    from equilibrist.control.nonlinear import translate_controller
     from equilibrist.native import pyc
     from equilibrist.numeric import libm
 
@@ -361,7 +361,7 @@ def check_files(ctrl: NonlinearController, name: str, vectors: dict[str, np.ndar
     and applied inputs to the library and requires every command (and
     estimate) to equal the recorded one exactly.
     """
-    from equilibrist.export._check import check_files as shared
+    from equilibrist.export.check import check_files as shared
 
     iface = interface or interface_of(ctrl)
     k = len(vectors["y"])
@@ -449,10 +449,10 @@ def export_files(ctrl: NonlinearController, out: str | Path, *, system: System,
                  precision: str = "double", duration: float | None = None, seed: int = 0,
                  force: bool = False, name: str | None = None) -> ControllerExport:
     """The library, recorded vectors, ``make check`` and the HIL files of *ctrl* in *out*."""
-    from equilibrist.export._size import controller_readme, measure
     from equilibrist.export.data import c_identifier
+    from equilibrist.export.folder import check_folder, generator_version, write_files
+    from equilibrist.export.size import controller_readme, measure
     from equilibrist.export.vectors import check_duration
-    from equilibrist.export.writer import check_folder, generator_version, write_files
     from equilibrist.hil.firmware import WHAT, with_hil
 
     if precision != "double":
@@ -498,7 +498,7 @@ class CompiledNonlinear:
     def __init__(self, ctrl: NonlinearController, *, name: str | None = None,
                  files: dict[str, str] | None = None, interface: Interface | None = None) -> None:
         from equilibrist.export.data import c_identifier
-        from equilibrist.export.native import build_shared_library
+        from equilibrist.export.shared_library import build_shared_library
 
         lib_name = name or c_identifier(ctrl.name)
         self.ctrl = ctrl

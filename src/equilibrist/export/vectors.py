@@ -25,16 +25,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from equilibrist.control.design import Design
+from equilibrist.control.design_record import Design
 from equilibrist.errors import ExportError
-from equilibrist.export.c_code import Vectors
+from equilibrist.export.c_text import Vectors
 from equilibrist.export.data import ControllerData, check_controller, check_precision
 from equilibrist.numeric.system import System
 
 if TYPE_CHECKING:
     from typing import TypedDict
 
-    from equilibrist.export.native import CompiledController
+    from equilibrist.export.shared_library import CompiledController
     from equilibrist.sim.noise import Noise
     from equilibrist.sim.signals import Step
 
@@ -152,7 +152,7 @@ class CController:
     Parameters
     ----------
     compiled:
-        A loaded :class:`~equilibrist.export.native.CompiledController`.
+        A loaded :class:`~equilibrist.export.shared_library.CompiledController`.
     x_estimate:
         Initial estimate (absolute state) for ``init_at``; None starts at
         the operating point (``init``), as the simulation's LQG does.
@@ -197,10 +197,10 @@ def c_controller(design: Design, *, controller: str = "lqg", precision: str = "d
                  x_estimate: npt.ArrayLike | None = None) -> CController:
     """Generate, compile and load *design*'s C controller as a simulation controller.
 
-    See :func:`~equilibrist.export.native.compile_controller` for the build
+    See :func:`~equilibrist.export.shared_library.compile_controller` for the build
     and :class:`CController` for the interface.
     """
-    from equilibrist.export.native import compile_controller
+    from equilibrist.export.shared_library import compile_controller
 
     return CController(compile_controller(design, controller=controller, precision=precision),
                        x_estimate)
@@ -273,7 +273,7 @@ def record(design: Design, system: System, *, controller: str = "lqg", precision
     ExportError
         When the recorded run falls (the design does not hold the plant).
     """
-    from equilibrist.export.writer import controller_data
+    from equilibrist.export.data import controller_data
     from equilibrist.sim import simulate
 
     check_controller(controller)

@@ -7,10 +7,7 @@ into place, so a bad input leaves nothing half-written.
 
 from __future__ import annotations
 
-import math
 import os
-import shutil
-import tempfile
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,16 +16,23 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 
 from equilibrist.errors import ExportError
-from equilibrist.export import c_code
-from equilibrist.export.data import ControllerData, check_controller, check_precision, from_design
+from equilibrist.export import c_library, c_programs, c_text
+from equilibrist.export.data import (
+    ControllerData,
+    check_controller,
+    check_precision,
+    controller_data,
+)
+from equilibrist.export.folder import EXPORT_MARKER, check_folder, generator_version, write_files
 
 if TYPE_CHECKING:
     from typing import TypedDict, Unpack
 
-    from equilibrist.control._mpc_runtime import MPCRuntime
-    from equilibrist.control.controller import LinearController, NonlinearController
-    from equilibrist.control.design import Design
-    from equilibrist.export._size import Footprint
+    from equilibrist.control.design_record import Design
+    from equilibrist.control.linear import LinearController
+    from equilibrist.control.mpc_runtime import MPCRuntime
+    from equilibrist.control.nonlinear import NonlinearController
+    from equilibrist.export.size import Footprint
     from equilibrist.hil.firmware import Adapter
     from equilibrist.numeric.system import System
 
@@ -42,85 +46,6 @@ if TYPE_CHECKING:
 
 
 ARDUINO_FOLDER = "example_arduino"
-
-
-def generator_version() -> str:
-    """``"equilibrist <version>"``, written into every export."""
-    from equilibrist import __version__
-
-    return f"equilibrist {__version__}"
-
-
-def controller_data(design: Design | object, *, controller: str = "lqg") -> ControllerData:
-    """:func:`~equilibrist.export.data.from_design` for a discrete design.
-
-    Raises
-    ------
-    ExportError
-        A continuous design (no rate), or anything :func:`from_design` refuses.
-    """
-    check_controller(controller)
-    from equilibrist.control.design import Design
-
-    if not isinstance(design, Design):
-        raise ExportError(f"design = {design!r}: expected a Design (equilibrist.control.design."
-                          f"design(system, rate=...)), not {type(design).__name__}")
-    if design.discrete is None or not design.rate:
-        raise ExportError(
-            f"the design of {design.system_key} is continuous: "
-            "a digital controller needs a sample rate (design it with rate=...)"
-        )
-    return from_design(design, controller=controller)
-
-
-def check_rate(rate: object) -> float:
-    """*rate* as a positive finite number of samples per second, else :class:`ExportError`."""
-    try:
-        value = float(rate)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise ExportError(f"rate must be a positive number of samples per second (Hz), got {rate!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise ExportError(f"rate must be a positive number of samples per second (Hz), got {value:g}")
-    return value
-
-
-# Every export folder holds this file: a folder without it is the user's.
-EXPORT_MARKER = ".made-by-equilibrist"
-
-
-def check_folder(out: object, *, force: bool = False) -> Path:
-    """The output folder, if it can be written (existing, or new in an existing folder: no
-    missing parent is created), else :class:`ExportError`.
-
-    An existing folder that holds files and is not an earlier export is the
-    user's: it is refused unless *force* (its files of the export's names
-    are then replaced, the others left alone).
-    """
-    try:
-        path = Path(os.fspath(out)).expanduser()  # type: ignore[call-overload]  # TypeError caught below
-    except TypeError:
-        raise ExportError(f"output folder {out!r} is not a path") from None
-    path = path.absolute()
-    if path.exists():
-        if not path.is_dir():
-            raise ExportError(f"output folder {path} exists and is not a folder")
-        if not os.access(path, os.W_OK | os.X_OK):
-            raise ExportError(f"output folder {path} is not writable")
-        if not force and not (path / EXPORT_MARKER).exists() and any(path.iterdir()):
-            raise ExportError(
-                f"output folder {path} holds files that equilibrist did not write: name a new or "
-                "empty folder, or add --force to replace the files of the export's names"
-            )
-        return path
-    ancestor = path.parent
-    if not ancestor.exists():
-        raise ExportError(f"cannot create output folder {path}: the folder {ancestor} does not "
-                          "exist (equilibrist creates no missing folder: create it first)")
-    if not ancestor.is_dir():
-        raise ExportError(f"cannot create output folder {path}: {ancestor} is not a folder")
-    if not os.access(ancestor, os.W_OK | os.X_OK):
-        raise ExportError(f"cannot create output folder {path}: {ancestor} is not writable")
-    return path
 
 
 @dataclass(frozen=True)
@@ -145,7 +70,7 @@ class Export:
     files: Mapping[str, str]
     data: ControllerData
     precision: str
-    vectors: c_code.Vectors
+    vectors: c_text.Vectors
     #: What ``make size`` printed at export (None: not measured, see :attr:`size_note`).
     footprint: Footprint | None = None
     size_note: str = ""
@@ -165,7 +90,7 @@ class Export:
 
 def render(
     data: ControllerData,
-    vectors: c_code.Vectors,
+    vectors: c_text.Vectors,
     *,
     precision: str,
     version: str,
@@ -179,7 +104,7 @@ def render(
 
 def render_measured(
     data: ControllerData,
-    vectors: c_code.Vectors,
+    vectors: c_text.Vectors,
     *,
     precision: str,
     version: str,
@@ -187,23 +112,23 @@ def render_measured(
     param_table: tuple[tuple[str, float, str, str], ...] = (),
 ) -> tuple[dict[str, tuple[str, str]], Footprint | None, str]:
     """:func:`render`, and the footprint ``make size`` printed for it (None and why not)."""
-    from equilibrist.export._size import measure, readme_lines
+    from equilibrist.export.size import measure, readme_lines
 
     name = data.name
-    head = c_code.header(data, precision=precision, version=version, title=title,
+    head = c_library.header(data, precision=precision, version=version, title=title,
                          param_table=param_table)
-    src = c_code.source(data, precision=precision, version=version)
+    src = c_library.source(data, precision=precision, version=version)
     files: dict[str, tuple[str, str]] = {
         f"{name}.h": (head, "the library's header: constants, units, the functions"),
         f"{name}.c": (src, "the library: init, step, estimate, version"),
-        "example_desktop.c": (c_code.desktop_example(data),
+        "example_desktop.c": (c_programs.desktop_example(data),
                               "desktop example: balances the linear model, or reads stdin with '-'"),
-        f"test_{name}.c": (c_code.test_program(data), "test program: replays the test vectors"),
-        f"{name}_vectors.h": (c_code.vectors_header(data, vectors, version=version),
+        f"test_{name}.c": (c_programs.test_program(data), "test program: replays the test vectors"),
+        f"{name}_vectors.h": (c_programs.vectors_header(data, vectors, version=version),
                               "test vectors: a recorded noisy closed-loop run"),
-        "Makefile": (c_code.makefile(data), "make / make check / make size / make clean"),
+        "Makefile": (c_programs.makefile(data), "make / make check / make size / make clean"),
         f"{ARDUINO_FOLDER}/{ARDUINO_FOLDER}.ino": (
-            c_code.arduino_sketch(data, precision=precision),
+            c_programs.arduino_sketch(data, precision=precision),
             "Arduino sketch (with its own copy of the library)",
         ),
         f"{ARDUINO_FOLDER}/{name}.h": (head, "copy of the header for the sketch"),
@@ -214,7 +139,7 @@ def render_measured(
     listing = {path: what for path, (_, what) in files.items()}
     listing["README.txt"] = "this list"
     files["README.txt"] = (
-        c_code.readme(data, precision=precision, version=version, files=listing,
+        c_programs.readme(data, precision=precision, version=version, files=listing,
                       footprint=readme_lines(footprint, why)),
         "this list",
     )
@@ -254,52 +179,6 @@ def _with_hil(files: dict[str, tuple[str, str]], data: ControllerData) -> dict[s
     whats = {rel: what for rel, (_, what) in files.items()}
     return {rel: (text, whats.get(rel) or WHAT.get(rel) or "hardware in the loop: copy for the "
                   "sketch") for rel, text in texts.items()}
-
-
-def write_files(folder: Path, files: Mapping[str, str]) -> None:
-    """Write *files* (relative path -> text) into *folder* through a staging folder.
-
-    A new folder appears whole (one rename); into an existing folder each
-    file is moved into place, replacing an older file of the same name and
-    leaving other files alone.
-    """
-    folder = check_folder(folder, force=True)
-    existed = folder.exists()
-    if existed:
-        stage_root = folder
-    else:
-        stage_root = folder.parent
-        while not stage_root.exists():
-            stage_root = stage_root.parent
-    try:
-        staging = Path(tempfile.mkdtemp(prefix=".equilibrist-export-", dir=stage_root))
-    except OSError as exc:
-        raise ExportError(f"cannot write the export into {folder}: {exc.strerror or exc}") from None
-    try:
-        for rel, text in files.items():
-            path = staging / rel
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(text)
-        if not existed:
-            folder.parent.mkdir(parents=True, exist_ok=True)
-            os.chmod(staging, 0o777 & ~_umask())
-            os.rename(staging, folder)
-            return
-        for rel in files:
-            target = folder / rel
-            target.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(staging / rel, target)
-    except OSError as exc:
-        raise ExportError(f"cannot write the export into {folder}: {exc.strerror or exc}") from None
-    finally:
-        if staging.exists():
-            shutil.rmtree(staging, ignore_errors=True)
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
 
 
 class ExportedController(Protocol):
@@ -361,8 +240,9 @@ def exporter_of(ctrl: object) -> Callable[..., ExportReport]:
     that has an exporter): the MPC's library with DAQP, an LQR or LQG
     design's library, any other linear controller or :class:`NonlinearController` (the
     swing-up too) translated from its source. Other values are refused in one line."""
-    from equilibrist.control._mpc_runtime import MPCRuntime
-    from equilibrist.control.controller import LinearController, NonlinearController
+    from equilibrist.control.linear import LinearController
+    from equilibrist.control.mpc_runtime import MPCRuntime
+    from equilibrist.control.nonlinear import NonlinearController
 
     def mpc(built: MPCRuntime, out: str | Path, *, system: System,
             **options: Unpack[_Options]) -> ExportReport:
@@ -426,8 +306,9 @@ def _design_form(ctrl: LinearController) -> str | None:
     """``"lqr"`` or ``"lqg"`` where *ctrl* is its discrete design's controller of that form as
     the design makes it (the same numbers, names, limits and start), else None: a controller
     changed after (started elsewhere, other gains or limits) is exported as the value it is."""
-    from equilibrist.control.controller import ControllerError, LinearController
-    from equilibrist.control.design import Design
+    from equilibrist.control.design_record import Design
+    from equilibrist.control.linear import LinearController
+    from equilibrist.errors import ControllerError
 
     design = ctrl.design
     if not isinstance(design, Design) or design.discrete is None or not design.rate:
@@ -451,7 +332,7 @@ def export_c(
     *,
     controller: str = "lqg",
     precision: str = "double",
-    vectors: c_code.Vectors | None = None,
+    vectors: c_text.Vectors | None = None,
     duration: float | None = None,
     seed: int = 0,
     system: System | None = None,
@@ -527,7 +408,7 @@ def export_c(
 
 
 def _system_of(design: Design) -> System:
-    from equilibrist.numeric.system import system_from_key
+    from equilibrist.numeric.lookup import system_from_key
 
     return system_from_key(str(design.system_key), design.params)
 

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any, NoReturn, TypedDict, TypeVar
 
 import numpy as np
 
-from equilibrist.control.controller import PythonControllerBase
+from equilibrist.control.python_controller import PythonControllerBase
 from equilibrist.errors import quote_outside
 from equilibrist.hil import protocol as proto
 from equilibrist.hil.link import DeviceGone, SerialLink

@@ -11,9 +11,11 @@ prediction errors of the model's Kalman filter) and
 :mod:`equilibrist.ident.log` for the log's format.
 """
 
-from equilibrist.ident.fit import BACKENDS, FORMAT, Estimate, Identification, OutputFit, identify
+from equilibrist.ident.fit import identify
 from equilibrist.ident.log import IdentificationError, Log, read_log
 from equilibrist.ident.params import read_params, write_params
+from equilibrist.ident.result import FORMAT, Estimate, Identification, OutputFit
+from equilibrist.ident.shooting import BACKENDS
 
 __all__ = [
     "BACKENDS",

@@ -72,11 +72,11 @@ with entries ``(1, -1)``.
 The replay (NRMSE, the plot) is the shooting segments' integration from
 their states at the final parameters.
 
-The pieces: the answer's types in :mod:`equilibrist.ident._fit_result`, the
-multiple-shooting stage in :mod:`equilibrist.ident._fit_shooting`, the
-prediction-error stage in :mod:`equilibrist.ident._fit_prediction`, the noise
-models and the Kalman gain in :mod:`equilibrist.ident._fit_noise`, the
-uncertainty and the report's numbers in :mod:`equilibrist.ident._fit_answer`.
+The pieces: the answer's types in :mod:`equilibrist.ident.result`, the
+multiple-shooting stage in :mod:`equilibrist.ident.shooting`, the
+prediction-error stage in :mod:`equilibrist.ident.prediction`, the noise
+models and the Kalman gain in :mod:`equilibrist.ident.noise`, the
+uncertainty and the report's numbers in :mod:`equilibrist.ident.answer`.
 """
 
 from __future__ import annotations
@@ -91,33 +91,21 @@ from equilibrist.errors import nearest
 
 # The names marked F401 are not used here: imported so that they stay importable
 # from this module, where they were defined before it was split.
-from equilibrist.ident._fit_answer import (
-    WEAK_LOG_STD,  # noqa: F401
+from equilibrist.ident.answer import (
     _answer,
 )
-from equilibrist.ident._fit_noise import (
-    STRUCTURAL_RATIO,  # noqa: F401
+from equilibrist.ident.log import IdentificationError, Log
+from equilibrist.ident.noise import (
     _linearization,
     _process_prior,
     _sensor_prior,
     _state_floor,
 )
-from equilibrist.ident._fit_prediction import _filter, _Predictor
-from equilibrist.ident._fit_result import (
-    FORMAT,
-    WHITENESS_LAGS,  # noqa: F401
-    WHITENESS_LEVEL,  # noqa: F401
-    Estimate,
+from equilibrist.ident.prediction import _filter, _Predictor
+from equilibrist.ident.result import (
     Identification,
-    OutputFit,
 )
-from equilibrist.ident._fit_shooting import (
-    BACKENDS,
-    CALL_STEPS,  # noqa: F401
-    MAX_SEGMENT_SECONDS,  # noqa: F401
-    MIN_SEGMENT_SAMPLES,  # noqa: F401
-    SEGMENT_NOISE_RATIO,  # noqa: F401
-    ShootFunction,  # noqa: F401
+from equilibrist.ident.shooting import (
     _boundaries,
     _guess_states,
     _leverage,
@@ -127,7 +115,6 @@ from equilibrist.ident._fit_shooting import (
     _shooter,
     _whitening,
 )
-from equilibrist.ident.log import IdentificationError, Log
 from equilibrist.numeric.system import System
 
 # The longest RK4 step [s] (the simulator's default physics step).
@@ -360,4 +347,7 @@ def identify(
                    (lo, hi), nfev)
 
 
-__all__ = ["BACKENDS", "FORMAT", "Estimate", "Identification", "OutputFit", "check_free", "identify"]
+__all__ = [
+    "check_free",
+    "identify",
+]

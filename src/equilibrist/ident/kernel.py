@@ -34,7 +34,7 @@ class Shooting:
     """``shoot_many`` and ``innovations`` of one system's core."""
 
     def __init__(self, system: System) -> None:
-        from equilibrist.native.simcore import load_core
+        from equilibrist.sim.simcore import load_core
 
         self.system = system
         self.core = load_core(system)

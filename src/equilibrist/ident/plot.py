@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from equilibrist.ident.fit import Identification
+from equilibrist.ident.result import Identification
 
 
 def plot_fit(result: Identification, path: str | Path) -> Path:

@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING
 
 from equilibrist.errors import DefinitionError
 from equilibrist.importers.tree import ActuatorData, Tree, read_tree
+from equilibrist.mechanics.definition import Entry
 from equilibrist.mechanics.spec import (
     Input,
     OperatingPoint,
@@ -46,7 +47,6 @@ from equilibrist.mechanics.spec import (
     nonnegative,
     positive,
 )
-from equilibrist.systems.registry import Entry
 
 if TYPE_CHECKING:
     import numpy as np

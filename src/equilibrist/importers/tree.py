@@ -9,8 +9,8 @@ Anything that the compiled model has and equilibrist does not model is
 refused with one line naming the element; nothing is silently dropped.
 
 MuJoCo's compiler and the checks of the compiled model's values are in
-:mod:`equilibrist.importers._mujoco`, the search for the operating point in
-:mod:`equilibrist.importers._tree_equilibrium`; their public names are
+:mod:`equilibrist.importers.mujoco_compiler`, the search for the operating point in
+:mod:`equilibrist.importers.equilibrium`; their public names are
 importable from here.
 """
 
@@ -23,7 +23,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from equilibrist.errors import DefinitionError
-from equilibrist.importers._mujoco import (
+from equilibrist.importers.equilibrium import (
+    _authority,
+    _holds,
+    _linearization,
+    _nearest_equilibrium,
+)
+from equilibrist.importers.mujoco_compiler import (
     _check_inertia,
     _identifier,
     _model_name,
@@ -31,14 +37,6 @@ from equilibrist.importers._mujoco import (
     _not_finite,
     compile_model,
     load_mujoco,
-    one_line,
-)
-from equilibrist.importers._tree_equilibrium import (
-    MAX_MOVE,
-    _authority,
-    _holds,
-    _linearization,
-    _nearest_equilibrium,
 )
 
 if TYPE_CHECKING:
@@ -434,7 +432,6 @@ def _motors(model: mujoco.MjModel, file: Path,
 
 
 __all__ = [
-    "MAX_MOVE",
     "TINY",
     "ActuatorData",
     "BodyData",
@@ -442,8 +439,5 @@ __all__ = [
     "Matrix3",
     "Tree",
     "Vector3",
-    "compile_model",
-    "load_mujoco",
-    "one_line",
     "read_tree",
 ]

@@ -1,6 +1,6 @@
 /* The simulation core of equilibrist, in C: written once, compiled per system and controller.
  *
- * This file is a template. equilibrist.native.simcore writes one translation
+ * This file is a template. equilibrist.sim.simcore writes one translation
  * unit per system and controller: the calling convention's constants
  * (EQ_IO_*, EQ_REC_*... from equilibrist.sim.layout), the project's libm
  * (equilibrist.numeric.libm), the system's dynamics and the controller
@@ -25,7 +25,7 @@
  */
 
 /* ---- the run's arrays: the struct eq_args, written before this body from
- * equilibrist.native.simcore.FIELDS (which ctypes' RunArgs mirrors): the sample range,
+ * equilibrist.sim.simcore.FIELDS (which ctypes' RunArgs mirrors): the sample range,
  * options, state, controller, noise, parameter sets, events, and the outputs. ---- */
 
 /* ---- the generator and the integrators: integrators.c, inserted here ---- */

@@ -7,7 +7,7 @@ its own driver. The library carries the digest of the sources it was built
 from (``eq_daqp_digest``): a library from other sources, or none (an install
 on a machine without a compiler, where the build is optional), leaves the MPC
 to compile DAQP's objects into the cache instead
-(:func:`equilibrist.control._mpc_c.daqp_objects`).
+(:func:`equilibrist.control.mpc_library.daqp_objects`).
 
 This module imports nothing but the standard library: ``setup.py`` reads it
 by its path, before any dependency is installed.

@@ -8,7 +8,7 @@
  *
  *   fs (copies, n + n_p + 2) double: per copy [x | p | energy upright, energy hanging]
  *   us (copies, 6) uint64: per copy [xoshiro256** words (4) | periods taken | autoreset due]
- *   cf double and ci int64: the settings written by equilibrist.envs._core; ci's head
+ *   cf double and ci int64: the settings written by equilibrist.envs.core; ci's head
  *     holds the sizes and the offsets of cf's blocks and of ci's own index blocks
  *     (slots EQ_CI_*, EQ_CF_*, EQ_US_* from equilibrist.sim.layout).
  *

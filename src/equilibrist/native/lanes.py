@@ -1,7 +1,7 @@
 """Eight copies at once: the vector environment's physics in GCC's vector types.
 
 A vector environment steps thousands of copies of one rig through the same
-arithmetic. Its core (:func:`equilibrist.native.simcore.load_core` with
+arithmetic. Its core (:func:`equilibrist.sim.simcore.load_core` with
 ``lanes=True``) steps them :data:`LANES` at a time: the rig's dynamics ``f``
 and the RK4 stages run on ``eqv`` values, eight doubles side by side, which
 the compiler maps to one AVX-512 register, two AVX2 or four SSE2 ones

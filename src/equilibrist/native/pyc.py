@@ -195,7 +195,7 @@ class Module:
                                       else "_" + "".join(t.lower() for t in types))
         self.busy.add(key)
         try:
-            from equilibrist.native._translate import Translator
+            from equilibrist.native.translate import Translator
 
             fn = Translator(self, fdef, types, cname).run()
         finally:

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from equilibrist.errors import EquilibristError
-from equilibrist.systems.registry import Entry
+from equilibrist.mechanics.definition import Entry
 
 if TYPE_CHECKING:  # sympy is imported only when a model is derived or unpickled
     from equilibrist.mechanics.model import SymbolicModel

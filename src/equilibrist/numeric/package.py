@@ -17,11 +17,12 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from equilibrist.mechanics.definition import Entry
 from equilibrist.numeric.cache import PACKAGED, derive, packaged_path
 from equilibrist.systems import registry
 
 
-def generated_source(entry: registry.Entry) -> str:
+def generated_source(entry: Entry) -> str:
     """The generated module of *entry*, derived now."""
     from equilibrist.numeric.codegen import generate_source
 

@@ -5,7 +5,7 @@ Its dynamics are a pure function of ``(x, u)``; the parameters are a fixed
 vector ``p`` handed to the generated functions.
 
 Finding a system by name or by the key a file records (:func:`get_system`,
-:func:`system_from_key`, ...) is in :mod:`equilibrist.numeric._lookup`; those
+:func:`system_from_key`, ...) is in :mod:`equilibrist.numeric.lookup`; those
 functions are importable from here.
 """
 
@@ -29,19 +29,15 @@ from equilibrist.errors import (
     finite_number,
     nearest,
 )
+from equilibrist.mechanics.definition import DeriveFunction
 from equilibrist.mechanics.spec import SystemSpec
 from equilibrist.numeric import cache
-from equilibrist.numeric._lookup import (
+from equilibrist.numeric.linear import LinearModel
+from equilibrist.numeric.lookup import (
     _bind,
     _check_limits_order,
     _validated,
-    get_system,
-    rebuild_system,
-    system_for_data,
-    system_from_key,
 )
-from equilibrist.numeric.linear import LinearModel
-from equilibrist.systems import registry
 
 if TYPE_CHECKING:  # sympy is imported only when the symbolic model is asked for
     from equilibrist.mechanics.model import SymbolicModel
@@ -110,14 +106,14 @@ class System:
 
     def __reduce__(self) -> tuple[Callable[..., System], tuple[object, ...]]:
         """A system pickles as its definition's content and its parameter values
-        (:func:`~equilibrist.numeric._lookup.portable`), not as the compiled objects of this
+        (:func:`~equilibrist.numeric.lookup.portable`), not as the compiled objects of this
         process: a worker or a later session rebuilds it, from its cache when it has it."""
-        from equilibrist.numeric._lookup import portable, unpickle_system
+        from equilibrist.numeric.lookup import portable, unpickle_system
 
         return unpickle_system, portable(self)
 
     @classmethod
-    def from_definition(cls, spec: SystemSpec, derive: registry.DeriveFunction, **params: object) -> System:
+    def from_definition(cls, spec: SystemSpec, derive: DeriveFunction, **params: object) -> System:
         """A system built from a spec and its derivation, with no registration.
 
         The derived model is cached by the content of the definition (the
@@ -463,8 +459,4 @@ __all__ = [
     "SINGULAR_CONDITION",
     "Equilibrium",
     "System",
-    "get_system",
-    "rebuild_system",
-    "system_for_data",
-    "system_from_key",
 ]

@@ -27,11 +27,11 @@ from equilibrist._lazy import exports
 # Each name from its module on first use (PEP 562): a command that runs one simulation
 # does not import the batch machinery (worker pools, result files) it does not need.
 _WHERE = {
-    "LinearController": "equilibrist.control.controller",
-    "NonlinearController": "equilibrist.control.controller",
-    "PythonController": "equilibrist.control.controller",
-    "PythonControllerBase": "equilibrist.control.controller",
-    "BatchResult": "equilibrist.sim.batch",
+    "LinearController": "equilibrist.control.linear",
+    "NonlinearController": "equilibrist.control.nonlinear",
+    "PythonController": "equilibrist.control.python_controller",
+    "PythonControllerBase": "equilibrist.control.python_controller",
+    "BatchResult": "equilibrist.sim.batch_result",
     "MonteCarloResult": "equilibrist.sim.batch",
     "RegionOfAttraction": "equilibrist.sim.batch",
     "monte_carlo": "equilibrist.sim.batch",
@@ -57,20 +57,17 @@ _WHERE = {
 }
 
 if TYPE_CHECKING:
-    from equilibrist.control.controller import (
-        LinearController,
-        NonlinearController,
-        PythonController,
-        PythonControllerBase,
-    )
+    from equilibrist.control.linear import LinearController
+    from equilibrist.control.nonlinear import NonlinearController
+    from equilibrist.control.python_controller import PythonController, PythonControllerBase
     from equilibrist.sim.batch import (
-        BatchResult,
         MonteCarloResult,
         RegionOfAttraction,
         monte_carlo,
         region_of_attraction,
         simulate_batch,
     )
+    from equilibrist.sim.batch_result import BatchResult
     from equilibrist.sim.controllers import LQG, Controller, OpenLoop, StateFeedback
     from equilibrist.sim.events import Impulse, Kick, ParameterChange, Pulse
     from equilibrist.sim.noise import Noise

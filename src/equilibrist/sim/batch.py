@@ -11,9 +11,9 @@ accumulated while running (fell and when, final state, peak and RMS input,
 time saturated, peak deviation, estimation error RMS); ``record=True``
 keeps every trajectory too, after checking that they fit in memory.
 
-The batch's result is in :mod:`equilibrist.sim._batch_result`, its initial
-states, parameters and draws in :mod:`equilibrist.sim._batch_inputs`, the runs
-of a Python controller in :mod:`equilibrist.sim._batch_python`; their public
+The batch's result is in :mod:`equilibrist.sim.batch_result`, its initial
+states, parameters and draws in :mod:`equilibrist.sim.batch_inputs`, the runs
+of a Python controller in :mod:`equilibrist.sim.batch_python`; their public
 names are importable from here.
 """
 
@@ -30,8 +30,9 @@ import numpy as np
 
 from equilibrist.errors import SimulationError, nearest
 from equilibrist.numeric.system import System
-from equilibrist.sim import _setup, layout
-from equilibrist.sim._batch_inputs import (
+from equilibrist.sim import budget, layout, setup_checks
+from equilibrist.sim import setup as _setup
+from equilibrist.sim.batch_inputs import (
     _count,
     _floats,
     _initial_states,
@@ -41,13 +42,13 @@ from equilibrist.sim._batch_inputs import (
     child_seed,
     sample_uniform,
 )
-from equilibrist.sim._batch_python import _python_batch
-from equilibrist.sim._batch_result import FORMAT, BatchResult, _batch_result
-from equilibrist.sim._setup_checks import _has_operating_point
+from equilibrist.sim.batch_python import _python_batch
+from equilibrist.sim.batch_result import BatchResult, _batch_result
 from equilibrist.sim.events import Event
 from equilibrist.sim.kernel import Kernel, set_workers, thread_count
 from equilibrist.sim.noise import Noise, SeedLike, describe_seed, generator_state, seed_sequence
 from equilibrist.sim.run import _progress_bar, call_interruptibly
+from equilibrist.sim.setup_checks import _has_operating_point
 from equilibrist.tasks import balance_box
 
 
@@ -83,7 +84,7 @@ def simulate_batch(
     workers: int | None = None,
     max_memory: float | None = None,
     progress: bool = False,
-    max_steps: float | None = _setup.DEFAULT_MAX_STEPS,
+    max_steps: float | None = budget.DEFAULT_MAX_STEPS,
 ) -> BatchResult:
     """*runs* independent runs of the same closed loop, in parallel.
 
@@ -105,7 +106,7 @@ def simulate_batch(
         Threads (default: all cores).
     max_steps : float or None
         The most physics steps the batch may take over all its runs
-        (default :data:`~equilibrist.sim._setup.DEFAULT_MAX_STEPS`); a batch
+        (default :data:`~equilibrist.sim.setup.DEFAULT_MAX_STEPS`); a batch
         that needs more is refused before it starts. None: no bound.
 
     The runs are made in one call of the compiled core, which hands them
@@ -120,7 +121,7 @@ def simulate_batch(
     pickled to them, so it must be defined at module level), or one by
     one in this process with ``workers=1``.
     """
-    _setup.check_system(system)
+    setup_checks.check_system(system)
     runs = _count(runs, "runs")
     if workers is not None:
         workers = _count(workers, "workers")
@@ -147,7 +148,7 @@ def simulate_batch(
     if record:
         per_run += setup.n_rows * setup.record_width * 8.0
     what = f"a batch of {runs} runs" + (f" of {setup.n_rows} samples with trajectories" if record else "")
-    _setup.check_memory(runs * per_run, what, max_memory)
+    budget.check_memory(runs * per_run, what, max_memory)
 
     x0s = _initial_states(system, x0, runs, setup.x_op)
     pmat = _parameter_matrix(system, params, runs)
@@ -263,10 +264,10 @@ def region_of_attraction(
     *seed*. The other states start at the operating point. *options* go to
     :func:`simulate_batch` (``duration`` is required).
     """
-    _setup.check_system(system)
+    setup_checks.check_system(system)
     if (grid is None) == (samples is None):
         raise SimulationError("give either grid={state: (low, high, count)} or samples={state: (low, high)}")
-    ctrl_x_op, _ = _setup.operating_point(system, controller)
+    ctrl_x_op, _ = setup_checks.operating_point(system, controller)
     if grid is not None:
         _mapping(grid, "grid", "{state: (low, high, count)}")
         if not grid:
@@ -340,13 +341,9 @@ def monte_carlo(
 
 
 __all__ = [
-    "FORMAT",
-    "BatchResult",
     "MonteCarloResult",
     "RegionOfAttraction",
-    "child_seed",
     "monte_carlo",
     "region_of_attraction",
-    "sample_uniform",
     "simulate_batch",
 ]

@@ -30,19 +30,13 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from equilibrist.control._checks import given_text, real_array
-from equilibrist.control.controller import (
-    ControllerError,
-    LinearController,
-    LinearRuntime,
-    NonlinearController,
-    PythonController,
-    StepAdapter,
-    as_python_controller,
-    python_controller_name,
-)
-from equilibrist.control.design import Design
-from equilibrist.errors import DimensionError, EquilibristError, SimulationError
+from equilibrist.control.checks import given_text, real_array
+from equilibrist.control.controller import as_python_controller, python_controller_name
+from equilibrist.control.design_record import Design
+from equilibrist.control.linear import LinearController, LinearRuntime
+from equilibrist.control.nonlinear import NonlinearController
+from equilibrist.control.python_controller import PythonController, StepAdapter
+from equilibrist.errors import ControllerError, DimensionError, EquilibristError, SimulationError
 from equilibrist.numeric.system import System
 from equilibrist.sim.signals import Signal, Value, as_signal
 

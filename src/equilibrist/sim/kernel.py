@@ -1,12 +1,12 @@
 """The compiled simulation core, as the simulator, the batches and the playground call it.
 
 The core is C generated per system and controller
-(:mod:`equilibrist.native.simcore`): the system's dynamics and the
+(:mod:`equilibrist.sim.simcore`): the system's dynamics and the
 controller translated from their one Python definition, the loops written
 once in ``equilibrist/native/core.c``, compiled by the machine's C compiler
 and cached by content. :class:`Kernel` picks the library for a run
 (:meth:`Kernel.core`); the callers pass its entries the arrays by keyword,
-and the library (:class:`~equilibrist.native.simcore.NativeCore`) is the one
+and the library (:class:`~equilibrist.sim.simcore.NativeCore`) is the one
 place that knows the entries' argument order.
 
 The entries (see ``core.c`` for the array conventions):
@@ -37,15 +37,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.control._controller_layout import linear_pattern
-from equilibrist.control.controller import (
-    NonlinearController,
-    linear_sizes,
-)
+from equilibrist.control.linear_layout import linear_pattern, linear_sizes
+from equilibrist.control.nonlinear import NonlinearController
 from equilibrist.numeric.system import System
 
 if TYPE_CHECKING:
-    from equilibrist.native.simcore import NativeCore
+    from equilibrist.sim.simcore import NativeCore
 
 #: What the linear library of a core is specialized to: a controller's sizes
 #: ``(nz, ny, nr, m, n)`` (its loops with literal trip counts), or its
@@ -74,7 +71,7 @@ def _linear_key(cp: np.ndarray) -> Linear | None:
 def load_kernel(system: System) -> NativeCore:
     """The core of *system* with the generic linear library: the entries that run no
     controller of their own (``rk4_steps``, ``normals``, ``f``, the environments')."""
-    from equilibrist.native.simcore import load_core
+    from equilibrist.sim.simcore import load_core
 
     return load_core(system)
 
@@ -93,7 +90,7 @@ class Kernel:
 
     def core(self, cp: np.ndarray) -> NativeCore:
         """The library whose ``run_one``/``run_many`` run controller parameters *cp*."""
-        from equilibrist.native.simcore import load_core
+        from equilibrist.sim.simcore import load_core
 
         if self.controller is not None:
             return load_core(self.system, None, self.controller)
@@ -105,7 +102,7 @@ class Kernel:
 
     def compiled(self, cp: np.ndarray) -> bool:
         """Whether the library for controller parameters *cp* is loaded in this process."""
-        from equilibrist.native.simcore import loaded
+        from equilibrist.sim.simcore import loaded
 
         if self.controller is not None:
             return loaded(self.system, None, self.controller)

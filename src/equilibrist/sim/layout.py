@@ -3,7 +3,7 @@
 Every array the core shares with Python has its slots, columns or rows
 named here. :func:`constants` turns them into the ``_NAME = index`` lines
 that :mod:`equilibrist.sim.kernel` writes into each generated kernel
-source, and the Python side (:mod:`equilibrist.sim._setup`,
+source, and the Python side (:mod:`equilibrist.sim.setup`,
 :mod:`equilibrist.sim.run`, :mod:`equilibrist.sim.batch`) packs and reads
 the same arrays through :class:`Slots` and :class:`Blocks`. The entries'
 argument order is known only to :class:`equilibrist.sim.kernel.Kernel`,
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from equilibrist.control.controller import linear_constants
+from equilibrist.control.linear_layout import linear_constants
 
 
 @dataclass(frozen=True)
@@ -110,7 +110,7 @@ SCRATCH = Slots("S", ("y", "x_hat", "u_cmd", "u_sat", "u_app", "z_new", "k1", "k
                       "xt", "xprev", "ubuf", "wvec", "zbuf", "pcur", "fell_x", "wk"))
 #: Rows of the adaptive integrator's work space at the end of the scratch array.
 SCRATCH_WORK_ROWS = 16
-#: The environments' settings (:mod:`equilibrist.envs._core` writes them): the slots of
+#: The environments' settings (:mod:`equilibrist.envs.core` writes them): the slots of
 #: ``ci``'s head (sizes, switches, and the offsets of ``cf``'s blocks and of ``ci``'s own
 #: index blocks), of ``cf``'s head, and of a copy's ``us`` row after its four generator words.
 ENV_CI = Slots("CI", (

@@ -26,7 +26,7 @@ from functools import cached_property
 
 import numpy as np
 
-from equilibrist.control.design import Design
+from equilibrist.control.design_record import Design
 from equilibrist.errors import DimensionError, SimulationError
 
 

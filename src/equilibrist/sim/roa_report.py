@@ -32,7 +32,7 @@ from equilibrist.sim.roa import (
 
 if TYPE_CHECKING:
     from equilibrist.control.certify import Certificate
-    from equilibrist.control.design import Design
+    from equilibrist.control.design_record import Design
 
 
 @dataclass(frozen=True, eq=False)

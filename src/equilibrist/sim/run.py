@@ -33,10 +33,12 @@ from typing import Any, TypeVar
 import numpy as np
 
 from equilibrist import interrupt
-from equilibrist.control.controller import LinearController, NonlinearController
+from equilibrist.control.linear import LinearController
+from equilibrist.control.nonlinear import NonlinearController
 from equilibrist.errors import SimulationError
 from equilibrist.numeric.system import System
-from equilibrist.sim import _setup, layout
+from equilibrist.sim import budget, layout, setup_data
+from equilibrist.sim import setup as _setup
 from equilibrist.sim.events import Event
 from equilibrist.sim.kernel import Kernel
 from equilibrist.sim.noise import Noise, SeedLike, describe_seed, generator_state, seed_sequence
@@ -137,7 +139,7 @@ def simulate(
     region: Mapping[str, tuple[float, float]] | None = None,
     progress: bool = False,
     excitation: object = None,
-    max_steps: float | None = _setup.DEFAULT_MAX_STEPS,
+    max_steps: float | None = budget.DEFAULT_MAX_STEPS,
 ) -> SimResult:
     """Simulate *system* under *controller* for *duration* seconds.
 
@@ -193,7 +195,7 @@ def simulate(
         an identification experiment. The logged input is what acted.
     max_steps : float or None
         The most physics steps the run may take (default
-        :data:`~equilibrist.sim._setup.DEFAULT_MAX_STEPS`); a run that needs
+        :data:`~equilibrist.sim.setup.DEFAULT_MAX_STEPS`); a run that needs
         more is refused before it starts. None: no bound.
 
     Returns
@@ -223,7 +225,7 @@ def _progress_bar(total: int, enabled: bool, unit: str) -> Any:
                 dynamic_ncols=True)
 
 
-def _run_compiled(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
+def _run_compiled(setup: setup_data.Setup, kernel: Kernel, rng: np.ndarray,
                   seq: np.random.SeedSequence | None, progress: bool) -> SimResult:
     n = setup.system.n_states
     x = setup.x0.copy()
@@ -288,7 +290,7 @@ class StopRun(Exception):
     """
 
 
-def _run_python(setup: _setup.Setup, kernel: Kernel, rng: np.ndarray,
+def _run_python(setup: setup_data.Setup, kernel: Kernel, rng: np.ndarray,
                 seq: np.random.SeedSequence | None, progress: bool) -> SimResult:
     """A run of a :class:`~equilibrist.control.controller.PythonController`: the core
     measures and advances the plant, the controller is called in between."""
@@ -390,7 +392,7 @@ def _outside(x: np.ndarray, region: np.ndarray) -> int:
     return int(out[0]) if out.size else -1
 
 
-def _result(setup: _setup.Setup, rec: np.ndarray, rows: int, status: np.ndarray,
+def _result(setup: setup_data.Setup, rec: np.ndarray, rows: int, status: np.ndarray,
             fell_x: np.ndarray, x_end: np.ndarray, seq: np.random.SeedSequence | None,
             *, estimates: bool) -> SimResult:
     """The result of a run recorded in *rec* (its first *rows* rows).

@@ -18,7 +18,7 @@ from equilibrist.numeric.system import System
 from equilibrist.sim.kernel import load_kernel
 
 if TYPE_CHECKING:
-    from equilibrist.native.simcore import NativeCore
+    from equilibrist.sim.simcore import NativeCore
 
 
 @dataclass(frozen=True, eq=False)

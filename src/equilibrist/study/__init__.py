@@ -13,8 +13,9 @@ when a study runs: ``pip install 'equilibrist[cluster]'``.
 """
 
 from equilibrist.study.compute import evaluate_point, metric_names
+from equilibrist.study.record import Axis, Study, StudyError
 from equilibrist.study.runner import StudyRun, default_chunk_size, run_study
-from equilibrist.study.spec import Axis, Study, StudyError, load_study_file, make_study
+from equilibrist.study.spec import load_study_file, make_study
 from equilibrist.study.store import read_study
 
 __all__ = [

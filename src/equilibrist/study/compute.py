@@ -41,8 +41,7 @@ from typing import TYPE_CHECKING, NotRequired, TypedDict
 import numpy as np
 
 from equilibrist.errors import EquilibristError
-from equilibrist.study._spec_study import kind_options
-from equilibrist.study.spec import Study
+from equilibrist.study.record import Study, kind_options
 
 if TYPE_CHECKING:
     from equilibrist.numeric.system import System
@@ -131,13 +130,14 @@ class _RunOptions(TypedDict):
 def evaluate_point(study: Study, index: int, *,
                    threads: int | None = None) -> dict[str, object]:
     """The table row of point *index* (a mapping column -> value)."""
-    from equilibrist.control import kinds as registry
     from equilibrist.control.controller import measured_outputs
     from equilibrist.control.design import design
-    from equilibrist.numeric.system import get_system
-    from equilibrist.sim._setup import operating_point
-    from equilibrist.sim.batch import region_of_attraction, sample_uniform, simulate_batch
+    from equilibrist.controllers import kinds as registry
+    from equilibrist.numeric.lookup import get_system
+    from equilibrist.sim.batch import region_of_attraction, simulate_batch
+    from equilibrist.sim.batch_inputs import sample_uniform
     from equilibrist.sim.noise import Noise
+    from equilibrist.sim.setup_checks import operating_point
     from equilibrist.tasks import get_task, task_names
 
     values = study.point(index)

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from equilibrist.errors import nearest
-from equilibrist.study.spec import Study, StudyError
+from equilibrist.study.record import Study, StudyError
 
 if TYPE_CHECKING:
     import pyarrow as pa

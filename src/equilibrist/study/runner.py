@@ -31,7 +31,7 @@ from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 from equilibrist.study.compute import chunk_task, evaluate_chunk
-from equilibrist.study.spec import Study, StudyError
+from equilibrist.study.record import Study, StudyError
 from equilibrist.study.store import Store, check_out, require_pyarrow
 
 if TYPE_CHECKING:  # Dask and tqdm are imported when a study runs

@@ -13,7 +13,7 @@ a parameter (``m_p``)  the plant's physical parameter (validated against its ran
                        the state's unit; the LQR weight is ``1 / scale**2``
 ``r.<input>``          Bryson scale of an input, in the input's unit
 ``controller``         a controller kind offered to studies (``lqr``, ``lqg``, ``mpc``,
-                       ``swingup``, a kind of one's own: :mod:`equilibrist.control.kinds`)
+                       ``swingup``, a kind of one's own: :mod:`equilibrist.controllers.kinds`)
 ``noise``              scale of the noise's standard deviations (0 = no noise; the
                        design keeps the spec's covariances)
 ``delay``              0 or 1: each command applied one sample late
@@ -45,17 +45,13 @@ from pathlib import Path
 from equilibrist.errors import nearest
 
 # The module was split in three; every name stays importable from here.
-from equilibrist.study._spec_axes import _axis, _number, _ranges, _whole
-from equilibrist.study._spec_study import (
+from equilibrist.study.axes import _axis, _number, _ranges, _whole
+from equilibrist.study.record import (
     BATCH_CELLS,
     DESIGN_FOR,
-    FORMAT,
     MAX_POINTS,
-    MAX_ROA_STATES,
     MAX_RUN_SAMPLES,
     METRICS,
-    SPECIAL,
-    Axis,
     Study,
     StudyError,
     _does_not_apply,
@@ -128,7 +124,7 @@ def make_study(
     StudyError
         Naming every problem.
     """
-    from equilibrist.numeric.system import get_system
+    from equilibrist.numeric.lookup import get_system
     from equilibrist.systems import files, registry
 
     problems: list[str] = []
@@ -238,7 +234,7 @@ def make_study(
 def _controller_options(given: Mapping[str, object], kinds_used: Sequence[str],
                         problems: list[str]) -> dict[str, str]:
     """*given* checked against the options of the study's kinds, as text (files absolute)."""
-    from equilibrist.control import kinds
+    from equilibrist.controllers import kinds
 
     known = [k for k in dict.fromkeys(kinds_used) if k in controllers()]
     out: dict[str, str] = {}
@@ -346,7 +342,7 @@ def load_study_file(path: str | Path, *, system: str | None = None) -> Study:
 
 def _files_beside(study_file: Path, options: Mapping[str, object]) -> dict[str, object]:
     """*options* with each relative file of a ``FILE...`` option read from the study file's folder."""
-    from equilibrist.control import kinds
+    from equilibrist.controllers import kinds
 
     files = {o.key for o in kinds.options() if _is_file(o)}
     out = dict(options)
@@ -385,18 +381,6 @@ def _named_system(study_file: Path, recorded: str, named: str | None) -> str:
 
 
 __all__ = [
-    "BATCH_CELLS",
-    "DESIGN_FOR",
-    "FORMAT",
-    "MAX_POINTS",
-    "MAX_ROA_STATES",
-    "MAX_RUN_SAMPLES",
-    "METRICS",
-    "SPECIAL",
-    "Axis",
-    "Study",
-    "StudyError",
-    "controllers",
     "load_study_file",
     "make_study",
 ]

@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 from equilibrist.atomic import create_file
 from equilibrist.study.compute import metric_names
-from equilibrist.study.spec import FORMAT, Study, StudyError
+from equilibrist.study.record import FORMAT, Study, StudyError
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -64,7 +64,7 @@ def versions() -> dict[str, str]:
 def schema(study: Study) -> pa.Schema:
     """The table's columns and types (the same for every chunk)."""
     pa = require_pyarrow()
-    from equilibrist.numeric.system import get_system
+    from equilibrist.numeric.lookup import get_system
 
     inputs = get_system(study.system, **study.settings).input_names
     fields = [pa.field("point", pa.int64(), nullable=False)]

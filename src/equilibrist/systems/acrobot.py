@@ -109,7 +109,7 @@ SPEC = SystemSpec(
     hanging={"theta1": 0.0, "theta2": 0.0},
     swingup=SwingUp("acrobot", {"k_energy": 1.0, "a_max": 20.0, "k_p": 60.0, "k_v": 30.0,
                                 "k_d": 30.0, "release_factor": 20.0}),
-    drawing="equilibrist.viz._scenes_planar:AcrobotScene",
+    drawing="equilibrist.viz.scenes_planar:AcrobotScene",
     position=11,
 )
 

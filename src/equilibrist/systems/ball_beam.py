@@ -136,7 +136,7 @@ SPEC = SystemSpec(
     sensor_noise={"R": 1e-3, "theta": 1.5e-3},
     # Motor torque ripple on the beam; surface roughness under the ball.
     process_noise={"theta_dot": 0.1, "R_dot": 0.05},
-    drawing="equilibrist.viz._scenes_planar:BallBeamScene",
+    drawing="equilibrist.viz.scenes_planar:BallBeamScene",
     scenario=Scenario(duration=8.0, start={"R": -0.05}, push=0.2, push_duration=0.1,
         step={"R": 0.05}, step_at=1.0,
         push_name="a torque kick of 0.2 N m on the beam for 0.1 s"),

@@ -115,7 +115,7 @@ SPEC = SystemSpec(
     sensor_noise={"R": 1e-3, "theta": 2e-3},
     # Surface roughness and the neglected theta_ddot push on the ball.
     process_noise={"R_dot": 0.05},
-    drawing="equilibrist.viz._scenes_planar:BallBeamScene",
+    drawing="equilibrist.viz.scenes_planar:BallBeamScene",
     scenario=Scenario(duration=8.0, start={"R": -0.05}, push=2.0, push_duration=0.1,
         step={"R": 0.05}, step_at=1.0,
         push_name="a jolt of 2 rad/s on the beam's rate for 0.1 s",

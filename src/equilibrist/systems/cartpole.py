@@ -92,7 +92,7 @@ SPEC = SystemSpec(
     process_noise={"x_dot": 0.05, "theta_dot": 0.05},
     hanging={"theta": math.pi},
     swingup=SwingUp("cart", {"k_energy": 5.0, "a_max": 6.0, "k_x": 6.0, "k_v": 2.0}),
-    drawing="equilibrist.viz._scenes_planar:CartpoleScene",
+    drawing="equilibrist.viz.scenes_planar:CartpoleScene",
     scenario=Scenario(duration=12.0, start={"theta": 0.1}, push=120.0, push_duration=0.1,
         step={"x": 0.3}, step_at=1.0,
         push_name="a shove of 120 N on the cart for 0.1 s"),

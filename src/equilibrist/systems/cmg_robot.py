@@ -158,7 +158,7 @@ SPEC = SystemSpec(
     sensor_noise={"phi": 1.5e-3, "theta": 2e-3},
     # Flywheel imbalance shakes the body; servo torque ripple on the gimbal.
     process_noise={"theta_dot": 0.2, "phi_dot": 2.0},
-    drawing="equilibrist.viz._scenes_3d:CmgRobotScene",
+    drawing="equilibrist.viz.scenes_3d:CmgRobotScene",
     scenario=Scenario(duration=8.0, start={"theta": 0.03}, push=0.15, push_duration=0.1,
         push_name="a kick of 0.15 N m on the gimbals for 0.1 s"),
     position=10,

@@ -142,7 +142,7 @@ SPEC = SystemSpec(
     # joints (1.5 mrad quantization), as the cart-pole.
     sensor_noise={"x": 5e-5, "theta1": 1.5e-3, "theta2": 1.5e-3},
     process_noise={"x_dot": 0.05, "theta1_dot": 0.1, "theta2_dot": 0.1},
-    drawing="equilibrist.viz._scenes_planar:DoubleCartpoleScene",
+    drawing="equilibrist.viz.scenes_planar:DoubleCartpoleScene",
     scenario=Scenario(duration=10.0, start={"theta1": 0.04, "theta2": -0.03}, push=8.0,
         push_duration=0.1, step={"x": 0.15}, step_at=1.0,
         push_name="a shove of 8 N on the cart for 0.1 s"),

@@ -31,8 +31,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from equilibrist.errors import DefinitionError, UnknownNameError
+from equilibrist.mechanics.definition import DeriveFunction, Entry
 from equilibrist.mechanics.spec import SystemSpec
-from equilibrist.systems.registry import SPEC_ATTRIBUTE, DeriveFunction, Entry, family_names
+from equilibrist.systems.registry import SPEC_ATTRIBUTE, family_names
 
 if TYPE_CHECKING:
     from equilibrist.mechanics.model import Derivation, SymbolicModel

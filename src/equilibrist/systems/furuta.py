@@ -146,7 +146,7 @@ SPEC = SystemSpec(
     swingup=SwingUp("rotary", {"k_energy": 40.0, "a_max": 0.05, "catch_fraction": 20.0,
                                "accel": 100.0},
                     free=("phi",)),
-    drawing="equilibrist.viz._scenes_3d:FurutaScene",
+    drawing="equilibrist.viz.scenes_3d:FurutaScene",
     position=6,
 )
 

@@ -179,7 +179,7 @@ SPEC_ZXZ = SystemSpec(
         "zxz Euler angles are singular where sin(theta) = 0 (axis vertical: precession and spin "
         "turn about the same line); use euler='xyz' near the upright"
     ),
-    drawing="equilibrist.viz._scenes_3d:GyroscopeScene",
+    drawing="equilibrist.viz.scenes_3d:GyroscopeScene",
     position=9,
 )
 
@@ -212,7 +212,7 @@ SPEC_XYZ = SystemSpec(
         "xyz Euler angles are singular where cos(phi) = 0 (axis horizontal along the room's x "
         "axis: theta and psi turn about the same line); use euler='zxz' there"
     ),
-    drawing="equilibrist.viz._scenes_3d:GyroscopeScene",
+    drawing="equilibrist.viz.scenes_3d:GyroscopeScene",
     position=9,
 )
 

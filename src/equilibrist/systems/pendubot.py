@@ -98,7 +98,7 @@ SPEC = SystemSpec(
     # few degrees about upright.
     process_noise={"theta1_dot": 0.01, "theta2_dot": 0.01},
     control_rate=200.0,
-    drawing="equilibrist.viz._scenes_planar:TwoLinkScene",
+    drawing="equilibrist.viz.scenes_planar:TwoLinkScene",
     position=12,
 )
 

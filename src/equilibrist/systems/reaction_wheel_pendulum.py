@@ -125,7 +125,7 @@ SPEC = SystemSpec(
     swingup=SwingUp("wheel", {"k_energy": 0.5, "a_max": 0.2, "catch_fraction": 10.0,
                               "accel": 40.0},
                     free=("phi",)),
-    drawing="equilibrist.viz._scenes_planar:ReactionWheelScene",
+    drawing="equilibrist.viz.scenes_planar:ReactionWheelScene",
     scenario=Scenario(duration=8.0, start={"theta": 0.08}, push=0.1,
         push_duration=0.1,
         push_name="a torque kick of 0.1 N m for 0.1 s"),

@@ -139,7 +139,7 @@ SPEC = SystemSpec(
     sensor_noise={"theta": 1.5e-3},
     # Propeller wash and thrust ripple: about 0.5 rad/s^2 of angular acceleration.
     process_noise={"theta_dot": 0.5},
-    drawing="equilibrist.viz._scenes_planar:SeesawScene",
+    drawing="equilibrist.viz.scenes_planar:SeesawScene",
     scenario=Scenario(duration=8.0, start={"theta": -0.15}, push=-2.0, push_duration=0.15,
         step={"theta": 0.1}, step_at=1.5,
         push_name="a downward tap of 2 N on the motor end for 0.15 s"),

@@ -123,7 +123,7 @@ SPEC = SystemSpec(
     # complementary filter: about 2 mrad.
     sensor_noise={"phi": 4.8e-3, "theta": 2e-3},
     process_noise={"phi_dot": 0.5, "theta_dot": 0.1},
-    drawing="equilibrist.viz._scenes_planar:WheeledPendulumScene",
+    drawing="equilibrist.viz.scenes_planar:WheeledPendulumScene",
     scenario=Scenario(duration=8.0, start={"theta": 0.08}, push=0.12, push_duration=0.1,
         step={"phi": 5.0}, step_at=1.0,
         push_name="a torque kick of 0.12 N m on the wheel for 0.1 s"),

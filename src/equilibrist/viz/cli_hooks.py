@@ -138,7 +138,7 @@ def handle_outputs(args: argparse.Namespace, result: SimResult, *,
 
     run = as_run(result, system=system)
     if args.plot is not None:
-        from equilibrist.viz.plots import plot_response
+        from equilibrist.viz.plots_runs import plot_response
 
         plot_response(run, args.plot)
         written.append(Path(args.plot))

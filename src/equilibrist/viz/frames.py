@@ -17,9 +17,9 @@ from typing import TYPE_CHECKING, TypedDict, Unpack
 
 import numpy as np
 
-from equilibrist.viz._drawing import _nice
+from equilibrist.viz.drawing import COLORS, Scene, Shape, _nice
 from equilibrist.viz.output import VizError, save_figure
-from equilibrist.viz.scenes import COLORS, Scene, Shape, scene_for
+from equilibrist.viz.scenes import scene_for
 
 if TYPE_CHECKING:
     from matplotlib.artist import Artist

@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from equilibrist.viz.scenes import COLORS, Scene, Shape, bar, circle
+from equilibrist.viz.drawing import COLORS, Scene, Shape, bar, circle
 
 # The three candidate views: the two world axes shown (right, up) and the
 # name of the plane.

@@ -8,9 +8,9 @@ degrees (``degrees=False`` keeps radians). Runs are read through
 :func:`~equilibrist.viz.runs.as_run`, so a simulation result or a
 :class:`~equilibrist.viz.runs.Run` made from arrays both work.
 
-The plots of runs over time are in :mod:`equilibrist.viz._plots_runs`, the maps
-(regions of attraction, poles) in :mod:`equilibrist.viz._plots_maps`, what they
-share (line styles, units, figures) in :mod:`equilibrist.viz._plot_common`; all are
+The plots of runs over time are in :mod:`equilibrist.viz.plots_runs`, the maps
+(regions of attraction, poles) in :mod:`equilibrist.viz.plots_maps`, what they
+share (line styles, units, figures) in :mod:`equilibrist.viz.plot_common`; all are
 importable from here.
 """
 
@@ -21,30 +21,18 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.viz._plot_common import (
-    APPLIED,
-    COMMAND,
-    ESTIMATE,
-    EVENT,
-    LIMIT,
-    MEASURED,
-    OPERATING,
-    REFERENCE,
-    TRUE,
+from equilibrist.viz.output import VizError
+from equilibrist.viz.plot_common import (
     _figure,
     _finish,
     _wrap,
     axis_label,
     display_unit,
 )
-from equilibrist.viz._plots_maps import (
-    plot_poles,
+from equilibrist.viz.plots_maps import (
     plot_region_of_attraction,
-    plot_regions_side_by_side,
-    plot_roa_slice,
 )
-from equilibrist.viz._plots_runs import plot_comparison, plot_fan, plot_response
-from equilibrist.viz.output import VizError
+from equilibrist.viz.plots_runs import plot_fan
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -81,8 +69,9 @@ def plot_batch(batch: object, path: str | Path | None = None, *, degrees: bool =
     -------
     matplotlib.figure.Figure
     """
-    from equilibrist.sim.batch import BatchResult, MonteCarloResult, RegionOfAttraction
-    from equilibrist.viz._adapt import system_of
+    from equilibrist.sim.batch import MonteCarloResult, RegionOfAttraction
+    from equilibrist.sim.batch_result import BatchResult
+    from equilibrist.viz.adapt import system_of
 
     if isinstance(batch, MonteCarloResult | RegionOfAttraction):
         batch = batch.batch
@@ -135,23 +124,5 @@ def plot_batch(batch: object, path: str | Path | None = None, *, degrees: bool =
 
 
 __all__ = [
-    "APPLIED",
-    "COMMAND",
-    "ESTIMATE",
-    "EVENT",
-    "LIMIT",
-    "MEASURED",
-    "OPERATING",
-    "REFERENCE",
-    "TRUE",
-    "axis_label",
-    "display_unit",
     "plot_batch",
-    "plot_comparison",
-    "plot_fan",
-    "plot_poles",
-    "plot_region_of_attraction",
-    "plot_regions_side_by_side",
-    "plot_response",
-    "plot_roa_slice",
 ]

@@ -200,6 +200,6 @@ def as_run(result: SimResult | Run, *, system: System | None = None, label: str 
     """
     if isinstance(result, Run):
         return result if label is None else result.with_label(label)
-    from equilibrist.viz import _adapt
+    from equilibrist.viz import adapt as _adapt
 
     return _adapt.run_from_result(result, system=system, label=label)

@@ -19,9 +19,9 @@ A wheel's radius comes from its inertia as a uniform disc,
 (``SystemSpec.drawing``, imported when a picture is made), or a drawing of
 its kinematic tree.
 
-The scenes are in :mod:`equilibrist.viz._scenes_planar` and
-:mod:`equilibrist.viz._scenes_3d`, what they draw with (:class:`Shape`,
-:class:`Scene`, the geometry) in :mod:`equilibrist.viz._drawing`; all are
+The scenes are in :mod:`equilibrist.viz.scenes_planar` and
+:mod:`equilibrist.viz.scenes_3d`, what they draw with (:class:`Shape`,
+:class:`Scene`, the geometry) in :mod:`equilibrist.viz.drawing`; all are
 importable from here.
 """
 
@@ -33,29 +33,8 @@ from typing import cast
 
 from equilibrist.errors import DefinitionError, UnknownNameError
 from equilibrist.mechanics.spec import SystemSpec
-from equilibrist.viz._drawing import (
-    COLORS,
+from equilibrist.viz.drawing import (
     Scene,
-    Shape,
-    arc_arrow,
-    arrow,
-    bar,
-    circle,
-    disc_radius,
-    lean,
-    rect,
-    rotate,
-)
-from equilibrist.viz._scenes_3d import CmgRobotScene, FurutaScene, GyroscopeScene
-from equilibrist.viz._scenes_planar import (
-    AcrobotScene,
-    BallBeamScene,
-    CartpoleScene,
-    DoubleCartpoleScene,
-    ReactionWheelScene,
-    SeesawScene,
-    TwoLinkScene,
-    WheeledPendulumScene,
 )
 
 
@@ -110,28 +89,6 @@ def scene_for(system: object) -> Scene:
 
 
 __all__ = [
-    "COLORS",
-    "AcrobotScene",
-    "BallBeamScene",
-    "CartpoleScene",
-    "CmgRobotScene",
-    "DoubleCartpoleScene",
-    "FurutaScene",
-    "GyroscopeScene",
-    "ReactionWheelScene",
-    "Scene",
-    "SeesawScene",
-    "Shape",
-    "TwoLinkScene",
-    "WheeledPendulumScene",
-    "arc_arrow",
-    "arrow",
-    "bar",
-    "circle",
-    "disc_radius",
     "drawing_class",
-    "lean",
-    "rect",
-    "rotate",
     "scene_for",
 ]

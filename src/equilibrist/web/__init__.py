@@ -1,6 +1,6 @@
 """The local playground: a live web page to watch a system balance, push it and tune it.
 
-``equilibrist play`` serves it (:mod:`equilibrist.cli.play`). The server
+``equilibrist play`` serves it (:mod:`equilibrist.cli.play`, through :mod:`equilibrist.web.server`). The server
 (:mod:`equilibrist.web.app`, Starlette over uvicorn) runs one
 :class:`~equilibrist.web.session.Session` per browser tab: the system's
 compiled core in real time at the control rate, the controller redesigned
@@ -50,8 +50,8 @@ def play(*systems: System, first: str | None = None, host: str = "127.0.0.1", po
     catalogue. ``port=0`` takes any free port (the address is printed).
     """
     require()
-    from equilibrist.cli.play import serve
-    from equilibrist.web.session import Catalogue
+    from equilibrist.web.server import serve
+    from equilibrist.web.session_design import Catalogue
 
     catalogue = Catalogue.of(systems) if systems else Catalogue.default()
     serve(catalogue, first=first, host=host, port=port, browser=browser)

@@ -38,10 +38,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from equilibrist.errors import EquilibristError
-from equilibrist.web._session_plan import compute_plan
-from equilibrist.web._session_roa import compute_roa
 from equilibrist.web.protocol import ProtocolError, parse
-from equilibrist.web.session import Catalogue, Session, redesign
+from equilibrist.web.session import Session
+from equilibrist.web.session_design import Catalogue, redesign
+from equilibrist.web.session_plan import compute_plan
+from equilibrist.web.session_roa import compute_roa
 
 if TYPE_CHECKING:
     from starlette.applications import Starlette
@@ -476,8 +477,8 @@ async def _work(ws: WebSocket, session: Session, inbox: asyncio.Queue[str | byte
 
     Each is checked against the limits in force when its turn comes (a
     ``select`` changes them for the messages after it). A region of attraction
-    is computed aside (:func:`~equilibrist.web._session_roa.compute_roa`), and so is
-    the plan a tracking kind needs (:func:`~equilibrist.web._session_plan.compute_plan`):
+    is computed aside (:func:`~equilibrist.web.session_roa.compute_roa`), and so is
+    the plan a tracking kind needs (:func:`~equilibrist.web.session_plan.compute_plan`):
     the messages after them do not wait for them.
     """
     designing = 0

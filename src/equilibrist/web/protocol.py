@@ -27,10 +27,10 @@ MAX_MESSAGE_BYTES = 16 * 1024
 
 def controllers() -> tuple[str, ...]:
     """The controllers a client may pick, in the picker's order: the registry's kinds offered
-    on the playground (:mod:`equilibrist.control.kinds`), the default (LQG) first and the
+    on the playground (:mod:`equilibrist.controllers.kinds`), the default (LQG) first and the
     open loop, named ``off``, last. A session refuses those that do not apply to its system
     (:attr:`Limits.unavailable`)."""
-    from equilibrist.control import kinds
+    from equilibrist.controllers import kinds
 
     offered = kinds.all_kinds("playground")
     names = [k.name for k in offered if not k.open_loop]
@@ -45,7 +45,7 @@ OFF = "off"
 def kind_name(controller: str) -> str:
     """The registry's name of a picked controller (``off`` is the open loop, ``none``)."""
     if controller == OFF:
-        from equilibrist.control import kinds
+        from equilibrist.controllers import kinds
 
         return next(k.name for k in kinds.all_kinds("playground") if k.open_loop)
     return controller

@@ -19,7 +19,7 @@ calling convention for the session's loop:
 :class:`~equilibrist.control.controller.NonlinearController`'s source run
 by its plain-Python runtime
 (:class:`~equilibrist.control.controller.NonlinearRuntime`). The same
-functions compiled to C (:mod:`equilibrist.native.ctrl`) cost less per
+functions compiled to C (:mod:`equilibrist.control.compiled`) cost less per
 sample but take a compiler run on first use, which would hold the interpreter
 that streams every other session's frames; the plain-Python sample (some
 40 microseconds on the cart-pole, 200 Hz) is under 1 % of a core.
@@ -45,9 +45,9 @@ import numpy as np
 from equilibrist.errors import EquilibristError
 
 if TYPE_CHECKING:
-    from equilibrist.control.controller import NonlinearController, NonlinearRuntime
-    from equilibrist.control.design import Design
-    from equilibrist.control.mpc import MPCRuntime
+    from equilibrist.control.design_record import Design
+    from equilibrist.control.mpc_runtime import MPCRuntime
+    from equilibrist.control.nonlinear import NonlinearController, NonlinearRuntime
     from equilibrist.control.trajopt import Trajectory
     from equilibrist.numeric.system import System
 
@@ -56,7 +56,7 @@ def runner_kinds() -> tuple[str, ...]:
     """The playground's kinds built here: every kind of the registry offered on the
     playground that is not LQR/LQG (``linear``, run by the session's own filter) or the open
     loop."""
-    from equilibrist.control import kinds
+    from equilibrist.controllers import kinds
 
     return tuple(k.name for k in kinds.all_kinds("playground") if not (k.linear or k.open_loop))
 
@@ -66,17 +66,17 @@ _EMPTY = np.zeros(0)
 
 
 #: The kinds that track a plan: the session plans the swing-up before it builds them
-#: (:mod:`equilibrist.web._session_plan`).
+#: (:mod:`equilibrist.web.session_plan`).
 PLANNED = ("tvlqr",)
 
 
 def unavailable(system: System) -> dict[str, str]:
     """``{controller: reason}`` of the playground's controllers that do not apply to *system*
-    (each kind's own :attr:`~equilibrist.control.kinds.ControllerKind.applies`; a kind that
+    (each kind's own :attr:`~equilibrist.controllers.kinds.ControllerKind.applies`; a kind that
     tracks a plan needs a swing-up to plan and CasADi to plan it)."""
     import importlib.util
 
-    from equilibrist.control import kinds
+    from equilibrist.controllers import kinds
 
     out: dict[str, str] = {}
     for kind in kinds.all_kinds("playground"):
@@ -147,7 +147,7 @@ class SwingUpRunner(NonlinearRunner):
     """The swing-up: a nonlinear controller whose state holds the supervisor's mode."""
 
     def __init__(self, ctrl: NonlinearController, system: System, kind: str = "swingup") -> None:
-        from equilibrist.control.swingup import MODE_BALANCE, Z
+        from equilibrist.control.swingup_law import MODE_BALANCE, Z
 
         super().__init__(ctrl, system, kind)
         self._mode_slot = int(Z["mode"])
@@ -328,15 +328,15 @@ def build_runner(kind: str, system: System, design: Design) -> Runner:
     """The runner of the registry's controller *kind* built on *design* for *system*.
 
     The kind is built as ``simulate`` builds it, with the page's design
-    (:class:`~equilibrist.control.kinds.ControllerRequest`); a
+    (:class:`~equilibrist.controllers.kinds.ControllerRequest`); a
     ``NonlinearController`` runs by its Python runtime, the MPC by its own.
     Raises an ``EquilibristError`` (one line) when the controller does not
     apply or cannot be built, or is of a form the page cannot run.
     """
-    from equilibrist.control import kinds
-    from equilibrist.control.controller import NonlinearController
-    from equilibrist.control.mpc import MPCRuntime
+    from equilibrist.control.mpc_runtime import MPCRuntime
+    from equilibrist.control.nonlinear import NonlinearController
     from equilibrist.control.swingup import SwingUpController
+    from equilibrist.controllers import kinds
 
     record = kinds.get(kind, "playground")
     request = kinds.ControllerRequest.of_design(system, design)  # the page's own, tuned there

@@ -23,7 +23,7 @@ How a sample runs (the rig as the simulator runs it, :mod:`equilibrist.sim.run`)
    ``--push`` of ``equilibrist simulate``);
 5. the plant advances one control period in RK4 steps of at most 1 ms on the
    compiled core, as ``simulate`` advances it around a Python controller
-   (:class:`~equilibrist.native.steps.PlantSteps`): the process noise the
+   (:class:`~equilibrist.sim.steps.PlantSteps`): the process noise the
    spec gives on the state rates is white noise of ``simulate``'s model
    (:meth:`~equilibrist.sim.noise.Noise.from_spec`), held over each physics
    step, and the sensors' noise is drawn from the same generator: with the
@@ -58,40 +58,30 @@ import numpy as np
 # The module was split in four; every name stays importable from here. The names marked
 # F401 are not used here: imported so that they stay importable from this module.
 from equilibrist.control import fixed
-from equilibrist.web._session_design import (
-    NOISE_FLOOR,  # noqa: F401
+from equilibrist.web.protocol import Limits, Message, controllers
+from equilibrist.web.runners import Runner, hanging_refusal, unavailable
+from equilibrist.web.session_design import (
     Catalogue,
     SessionError,
     Settings,
     describe_design,
-    design_for,
     label,
     make_design,
-    redesign,
     tuned_system,
 )
-from equilibrist.web._session_loop import (
-    _Linear,  # noqa: F401
+from equilibrist.web.session_loop import (
     _Loop,
     _Record,
 )
-from equilibrist.web._session_output import (
-    DIGITS,  # noqa: F401
-    MAX_CHART_SAMPLES,  # noqa: F401
-    MAX_UNSEEN,  # noqa: F401
-    _SessionOutput,  # noqa: F401
-)
-from equilibrist.web._session_plan import _SessionPlan
-from equilibrist.web._session_roa import _SessionRoa
-from equilibrist.web.protocol import Limits, Message, controllers
-from equilibrist.web.runners import Runner, hanging_refusal, unavailable
+from equilibrist.web.session_plan import _SessionPlan
+from equilibrist.web.session_roa import _SessionRoa
 
 if TYPE_CHECKING:
-    from equilibrist.control.design import Design
+    from equilibrist.control.design_record import Design
     from equilibrist.mechanics.spec import Parameter
-    from equilibrist.native.steps import PlantSteps
     from equilibrist.numeric.system import System
-    from equilibrist.viz.scenes import Scene
+    from equilibrist.sim.steps import PlantSteps
+    from equilibrist.viz.drawing import Scene
 
 #: Longest catch-up after a stall [s]: beyond it the simulation skips ahead.
 MAX_CATCH_UP = 0.25
@@ -576,5 +566,6 @@ class Session(_SessionPlan, _SessionRoa):
                 self.fell = {"at": self.t, "state": self.state_names[int(self.region_idx[out[0]])]}
 
 
-__all__ = ["Catalogue", "Session", "SessionError", "Settings", "design_for", "make_design",
-           "redesign", "tuned_system"]
+__all__ = [
+    "Session",
+]
