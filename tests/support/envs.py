@@ -1,5 +1,5 @@
 """A vector environment whose two ways of stepping run on a fake clock (the thread choice's
-tests: tests/test_envs.py, tests/test_env_threads.py)."""
+tests: tests/envs/test_envs.py, tests/envs/test_env_threads.py)."""
 
 from __future__ import annotations
 

@@ -19,7 +19,7 @@ so the bits depend only on the inputs.
 
 The matrices of a balancing rig are small (a few to a few tens of rows):
 the loops over one dimension cost microseconds each. Accuracy is that of
-the LAPACK routines (checked against them in tests/test_control_fixed.py).
+the LAPACK routines (checked against them in tests/control/test_control_fixed.py).
 """
 
 from __future__ import annotations

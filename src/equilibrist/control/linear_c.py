@@ -11,7 +11,7 @@ multiply-adds, the exported controller and the simulated one agree to the
 last bit, and nothing of the library is written a second time by hand. In
 single precision the translation's ``double`` is the export's real type.
 
-It is tested on its own (``tests/test_export_linear_c.py``) against the
+It is tested on its own (``tests/export/test_export_linear_c.py``) against the
 Python controller on random forms, in double and single precision.
 """
 

@@ -14,7 +14,7 @@ without ``fastmath``) give the same bits on every CPU.
 They are the kernels of fdlibm (Sun Microsystems, 1993), as kept in musl:
 ``__sin``, ``__cos`` and ``__rem_pio2``'s Cody-Waite reduction (three
 steps, 118 bits of pi/2), and ``log``. Within 1 ulp of the exact value
-(checked against mpmath in tests/test_bits_cpu.py) for every finite
+(checked against mpmath in tests/sim/test_bits_cpu.py) for every finite
 argument of ``sin`` and ``cos`` with ``|x| < 2**20 * pi / 2`` (about
 1.6e6 rad); beyond that the reduction is still deterministic but loses
 accuracy (fdlibm's Payne-Hanek path is not ported: no angle of a

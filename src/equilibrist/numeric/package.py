@@ -8,7 +8,7 @@ generated module written as ``<system>_<key>.py.txt``, the key being
 of older keys are removed. A first use of a catalogue system then copies
 its module from there into the cache instead of importing sympy and
 deriving it (:func:`equilibrist.numeric.cache.load`).
-``tests/test_packaged_models.py`` derives every system again and checks
+``tests/numeric/test_packaged_models.py`` derives every system again and checks
 that the shipped text is what the derivation gives now.
 """
 

@@ -18,7 +18,7 @@ def fresh_cache(tmp_path, monkeypatch):
 
 
 def test_second_load_reads_the_cache_without_deriving(fresh_cache, monkeypatch) -> None:
-    # Without the shipped derivations (tests/test_packaged_models.py covers those): derived.
+    # Without the shipped derivations (tests/numeric/test_packaged_models.py covers those): derived.
     monkeypatch.setattr(cache, "PACKAGED", fresh_cache / "nothing-shipped")
     entry = registry.lookup("cartpole")
     first = cache.load(entry)

@@ -20,7 +20,7 @@ import pytest
 from equilibrist.cli.main import main
 from equilibrist.numeric.lookup import get_system
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 MODELS = ROOT / "tests" / "models"
 LEANING = MODELS / "leaning_cartpole.xml"
 ACROBOT = MODELS / "acrobot_named.xml"

@@ -12,7 +12,7 @@ from equilibrist.control.design import design
 from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import Pulse, StateFeedback, simulate
 
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 
 def _ends_balanced(system, ctrl, push: float, duration: float) -> bool:

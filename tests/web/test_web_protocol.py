@@ -367,7 +367,6 @@ def test_the_accepted_hosts_are_the_loopback_names_and_the_bound_address():
 def _python_control_gain(design_msg, system_name, scales, rate):
     """The LQR gain of the same weights from python-control (an independent solver)."""
     import control
-
     from equilibrist import get_system
 
     system = get_system(system_name)
@@ -574,7 +573,7 @@ def test_a_run_is_copied_where_its_samples_are_added(client, monkeypatch):
 
 
 def test_user_model_path_is_offered_as_given():
-    path = str(Path(__file__).parents[1] / "examples" / "my_cartpole.py")
+    path = str(Path(__file__).parents[2] / "examples" / "my_cartpole.py")
     cat = Catalogue.default([path])
     assert cat.names[0] == path and "cartpole" in cat.names
     assert len(set(cat.names)) == len(cat.names)
@@ -620,7 +619,7 @@ def test_a_script_plays_its_own_system(tmp_path):
 
     import websockets
 
-    example = Path(__file__).parents[1] / "examples" / "my_cartpole.py"
+    example = Path(__file__).parents[2] / "examples" / "my_cartpole.py"
     script = tmp_path / "play_mine.py"
     script.write_text(textwrap.dedent(f"""
         import dataclasses

@@ -12,7 +12,7 @@ import numpy as np
 from equilibrist.cli.main import main
 from equilibrist.numeric.lookup import get_system
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 FURUTA = str(ROOT / "examples" / "furuta.xml")
 PENDUBOT = str(ROOT / "examples" / "pendubot.urdf")
 

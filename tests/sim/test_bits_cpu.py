@@ -44,7 +44,7 @@ from tests.support import require
 
 from equilibrist.numeric import libm
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[1]  # tests/: its support package and models
 ON_X86_LINUX = sys.platform == "linux" and platform.machine() == "x86_64"
 
 

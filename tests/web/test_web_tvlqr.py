@@ -11,9 +11,9 @@ import json
 
 import numpy as np
 import pytest
-from tests import test_web_browser as _shared
+import test_web_browser as _shared  # beside this file (tests/web/)
+from test_web_browser import wait_for
 from tests.support.web import LocalClient, next_frame, opening, receive_until
-from tests.test_web_browser import wait_for
 
 from equilibrist.errors import DesignError
 from equilibrist.web.app import create_app

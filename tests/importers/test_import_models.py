@@ -22,7 +22,7 @@ from tests.support.jacobians import central_differences
 from equilibrist.numeric.lookup import get_system
 from equilibrist.numeric.system import System
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 MODELS = ROOT / "tests" / "models"
 SHIPPED = [ROOT / "examples" / "furuta.xml", ROOT / "examples" / "pendubot.urdf"]
 TEST_MODELS = [MODELS / "cartpole.xml", MODELS / "spatial.xml", MODELS / "slides.xml", MODELS / "arm.urdf",

@@ -69,7 +69,7 @@ def test_check_env_passes_without_warning(env_id: str) -> None:
 
 
 def test_model_file_environments(tmp_path) -> None:
-    examples = os.path.join(os.path.dirname(__file__), "..", "examples")
+    examples = os.path.join(os.path.dirname(__file__), "..", "..", "examples")
     # An MJCF model, drawn from its kinematic tree.
     env = _make("equilibrist/balance-v0", system=os.path.join(examples, "furuta.xml"))
     check_env(env)

@@ -23,7 +23,7 @@ from equilibrist.numeric.lookup import system_from_key
 from equilibrist.numeric.system import System
 from equilibrist.systems import files
 
-EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "my_cartpole.py"
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "my_cartpole.py"
 CATALOGUE_VALUES = {"m_c": 10.0, "m_p": 1.0, "l": 0.5, "I_p": 0.08333, "b_c": 0.3, "b_p": 0.02, "g": 9.8}
 
 

@@ -7,8 +7,8 @@ from __future__ import annotations
 import json
 
 import pytest
-from tests import test_web_browser as _shared
-from tests.test_web_browser import button, wait_for
+import test_web_browser as _shared  # beside this file (tests/web/)
+from test_web_browser import button, wait_for
 
 pytestmark = pytest.mark.slow
 

@@ -9,7 +9,7 @@ dynamics' sine and cosine and the generator's logarithm became the
 project's own (equilibrist.numeric.libm, fdlibm's kernels) instead of the C
 library's, which glibc picks by the CPU's features: a few results in ten
 thousand moved by one ulp, and every closed loop amplifies that. They are
-now the same on every x86-64 CPU (tests/test_bits_cpu.py runs them under
+now the same on every x86-64 CPU (tests/sim/test_bits_cpu.py runs them under
 another feature set). The runs that design their controller were taken again
 when the designs moved from LAPACK (whose BLAS kernel the CPU selects) to
 the fixed order of equilibrist.control.fixed: they are the same under

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import functools
 
-import control
 import numpy as np
 import pytest
 import scipy.integrate
@@ -13,6 +12,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
+import control
 from equilibrist.control import (
     controllability,
     design,
@@ -309,7 +309,7 @@ def test_gain_margins_bound_the_stable_gains(
     name: str, variant: dict[str, str], rate: float | None
 ) -> None:
     """Independent truth: the closed-loop eigenvalues of A - k B K at the margins of the state
-    feedback (``lqr_margins``; the LQG loop's, ``margins``, are tests/test_control_margins.py's)."""
+    feedback (``lqr_margins``; the LQG loop's, ``margins``, are tests/control/test_control_margins.py's)."""
     d = design(_system(name, tuple(variant.items())), rate=rate)
     if d.plant.n_inputs != 1:
         pytest.skip("margins are for single-input loops")

@@ -284,7 +284,7 @@ def test_a_study_of_a_users_system_file(tmp_path, capsys):
     """A system file goes through a study as a catalogue system does (issue: bring your own robot)."""
     from pathlib import Path
 
-    example = str(Path(__file__).resolve().parent.parent / "examples" / "my_cartpole.py")
+    example = str(Path(__file__).resolve().parents[2] / "examples" / "my_cartpole.py")
     out = tmp_path / "mine.parquet"
     assert main(["sweep", example, "--vary", "m_p=0.1:0.2:2", "--runs", "8",
                  "--x0", "theta=-0.02:0.02", "--duration", "2", "--out", str(out), "--json"]) == 0

@@ -167,7 +167,7 @@ def test_roa_shows_progress_bars_on_a_terminal(capsys, monkeypatch, terminal, ex
 def _readme_commands(word: str) -> list[str]:
     from pathlib import Path
 
-    text = (Path(__file__).parent.parent / "README.md").read_text()
+    text = (Path(__file__).parents[2] / "README.md").read_text()
     blocks = re.findall(r"```sh\n(.*?)```", text, flags=re.S)
     return [line for block in blocks for line in block.splitlines()
             if line.startswith("equilibrist ") and word in line]

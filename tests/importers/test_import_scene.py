@@ -13,7 +13,7 @@ from equilibrist.viz.frames import FrameRenderer, draw_state
 from equilibrist.viz.generic import GenericScene
 from equilibrist.viz.scenes import scene_for
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 FILES = [ROOT / "examples" / "furuta.xml", ROOT / "examples" / "pendubot.urdf",
          ROOT / "tests" / "models" / "cartpole.xml", ROOT / "tests" / "models" / "arm.urdf"]
 

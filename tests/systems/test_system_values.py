@@ -17,7 +17,7 @@ import numpy as np
 from equilibrist import get_system
 from equilibrist.systems import files
 
-EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "my_cartpole.py"
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "my_cartpole.py"
 
 # A script, as a user writes one: its own rig (the example's file, with the pole's length
 # taken through a helper of the script), a Python controller, a batch in worker processes,

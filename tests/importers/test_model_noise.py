@@ -18,7 +18,7 @@ import pytest
 from equilibrist.cli.main import main
 from equilibrist.numeric.lookup import get_system
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 ACROBOT = ROOT / "tests" / "models" / "acrobot_named.xml"  # +-2 N m on the elbow
 PENDUBOT = ROOT / "examples" / "pendubot.urdf"
 
