@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import functools
 
+import control
 import numpy as np
 import pytest
 
-import control
 from equilibrist.control import DiscreteKalmanFilter, Estimate, design
 from equilibrist.control.riccati import current_gain
 from equilibrist.errors import DesignError, DimensionError

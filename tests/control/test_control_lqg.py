@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import functools
 
+import control
 import numpy as np
 import pytest
 import scipy.linalg
 
-import control
 from equilibrist.control import (
     design,
     discrete_reference_gain,

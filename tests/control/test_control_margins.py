@@ -15,11 +15,11 @@ import functools
 import json
 import warnings
 
+import control as ct
 import numpy as np
 import pytest
 import scipy.linalg
 
-import control as ct
 from equilibrist.cli.main import main
 from equilibrist.control import Design, Margins, design, loop_at_input
 from equilibrist.control.linear import LinearController

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 
+import control
 import numpy as np
 import pytest
 import scipy.integrate
@@ -12,7 +13,6 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-import control
 from equilibrist.control import (
     controllability,
     design,

@@ -367,6 +367,7 @@ def test_the_accepted_hosts_are_the_loopback_names_and_the_bound_address():
 def _python_control_gain(design_msg, system_name, scales, rate):
     """The LQR gain of the same weights from python-control (an independent solver)."""
     import control
+
     from equilibrist import get_system
 
     system = get_system(system_name)
