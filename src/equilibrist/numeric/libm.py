@@ -333,8 +333,17 @@ def c_source(prefix: str = "", *, log: bool = False, exp: bool = False) -> str:
     the Python version. *prefix* goes before each function's name;
     ``eq_log`` only with *log* (an unused static function is a warning).
     """
-    p = prefix
-    body = f"""
+    body = _c_kernels(prefix) + _c_rem_pio2(prefix) + _c_sin_cos(prefix)
+    head = ("/* sin, cos, log of equilibrist.numeric.libm (fdlibm's kernels, as in musl): the\n"
+            " * simulation's bits on every CPU. Compile with -ffp-contract=off, never -ffast-math. */\n")
+    return (head + _c_constants() + "\n" + body + (_c_log(prefix) if log else "")
+            + (EXP_C.format(p=prefix) if exp else ""))
+
+
+def _c_kernels(p: str) -> str:
+    """fdlibm's sine and cosine kernels in C, ``{p}eq_ksin`` and ``{p}eq_kcos`` (*p*: the
+    prefix of the names)."""
+    return f"""
 static double {p}eq_ksin(double x, double y, int iy)
 {{
 {kernel_c("sin_poly", "double")}
@@ -348,7 +357,13 @@ static double {p}eq_kcos(double x, double y)
 {{
 {kernel_c("cos", "double")}
 }}
+"""
 
+
+def _c_rem_pio2(p: str) -> str:
+    """``{p}eq_rem_pio2``: the argument reduced by a multiple of pi/2 (into *y*), and
+    the multiple's last two bits."""
+    return f"""
 static int {p}eq_rem_pio2(double x, double *y)
 {{
     double fn = x * EQ_INVPIO2 + EQ_TOINT - EQ_TOINT;
@@ -387,7 +402,12 @@ static int {p}eq_rem_pio2(double x, double *y)
     }}
     return 0;
 }}
+"""
 
+
+def _c_sin_cos(p: str) -> str:
+    """``{p}eq_sin`` and ``{p}eq_cos``: the reduction, then the kernel its quadrant calls."""
+    return f"""
 static double {p}eq_sin(double x)
 {{
     double a = fabs(x);
@@ -442,7 +462,11 @@ static double {p}eq_cos(double x)
     return {p}eq_ksin(y[0], y[1], 1);
 }}
 """
-    log_body = f"""
+
+
+def _c_log(p: str) -> str:
+    """``{p}eq_log``: fdlibm's logarithm."""
+    return f"""
 static double {p}eq_log(double x)
 {{
     double m, f, hfsq, s, z, w, t1, t2, r, dk;
@@ -470,7 +494,3 @@ static double {p}eq_log(double x)
     return s * (hfsq + r) + dk * EQ_LN2_LO - hfsq + f + dk * EQ_LN2_HI;
 }}
 """
-    head = ("/* sin, cos, log of equilibrist.numeric.libm (fdlibm's kernels, as in musl): the\n"
-            " * simulation's bits on every CPU. Compile with -ffp-contract=off, never -ffast-math. */\n")
-    return (head + _c_constants() + "\n" + body + (log_body if log else "")
-            + (EXP_C.format(p=prefix) if exp else ""))
