@@ -141,7 +141,7 @@ def desktop_example(data: ControllerData) -> str:
     """
     nm = _names(data)
     real = nm("real")
-    N, M, P = (nm.macro(s) for s in ("N_STATES", "N_INPUTS", "N_MEASUREMENTS"))
+    M, P = nm.macro("N_INPUTS"), nm.macro("N_MEASUREMENTS")
     first = data.measured_names[0]
     first_unit = data.measured_units[0]
     fmt = "%.9g"
@@ -159,6 +159,49 @@ def desktop_example(data: ControllerData) -> str:
         "",
         f'#include "{nm.lower}.h"',
         "",
+        *_desktop_plant(data),
+        *_desktop_stdin(data),
+        "int main(int argc, char **argv)",
+        "{",
+        f"    {nm('state')} ctrl;",
+        f"    {real} y[{P}];",
+        f"    {real} u[{M}];",
+        "    long k;",
+        "    int i;",
+        '    if (argc > 1 && strcmp(argv[1], "-") == 0) {',
+        "        return run_stdin();",
+        "    }",
+        f'    printf("# %s\\n", {nm("version")}());',
+        f"    /* Start the model off the operating point: {first} moved by a little. */",
+        f"    plant[{nm('MEASURED_STATE')}[0]] = {_offset(data, first, first_unit)};",
+        f"    {nm('init')}(&ctrl);",
+        f"    for (k = 0; k <= (long)(3.0 * {nm.macro('SAMPLE_RATE')}); ++k) {{",
+        "        read_sensors(y);",
+        f"        {nm('step')}(&ctrl, y, NULL, u);",
+        "        write_motors(u);",
+        f'        printf("{fmt}", (double)k * {nm.macro("SAMPLE_PERIOD")});',
+        f"        for (i = 0; i < {P}; ++i) {{",
+        f'            printf(" {fmt}", (double)y[i]);',
+        "        }",
+        f"        for (i = 0; i < {M}; ++i) {{",
+        f'            printf(" {fmt}", (double)u[i]);',
+        "        }",
+        '        printf("\\n");',
+        "    }",
+        "    return 0;",
+        "}",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _desktop_plant(data: ControllerData) -> list[str]:
+    """The desktop example's robot, the exported linear model: ``read_sensors`` reads its
+    measured states, ``write_motors`` steps it with the command."""
+    nm = _names(data)
+    real = nm("real")
+    N, M, P = (nm.macro(s) for s in ("N_STATES", "N_INPUTS", "N_MEASUREMENTS"))
+    return [
         "/* The robot, here a linear model: state deviation from the operating point. */",
         f"static double plant[{N}];",
         "",
@@ -192,6 +235,17 @@ def desktop_example(data: ControllerData) -> str:
         "    }",
         "}",
         "",
+    ]
+
+
+def _desktop_stdin(data: ControllerData) -> list[str]:
+    """The desktop example's ``run_stdin``: measurements from standard input, one line per
+    sample, and the command printed for each."""
+    nm = _names(data)
+    real = nm("real")
+    M, P = nm.macro("N_INPUTS"), nm.macro("N_MEASUREMENTS")
+    fmt = "%.9g"
+    return [
         "static int run_stdin(void)",
         "{",
         f"    {nm('state')} ctrl;",
@@ -221,38 +275,7 @@ def desktop_example(data: ControllerData) -> str:
         "    }",
         "}",
         "",
-        "int main(int argc, char **argv)",
-        "{",
-        f"    {nm('state')} ctrl;",
-        f"    {real} y[{P}];",
-        f"    {real} u[{M}];",
-        "    long k;",
-        "    int i;",
-        '    if (argc > 1 && strcmp(argv[1], "-") == 0) {',
-        "        return run_stdin();",
-        "    }",
-        f'    printf("# %s\\n", {nm("version")}());',
-        f"    /* Start the model off the operating point: {first} moved by a little. */",
-        f"    plant[{nm('MEASURED_STATE')}[0]] = {_offset(data, first, first_unit)};",
-        f"    {nm('init')}(&ctrl);",
-        f"    for (k = 0; k <= (long)(3.0 * {nm.macro('SAMPLE_RATE')}); ++k) {{",
-        "        read_sensors(y);",
-        f"        {nm('step')}(&ctrl, y, NULL, u);",
-        "        write_motors(u);",
-        f'        printf("{fmt}", (double)k * {nm.macro("SAMPLE_PERIOD")});',
-        f"        for (i = 0; i < {P}; ++i) {{",
-        f'            printf(" {fmt}", (double)y[i]);',
-        "        }",
-        f"        for (i = 0; i < {M}; ++i) {{",
-        f'            printf(" {fmt}", (double)u[i]);',
-        "        }",
-        '        printf("\\n");',
-        "    }",
-        "    return 0;",
-        "}",
-        "",
     ]
-    return "\n".join(lines)
 
 
 def _offset(data: ControllerData, name: str, unit: str) -> str:
