@@ -42,6 +42,7 @@ from __future__ import annotations
 import math
 import types
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -73,6 +74,7 @@ from equilibrist.control.weights import (
 from equilibrist.errors import DesignError
 
 if TYPE_CHECKING:
+    from equilibrist.numeric.linear import LinearModel
     from equilibrist.numeric.system import System
 
 
@@ -146,6 +148,32 @@ def design(
     if not isinstance(system, _System):
         raise DesignError(f"system = {system!r}: expected a System (equilibrist.get_system(name)), "
                           f"not {type(system).__name__}")
+    discretization, kalman_form, rate_hz = _checked_options(
+        system, outputs=outputs, at=at, discretization=discretization, kalman_form=kalman_form,
+        rate=rate,
+    )
+    if system.n_inputs == 0:
+        raise DesignError(f"{system.key} has no input: there is no controller to design")
+    names = tuple(system.output_names if outputs is None else outputs)
+    plant = _operating_plant(system, names, at=at, rate_hz=rate_hz)
+    weights = _design_weights(system, plant, names, q=q, r=r, qn=qn, rn=rn, G=G, rate_hz=rate_hz)
+    return _solved(system, plant, names, weights, rate_hz=rate_hz,
+                   discretization=discretization, kalman_form=kalman_form)
+
+
+def _checked_options(
+    system: System,
+    *,
+    outputs: Sequence[str] | None,
+    at: Mapping[str, float] | None,
+    discretization: str,
+    kalman_form: str,
+    rate: float | None,
+) -> tuple[str, str, float | None]:
+    """The options of :func:`design` checked, every problem at once: the discretization and
+    Kalman form (the defaults in place of one that is not a string) and the rate in Hz.
+
+    Raises :class:`DesignError` naming every problem."""
     problems: list[str] = []
     if outputs is not None and (isinstance(outputs, str | bytes) or not isinstance(outputs, Sequence)
                                 or not all(isinstance(o, str) for o in outputs)):
@@ -188,10 +216,18 @@ def design(
                     f"rate must be a positive number of samples per second (Hz), got {rate_hz:g}"
                 )
     checks.raise_if(problems)
-    if system.n_inputs == 0:
-        raise DesignError(f"{system.key} has no input: there is no controller to design")
+    return discretization, kalman_form, rate_hz
 
-    names = tuple(system.output_names if outputs is None else outputs)
+
+def _operating_plant(
+    system: System, names: tuple[str, ...], *, at: Mapping[str, float] | None,
+    rate_hz: float | None,
+) -> LinearModel:
+    """*system* linearized with the outputs *names*, at its canonical operating point or at
+    the equilibrium with the states *at*; a rate too fast or too slow for it is refused.
+
+    Raises :class:`DesignError` for no output or a repeated one, no equilibrium at *at*, or
+    the rate."""
     if not names:
         raise DesignError("no measured outputs: the estimator needs at least one")
     repeated = sorted({n for n in names if names.count(n) > 1})
@@ -208,8 +244,7 @@ def design(
         plant = system.linearize(eq.x, eq.u, outputs=names)
     else:
         plant = system.linearize(outputs=names)
-    states, inputs = plant.state_names, plant.input_names
-    n, m = plant.n_states, plant.n_inputs
+    n = plant.n_states
     if rate_hz is not None and rate_hz > MAX_RATE:
         # Past this the sampled plant is the identity to double precision (an
         # input moves the state by ~dt^2 per sample) and every mode looks
@@ -229,8 +264,34 @@ def design(
                 f"{fastest:.4g} rad/s, changes by e^{fastest / rate_hz:.3g} within one sample; "
                 f"sample at {10 * fastest / (2 * math.pi):.3g} Hz or more"
             )
+    return plant
 
-    # Weights: defaults from the spec, or the user's; every problem at once.
+
+@dataclass(frozen=True)
+class _Weights:
+    """The weights of a design: LQR's ``Q``, ``R``; the noise intensities ``QN`` (on the
+    noise inputs ``G``) and ``RN``; and the notes on a process-noise floor."""
+
+    Q: np.ndarray
+    R: np.ndarray
+    QN: np.ndarray
+    RN: np.ndarray
+    G: np.ndarray
+    notes: tuple[str, ...]
+
+
+def _design_weights(
+    system: System, plant: LinearModel, names: tuple[str, ...], *, q: object | None,
+    r: object | None, qn: object | None, rn: object | None, G: object | None,
+    rate_hz: float | None,
+) -> _Weights:
+    """The weights: the user's, or the defaults from the spec (see the module docstring).
+
+    Raises :class:`DesignError` naming every problem at once (a missing design scale or
+    noise level, a weight that is not (semi)definite)."""
+    states, inputs = plant.state_names, plant.input_names
+    n = plant.n_states
+    problems: list[str] = []
     missing: list[str] = []
     Q = (
         _bryson(system, states, missing)
@@ -291,7 +352,19 @@ def design(
     else:
         QN = _weight(qn, "qn", noise_labels, definite=False, problems=problems)
     checks.raise_if(problems)
+    return _Weights(Q=Q, R=R, QN=QN, RN=RN, G=Gm, notes=notes)
 
+
+def _solved(
+    system: System, plant: LinearModel, names: tuple[str, ...], weights: _Weights, *,
+    rate_hz: float | None, discretization: str, kalman_form: str,
+) -> Design:
+    """The gains for *weights*, continuous or (with a rate) sampled: LQR, the Kalman filter,
+    the reference gain of the first ``m`` outputs (or why there is none), as a
+    :class:`Design`."""
+    states, inputs = plant.state_names, plant.input_names
+    n, m = plant.n_states, plant.n_inputs
+    Q, R, QN, RN, Gm = weights.Q, weights.R, weights.QN, weights.RN, weights.G
     tracked = names[:m] if len(names) >= m else ()
     Cr = plant.C[:m] if tracked else None
     Kc: np.ndarray | None = None
@@ -351,7 +424,7 @@ def design(
         Rd=Rd,
         tracked=tracked,
         estimator_poles=_sorted(Ef, discrete),
-        notes=notes,
+        notes=weights.notes,
     )
 
 
