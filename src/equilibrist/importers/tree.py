@@ -156,14 +156,70 @@ def read_tree(
     """
     mujoco = load_mujoco()
     model = compile_model(file)
-    where = file.name
+    problems = _unmodelled(model)
+    problems.extend(_not_finite(model, mujoco))
+    if problems:
+        raise DefinitionError(f"{file.name}: " + "; ".join(problems))
+    compiled_names = _joint_names(model, file)
+    order = _joint_order(model, file, compiled_names, joint_order)
+    position = {j: k for k, j in enumerate(order)}
+    joints = _joints(model, order, compiled_names)
+    bodies = _moving_bodies(model, file, position)
+    if actuators is None:
+        actuators = _motors(model, file, position)
+    sensors, ignored = _sensors(model, compiled_names)
+
+    # -- the operating point ---------------------------------------------------------------
+    data = mujoco.MjData(model)
+    key_name, qpos, qvel, ctrl = _keyframe(model)
+    model.opt.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_CONSTRAINT)
+    moved: list[tuple[str, float]] = []
+    key_is_equilibrium = _holds(model, data, qpos, qvel, ctrl)
+    if not key_is_equilibrium:
+        qpos, ctrl, moved = _nearest_equilibrium(model, data, qpos, qvel, ctrl, actuators, order, compiled_names)
+        key_is_equilibrium = _holds(model, data, qpos, qvel, ctrl)
+    data.qpos[:], data.qvel[:] = qpos, qvel
+    mujoco.mj_kinematics(model, data)
+    gravity = np.asarray(model.opt.gravity, float)
+    qpos_by_joint = tuple(float(qpos[int(model.jnt_qposadr[j])]) for j in order)
+    qvel_by_joint = tuple(float(qvel[int(model.jnt_dofadr[j])]) for j in order)
+
+    notes = ["contacts and joint limits (range) are not modelled: the model is the free motion "
+             "of the kinematic tree"]
+    limited = [j.name for j in joints if j.limited]
+    if limited:
+        notes.append(f"joints with a range that is not enforced: {', '.join(limited)}")
+    if ignored:
+        notes.append(f"sensors other than jointpos are not used: {', '.join(ignored)}")
+    return Tree(
+        model_name=_model_name(model, file),
+        bodies=tuple(bodies),
+        joints=tuple(joints),
+        actuators=actuators,
+        gravity=_vec(gravity),
+        sensors=tuple(sensors),
+        key_name=key_name,
+        key_qpos=qpos_by_joint,
+        key_qvel=qvel_by_joint,
+        key_ctrl=tuple(float(c) for c in ctrl) if len(ctrl) == len(actuators) else tuple(0.0 for _ in actuators),
+        vertical_hinges=_vertical_hinges(model, data, gravity, compiled_names),
+        key_is_equilibrium=key_is_equilibrium,
+        key_moved=tuple(moved),
+        authority=_authority(model, data, qpos, actuators, order),
+        linear=_linearization(model, data, qpos, qvel, ctrl, actuators, order),
+        notes=tuple(notes),
+    )
+
+
+def _unmodelled(model: mujoco.MjModel) -> list[str]:
+    """What the compiled model holds that equilibrist does not model, one line each."""
+    mujoco = load_mujoco()
     T = mujoco.mjtObj
     problems: list[str] = []
 
     def refuse(what: str) -> None:
         problems.append(what)
 
-    # -- elements equilibrist does not model ---------------------------------------
     for i in range(model.ntendon):
         refuse(f"tendon {_name(model, T.mjOBJ_TENDON, i) or i!r} is not modelled")
     for i in range(model.neq):
@@ -198,11 +254,13 @@ def read_tree(
                 refuse(f"joint {jname!r} has nonlinear damping (dampingpoly), which is not modelled")
             if np.any(model.jnt_stiffnesspoly[j] != 0):
                 refuse(f"joint {jname!r} has nonlinear stiffness (stiffnesspoly), which is not modelled")
-    problems.extend(_not_finite(model, mujoco))
-    if problems:
-        raise DefinitionError(f"{where}: " + "; ".join(problems))
+    return problems
 
-    # -- joints ----------------------------------------------------------------------
+
+def _joint_names(model: mujoco.MjModel, file: Path) -> list[str]:
+    """The names of the compiled model's joints, in its order; each must be an identifier."""
+    T = load_mujoco().mjtObj
+    where = file.name
     compiled_names = []
     for j in range(model.njnt):
         jname = _name(model, T.mjOBJ_JOINT, j)
@@ -213,6 +271,13 @@ def read_tree(
             )
         _identifier("joint", jname, file)
         compiled_names.append(jname)
+    return compiled_names
+
+
+def _joint_order(model: mujoco.MjModel, file: Path, compiled_names: list[str],
+                 joint_order: tuple[str, ...] | None) -> list[int]:
+    """The compiled model's joints (indices) in *joint_order*, or in the compiler's order."""
+    where = file.name
     order = list(range(model.njnt))
     if joint_order is not None:
         # The file's document order; MuJoCo expands a URDF planar joint into
@@ -227,7 +292,12 @@ def read_tree(
             return max(owners, key=lambda k: len(joint_order[k]))
 
         order = sorted(range(model.njnt), key=rank)
-    position = {j: k for k, j in enumerate(order)}
+    return order
+
+
+def _joints(model: mujoco.MjModel, order: list[int], compiled_names: list[str]) -> list[JointData]:
+    """The hinge and slide joints, in *order*."""
+    mujoco = load_mujoco()
     joints = []
     for j in order:
         dof, adr = int(model.jnt_dofadr[j]), int(model.jnt_qposadr[j])
@@ -243,8 +313,15 @@ def read_tree(
             armature=float(model.dof_armature[dof]),
             limited=bool(model.jnt_limited[j]),
         ))
+    return joints
 
-    # -- bodies: every body that moves (welded to a body with a joint) ------------------
+
+def _moving_bodies(model: mujoco.MjModel, file: Path, position: dict[int, int]) -> list[BodyData]:
+    """Every body that moves (welded to a body with a joint), parents first; *position*
+    maps a compiled joint's index to its place in the joints."""
+    mujoco = load_mujoco()
+    T = mujoco.mjtObj
+    where = file.name
     index: dict[int, int] = {}
     bodies: list[BodyData] = []
     for b in range(1, model.nbody):
@@ -291,12 +368,15 @@ def read_tree(
             inertia=tuple(_vec(r) for r in full),  # type: ignore[arg-type]
         ))
         index[b] = len(bodies) - 1
+    return bodies
 
-    # -- actuators -----------------------------------------------------------------------
-    if actuators is None:
-        actuators = _motors(model, file, position)
 
-    # -- sensors ---------------------------------------------------------------------------
+def _sensors(model: mujoco.MjModel,
+             compiled_names: list[str]) -> tuple[list[tuple[str, float | None]], list[str]]:
+    """The measured joints with their noise (None: the file gives none), and the names of
+    the sensors that are not joint positions (not used)."""
+    mujoco = load_mujoco()
+    T = mujoco.mjtObj
     sensors: list[tuple[str, float | None]] = []
     ignored: list[str] = []
     for s in range(model.nsensor):
@@ -307,10 +387,14 @@ def read_tree(
             sensors.append((compiled_names[j], noise if noise > 0 else None))
         else:
             ignored.append(sname)
+    return sensors, ignored
 
-    # -- the operating point ---------------------------------------------------------------
+
+def _keyframe(model: mujoco.MjModel) -> tuple[str | None, np.ndarray, np.ndarray, np.ndarray]:
+    """The operating point the file gives: the keyframe named ``balance``, else the first,
+    else the zero configuration (name None); its ``qpos``, ``qvel`` and ``ctrl``."""
+    T = load_mujoco().mjtObj
     key_name: str | None = None
-    data = mujoco.MjData(model)
     if model.nkey:
         k = 0
         for i in range(model.nkey):
@@ -325,15 +409,13 @@ def read_tree(
         qpos = np.zeros(model.nq)
         qvel = np.zeros(model.nv)
         ctrl = np.zeros(model.nu)
-    model.opt.disableflags |= int(D.mjDSBL_CONSTRAINT)
-    moved: list[tuple[str, float]] = []
-    key_is_equilibrium = _holds(model, data, qpos, qvel, ctrl)
-    if not key_is_equilibrium:
-        qpos, ctrl, moved = _nearest_equilibrium(model, data, qpos, qvel, ctrl, actuators, order, compiled_names)
-        key_is_equilibrium = _holds(model, data, qpos, qvel, ctrl)
-    data.qpos[:], data.qvel[:] = qpos, qvel
-    mujoco.mj_kinematics(model, data)
-    gravity = np.asarray(model.opt.gravity, float)
+    return key_name, qpos, qvel, ctrl
+
+
+def _vertical_hinges(model: mujoco.MjModel, data: mujoco.MjData, gravity: np.ndarray,
+                     compiled_names: list[str]) -> tuple[str, ...]:
+    """The hinges whose axis is vertical in *data*'s pose (gravity does no work along them)."""
+    mujoco = load_mujoco()
     vertical: list[str] = []
     g_norm = float(np.linalg.norm(gravity))
     for j in range(model.njnt):
@@ -341,34 +423,7 @@ def read_tree(
             axis = np.asarray(data.xaxis[j], float)
             if abs(abs(float(axis @ gravity)) / g_norm - 1.0) < 1e-9:
                 vertical.append(compiled_names[j])
-    qpos_by_joint = tuple(float(qpos[int(model.jnt_qposadr[j])]) for j in order)
-    qvel_by_joint = tuple(float(qvel[int(model.jnt_dofadr[j])]) for j in order)
-
-    notes = ["contacts and joint limits (range) are not modelled: the model is the free motion "
-             "of the kinematic tree"]
-    limited = [j.name for j in joints if j.limited]
-    if limited:
-        notes.append(f"joints with a range that is not enforced: {', '.join(limited)}")
-    if ignored:
-        notes.append(f"sensors other than jointpos are not used: {', '.join(ignored)}")
-    return Tree(
-        model_name=_model_name(model, file),
-        bodies=tuple(bodies),
-        joints=tuple(joints),
-        actuators=actuators,
-        gravity=_vec(gravity),
-        sensors=tuple(sensors),
-        key_name=key_name,
-        key_qpos=qpos_by_joint,
-        key_qvel=qvel_by_joint,
-        key_ctrl=tuple(float(c) for c in ctrl) if len(ctrl) == len(actuators) else tuple(0.0 for _ in actuators),
-        vertical_hinges=tuple(vertical),
-        key_is_equilibrium=key_is_equilibrium,
-        key_moved=tuple(moved),
-        authority=_authority(model, data, qpos, actuators, order),
-        linear=_linearization(model, data, qpos, qvel, ctrl, actuators, order),
-        notes=tuple(notes),
-    )
+    return tuple(vertical)
 
 
 def _motors(model: mujoco.MjModel, file: Path,
