@@ -1,16 +1,14 @@
 """The vector environment's lanes (native/lanes.py): eight copies at once in AVX-512, the
 bits of one copy at a time.
 
-Independent truths: the same environment stepped one copy at a time (the core without
-lanes), and, for the lanes' sine and cosine, libm's scalar eq_sin/eq_cos over every range
-(first range, reduced, tiny, signed zeros, near multiples of pi/2, huge, NaN), compiled apart.
+Independent truth: the same environment stepped one copy at a time (the core without
+lanes). The lanes' C on its own (a widened dynamics, the lanes' sine and cosine) is tested in
+tests/native/test_native_lanes.py.
 """
 
 from __future__ import annotations
 
 import functools
-import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +17,6 @@ import pytest
 from equilibrist.envs import vector as vector_module
 from equilibrist.envs.vector import EquilibristVectorEnv
 from equilibrist.native import lanes
-from equilibrist.numeric import libm
 
 
 def _avx512() -> bool:
@@ -63,57 +60,3 @@ def test_lanes_give_the_bits_of_one_copy_at_a_time(monkeypatch, system, task, op
     ended = sum(int(t.sum()) for t in fast[3::5])
     if task == "balance":
         assert ended > 0  # autoresets happened inside the blocks
-
-
-def test_a_dynamics_with_a_branch_is_not_widened() -> None:
-    from equilibrist.native import pyc
-
-    source = ("def f(x, u, p, out):\n    if x[0] > 0.0:\n        out[0] = x[1]\n"
-              "    else:\n        out[0] = -x[1]\n")
-    module = pyc.Module(source, prefix="t_")
-    assert lanes.widen(module.function("f", ("F1", "F1", "F1", "F1"))) is None
-    straight = pyc.Module("def f(x, u, p, out):\n    a = x[0]\n    out[0] = eq_sin(a) * eq_cos(a)\n",
-                          prefix="t_")
-    widened = lanes.widen(straight.function("f", ("F1", "F1", "F1", "F1")))
-    assert widened is not None and "eqv_sincos(" in widened and "double" not in widened
-
-
-HARNESS = r"""
-static uint64_t st = 88172645463325252ull;
-static double rnd(void) { st ^= st << 13; st ^= st >> 7; st ^= st << 17;
-                          return (double)(st >> 11) * (1.0 / 9007199254740992.0); }
-int main(void) {
-    long bad = 0; int k, l;
-    const double scales[] = {1e-9, 1e-7, 0.5, 0.8, 2.0, 10.0, 1e3, 1e5, 1e7, 1e300};
-    for (k = 0; k < 400000; k++) {
-        eqv x, s, c;
-        for (l = 0; l < EQ_LANES; l++) x[l] = (2 * rnd() - 1) * scales[(k + l) % 10];
-        if (k % 100 == 0) x[k % EQ_LANES] = 1.5707963267948966 * (k % 7);
-        if (k % 99 == 0) x[k % EQ_LANES] = -0.0;
-        if (k % 97 == 0) x[k % EQ_LANES] = NAN;
-        if (k % 3 == 0) for (l = 0; l < EQ_LANES; l++) x[l] = (2 * rnd() - 1) * 0.78;
-        eqv_sincos(x, &s, &c);
-        for (l = 0; l < EQ_LANES; l++) {
-            double a = eq_sin(x[l]), b = eq_cos(x[l]);
-            bad += memcmp(&a, &s[l], 8) != 0 || memcmp(&b, &c[l], 8) != 0;
-        }
-    }
-    printf("%ld\n", bad);
-    return 0;
-}
-"""
-
-
-def test_the_lanes_sine_and_cosine_are_libms_to_the_bit(tmp_path: Path) -> None:
-    if shutil.which("gcc") is None:
-        pytest.fail("gcc is needed (CI installs it)")
-    # Compiled for AVX-512 where the CPU has it (as the lanes run), else for the machine's
-    # baseline (GCC's vector operations lane by lane: the same arithmetic).
-    target = lanes._PUSH_POP if _avx512() else "#define EQ_LANES_PUSH\n#define EQ_LANES_POP\n"
-    text = ("#include <math.h>\n#include <stdint.h>\n#include <stdio.h>\n#include <string.h>\n"
-            + libm.c_source() + target + lanes.PRELUDE + HARNESS)
-    (tmp_path / "t.c").write_text(text)
-    subprocess.run(["gcc", "-std=gnu99", "-O2", "-ffp-contract=off", "-fno-math-errno", "t.c",
-                    "-o", "t", "-lm"], cwd=tmp_path, check=True, capture_output=True)
-    out = subprocess.run([str(tmp_path / "t")], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "0"
