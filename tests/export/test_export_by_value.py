@@ -81,7 +81,7 @@ def test_a_design_controller_is_the_design_library_until_it_is_changed(
     writer.export_controller(as_made, tmp_path / "design", system=system)
     assert (tmp_path / "design" / "cartpole_lqg.h").exists()  # the design's documented library
     moved = as_made.start_at(np.array([0.1, 0.05, 0.0, 0.0]))  # started elsewhere: another value
-    assert writer._design_form(moved) is None and writer._design_form(as_made) == "lqg"
+    assert not writer.made_by_design(moved) and writer.made_by_design(as_made)
     writer.export_controller(moved, tmp_path / "moved", system=system)
     assert not (tmp_path / "moved" / "cartpole_lqg.h").exists()
     assert " 0 mismatches" in _make_check(tmp_path / "moved")

@@ -13,7 +13,7 @@ import argparse
 import sys
 
 from equilibrist.cli import common
-from equilibrist.errors import UsageError
+from equilibrist.errors import ExportError, UsageError
 
 _EPILOG = """\
 --mode lockstep (default): the simulator waits for each answer; the run equals
@@ -58,30 +58,6 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.set_defaults(func=run)
 
 
-def design_id(kind: str, controller: object) -> str:
-    """The design id the export of *controller* carries (what the device reports): by the
-    value's form, as the export writes it (an LQR/LQG design's library, the MPC, any
-    nonlinear controller translated to C)."""
-    from equilibrist.control.linear import LinearController
-    from equilibrist.control.nonlinear import NonlinearController
-
-    if isinstance(controller, LinearController) and controller.design is not None:
-        from equilibrist.export.data import from_design
-
-        return from_design(controller.design, controller=kind).fingerprint
-    if isinstance(controller, NonlinearController):
-        from equilibrist.export.nonlinear_c import design_id as nonlinear_id
-
-        return nonlinear_id(controller)
-    from equilibrist.control.mpc_runtime import MPCRuntime
-
-    if isinstance(controller, MPCRuntime):
-        from equilibrist.export.mpc_c import design_id as mpc_id
-
-        return mpc_id(controller)
-    raise UsageError(f"--controller {kind}: there is no exported controller to run on a device")
-
-
 def run(args: argparse.Namespace) -> int:
     from equilibrist.cli.simulate import (
         build_run,
@@ -92,6 +68,8 @@ def run(args: argparse.Namespace) -> int:
         start_of,
     )
     from equilibrist.control.controller import measured_outputs
+    from equilibrist.controllers import kinds
+    from equilibrist.export.writer import design_id
     from equilibrist.hil.link import SerialLink
     from equilibrist.hil.protocol import Hello
     from equilibrist.hil.run import DeviceController, run_hil
@@ -106,16 +84,21 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--baud {args.baud!r}: expected a whole number of bits per second") from None
     if not 50 <= baud <= 20_000_000:
         raise UsageError(f"--baud {baud}: expected 50 to 20000000 bits per second")
-    if getattr(args, "controller", None) == "none":
-        raise UsageError("--controller none is the open loop: there is no controller on a device")
+    kind = kinds.get(args.controller or "lqg")
+    if kind.open_loop:
+        raise UsageError(f"--controller {kind.name} is the open loop: there is no controller "
+                         "on a device")
     system, options = build_run(args)
-    kind = args.controller or "lqg"
     simulated = options.pop("controller")
+    try:
+        controller_id = design_id(simulated)
+    except ExportError as exc:
+        raise UsageError(f"--controller {kind.name}: {exc}") from None
     outputs = measured_outputs(simulated) or tuple(system.spec.outputs)
     nr = 0 if options.get("reference") is None else len(getattr(simulated, "tracked_names", ()))
     host = Hello(real_size=8 if args.payload == "float64" else 4, n=system.n_states,
                  m=system.n_inputs, p=len(outputs), references=nr, estimate=0,
-                 rate=float(options["rate"]), controller_id=design_id(kind, simulated))
+                 rate=float(options["rate"]), controller_id=controller_id)
     options["outputs"] = None
     with SerialLink(args.port, baudrate=baud) as link:
         device = DeviceController(link, host, outputs=tuple(outputs),

@@ -29,7 +29,7 @@ from equilibrist.export.data import ControllerData
 def _header_comment(data: ControllerData, *, version: str, precision: str,
                     title: str, param_table: Sequence[tuple[str, float, str, str]]) -> str:
     nm = _names(data)
-    kind = "LQG (Kalman filter and LQR state feedback)" if data.controller == "lqg" else (
+    kind = "LQG (Kalman filter and LQR state feedback)" if data.filtered else (
         "LQR state feedback (full state measured)"
     )
     lines = [
@@ -66,7 +66,7 @@ def _header_comment(data: ControllerData, *, version: str, precision: str,
     lines.append(
         f"Sample period {data.dt:.10g} s ({data.rate:.10g} Hz), "
         f"discretization {data.settings.get('discretization', 'zoh')}"
-        + (f", Kalman form {data.form}" if data.controller == "lqg" else "")
+        + (f", Kalman form {data.form}" if data.filtered else "")
         + f", arithmetic in {precision}."
     )
     lines.append("Design weights:")
@@ -83,13 +83,13 @@ def _header_comment(data: ControllerData, *, version: str, precision: str,
         lines.extend(f"      {t}" for t in text[1:])
     lines.append("")
     lines.append("Equations, in deviations from the operating point (dy = y - Y0, du = u - U0):")
-    if data.controller == "lqg" and data.form == "current":
+    if data.form == "current":
         lines += [
             "  xhat = z + KF (dy - C z)            correct the prediction z with the measurements",
             "  u    = U0 - K xhat + KC (r - R0)     feedback, then saturated to [U_MIN, U_MAX]",
             "  z    = AD xhat + BD (u - U0)         predict the next sample with the applied u",
         ]
-    elif data.controller == "lqg":
+    elif data.filtered:
         lines += [
             "  xhat = z                             the prediction made at the last sample",
             "  u    = U0 - K xhat + KC (r - R0)     feedback, then saturated to [U_MIN, U_MAX]",
@@ -102,7 +102,7 @@ def _header_comment(data: ControllerData, *, version: str, precision: str,
         ]
     if not data.n_references:
         lines.append("  (no KC, R0: the design has no reference gain)")
-    if data.controller == "lqg":
+    if data.filtered:
         lines.append("The prediction assumes the returned u acts from this sample to the next: apply it")
         lines.append("right away (a command held back one sample makes the estimate wrong).")
     lines += [
@@ -116,11 +116,7 @@ def _header_comment(data: ControllerData, *, version: str, precision: str,
 def header(data: ControllerData, *, precision: str, version: str, title: str = "",
            param_table: Sequence[tuple[str, float, str, str]] = ()) -> str:
     """The library's header ``<name>.h``."""
-    nm = _names(data)
-    real = nm("real")
-    guard = nm.macro("H")
-    rate = data.rate
-    period_us = round(data.dt * 1e6)
+    guard = _names(data).macro("H")
     lines = [
         _header_comment(data, version=version, precision=precision, title=title,
                         param_table=param_table),
@@ -133,6 +129,19 @@ def header(data: ControllerData, *, precision: str, version: str, title: str = "
         'extern "C" {',
         "#endif",
         "",
+        *_header_macros(data, precision=precision, version=version),
+        *_header_declarations(data, precision=precision),
+        *_header_linear_form(data),
+        *_header_functions(data),
+    ]
+    return "\n".join(lines)
+
+
+def _header_macros(data: ControllerData, *, precision: str, version: str) -> list[str]:
+    """The header's macros: the sizes, the sample period, what the controller is, and the
+    index of each state, measurement, input and reference."""
+    nm = _names(data)
+    return [
         f"#define {nm.macro('N_STATES')} {data.n_states}",
         f"#define {nm.macro('N_INPUTS')} {data.n_inputs}",
         f"#define {nm.macro('N_MEASUREMENTS')} {data.n_measured}",
@@ -142,8 +151,8 @@ def header(data: ControllerData, *, precision: str, version: str, title: str = "
         "",
         "/* Sample period [s] and rate [Hz]; the period in microseconds for timer loops. */",
         f"#define {nm.macro('SAMPLE_PERIOD')} {literal(data.dt, 'double')}",
-        f"#define {nm.macro('SAMPLE_RATE')} {literal(rate, 'double')}",
-        f"#define {nm.macro('SAMPLE_PERIOD_US')} {period_us}UL",
+        f"#define {nm.macro('SAMPLE_RATE')} {literal(data.rate, 'double')}",
+        f"#define {nm.macro('SAMPLE_PERIOD_US')} {round(data.dt * 1e6)}UL",
         "",
         "/* What this controller is, for the firmware to report. */",
         f"#define {nm.macro('GENERATOR')} {_c_string(version)}",
@@ -157,6 +166,15 @@ def header(data: ControllerData, *, precision: str, version: str, title: str = "
         *_index_macros(nm, "U", data.input_names),
         *_index_macros(nm, "R", data.tracked_names),
         "",
+    ]
+
+
+def _header_declarations(data: ControllerData, *, precision: str) -> list[str]:
+    """The header's types (the real type, the controller's memory) and its constants: the
+    operating point, the limits, the plant and the gains."""
+    nm = _names(data)
+    real = nm("real")
+    lines = [
         f"typedef {precision} {real};",
         "",
         "/* The controller's memory: one per controller, no dynamic allocation. */",
@@ -190,7 +208,7 @@ def header(data: ControllerData, *, precision: str, version: str, title: str = "
         f"extern const {real} {nm('C')}[{nm.macro('N_MEASUREMENTS')}][{nm.macro('N_STATES')}];",
         f"extern const {real} {nm('K')}[{nm.macro('N_INPUTS')}][{nm.macro('N_STATES')}];",
     ]
-    if data.controller == "lqg":
+    if data.filtered:
         lines.append(
             f"extern const {real} {nm('KF')}[{nm.macro('N_STATES')}][{nm.macro('N_MEASUREMENTS')}];"
         )
@@ -198,8 +216,16 @@ def header(data: ControllerData, *, precision: str, version: str, title: str = "
         lines.append(
             f"extern const {real} {nm('KC')}[{nm.macro('N_INPUTS')}][{nm.macro('N_REFERENCES')}];"
         )
-    packed = deviation_vector(data.form_controller)
-    lines += [
+    return lines
+
+
+def _header_linear_form(data: ControllerData) -> list[str]:
+    """The header's controller as one linear form: the packed vector ``LINEAR`` and a
+    pointer into it for each of its matrices."""
+    nm = _names(data)
+    real = nm("real")
+    packed = deviation_vector(data.linear)
+    lines = [
         "",
         "/* The controller as one linear form (what step runs), matrices row-major:",
         " *   u  = U0 + CC z + DY (y - Y0) + DR (r - R0), then saturated",
@@ -217,7 +243,14 @@ def header(data: ControllerData, *, precision: str, version: str, title: str = "
             at = int(packed[LINEAR_HEADER.index(label)])
             lines.append(f"#define {nm(label.upper())} ({nm('LINEAR')} + {at})"
                          f"  /* {rows} x {cols} */")
-    lines += [
+    return lines
+
+
+def _header_functions(data: ControllerData) -> list[str]:
+    """The header's functions (init, init_at, step, estimate, version), and its end."""
+    nm = _names(data)
+    real = nm("real")
+    return [
         "",
         "/* Start at the operating point (estimate zero deviation). */",
         f"void {nm('init')}({nm('state')} *s);",
@@ -246,17 +279,27 @@ def header(data: ControllerData, *, precision: str, version: str, title: str = "
         "}",
         "#endif",
         "",
-        f"#endif /* {guard} */",
+        f"#endif /* {nm.macro('H')} */",
         "",
     ]
-    return "\n".join(lines)
 
 
 def source(data: ControllerData, *, precision: str, version: str) -> str:
     """The library's source ``<name>.c``: constants and the four functions."""
+    lines = [
+        *_source_constants(data, precision=precision, version=version),
+        *_source_version(data, precision=precision, version=version),
+        *_source_init(data, precision=precision),
+        *_source_estimate(data),
+        *_source_step(data),
+    ]
+    return "\n".join(lines)
+
+
+def _source_constants(data: ControllerData, *, precision: str, version: str) -> list[str]:
+    """The source's first line, its include, and the constants the header declares."""
     nm = _names(data)
     real = nm("real")
-    zero = literal(0.0, precision)
     N, M, P, NR = (nm.macro(s) for s in ("N_STATES", "N_INPUTS", "N_MEASUREMENTS", "N_REFERENCES"))
     meas_idx = ", ".join(str(i) for i in data.measured_index)
     lines = [
@@ -279,19 +322,25 @@ def source(data: ControllerData, *, precision: str, version: str) -> str:
         f"const {real} {nm('C')}[{P}][{N}] = {_matrix(data.C, precision)};",
         f"const {real} {nm('K')}[{M}][{N}] = {_matrix(data.K, precision)};",
     ]
-    if data.controller == "lqg":
+    if data.filtered:
         lines.append(f"const {real} {nm('KF')}[{N}][{P}] = {_matrix(data.Kf, precision)};")
     if data.n_references:
         lines.append(f"const {real} {nm('KC')}[{M}][{NR}] = {_matrix(data.Kc, precision)};")
-    packed = deviation_vector(data.form_controller)
+    packed = deviation_vector(data.linear)
     lines.append(f"const {real} {nm('LINEAR')}[{nm.macro('N_LINEAR')}] = "
                  f"{_vector(packed, precision)};")
+    return lines
+
+
+def _source_version(data: ControllerData, *, precision: str, version: str) -> list[str]:
+    """The linear library's C (what step runs), then the version text and its function."""
+    nm = _names(data)
     version_line = (
         f"{nm.lower} ({version}, design {data.fingerprint}): {_settings_string(data, precision)}"
     )
     sizes = {"nz": data.n_z, "ny": data.n_measured, "nr": data.n_references,
              "m": data.n_inputs, "n": data.n_states}
-    lines += [
+    return [
         "",
         "#include <stdint.h>",
         linear_c(sizes, precision),
@@ -302,12 +351,24 @@ def source(data: ControllerData, *, precision: str, version: str) -> str:
         f"    return {nm('version_text')};",
         "}",
         "",
+    ]
+
+
+def _source_init(data: ControllerData, *, precision: str) -> list[str]:
+    """``init`` (at the operating point) and ``init_at`` (from an estimate of the state).
+
+    Raises :class:`ExportError` when the controller's state is not the state estimate."""
+    nm = _names(data)
+    real = nm("real")
+    zero = literal(0.0, precision)
+    N, M = nm.macro("N_STATES"), nm.macro("N_INPUTS")
+    lines = [
         f"void {nm('init')}({nm('state')} *s)",
         "{",
         "    int i;",
     ]
     if data.n_z:
-        z0 = np.asarray(data.form_controller.z0)
+        z0 = np.asarray(data.linear.z0)
         if np.any(z0 != 0):
             lines.append(f"    static const {real} z0[{nm.macro('N_Z')}] = {_vector(z0, precision)};")
         lines += [
@@ -337,7 +398,7 @@ def source(data: ControllerData, *, precision: str, version: str) -> str:
     ]
     if data.n_z:
         # z = state_map (x - x0): the state map of an LQG form is the identity.
-        smap = np.asarray(data.form_controller.state_map)
+        smap = np.asarray(data.linear.state_map)
         if smap.shape == (data.n_states, data.n_states) and np.array_equal(smap, np.eye(data.n_states)):
             lines += [
                 f"    for (i = 0; i < {N}; ++i) {{",
@@ -349,7 +410,16 @@ def source(data: ControllerData, *, precision: str, version: str) -> str:
     lines += [
         "}",
         "",
-        f"void {nm('estimate')}(const {nm('state')} *s, {real} x[{N}])",
+    ]
+    return lines
+
+
+def _source_estimate(data: ControllerData) -> list[str]:
+    """``estimate``: the state estimate behind the last step, absolute units."""
+    nm = _names(data)
+    N = nm.macro("N_STATES")
+    return [
+        f"void {nm('estimate')}(const {nm('state')} *s, {nm('real')} x[{N}])",
         "{",
         "    int i;",
         f"    for (i = 0; i < {N}; ++i) {{",
@@ -357,6 +427,16 @@ def source(data: ControllerData, *, precision: str, version: str) -> str:
         "    }",
         "}",
         "",
+    ]
+
+
+def _source_step(data: ControllerData) -> list[str]:
+    """``step``: the estimate and the command from the linear form, the command saturated,
+    then the controller's next state with the command applied."""
+    nm = _names(data)
+    real = nm("real")
+    N, M, P, NR = (nm.macro(s) for s in ("N_STATES", "N_INPUTS", "N_MEASUREMENTS", "N_REFERENCES"))
+    lines = [
         f"int {nm('step')}({nm('state')} *s, const {real} y[{P}], const {real} *r, {real} u[{M}])",
         "{",
         "    int i;",
@@ -409,11 +489,11 @@ def source(data: ControllerData, *, precision: str, version: str) -> str:
         "}",
         "",
     ]
-    return "\n".join(lines)
+    return lines
 
 
 def _form_shapes(data: ControllerData) -> list[tuple[str, int, int]]:
     """``(name, rows, columns)`` of each matrix of the linear form."""
-    lin = data.form_controller
+    lin = data.linear
     return [(label, int(np.shape(getattr(lin, label))[0]), int(np.shape(getattr(lin, label))[1]))
             for label in ("Ac", "By", "Br", "Bu", "Cc", "Dy", "Dr", "Ez", "Ey")]

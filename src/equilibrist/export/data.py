@@ -1,10 +1,12 @@
 """What an exported controller is made of: the numbers and names of a digital controller.
 
-:class:`ControllerData` is taken from a design (the control layer's
-``Design``) and holds exactly what the generated C code needs, already
-checked: sizes, finite values, input limits around the operating input.
-Everything downstream (the C text, the test vectors, the ctypes wrapper)
-reads this one object, so the numbers that ship are the numbers that were
+:class:`ControllerData` is a view of the one controller value the
+simulation runs, a :class:`~equilibrist.control.linear.LinearController`
+made by its design (:func:`of_controller`, or :func:`from_design` from the
+design), checked for what the generated C code needs: sizes, finite values,
+input limits around the operating input. Everything downstream (the C
+text, the test vectors, the ctypes wrapper, the hardware-in-the-loop
+files) reads it, so the numbers that ship are the numbers that were
 simulated.
 
 The controller is the one the simulation core runs: the design's
@@ -92,82 +94,154 @@ def c_identifier(text: str) -> str:
 
 @dataclass(frozen=True, eq=False)
 class ControllerData:
-    """A digital controller ready to be written as C.
+    """A digital controller ready to be written as C: the one linear controller the
+    simulation runs (:attr:`linear`, made by its design) and what the C text adds to it
+    (units, the design's parameters, weights and settings, for the record).
 
-    All matrices are float64 arrays; vectors are 1-D. Sizes: ``n`` states,
-    ``m`` inputs, ``p`` measurements (the full state for ``lqr``), ``nr``
+    Every number is read from :attr:`linear` (and, for what the header documents but
+    the step does not run, the plant and gains of the design it carries): this is a
+    view of the controller, not a second record of it. Sizes: ``n`` states, ``m``
+    inputs, ``p`` measurements (the full state without a Kalman filter), ``nr``
     references (``m`` when the design has a reference gain, else 0).
 
     Attributes
     ----------
+    linear:
+        The controller (what the C step runs), with its discrete design.
     system:
         The system's key (``cartpole``).
-    controller:
-        ``"lqg"`` or ``"lqr"``.
-    form:
-        Kalman form ``"current"`` or ``"predictor"`` (``lqg``); ``""`` for ``lqr``.
-    dt:
-        Sample period [s].
-    x0, u0:
-        Operating point (absolute state and input).
-    y0, r0:
-        Measurements and tracked outputs at the operating point.
-    Ad, Bd, C:
-        Discrete plant and measurement matrix (``C`` selects the measured states).
-    K, Kf, Kc:
-        State feedback (``m x n``), estimator gain (``n x p``, zero-sized for
-        ``lqr``), reference gain (``m x nr``).
-    u_min, u_max:
-        Input limits the controller saturates to.
+    state_units, input_units:
+        Units of the states and inputs (``""`` where unknown).
     params:
         The system's parameter values the design was made with.
     weights:
         The design weights (``Q``, ``R``, ``QN``, ``RN``, ``G``) for the record.
     settings:
         The generating settings (rate, discretization, Kalman form, ...).
-    linear:
-        The controller as the one linear form (what the C step runs).
     """
 
+    linear: LinearController
     system: str
-    controller: str
-    form: str
-    dt: float
-    state_names: tuple[str, ...]
     state_units: tuple[str, ...]
-    input_names: tuple[str, ...]
     input_units: tuple[str, ...]
-    measured_names: tuple[str, ...]
-    measured_units: tuple[str, ...]
-    tracked_names: tuple[str, ...]
-    x0: np.ndarray
-    u0: np.ndarray
-    y0: np.ndarray
-    r0: np.ndarray
-    Ad: np.ndarray
-    Bd: np.ndarray
-    C: np.ndarray
-    K: np.ndarray
-    Kf: np.ndarray
-    Kc: np.ndarray
-    u_min: np.ndarray
-    u_max: np.ndarray
     params: Mapping[str, float] = field(default_factory=dict)
     weights: Mapping[str, np.ndarray] = field(default_factory=dict)
     settings: Mapping[str, str] = field(default_factory=dict)
-    linear: LinearController | None = field(default=None, repr=False)
 
     @property
-    def form_controller(self) -> LinearController:
-        """:attr:`linear`, which :func:`from_design` always fills in."""
-        if self.linear is None:
-            raise ExportError("the controller data has no linear form")
-        return self.linear
+    def design(self) -> Design:
+        """The discrete design :attr:`linear` was made from (:func:`of_controller` checks it)."""
+        design = self.linear.design
+        if design is None or design.discrete is None or design.dt is None:
+            raise ExportError("the controller has no discrete design to export")
+        return design
+
+    @property
+    def controller(self) -> str:
+        """The controller's form as :meth:`LinearController.from_design` names it (``"lqg"``,
+        ``"lqr"``): the library's name and C prefix end with it."""
+        return self.linear.kind
+
+    @property
+    def form(self) -> str:
+        """The Kalman form (``"current"``, ``"predictor"``), ``""`` without a Kalman filter."""
+        return self.linear.form
+
+    @property
+    def filtered(self) -> bool:
+        """Whether a Kalman filter estimates the state from the measurements."""
+        return bool(self.linear.form)
+
+    @property
+    def dt(self) -> float:
+        """Sample period [s]."""
+        return float(self.design.dt)  # type: ignore[arg-type]  # checked by design
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return self.linear.state_names
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return self.linear.input_names
+
+    @property
+    def measured_names(self) -> tuple[str, ...]:
+        return self.linear.output_names
+
+    @property
+    def tracked_names(self) -> tuple[str, ...]:
+        return self.linear.tracked_names
+
+    @property
+    def measured_units(self) -> tuple[str, ...]:
+        return tuple(self.state_units[i] for i in self.measured_index)
+
+    @property
+    def x0(self) -> np.ndarray:
+        """Operating state (absolute)."""
+        return self.linear.x_op
+
+    @property
+    def u0(self) -> np.ndarray:
+        """Operating input (absolute)."""
+        return self.linear.u_op
+
+    @property
+    def y0(self) -> np.ndarray:
+        """Measurements at the operating point."""
+        return _readonly(self.C @ self.x0)
+
+    @property
+    def r0(self) -> np.ndarray:
+        """Tracked outputs at the operating point."""
+        return self.linear.r_op
+
+    @property
+    def Ad(self) -> np.ndarray:
+        """The design's discrete plant matrix."""
+        return _readonly(np.array(self.design.discrete.A, dtype=float))  # type: ignore[union-attr]
+
+    @property
+    def Bd(self) -> np.ndarray:
+        """The design's discrete input matrix."""
+        return _readonly(np.array(self.design.discrete.B, dtype=float))  # type: ignore[union-attr]
+
+    @property
+    def C(self) -> np.ndarray:
+        """The measurement matrix: a selection of the states."""
+        return _readonly(np.eye(self.n_states)[list(self.measured_index)].reshape(
+            self.n_measured, self.n_states))
+
+    @property
+    def K(self) -> np.ndarray:
+        """The state feedback (``m x n``) of the design."""
+        return _readonly(np.array(self.design.K, dtype=float))
+
+    @property
+    def Kf(self) -> np.ndarray:
+        """The Kalman filter's gain (``n x p``; zero-sized without a filter)."""
+        if not self.filtered:
+            return _readonly(np.zeros((self.n_states, 0)))
+        return _readonly(np.array(self.design.Kf, dtype=float))
+
+    @property
+    def Kc(self) -> np.ndarray:
+        """The reference gain (``m x nr``): the controller's ``Dr``."""
+        return self.linear.Dr
+
+    @property
+    def u_min(self) -> np.ndarray:
+        return _limit(self.linear.u_min)
+
+    @property
+    def u_max(self) -> np.ndarray:
+        return _limit(self.linear.u_max)
 
     @property
     def n_z(self) -> int:
         """States of the controller (the Kalman prediction; 0 for LQR)."""
-        return self.form_controller.n_z
+        return self.linear.n_z
 
     @property
     def n_states(self) -> int:
@@ -192,8 +266,8 @@ class ControllerData:
 
     @property
     def measured_index(self) -> tuple[int, ...]:
-        """Index of the state each measurement reads (``C`` is a selection matrix)."""
-        return tuple(int(np.argmax(np.abs(row))) for row in self.C)
+        """Index of the state each measurement reads."""
+        return tuple(self.state_names.index(o) for o in self.measured_names)
 
     @property
     def name(self) -> str:
@@ -213,6 +287,17 @@ class ControllerData:
                     self.Kf, self.Kc, self.u_min, self.u_max):
             h.update(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
         return h.hexdigest()[:12]
+
+
+def _readonly(arr: np.ndarray) -> np.ndarray:
+    arr.setflags(write=False)
+    return arr
+
+
+def _limit(arr: np.ndarray | None) -> np.ndarray:
+    if arr is None:  # LinearController fills its limits in
+        raise ExportError("the controller has no input limits")
+    return arr
 
 
 def _array(value: object, name: str, shape: tuple[int, ...], problems: list[str]) -> np.ndarray:
@@ -241,20 +326,17 @@ def _units(names: tuple[str, ...], default: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def from_design(design: Design, *, controller: str = "lqg") -> ControllerData:
-    """The :class:`ControllerData` of a design.
+    """The :class:`ControllerData` of a design's controller.
 
     Parameters
     ----------
     design:
-        A control-layer ``Design`` (``equilibrist.control``): its discrete
-        plant, gains, operating point, weights and settings are read.
+        A control-layer ``Design``: its controller (with its reference gain when it has
+        one) is :meth:`LinearController.from_design`'s, limited to the parameters'
+        input limits.
     controller:
         ``"lqg"`` (measurements through the Kalman filter) or ``"lqr"``
         (the full state measured, no estimator).
-
-    Returns
-    -------
-    ControllerData
 
     Raises
     ------
@@ -264,138 +346,135 @@ def from_design(design: Design, *, controller: str = "lqg") -> ControllerData:
         input outside the input limits. Every problem is named at once.
     """
     check_controller(controller)
-    plant = design.plant
-    discrete = design.discrete
-    system = design.system_key
-    state_names = tuple(plant.state_names)
-    input_names = tuple(plant.input_names)
-    n, m = len(state_names), len(input_names)
-    if m == 0:
-        raise ExportError(f"{system} has no input: there is no controller to export")
-    problems: list[str] = []
-    if discrete is None or design.dt is None:
-        raise ExportError(f"the design of {system} is continuous: export needs a digital design (a rate)")
+    _check_digital(design)
+    problems = _design_problems(design)
+    if problems:
+        raise ExportError(f"cannot export the {controller} controller of {design.system_key}: "
+                          + "; ".join(problems))
     params = dict(design.params)
-    state_units = _units(state_names, tuple(plant.state_units))
-    input_units = _units(input_names, tuple(plant.input_units))
-    dt = float(design.dt)
+    names = design.plant.input_names
+    try:
+        linear = LinearController.from_design(
+            design, kind=controller, tracking=design.Kc is not None,
+            u_min=[float(params.get(f"{i}_min", -math.inf)) for i in names],
+            u_max=[float(params.get(f"{i}_max", math.inf)) for i in names])
+    except EquilibristError as exc:
+        raise ExportError(f"cannot export the {controller} controller of "
+                          f"{design.system_key}: {exc}") from exc
+    return of_controller(linear)
+
+
+def of_controller(linear: LinearController) -> ControllerData:
+    """The :class:`ControllerData` of *linear*, a controller its discrete design made
+    (:meth:`LinearController.from_design`): the view the C library is written from.
+
+    Raises
+    ------
+    ExportError
+        A controller without a discrete design, or anything :func:`from_design` refuses.
+    """
+    design = linear.design
+    if not isinstance(design, Design):
+        raise ExportError(f"the {linear.kind} controller has no design: its library is "
+                          "written from the design that made it")
+    _check_digital(design)
+    system = design.system_key
+    problems = _design_problems(design) + _controller_problems(linear, design)
+    if problems:
+        raise ExportError(f"cannot export the {linear.kind} controller of {system}: "
+                          + "; ".join(problems))
+    plant = design.plant
+    return ControllerData(
+        linear=linear, system=system,
+        state_units=_units(linear.state_names, tuple(plant.state_units)),
+        input_units=_units(linear.input_names, tuple(plant.input_units)),
+        params=dict(design.params), weights=_weights(design, filtered=bool(linear.form)),
+        settings=_settings(design, linear))
+
+
+def _check_digital(design: Design) -> None:
+    """A design with an input and a sample rate, or an :class:`ExportError`."""
+    if not design.plant.input_names:
+        raise ExportError(f"{design.system_key} has no input: there is no controller to export")
+    if design.discrete is None or design.dt is None:
+        raise ExportError(f"the design of {design.system_key} is continuous: export needs a "
+                          "digital design (a rate)")
+
+
+def _design_problems(design: Design) -> list[str]:
+    """What in *design*'s numbers the C code cannot hold: every problem, in words."""
+    plant, discrete = design.plant, design.discrete
+    assert discrete is not None  # _check_digital
+    n, m = len(plant.state_names), len(plant.input_names)
+    problems: list[str] = []
+    dt = float(design.dt or 0.0)
     if not (math.isfinite(dt) and dt > 0):
         problems.append(f"the sample period {dt!r} s is not a positive number")
-    x0 = _array(plant.x0, "x0", (n,), problems)
+    _array(plant.x0, "x0", (n,), problems)
     u0 = _array(plant.u0, "u0", (m,), problems)
-    Ad = _array(discrete.A, "Ad", (n, n), problems)
-    Bd = _array(discrete.B, "Bd", (n, m), problems)
-    K = _array(design.K, "K", (m, n), problems)
-
-    if controller == "lqg":
-        form = design.kalman_form
-        if form not in FORMS:
-            problems.append(f"Kalman form {form!r} is unknown: expected one of {', '.join(FORMS)}")
-        measured = tuple(discrete.output_names)
-        p = len(measured)
-        C = _array(discrete.C, "C", (p, n), problems)
-        Kf = _array(design.Kf, "Kf", (n, p), problems)
-        D = np.asarray(discrete.D, dtype=float)
-        if D.size and np.any(D != 0):
-            problems.append("the measurements depend on the input (D != 0): not supported")
-        if p == 0:
-            problems.append("the design measures no output: an LQG controller needs measurements")
-    else:
-        form = ""
-        measured = state_names
-        C = np.eye(n)
-        C.setflags(write=False)
-        Kf = np.zeros((n, 0))
-        Kf.setflags(write=False)
-    selection = all(
-        np.count_nonzero(row) == 1 and float(np.max(row)) == 1.0 for row in np.asarray(C)
-    )
-    if not selection:
-        problems.append("C is not a selection of states (each measurement one state)")
-    measured_units = tuple(
-        state_units[int(np.argmax(row))] if selection else "" for row in np.asarray(C)
-    )
-
-    Kc_raw = design.Kc
-    tracked = tuple(design.tracked) if Kc_raw is not None else ()
-    if Kc_raw is None:
-        Kc = np.zeros((m, 0))
-        r0 = np.zeros(0)
-    else:
-        Kc = _array(Kc_raw, "Kc", (m, len(tracked)), problems)
+    _array(discrete.A, "Ad", (n, n), problems)
+    _array(discrete.B, "Bd", (n, m), problems)
+    _array(design.K, "K", (m, n), problems)
+    if design.Kc is not None:
+        tracked = tuple(design.tracked)
+        _array(design.Kc, "Kc", (m, len(tracked)), problems)
         if len(tracked) != m:
             problems.append(f"{len(tracked)} tracked outputs for {m} inputs")
-        rows = []
-        for t in tracked:
-            if t not in state_names:
-                problems.append(f"tracked output {t!r} is not a state of {system}")
-            else:
-                rows.append(state_names.index(t))
-        r0 = np.asarray(x0)[rows] if len(rows) == len(tracked) else np.zeros(len(tracked))
-    u_min = np.array([float(params.get(f"{i}_min", -math.inf)) for i in input_names])
-    u_max = np.array([float(params.get(f"{i}_max", math.inf)) for i in input_names])
-    for i, name in enumerate(input_names):
-        if not (math.isfinite(u_min[i]) and math.isfinite(u_max[i])):
+        problems += [f"tracked output {t!r} is not a state of {design.system_key}"
+                     for t in tracked if t not in plant.state_names]
+    params = dict(design.params)
+    for i, name in enumerate(plant.input_names):
+        low = float(params.get(f"{name}_min", -math.inf))
+        high = float(params.get(f"{name}_max", math.inf))
+        if not (math.isfinite(low) and math.isfinite(high)):
             problems.append(f"input {name} has no finite limits {name}_min, {name}_max")
-        elif not u_min[i] <= u0[i] <= u_max[i]:
-            problems.append(
-                f"the operating input {name} = {u0[i]:g} is outside its limits "
-                f"[{u_min[i]:g}, {u_max[i]:g}]"
-            )
-    if problems:
-        raise ExportError(f"cannot export the {controller} controller of {system}: " + "; ".join(problems))
+        elif not low <= u0[i] <= high:
+            problems.append(f"the operating input {name} = {u0[i]:g} is outside its limits "
+                            f"[{low:g}, {high:g}]")
+    return problems
 
-    y0 = np.asarray(C) @ np.asarray(x0)
-    weights = {label: np.asarray(value, dtype=float) for label, value in
-               (("Q", design.Q), ("R", design.R), ("QN", design.QN), ("RN", design.RN), ("G", design.G))}
-    if controller == "lqr":
-        weights = {k: v for k, v in weights.items() if k in ("Q", "R")}
-    rate = float(design.rate) if design.rate else 1.0 / dt
-    settings = {
-        "system": system,
-        "controller": controller,
-        "rate": f"{rate:.12g} Hz",
-        "discretization": design.discretization,
-    }
-    if controller == "lqg":
-        settings["kalman_form"] = form
+
+def _controller_problems(linear: LinearController, design: Design) -> list[str]:
+    """What the C library cannot run of *linear*: a Kalman filter's gain, its measurements."""
+    problems: list[str] = []
+    if linear.n_z and not linear.form:
+        problems.append("a controller with a state of its own that is no Kalman filter")
+    if not linear.form:
+        return problems
+    if linear.form not in FORMS:
+        problems.append(f"Kalman form {linear.form!r} is unknown: expected one of "
+                        f"{', '.join(FORMS)}")
+    discrete = design.discrete
+    assert discrete is not None  # _check_digital
+    n, p = linear.n_states, linear.n_outputs
+    C = _array(discrete.C, "C", (p, n), problems)
+    _array(design.Kf, "Kf", (n, p), problems)
+    D = np.asarray(discrete.D, dtype=float)
+    if D.size and np.any(D != 0):
+        problems.append("the measurements depend on the input (D != 0): not supported")
+    if p == 0:
+        problems.append("the design measures no output: an LQG controller needs measurements")
+    if not all(np.count_nonzero(row) == 1 and float(np.max(row)) == 1.0 for row in C):
+        problems.append("C is not a selection of states (each measurement one state)")
+    return problems
+
+
+def _weights(design: Design, *, filtered: bool) -> dict[str, np.ndarray]:
+    """The design's weights for the record: the noise intensities only with a filter."""
+    labels = ("Q", "R", "QN", "RN", "G") if filtered else ("Q", "R")
+    return {label: np.asarray(getattr(design, label), dtype=float) for label in labels}
+
+
+def _settings(design: Design, linear: LinearController) -> dict[str, str]:
+    """The generating settings the library's header and README record."""
+    rate = float(design.rate) if design.rate else 1.0 / float(design.dt or 1.0)
+    settings = {"system": design.system_key, "controller": linear.kind,
+                "rate": f"{rate:.12g} Hz", "discretization": design.discretization}
+    if linear.form:
+        settings["kalman_form"] = linear.form
+    tracked = linear.tracked_names
     settings["reference"] = ", ".join(tracked) if tracked else "none"
-    for arr in (y0, r0, u_min, u_max):
-        arr.setflags(write=False)
-    try:
-        linear = LinearController.from_design(design, kind=controller, tracking=bool(tracked),
-                                              u_min=u_min, u_max=u_max)
-    except EquilibristError as exc:
-        raise ExportError(f"cannot export the {controller} controller of {system}: {exc}") from exc
-    return ControllerData(
-        system=system,
-        controller=controller,
-        form=form,
-        dt=dt,
-        state_names=state_names,
-        state_units=state_units,
-        input_names=input_names,
-        input_units=input_units,
-        measured_names=measured,
-        measured_units=measured_units,
-        tracked_names=tracked,
-        x0=x0,
-        u0=u0,
-        y0=y0,
-        r0=np.asarray(r0, dtype=float),
-        Ad=Ad,
-        Bd=Bd,
-        C=np.asarray(C, dtype=float),
-        K=K,
-        Kf=np.asarray(Kf, dtype=float),
-        Kc=np.asarray(Kc, dtype=float),
-        u_min=u_min,
-        u_max=u_max,
-        params=params,
-        weights=weights,
-        settings=settings,
-        linear=linear,
-    )
+    return settings
 
 
 def controller_data(design: Design | object, *, controller: str = "lqg") -> ControllerData:

@@ -280,7 +280,7 @@ def record(design: Design, system: System, *, controller: str = "lqg", precision
     check_precision(precision)
     data = controller_data(design, controller=controller)
     tracking = design.Kc is not None
-    linear = data.form_controller
+    linear = data.linear
     given = _START.get()
     if given is not None and given.given is not None:
         run = scenario(design, system, duration=duration, start=given.given)

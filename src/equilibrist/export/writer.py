@@ -11,7 +11,7 @@ import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -287,12 +287,12 @@ def export_controller(ctrl: object, out: str | os.PathLike[str], *, system: Syst
 
 def _export_linear(ctrl: LinearController, out: str | os.PathLike[str], *, system: System,
                    **options: Unpack[_Options]) -> ExportReport:
-    """An LQR or LQG design's controller: the design's library (its matrices, the Kalman form,
-    the recorded run); any other linear controller: the linear library on its packed vector,
-    through the nonlinear export (:meth:`LinearController.as_nonlinear`)."""
-    form = _design_form(ctrl)
-    if form is not None and ctrl.design is not None:
-        return export_c(ctrl.design, out, controller=form, system=system, **options)
+    """A controller its discrete design made (an LQR, an LQG): the design's library (its
+    matrices, the Kalman form, the recorded run); any other linear controller: the linear
+    library on its packed vector, through the nonlinear export
+    (:meth:`LinearController.as_nonlinear`)."""
+    if ctrl.design is not None and made_by_design(ctrl):
+        return export_c(ctrl.design, out, controller=ctrl.kind, system=system, **options)
     from equilibrist.export.nonlinear_c import export_files
 
     return export_files(ctrl.as_nonlinear(), Path(out), system=system, **options)
@@ -302,28 +302,48 @@ def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
     return a is b if a is None or b is None else bool(np.array_equal(a, b))
 
 
-def _design_form(ctrl: LinearController) -> str | None:
-    """``"lqr"`` or ``"lqg"`` where *ctrl* is its discrete design's controller of that form as
-    the design makes it (the same numbers, names, limits and start), else None: a controller
-    changed after (started elsewhere, other gains or limits) is exported as the value it is."""
+def made_by_design(ctrl: LinearController) -> bool:
+    """Whether *ctrl* is its discrete design's controller as the design makes it (the same
+    numbers, names, limits and start): a controller changed after (started elsewhere, other
+    gains or limits) is exported as the value it is."""
     from equilibrist.control.design_record import Design
     from equilibrist.control.linear import LinearController
-    from equilibrist.errors import ControllerError
+    from equilibrist.errors import EquilibristError
 
     design = ctrl.design
     if not isinstance(design, Design) or design.discrete is None or not design.rate:
-        return None
-    for form in ("lqr", "lqg"):
-        for tracking in (False, True):
-            try:
-                made = LinearController.from_design(design, kind=form, tracking=tracking)
-            except ControllerError:
-                continue
-            if (made.fingerprint == ctrl.fingerprint and made.rate == ctrl.rate
-                    and np.array_equal(made.z0, ctrl.z0)
-                    and _same(made.u_min, ctrl.u_min) and _same(made.u_max, ctrl.u_max)):
-                return form
-    return None
+        return False
+    try:
+        made = LinearController.from_design(design, kind=ctrl.kind,
+                                            tracking=bool(ctrl.tracked_names))
+    except EquilibristError:
+        return False
+    return (made.fingerprint == ctrl.fingerprint and made.rate == ctrl.rate
+            and made.form == ctrl.form and np.array_equal(made.z0, ctrl.z0)
+            and _same(made.u_min, ctrl.u_min) and _same(made.u_max, ctrl.u_max))
+
+
+def design_id(ctrl: object) -> str:
+    """The design id the export of the controller value *ctrl* carries (what a device flashed
+    with it reports), chosen as :func:`exporter_of` chooses the exporter."""
+    from equilibrist.control.linear import LinearController
+    from equilibrist.control.mpc_runtime import MPCRuntime
+    from equilibrist.control.nonlinear import NonlinearController
+    from equilibrist.export.mpc_c import design_id as mpc_id
+    from equilibrist.export.nonlinear_c import design_id as nonlinear_id
+
+    def linear(value: LinearController) -> str:
+        if value.design is not None and made_by_design(value):  # the design's library
+            return controller_data(value.design, controller=value.kind).fingerprint
+        return nonlinear_id(value.as_nonlinear())
+
+    ids: dict[type, Callable[[Any], str]] = {
+        MPCRuntime: mpc_id, NonlinearController: nonlinear_id, LinearController: linear}
+    for cls in type(ctrl).__mro__:
+        if cls in ids:
+            return ids[cls](ctrl)
+    raise ExportError("there is no exported controller for "
+                      + ("the open loop" if ctrl is None else f"a {type(ctrl).__name__}"))
 
 
 def export_c(

@@ -400,7 +400,7 @@ class Session(_SessionPlan, _SessionRoa):
             if leaving_swingup:
                 # The filter ran on a linear model far from where the pendulum was: start it
                 # at the swing-up's own estimate.
-                self.loop.lqg.start_at(self.xhat)
+                self.loop.filter.start_at(self.xhat)
             self.design_message = describe_design(d, settings.controller, seconds, runner,
                                                   controller_seconds)
             self.messages.append(self.design_message)
@@ -504,15 +504,16 @@ class Session(_SessionPlan, _SessionRoa):
         if self.plant is None or self.plant.x is not x:
             self.plant = self._plant_steps()
         y = self.plant.measure()
-        kind = self.settings.controller
         # The filter runs whichever controller is in charge, so that switching is bumpless.
-        u_lqg = loop.lqg.output(y)
-        runner = loop.runner if loop.runner is not None and loop.runner.kind == kind else None
+        u_filter = loop.filter.output(y)
+        linear = loop.linear(self.settings.controller)
+        runner = loop.runner if loop.runner is not None and \
+            loop.runner.kind == self.settings.controller else None
         y_r = y
-        if kind == "lqg":
-            u_cmd = u_lqg
-        elif kind == "lqr":
-            u_cmd = loop.lqr.output(x[loop.lqr.idx])
+        if linear is loop.filter:
+            u_cmd = u_filter
+        elif linear is not None:
+            u_cmd = linear.output(y[linear.pick] if linear.reads_sensors else x[linear.idx])
         elif runner is not None:
             if loop.runner_pick is not None:
                 y_r = y[loop.runner_pick]
@@ -525,13 +526,15 @@ class Session(_SessionPlan, _SessionRoa):
         else:
             u_cmd = loop.u_op
         u_sat = np.minimum(np.maximum(u_cmd, self.u_low), self.u_high)
-        if kind == "lqr":
-            xhat = x.copy()
+        if linear is not None and linear is not loop.filter:
+            xhat = linear.estimate() if linear.reads_sensors else x.copy()
         elif runner is not None and runner.estimate is not None:
             xhat = runner.estimate
         else:
-            xhat = loop.lqg.estimate()
-        loop.lqg.update(u_sat)
+            xhat = loop.filter.estimate()
+        loop.filter.update(u_sat)
+        if linear is not None and linear is not loop.filter and linear.ctrl.n_z:
+            linear.update(u_sat)
         if runner is not None:
             runner.update(self.t, y_r, u_sat)
             if runner.mode != self.mode:

@@ -1,6 +1,7 @@
 """The controllers in force in a playground session (the one controller contract's linear
-forms, in the compiled core's order of sums; the swing-up or MPC runner) and the record of
-the last run; split from :mod:`equilibrist.web.session`.
+forms, built by their kind records and run in the compiled core's order of sums; the
+swing-up, MPC or other runner) and the record of the last run; split from
+:mod:`equilibrist.web.session`.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from equilibrist.control.linear_layout import python_linear
+from equilibrist.web.protocol import kind_name
 from equilibrist.web.runners import Runner
 
 if TYPE_CHECKING:
@@ -41,6 +43,12 @@ class _Linear:
     def __init__(self, ctrl: LinearController, system: System) -> None:
         self.ctrl = ctrl
         self.idx = np.array([system.state_index(o) for o in ctrl.output_names], dtype=np.int64)
+        #: Whether it reads the sensors through a Kalman filter (their noise included);
+        #: without a filter it reads the true state of the states it names (``LQR (true
+        #: state)``), which is then the page's estimate.
+        self.reads_sensors = bool(ctrl.form)
+        #: Where its measurements are among the sensors' (when it reads them).
+        self.pick = np.zeros(0, dtype=np.int64)
         self.z = np.array(ctrl.z0, dtype=float)
         self._y: list[float] = np.asarray(ctrl.y_op, dtype=float).tolist()
         packed = ctrl.packed()
@@ -72,23 +80,26 @@ class _Linear:
 
 
 class _Loop:
-    """The controllers of one design: LQG (in charge, or its filter running alongside for
-    the estimate and a bumpless switch) and LQR on the true state."""
+    """The controllers of one design: its Kalman filter (:attr:`filter`, always running, for
+    the page's estimate and a bumpless switch), the linear controller of each linear kind
+    picked (built by its kind record, as ``simulate`` builds it) and the swing-up, MPC or
+    other runner in charge."""
 
     def __init__(self, d: Design, system: System, previous: _Loop | None = None,
                  runner: Runner | None = None, x_estimate: np.ndarray | None = None) -> None:
         from equilibrist.control.linear import LinearController
 
         self.design = d
+        self.system = system
         self.x_op = np.array(d.plant.x0, dtype=float)
         self.u_op = np.array(d.plant.u0, dtype=float)
         self.outputs = tuple(d.plant.output_names)
         self.out_idx = np.array([system.state_index(o) for o in self.outputs], dtype=np.int64)
-        self.lqg = _Linear(LinearController.from_design(d, kind="lqg"), system)
-        self.lqr = _Linear(LinearController.from_design(d, kind="lqr"), system)
+        self.filter = _Linear(LinearController.from_design(d, kind="lqg"), system)
+        self._linear: dict[str, _Linear | None] = {}
         if previous is not None:
             # The new filter goes on from the previous one's estimate.
-            self.lqg.start_at(previous.lqg.estimate())
+            self.filter.start_at(previous.filter.estimate())
         # The swing-up or the MPC, when one is in charge: it goes on from the previous
         # one of its kind (a retune), or starts at the estimate in force (a switch).
         self.runner = runner
@@ -108,11 +119,54 @@ class _Loop:
                 noise = system.spec.sensor_noise
                 self.runner_sigma = np.array([float(noise.get(o, 0.0)) for o in runner.outputs])
 
+    def linear(self, controller: str) -> _Linear | None:
+        """The linear controller the picker's *controller* runs (None: the kind is not a
+        linear one, or is the open loop), built once per design by its kind record. The
+        design's own LQG is :attr:`filter` itself, so that it runs once and switching to it
+        is bumpless."""
+        if controller not in self._linear:
+            self._linear[controller] = self._build_linear(controller)
+        return self._linear[controller]
+
+    def _build_linear(self, controller: str) -> _Linear | None:
+        from equilibrist.control.linear import LinearController
+        from equilibrist.controllers import kinds
+        from equilibrist.errors import EquilibristError
+
+        record = kinds.get(kind_name(controller), "playground")
+        if not record.linear or record.open_loop:
+            return None
+        built = record.make(kinds.ControllerRequest.of_design(self.system, self.design))
+        if not isinstance(built, LinearController):
+            raise EquilibristError(f"the {record.name} kind is linear but built a "
+                                   f"{type(built).__name__}, not a LinearController")
+        if _same_controller(built, self.filter.ctrl):
+            return self.filter
+        linear = _Linear(built, self.system)
+        if linear.reads_sensors:
+            missing = [o for o in built.output_names if o not in self.outputs]
+            if missing:
+                raise EquilibristError(f"the {record.name} controller measures "
+                                       f"{', '.join(missing)}, which the design does not")
+            linear.pick = np.array([self.outputs.index(o) for o in built.output_names],
+                                   dtype=np.int64)
+        return linear
+
     def reset(self) -> None:
-        self.lqg.z = np.array(self.lqg.ctrl.z0, dtype=float)
-        self.lqr.z = np.array(self.lqr.ctrl.z0, dtype=float)
+        self.filter.z = np.array(self.filter.ctrl.z0, dtype=float)
+        for linear in self._linear.values():
+            if linear is not None:
+                linear.z = np.array(linear.ctrl.z0, dtype=float)
         if self.runner is not None:
             self.runner.reset()
+
+
+def _same_controller(a: LinearController, b: LinearController) -> bool:
+    """Whether *a* and *b* are the same controller (numbers, names, form, start, limits)."""
+    return (a.fingerprint == b.fingerprint and a.form == b.form and a.rate == b.rate
+            and np.array_equal(a.z0, b.z0)
+            and np.array_equal(np.asarray(a.u_min), np.asarray(b.u_min))
+            and np.array_equal(np.asarray(a.u_max), np.asarray(b.u_max)))
 
 
 @dataclass
