@@ -41,6 +41,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from equilibrist.errors import nearest
 
@@ -52,11 +53,15 @@ from equilibrist.study.record import (
     MAX_POINTS,
     MAX_RUN_SAMPLES,
     METRICS,
+    Axis,
     Study,
     StudyError,
     _does_not_apply,
     controllers,
 )
+
+if TYPE_CHECKING:
+    from equilibrist.numeric.system import System
 
 
 def make_study(
@@ -124,40 +129,14 @@ def make_study(
     StudyError
         Naming every problem.
     """
-    from equilibrist.numeric.lookup import get_system
-    from equilibrist.systems import files, registry
-
-    problems: list[str] = []
-    # An unknown system or a bad system file is its own clear error.
-    if files.looks_like_path(system):
-        files.from_file(system)
-    else:
-        registry.lookup_family(system)
-    # Numbers as floats: a study file's 1 and the command line's 1.0 are one study.
-    fixed = {k: float(v) if isinstance(v, int | float) and not isinstance(v, bool) else v
-             for k, v in (settings or {}).items()}
-    sysm = get_system(system, **fixed)
+    fixed, sysm = _study_system(system, settings)
     spec = sysm.spec
-    if sysm.n_inputs == 0:
-        raise StudyError(f"{sysm.key} has no input: a study needs a controller to design")
+    problems: list[str] = []
     sampled = sample is not None
     n_sample = None
     if sampled:
         n_sample = _whole(sample, "--sample random:N", problems)
-    items = list(vary.items()) if isinstance(vary, Mapping) else list(vary)
-    names = [n for n, _ in items]
-    for n in sorted({n for n in names if names.count(n) > 1}):
-        problems.append(f"--vary {n} is given twice")
-    axes = []
-    for name, value in items:
-        if name in fixed:
-            problems.append(f"--vary {name}: it is also fixed with --set")
-            continue
-        ax = _axis(sysm, str(name).strip(), value, sampled, problems)
-        if ax is not None:
-            axes.append(ax)
-    if sampled and not items:
-        problems.append("--sample random:N needs at least one --vary range")
+    axes = _axes(sysm, vary, fixed=fixed, sampled=sampled, problems=problems)
     n_runs = _whole(runs, "--runs", problems)
     dur = _number(duration, "--duration", problems)
     if dur is not None and dur <= 0:
@@ -169,14 +148,7 @@ def make_study(
         problems.append(f"--controller {controller}: {_does_not_apply(controller, sysm)}")
     kinds_used = [controller] + [str(v) for a in axes if a.kind == "controller" for v in a.values]
     options_v = _controller_options(controller_options or {}, kinds_used, problems)
-    if isinstance(noise, str):
-        noise_v = {"on": 1.0, "off": 0.0}.get(noise.strip().lower())
-        if noise_v is None:
-            noise_v = _number(noise, "--noise", problems)
-    else:
-        noise_v = _number(noise, "--noise", problems)
-    if noise_v is not None and noise_v < 0:
-        problems.append(f"--noise must be >= 0, got {noise_v:g}")
+    noise_v = _noise_scale(noise, problems)
     rate_v = float(spec.control_rate) if rate is None else _number(rate, "--rate", problems)
     if rate_v is not None and rate_v <= 0:
         problems.append(f"--rate must be positive, got {rate_v:g}")
@@ -186,24 +158,9 @@ def make_study(
         problems.append(f"--metrics {metrics!r}: expected full or basic")
     x0_r = _ranges(sysm, x0 or {}, "--x0", problems, counted=False)
     roa_r = _ranges(sysm, roa or {}, "--roa", problems, counted=True)
-    spread_v: dict[str, float] = {}
-    for name, rel in (spread or {}).items():
-        if name not in spec.parameter_names:
-            problems.append(f"--spread: unknown parameter {name!r} of {sysm.key} "
-                            f"({nearest(name, spec.parameter_names)})")
-            continue
-        v = _number(rel, f"--spread {name}", problems)
-        if v is not None and not 0 <= v < 1:
-            problems.append(f"--spread {name}: expected a relative spread in [0, 1), got {v:g}")
-        elif v is not None:
-            spread_v[name] = v
+    spread_v = _spreads(sysm, spread or {}, problems)
     if dur is not None and rate_v is not None and dur > 0:
-        fastest = max([rate_v] + [float(v) for a in axes if a.kind == "rate"
-                                  for v in (a.values or (a.high,)) if v is not None])
-        if dur * fastest > MAX_RUN_SAMPLES:
-            problems.append(f"--duration {dur:g} s at {fastest:g} Hz is {dur * fastest:.3g} samples "
-                            f"a run: at most {MAX_RUN_SAMPLES} ({MAX_RUN_SAMPLES / fastest:g} s at "
-                            "that rate)")
+        _check_run_samples(dur, _rates(rate_v, axes), problems)
     if problems:
         raise StudyError("; ".join(problems))
     assert n_runs is not None and dur is not None and seed_v is not None
@@ -220,15 +177,105 @@ def make_study(
         raise StudyError(f"the study has {study.n_points} points: at most {MAX_POINTS} per study "
                          "(split it, or draw a random sample)")
     if batch_size is None:
-        rates = [rate_v] + [float(v) for a in axes if a.kind == "rate"
-                            for v in (a.values or (a.high,)) if v is not None]
-        rows = int(dur * max(rates)) + 2
-        width = 2 * sysm.n_states + len(sysm.output_names) + 3 * sysm.n_inputs
-        batch_size = max(8, min(1024, BATCH_CELLS // (rows * width)))
+        batch_size = _default_batch_size(sysm, duration=dur, rates=_rates(rate_v, axes))
     size = _whole(batch_size, "batch_size", problems)
     if problems or size is None:
         raise StudyError("; ".join(problems))
     return _replace_batch(study, min(size, n_runs))
+
+
+def _study_system(system: str,
+                  settings: Mapping[str, object] | None) -> tuple[dict[str, object], System]:
+    """The study's fixed settings (numbers as floats: a study file's 1 and the command line's
+    1.0 are one study) and its system with them; a system without input is refused."""
+    from equilibrist.numeric.lookup import get_system
+    from equilibrist.systems import files, registry
+
+    # An unknown system or a bad system file is its own clear error.
+    if files.looks_like_path(system):
+        files.from_file(system)
+    else:
+        registry.lookup_family(system)
+    fixed = {k: float(v) if isinstance(v, int | float) and not isinstance(v, bool) else v
+             for k, v in (settings or {}).items()}
+    sysm = get_system(system, **fixed)
+    if sysm.n_inputs == 0:
+        raise StudyError(f"{sysm.key} has no input: a study needs a controller to design")
+    return fixed, sysm
+
+
+def _axes(sysm: System, vary: Mapping[str, object] | Sequence[tuple[str, object]], *,
+          fixed: Mapping[str, object], sampled: bool, problems: list[str]) -> list[Axis]:
+    """The varied quantities' axes; a quantity given twice, or also fixed, is a problem."""
+    items = list(vary.items()) if isinstance(vary, Mapping) else list(vary)
+    names = [n for n, _ in items]
+    for n in sorted({n for n in names if names.count(n) > 1}):
+        problems.append(f"--vary {n} is given twice")
+    axes = []
+    for name, value in items:
+        if name in fixed:
+            problems.append(f"--vary {name}: it is also fixed with --set")
+            continue
+        ax = _axis(sysm, str(name).strip(), value, sampled, problems)
+        if ax is not None:
+            axes.append(ax)
+    if sampled and not items:
+        problems.append("--sample random:N needs at least one --vary range")
+    return axes
+
+
+def _noise_scale(noise: float | str, problems: list[str]) -> float | None:
+    """The noise's scale: a number >= 0, or ``on`` (1) and ``off`` (0)."""
+    if isinstance(noise, str):
+        noise_v = {"on": 1.0, "off": 0.0}.get(noise.strip().lower())
+        if noise_v is None:
+            noise_v = _number(noise, "--noise", problems)
+    else:
+        noise_v = _number(noise, "--noise", problems)
+    if noise_v is not None and noise_v < 0:
+        problems.append(f"--noise must be >= 0, got {noise_v:g}")
+    return noise_v
+
+
+def _spreads(sysm: System, spread: Mapping[str, object], problems: list[str]) -> dict[str, float]:
+    """The relative spreads of the parameters, each in [0, 1)."""
+    spec = sysm.spec
+    spread_v: dict[str, float] = {}
+    for name, rel in spread.items():
+        if name not in spec.parameter_names:
+            problems.append(f"--spread: unknown parameter {name!r} of {sysm.key} "
+                            f"({nearest(name, spec.parameter_names)})")
+            continue
+        v = _number(rel, f"--spread {name}", problems)
+        if v is not None and not 0 <= v < 1:
+            problems.append(f"--spread {name}: expected a relative spread in [0, 1), got {v:g}")
+        elif v is not None:
+            spread_v[name] = v
+    return spread_v
+
+
+def _rates(rate: float, axes: Sequence[Axis]) -> list[float]:
+    """The study's rate and every rate its axes reach [Hz]."""
+    return [rate] + [float(v) for a in axes if a.kind == "rate"
+                     for v in (a.values or (a.high,)) if v is not None]
+
+
+def _check_run_samples(duration: float, rates: Sequence[float], problems: list[str]) -> None:
+    """A run of *duration* at the fastest of *rates* has at most :data:`MAX_RUN_SAMPLES`
+    samples."""
+    fastest = max(rates)
+    if duration * fastest > MAX_RUN_SAMPLES:
+        problems.append(f"--duration {duration:g} s at {fastest:g} Hz is {duration * fastest:.3g} "
+                        f"samples a run: at most {MAX_RUN_SAMPLES} ({MAX_RUN_SAMPLES / fastest:g} "
+                        "s at that rate)")
+
+
+def _default_batch_size(sysm: System, *, duration: float, rates: Sequence[float]) -> int:
+    """Runs per compiled batch: as many as fit in :data:`BATCH_CELLS` cells of trajectories
+    at the fastest of *rates* (8 to 1024)."""
+    rows = int(duration * max(rates)) + 2
+    width = 2 * sysm.n_states + len(sysm.output_names) + 3 * sysm.n_inputs
+    return max(8, min(1024, BATCH_CELLS // (rows * width)))
 
 
 def _controller_options(given: Mapping[str, object], kinds_used: Sequence[str],
