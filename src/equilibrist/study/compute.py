@@ -36,15 +36,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, NotRequired, TypedDict
 
 import numpy as np
 
 from equilibrist.errors import EquilibristError
-from equilibrist.study.record import Study, kind_options
+from equilibrist.study.record import Axis, AxisValue, Study, kind_options
 
 if TYPE_CHECKING:
+    from equilibrist.control.controller import AnyController
+    from equilibrist.control.design_record import Design
     from equilibrist.numeric.system import System
+    from equilibrist.sim.batch_result import BatchResult
     from equilibrist.sim.noise import Noise
 
 SETTLE_FRACTION = 0.02
@@ -130,15 +134,9 @@ class _RunOptions(TypedDict):
 def evaluate_point(study: Study, index: int, *,
                    threads: int | None = None) -> dict[str, object]:
     """The table row of point *index* (a mapping column -> value)."""
-    from equilibrist.control.controller import measured_outputs
     from equilibrist.control.design import design
     from equilibrist.controllers import kinds as registry
     from equilibrist.numeric.lookup import get_system
-    from equilibrist.sim.batch import region_of_attraction, simulate_batch
-    from equilibrist.sim.batch_inputs import sample_uniform
-    from equilibrist.sim.noise import Noise
-    from equilibrist.sim.setup_checks import operating_point
-    from equilibrist.tasks import get_task, task_names
 
     values = study.point(index)
     nominal = get_system(study.system, **study.settings)
@@ -162,15 +160,8 @@ def evaluate_point(study: Study, index: int, *,
     kind = str(values.get("controller", study.controller))
     noise_scale = float(values.get("noise", study.noise))
     delay = bool(values.get("delay", study.delay))
-    q = r = None
-    q_scales = {kinds[k].target: float(v) for k, v in values.items() if kinds[k].kind == "q"}
-    r_scales = {kinds[k].target: float(v) for k, v in values.items() if kinds[k].kind == "r"}
     base = plant if study.design_for == "point" else nominal
-    scales = base.spec.design_scales
-    if q_scales:
-        q = [1.0 / (q_scales.get(s) or float(scales.get(s, math.nan))) ** 2 for s in base.state_names]
-    if r_scales:
-        r = [1.0 / (r_scales.get(u) or float(scales.get(u, math.nan))) ** 2 for u in base.input_names]
+    q, r = _point_weights(values, kinds, base)
     try:
         d = design(base, q=q, r=r, rate=rate)
     except EquilibristError as exc:
@@ -183,87 +174,158 @@ def evaluate_point(study: Study, index: int, *,
         controller = record.make(request)
     except EquilibristError as exc:
         return failed("design failed", exc)
-    noise = None
-    if noise_scale > 0:
-        if record.noise == "design":
-            nd = Noise.from_design(d)
-        else:
-            nd = Noise.from_spec(base, outputs=measured_outputs(controller), rate=rate)
-        s2 = noise_scale**2
-        noise = Noise(nd.process_gain, nd.process_intensity * s2,
-                      nd.measurement_covariance * s2, nd.outputs)
-    full = study.metrics == "full"
-    runs = study.runs
+    noise = _point_noise(noise_scale, from_design=record.noise == "design", design=d,
+                         system=base, controller=controller, rate=rate)
+    options: _RunOptions = {"duration": study.duration, "rate": rate, "delay": delay,
+                            "noise": noise}
     try:
-        x_op, u_op = operating_point(plant, controller)
-        x0s, spread = sample_uniform(plant, runs, ranges=dict(study.x0), spread=dict(study.spread),
-                                     seed=study.point_seed(index, 1),
-                                     x_op=_start(plant, controller, x_op))
-        fell = np.zeros(runs, dtype=bool)
-        fell_at = np.full(runs, np.nan)
-        balanced_since = np.full(runs, np.nan)
-        settle = np.full(runs, np.inf)
-        peak = np.zeros((runs, len(inputs)))
-        saturated = np.zeros(runs)
-        cost = np.full(runs, np.nan)
-        steps = 0
-        qw = _bryson_weights(nominal, nominal.state_names)
-        rw = _bryson_weights(nominal, inputs)
-        options: _RunOptions = {"duration": study.duration, "rate": rate, "delay": delay,
-                                "noise": noise}
-        if record.task is not None and record.task in task_names(plant):
-            # A swing-up starts hanging: only the task's region (the cart's track) ends it,
-            # as simulate and batch run it.
-            options["region"] = dict(get_task(plant, record.task).region)
-        for b, start in enumerate(range(0, runs, study.batch_size)):
-            sl = slice(start, min(runs, start + study.batch_size))
-            batch = simulate_batch(
-                plant, controller, runs=sl.stop - sl.start, x0=x0s[sl],
-                params={k: v[sl] for k, v in spread.items()}, seed=study.point_seed(index, 2, b),
-                record=full, workers=threads, **options)
-            steps += batch.steps
-            fell[sl] = batch.fell
-            fell_at[sl] = batch.fell_at
-            if batch.balanced_since is not None:
-                balanced_since[sl] = batch.balanced_since
-            peak[sl] = batch.peak_input
-            saturated[sl] = batch.time_saturated
-            if full and batch.trajectories is not None:
-                setup = batch._setup
-                assert setup is not None  # a batch that recorded its runs keeps its setup
-                n, m = plant.n_states, plant.n_inputs
-                up = ~batch.fell
-                traj = batch.trajectories[up]
-                states = traj[:, :, :n]
-                names = setup.outputs or plant.state_names
-                watched = [plant.state_names.index(o) for o in names]
-                idx = np.nonzero(up)[0] + start
-                settle[idx] = settling_times(states, setup.times, watched, setup.x_op)
-                if qw is not None and rw is not None:
-                    c_u = 2 * n + len(setup.outputs)
-                    dx = states - setup.x_op
-                    du = traj[:, :, c_u + 2 * m : c_u + 3 * m] - setup.u_op
-                    cost[idx] = ((dx**2 * qw).sum(axis=(1, 2)) + (du**2 * rw).sum(axis=(1, 2))) / rate
-        roa_fraction = math.nan
-        if study.roa:
-            roa = region_of_attraction(
-                plant, controller, grid={k: (lo, hi, n) for k, (lo, hi, n) in study.roa.items()},
-                seed=study.point_seed(index, 3), workers=threads, **options)
-            roa_fraction = roa.fraction_caught
-            steps += roa.batch.steps
+        tally, roa_fraction = _simulate_point(study, index, plant, nominal, controller,
+                                              task=record.task, options=options, threads=threads)
     except EquilibristError as exc:
         return failed("simulation failed", exc)
-    del u_op
+    _fill_metrics(row, tally, inputs, runs=study.runs, full=study.metrics == "full",
+                  roa_fraction=roa_fraction)
+    return row
+
+
+def _point_weights(values: Mapping[str, AxisValue], kinds: Mapping[str, Axis],
+                   base: System) -> tuple[list[float] | None, list[float] | None]:
+    """The LQR weights of a point that varies Bryson scales (None: the design's default),
+    the scales it does not vary taken from *base*'s spec."""
+    q = r = None
+    q_scales = {kinds[k].target: float(v) for k, v in values.items() if kinds[k].kind == "q"}
+    r_scales = {kinds[k].target: float(v) for k, v in values.items() if kinds[k].kind == "r"}
+    scales = base.spec.design_scales
+    if q_scales:
+        q = [1.0 / (q_scales.get(s) or float(scales.get(s, math.nan))) ** 2 for s in base.state_names]
+    if r_scales:
+        r = [1.0 / (r_scales.get(u) or float(scales.get(u, math.nan))) ** 2 for u in base.input_names]
+    return q, r
+
+
+def _point_noise(scale: float, *, from_design: bool, design: Design, system: System,
+                 controller: AnyController | None, rate: float) -> Noise | None:
+    """The noise of a point's runs: the design's (or the spec's, for the controller's
+    measured outputs) with its standard deviations times *scale*; None at scale 0."""
+    from equilibrist.control.controller import measured_outputs
+    from equilibrist.sim.noise import Noise
+
+    if not scale > 0:
+        return None
+    if from_design:
+        nd = Noise.from_design(design)
+    else:
+        nd = Noise.from_spec(system, outputs=measured_outputs(controller), rate=rate)
+    s2 = scale**2
+    return Noise(nd.process_gain, nd.process_intensity * s2,
+                 nd.measurement_covariance * s2, nd.outputs)
+
+
+@dataclass
+class _Tally:
+    """What a point's runs measured, run by run, and the physics steps they took."""
+
+    fell: np.ndarray
+    fell_at: np.ndarray
+    balanced_since: np.ndarray
+    settle: np.ndarray
+    peak: np.ndarray
+    saturated: np.ndarray
+    cost: np.ndarray
+    steps: int = 0
+
+    @classmethod
+    def empty(cls, runs: int, n_inputs: int) -> _Tally:
+        """Nothing measured yet: no fall, never settled, no cost."""
+        return cls(fell=np.zeros(runs, dtype=bool), fell_at=np.full(runs, np.nan),
+                   balanced_since=np.full(runs, np.nan), settle=np.full(runs, np.inf),
+                   peak=np.zeros((runs, n_inputs)), saturated=np.zeros(runs),
+                   cost=np.full(runs, np.nan))
+
+
+def _simulate_point(study: Study, index: int, plant: System, nominal: System,
+                    controller: object, *, task: str | None, options: _RunOptions,
+                    threads: int | None) -> tuple[_Tally, float]:
+    """A point's runs, batch by batch, and its region of attraction (NaN without ``roa``)."""
+    from equilibrist.sim.batch import region_of_attraction, simulate_batch
+    from equilibrist.sim.batch_inputs import sample_uniform
+    from equilibrist.sim.setup_checks import operating_point
+    from equilibrist.tasks import get_task, task_names
+
+    full = study.metrics == "full"
+    runs = study.runs
+    x_op, _u_op = operating_point(plant, controller)
+    x0s, spread = sample_uniform(plant, runs, ranges=dict(study.x0), spread=dict(study.spread),
+                                 seed=study.point_seed(index, 1),
+                                 x_op=_start(plant, controller, x_op))
+    tally = _Tally.empty(runs, len(nominal.input_names))
+    qw = _bryson_weights(nominal, nominal.state_names)
+    rw = _bryson_weights(nominal, nominal.input_names)
+    if task is not None and task in task_names(plant):
+        # A swing-up starts hanging: only the task's region (the cart's track) ends it,
+        # as simulate and batch run it.
+        options["region"] = dict(get_task(plant, task).region)
+    for b, start in enumerate(range(0, runs, study.batch_size)):
+        sl = slice(start, min(runs, start + study.batch_size))
+        batch = simulate_batch(
+            plant, controller, runs=sl.stop - sl.start, x0=x0s[sl],
+            params={k: v[sl] for k, v in spread.items()}, seed=study.point_seed(index, 2, b),
+            record=full, workers=threads, **options)
+        tally.steps += batch.steps
+        tally.fell[sl] = batch.fell
+        tally.fell_at[sl] = batch.fell_at
+        if batch.balanced_since is not None:
+            tally.balanced_since[sl] = batch.balanced_since
+        tally.peak[sl] = batch.peak_input
+        tally.saturated[sl] = batch.time_saturated
+        if full and batch.trajectories is not None:
+            _tally_trajectories(tally, batch, plant, start, qw=qw, rw=rw, rate=options["rate"])
+    roa_fraction = math.nan
+    if study.roa:
+        roa = region_of_attraction(
+            plant, controller, grid={k: (lo, hi, n) for k, (lo, hi, n) in study.roa.items()},
+            seed=study.point_seed(index, 3), workers=threads, **options)
+        roa_fraction = roa.fraction_caught
+        tally.steps += roa.batch.steps
+    return tally, roa_fraction
+
+
+def _tally_trajectories(tally: _Tally, batch: BatchResult, plant: System, start: int, *,
+                        qw: np.ndarray | None, rw: np.ndarray | None, rate: float) -> None:
+    """The settling times and (with the spec's weights) the costs of a batch's runs that
+    stayed up, from its recorded trajectories; its first run is run *start* of the point."""
+    setup = batch._setup
+    assert setup is not None  # a batch that recorded its runs keeps its setup
+    assert batch.trajectories is not None
+    n, m = plant.n_states, plant.n_inputs
+    up = ~batch.fell
+    traj = batch.trajectories[up]
+    states = traj[:, :, :n]
+    names = setup.outputs or plant.state_names
+    watched = [plant.state_names.index(o) for o in names]
+    idx = np.nonzero(up)[0] + start
+    tally.settle[idx] = settling_times(states, setup.times, watched, setup.x_op)
+    if qw is not None and rw is not None:
+        c_u = 2 * n + len(setup.outputs)
+        dx = states - setup.x_op
+        du = traj[:, :, c_u + 2 * m : c_u + 3 * m] - setup.u_op
+        tally.cost[idx] = ((dx**2 * qw).sum(axis=(1, 2)) + (du**2 * rw).sum(axis=(1, 2))) / rate
+
+
+def _fill_metrics(row: dict[str, object], tally: _Tally, inputs: Sequence[str], *, runs: int,
+                  full: bool, roa_fraction: float) -> None:
+    """The metric columns of *row* from what the point's runs measured."""
+    fell, balanced_since, peak = tally.fell, tally.balanced_since, tally.peak
     up = ~fell
     row.update({
         "runs": runs,
         "stayed_up": int(up.sum()),
         "fraction_up": float(up.mean()),
-        "fell_at_median": float(np.median(fell_at[fell])) if fell.any() else math.nan,
-        "time_saturated_mean": float(saturated.mean()),
-        "time_saturated_max": float(saturated.max()),
+        "fell_at_median": float(np.median(tally.fell_at[fell])) if fell.any() else math.nan,
+        "time_saturated_mean": float(tally.saturated.mean()),
+        "time_saturated_max": float(tally.saturated.max()),
         "roa_fraction": roa_fraction,
-        "steps": int(steps),
+        "steps": int(tally.steps),
         # Ends balanced and stays (equilibrist.tasks.balance_box): a swing-up's success.
         "fraction_balanced": float(np.isfinite(balanced_since).mean()),
         "time_to_balance_p50": _quantile(balanced_since[np.isfinite(balanced_since)], 0.5),
@@ -273,6 +335,7 @@ def evaluate_point(study: Study, index: int, *,
         row[f"peak_input_p50.{u}"] = _quantile(peak[:, j], 0.5)
         row[f"peak_input_max.{u}"] = float(peak[:, j].max())
     if full:
+        settle, cost = tally.settle, tally.cost
         row["settled_fraction"] = float(np.isfinite(settle).mean())
         row["settling_p50"] = _quantile(settle, 0.5)
         row["settling_p90"] = _quantile(settle, 0.9)
@@ -280,7 +343,6 @@ def evaluate_point(study: Study, index: int, *,
         kept = cost[up & np.isfinite(cost)]
         row["cost_mean"] = float(kept.mean()) if kept.size else math.nan
         row["cost_p90"] = _quantile(kept, 0.9)
-    return row
 
 
 def evaluate_chunk(study: Study, chunk: int, chunk_size: int, *,
