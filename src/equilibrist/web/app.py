@@ -45,7 +45,11 @@ from equilibrist.web.session_plan import compute_plan
 from equilibrist.web.session_roa import compute_roa
 
 if TYPE_CHECKING:
+    from collections.abc import Awaitable, Callable
+
     from starlette.applications import Starlette
+    from starlette.requests import Request
+    from starlette.responses import Response
     from starlette.types import ASGIApp, Receive, Scope, Send
     from starlette.websockets import WebSocket
 
@@ -272,11 +276,9 @@ def create_app(
     require()
     from starlette.applications import Starlette
     from starlette.middleware import Middleware
-    from starlette.requests import Request
-    from starlette.responses import FileResponse, JSONResponse, Response
+    from starlette.responses import FileResponse, Response
     from starlette.routing import Mount, Route, WebSocketRoute
     from starlette.staticfiles import StaticFiles
-    from starlette.websockets import WebSocketDisconnect
 
     cat = catalogue if catalogue is not None else Catalogue.default()
     first = system or ("cartpole" if "cartpole" in cat.names else cat.names[0])
@@ -287,6 +289,30 @@ def create_app(
 
     async def index(request: Request) -> Response:
         return FileResponse(STATIC / "index.html", headers=_HEADERS)
+
+    download = _download_handler(state)
+    socket = _socket_handler(state)
+
+    async def favicon(request: Request) -> Response:
+        return Response(status_code=204, headers=_HEADERS)
+
+    routes = [
+        Route("/", index),
+        Route("/favicon.ico", favicon),
+        Route("/download/{token}/{kind}", download),
+        WebSocketRoute("/ws", socket),
+        Mount("/static", StaticFiles(directory=STATIC), name="static"),
+    ]
+    check = HostCheck.serving(host, port)
+    app = Starlette(routes=routes, middleware=[Middleware(_Guard, check=check)])
+    app.state.playground = state
+    app.state.host_check = check
+    return app
+
+
+def _download_handler(state: _State) -> Callable[[Request], Awaitable[Response]]:
+    """The handler of ``/download/{token}/{kind}``: a session's controller as C, or its run."""
+    from starlette.responses import JSONResponse, Response
 
     async def download(request: Request) -> Response:
         token = request.path_params["token"]
@@ -311,6 +337,14 @@ def create_app(
         headers = dict(_HEADERS)
         headers["Content-Disposition"] = f'attachment; filename="{name}"'
         return Response(body, media_type=DOWNLOADS[kind], headers=headers)
+
+    return download
+
+
+def _socket_handler(state: _State) -> Callable[[WebSocket], Awaitable[None]]:
+    """The handler of ``/ws``: one session per socket, its frames streamed, its messages
+    received, freed when the socket closes."""
+    from starlette.websockets import WebSocketDisconnect
 
     async def socket(ws: WebSocket) -> None:
         # (Its Host and Origin were checked by the guard, before it got here.)
@@ -351,21 +385,7 @@ def create_app(
                 if not streamer.cancelled():
                     streamer.exception()
 
-    async def favicon(request: Request) -> Response:
-        return Response(status_code=204, headers=_HEADERS)
-
-    routes = [
-        Route("/", index),
-        Route("/favicon.ico", favicon),
-        Route("/download/{token}/{kind}", download),
-        WebSocketRoute("/ws", socket),
-        Mount("/static", StaticFiles(directory=STATIC), name="static"),
-    ]
-    check = HostCheck.serving(host, port)
-    app = Starlette(routes=routes, middleware=[Middleware(_Guard, check=check)])
-    app.state.playground = state
-    app.state.host_check = check
-    return app
+    return socket
 
 
 async def _send(ws: WebSocket, message: dict[str, object]) -> None:

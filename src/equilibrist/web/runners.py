@@ -104,6 +104,9 @@ class NonlinearRunner:
     """Any :class:`~equilibrist.control.controller.NonlinearController` in the session's loop
     (a kind of one's own, the swing-up), run by its plain-Python runtime."""
 
+    #: What takes the sample's time, for the page's warning that the loop lags.
+    busy = "the controller"
+
     def __init__(self, ctrl: NonlinearController, system: System, kind: str) -> None:
         self.kind = kind
         self.ctrl = ctrl
@@ -255,6 +258,8 @@ def build_plan_runner(kind: str, system: System, design: Design, trajectory: Tra
 
 class MPCRunner:
     """The constrained MPC in the session's loop (see the module docstring)."""
+
+    busy = "the MPC's solves"
 
     def __init__(self, runtime: MPCRuntime, system: System, setup_seconds: float,
                  kind: str = "mpc") -> None:

@@ -469,7 +469,7 @@ class Session(_SessionPlan, _SessionRoa):
             return
         self.last_lag_warning = now
         runner = self.loop.runner
-        what = "the MPC's solves" if runner is not None and runner.kind == "mpc" else "the controller"
+        what = runner.busy if runner is not None else "the controller"
         stats = runner.solve_stats() if runner is not None else None
         worst = f" (worst solve {stats['worst_ms']:.2f} ms)" if stats else ""
         self.messages.append({
