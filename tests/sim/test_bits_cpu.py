@@ -285,7 +285,7 @@ SCENARIOS = ["open-loop-falls", "lqg-noise-events", "lqr-adaptive", "batch-lqr-n
 @pytest.mark.slow
 def test_the_recorded_numbers_under_another_cpu_feature_set() -> None:
     """glibc's SSE2 paths (the core's machine code is the x86-64 baseline's either way)."""
-    got = json.loads(_python(_DIGESTS.format(here=str(HERE), names=SCENARIOS), OTHER_CPU))
+    got = json.loads(_python(_DIGESTS.format(here=str(HERE / "sim"), names=SCENARIOS), OTHER_CPU))
     assert got == {name: [] for name in SCENARIOS}, f"differ from the recorded numbers: {got}"
 
 
@@ -296,7 +296,7 @@ def test_the_recorded_designs_under_another_blas_kernel() -> None:
     BLAS kernel another CPU would select (OPENBLAS_CORETYPE) changes no bit of a run."""
     names = ["lqr-saturating-delay", "lqg-noise-events", "lqg-predictor-tracking",
              "batch-lqg-recorded"]
-    got = json.loads(_python(_DIGESTS.format(here=str(HERE), names=names),
+    got = json.loads(_python(_DIGESTS.format(here=str(HERE / "sim"), names=names),
                              {"OPENBLAS_CORETYPE": "Nehalem"}))
     assert got == {name: [] for name in names}, f"differ from the recorded numbers: {got}"
 
@@ -305,7 +305,7 @@ def test_the_core_takes_nothing_from_blas() -> None:
     """With the gains and noise given as numbers, another BLAS kernel changes nothing."""
     code = f"""
     import sys, numpy as np
-    sys.path.insert(0, {str(HERE)!r})
+    sys.path.insert(0, {str(HERE / "sim")!r})
     from test_sim_bits import digest
     from equilibrist.numeric.lookup import get_system
     from equilibrist.sim import Noise, StateFeedback, simulate

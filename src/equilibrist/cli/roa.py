@@ -242,10 +242,11 @@ def _check_work(runs: int, *, duration: float, rate: float, physics_step: float 
     *max_steps* physics steps; the advice names this command's options."""
     from equilibrist.errors import SimulationError
     from equilibrist.sim.budget import check_steps
+    from equilibrist.sim.integrators import DEFAULT
     from equilibrist.sim.setup_steps import timing
 
     problems: list[str] = []  # a physics step that does not divide the period: the runs say so
-    _h, n_sub, n_samples = timing(rate, duration, physics_step, "rk4", runs=runs, bound=None,
+    _h, n_sub, n_samples = timing(rate, duration, physics_step, DEFAULT, runs=runs, bound=None,
                                   threads=1, problems=problems)
     if n_sub is None or n_samples is None:
         return

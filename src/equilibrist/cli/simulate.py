@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 
 
 _EPILOG = """\
-The run: the nonlinear plant integrated with RK4 (or --integrator adaptive)
+The run: the nonlinear plant integrated with RK4 (or another --integrator)
 at --physics-step, which must divide the control period 1/--rate; the
 controller designed for that rate (LQR on the full state, or LQG: a discrete
 Kalman filter on the measured --outputs) with zero-order hold and the
@@ -79,7 +79,10 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
                    help="controller sample rate [Hz] (default: the system's control rate)")
     p.add_argument("--physics-step", metavar="S",
                    help="integration step [s], dividing 1/rate (default: at most 1 ms)")
-    p.add_argument("--integrator", choices=("rk4", "adaptive"), default="rk4")
+    from equilibrist.sim import integrators
+
+    p.add_argument("--integrator", choices=integrators.names(), default=integrators.DEFAULT,
+                   help=integrators.help_text())
     p.add_argument("--plant", choices=("nonlinear", "linear"), default="nonlinear",
                    help="the system's own dynamics (default) or its linearization")
     common.add_items(p, "--x0", marker="=", metavar="NAME=VALUE",

@@ -2,10 +2,11 @@
 
 :class:`Core` is built from a system, a task and the environment's options;
 the single environment and the vector environment read the same one, so
-both step exactly the same numbers. It is the only Python code that knows
-the slots of the core's settings arrays (``ci``, ``cf``) and of a copy's
-rows (``fs``, ``us``); ``equilibrist/sim/_env_template.py`` names the same
-slots (``_CI_*``, ``_CF_*``, ``_US_*``), and the tests check both agree.
+both step exactly the same numbers. It is the only Python code that packs
+the core's settings arrays (``ci``, ``cf``) and a copy's rows (``fs``,
+``us``), whose slots are named once in :mod:`equilibrist.sim.layout`
+(``ENV_CI``, ``ENV_CF``, ``ENV_US``: ``EQ_CI_*``, ``EQ_CF_*``, ``EQ_US_*`` in
+``native/env.c``).
 
 The single and the vector environment take the same options,
 :data:`OPTION_DEFAULTS`, and both check them through one function
@@ -26,8 +27,9 @@ from equilibrist.control.checks import given_text, real_array
 from equilibrist.errors import DesignError, EquilibristError, UnknownNameError, nearest
 from equilibrist.numeric.lookup import get_system
 from equilibrist.numeric.system import System
-from equilibrist.sim import layout
+from equilibrist.sim import integrators, layout
 from equilibrist.sim.noise import Noise, square_root
+from equilibrist.sim.setup_steps import default_substeps
 from equilibrist.sim.simcore import load_core
 from equilibrist.tasks import TASK_NAMES, Task, check_point, get_task
 
@@ -54,6 +56,7 @@ US_WIDTH = 4 + len(US_SLOTS)
 OPTION_DEFAULTS: dict[str, object] = {
     "params": None, "rate": None, "physics_step": None, "observe": "outputs", "noise": True,
     "randomize": None, "action_units": "normalized", "alive_bonus": ALIVE_BONUS, "at": None,
+    "integrator": integrators.DEFAULT,
 }
 
 
@@ -104,7 +107,11 @@ class Core:
     system, task:
         The bound system and the task posed on it.
     rate, physics_step, n_sub, n_samples:
-        Control rate [Hz], RK4 step [s], steps per period, periods per episode.
+        Control rate [Hz], physics step [s], steps per period, periods per episode.
+    integrator:
+        The physics steps' integrator (a name of :mod:`equilibrist.sim.integrators`' table;
+        an adaptive one with its default tolerances). The vector environment's lanes step
+        those whose entry says ``lanes`` (RK4); the others' copies one at a time.
     observe:
         ``"outputs"`` (the rig's sensors, with their noise) or ``"state"``.
     observation_names:
@@ -126,6 +133,7 @@ class Core:
     physics_step: float
     n_sub: int
     n_samples: int
+    integrator: str
     observe: str
     observation_names: tuple[str, ...]
     action_units: str
@@ -214,6 +222,7 @@ class Core:
             "task": self.task.name,
             "rate": self.rate,
             "physics_step": self.physics_step,
+            "integrator": self.integrator,
             "n_samples": self.n_samples,
             "observe": self.observe,
             "observation": list(self.observation_names),
@@ -238,10 +247,12 @@ def build_core(
     action_units: str = "normalized",
     alive_bonus: float = ALIVE_BONUS,
     at: Mapping[str, object] | None = None,
+    integrator: str = integrators.DEFAULT,
     lanes: bool = False,
 ) -> Core:
     """Validate an environment's options (every problem at once) and pack them. *lanes*:
-    the core steps copies eight at a time (a vector environment's; the same bits)."""
+    the core steps copies eight at a time (a vector environment's; the same bits) where the
+    integrator has a lanes step (its table entry's ``lanes``)."""
     sysm = bind_system(system, params)
     if not sysm.n_inputs:
         raise EnvError(f"{sysm.key} has no input: there is nothing for an agent to do")
@@ -254,29 +265,49 @@ def build_core(
         except DesignError as exc:  # no equilibrium there, or a swing-up
             raise EnvError(str(exc)) from None
     problems: list[str] = []
-    names = sysm.state_names
-    n = sysm.n_states
-
     run_rate = tsk.rate if rate is None else _positive(rate, "rate [Hz]", problems)
-    h = n_sub = None
-    if run_rate is not None:
-        period = 1.0 / run_rate
-        if physics_step is None:
-            n_sub = max(1, math.ceil(period / 1e-3 - 1e-9))
-            h = period / n_sub
-        else:
-            step = _positive(physics_step, "physics_step [s]", problems)
-            if step is not None:
-                ratio = period / step
-                k = round(ratio)
-                if k < 1 or abs(ratio - k) > 1e-9 * max(1.0, ratio):
-                    sug = period / max(1, math.ceil(ratio))
-                    problems.append(
-                        f"physics_step {step:g} s does not divide the control period {period:g} s "
-                        f"({run_rate:g} Hz): use the period divided by a whole number, e.g. {sug:.6g} s"
-                    )
-                else:
-                    n_sub, h = k, period / k
+    wrong = integrators.check(integrator, what="integrator=")
+    if wrong is not None:
+        problems.append(wrong)
+        integrator = integrators.DEFAULT
+    h, n_sub = _physics_step(run_rate, physics_step, integrator, problems)
+    bonus = _check_options(observe, action_units, noise, alive_bonus, problems)
+    rnd = _randomization(sysm, randomize, problems)
+    if problems or run_rate is None or h is None or n_sub is None or bonus is None:
+        raise EnvError("; ".join(problems) if problems else "invalid environment settings")
+    return _packed(sysm, tsk, point, run_rate=run_rate, h=h, n_sub=n_sub, integrator=integrator,
+                   observe=observe, noise=noise, rnd=rnd, action_units=action_units,
+                   bonus=bonus, lanes=lanes)
+
+
+def _physics_step(run_rate: float | None, physics_step: float | None, integrator: str,
+                  problems: list[str]) -> tuple[float | None, int | None]:
+    """The physics step and the steps per period (the period split into steps of at most
+    1 ms by default, or one step for an adaptive integrator)."""
+    if run_rate is None:
+        return None, None
+    period = 1.0 / run_rate
+    if physics_step is None:
+        n_sub = default_substeps(period, integrator)
+        return period / n_sub, n_sub
+    step = _positive(physics_step, "physics_step [s]", problems)
+    if step is None:
+        return None, None
+    ratio = period / step
+    k = round(ratio)
+    if k < 1 or abs(ratio - k) > 1e-9 * max(1.0, ratio):
+        sug = period / max(1, math.ceil(ratio))
+        problems.append(
+            f"physics_step {step:g} s does not divide the control period {period:g} s "
+            f"({run_rate:g} Hz): use the period divided by a whole number, e.g. {sug:.6g} s"
+        )
+        return None, None
+    return period / k, k
+
+
+def _check_options(observe: str, action_units: str, noise: bool, alive_bonus: float,
+                   problems: list[str]) -> float | None:
+    """The switches checked by value; the alive bonus (None if it is not a finite number)."""
     if observe not in OBSERVE:
         problems.append(f"observe={observe!r}: expected one of {', '.join(map(repr, OBSERVE))}")
     if action_units not in ACTION_UNITS:
@@ -285,21 +316,25 @@ def build_core(
         )
     if not isinstance(noise, bool):
         problems.append(f"noise={noise!r}: expected True or False")
-    bonus = None
     try:
         bonus = float(alive_bonus)
         if not math.isfinite(bonus):
             raise ValueError
     except (TypeError, ValueError):
         problems.append(f"alive_bonus={alive_bonus!r}: expected a finite number (reward per second)")
+        return None
+    return bonus
 
-    # Domain randomization: relative spreads of physical parameters.
+
+def _randomization(sysm: System, randomize: Mapping[str, object] | None,
+                   problems: list[str]) -> dict[str, float]:
+    """Domain randomization: the relative spreads of physical parameters, checked."""
     pnames = sysm.spec.parameter_names
     limit_names = {f"{i}_{s}" for i in sysm.input_names for s in ("min", "max")}
     rnd: dict[str, float] = {}
     if randomize is not None and not isinstance(randomize, Mapping):
         problems.append(f"randomize: expected {{parameter: relative spread}}, got {type(randomize).__name__}")
-        randomize = None
+        return rnd
     for name, spread in (randomize or {}).items():
         if name not in pnames:
             problems.append(f"randomize: {sysm.key} has no parameter {name!r} ({nearest(name, pnames)})")
@@ -323,10 +358,15 @@ def build_core(
             problems.append(f"randomize: {name} is 0, so a relative spread can not change it")
             continue
         rnd[name] = s
+    return rnd
 
-    if problems or run_rate is None or h is None or n_sub is None or bonus is None:
-        raise EnvError("; ".join(problems) if problems else "invalid environment settings")
 
+def _packed(sysm: System, tsk: Task, point: dict[str, float] | None, *, run_rate: float,
+            h: float, n_sub: int, integrator: str, observe: str, noise: bool,
+            rnd: dict[str, float], action_units: str, bonus: float, lanes: bool) -> Core:
+    """The validated settings packed into the core's arrays (``ci``, ``cf``)."""
+    names = sysm.state_names
+    n = sysm.n_states
     outputs = tuple(sysm.spec.outputs) or tuple(names)
     c_idx = np.array([names.index(o) for o in outputs], dtype=np.int64)
     lw = np.zeros((n, 0))
@@ -348,6 +388,7 @@ def build_core(
         dtype=np.int64,
     )
     n_samples = max(1, math.ceil(tsk.duration * run_rate - 1e-9))
+    pnames = sysm.spec.parameter_names
     rnd_idx = np.array([pnames.index(k) for k in rnd], dtype=np.int64)
     op = np.concatenate([tsk.x_op, tsk.u_op]).astype(float)
     sc = np.concatenate([tsk.state_scales, tsk.input_scales]).astype(float)
@@ -356,10 +397,12 @@ def build_core(
     ci, cf = _pack(
         ints={"n_sub": n_sub, "n_samples": n_samples, "observe_state": int(observe == "state"),
               "reward": TASK_NAMES.index(tsk.name), "physical": int(action_units == "physical"),
-              "chunks": 1, "autoreset": 0, "ny": len(c_idx), "nw": lw.shape[1],
-              "nlv": lv.shape[0], "nhang": len(hang), "nrnd": len(rnd_idx), "np": len(p_nom)},
+              "chunks": 1, "autoreset": 0, "integrator": integrators.number(integrator),
+              "ny": len(c_idx), "nw": lw.shape[1], "nlv": lv.shape[0], "nhang": len(hang),
+              "nrnd": len(rnd_idx), "np": len(p_nom)},
         index_blocks={"c_idx": c_idx, "hang": hang, "rnd_idx": rnd_idx},
-        floats={"h": h, "dt": 1.0 / run_rate, "bonus": bonus},
+        floats={"h": h, "dt": 1.0 / run_rate, "bonus": bonus, "rtol": integrators.RTOL,
+                "atol": integrators.ATOL},
         float_blocks={"region": region, "op": op, "iscale": 1.0 / sc,
                       "start": np.asarray(tsk.start, dtype=float),
                       "spread": np.asarray(tsk.spread, dtype=float), "p_nom": p_nom,
@@ -367,11 +410,11 @@ def build_core(
     )
     return Core(
         system=sysm, task=tsk, rate=float(run_rate), physics_step=float(h), n_sub=int(n_sub),
-        n_samples=int(n_samples), observe=observe,
+        n_samples=int(n_samples), integrator=integrator, observe=observe,
         observation_names=tuple(names) if observe == "state" else outputs,
         action_units=action_units, noise=spec_noise, randomize=dict(rnd), alive_bonus=bonus,
         at=point,
-        kernel=load_core(sysm, lanes=lanes), c_idx=c_idx, lv=np.ascontiguousarray(lv),
+        kernel=load_core(sysm, lanes=lanes and integrators.get(integrator).lanes), c_idx=c_idx, lv=np.ascontiguousarray(lv),
         lw=np.ascontiguousarray(lw), region=region,
         op=op, sc=sc, hang=hang, p_nom=p_nom, rnd_idx=rnd_idx, rnd_spread=rnd_spread,
         ci=ci, cf=cf,

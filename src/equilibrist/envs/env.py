@@ -167,7 +167,11 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
     rate : float, optional
         Control rate [Hz]: one step is one period (default: the task's).
     physics_step : float, optional
-        RK4 step [s]; must divide the period (default: at most 1 ms).
+        The integrator's step [s]; must divide the period (default: at most 1 ms, or the
+        period for an adaptive integrator).
+    integrator : str
+        A name of :mod:`equilibrist.sim.integrators`' table (default ``"rk4"``; the vector
+        environment steps eight copies at once with RK4 only, one at a time otherwise).
     observe : {"outputs", "state"}
         The rig's measured outputs with their sensor noise, or the state.
     noise : bool

@@ -21,6 +21,7 @@ from equilibrist.errors import EquilibristError
 from equilibrist.ident.log import IdentificationError, Log
 from equilibrist.ident.noise import _information_inverse, _steady_gain, _van_loan
 from equilibrist.numeric.system import System
+from equilibrist.sim.integrators import DEFAULT
 
 BACKENDS = ("compiled", "solve_ivp")
 # Segment length rule: process noise may move an output by this fraction of
@@ -31,7 +32,7 @@ SEGMENT_NOISE_RATIO = 0.25
 # the process noise.
 MIN_SEGMENT_SAMPLES = 5
 MAX_SEGMENT_SECONDS = 1.0
-# RK4 steps of one call of the compiled integrator at most (a few tens of ms): Ctrl-C
+# Steps of one call of the compiled integrator at most (a few tens of ms): Ctrl-C
 # is answered between calls.
 CALL_STEPS = 1_000_000
 
@@ -132,7 +133,7 @@ class _Problem(_Unknowns):
         return theta, off, rest.reshape(self.n_seg, self.n)
 
     def run(self, P: np.ndarray, XS: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Every segment for each case, in calls of at most :data:`CALL_STEPS` RK4 steps.
+        """Every segment for each case, in calls of at most :data:`CALL_STEPS` steps.
 
         Ctrl-C reaches Python only between calls of the compiled loop: so
         the cases go one by one and their segments in runs of bounded work,
@@ -156,7 +157,7 @@ class _Problem(_Unknowns):
         return yhat, xend
 
     def runs_of_segments(self) -> list[tuple[int, int]]:
-        """Consecutive segments ``[a, b)`` of at most :data:`CALL_STEPS` RK4 steps (one at least)."""
+        """Consecutive segments ``[a, b)`` of at most :data:`CALL_STEPS` steps (one at least)."""
         per_row = np.concatenate([[0], np.cumsum(self.n_sub)])
         seg_steps = per_row[self.bounds[1:]] - per_row[self.bounds[:-1]]
         out, a, total = [], 0, 0
@@ -285,11 +286,13 @@ def _solve_ivp_shoot(system: System) -> ShootFunction:
     return shoot_many
 
 
-def _shooter(system: System, backend: str) -> ShootFunction:
+def _shooter(system: System, backend: str, integrator: str = DEFAULT) -> ShootFunction:
+    """The shooting loop of *backend*: the compiled one steps with *integrator* (a name of
+    :mod:`equilibrist.sim.integrators`' table)."""
     if backend == "compiled":
         from equilibrist.ident.kernel import load_shooting
 
-        return load_shooting(system).shoot_many
+        return load_shooting(system, integrator).shoot_many
     if backend == "solve_ivp":
         return _solve_ivp_shoot(system)
     raise IdentificationError(f"backend {backend!r}: expected one of {', '.join(BACKENDS)}")

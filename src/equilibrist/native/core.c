@@ -1,12 +1,15 @@
 /* The simulation core of equilibrist, in C: written once, compiled per system and controller.
  *
- * This file is a template. equilibrist.sim.simcore writes one translation
- * unit per system and controller: the calling convention's constants
- * (EQ_IO_*, EQ_REC_*... from equilibrist.sim.layout), the project's libm
- * (equilibrist.numeric.libm), the system's dynamics and the controller
- * translated from their one Python definition (equilibrist.native.pyc), the
- * glue below the marker "the generated part ends here", then this body. The
- * unit defines:
+ * equilibrist.sim.simcore writes one translation unit per system and
+ * controller: the calling convention's constants (EQ_IO_*, EQ_REC_*... from
+ * equilibrist.sim.layout; EQ_INT_* and the integrators' work rows from
+ * equilibrist.sim.integrators), the run's argument struct eq_args (from
+ * equilibrist.sim.simcore.FIELDS, which also gives ctypes its RunArgs), the
+ * project's libm (equilibrist.numeric.libm), the system's dynamics and the
+ * controller translated from their one Python definition
+ * (equilibrist.native.pyc), the glue below the marker "the generated part ends
+ * here", then this body, with integrators.c and the integrators' dispatch
+ * (eq_step...) where its marker says. The unit defines:
  *
  *   EQ_N, EQ_M        states and inputs of the system
  *   eq_f(x, u, p, out)                       out = f(x, u, p)
@@ -14,19 +17,23 @@
  *   eq_ctrl_update(t, z, nz, y, ny, r, nr, u_app, cp, ncp, z_out)
  *   eq_ctrl_estimate(t, z, nz, y, ny, r, nr, cp, ncp, x_out)
  *
- * The arithmetic is the numba core's (equilibrist/sim/_kernel_template.py,
- * _rk4_template.py), operation for operation: the same sums in the same
- * order, Python's min and max, numba's unrolled integer powers, the
- * project's log for the normal deviates; compiled with -ffp-contract=off
- * and without -ffast-math, so a run gives the same bits as before, on
- * every CPU. See that template for the conventions (absolute state and
- * input, samples and physics steps, events by physics step, fell codes,
- * the random generator, the stop flag).
+ * The arithmetic is fixed operation for operation: the same sums in the same
+ * order, Python's min and max (eq_minf, eq_maxf), integer powers by repeated
+ * squaring (pyc), the project's log for the normal deviates; compiled with
+ * -ffp-contract=off and without -ffast-math, so a run gives the same bits on
+ * every CPU. The conventions: the state and the input are absolute (not
+ * deviations from the operating point); sample k is at t = k / rate, and
+ * the n_sub physics steps after it are numbered s = k * n_sub + j; events
+ * (kicks, pulses, parameter changes) are given by physics step; a run falls
+ * when a state leaves its region (the fell code: the index of the state,
+ * -2 when a state is not finite, -3 when the integrator failed); each run
+ * draws its noise from its own xoshiro256** state; a run stops between
+ * samples (and every 4096 physics steps) when *stop is set.
  */
 
 /* ---- the run's arrays: the struct eq_args, written before this body from
- * equilibrist.sim.simcore.FIELDS (which ctypes' RunArgs mirrors): the sample range,
- * options, state, controller, noise, parameter sets, events, and the outputs. ---- */
+ * equilibrist.sim.simcore.FIELDS: the sample range, options, state, controller, noise,
+ * parameter sets, events, and the outputs. ---- */
 
 /* ---- the generator and the integrators: integrators.c, inserted here ---- */
 
@@ -82,7 +89,9 @@ static inline void eq_measure(const double *x, const int64_t *c_idx, int64_t ny,
     }
 }
 
-/* The scratch of one run: EQ_SCR_ROWS rows of `width`. */
+/* The scratch of one run: EQ_SCR_ROWS rows of `width` (layout.SCRATCH's, the last, wk,
+ * starting the integrator's work rows). */
+#define EQ_SCR_ROWS (EQ_S_WK + EQ_STEP_ROWS)
 static int64_t eq_width(int64_t p_len, int64_t ny, int64_t nw, int64_t nz)
 {
     int64_t w = EQ_N;
@@ -110,15 +119,20 @@ eq_advance_t(const eq_args *a, int64_t k, double *x, const double *u_app, const 
     const int64_t integrator = a->iopts[EQ_IO_INTEGRATOR];
     const double h = a->fopts[EQ_FO_H];
     const int64_t lin_size = (int64_t)EQ_N * (2 * EQ_N + EQ_M + 1);
-    double *k1 = EQ_ROW(scr, width, EQ_S_K1), *k2 = EQ_ROW(scr, width, EQ_S_K2);
-    double *k3 = EQ_ROW(scr, width, EQ_S_K3), *k4 = EQ_ROW(scr, width, EQ_S_K4);
-    double *xt = EQ_ROW(scr, width, EQ_S_XT), *xprev = EQ_ROW(scr, width, EQ_S_XPREV);
+    double *xprev = EQ_ROW(scr, width, EQ_S_XPREV);
     double *ubuf = EQ_ROW(scr, width, EQ_S_UBUF), *wvec = EQ_ROW(scr, width, EQ_S_WVEC);
     double *zbuf = EQ_ROW(scr, width, EQ_S_ZBUF), *pcur = EQ_ROW(scr, width, EQ_S_PCUR);
-    double *fell_x = EQ_ROW(scr, width, EQ_S_FELL_X), *wk = EQ_ROW(scr, width, EQ_S_WK);
+    double *fell_x = EQ_ROW(scr, width, EQ_S_FELL_X);
+    eq_step_ctx ctx;
     int ok = 1;
     int64_t j, e, i, c;
-    wk[12 * width] = h;
+    ctx.work = EQ_ROW(scr, width, EQ_S_WK);
+    ctx.width = width;
+    ctx.rtol = a->fopts[EQ_FO_RTOL];
+    ctx.atol = a->fopts[EQ_FO_ATOL];
+    ctx.op = a->op;
+    ctx.lin = NULL;
+    eq_step_begin(integrator, h, &ctx);
     for (j = 0; j < n_sub; j++) {
         int64_t s = k * n_sub + j;
         int64_t code;
@@ -147,15 +161,8 @@ eq_advance_t(const eq_args *a, int64_t k, double *x, const double *u_app, const 
             }
         }
         for (i = 0; i < n; i++) xprev[i] = x[i];
-        if (integrator == EQ_INT_RK4) {
-            eq_rk4_step(x, ubuf, pcur, wvec, nw, h, k1, k2, k3, k4, xt);
-        } else if (integrator == EQ_INT_ADAPTIVE) {
-            ok = eq_dopri(x, ubuf, pcur, wvec, h, a->fopts[EQ_FO_RTOL], a->fopts[EQ_FO_ATOL],
-                          wk, width);
-        } else {
-            eq_linear(x, ubuf, a->op, wvec,
-                      lin_s + eq_pset(a->p_switch, a->n_sets, s) * lin_size, xt);
-        }
+        if (lin_s != NULL) ctx.lin = lin_s + eq_pset(a->p_switch, a->n_sets, s) * lin_size;
+        ok = eq_step(integrator, x, ubuf, pcur, wvec, nw, h, &ctx);
     check:
         code = eq_outside(x, a->region);
         if (!ok) code = -3;
@@ -210,8 +217,10 @@ static inline int eq_in_box(const double *x, const double *op, const double *box
     return 1;
 }
 
-/* Samples k_start .. k_end - 1 of one closed-loop run (resumable); see _kernel_template._run.
- * plain: as in eq_advance_t (the constant of eq_run and eq_run_plain). */
+/* Samples k_start .. k_end - 1 of one closed-loop run (resumable): at each sample the
+ * sensors, the controller's output (and estimate), the saturated and applied input, the
+ * record and the accumulators, the controller's update, then the physics steps to the next
+ * sample. plain: as in eq_advance_t (the constant of eq_run and eq_run_plain). */
 static inline __attribute__((always_inline)) void
 eq_run_t(const eq_args *a, int64_t k_start, int64_t k_end, double *x, double *z, double *u_prev,
          uint64_t *rng, const double *p_sets, const double *lin_s, double *rec, double *acc,
@@ -419,7 +428,13 @@ EQ_EXPORT void eq_measure_one(const double *x, const int64_t *c_idx, int64_t ny,
     eq_measure(x, c_idx, ny, lv, nlv, rng, y, zbuf);
 }
 
-/* The width of advance_one's scratch (EQ_SCR_ROWS rows). */
+/* The rows of advance_one's scratch. */
+EQ_EXPORT int64_t eq_scratch_rows(void)
+{
+    return EQ_SCR_ROWS;
+}
+
+/* The width of advance_one's scratch (eq_scratch_rows() rows). */
 EQ_EXPORT int64_t eq_scratch_width(int64_t p_len, int64_t ny, int64_t nw)
 {
     return eq_width(p_len, ny, nw, 0);

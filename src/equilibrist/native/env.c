@@ -2,7 +2,8 @@
  *
  * A control period of an environment is, number for number, a sample of
  * `simulate` with a Python controller: zero-order hold of the saturated
- * input, RK4 physics steps with process noise held over each, the region
+ * input, physics steps of the environment's integrator (EQ_CI_INTEGRATOR, a
+ * number of equilibrist.sim.integrators' table) with process noise held over each, the region
  * checked after each physics step, the sensors read with noise at the next
  * sample. Every entry takes the same few arrays:
  *
@@ -16,15 +17,16 @@
  * The unit defines eq_energy(x, p) (the system's energy) before this body.
  */
 
-#define EQ_ENV_SCR 9 /* scratch rows: u, w, zbuf, k1, k2, k3, k4, xt, xprev */
+/* Scratch rows of `width` (layout.ENV_SCRATCH's; the last, work, starts the integrator's). */
+#define EQ_ENV_SCR (EQ_ES_WORK + EQ_STEP_ROWS)
 /* A parallel step gives each block of copies scratch at least this many doubles apart
  * (two cache lines): scratch written by two threads in one line would bounce it. */
 #define EQ_ENV_GAP 16
 
 typedef struct {
     int64_t n_sub, n_samples, observe_state, reward, physical, autoreset, ny, nw, nlv, np;
-    int64_t nhang;
-    double h, dt, bonus;
+    int64_t nhang, integrator;
+    double h, dt, bonus, rtol, atol;
     const double *region; /* 2 x n: lower bounds, upper bounds */
     const double *op;     /* state then input */
     const double *iscale; /* 1 / scales: state then input */
@@ -47,9 +49,12 @@ static void eq_env_settings(const double *cf, const int64_t *ci, eq_env *S)
     S->nlv = ci[EQ_CI_NLV];
     S->np = ci[EQ_CI_NP];
     S->nhang = ci[EQ_CI_NHANG];
+    S->integrator = ci[EQ_CI_INTEGRATOR];
     S->h = cf[EQ_CF_H];
     S->dt = cf[EQ_CF_DT];
     S->bonus = cf[EQ_CF_BONUS];
+    S->rtol = cf[EQ_CF_RTOL];
+    S->atol = cf[EQ_CF_ATOL];
     S->region = cf + ci[EQ_CI_O_REGION];
     S->op = cf + ci[EQ_CI_O_OP];
     S->iscale = cf + ci[EQ_CI_O_ISCALE];
@@ -106,13 +111,22 @@ static void eq_env_input(const double *a, const double *p, int64_t np_, int64_t 
     }
 }
 
-/* One control period; the region code at a fall (the last finite state kept), else -1.
- * w is zero on entry and stays so without process noise. */
+/* One control period; the region code at a fall (-2 not finite, -3 the integrator failed:
+ * the last state before it kept), else -1. w is zero on entry and stays so without process
+ * noise; work: the integrator's rows of `width`. */
 static int64_t eq_env_physics(double *x, const double *u, const double *p, uint64_t *rng,
-                              const eq_env *S, double *w, double *zbuf, double *k1, double *k2,
-                              double *k3, double *k4, double *xt, double *xprev)
+                              const eq_env *S, double *w, double *zbuf, double *xprev,
+                              double *work, int64_t width)
 {
     int64_t s, i, c;
+    eq_step_ctx ctx;
+    ctx.work = work;
+    ctx.width = width;
+    ctx.rtol = S->rtol;
+    ctx.atol = S->atol;
+    ctx.op = S->op;
+    ctx.lin = NULL;
+    eq_step_begin(S->integrator, S->h, &ctx);
     for (s = 0; s < S->n_sub; s++) {
         int64_t code;
         if (S->nw > 0) {
@@ -124,10 +138,10 @@ static int64_t eq_env_physics(double *x, const double *u, const double *p, uint6
             }
         }
         for (i = 0; i < EQ_N; i++) xprev[i] = x[i];
-        eq_rk4_step(x, u, p, w, S->nw, S->h, k1, k2, k3, k4, xt);
-        code = eq_outside(x, S->region);
+        code = eq_step(S->integrator, x, u, p, w, S->nw, S->h, &ctx) ? eq_outside(x, S->region)
+                                                                       : -3;
         if (code != -1) {
-            if (code == -2) {
+            if (code < -1) {
                 for (i = 0; i < EQ_N; i++) x[i] = xprev[i];
             }
             return code;
@@ -208,9 +222,8 @@ static double eq_env_step_copy(int64_t r, const double *a, double *fs, uint64_t 
                                const eq_env *S, double *scr, int64_t width, int *status)
 {
     const int64_t fw = eq_env_fs_width(ci);
-    double *u = scr, *w = scr + width, *zbuf = scr + 2 * width, *k1 = scr + 3 * width;
-    double *k2 = scr + 4 * width, *k3 = scr + 5 * width, *k4 = scr + 6 * width;
-    double *xt = scr + 7 * width, *xprev = scr + 8 * width;
+    double *u = scr + EQ_ES_U * width, *w = scr + EQ_ES_W * width;
+    double *zbuf = scr + EQ_ES_ZBUF * width, *xprev = scr + EQ_ES_XPREV * width;
     double *row = fs + r * fw;
     uint64_t *urow = us + r * EQ_US_WIDTH;
     int64_t code;
@@ -221,7 +234,8 @@ static double eq_env_step_copy(int64_t r, const double *a, double *fs, uint64_t 
         return 0.0;
     }
     eq_env_input(a, row + EQ_N, S->np, S->physical, u);
-    code = eq_env_physics(row, u, row + EQ_N, urow, S, w, zbuf, k1, k2, k3, k4, xt, xprev);
+    code = eq_env_physics(row, u, row + EQ_N, urow, S, w, zbuf, xprev, scr + EQ_ES_WORK * width,
+                          width);
     return eq_env_finish(row, u, urow, orow, S, zbuf, code, status);
 }
 
@@ -258,7 +272,7 @@ static void eq_env_block(int64_t r0, const double *actions, double *fs, uint64_t
                          double *scr, int64_t width)
 {
     const int64_t fw = eq_env_fs_width(ci);
-    double *zbuf = scr + 2 * width;
+    double *zbuf = scr + EQ_ES_ZBUF * width;
     eqv x[EQ_N], xprev[EQ_N], u[EQ_M], p[EQ_NP], w[EQ_N];
     double uu[EQ_LANES][EQ_M > 0 ? EQ_M : 1], xl[EQ_N];
     const eqv zero = {0.0};
@@ -362,7 +376,7 @@ static void eq_env_step_range(int64_t lo, int64_t hi, const double *actions, dou
     int64_t r = lo;
     eq_env_settings(cf, ci, &S);
 #ifdef EQ_LANES
-    if (S.np == EQ_NP && eq_lanes_usable()) {
+    if (S.np == EQ_NP && eq_int_lanes(S.integrator) && eq_lanes_usable()) {
         for (; r + EQ_LANES <= hi; r += EQ_LANES) {
             eq_env_block(r, actions, fs, us, obs, n_obs, rewards, flags, n_copies, cf, ci, &S, scr,
                          width);
@@ -408,7 +422,8 @@ EQ_EXPORT int64_t eq_env_step_many(const double *actions, double *fs, uint64_t *
     return 0;
 }
 
-/* How many copies the vector environment's step runs at once on this CPU (1: one at a time). */
+/* How many copies the vector environment's step runs at once on this CPU (1: one at a time)
+ * with an integrator that has a lanes step (eq_int_lanes). */
 EQ_EXPORT int64_t eq_env_lanes(void)
 {
 #ifdef EQ_LANES

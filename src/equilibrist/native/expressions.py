@@ -1,7 +1,7 @@
 """The expressions of the C translation (see :mod:`equilibrist.native.pyc`).
 
 :class:`Expressions` writes one Python expression as C (fully parenthesized
-in Python's evaluation order, with numba's and CPython's typing rules) and
+in Python's evaluation order, with the typing rules of :mod:`equilibrist.native.pyc`) and
 knows the names in scope; :class:`equilibrist.native.translate.Translator`
 adds the statements and the function around them.
 """
@@ -194,7 +194,7 @@ class Expressions:
         if isinstance(node.right, ast.Name) and node.right.id in self.m.constants:
             exponent = self.m.constants[node.right.id]
         if isinstance(exponent, int) and abs(exponent) <= 64:
-            # numba's static power: res = 1; while e: (if e & 1: res *= val); e >>= 1; val *= val
+            # A static power: res = 1; while e: (if e & 1: res *= val); e >>= 1; val *= val
             if exponent == 0:
                 return ("1.0", "f") if tb == "f" else ("INT64_C(1)", "i")
             name = self.fresh()

@@ -1,8 +1,25 @@
-/* The simulation core's generator and integrators: the first part of its body (see core.c,
- * which follows it in the unit): xoshiro256** with the polar method's normal deviates,
- * RK4 (with and without noise, and eq_rk4_plain: the noise-free step of eq_run_plain),
- * Dormand-Prince 5(4), and the exact step of the affine model. The same arithmetic as
- * the numba core's, operation for operation (see core.c). */
+/* The simulation core's generator and built-in integrators: the first part of its body
+ * (core.c, which follows it in the unit): xoshiro256** with the polar method's normal
+ * deviates, RK4 (with and without noise, and eq_rk4_plain: the noise-free step of
+ * eq_run_plain), Dormand-Prince 5(4), and the exact step of the affine model.
+ *
+ * Each integrator's step of the table (equilibrist.sim.integrators, which writes the
+ * dispatch eq_step after this file) takes the state, input, parameters and noise and an
+ * eq_step_ctx: its work rows (EQ_<NAME>_<ROW>, named in that table) and what some of
+ * them read besides. */
+
+/* What a step may use besides x, u, p and the noise: work, the integrator's rows of
+ * `width` doubles (width >= EQ_N); the run's tolerances (the adaptive integrator's); a
+ * linear plant's operating point (state then input) and its [Phi | E | Gamma | f0]. */
+typedef struct {
+    double *work;
+    int64_t width;
+    double rtol, atol;
+    const double *op;
+    const double *lin;
+} eq_step_ctx;
+
+#define EQ_WORK(c, row) ((c)->work + (int64_t)(row) * (c)->width)
 
 /* Dormand-Prince 5(4) tableau. */
 #define EQ_A21 (1.0 / 5.0)
@@ -165,15 +182,18 @@ eq_rk4_plain(double *restrict x, const double *restrict u, const double *restric
     eq_rk4(x, u, p, w, h, k1, k2, k3, k4, xt);
 }
 
-/* Integrate over [0, h] with adaptive Dormand-Prince steps; 0 if it gives up.
- * wk: rows of width `width` (k1..k7, yt, yn, ..., row 12 carries the step size). */
+/* Integrate over [0, h] with adaptive Dormand-Prince steps; 0 if it gives up. Its work
+ * rows: the stages, the trial and the new state, and the step size to try next (set to the
+ * period's h by eq_dopri_begin, carried from one call to the next within a period). */
 static int eq_dopri(double *x, const double *u, const double *p, const double *w, double h,
-                    double rtol, double atol, double *wk, int64_t width)
+                    double rtol, double atol, const eq_step_ctx *c)
 {
     const int n = EQ_N;
-    double *k1 = wk, *k2 = wk + width, *k3 = wk + 2 * width, *k4 = wk + 3 * width;
-    double *k5 = wk + 4 * width, *k6 = wk + 5 * width, *k7 = wk + 6 * width;
-    double *yt = wk + 7 * width, *yn = wk + 8 * width, *hstate = wk + 12 * width;
+    double *k1 = EQ_WORK(c, EQ_ADAPTIVE_K1), *k2 = EQ_WORK(c, EQ_ADAPTIVE_K2);
+    double *k3 = EQ_WORK(c, EQ_ADAPTIVE_K3), *k4 = EQ_WORK(c, EQ_ADAPTIVE_K4);
+    double *k5 = EQ_WORK(c, EQ_ADAPTIVE_K5), *k6 = EQ_WORK(c, EQ_ADAPTIVE_K6);
+    double *k7 = EQ_WORK(c, EQ_ADAPTIVE_K7), *yt = EQ_WORK(c, EQ_ADAPTIVE_YT);
+    double *yn = EQ_WORK(c, EQ_ADAPTIVE_YN), *hstate = EQ_WORK(c, EQ_ADAPTIVE_H_NEXT);
     double t = 0.0;
     double dt = eq_minf(hstate[0], h);
     long steps = 0;
@@ -260,4 +280,42 @@ static inline void eq_linear(double *x, const double *u, const double *op, const
         }
         x[i] = op[i] + v;
     }
+}
+
+/* ---- the table's steps (equilibrist.sim.integrators: their signatures) ---- */
+static inline int eq_rk4_step_ctx(double *x, const double *u, const double *p, const double *w,
+                                  int64_t nw, double h, const eq_step_ctx *c)
+{
+    eq_rk4_step(x, u, p, w, nw, h, EQ_WORK(c, EQ_RK4_K1), EQ_WORK(c, EQ_RK4_K2),
+                EQ_WORK(c, EQ_RK4_K3), EQ_WORK(c, EQ_RK4_K4), EQ_WORK(c, EQ_RK4_XT));
+    return 1;
+}
+
+static inline void eq_rk4_free_ctx(double *x, const double *u, const double *p, double h,
+                                   const eq_step_ctx *c)
+{
+    eq_rk4_free(x, u, p, h, EQ_WORK(c, EQ_RK4_K1), EQ_WORK(c, EQ_RK4_K2),
+                EQ_WORK(c, EQ_RK4_K3), EQ_WORK(c, EQ_RK4_K4), EQ_WORK(c, EQ_RK4_XT));
+}
+
+static inline int eq_dopri_step(double *x, const double *u, const double *p, const double *w,
+                                int64_t nw, double h, const eq_step_ctx *c)
+{
+    (void)nw;
+    return eq_dopri(x, u, p, w, h, c->rtol, c->atol, c);
+}
+
+static inline void eq_dopri_begin(double h, const eq_step_ctx *c)
+{
+    EQ_WORK(c, EQ_ADAPTIVE_H_NEXT)[0] = h;
+}
+
+static inline int eq_linear_step(double *x, const double *u, const double *p, const double *w,
+                                 int64_t nw, double h, const eq_step_ctx *c)
+{
+    (void)p;
+    (void)nw;
+    (void)h;
+    eq_linear(x, u, c->op, w, c->lin, EQ_WORK(c, EQ_LINEAR_DX));
+    return 1;
 }

@@ -6,15 +6,14 @@ controllers' sources (the linear library of
 ``output``/``update``/``estimate``) are plain Python over floats, integers
 and 1-D or 2-D arrays: the one definition that runs in Python as the
 reference. This module turns such a function into a C99 function that
-performs the same IEEE operations in the same order, with the typing rules
-numba applied to the same source before (so a run in the C core gives the
-bits the numba core gave):
+performs the same IEEE operations in the same order, with fixed typing
+rules (so a run in the C core gives the same bits on every machine):
 
 - integers are ``int64_t``, floats ``double``; ``/`` is a float division,
-  ``//`` and ``%`` follow Python's signs (for floats, CPython's and numba's
+  ``//`` and ``%`` follow Python's signs (for floats, CPython's
   ``fmod``-based rule); ``x ** k`` with an integer literal ``k`` is
-  computed by repeated squaring exactly as numba unrolls it, any other
-  power with ``pow``;
+  computed by repeated squaring (``r = 1; while k: if k & 1: r *= x;
+  k >>= 1; x *= x``), any other power with ``pow``;
 - ``min`` and ``max`` keep Python's rule for ties and NaN (``max(a, b)`` is
   ``b if b > a else a``); ``int(x)`` truncates; ``abs`` of a float is
   ``fabs``;
@@ -53,7 +52,7 @@ SCALARS = ("f", "i")
 ARRAYS = ("F1", "F2", "I1", "I2")
 
 # math (or numpy) functions of one or two floats that are the C library's function of the
-# same name: the call numba makes for them too.
+# same name.
 _MATH = {
     "sqrt": "sqrt", "exp": "exp", "log": "log", "sin": "sin", "cos": "cos", "tan": "tan",
     "asin": "asin", "acos": "acos", "atan": "atan", "atan2": "atan2", "sinh": "sinh",

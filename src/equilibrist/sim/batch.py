@@ -30,7 +30,7 @@ import numpy as np
 
 from equilibrist.errors import SimulationError, nearest
 from equilibrist.numeric.system import System
-from equilibrist.sim import budget, layout, setup_checks
+from equilibrist.sim import budget, integrators, layout, setup_checks
 from equilibrist.sim import setup as _setup
 from equilibrist.sim.batch_inputs import (
     _count,
@@ -49,6 +49,7 @@ from equilibrist.sim.kernel import Kernel, set_workers, thread_count
 from equilibrist.sim.noise import Noise, SeedLike, describe_seed, generator_state, seed_sequence
 from equilibrist.sim.run import _progress_bar, call_interruptibly
 from equilibrist.sim.setup_checks import _has_operating_point
+from equilibrist.sim.setup_data import Setup
 from equilibrist.tasks import balance_box
 
 
@@ -71,9 +72,9 @@ def simulate_batch(
     seed: SeedLike = None,
     rate: float | None = None,
     physics_step: float | None = None,
-    integrator: str = "rk4",
-    rtol: float = 1e-8,
-    atol: float = 1e-10,
+    integrator: str = integrators.DEFAULT,
+    rtol: float = integrators.RTOL,
+    atol: float = integrators.ATOL,
     plant: str = "nonlinear",
     delay: bool = False,
     noise: Noise | None = None,
@@ -139,20 +140,42 @@ def simulate_batch(
         noise=noise, reference=reference, events=events, outputs=None, region=region,
         max_steps=max_steps, runs=runs, threads=_threads(workers),
     )
-    n, m = system.n_states, system.n_inputs
+    _check_memory(setup, runs, record, max_memory)
+    x0s = _initial_states(system, x0, runs, setup.x_op)
+    pmat = _parameter_matrix(system, params, runs)
+    base_seq = seed_sequence(seed) if (noise is not None or seed is not None) else None
+    seqs, seeds, rngs = _run_seeds(setup, base_seq, runs)
+    if not setup.compiled:
+        return _python_batch(setup, x0s, pmat, seqs, record, progress, workers)
+    p_sets_r = setup.p_sets(pmat)
+    if setup.plant == "linear":
+        lin_r = np.stack([setup.linear_blocks(p_sets_r[i]) for i in range(runs)])
+    else:
+        lin_r = np.zeros((runs, p_sets_r.shape[1], 0, 0))
+    runs_in = dict(x0s=x0s, rngs=rngs, p_sets_r=p_sets_r, lin_r=lin_r)
+    return _run_compiled_batch(setup, runs_in, pmat, seeds, record=record, workers=workers,
+                               progress=progress)
+
+
+def _check_memory(setup: Setup, runs: int, record: bool, max_memory: float | None) -> None:
+    """Refuse a batch whose arrays would not fit in *max_memory* (before any is made)."""
+    n, m = setup.system.n_states, setup.system.n_inputs
     n_sets = len(setup.change_values) + 1
-    n_p = len(system.spec.parameter_names)
+    n_p = len(setup.system.spec.parameter_names)
     per_run = (3 * n + n_sets * n_p + setup.acc_len + n + 8) * 8.0
-    if plant == "linear":
+    if setup.plant == "linear":
         per_run += n_sets * n * (2 * n + m + 1) * 8.0
     if record:
         per_run += setup.n_rows * setup.record_width * 8.0
     what = f"a batch of {runs} runs" + (f" of {setup.n_rows} samples with trajectories" if record else "")
     budget.check_memory(runs * per_run, what, max_memory)
 
-    x0s = _initial_states(system, x0, runs, setup.x_op)
-    pmat = _parameter_matrix(system, params, runs)
-    base_seq = seed_sequence(seed) if (noise is not None or seed is not None) else None
+
+def _run_seeds(setup: Setup, base_seq: np.random.SeedSequence | None, runs: int
+               ) -> tuple[list[np.random.SeedSequence | None], Sequence[dict[str, object] | None],
+                          np.ndarray]:
+    """Each run's seed sequence (where a Python controller's run needs it), its seed's
+    description, and its generator state (zeros where the core draws nothing)."""
     # The runs' generators are made only where the core draws from them (noise); otherwise
     # each run's seed is only named (the same names, without making 10^5 SeedSequences).
     draws = setup.lv.shape[0] > 0 or (setup.lw.ndim == 2 and setup.lw.shape[1] > 0)
@@ -167,21 +190,22 @@ def simulate_batch(
             rngs = np.stack([generator_state(s) for s in children])
     elif base_seq is not None:
         seeds = child_descriptions(base_seq, runs)
-    p_sets_r = setup.p_sets(pmat)
-    if plant == "linear":
-        lin_r = np.stack([setup.linear_blocks(p_sets_r[i]) for i in range(runs)])
-    else:
-        lin_r = np.zeros((runs, n_sets, 0, 0))
+    return seqs, seeds, rngs
 
-    if not setup.compiled:
-        return _python_batch(setup, x0s, pmat, seqs, record, progress, workers)
 
+def _run_compiled_batch(setup: Setup, runs_in: dict[str, np.ndarray], pmat: np.ndarray,
+                        seeds: Sequence[dict[str, object] | None], *, record: bool,
+                        workers: int | None, progress: bool) -> BatchResult:
+    """The runs of a compiled controller in one call of the core's ``run_many`` (*runs_in*:
+    the per-run ``x0s``, ``rngs``, ``p_sets_r`` and ``lin_r``), stopped by Ctrl-C."""
+    system = setup.system
+    x0s = runs_in["x0s"]
+    runs, n = x0s.shape
     kernel = Kernel(system, setup.nonlinear)
-    recs = np.empty((runs, setup.n_rows if record else 0, setup.record_width))
-    accs = np.zeros((runs, setup.acc_len))
-    statuses = np.zeros((runs, len(layout.STATUS)), dtype=np.int64)
-    fell_xs = np.zeros((runs, n))
-    x_ends = np.zeros((runs, n))
+    outs = dict(recs=np.empty((runs, setup.n_rows if record else 0, setup.record_width)),
+                accs=np.zeros((runs, setup.acc_len)),
+                statuses=np.zeros((runs, len(layout.STATUS)), dtype=np.int64),
+                fell_xs=np.zeros((runs, n)), x_ends=np.zeros((runs, n)))
     stop = np.zeros(1, dtype=np.int64)
     core = kernel.core(setup.cp)
     shared = dict(
@@ -194,9 +218,7 @@ def simulate_batch(
     )
 
     def run_arrays(sl: slice) -> dict[str, np.ndarray]:
-        return dict(x0s=x0s[sl], rngs=rngs[sl], p_sets_r=p_sets_r[sl], lin_r=lin_r[sl],
-                    recs=recs[sl], accs=accs[sl], statuses=statuses[sl], fell_xs=fell_xs[sl],
-                    x_ends=x_ends[sl])
+        return {name: arr[sl] for name, arr in (*runs_in.items(), *outs.items())}
 
     if not kernel.compiled(setup.cp):
         # Load (or compile) the core here, outside the timing (steps_per_second is the
@@ -217,6 +239,7 @@ def simulate_batch(
 
     bar = _progress_bar(runs, progress, "runs")
     st = layout.STATUS
+    statuses = outs["statuses"]
 
     def show() -> None:
         if bar is not None:
@@ -228,9 +251,8 @@ def simulate_batch(
     finally:
         if bar is not None:
             bar.close()
-    elapsed = timing[0]
-    return _batch_result(setup, x0s, pmat, seeds, statuses, accs, fell_xs, x_ends,
-                         recs if record else None, elapsed)
+    return _batch_result(setup, x0s, pmat, seeds, statuses, outs["accs"], outs["fell_xs"],
+                         outs["x_ends"], outs["recs"] if record else None, timing[0])
 
 
 @dataclass(frozen=True, eq=False)

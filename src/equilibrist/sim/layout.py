@@ -1,13 +1,15 @@
 """The compiled core's calling convention, defined once.
 
 Every array the core shares with Python has its slots, columns or rows
-named here. :func:`constants` turns them into the ``_NAME = index`` lines
-that :mod:`equilibrist.sim.kernel` writes into each generated kernel
-source, and the Python side (:mod:`equilibrist.sim.setup`,
-:mod:`equilibrist.sim.run`, :mod:`equilibrist.sim.batch`) packs and reads
-the same arrays through :class:`Slots` and :class:`Blocks`. The entries'
-argument order is known only to :class:`equilibrist.sim.kernel.Kernel`,
-whose methods take keyword arguments.
+named here. :func:`constants` turns them into the ``_NAME = index`` values
+that :mod:`equilibrist.sim.simcore` writes into each generated unit as
+``#define EQ_NAME index`` (with the integrators' numbers and work rows from
+:mod:`equilibrist.sim.integrators`), and the Python side
+(:mod:`equilibrist.sim.setup`, :mod:`equilibrist.sim.run`,
+:mod:`equilibrist.sim.batch`, :mod:`equilibrist.envs.core`) packs and reads
+the same arrays through :class:`Slots` and :class:`Blocks`. The run's
+argument struct is :data:`equilibrist.sim.simcore.FIELDS`, written from there
+for C and for ctypes both.
 """
 
 from __future__ import annotations
@@ -95,8 +97,6 @@ IOPTS = Slots("IO", ("n_samples", "record", "delay", "n_sub", "integrator", "est
 FOPTS = Slots("FO", ("h", "rtol", "atol", "rate"))
 #: A run's status (``int64``): rows written, fell (0/1), the fell code, the physics step it fell.
 STATUS = Slots("ST", ("rows", "fell", "fell_code", "fell_step"))
-#: Integrators by number.
-INTEGRATORS = {"rk4": 0, "adaptive": 1, "linear": 2}
 #: A row of a recorded trajectory.
 RECORD = Blocks("REC", (("x", "n"), ("x_hat", "n"), ("y", "ny"), ("u_cmd", "m"),
                         ("u_sat", "m"), ("u_app", "m")))
@@ -105,38 +105,34 @@ RECORD = Blocks("REC", (("x", "n"), ("x_hat", "n"), ("y", "ny"), ("u_cmd", "m"),
 #: outside the balance box (``bal``, equilibrist.tasks.balance_box; 0: never).
 ACC = Blocks("ACC", (("peak_u", "m"), ("sum_u2", "m"), ("n_sat", "1"), ("peak_dx", "n"),
                      ("sum_est2", "n"), ("peak_u_app", "m"), ("last_out", "1")))
-#: Rows of the per-run scratch array (``fell_x`` receives the state at a fall).
-SCRATCH = Slots("S", ("y", "x_hat", "u_cmd", "u_sat", "u_app", "z_new", "k1", "k2", "k3", "k4",
-                      "xt", "xprev", "ubuf", "wvec", "zbuf", "pcur", "fell_x", "wk"))
-#: Rows of the adaptive integrator's work space at the end of the scratch array.
-SCRATCH_WORK_ROWS = 16
+#: Rows of the per-run scratch array (``fell_x`` receives the state at a fall); the
+#: integrator's work rows (:func:`equilibrist.sim.integrators.work_rows`) start at ``wk``.
+SCRATCH = Slots("S", ("y", "x_hat", "u_cmd", "u_sat", "u_app", "z_new", "xprev", "ubuf", "wvec",
+                      "zbuf", "pcur", "fell_x", "wk"))
 #: The environments' settings (:mod:`equilibrist.envs.core` writes them): the slots of
 #: ``ci``'s head (sizes, switches, and the offsets of ``cf``'s blocks and of ``ci``'s own
 #: index blocks), of ``cf``'s head, and of a copy's ``us`` row after its four generator words.
 ENV_CI = Slots("CI", (
     "n_sub", "n_samples", "observe_state", "reward", "physical", "chunks", "autoreset",
+    "integrator",
     "ny", "nw", "nlv", "nhang", "nrnd", "np",
     "o_c_idx", "o_hang", "o_rnd_idx",
     "o_region", "o_op", "o_iscale", "o_start", "o_spread", "o_p_nom", "o_rnd_spread", "o_lv",
     "o_lw",
 ))
-ENV_CF = Slots("CF", ("h", "dt", "bonus"))
+ENV_CF = Slots("CF", ("h", "dt", "bonus", "rtol", "atol"))
 ENV_US = ("k", "auto")
+#: Rows of an environment step's scratch; the integrator's work rows start at ``work``.
+ENV_SCRATCH = Slots("ES", ("u", "w", "zbuf", "xprev", "work"))
 
 
 def constants() -> dict[str, int]:
     """Every slot, column block and scratch row as a source constant (``_IO_DELAY = 2``...)."""
     out: dict[str, int] = {}
-    for part in (IOPTS, FOPTS, STATUS, RECORD, ACC, SCRATCH, ENV_CI, ENV_CF):
+    for part in (IOPTS, FOPTS, STATUS, RECORD, ACC, SCRATCH, ENV_CI, ENV_CF, ENV_SCRATCH):
         out.update(part.constants())
     out.update({f"_US_{name.upper()}": 4 + i for i, name in enumerate(ENV_US)})
     out["_US_WIDTH"] = 4 + len(ENV_US)
-    out["_SCR_ROWS"] = len(SCRATCH) - 1 + SCRATCH_WORK_ROWS
-    out.update({f"_INT_{k.upper()}": v for k, v in INTEGRATORS.items()})
     out.update(linear_constants())
     return out
 
-
-def constants_source() -> str:
-    """:func:`constants` as Python source lines."""
-    return "\n".join(f"{name} = {value}" for name, value in constants().items()) + "\n"

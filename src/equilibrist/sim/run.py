@@ -37,7 +37,7 @@ from equilibrist.control.linear import LinearController
 from equilibrist.control.nonlinear import NonlinearController
 from equilibrist.errors import SimulationError
 from equilibrist.numeric.system import System
-from equilibrist.sim import budget, layout, setup_data
+from equilibrist.sim import budget, integrators, layout, setup_data
 from equilibrist.sim import setup as _setup
 from equilibrist.sim.events import Event
 from equilibrist.sim.kernel import Kernel
@@ -125,9 +125,9 @@ def simulate(
     duration: float,
     rate: float | None = None,
     physics_step: float | None = None,
-    integrator: str = "rk4",
-    rtol: float = 1e-8,
-    atol: float = 1e-10,
+    integrator: str = integrators.DEFAULT,
+    rtol: float = integrators.RTOL,
+    atol: float = integrators.ATOL,
     plant: str = "nonlinear",
     x0: Mapping[str, float] | Sequence[float] | np.ndarray | None = None,
     delay: bool = False,
@@ -159,11 +159,12 @@ def simulate(
         Controller sample rate [Hz]; defaults to the controller's design rate.
     physics_step : float, optional
         Integration step [s]; must divide the control period. Default: the
-        period split into steps of at most 1 ms (RK4) or the period itself
-        (adaptive).
-    integrator : {"rk4", "adaptive"}
-        Fixed-step RK4, or Dormand-Prince 5(4) with *rtol*, *atol* inside
-        each physics step.
+        period split into steps of at most 1 ms (a fixed-step integrator) or
+        the period itself (an adaptive one).
+    integrator : str
+        A name of :mod:`equilibrist.sim.integrators`' table: ``"rk4"``
+        (fixed-step RK4, the default), ``"adaptive"`` (Dormand-Prince 5(4)
+        with *rtol*, *atol* inside each physics step), or one registered.
     plant : {"nonlinear", "linear"}
         The system's own dynamics, or its linearization at the operating
         point (propagated exactly, by matrix exponential).
@@ -247,7 +248,8 @@ def _run_compiled(setup: setup_data.Setup, kernel: Kernel, rng: np.ndarray,
     )
     total = setup.n_rows
     rows, fell = layout.STATUS["rows"], layout.STATUS["fell"]
-    if setup.integrator != "adaptive" and setup.n_samples * setup.n_sub <= _FIRST_CHUNK_STEPS:
+    if integrators.get(setup.integrator).fixed_step \
+            and setup.n_samples * setup.n_sub <= _FIRST_CHUNK_STEPS:
         core.run_one(k_start=0, k_end=total, **arrays)
         return _result(setup, rec, int(status[rows]), status, fell_x, x, seq,
                        estimates=setup.estimates)

@@ -13,7 +13,7 @@ from equilibrist.control.nonlinear import NonlinearController
 from equilibrist.control.python_controller import PythonController
 from equilibrist.numeric.system import System
 from equilibrist.sim import events as ev
-from equilibrist.sim import layout
+from equilibrist.sim import integrators, layout
 from equilibrist.sim.noise import Noise
 
 if TYPE_CHECKING:
@@ -82,7 +82,7 @@ class Setup:
         return layout.IOPTS.pack(
             np.int64, n_samples=self.n_samples, record=int(record), delay=int(self.delay),
             n_sub=self.n_sub, estimates=int(self.estimates), accumulate=int(accumulate),
-            integrator=layout.INTEGRATORS["linear" if self.plant == "linear" else self.integrator],
+            integrator=integrators.number("linear" if self.plant == "linear" else self.integrator),
         )
 
     @property

@@ -21,6 +21,7 @@ from equilibrist.control.python_controller import PythonController
 from equilibrist.errors import EquilibristError, SimulationError
 from equilibrist.numeric.system import System
 from equilibrist.sim import events as ev
+from equilibrist.sim import integrators
 from equilibrist.sim.budget import check_steps
 from equilibrist.sim.controllers import Resolved, as_controller
 from equilibrist.sim.noise import Noise, square_root
@@ -35,7 +36,6 @@ from equilibrist.sim.setup_checks import (
 )
 from equilibrist.sim.signals import Signal, as_signal
 
-INTEGRATORS = {"rk4": 0, "adaptive": 1}
 PLANTS = ("nonlinear", "linear")
 # The default physics step: the control period split into steps of at most this.
 DEFAULT_MAX_STEP = 1e-3
@@ -78,8 +78,9 @@ def check_arguments(
     if not isinstance(delay, bool | np.bool_):
         problems.append(f"delay = {delay!r}: expected True or False")
     if not isinstance(integrator, str):
-        problems.append(f"integrator = {integrator!r}: expected one of {', '.join(INTEGRATORS)}")
-        integrator = "rk4"
+        problems.append(f"integrator = {integrator!r}: expected one of "
+                        f"{', '.join(integrators.names())}")
+        integrator = integrators.DEFAULT
     if not isinstance(plant, str):
         problems.append(f"plant = {plant!r}: expected one of {', '.join(PLANTS)}")
         plant = "nonlinear"
@@ -126,13 +127,23 @@ def sample_rate(rate: float | None, ctrl_rate: float | None, problems: list[str]
 def solver(integrator: str, plant: str, rtol: float, atol: float,
            problems: list[str]) -> tuple[float | None, float | None]:
     """The integrator and plant checked by name; the tolerances (None if not positive)."""
-    if integrator not in INTEGRATORS:
-        problems.append(f"integrator {integrator!r}: expected one of {', '.join(INTEGRATORS)}")
+    wrong = integrators.check(integrator)
+    if wrong is not None:
+        problems.append(wrong)
     if plant not in PLANTS:
         problems.append(f"plant {plant!r}: expected one of {', '.join(PLANTS)}")
     tol_r = _positive(rtol, "rtol", problems)
     tol_a = _positive(atol, "atol", problems)
     return tol_r, tol_a
+
+
+def default_substeps(period: float, integrator: str) -> int:
+    """The physics steps of a control period when none is asked: steps of at most
+    :data:`DEFAULT_MAX_STEP` for a fixed-step integrator, one period for an adaptive one."""
+    known = integrator in integrators.names()
+    if known and not integrators.get(integrator).fixed_step:
+        return 1
+    return max(1, math.ceil(period / DEFAULT_MAX_STEP - 1e-9))
 
 
 def timing(run_rate: float | None, dur: float | None, physics_step: float | None,
@@ -147,7 +158,7 @@ def timing(run_rate: float | None, dur: float | None, physics_step: float | None
     if run_rate is not None:
         period = 1.0 / run_rate
         if physics_step is None:
-            n_sub = 1 if integrator == "adaptive" else max(1, math.ceil(period / DEFAULT_MAX_STEP - 1e-9))
+            n_sub = default_substeps(period, integrator)
             h = period / n_sub
         else:
             step = _positive(physics_step, "physics step [s]", problems)

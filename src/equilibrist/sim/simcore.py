@@ -2,12 +2,14 @@
 
 :func:`unit_source` writes the translation unit: the calling convention's
 constants (:mod:`equilibrist.sim.layout`), the run's argument struct
-(:data:`FIELDS`, mirrored by :class:`RunArgs`), the project's libm
+(:data:`FIELDS`, from which :func:`struct_source` writes the C struct and
+:class:`RunArgs` is the ctypes one), the project's libm
 (:mod:`equilibrist.numeric.libm`), the system's dynamics ``f`` and the
 controller's functions, both translated from their one Python definition
 by :mod:`equilibrist.native.pyc`, and the core's body (``core.c``, the
-numba template's loops written once in C, with its generator and integrators
-from ``integrators.c``). :func:`load_core` compiles it
+loops written once in C, with its generator and integrators from
+``integrators.c`` and the integrators' dispatch written from their table,
+:mod:`equilibrist.sim.integrators`). :func:`load_core` compiles it
 (:mod:`equilibrist.native.build`: cached by content, atomic, checked) and
 :class:`NativeCore` calls its entries.
 
@@ -44,7 +46,7 @@ from equilibrist.native import build, pyc
 from equilibrist.native.lanes import source as lanes_section
 from equilibrist.numeric import libm
 from equilibrist.numeric.system import System
-from equilibrist.sim import layout
+from equilibrist.sim import integrators, layout
 
 #: The core's C sources (core.c, integrators.c, env.c, shoot.c), in the package that writes C.
 _C_FOLDER = Path(build.__file__).parent
@@ -77,19 +79,22 @@ _CTYPES: dict[str, type[ctypes.c_int64 | ctypes.c_void_p]] = {
 
 
 class RunArgs(ctypes.Structure):
-    """The C core's ``eq_args``, field for field (from :data:`FIELDS`)."""
+    """The C core's ``eq_args`` for ctypes, written from :data:`FIELDS` (as
+    :func:`struct_source` writes it for C)."""
 
     _fields_ = [(name, _CTYPES[kind]) for name, kind in FIELDS]
 
 
-def _struct_source() -> str:
+def struct_source() -> str:
+    """The C core's ``eq_args``, written from :data:`FIELDS` (as :class:`RunArgs` is)."""
     lines = ["typedef struct {"]
     lines += [f"    {_C_TYPES[kind]}{'' if kind != 'i' else ' '}{name};".replace("* ", "*")
               for name, kind in FIELDS]
     return "\n".join(lines) + "\n} eq_args;\n"
 
 
-#: The line of core.c where the unit takes integrators.c (the generator and the integrators).
+#: The line of core.c where the unit takes integrators.c (the generator and the built-in
+#: integrators) and the integrators' table (the registered ones and the dispatch).
 _INTEGRATORS = "/* ---- the generator and the integrators: integrators.c, inserted here ---- */\n"
 
 
@@ -97,8 +102,8 @@ def _body() -> str:
     here = _C_FOLDER
     core = (here / "core.c").read_text()
     assert _INTEGRATORS in core
-    return core.replace(_INTEGRATORS, (here / "integrators.c").read_text(), 1)
-
+    return core.replace(_INTEGRATORS,
+                        (here / "integrators.c").read_text() + integrators.c_source(), 1)
 
 
 _GLUE = """
@@ -204,8 +209,8 @@ def unit_source(system: System, key: bytes | tuple[int, ...] | None = None,
         '#define EQ_EXPORT __attribute__((visibility("default")))\n',
         f"#define EQ_N {system.n_states}\n#define EQ_M {system.n_inputs}\n"
         f"#define EQ_NP {len(system.p)}\n",
-        _constants(layout.constants()),
-        _struct_source(),
+        _constants({**layout.constants(), **integrators.constants()}),
+        struct_source(),
         libm.c_source(log=True, exp=True),
         pyc.PRELUDE,
         "\n/* ---- the system's dynamics, from its generated Python module ---- */\n",
@@ -230,6 +235,7 @@ def unit_source(system: System, key: bytes | tuple[int, ...] | None = None,
 _GENERATOR_FILES = ("core.c", "integrators.c", "env.c", "shoot.c")
 _GENERATOR_MODULES = ("equilibrist.native.pyc", "equilibrist.sim.simcore", "equilibrist.native.lanes",
                       "equilibrist.numeric.libm", "equilibrist.sim.layout",
+                      "equilibrist.sim.integrators",
                       "equilibrist.control.controller", "equilibrist.tasks")
 _GENERATOR: list[str] = []
 
@@ -255,7 +261,7 @@ def unit_inputs(system: System, key: bytes | tuple[int, ...] | None = None,
                 controller: NonlinearController | None = None, *, lanes: bool = False) -> str:
     """A text that determines :func:`unit_source` of the same arguments entirely, cheap to
     make: the digests of the system's generated module and of the generator's sources, and
-    what the controller is (its pattern, sizes or source)."""
+    what the controller is (its pattern, sizes or source), and the integrators' table."""
     import hashlib
 
     module = hashlib.sha256(system.compiled.module_path.read_bytes()).hexdigest()
@@ -266,7 +272,8 @@ def unit_inputs(system: System, key: bytes | tuple[int, ...] | None = None,
         what = "pattern:" + key.hex()
     else:
         what = "sizes:" + repr(key)
-    return "\n".join((module, _generator_digest(), what, "lanes" if lanes else "one"))
+    return "\n".join((module, _generator_digest(), what, "lanes" if lanes else "one",
+                      integrators.digest()))
 
 
 def _ptr(a: np.ndarray | None) -> int | None:
@@ -300,6 +307,8 @@ class NativeCore:
         vp, i64 = ctypes.c_void_p, ctypes.c_int64
         lib.eq_measure_one.argtypes = [vp, vp, i64, vp, i64, vp, vp]
         lib.eq_measure_one.restype = None
+        lib.eq_scratch_rows.argtypes = []
+        lib.eq_scratch_rows.restype = i64
         lib.eq_scratch_width.argtypes = [i64, i64, i64]
         lib.eq_scratch_width.restype = i64
         lib.eq_advance_one.argtypes = [args_p, i64, vp, vp]
@@ -323,9 +332,12 @@ class NativeCore:
         lib.eq_env_begin_one.restype = None
         lib.eq_env_reset_many.argtypes = [vp, vp, vp, i64, i64, vp, vp]
         lib.eq_env_reset_many.restype = None
-        lib.eq_shoot_many.argtypes = [vp, i64, i64, vp, vp, i64, vp, i64, vp, vp, vp, i64, vp, vp]
+        f64 = ctypes.c_double
+        lib.eq_shoot_many.argtypes = [i64, f64, f64, vp, i64, i64, vp, vp, i64, vp, i64, vp, vp,
+                                      vp, i64, vp, vp]
         lib.eq_shoot_many.restype = None
-        lib.eq_innovations.argtypes = [vp, vp, vp, i64, vp, vp, vp, i64, vp, vp, vp, vp]
+        lib.eq_innovations.argtypes = [i64, f64, f64, vp, vp, vp, i64, vp, vp, vp, i64, vp, vp,
+                                       vp, vp]
         lib.eq_innovations.restype = None
 
     # -- the shared argument struct ------------------------------------------------------------
@@ -385,7 +397,8 @@ class NativeCore:
                 pulse_value: np.ndarray, rec_cols: np.ndarray, acc_cols: np.ndarray,
                 rec: np.ndarray, acc: np.ndarray, status: np.ndarray, fell_x: np.ndarray,
                 stop: np.ndarray) -> None:
-        """The numba core's ``run_one``, argument for argument."""
+        """One closed-loop run, or samples *k_start* .. *k_end* - 1 of one (``eq_run_one``:
+        *x*, *z*, *u_prev*, *rng*, *rec*, *acc*, *status*, *fell_x* written in place)."""
         values = self._common(op=op, c_idx=c_idx, cp=cp, ref=ref, uff=uff, lv=lv, lw=lw,
                               p_switch=p_switch, region=region, kicks=kicks,
                               kick_value=kick_value, pulses=pulses, pulse_value=pulse_value,
@@ -416,7 +429,8 @@ class NativeCore:
                  accs: np.ndarray, statuses: np.ndarray, fell_xs: np.ndarray,
                  x_ends: np.ndarray, stop: np.ndarray, threads: int = 1,
                  bal: np.ndarray | None = None) -> None:
-        """The numba core's ``run_many``, argument for argument (plus the thread count, and
+        """Independent runs from *x0s*, in parallel on *threads* threads (``eq_run_many``:
+        the per-run blocks of *recs*, *accs*, *statuses*, *fell_xs*, *x_ends* written; *bal*
         the balance box whose last exit each run's accumulators keep)."""
         values = self._common(op=op, c_idx=c_idx, cp=cp, ref=ref, uff=uff, lv=lv, lw=lw,
                               p_switch=p_switch, region=region, kicks=kicks,
@@ -465,7 +479,7 @@ class NativeCore:
 
     def scratch(self, p_len: int, ny: int, nw: int) -> np.ndarray:
         width = int(self.lib.eq_scratch_width(p_len, ny, nw))
-        return np.zeros((layout.constants()["_SCR_ROWS"], width))
+        return np.zeros((int(self.lib.eq_scratch_rows()), width))
 
     def advancer(self, *, x: np.ndarray, u_app: np.ndarray, op: np.ndarray,
                  p_sets: np.ndarray, p_switch: np.ndarray, lin_s: np.ndarray | None,
@@ -500,13 +514,13 @@ class NativeCore:
 
     def plant(self, *, x: np.ndarray, p: np.ndarray, rate: float, n_sub: int,
               lw: np.ndarray, outputs: np.ndarray, lv: np.ndarray,
-              rng: np.ndarray) -> PlantSteps:
+              rng: np.ndarray, integrator: str = integrators.DEFAULT) -> PlantSteps:
         """The plant alone, sample by sample, as ``simulate`` advances it around a controller
         written in Python: see :class:`PlantSteps`."""
         from equilibrist.sim.steps import PlantSteps
 
         return PlantSteps(self, x=x, p=p, rate=rate, n_sub=n_sub, lw=lw, outputs=outputs, lv=lv,
-                          rng=rng)
+                          rng=rng, integrator=integrator)
 
     def rk4_steps(self, x: np.ndarray, u: np.ndarray, p: np.ndarray, h: float,
                   n_steps: int) -> None:
@@ -529,31 +543,39 @@ class NativeCore:
     # -- the identification's integrator (equilibrist.ident.kernel) ---------------------------
     def shoot_many(self, P: np.ndarray, XS: np.ndarray, bounds: np.ndarray, t: np.ndarray,
                    u: np.ndarray, n_sub: np.ndarray, c_idx: np.ndarray, yhat: np.ndarray,
-                   xend: np.ndarray) -> None:
-        """C-contiguous arrays of the right dtypes (see ``shoot.c``)."""
+                   xend: np.ndarray, *, integrator: str = integrators.DEFAULT,
+                   rtol: float = integrators.RTOL, atol: float = integrators.ATOL) -> None:
+        """C-contiguous arrays of the right dtypes (see ``shoot.c``); the steps of
+        *integrator* (a name of :mod:`equilibrist.sim.integrators`' table)."""
         if P.shape[0] == 0:
             return
-        self.lib.eq_shoot_many(_ptr(P), P.shape[0], P.shape[1], _ptr(XS), _ptr(bounds),
+        self.lib.eq_shoot_many(integrators.number(integrator), float(rtol), float(atol),
+                               _ptr(P), P.shape[0], P.shape[1], _ptr(XS), _ptr(bounds),
                                len(bounds) - 1, _ptr(t), len(t), _ptr(u), _ptr(n_sub),
                                _ptr(c_idx), len(c_idx), _ptr(yhat), _ptr(xend))
 
     def innovations(self, p: np.ndarray, x0: np.ndarray, t: np.ndarray, u: np.ndarray,
                     n_sub: np.ndarray, c_idx: np.ndarray, gain: np.ndarray, y: np.ndarray,
-                    off: np.ndarray, e: np.ndarray) -> None:
-        """C-contiguous arrays of the right dtypes (see ``shoot.c``)."""
-        self.lib.eq_innovations(_ptr(p), _ptr(x0), _ptr(t), len(t), _ptr(u), _ptr(n_sub),
+                    off: np.ndarray, e: np.ndarray, *, integrator: str = integrators.DEFAULT,
+                    rtol: float = integrators.RTOL, atol: float = integrators.ATOL) -> None:
+        """C-contiguous arrays of the right dtypes (see ``shoot.c``); the steps of
+        *integrator*."""
+        self.lib.eq_innovations(integrators.number(integrator), float(rtol), float(atol),
+                                _ptr(p), _ptr(x0), _ptr(t), len(t), _ptr(u), _ptr(n_sub),
                                 _ptr(c_idx), len(c_idx), _ptr(gain), _ptr(y), _ptr(off),
                                 _ptr(e))
 
 
-_CORES: dict[tuple[Path, bytes | tuple[int, ...] | None, str | None, bool], NativeCore] = {}
+_CacheKey = tuple[Path, bytes | tuple[int, ...] | None, str | None, bool, str]
+_CORES: dict[_CacheKey, NativeCore] = {}
 
 
 def _cache_key(system: System, key: bytes | tuple[int, ...] | None,
-               controller: NonlinearController | None,
-               lanes: bool) -> tuple[Path, bytes | tuple[int, ...] | None, str | None, bool]:
+               controller: NonlinearController | None, lanes: bool) -> _CacheKey:
+    """A loaded core's key: a core loaded before an integrator was registered lacks it."""
     source = None if controller is None else controller.source + repr(controller.has_estimate)
-    return (system.compiled.module_path, key if controller is None else None, source, lanes)
+    return (system.compiled.module_path, key if controller is None else None, source, lanes,
+            integrators.digest())
 
 
 def loaded(system: System, key: bytes | tuple[int, ...] | None = None,
@@ -584,4 +606,4 @@ def load_core(system: System, key: bytes | tuple[int, ...] | None = None,
 
 
 __all__ = ["FIELDS", "GENERATOR", "NativeCore", "RunArgs", "linear_library", "load_core", "loaded",
-           "unit_source"]
+           "struct_source", "unit_source"]

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.sim import layout
+from equilibrist.sim import integrators, layout
 
 if TYPE_CHECKING:
     from equilibrist.sim.simcore import NativeCore
@@ -19,7 +19,8 @@ class PlantSteps:
     The same two halves of a sample as ``simulate`` with a Python controller
     (:func:`equilibrist.sim.run.simulate`): :meth:`measure` reads the
     sensors with their noise (``y = x[outputs] + lv z``), :meth:`advance`
-    holds the applied input over the period's *n_sub* RK4 steps, each with
+    holds the applied input over the period's *n_sub* steps of *integrator*
+    (a name of :mod:`equilibrist.sim.integrators`' table), each with
     its process noise ``lw z`` (``lw``: ``n x nw``, the noise gain over the
     root of the step), drawn from the generator state *rng* in the same
     order. Same seed, same inputs: the same bits as ``simulate``. *x*, *p*
@@ -29,7 +30,7 @@ class PlantSteps:
 
     def __init__(self, core: NativeCore, *, x: np.ndarray, p: np.ndarray, rate: float,
                  n_sub: int, lw: np.ndarray, outputs: np.ndarray, lv: np.ndarray,
-                 rng: np.ndarray) -> None:
+                 rng: np.ndarray, integrator: str = integrators.DEFAULT) -> None:
         n, m = core.system.n_states, core.system.n_inputs
         core._out(x, np.float64, "x")
         core._out(rng, np.uint64, "rng")
@@ -51,9 +52,10 @@ class PlantSteps:
             pulses=np.zeros((0, 3), dtype=np.int64), pulse_value=np.zeros(0), lw=self.lw,
             rng=rng,
             iopts=layout.IOPTS.pack(int, n_samples=0, record=0, delay=0, n_sub=int(n_sub),
-                                    integrator=layout.INTEGRATORS["rk4"], estimates=0,
+                                    integrator=integrators.number(integrator), estimates=0,
                                     accumulate=0),
-            fopts=layout.FOPTS.pack(h=h, rtol=0.0, atol=0.0, rate=float(rate)),
+            fopts=layout.FOPTS.pack(h=h, rtol=integrators.RTOL, atol=integrators.ATOL,
+                                    rate=float(rate)),
             status=self.status, scr=core.scratch(p_sets.shape[1], 0, self.lw.shape[1]))
         self._measure = core.measurer(x=x, c_idx=self.c_idx, lv=self.lv, rng=rng, y=self.y)
 
