@@ -85,10 +85,7 @@ def tour_controlled(
     Outcome
     """
     from equilibrist.control import design
-    from equilibrist.sim import LQG, Noise, Pulse, StateFeedback, Step, simulate
-    from equilibrist.viz.animation import animate_result
-    from equilibrist.viz.plots_maps import plot_poles
-    from equilibrist.viz.plots_runs import plot_comparison, plot_response
+    from equilibrist.sim import StateFeedback
 
     began = time.perf_counter()
     d = design(system, rate=system.spec.control_rate, at=at)
@@ -98,47 +95,11 @@ def tour_controlled(
     sub = folder / slug
     sub.mkdir(parents=True, exist_ok=True)
     tracking = bool(sc.step) and d.Kc is not None
-    x_op = np.asarray(d.plant.x0, float)
-    x0 = x_op.copy()
-    for name, offset in sc.start.items():
-        x0[system.state_index(name)] += offset
-    reference = None
-    if tracking:
-        r0 = np.asarray(d.r0, float)
-        r1 = r0 + np.array([sc.step.get(n, 0.0) for n in d.tracked])
-        reference = Step(value=r1, at=sc.step_at, initial=r0)
     push_at = sc.duration / 2
-    events = [Pulse(time=push_at, value=sc.push, duration=sc.push_duration)] if sc.push else []
-    common: _RunOptions = {"duration": sc.duration, "x0": x0, "reference": reference,
-                           "events": events}
-    lqg = LQG.from_design(d, tracking=tracking)
-    main = simulate(system, lqg, noise=Noise.from_design(d), seed=SEED, progress=progress, **common)
-    ideal = simulate(system, StateFeedback.from_design(d, tracking=tracking), **common)
+    main, ideal = _tour_runs(system, d, sc, tracking=tracking, push_at=push_at, progress=progress)
     main.save(sub / "run.npz")
-
-    rate = f"{d.rate:g} Hz"
-    label_main = f"digital LQG at {rate}, noisy sensors"
-    plot_response(main, sub / "response.png",
-                  title=f"{system.spec.title}: {label_main}, {'FELL' if main.fell else 'stayed up'}")
-    plot_comparison({label_main: main, "ideal LQR on the true state, no noise": ideal},
-                    sub / "comparison.png",
-                    title=f"{system.spec.title}: what the estimator and the noise cost")
-    plot_poles(d, sub / "poles.png")
-    animate_result(main, sub / "animation.gif", width=size[0], height=size[1], fps=fps,
-                   max_frames=max_frames, progress=progress)
-    images = [
-        Image(f"{slug}/animation.gif", "The run, drawn to scale from the simulated states "
-              "(time stamp top right; the gauge shows the input applied, red when saturated)."),
-        Image(f"{slug}/poles.png", "Poles: open loop (x), with the LQR state feedback (o) and of "
-              "the Kalman estimator (diamonds). The loop is stable when all closed-loop poles are "
-              "inside the unit circle."),
-        Image(f"{slug}/response.png", "Time response: true states (solid), the Kalman filter's "
-              "estimates (dashed), the sensor readings (grey dots), the reference (dash-dot); the "
-              "input applied, the command before saturation (dotted), the limits (red dashed).",
-              wide=True),
-        Image(f"{slug}/comparison.png", "The same run with the ideal loop: LQR on the true "
-              "state without noise.", wide=True),
-    ]
+    images = _tour_pictures(system, d, main, ideal, sub, slug, size=size, fps=fps,
+                            max_frames=max_frames, progress=progress)
     notes: list[str] = [*([sc.note] if sc.note else []), *getattr(d, "notes", ())]
     if system.name in ("cartpole", "reaction_wheel_pendulum", "furuta", "acrobot"):
         from equilibrist.apps.swingup_demo import swingup_animation
@@ -162,7 +123,81 @@ def tour_controlled(
             from equilibrist.apps.mpc_demo import mpc_images
 
             images += mpc_images(system, sub, slug)
+    row, story, facts = _tour_summary(system, d, sc, main, ideal, push_at=push_at,
+                                      tracking=tracking, roa_fact=roa_fact, slug=slug)
+    return Outcome(
+        key=system.key,
+        row=row,
+        section=_section(system, slug, story, images, facts, notes),
+        stayed_up=not main.fell,
+        seconds=time.perf_counter() - began,
+        simulated=sc.duration,
+    )
 
+
+def _tour_runs(system: System, d: Design, sc: Scenario, *, tracking: bool, push_at: float,
+               progress: bool) -> tuple[SimResult, SimResult]:
+    """The scenario's realistic run (the digital LQG, noisy sensors) and its ideal one (LQR
+    on the true state, no noise): the same start, reference step and push."""
+    from equilibrist.sim import LQG, Noise, Pulse, StateFeedback, Step, simulate
+
+    x_op = np.asarray(d.plant.x0, float)
+    x0 = x_op.copy()
+    for name, offset in sc.start.items():
+        x0[system.state_index(name)] += offset
+    reference = None
+    if tracking:
+        r0 = np.asarray(d.r0, float)
+        r1 = r0 + np.array([sc.step.get(n, 0.0) for n in d.tracked])
+        reference = Step(value=r1, at=sc.step_at, initial=r0)
+    events = [Pulse(time=push_at, value=sc.push, duration=sc.push_duration)] if sc.push else []
+    common: _RunOptions = {"duration": sc.duration, "x0": x0, "reference": reference,
+                           "events": events}
+    lqg = LQG.from_design(d, tracking=tracking)
+    main = simulate(system, lqg, noise=Noise.from_design(d), seed=SEED, progress=progress, **common)
+    ideal = simulate(system, StateFeedback.from_design(d, tracking=tracking), **common)
+    return main, ideal
+
+
+def _tour_pictures(system: System, d: Design, main: SimResult, ideal: SimResult, sub: Path,
+                   slug: str, *, size: tuple[int, int], fps: float, max_frames: int,
+                   progress: bool) -> list[Image]:
+    """The realistic run's response, its comparison with the ideal one, the poles and the
+    animation, drawn into *sub*, with their captions."""
+    from equilibrist.viz.animation import animate_result
+    from equilibrist.viz.plots_maps import plot_poles
+    from equilibrist.viz.plots_runs import plot_comparison, plot_response
+
+    label_main = f"digital LQG at {d.rate:g} Hz, noisy sensors"
+    plot_response(main, sub / "response.png",
+                  title=f"{system.spec.title}: {label_main}, {'FELL' if main.fell else 'stayed up'}")
+    plot_comparison({label_main: main, "ideal LQR on the true state, no noise": ideal},
+                    sub / "comparison.png",
+                    title=f"{system.spec.title}: what the estimator and the noise cost")
+    plot_poles(d, sub / "poles.png")
+    animate_result(main, sub / "animation.gif", width=size[0], height=size[1], fps=fps,
+                   max_frames=max_frames, progress=progress)
+    return [
+        Image(f"{slug}/animation.gif", "The run, drawn to scale from the simulated states "
+              "(time stamp top right; the gauge shows the input applied, red when saturated)."),
+        Image(f"{slug}/poles.png", "Poles: open loop (x), with the LQR state feedback (o) and of "
+              "the Kalman estimator (diamonds). The loop is stable when all closed-loop poles are "
+              "inside the unit circle."),
+        Image(f"{slug}/response.png", "Time response: true states (solid), the Kalman filter's "
+              "estimates (dashed), the sensor readings (grey dots), the reference (dash-dot); the "
+              "input applied, the command before saturation (dotted), the limits (red dashed).",
+              wide=True),
+        Image(f"{slug}/comparison.png", "The same run with the ideal loop: LQR on the true "
+              "state without noise.", wide=True),
+    ]
+
+
+def _tour_summary(
+    system: System, d: Design, sc: Scenario, main: SimResult, ideal: SimResult, *,
+    push_at: float, tracking: bool, roa_fact: tuple[str, str] | None, slug: str,
+) -> tuple[tuple[str, ...], list[str], list[tuple[str, str]]]:
+    """The system's row of the summary table, its story and its facts, from the runs."""
+    rate = f"{d.rate:g} Hz"
     m = main.metrics()
     u_name, u_unit = system.input_names[0], system.input_units[0]
     low, high = system.input_limits
@@ -200,14 +235,7 @@ def tour_controlled(
         *([roa_fact] if roa_fact else []),
         ("result file", f"{slug}/run.npz (equilibrist plot / equilibrist animate read it)"),
     ]
-    return Outcome(
-        key=system.key,
-        row=row,
-        section=_section(system, slug, story, images, facts, notes),
-        stayed_up=not main.fell,
-        seconds=time.perf_counter() - began,
-        simulated=sc.duration,
-    )
+    return row, story, facts
 
 
 #: The systems whose tour shows the LQR's region of attraction, estimated and certified.
