@@ -485,7 +485,27 @@ def certify(system: System, K: np.ndarray, S: np.ndarray, *, x_op: np.ndarray,
     if not math.isfinite(cap):
         raise CertificateUnavailable("no fall region and no cap: the level is unbounded")
     R = math.sqrt(cap)
-    # The ball about the operating point proven at once.
+    r0, lam, b = _inner_ball(loop, R)
+    say = progress or (lambda _m: None)
+    say(f"inner ball |z| <= {r0:.3g} (level {r0 * r0:.3g}), Lambda {lam:.3g}")
+    r0, lam = _cone_ball(loop, r0, lam, R, max_patches=min(20_000, max(2_000, max_boxes // 5)))
+    floor = b * math.sqrt(n) / -lam
+    say(f"cones: ball |z| <= {r0:.3g} (level {r0 * r0:.3g})")
+    search = _Search(R=R, limited="region", violation=None)
+    _sampled_decrease(loop, search, x_op)
+    g = grid or (8 if n <= 4 else 4 if n <= 6 else 2)
+    _boxes(loop, search, x_op, r0=r0, g=g, max_boxes=max_boxes, chunk=chunk,
+           min_width=min_width, say=say, counted=counted)
+    rho = max(search.R, r0) ** 2 * (1.0 - _COVER)
+    return Certificate(rho=rho, method=METHOD, assumes=ASSUMES, limited_by=search.limited,
+                       rho_region=rho_region, inner=r0 * r0, inner_floor=floor * floor,
+                       boxes=search.boxes, levels=search.rounds,
+                       seconds=time.perf_counter() - t0, violation=search.violation)
+
+
+def _inner_ball(loop: _Loop, R: float) -> tuple[float, float, float]:
+    """The ball about the operating point proven at once: its radius (halved from *R* until
+    the decrease holds there), and the bounds ``Lambda`` and ``b`` of :meth:`_Loop.inner`."""
     r0, lam, b = R, math.inf, math.inf
     for _ in range(60):
         lam, b = loop.inner(r0)
@@ -495,15 +515,27 @@ def certify(system: System, K: np.ndarray, S: np.ndarray, *, x_op: np.ndarray,
     else:
         raise CertificateUnavailable("dV/dt is not negative definite at the operating point: "
                                      "the design does not stabilize the continuous loop")
-    say = progress or (lambda _m: None)
-    say(f"inner ball |z| <= {r0:.3g} (level {r0 * r0:.3g}), Lambda {lam:.3g}")
-    r0, lam = _cone_ball(loop, r0, lam, R, max_patches=min(20_000, max(2_000, max_boxes // 5)))
-    floor = b * math.sqrt(n) / -lam
-    say(f"cones: ball |z| <= {r0:.3g} (level {r0 * r0:.3g})")
-    limited = "region"
-    violation: list[float] | None = None
-    # Points first (cheap): the nearest sampled point where dV/dt >= 0 bounds any level this
-    # V can have; the search starts a little inside it, where the decrease is not marginal.
+    return r0, lam, b
+
+
+@dataclass
+class _Search:
+    """The search's state: the radius still claimed, what limits it (``region``,
+    ``decrease``, ``resolution``, ``budget``), the state where dV/dt was seen >= 0, and the
+    boxes evaluated in how many rounds."""
+
+    R: float
+    limited: str
+    violation: list[float] | None
+    boxes: int = 0
+    rounds: int = 0
+
+
+def _sampled_decrease(loop: _Loop, search: _Search, x_op: np.ndarray) -> None:
+    """Points first (cheap): the nearest sampled point where dV/dt >= 0 bounds any level this
+    V can have; the search starts a little inside it, where the decrease is not marginal."""
+    n = loop.n
+    R = search.R
     rng = np.random.default_rng(0)
     dirs = rng.normal(size=(4096, n))
     dirs /= np.linalg.norm(dirs, axis=1)[:, None]
@@ -511,10 +543,19 @@ def certify(system: System, K: np.ndarray, S: np.ndarray, *, x_op: np.ndarray,
         pts = dirs * r
         bad = loop.vdot_point(pts).lo >= 0.0
         if bad.any():
-            R, limited = _SHY * float(r), "decrease"
-            violation = (x_op + loop.T @ pts[int(np.argmax(bad))]).tolist()
+            search.R, search.limited = _SHY * float(r), "decrease"
+            search.violation = (x_op + loop.T @ pts[int(np.argmax(bad))]).tolist()
             break
-    g = grid or (8 if n <= 4 else 4 if n <= 6 else 2)
+
+
+def _boxes(loop: _Loop, search: _Search, x_op: np.ndarray, *, r0: float, g: int,
+           max_boxes: int, chunk: int, min_width: float, say: Callable[[str], None],
+           counted: Callable[[int], None] | None) -> None:
+    """Branch and bound over boxes of the shell between *r0* and the radius, from a grid of
+    *g* boxes a side: each box's enclosure of dV/dt proves it, or its centre shows a
+    violation, or it is split; the radius shrinks to what is proven."""
+    R = search.R
+    n = loop.n
     edges = np.linspace(-R, R, g + 1)
     idx = np.array(np.meshgrid(*[np.arange(g)] * n, indexing="ij")).reshape(n, -1).T
     # The pending boxes, nearest first: when the budget runs out, every box nearer than the
@@ -526,7 +567,7 @@ def certify(system: System, K: np.ndarray, S: np.ndarray, *, x_op: np.ndarray,
         a2 = np.where((blo <= 0) & (bhi >= 0), 0.0, np.minimum(blo * blo, bhi * bhi))
         near = np.sqrt(a2.sum(axis=1))
         far = np.sqrt(np.maximum(blo * blo, bhi * bhi).sum(axis=1))
-        keep = (near < R) & (far > r0)
+        keep = (near < search.R) & (far > r0)
         blo, bhi, near = blo[keep], bhi[keep], near[keep]
         take = min(blo.shape[0], chunk, max_boxes - total)
         if take < blo.shape[0]:
@@ -549,16 +590,16 @@ def certify(system: System, K: np.ndarray, S: np.ndarray, *, x_op: np.ndarray,
         if bad.any():
             rc = np.sqrt((c[bad] ** 2).sum(axis=1))
             k = int(np.argmin(rc))
-            if _SHY * rc[k] < R:
-                R, limited = _SHY * float(rc[k]), "decrease"
-                violation = (x_op + loop.T @ c[bad][k]).tolist()
+            if _SHY * rc[k] < search.R:
+                search.R, search.limited = _SHY * float(rc[k]), "decrease"
+                search.violation = (x_op + loop.T @ c[bad][k]).tolist()
         width = (bhi - blo).max(axis=1)
         fine = width <= min_width * np.maximum(near, r0)
         if fine.any():
             m = float(near[fine].min())
-            if m < R:
-                R, limited = m, "resolution"
-        split = ~fine & (near < R)
+            if m < search.R:
+                search.R, search.limited = m, "resolution"
+        split = ~fine & (near < search.R)
         blo, bhi, smear = blo[split], bhi[split], smear[split]
         # Each box in two across the coordinate that smears its enclosure most.
         j = np.argmax(smear, axis=1)
@@ -570,20 +611,15 @@ def certify(system: System, K: np.ndarray, S: np.ndarray, *, x_op: np.ndarray,
         blo = np.concatenate([rest_lo, blo, lo2])
         bhi = np.concatenate([rest_hi, hi1, bhi])
         if rounds % 10 == 0:
-            say(f"{total} boxes, {blo.shape[0]} pending, radius {R:.4g}")
+            say(f"{total} boxes, {blo.shape[0]} pending, radius {search.R:.4g}")
     if blo.shape[0]:
         a2 = np.where((blo <= 0) & (bhi >= 0), 0.0, np.minimum(blo * blo, bhi * bhi))
         near = np.sqrt(a2.sum(axis=1))
         far = np.sqrt(np.maximum(blo * blo, bhi * bhi).sum(axis=1))
-        pending = (near < R) & (far > r0)
-        if pending.any() and float(near[pending].min()) < R:
-            R, limited = float(near[pending].min()), "budget"
-    levels = rounds
-    rho = max(R, r0) ** 2 * (1.0 - _COVER)
-    return Certificate(rho=rho, method=METHOD, assumes=ASSUMES, limited_by=limited,
-                       rho_region=rho_region, inner=r0 * r0, inner_floor=floor * floor,
-                       boxes=total, levels=levels, seconds=time.perf_counter() - t0,
-                       violation=violation)
+        pending = (near < search.R) & (far > r0)
+        if pending.any() and float(near[pending].min()) < search.R:
+            search.R, search.limited = float(near[pending].min()), "budget"
+    search.boxes, search.rounds = total, rounds
 
 
 @contextlib.contextmanager
