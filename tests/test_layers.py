@@ -5,11 +5,12 @@ The layers themselves are import-linter's contract in pyproject.toml (``make tes
 grimp's, import-linter's engine: every import that runs, those inside functions included,
 and none under ``TYPE_CHECKING``. Within a package, modules may import each other in a
 cycle of at most three files (a translator and its two halves, say); a longer cycle is a
-knot to untie.
+knot to untie. And no function is longer than :data:`MAX_FUNCTION_LINES` lines.
 """
 
 from __future__ import annotations
 
+import ast
 import sys
 from pathlib import Path
 
@@ -21,6 +22,18 @@ import equilibrist
 ROOT = Path(equilibrist.__file__).parent
 PYPROJECT = Path(__file__).resolve().parent.parent / "pyproject.toml"
 MAX_CYCLE = 3
+#: The longest a function may be, from its ``def`` line to its last line (its docstring
+#: counted, its decorators not).
+MAX_FUNCTION_LINES = 120
+#: Functions still longer than that, by file (relative to the package) and name. They are
+#: being split; each entry goes when its function is: the list is to end empty.
+LONG_FUNCTIONS_BEING_SPLIT = frozenset({
+    ("sim/batch.py", "simulate_batch"),
+    ("envs/core.py", "build_core"),
+    ("control/mpc_library.py", "library_files"),
+    ("web/app.py", "create_app"),
+    ("export/data.py", "from_design"),
+})
 
 
 @pytest.fixture(scope="module")
@@ -100,3 +113,35 @@ def test_the_demos_are_applications() -> None:
     for name in ("tour", "mpc_demo", "swingup_demo", "planned_demo"):
         assert (ROOT / "apps" / f"{name}.py").exists()
         assert not (ROOT / "viz" / f"{name}.py").exists()
+
+
+def _long_functions(limit: int) -> list[tuple[str, str, int, int]]:
+    """``(file, name, line, lines)`` of every function (methods and nested functions
+    included) of the package longer than *limit* lines."""
+    found = []
+    for path in sorted(ROOT.rglob("*.py")):
+        rel = path.relative_to(ROOT).as_posix()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), filename=str(path))):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                assert node.end_lineno is not None
+                lines = node.end_lineno - node.lineno + 1
+                if lines > limit:
+                    found.append((rel, node.name, node.lineno, lines))
+    return found
+
+
+def test_no_function_is_longer_than_the_limit() -> None:
+    """A function longer than :data:`MAX_FUNCTION_LINES` is split into functions named for
+    what each handles."""
+    long = [f for f in _long_functions(MAX_FUNCTION_LINES)
+            if (f[0], f[1]) not in LONG_FUNCTIONS_BEING_SPLIT]
+    assert not long, f"functions longer than {MAX_FUNCTION_LINES} lines:\n" + "\n".join(
+        f"  {file}:{line} {name} ({lines} lines)" for file, name, line, lines in long)
+
+
+def test_the_length_check_finds_a_long_function() -> None:
+    """The check above can fail: it sees functions, methods and nested functions alike."""
+    every = {(file, name) for file, name, _, _ in _long_functions(0)}
+    assert ("control/design.py", "design") in every  # a function
+    assert ("control/certify.py", "inner") in every  # a method (of _Loop)
+    assert ("study/plot.py", "cell") in every  # a function inside plot_study
