@@ -58,6 +58,7 @@ import numpy as np
 # The module was split in four; every name stays importable from here. The names marked
 # F401 are not used here: imported so that they stay importable from this module.
 from equilibrist.control import fixed
+from equilibrist.sim import integrators
 from equilibrist.web.protocol import Limits, Message, controllers
 from equilibrist.web.runners import Runner, hanging_refusal, unavailable
 from equilibrist.web.session_design import (
@@ -221,9 +222,11 @@ class Session(_SessionPlan, _SessionRoa):
         self.region_hi = np.array([region[s][1] for s in region], dtype=float)
 
     def _apply_rate(self) -> None:
+        from equilibrist.sim.setup_steps import default_substeps
+
         rate = self.settings.rate
         self.period = 1.0 / rate
-        self.n_sub = max(1, math.ceil(self.period / 1e-3 - 1e-9))
+        self.n_sub = default_substeps(self.period, integrators.DEFAULT)
         self.h = self.period / self.n_sub
         self.p = np.array(self.system.p, dtype=float)
         low, high = self.system.input_limits
@@ -496,7 +499,8 @@ class Session(_SessionPlan, _SessionRoa):
             lv = square_root(noise.measurement_covariance, "the sensor noise") * self.settings.noise
         steps: PlantSteps = self.kernel.plant(x=self.x, p=self.p, rate=self.settings.rate,
                                               n_sub=self.n_sub, lw=lw, outputs=loop.out_idx,
-                                              lv=lv, rng=self.core_rng)
+                                              lv=lv, rng=self.core_rng,
+                                              integrator=integrators.DEFAULT)
         return steps
 
     def _sample(self) -> None:
