@@ -6,6 +6,9 @@ arithmetic. Its core (:func:`equilibrist.sim.simcore.load_core` with
 and the RK4 stages run on ``eqv`` values, eight doubles side by side, which
 the compiler maps to one AVX-512 register, two AVX2 or four SSE2 ones
 (``target_clones``: the machine's best, chosen when the library loads).
+The lanes step RK4 only (``env.c``'s ``eqv_rk4``): the integrators' table
+(:mod:`equilibrist.sim.integrators`) says so (``lanes``), and a vector
+environment with another integrator steps its copies one at a time.
 
 The bits are those of one copy at a time, on every CPU: each lane performs the
 same IEEE operations in the same order as the scalar code (GCC's vector
