@@ -192,3 +192,20 @@ def test_the_table_says_each_fixed_step_order(euler, name):
         errors.append(np.max(np.abs(res.final_state - truth)))
     ratio = np.log2(errors[0] / errors[1])
     assert abs(ratio - order) < 0.3, (errors, ratio)
+
+
+@pytest.mark.parametrize("name", ["rk4", "adaptive", "euler"])
+def test_an_environment_rollout_is_simulate_to_the_bit(euler, name):
+    """Each integrator of the table: the environment's periods are simulate's samples."""
+    system = get_system(SYSTEM)
+    env = EquilibristEnv(SYSTEM, "balance", noise=False, observe="state",
+                         action_units="physical", integrator=name)
+    obs, _ = env.reset(seed=4)
+    states = [obs]
+    for _ in range(5):
+        states.append(env.step(np.zeros(1))[0])
+    rate = env.unwrapped.core.rate
+    ref = simulate(system, None, duration=5 / rate, rate=rate, integrator=name, x0=obs,
+                   region={})
+    assert np.all(ref.applied == 0.0)
+    assert np.array_equal(np.array(states), ref.states[:6])
