@@ -330,3 +330,66 @@ def test_balance_option_is_checked() -> None:
     ctrl = build_controller("swingup", ControllerRequest(system=get_system("furuta"), rate=None,
                                                          options={"balance": "lqg"}))
     assert isinstance(ctrl, NonlinearController) and ctrl.settings["balance"] == "lqg"
+
+
+def test_the_law_is_written_for_any_number_of_states_and_outputs() -> None:
+    """The supervisor, the tracker, the catch and the LQG hand-over read their sizes from the
+    layout: a rig of three coordinates (six states, a stand-in pumping term) translates to C,
+    and balancing it commands ``u_op - K dx``, on the filter's estimate with the LQG."""
+    from equilibrist.control.kalman import estimator
+    from equilibrist.control.nonlinear import CATCH_SOURCE, check_source, contract_namespace
+    from equilibrist.control.swingup_law import (
+        CP_SLOTS,
+        LAW_SOURCE,
+        LAYOUT,
+        layout_constants,
+        z_layout,
+    )
+
+    n, nq = 6, 3
+    head = "\n".join(f"{k} = {v}" for k, v in layout_constants(n, nq).items())
+    law = ("\n\ndef su_law(z, y, p):\n    return 0.0\n\n\n"
+           "def su_energy(x0, x1, x2, x3, x4, x5, p):\n    return 0.0\n")
+    source = head + "\n" + estimator().source + CATCH_SOURCE + LAW_SOURCE + law
+    check_source(source, has_estimate=True)
+    rng = np.random.default_rng(5)
+    K, S = rng.normal(size=n), np.eye(n)
+    gain = rng.uniform(0.0, 0.3, size=(n, nq))
+    slots = dict.fromkeys(CP_SLOTS, 0.0) | {
+        "T": 0.01, "alpha": 0.5, "beta": 0.1, "u_min": -100.0, "u_max": 100.0, "u_op": 0.5,
+        "c_in": 10.0, "c_out": 40.0, "current": 1.0, "n": n, "nq": nq, "np": 0}
+    blocks = {"x_op": np.zeros(n), "K": K, "S": S, "wrap": np.zeros(n), "free": np.zeros(n),
+              "Ad": np.eye(n), "Bd": np.zeros(n), "Kf": gain, "sel": np.arange(nq, dtype=float),
+              "phys": np.zeros(0)}
+    ns = contract_namespace()
+    exec(compile(source, "<six states>", "exec"), ns)
+    zl = z_layout(n)
+    y = rng.normal(scale=0.05, size=nq)
+    z = np.zeros(zl["end"])
+    z[zl["init"]] = z[zl["mode"]] = MODE_BALANCE
+    z[zl["xhat"]:zl["xhat"] + n] = rng.normal(scale=0.05, size=n)
+    z[zl["kz"]:zl["kz"] + n] = rng.normal(scale=0.05, size=n)
+    for lqg in (0.0, 1.0):
+        p = LAYOUT.pack(slots | {"lqg": lqg}, blocks)
+        u, x = np.zeros(1), np.zeros(n)
+        ns["output"](0.0, z, y, np.zeros(0), p, u)
+        ns["estimate"](0.0, z, y, np.zeros(0), p, x)
+        if lqg:
+            kz = z[zl["kz"]:zl["kz"] + n]
+            dx = kz + gain @ (y - kz[:nq])
+        else:
+            dx = x  # the tracker's estimate, about a zero reference
+        np.testing.assert_allclose(x, dx, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(u[0], 0.5 - K @ dx, rtol=1e-12, atol=1e-12)
+        zn = np.zeros(zl["end"])
+        ns["update"](0.0, z, y, np.zeros(0), np.array([0.5]), p, zn)
+        assert zn[zl["mode"]] == MODE_BALANCE
+
+
+def test_the_kinds_offer_the_balances_the_controllers_take() -> None:
+    from equilibrist.control.nonlinear import BALANCES
+    from equilibrist.controllers.kinds import get
+
+    for kind in ("swingup", "tvlqr"):
+        (option,) = [o for o in get(kind).options if o.flag == "--balance"]
+        assert option.choices == BALANCES

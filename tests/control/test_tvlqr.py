@@ -12,6 +12,7 @@ import pytest
 from equilibrist import get_system
 from equilibrist.cli.main import main
 from equilibrist.control.trajopt import load_trajectory
+from equilibrist.control.tvlqr import LAYOUT
 from equilibrist.controllers.kinds import ControllerRequest, build_controller
 from equilibrist.sim.run import simulate
 
@@ -24,12 +25,8 @@ def _controller(system, path: Path, catch: str = "on"):
 def test_the_gains_hand_over_to_the_balancing_lqr(cart_plan: Path) -> None:
     cart = get_system("cartpole")
     ctrl = _controller(cart, cart_plan)
-    steps, n, m = int(ctrl.params[0]), cart.n_states, cart.n_inputs
-    assert steps == 800
-    # [steps, rate, n, m, catch level], states, inputs, gains, x_op, u_op, K, S
-    off = 5 + (steps + 1) * n + (steps + 1) * m
-    gains = ctrl.params[off : off + steps * m * n].reshape(steps, m, n)
-    k_end = ctrl.params[-m * n - n * n : -n * n].reshape(m, n)
+    gains, k_end = LAYOUT.read(ctrl.params, "gains"), LAYOUT.read(ctrl.params, "K_end")
+    assert gains.shape == (800, cart.n_inputs, cart.n_states)
     # The last sample is linearized at the operating point and the recursion starts from the
     # balancing LQR's Riccati solution: its gain is the balancing gain.
     np.testing.assert_allclose(gains[-1], k_end, rtol=1e-6, atol=1e-9)

@@ -15,7 +15,7 @@ import pytest
 from equilibrist import get_system
 from equilibrist.cli.main import main
 from equilibrist.control.trajopt import load_trajectory
-from equilibrist.control.tvlqr import SOURCE, kalman_along
+from equilibrist.control.tvlqr import LAYOUT_LQG, SOURCE, kalman_along
 from equilibrist.controllers.kinds import ControllerRequest, build
 from equilibrist.sim.noise import Noise
 from equilibrist.sim.run import simulate
@@ -31,17 +31,8 @@ def _request(path: Path, balance: str | None = "lqg", form: str = "current") -> 
 
 def _tables(params: np.ndarray) -> dict[str, np.ndarray]:
     """The parameter vector of ``balance="lqg"`` cut into its tables (the source's layout)."""
-    K, n, m, ny = (int(params[i]) for i in (0, 2, 3, 4))
-    shapes = (("xs", (K + 1, n)), ("us", (K + 1, m)), ("gains", (K, m, n)), ("x_op", (n,)),
-              ("u_op", (m,)), ("K_end", (m, n)), ("index", (ny,)), ("A", (K, n, n)),
-              ("B", (K, n, m)), ("F", (K, n, ny)), ("Ad", (n, n)), ("Bd", (n, m)),
-              ("Kf", (n, ny)), ("S", (n, n)))
-    out, at = {}, 7
-    for name, shape in shapes:
-        size = math.prod(shape)
-        out[name] = params[at : at + size].reshape(shape)
-        at += size
-    assert at == params.size
+    out = {name: LAYOUT_LQG.read(params, name) for name, _dims in LAYOUT_LQG.blocks}
+    out["index"] = out.pop("sel")
     return out
 
 

@@ -419,11 +419,10 @@ class LinearController:
             raise DesignError("a reference gain Kc needs the names of the tracked outputs")
         comp = lqg_compensator(plant, Km, Kfm, Kc, tracked=tracked, form=form)
         p, nr = len(outs), len(comp.tracked_names)
-        Kf_arr = np.asarray(Kfm, dtype=float)
-        if form == "current":
-            Ez, Ey = np.eye(n) - fixed.matmul(Kf_arr, C), Kf_arr
-        else:
-            Ez, Ey = np.eye(n), np.zeros((n, p))
+        # The estimate behind the command: the estimator's own (control.kalman.realize).
+        if comp.Ez is None or comp.Ey is None:
+            raise DesignError("the LQG's estimate needs a discrete compensator")
+        Ez, Ey = comp.Ez, comp.Ey
         z0 = np.zeros(n) if x_hat0 is None else np.asarray(x_hat0, dtype=float).reshape(n)
         return cls(
             Ac=comp.A, Bu=comp.B[:, :m], By=comp.B[:, m : m + p], Br=comp.B[:, m + p : m + p + nr],

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -26,6 +27,82 @@ LINEAR_BLOCKS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("Ez", ("n", "nz")), ("Ey", ("n", "ny")),
     ("u_op", ("m",)), ("y_op", ("ny",)), ("r_op", ("nr",)), ("x_op", ("n",)),
 )
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The layout of a controller's parameter vector, one object for the packing and the source.
+
+    The vector is a header (the scalar *slots*, then the offset of each block), then the
+    *blocks* in order, each of the shape its dims say (names of slots, or integers). The
+    source reads the layout through :meth:`constants` (``PREFIX_SLOT``: a slot's index,
+    ``PREFIX_O_BLOCK``: the index of the slot holding a block's offset), so the offsets a
+    controller's source reads are the ones :meth:`pack` wrote; with *fixed* sizes
+    (:meth:`fixed_constants`) a block's offset is a constant of the source itself. This is
+    the linear controller's scheme (:data:`LINEAR_HEADER`, :data:`LINEAR_BLOCKS`) for any
+    controller.
+    """
+
+    prefix: str
+    slots: tuple[str, ...]
+    blocks: tuple[tuple[str, tuple[str | int, ...]], ...]
+
+    @property
+    def header(self) -> tuple[str, ...]:
+        return self.slots + tuple(f"o_{name}" for name, _ in self.blocks)
+
+    def constants(self) -> dict[str, int]:
+        """The header's indices as the source's constants (``TV_N``, ``TV_O_GAINS``...)."""
+        return {f"{self.prefix}_{name.upper()}": i for i, name in enumerate(self.header)}
+
+    def offsets(self, sizes: Mapping[str, float]) -> dict[str, int]:
+        """Each block's offset (and ``"end"``) for the slots' values *sizes*."""
+        out, at = {}, len(self.header)
+        for name, dims in self.blocks:
+            out[name] = at
+            at += math.prod(self._dim(d, sizes) for d in dims)
+        out["end"] = at
+        return out
+
+    def fixed_constants(self, sizes: Mapping[str, float]) -> dict[str, int]:
+        """:meth:`constants`, and each block's offset for *sizes* as ``PREFIX_BLOCK``."""
+        out = self.constants()
+        out.update({f"{self.prefix}_{name.upper()}": at for name, at in self.offsets(sizes).items()})
+        return out
+
+    def source(self, sizes: Mapping[str, float] | None = None) -> str:
+        """The constants as the source's first lines."""
+        consts = self.constants() if sizes is None else self.fixed_constants(sizes)
+        return "\n".join(f"{k} = {v}" for k, v in consts.items()) + "\n"
+
+    def pack(self, slots: Mapping[str, float], blocks: Mapping[str, object]) -> np.ndarray:
+        """The vector: *slots* by name, every block of *blocks* (flattened, checked against
+        its shape)."""
+        offsets = self.offsets(slots)
+        out = np.zeros(offsets["end"])
+        for i, name in enumerate(self.slots):
+            out[i] = float(slots[name])
+        for j, (name, dims) in enumerate(self.blocks):
+            values = np.asarray(blocks[name], dtype=float).reshape(-1)
+            size = math.prod(self._dim(d, slots) for d in dims)
+            if values.size != size:
+                raise ValueError(f"block {name} has {values.size} values, expected {size}")
+            out[len(self.slots) + j] = offsets[name]
+            out[offsets[name]:offsets[name] + size] = values
+        return out
+
+    def read(self, p: np.ndarray, name: str) -> np.ndarray:
+        """Block *name* of the packed vector *p*, in its shape."""
+        p = np.asarray(p, dtype=float)
+        sizes = {s: float(p[i]) for i, s in enumerate(self.slots)}
+        dims = dict(self.blocks)[name]
+        shape = tuple(self._dim(d, sizes) for d in dims)
+        at = int(p[self.header.index(f"o_{name}")])
+        return p[at:at + math.prod(shape)].reshape(shape)
+
+    @staticmethod
+    def _dim(d: str | int, sizes: Mapping[str, float]) -> int:
+        return d if isinstance(d, int) else int(sizes[d])
 
 
 def linear_constants() -> dict[str, int]:

@@ -23,6 +23,12 @@ prediction ``xpred_k = xhat_{k|k-1}`` and the feedback uses the corrected
     xpred_{k+1} = Ad (I - M C) xpred_k + [Bd, Ad M, 0] [u_k; y_k; r_k]
     u_k         = -K (I - M C) xpred_k + [0, -K M, Kc] [u_k; y_k; r_k]
 
+The discrete forms are the estimator's own arithmetic: for a plant whose outputs are states
+(``C`` selects them, ``D = 0``) the estimator's matrices are
+:func:`equilibrist.control.kalman.realize`'s, the one filter's source read off as a linear
+map (the same numbers as the products above, to the bit); only a plant measuring other
+combinations of its states takes the products of matrices.
+
 All signals are deviations from the operating point: ``du = u - u0``,
 ``dy = y - y0``, ``dr = r - r0`` with ``r0`` the tracked outputs at the
 operating point. Without a reference gain (a tracked output with zero DC
@@ -37,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from equilibrist.control import checks, fixed
-from equilibrist.control.kalman import check_form
+from equilibrist.control.kalman import check_form, measured_states, realize
 from equilibrist.errors import DesignError, DimensionError
 from equilibrist.numeric.linear import LinearModel
 
@@ -76,6 +82,10 @@ class Compensator:
     u0: np.ndarray
     y0: np.ndarray
     r0: np.ndarray
+    #: The estimate ``dx = Ez xhat + Ey dy`` behind the command (discrete forms; None for a
+    #: continuous compensator).
+    Ez: np.ndarray | None = None
+    Ey: np.ndarray | None = None
 
     @property
     def state_names(self) -> tuple[str, ...]:
@@ -180,7 +190,21 @@ def lqg_compensator(
     k = Kcm.shape[1]
     A, B, C, D = plant.A, plant.B, plant.C, plant.D
     zeros_r = np.zeros((n, k))
-    if kind in ("continuous", "predictor"):
+    sel = measured_states(C)
+    Ez = Ey = None
+    if kind != "continuous" and sel is not None and not np.any(D != 0):
+        # The estimator's own arithmetic, read off as matrices.
+        est = realize(A, B, Lm, sel, kind)
+        Ez, Ey = est.Ez, est.Ey
+        Ac = est.Ac
+        Bc = np.hstack([est.Bu, est.By, zeros_r])
+        if kind == "predictor":
+            Cc = -Km
+            Dc = np.hstack([np.zeros((m, m)), np.zeros((m, p)), Kcm])
+        else:
+            Cc = -fixed.matmul(Km, Ez)
+            Dc = np.hstack([np.zeros((m, m)), -fixed.matmul(Km, Ey), Kcm])
+    elif kind in ("continuous", "predictor"):
         Ac = A - fixed.matmul(Lm, C)
         Bc = np.hstack([B - fixed.matmul(Lm, D), Lm, zeros_r])
         Cc = -Km
@@ -207,4 +231,7 @@ def lqg_compensator(
         u0=np.asarray(plant.u0, dtype=float),
         y0=np.asarray(plant.y0, dtype=float),
         r0=r0,
+        Ez=Ez,
+        Ey=Ey,
     )
+

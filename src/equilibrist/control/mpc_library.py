@@ -93,10 +93,15 @@ def ldp_form(ctrl: MPC) -> dict[str, np.ndarray]:
 def filter_form(ctrl: MPC) -> LinearController:
     """The Kalman filter in front of the MPC as a linear controller: the design's LQG
     controller (``LinearController.lqg``), whose estimator the MPC runs, so one filter serves
-    the LQG and the MPC. ``z+ = Ac z + By dy + Bu du_applied`` and ``dx = Ez z + Ey dy``: for
-    the ``current`` form ``Ez = I - M C``, ``Ey = M``, ``Ac = Ad Ez``, ``By = Ad M``; for the
-    ``predictor`` form ``Ez = I``, ``Ey = 0``, ``Ac = Ad - L C``, ``By = L``; ``Bu = Bd`` in
-    both."""
+    the LQG and the MPC. ``z+ = Ac z + By dy + Bu du_applied`` and ``dx = Ez z + Ey dy``: the
+    linear map of the one estimator's source (:func:`equilibrist.control.kalman.realize`, the
+    estimator of :func:`~equilibrist.control.kalman.estimator` when the library is written):
+    for the Kalman filter's ``current`` form ``Ez = I - M C``, ``Ey = M``, ``Ac = Ad Ez``,
+    ``By = Ad M``; for the ``predictor`` form ``Ez = I``, ``Ey = 0``, ``Ac = Ad - L C``,
+    ``By = L``; ``Bu = Bd`` in both. The C that runs it is the linear library's translation
+    (the LQG's own sums, to the bit), not the estimator's functions translated again: their
+    unfolded sums (``z + M e``, then ``Ad`` times that) round otherwise than the LQG's
+    precomputed products."""
     from equilibrist.control.linear import LinearController
     from equilibrist.errors import ControllerError
 

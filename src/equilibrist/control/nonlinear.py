@@ -262,6 +262,48 @@ _RESERVED = frozenset({
 })
 
 
+#: What balances after a catch (the swing-up's and the time-varying LQR's ``balance=``): the
+#: design's LQR on the full state (or the swing-up's tracker), or on the estimator's estimate
+#: of the design's outputs (the LQG).
+BALANCES = ("lqr", "lqg")
+
+#: The catch of a balancing controller, written once for every controller that hands over to
+#: one (the swing-up, the time-varying LQR in both its forms, :func:`supervisor_source`): the
+#: hysteresis of the switch (``catch_switch``), and the catch region of the balance's level
+#: set ``V = dx' S dx`` (``catch_level``, ``catch_mode``: entered where ``V < enter``, kept
+#: while ``V <= leave``). ``catch_level`` reads the deviation ``dx_i`` from the controller's
+#: own ``catch_dev(i, t, z, y, params)`` (its estimate less the balance's operating point).
+CATCH_SOURCE = '''
+def catch_switch(held, enter, leave):
+    """The hysteresis of a hand-over: 1.0 (the balance) or 0.0 next, from whether the balance
+    holds now, whether to enter and whether to leave."""
+    if held != 0:
+        if leave != 0:
+            return 0.0
+        return 1.0
+    if enter != 0:
+        return 1.0
+    return 0.0
+
+
+def catch_level(t, z, y, params, S, n):
+    """The level V = dx' S dx (S: n x n) of the deviation dx_i = catch_dev(i, t, z, y, params)."""
+    v = 0.0
+    for i in range(n):
+        acc = 0.0
+        for j in range(n):
+            acc += S[i * n + j] * catch_dev(j, t, z, y, params)
+        v += catch_dev(i, t, z, y, params) * acc
+    return v
+
+
+def catch_mode(held, v, enter, leave):
+    """The catch region with its hysteresis: the balance takes over where the level v is below
+    enter, and keeps the rig while v is at most leave."""
+    return catch_switch(held, v < enter, not (v <= leave))
+'''
+
+
 def supervisor_source(*, catch: str, leave: str) -> str:
     """Source of a supervisor that switches between a nonlinear controller and a linear one.
 
@@ -280,20 +322,17 @@ def supervisor_source(*, catch: str, leave: str) -> str:
         catch region).
     *leave*
         True when it should hand back (leaving a larger region): the gap
-        between the two regions is the hysteresis.
+        between the two regions is the hysteresis (:data:`CATCH_SOURCE`'s
+        ``catch_switch``, the hand-over of every controller that catches).
 
     The linear controller's own state runs (its filter keeps estimating)
     in both modes, so it takes over with a current estimate.
     """
-    return f'''
+    return CATCH_SOURCE + f'''
 def output(t, z, y, r, params, u_out):
     a0, l0 = 1, 1 + int(params[0])
     nza = int(z.shape[0]) - 1 - int(params[l0 + _LIN_NZ])
-    mode = z[0]
-    if mode == 0.0 and ({catch}):
-        mode = 1.0
-    elif mode == 1.0 and ({leave}):
-        mode = 0.0
+    mode = catch_switch(z[0] == 1.0, ({catch}), ({leave}))
     if mode == 1.0:
         linear_output(t, z[1 + nza:], y, r, params[l0:], u_out)
     else:
@@ -303,11 +342,7 @@ def output(t, z, y, r, params, u_out):
 def update(t, z, y, r, u_applied, params, z_out):
     a0, l0 = 1, 1 + int(params[0])
     nza = int(z.shape[0]) - 1 - int(params[l0 + _LIN_NZ])
-    mode = z[0]
-    if mode == 0.0 and ({catch}):
-        mode = 1.0
-    elif mode == 1.0 and ({leave}):
-        mode = 0.0
+    mode = catch_switch(z[0] == 1.0, ({catch}), ({leave}))
     z_out[0] = mode
     first_update(t, z[1:1 + nza], y, r, u_applied, params[a0:l0], z_out[1:1 + nza])
     linear_update(t, z[1 + nza:], y, r, u_applied, params[l0:], z_out[1 + nza:])

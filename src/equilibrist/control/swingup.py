@@ -99,20 +99,20 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from equilibrist.control import fixed
-from equilibrist.control.nonlinear import NonlinearController
+from equilibrist.control.nonlinear import BALANCES, NonlinearController
 
 # The module was split in two; every name stays importable from here. The names marked
 # F401 are not used here: imported so that they stay importable from this module.
 from equilibrist.control.swingup_law import (
-    BALANCES,
-    CP,
+    CP_SLOTS,
     LAW_NAMES,
+    LAYOUT,
     MODE_BALANCE,
-    N_STATES,
     Z,
     controller_source,
     physics_source,
     python_namespace,
+    z_layout,
 )
 from equilibrist.errors import ControllerError
 
@@ -227,7 +227,7 @@ class SwingUpRuntime:
     def output(self, t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray:
         yv = np.ascontiguousarray(y, dtype=float)
         rv = np.ascontiguousarray(r, dtype=float)
-        x = np.zeros(N_STATES)
+        x = np.zeros(len(self.ctrl.state_names))
         u = np.zeros(1)
         self._ns["estimate"](float(t), self.z, yv, rv, self.ctrl.params, x)
         self._ns["output"](float(t), self.z, yv, rv, self.ctrl.params, u)
@@ -341,48 +341,45 @@ def swingup(
     noise = [float(system.spec.sensor_noise.get(c, 1e-3)) for c in system.spec.coordinates]
     alpha, beta = tracking_gains(max(noise), tune.accel, 1.0 / hz)
     phys = np.asarray(system.p, dtype=float)
-    cp = np.zeros(CP["end"] + phys.size)
-    values = {
-        "T": 1.0 / hz, "ke": tune.k_energy, "amax": tune.a_max,
-        "e0": tune.e0, "kx": tune.k_x, "kv": tune.k_v, "kp": tune.k_p, "kd": tune.k_d, "c_in": c_in,
-        "c_out": tune.release_factor * c_in, "alpha": alpha, "beta": beta,
-        "u_min": lo[0], "u_max": hi[0], "u_op": u_op[0],
-        "lqg": 1.0 if balance == "lqg" else 0.0,
-        "kform": 1.0 if design.kalman_form == "predictor" else 0.0,
-    }
-    for key, value in values.items():
-        cp[CP[key]] = value
-    cp[CP["phys"]:] = phys  # the system's own parameters, which its generated functions read
-    cp[CP["x_op"]:CP["x_op"] + n] = x_op
-    cp[CP["K"]:CP["K"] + n] = K[0]
-    cp[CP["S"]:CP["S"] + n * n] = S.reshape(-1)
-    for i in range(nq):
-        cp[CP["wrap"] + i] = 1.0 if system.state_units[i] == "rad" else 0.0
-    for i, coordinate in enumerate(system.spec.coordinates):
-        cp[CP["free"] + i] = 1.0 if coordinate in stated.free else 0.0
     # The design's Kalman filter: Ad, Bd, and its gain with one column per coordinate
     # (zero for a coordinate the design does not measure).
     disc = design.discrete
     if disc is None:
         raise ControllerError(f"the swing-up needs a discrete balancing design: design(system, rate={hz:g})")
-    cp[CP["Ad"]:CP["Ad"] + n * n] = np.asarray(disc.A, dtype=float).reshape(-1)
-    cp[CP["Bd"]:CP["Bd"] + n] = np.asarray(disc.B, dtype=float).reshape(-1)
     Kf = np.asarray(design.Kf, dtype=float).reshape(n, -1)
-    gain = np.zeros((n, 2))
+    gain = np.zeros((n, nq))
     for col, out in enumerate(eq.output_names):
         gain[:, names.index(out)] = Kf[:, col]
-    cp[CP["Kf"]:CP["Kf"] + 2 * n] = gain.reshape(-1)
+    slots = {
+        "T": 1.0 / hz, "ke": tune.k_energy, "amax": tune.a_max,
+        "e0": tune.e0, "kx": tune.k_x, "kv": tune.k_v, "kp": tune.k_p, "kd": tune.k_d, "c_in": c_in,
+        "c_out": tune.release_factor * c_in, "alpha": alpha, "beta": beta,
+        "u_min": lo[0], "u_max": hi[0], "u_op": u_op[0],
+        "lqg": 1.0 if balance == "lqg" else 0.0,
+        "current": 1.0 if design.kalman_form == "current" else 0.0,
+        "e_up": 0.0, "n": n, "nq": nq, "np": phys.size,
+    }
+    blocks = {
+        "x_op": x_op, "K": K[0], "S": S,
+        "wrap": [1.0 if i < nq and system.state_units[i] == "rad" else 0.0 for i in range(n)],
+        "free": [1.0 if i < nq and system.spec.coordinates[i] in stated.free else 0.0
+                 for i in range(n)],
+        "Ad": disc.A, "Bd": np.asarray(disc.B, dtype=float).reshape(n), "Kf": gain,
+        "sel": np.arange(nq, dtype=float),
+        "phys": phys,  # the system's own parameters, which its generated functions read
+    }
+    cp = LAYOUT.pack(slots, blocks)
     settings = {
         "law": law, "balance": balance, "kalman_form": design.kalman_form if balance == "lqg" else "",
         "c_in": c_in, "c_out": tune.release_factor * c_in,
         "alpha": alpha, "beta": beta,
         "tuning": {k: getattr(tune, k) for k in tune.__dataclass_fields__},
     }
-    source = controller_source(law, physics_source(system))
+    source = controller_source(law, physics_source(system), n, nq)
     # The energy measured from upright: the law's own at the operating point, at rest.
-    cp[CP["e_up"]] = python_namespace(source)["su_energy"](*x_op[:N_STATES], cp)
+    cp[CP_SLOTS.index("e_up")] = python_namespace(source)["su_energy"](*x_op, cp)
     return SwingUpController(
-        name="swingup", source=source, params=cp, z0=np.zeros(Z["end"]),
+        name="swingup", source=source, params=cp, z0=np.zeros(z_layout(n)["end"]),
         rate=hz, x_op=x_op, u_op=u_op, state_names=names, input_names=system.input_names,
         output_names=tuple(names[:nq]), has_estimate=True, settings=settings,
     )

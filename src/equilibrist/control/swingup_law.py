@@ -11,6 +11,8 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from equilibrist.control.linear_layout import Layout
+
 if TYPE_CHECKING:
     from equilibrist.control.nonlinear import NonlinearController
     from equilibrist.numeric.system import System
@@ -18,17 +20,14 @@ if TYPE_CHECKING:
 # --- layout of the parameters ``cp`` and of the state ``z`` (one place: the source,
 # the Python runtime and the C export read these) -----------------------------------
 CP_SLOTS = ("T", "ke", "amax", "e0", "kx", "kv", "kp", "c_in", "c_out", "alpha",
-            "beta", "u_min", "u_max", "u_op", "kd", "lqg", "kform", "e_up")
-N_STATES = 4  # every rig with a swing-up has two coordinates
-#: The blocks after the slots; the last, ``phys``, is the system's own parameter vector (as
-#: long as the system has parameters), which the system's generated functions read.
-CP_BLOCKS = (("x_op", N_STATES), ("K", N_STATES), ("S", N_STATES * N_STATES),
-             ("wrap", N_STATES), ("free", N_STATES), ("Ad", N_STATES * N_STATES),
-             ("Bd", N_STATES), ("Kf", N_STATES * 2), ("phys", 0))
-Z_SLOTS = (("init", 1), ("mode", 1), ("xhat", N_STATES), ("ref", N_STATES), ("kz", N_STATES))
-
-#: The balancing controllers the supervisor can hand over to (``balance=``).
-BALANCES = ("lqr", "lqg")
+            "beta", "u_min", "u_max", "u_op", "kd", "lqg", "current", "e_up", "n", "nq", "np")
+#: The parameters: the slots, then the blocks, their sizes in the system's states ``n``, its
+#: coordinates ``nq`` (what the rig measures: the filter's outputs, one per coordinate, zero
+#: gains for a coordinate the design does not measure) and its parameters ``np``. The last
+#: block, ``phys``, is the system's own parameter vector, which its generated functions read.
+LAYOUT = Layout("SU", CP_SLOTS, (
+    ("x_op", ("n",)), ("K", ("n",)), ("S", ("n", "n")), ("wrap", ("n",)), ("free", ("n",)),
+    ("Ad", ("n", "n")), ("Bd", ("n",)), ("Kf", ("n", "nq")), ("sel", ("nq",)), ("phys", ("np",))))
 
 MODE_PUMP, MODE_BALANCE = 0.0, 1.0
 
@@ -42,24 +41,48 @@ def _offsets(slots: tuple[tuple[str, int], ...], start: int = 0) -> dict[str, in
     return out
 
 
-CP = {**{name: i for i, name in enumerate(CP_SLOTS)},
-      **_offsets(CP_BLOCKS, len(CP_SLOTS))}
-Z = _offsets(Z_SLOTS)
+def cp_layout(n: int, nq: int, n_phys: int = 0) -> dict[str, int]:
+    """Where each slot and block of the parameters is, for a system of *n* states, *nq*
+    coordinates and *n_phys* parameters (``"end"``: the vector's length)."""
+    sizes = {"n": n, "nq": nq, "np": n_phys}
+    return {**{name: i for i, name in enumerate(CP_SLOTS)}, **LAYOUT.offsets(sizes)}
 
 
-def layout_constants() -> dict[str, int]:
-    """The layout as the source's constants (``SU_KE = 2``, ``SU_Z_MODE = 1`` ...)."""
-    out = {f"SU_{k.upper()}": v for k, v in CP.items() if k != "end"}
-    out.update({f"SU_Z_{k.upper()}": v for k, v in Z.items() if k != "end"})
+def z_layout(n: int) -> dict[str, int]:
+    """Where each slot of the state ``z`` is, for a system of *n* states: the tracker's start
+    flag and the mode (the same for every system), the tracker's estimate, the balance's held
+    reference and the filter's prediction (``kz``, a deviation from that reference)."""
+    return _offsets((("init", 1), ("mode", 1), ("xhat", n), ("ref", n), ("kz", n)))
+
+
+#: The layouts of the catalogue's swing-up rigs (two coordinates, four states); a controller's
+#: own are :func:`cp_layout` and :func:`z_layout` of its system (the mode's slot is always
+#: ``Z["mode"]``).
+CP = cp_layout(4, 2)
+Z = z_layout(4)
+
+
+def layout_constants(n: int, nq: int) -> dict[str, int]:
+    """The layout as the source's constants (``SU_KE = 1``, ``SU_Z_MODE = 1`` ...) for a
+    system of *n* states and *nq* coordinates: the slots' and blocks' places (from
+    :data:`LAYOUT`, the object that packs the parameters) and the sizes ``SU_N``, ``SU_NQ``."""
+    out = {k: v for k, v in LAYOUT.fixed_constants({"n": n, "nq": nq, "np": 0}).items()
+           if not k.startswith("SU_O_") and k != "SU_END"}
+    out.update({f"SU_Z_{k.upper()}": v for k, v in z_layout(n).items() if k != "end"})
+    out.update({"SU_DIM_N": n, "SU_DIM_NQ": nq})
     return out
 
 
 #: The law, in the Python the C translation knows: compiled into the simulation core as a
-#: :class:`~equilibrist.control.controller.NonlinearController` and run as is
-#: in Python. Written with scalars for the four states (no allocation).
+#: :class:`~equilibrist.control.controller.NonlinearController` and run as is in Python,
+#: for any number of states (``SU_DIM_N``) and coordinates (``SU_DIM_NQ``). The catch is
+#: :data:`~equilibrist.control.nonlinear.CATCH_SOURCE`'s, the Kalman filter of the LQG
+#: hand-over the estimator's (:data:`~equilibrist.control.kalman.ESTIMATOR_SOURCE`); the
+#: pumping term ``su_pump`` is the law's (:data:`LAW_SOURCES`), called by ``su_law`` with the
+#: tracker's estimate (written for the system's states by :func:`controller_source`).
 LAW_SOURCE = """
 def su_wrap(a):
-    return a - 2.0 * math.pi * math.floor((a + math.pi) / (2.0 * math.pi))
+    return kf_wrap(a)
 
 
 def su_sign(v):
@@ -79,14 +102,15 @@ def su_clip(v, lo, hi):
 
 
 def su_xhat(z, y, p, i):
-    # The alpha-beta tracker's current estimate of state i (positions 0, 1; rates 2, 3).
+    # The alpha-beta tracker's current estimate of state i (positions first, then rates).
+    nq = SU_DIM_NQ
     if z[SU_Z_INIT] == 0.0:
-        if i < 2:
+        if i < nq:
             return y[i]
         return 0.0
-    if i < 2:
+    if i < nq:
         return z[SU_Z_XHAT + i] + p[SU_ALPHA] * (y[i] - z[SU_Z_XHAT + i])
-    return z[SU_Z_XHAT + i] + p[SU_BETA] / p[SU_T] * (y[i - 2] - z[SU_Z_XHAT + i - 2])
+    return z[SU_Z_XHAT + i] + p[SU_BETA] / p[SU_T] * (y[i - nq] - z[SU_Z_XHAT + i - nq])
 
 
 def su_ref(z, xi, p, i, balancing):
@@ -106,125 +130,90 @@ def su_dev(xi, ri, p, i):
     return d
 
 
-def su_level(d0, d1, d2, d3, p):
-    s = SU_S
-    v = 0.0
-    v += d0 * (p[s] * d0 + p[s + 1] * d1 + p[s + 2] * d2 + p[s + 3] * d3)
-    v += d1 * (p[s + 4] * d0 + p[s + 5] * d1 + p[s + 6] * d2 + p[s + 7] * d3)
-    v += d2 * (p[s + 8] * d0 + p[s + 9] * d1 + p[s + 10] * d2 + p[s + 11] * d3)
-    v += d3 * (p[s + 12] * d0 + p[s + 13] * d1 + p[s + 14] * d2 + p[s + 15] * d3)
-    return v
+def catch_dev(i, t, z, y, p):
+    # The tracker's deviation of state i from the balance's reference: the catch's.
+    x = su_xhat(z, y, p, i)
+    return su_dev(x, su_ref(z, x, p, i, z[SU_Z_MODE] == 1.0), p, i)
 
 
 def su_kest(z, y, p, i):
-    # The Kalman filter's estimate (deviation from the held reference) of state i
-    # while the LQG balances: current form kz + M (dy - C kz), predictor form kz.
-    kz = SU_Z_KZ
-    if p[SU_KFORM] != 0.0:
-        return z[kz + i]
-    m = SU_KF + 2 * i
-    e0 = su_dev(y[0], z[SU_Z_REF], p, 0) - z[kz]
-    e1 = su_dev(y[1], z[SU_Z_REF + 1], p, 1) - z[kz + 1]
-    return z[kz + i] + p[m] * e0 + p[m + 1] * e1
+    # The Kalman filter's estimate (deviation from the held reference) of state i while the
+    # LQG balances.
+    return kf_estimate(i, z[SU_Z_KZ:], y, p[SU_KF:], SU_DIM_NQ, p[SU_SEL:], z[SU_Z_REF:],
+                       p[SU_WRAP:], p[SU_CURRENT])
 
 
-def su_kpred(z, y, p, i, d0, d1, d2, d3, du, balancing):
-    # The filter's prediction of state i for the next sample from this sample's
-    # estimate d (at the hand-over: the tracker's), the predictor form's correction
-    # once it runs.
-    a = SU_AD + 4 * i
-    v = p[a] * d0 + p[a + 1] * d1 + p[a + 2] * d2 + p[a + 3] * d3 + p[SU_BD + i] * du
-    if balancing and p[SU_KFORM] != 0.0:
-        kz = SU_Z_KZ
-        m = SU_KF + 2 * i
-        e0 = su_dev(y[0], z[SU_Z_REF], p, 0) - z[kz]
-        e1 = su_dev(y[1], z[SU_Z_REF + 1], p, 1) - z[kz + 1]
-        v = v + p[m] * e0 + p[m + 1] * e1
-    return v
+def su_mode(z, y, p):
+    # The catch, with its hysteresis, on the tracker's estimate (the law reads no time).
+    v = catch_level(0.0, z, y, p, p[SU_S:], SU_DIM_N)
+    return catch_mode(z[SU_Z_MODE] == 1.0, v, p[SU_C_IN], p[SU_C_OUT])
 
 
-def su_mode(z, v, p):
-    if z[SU_Z_MODE] == 1.0:
-        if v <= p[SU_C_OUT]:
-            return 1.0
-        return 0.0
-    if v < p[SU_C_IN]:
-        return 1.0
-    return 0.0
+def su_balance(z, y, p, kalman):
+    # The balancing LQR's command on the deviation (the filter's, with kalman).
+    s = -0.0
+    for j in range(SU_DIM_N):
+        if kalman:
+            s += p[SU_K + j] * su_kest(z, y, p, j)
+        else:
+            s += p[SU_K + j] * catch_dev(j, 0.0, z, y, p)
+    return p[SU_U_OP] - s
 
 
 def output(t, z, y, r, p, u_out):
-    x0 = su_xhat(z, y, p, 0)
-    x1 = su_xhat(z, y, p, 1)
-    x2 = su_xhat(z, y, p, 2)
-    x3 = su_xhat(z, y, p, 3)
     bal = z[SU_Z_MODE] == 1.0
-    d0 = su_dev(x0, su_ref(z, x0, p, 0, bal), p, 0)
-    d1 = su_dev(x1, su_ref(z, x1, p, 1, bal), p, 1)
-    d2 = su_dev(x2, su_ref(z, x2, p, 2, bal), p, 2)
-    d3 = su_dev(x3, su_ref(z, x3, p, 3, bal), p, 3)
-    mode = su_mode(z, su_level(d0, d1, d2, d3, p), p)
-    if mode == 1.0 and bal and p[SU_LQG] != 0.0:
-        d0 = su_kest(z, y, p, 0)
-        d1 = su_kest(z, y, p, 1)
-        d2 = su_kest(z, y, p, 2)
-        d3 = su_kest(z, y, p, 3)
+    mode = su_mode(z, y, p)
     if mode == 1.0:
-        k = SU_K
-        raw = p[SU_U_OP] - (p[k] * d0 + p[k + 1] * d1 + p[k + 2] * d2 + p[k + 3] * d3)
+        raw = su_balance(z, y, p, bal and p[SU_LQG] != 0.0)
     else:
-        raw = su_pump(x0, x1, x2, x3, p)
+        raw = su_law(z, y, p)
     u_out[0] = su_clip(raw, p[SU_U_MIN], p[SU_U_MAX])
 
 
 def update(t, z, y, r, u_applied, p, z_out):
-    x0 = su_xhat(z, y, p, 0)
-    x1 = su_xhat(z, y, p, 1)
-    x2 = su_xhat(z, y, p, 2)
-    x3 = su_xhat(z, y, p, 3)
+    n = SU_DIM_N
+    nq = SU_DIM_NQ
     bal = z[SU_Z_MODE] == 1.0
-    r0 = su_ref(z, x0, p, 0, bal)
-    r1 = su_ref(z, x1, p, 1, bal)
-    r2 = su_ref(z, x2, p, 2, bal)
-    r3 = su_ref(z, x3, p, 3, bal)
-    d0 = su_dev(x0, r0, p, 0)
-    d1 = su_dev(x1, r1, p, 1)
-    d2 = su_dev(x2, r2, p, 2)
-    d3 = su_dev(x3, r3, p, 3)
-    lqg = p[SU_LQG] != 0.0
-    mode = su_mode(z, su_level(d0, d1, d2, d3, p), p)
-    if mode == 1.0 and bal and lqg:
-        d0 = su_kest(z, y, p, 0)
-        d1 = su_kest(z, y, p, 1)
-        d2 = su_kest(z, y, p, 2)
-        d3 = su_kest(z, y, p, 3)
-    du = u_applied[0] - p[SU_U_OP]
-    for i in range(4):
-        if lqg and mode == 1.0:
-            z_out[SU_Z_KZ + i] = su_kpred(z, y, p, i, d0, d1, d2, d3, du, bal)
+    mode = su_mode(z, y, p)
+    if p[SU_LQG] != 0.0 and mode == 1.0:
+        if bal:
+            # The filter runs: its next prediction from its own estimate.
+            for i in range(n):
+                z_out[SU_Z_KZ + i] = kf_predict(
+                    i, -0.0, z[SU_Z_KZ:], y, p[SU_AD:], p[SU_BD:], p[SU_KF:], n, 1, nq,
+                    p[SU_SEL:], z[SU_Z_REF:], p[SU_WRAP:], p[SU_CURRENT], p[0:0], u_applied,
+                    p[SU_U_OP:])
         else:
+            # The hand-over: the filter starts from the tracker's estimate (held in the
+            # tracker's slots until they are written below).
+            for j in range(n):
+                z_out[SU_Z_XHAT + j] = catch_dev(j, 0.0, z, y, p)
+            for i in range(n):
+                z_out[SU_Z_KZ + i] = kf_predict(
+                    i, -0.0, z_out[SU_Z_XHAT:], y, p[SU_AD:], p[SU_BD:], p[SU_KF:], n, 1, 0,
+                    p[SU_SEL:], p[0:0], p[SU_WRAP:], 0, p[0:0], u_applied, p[SU_U_OP:])
+    else:
+        for i in range(n):
             z_out[SU_Z_KZ + i] = 0.0
     z_out[SU_Z_INIT] = 1.0
     z_out[SU_Z_MODE] = mode
-    z_out[SU_Z_REF] = r0
-    z_out[SU_Z_REF + 1] = r1
-    z_out[SU_Z_REF + 2] = r2
-    z_out[SU_Z_REF + 3] = r3
-    z_out[SU_Z_XHAT] = x0 + p[SU_T] * x2
-    z_out[SU_Z_XHAT + 1] = x1 + p[SU_T] * x3
-    z_out[SU_Z_XHAT + 2] = x2
-    z_out[SU_Z_XHAT + 3] = x3
+    for i in range(n):
+        x = su_xhat(z, y, p, i)
+        z_out[SU_Z_REF + i] = su_ref(z, x, p, i, bal)
+    for i in range(n):
+        if i < nq:
+            z_out[SU_Z_XHAT + i] = su_xhat(z, y, p, i) + p[SU_T] * su_xhat(z, y, p, i + nq)
+        else:
+            z_out[SU_Z_XHAT + i] = su_xhat(z, y, p, i)
 
 
 def estimate(t, z, y, r, p, x_out):
     if z[SU_Z_MODE] == 1.0 and p[SU_LQG] != 0.0:
-        for i in range(4):
+        for i in range(SU_DIM_N):
             x_out[i] = z[SU_Z_REF + i] + su_kest(z, y, p, i)
         return
-    x_out[0] = su_xhat(z, y, p, 0)
-    x_out[1] = su_xhat(z, y, p, 1)
-    x_out[2] = su_xhat(z, y, p, 2)
-    x_out[3] = su_xhat(z, y, p, 3)
+    for i in range(SU_DIM_N):
+        x_out[i] = su_xhat(z, y, p, i)
 """
 
 
@@ -319,12 +308,20 @@ def physics_source(system: System) -> str:
     return "\n\n".join(inspect.getsource(getattr(module, name)) for name in PHYSICS_FUNCTIONS)
 
 
-def controller_source(law: str, physics: str) -> str:
+def controller_source(law: str, physics: str, n: int, nq: int) -> str:
     """The swing-up's source for the law *law* (:data:`LAW_NAMES`) on a system's *physics*
-    (:func:`physics_source`): the layout's constants, :data:`LAW_SOURCE`, the law's
-    :data:`LAW_SOURCES` and the physics."""
-    head = "\n".join(f"{k} = {v}" for k, v in layout_constants().items())
-    return head + "\n" + LAW_SOURCE + LAW_SOURCES[law] + "\n\n" + physics
+    (:func:`physics_source`) of *n* states and *nq* coordinates: the layout's constants,
+    the estimator's source (:func:`~equilibrist.control.kalman.estimator`), the catch's,
+    :data:`LAW_SOURCE`, the law's :data:`LAW_SOURCES` (``su_law`` hands it the tracker's
+    estimate, state by state) and the physics."""
+    from equilibrist.control.kalman import estimator
+    from equilibrist.control.nonlinear import CATCH_SOURCE
+
+    head = "\n".join(f"{k} = {v}" for k, v in layout_constants(n, nq).items())
+    states = ", ".join(f"su_xhat(z, y, p, {i})" for i in range(n))
+    call = f"\n\ndef su_law(z, y, p):\n    return su_pump({states}, p)\n"
+    return (head + "\n" + estimator().source + CATCH_SOURCE + LAW_SOURCE + LAW_SOURCES[law]
+            + call + "\n\n" + physics)
 
 
 class ControllerNamespace(Protocol):
@@ -361,4 +358,4 @@ def energy(x: np.ndarray, ctrl: NonlinearController) -> float:
     """The energy the swing-up *ctrl* pumps (the pendulum's, or the acrobot's total), from
     upright, at state *x*."""
     x = np.asarray(x, dtype=float)
-    return float(python_namespace(ctrl.source)["su_energy"](x[0], x[1], x[2], x[3], ctrl.params))
+    return float(python_namespace(ctrl.source)["su_energy"](*x, ctrl.params))

@@ -56,7 +56,9 @@ import numpy as np
 
 from equilibrist.control import fixed, swingup
 from equilibrist.control.discretize import discrete_matrices
-from equilibrist.control.nonlinear import NonlinearController
+from equilibrist.control.kalman import KALMAN, Estimator, estimator, joseph, predict_covariance
+from equilibrist.control.linear_layout import Layout
+from equilibrist.control.nonlinear import BALANCES, CATCH_SOURCE, NonlinearController
 from equilibrist.errors import ControllerError
 
 if TYPE_CHECKING:
@@ -67,55 +69,64 @@ if TYPE_CHECKING:
 
 #: The most samples a plan may span at the controller's rate (its tables are parameters).
 MAX_SAMPLES = 200_000
-#: What balances: the full measured state, or the design's outputs through Kalman filters.
-BALANCES = ("lqr", "lqg")
+#: The parameters of ``balance="lqr"``, packed and read through this one layout: the plan's
+#: samples (states, inputs) and gains, then the balancing LQR (its operating point, gain and
+#: Riccati solution, whose level set is the catch region).
+LAYOUT = Layout("TV", ("steps", "knots", "rate", "n", "m", "level"), (
+    ("xs", ("knots", "n")), ("us", ("knots", "m")), ("gains", ("steps", "m", "n")),
+    ("x_op", ("n",)), ("u_op", ("m",)), ("K_end", ("m", "n")), ("S_end", ("n", "n"))))
 
-SOURCE = '''
-def tvlqr_offsets(params):
-    n = int(params[2])
-    m = int(params[3])
-    K = int(params[0])
-    ox = 5
-    ou = ox + (K + 1) * n
-    og = ou + (K + 1) * m
-    oop = og + K * m * n
-    oup = oop + n
-    okb = oup + m
-    osb = okb + m * n
-    return K, n, m, ox, ou, og, oop, oup, okb, osb
+#: ``balance="lqg"``: the same, and the filters: the state each output measures, the plan's
+#: linearizations and time-varying gains, the design's stationary filter (``current`` is 1
+#: for the current form, 0 for the predictor).
+LAYOUT_LQG = Layout("TV", ("steps", "knots", "rate", "n", "m", "ny", "current", "level"), (
+    ("xs", ("knots", "n")), ("us", ("knots", "m")), ("gains", ("steps", "m", "n")),
+    ("x_op", ("n",)), ("u_op", ("m",)), ("K_end", ("m", "n")), ("sel", ("ny",)),
+    ("A", ("steps", "n", "n")), ("B", ("steps", "n", "m")), ("F", ("steps", "n", "ny")),
+    ("Ad", ("n", "n")), ("Bd", ("n", "m")), ("Kf", ("n", "ny")), ("S_end", ("n", "n"))))
+
+#: The layout of each ``balance``.
+LAYOUTS = {"lqr": LAYOUT, "lqg": LAYOUT_LQG}
+
+_LAW = '''
+def tv_sample(t, params):
+    return int(math.floor(t * params[TV_RATE] + 0.5))
+
+
+def tv_at(params, slot):
+    return int(params[slot])
+'''
+
+SOURCE = LAYOUT.source() + CATCH_SOURCE + _LAW + '''
+
+def catch_dev(i, t, z, y, params):
+    return y[i] - params[tv_at(params, TV_O_X_OP) + i]
 
 
 def tvlqr_caught(t, z, y, params):
-    K, n, m, ox, ou, og, oop, oup, okb, osb = tvlqr_offsets(params)
-    k = int(math.floor(t * params[1] + 0.5))
-    if k >= K or z[0] >= 0.5:
+    if tv_sample(t, params) >= tv_at(params, TV_STEPS) or z[0] >= 0.5:
         return 1.0
-    v = 0.0
-    for i in range(n):
-        acc = 0.0
-        for j in range(n):
-            acc += params[osb + i * n + j] * (y[j] - params[oop + j])
-        v += (y[i] - params[oop + i]) * acc
-    if v <= params[4]:
-        return 1.0
-    return 0.0
+    n = tv_at(params, TV_N)
+    v = catch_level(t, z, y, params, params[tv_at(params, TV_O_S_END):], n)
+    return catch_mode(0, v, params[TV_LEVEL], params[TV_LEVEL])
 
 
 def output(t, z, y, r, params, u_out):
-    K, n, m, ox, ou, og, oop, oup, okb, osb = tvlqr_offsets(params)
-    k = int(math.floor(t * params[1] + 0.5))
+    n = tv_at(params, TV_N)
+    m = tv_at(params, TV_M)
+    k = tv_sample(t, params)
+    ox = tv_at(params, TV_O_X_OP)
+    ou = tv_at(params, TV_O_U_OP)
+    og = tv_at(params, TV_O_K_END)
     if tvlqr_caught(t, z, y, params) < 0.5:
-        for i in range(m):
-            acc = params[ou + k * m + i]
-            for j in range(n):
-                acc -= params[og + (k * m + i) * n + j] * (y[j] - params[ox + k * n + j])
-            u_out[i] = acc
-    else:
-        for i in range(m):
-            acc = params[oup + i]
-            for j in range(n):
-                acc -= params[okb + i * n + j] * (y[j] - params[oop + j])
-            u_out[i] = acc
+        ox = tv_at(params, TV_O_XS) + k * n
+        ou = tv_at(params, TV_O_US) + k * m
+        og = tv_at(params, TV_O_GAINS) + k * m * n
+    for i in range(m):
+        acc = params[ou + i]
+        for j in range(n):
+            acc -= params[og + i * n + j] * (y[j] - params[ox + j])
+        u_out[i] = acc
 
 
 def update(t, z, y, r, u_applied, params, z_out):
@@ -123,129 +134,91 @@ def update(t, z, y, r, u_applied, params, z_out):
 '''
 
 
-#: ``balance="lqg"``: the same law on a Kalman filter's estimate of the design's outputs
-#: (the plan's time-varying filter, then the design's own); ``z`` is ``xhat_{k|k-1}``.
-SOURCE_LQG = '''
-def tvkf_layout(params):
-    K = int(params[0])
-    n = int(params[2])
-    m = int(params[3])
-    ny = int(params[4])
-    ox = 7
-    ou = ox + (K + 1) * n
-    og = ou + (K + 1) * m
-    oop = og + K * m * n
-    oup = oop + n
-    okb = oup + m
-    oi = okb + m * n
-    oa = oi + ny
-    ob = oa + K * n * n
-    of = ob + K * n * m
-    oad = of + K * n * ny
-    obd = oad + n * n
-    ofd = obd + n * m
-    osb = ofd + n * ny
-    return K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd, osb
+def lqg_source(est: Estimator | None = None) -> str:
+    """The source of ``balance="lqg"``: the same law on the estimate of the estimator *est*
+    (default :func:`~equilibrist.control.kalman.estimator`), its functions embedded: the
+    plan's time-varying filter, then the design's stationary one; ``z`` is ``xhat_{k|k-1}``."""
+    return LAYOUT_LQG.source() + (est or estimator()).source + CATCH_SOURCE + _LAW + '''
+
+def tvkf_stage(t, z, y, params):
+    """The tables of this sample: the plan's at its sample k, or the balance's after the catch
+    (reference state, input, next reference, gain, A, B, filter gain)."""
+    n = tv_at(params, TV_N)
+    m = tv_at(params, TV_M)
+    ny = tv_at(params, TV_NY)
+    k = tv_sample(t, params)
+    if tvkf_caught(t, z, y, params) < 0.5:
+        return (tv_at(params, TV_O_XS) + k * n, tv_at(params, TV_O_US) + k * m,
+                tv_at(params, TV_O_XS) + (k + 1) * n, tv_at(params, TV_O_GAINS) + k * m * n,
+                tv_at(params, TV_O_A) + k * n * n, tv_at(params, TV_O_B) + k * n * m,
+                tv_at(params, TV_O_F) + k * n * ny)
+    return (tv_at(params, TV_O_X_OP), tv_at(params, TV_O_U_OP), tv_at(params, TV_O_X_OP),
+            tv_at(params, TV_O_K_END), tv_at(params, TV_O_AD), tv_at(params, TV_O_BD),
+            tv_at(params, TV_O_KF))
 
 
-def tvkf_xhat(j, z, y, params, ny, oi, ofk):
-    x = z[j]
-    if params[5] < 0.5:
-        for l in range(ny):
-            x += params[ofk + j * ny + l] * (y[l] - z[int(params[oi + l])])
-    return x
+def tvkf_xhat(j, z, y, params, of):
+    """State j of the estimate, the filter's gain at params[of]."""
+    return kf_estimate(j, z, y, params[of:], tv_at(params, TV_NY), params[tv_at(params, TV_O_SEL):],
+                       params[0:0], params[0:0], params[TV_CURRENT])
+
+
+def catch_dev(i, t, z, y, params):
+    of = tv_at(params, TV_O_F) + tv_sample(t, params) * tv_at(params, TV_N) * tv_at(params, TV_NY)
+    return tvkf_xhat(i, z, y, params, of) - params[tv_at(params, TV_O_X_OP) + i]
 
 
 def tvkf_caught(t, z, y, params):
-    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd, osb = tvkf_layout(params)
-    k = int(math.floor(t * params[1] + 0.5))
-    if k >= K or z[n] >= 0.5:
+    n = tv_at(params, TV_N)
+    if tv_sample(t, params) >= tv_at(params, TV_STEPS) or z[n] >= 0.5:
         return 1.0
-    ofk = of + k * n * ny
-    v = 0.0
-    for i in range(n):
-        acc = 0.0
-        for j in range(n):
-            acc += params[osb + i * n + j] * (tvkf_xhat(j, z, y, params, ny, oi, ofk)
-                                              - params[oop + j])
-        v += (tvkf_xhat(i, z, y, params, ny, oi, ofk) - params[oop + i]) * acc
-    if v <= params[6]:
-        return 1.0
-    return 0.0
-
-
-def tvkf_stage(t, z, y, params):
-    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd, osb = tvkf_layout(params)
-    k = int(math.floor(t * params[1] + 0.5))
-    oxr = oop
-    our = oup
-    oxn = oop
-    ogk = okb
-    oak = oad
-    obk = obd
-    ofk = ofd
-    if tvkf_caught(t, z, y, params) < 0.5:
-        oxr = ox + k * n
-        our = ou + k * m
-        oxn = ox + (k + 1) * n
-        ogk = og + k * m * n
-        oak = oa + k * n * n
-        obk = ob + k * n * m
-        ofk = of + k * n * ny
-    return oxr, our, oxn, ogk, oak, obk, ofk
+    v = catch_level(t, z, y, params, params[tv_at(params, TV_O_S_END):], n)
+    return catch_mode(0, v, params[TV_LEVEL], params[TV_LEVEL])
 
 
 def output(t, z, y, r, params, u_out):
-    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd, osb = tvkf_layout(params)
+    n = tv_at(params, TV_N)
+    m = tv_at(params, TV_M)
     oxr, our, oxn, ogk, oak, obk, ofk = tvkf_stage(t, z, y, params)
     for i in range(m):
         acc = params[our + i]
         for j in range(n):
-            acc -= params[ogk + i * n + j] * (tvkf_xhat(j, z, y, params, ny, oi, ofk)
-                                               - params[oxr + j])
+            acc -= params[ogk + i * n + j] * (tvkf_xhat(j, z, y, params, ofk) - params[oxr + j])
         u_out[i] = acc
 
 
 def update(t, z, y, r, u_applied, params, z_out):
-    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd, osb = tvkf_layout(params)
+    n = tv_at(params, TV_N)
+    m = tv_at(params, TV_M)
+    ny = tv_at(params, TV_NY)
     oxr, our, oxn, ogk, oak, obk, ofk = tvkf_stage(t, z, y, params)
     for i in range(n):
-        acc = params[oxn + i]
-        for j in range(n):
-            acc += params[oak + i * n + j] * (tvkf_xhat(j, z, y, params, ny, oi, ofk)
-                                               - params[oxr + j])
-        for l in range(m):
-            acc += params[obk + i * m + l] * (u_applied[l] - params[our + l])
-        if params[5] >= 0.5:
-            for l in range(ny):
-                acc += params[ofk + i * ny + l] * (y[l] - z[int(params[oi + l])])
-        z_out[i] = acc
+        z_out[i] = kf_predict(i, params[oxn + i], z, y, params[oak:], params[obk:], params[ofk:],
+                              n, m, ny, params[tv_at(params, TV_O_SEL):], params[0:0],
+                              params[0:0], params[TV_CURRENT], params[oxr:], u_applied,
+                              params[our:])
     z_out[n] = tvkf_caught(t, z, y, params)
 
 
 def estimate(t, z, y, r, params, x_out):
-    K, n, m, ny, ox, ou, og, oop, oup, okb, oi, oa, ob, of, oad, obd, ofd, osb = tvkf_layout(params)
+    n = tv_at(params, TV_N)
     oxr, our, oxn, ogk, oak, obk, ofk = tvkf_stage(t, z, y, params)
     for j in range(n):
-        x_out[j] = tvkf_xhat(j, z, y, params, ny, oi, ofk)
+        x_out[j] = tvkf_xhat(j, z, y, params, ofk)
 '''
 
 
-#: Where the plan's tables begin in the parameters, after the header of each ``balance``
-#: (``[steps, rate, n, m, catch level]``; ``lqg`` adds the outputs' count and the form).
-HEADER = {"lqr": 5, "lqg": 7}
+#: ``balance="lqg"`` with the Kalman filter (:data:`~equilibrist.control.kalman.KALMAN`).
+SOURCE_LQG = lqg_source(KALMAN)
 
 
 def plan_samples(ctrl: NonlinearController) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(t, states, inputs)``: the plan as the tracker *ctrl* samples it (at its rate, from
     its tables: the Hermite interpolant of the knots)."""
+    layout = LAYOUTS[str(ctrl.settings["balance"])]
     p = np.asarray(ctrl.params, dtype=float)
-    steps, rate, n, m = int(p[0]), float(p[1]), int(p[2]), int(p[3])
-    ox = HEADER[str(ctrl.settings["balance"])]
-    ou = ox + (steps + 1) * n
-    xs = p[ox:ou].reshape(steps + 1, n)
-    us = p[ou:ou + (steps + 1) * m].reshape(steps + 1, m)
-    return np.arange(steps + 1) / rate, xs, us
+    steps, rate = int(p[layout.slots.index("steps")]), float(p[layout.slots.index("rate")])
+    return np.arange(steps + 1) / rate, layout.read(p, "xs"), layout.read(p, "us")
 
 
 def _hermite_states(system: System, traj: Trajectory, t: np.ndarray) -> np.ndarray:
@@ -313,9 +286,10 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
         assert design is not None
         return _with_filter(system, traj, design, plant[::-1], xs, us, gains, rate=rate,
                             x_op=x_op, u_op=u_op, K_end=K_end, S_end=S_end, level=level, P0=P0)
-    params = np.concatenate([[steps, rate, n, m, level], xs.reshape(-1), us.reshape(-1),
-                             gains.reshape(-1), x_op, u_op,
-                             np.asarray(K_end, dtype=float).reshape(-1), S_end.reshape(-1)])
+    params = LAYOUT.pack({"steps": steps, "knots": steps + 1, "rate": rate, "n": n, "m": m,
+                          "level": level},
+                         {"xs": xs, "us": us, "gains": gains, "x_op": x_op, "u_op": u_op,
+                          "K_end": K_end, "S_end": S_end})
     return NonlinearController(
         name="tvlqr", source=SOURCE, params=params, z0=np.zeros(1), rate=float(rate),
         x_op=x_op, u_op=u_op, state_names=system.state_names, input_names=system.input_names,
@@ -365,8 +339,8 @@ def kalman_along(plant: list[tuple[np.ndarray, np.ndarray, np.ndarray]], C: np.n
     Ad_k M_k`` predictor) and the a-priori covariances ``(steps + 1, n, n)``, ``P_0`` first.
     """
     from equilibrist.control.discretize import discrete_noise
-    from equilibrist.control.riccati import current_gain
 
+    rule = estimator().gain
     n, ny = C.shape[1], C.shape[0]
     if design.Rd is None:
         raise ControllerError("the time-varying filter needs a discrete design (its Rd)")
@@ -376,17 +350,15 @@ def kalman_along(plant: list[tuple[np.ndarray, np.ndarray, np.ndarray]], C: np.n
     gains = np.zeros((len(plant), n, ny))
     covariances = np.zeros((len(plant) + 1, n, n))
     covariances[0] = P
-    eye = np.eye(n)
     held: np.ndarray | None = None
     Qd = np.zeros((n, n))
     for k, (A, Ad, _Bd) in enumerate(plant):
-        M = current_gain(P, C, Rd)
-        I_MC = eye - fixed.matmul(M, C)
-        posterior = fixed.symmetric(fixed.mm(I_MC, P, I_MC.T) + fixed.mm(M, Rd, M.T))
+        M = rule(P, C, Rd)
+        posterior = joseph(P, M, C, Rd)
         if A is not held:  # the same linearization again (a plan held still): the same Qd
             Qd, _ = discrete_noise(A, G, QN, RN, dt, method=design.discretization)
             held = A
-        P = fixed.symmetric(fixed.mm(Ad, posterior, Ad.T) + Qd)
+        P = predict_covariance(posterior, Ad, Qd)
         gains[k] = M if design.kalman_form == "current" else fixed.matmul(Ad, M)
         covariances[k + 1] = P
     if not (np.all(np.isfinite(gains)) and np.all(np.isfinite(covariances))):
@@ -414,17 +386,15 @@ def _with_filter(system: System, traj: Trajectory, design: Design,
     if start.shape != (n, n):
         raise ControllerError(f"P0 has shape {start.shape}: expected ({n}, {n})")
     filters, _ = kalman_along(plant, C, design, 1.0 / rate, start)
-    form = 0.0 if design.kalman_form == "current" else 1.0
-    params = np.concatenate([
-        [steps, rate, n, m, len(index), form, level], xs.reshape(-1), us.reshape(-1), gains.reshape(-1),
-        x_op, u_op, np.asarray(K_end, dtype=float).reshape(-1), np.asarray(index, dtype=float),
-        np.array([a for _, a, _ in plant]).reshape(-1), np.array([b for _, _, b in plant]).reshape(-1),
-        filters.reshape(-1), np.asarray(disc.A, dtype=float).reshape(-1),
-        np.asarray(disc.B, dtype=float).reshape(-1), np.asarray(design.Kf, dtype=float).reshape(-1),
-        S_end.reshape(-1),
-    ])
+    params = LAYOUT_LQG.pack(
+        {"steps": steps, "knots": steps + 1, "rate": rate, "n": n, "m": m, "ny": len(index),
+         "current": 1.0 if design.kalman_form == "current" else 0.0, "level": level},
+        {"xs": xs, "us": us, "gains": gains, "x_op": x_op, "u_op": u_op, "K_end": K_end,
+         "sel": np.asarray(index, dtype=float), "A": np.array([a for _, a, _ in plant]),
+         "B": np.array([b for _, _, b in plant]), "F": filters, "Ad": disc.A, "Bd": disc.B,
+         "Kf": design.Kf, "S_end": S_end})
     return NonlinearController(
-        name="tvlqr", source=SOURCE_LQG, params=params, z0=np.concatenate([xs[0], [0.0]]),
+        name="tvlqr", source=lqg_source(), params=params, z0=np.concatenate([xs[0], [0.0]]),
         rate=float(rate),
         x_op=x_op, u_op=u_op, state_names=names, input_names=system.input_names,
         output_names=design.plant.output_names, has_estimate=True,

@@ -5,12 +5,11 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from equilibrist.controllers.kinds import ControllerKind, ControllerRequest, Option
+from equilibrist.controllers.tvlqr import BALANCES
 
 if TYPE_CHECKING:
     from equilibrist.control.nonlinear import NonlinearController
     from equilibrist.numeric.system import System
-
-BALANCES = ("lqr", "lqg")
 
 
 def applies(system: System) -> str | None:

@@ -9,8 +9,11 @@ from equilibrist.controllers.kinds import ControllerKind, ControllerRequest, Opt
 if TYPE_CHECKING:
     from equilibrist.control.nonlinear import NonlinearController
 
-#: What ``--balance`` takes: the full measured state (``lqr``) or the design's outputs
-#: through a Kalman filter along the plan and the design's after it (``lqg``).
+#: What ``--balance`` takes (this kind's and the swing-up's): the full measured state
+#: (``lqr``) or the design's outputs through the estimator (``lqg``). The same tuple as
+#: :data:`equilibrist.control.nonlinear.BALANCES`, which the controllers check against (a
+#: test holds them equal): written here too because listing the kinds imports no numerics,
+#: and importing ``equilibrist.control`` does.
 BALANCES = ("lqr", "lqg")
 #: What ``--catch`` takes: hand over inside the catch region before the plan ends, or not.
 CATCHES = ("on", "off")

@@ -31,15 +31,28 @@ def _discretize(A: np.ndarray, GQG: np.ndarray, T: float) -> tuple[np.ndarray, n
     return sampled_noise(A, GQG, T)
 
 
+class FilterFallbackWarning(UserWarning):
+    """The model's Kalman filter has no steady state at some parameters: its gain there is the
+    one of the process noise alone (``P = Qd``), which the warning names."""
+
+
 def _steady_gain(Ad: np.ndarray, C: np.ndarray, Qd: np.ndarray,
                  R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The steady-state Kalman gain ``K`` and innovation covariance ``S`` of the sampled
     model: the predictor's covariance from the designs' own Riccati solver (structure-
     preserving doubling, :func:`equilibrist.control.fixed.dare` on the dual problem), else
-    scipy's DARE, else ``P = Qd``."""
+    scipy's DARE; the gain and ``S`` are the Kalman filter's own
+    (:func:`equilibrist.control.kalman.gain`, the one every consumer's filter has).
+
+    Where neither solver finds the stabilizing solution (the filter of the model at these
+    parameters has no steady state) the covariance falls back to ``P = Qd``, the one sample's
+    process noise: said by a :class:`FilterFallbackWarning`, not silently."""
+    import warnings
+
     from scipy.linalg import solve_discrete_are
 
     from equilibrist.control import fixed
+    from equilibrist.control.kalman import gain
     from equilibrist.errors import DesignError
 
     try:
@@ -47,10 +60,14 @@ def _steady_gain(Ad: np.ndarray, C: np.ndarray, Qd: np.ndarray,
     except (DesignError, np.linalg.LinAlgError):
         try:
             P = solve_discrete_are(Ad.T, C.T, Qd, R)
-        except (ValueError, np.linalg.LinAlgError):
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            warnings.warn(FilterFallbackWarning(
+                f"the model's Kalman filter has no steady state at these parameters ({exc}): "
+                "its prediction errors are weighted with the process noise of one sample "
+                "(P = Qd) instead"), stacklevel=2)
             P = Qd.copy()
-    S = C @ P @ C.T + R
-    return P @ C.T @ np.linalg.inv(S), (S + S.T) / 2
+    S = fixed.symmetric(fixed.mm(C, P, C.T) + R)
+    return gain(P, C, R), S
 
 
 def _information_inverse(H: np.ndarray) -> np.ndarray:

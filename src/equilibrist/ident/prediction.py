@@ -139,19 +139,31 @@ class _Predictor(_Unknowns):
 
 def _solve_ivp_filter(system: System) -> Callable[..., None]:
     """The Kalman filter's prediction errors with :func:`scipy.integrate.solve_ivp`
-    over each sample interval (the same loop as the compiled filter)."""
+    over each sample interval (the same loop as the compiled filter). The measurement
+    update is the estimator's own (:func:`equilibrist.control.kalman.estimator_namespace`:
+    ``kf_innovation`` and ``kf_estimate``, the functions every controller's filter runs), on
+    the measurements less the sensors' offsets."""
     from scipy.integrate import solve_ivp
+
+    from equilibrist.control.kalman import estimator_namespace
 
     fn = system.functions.f
     n = system.n_states
+    kf = estimator_namespace()
+    innovation, estimate = kf["kf_innovation"], kf["kf_estimate"]
+    empty = np.zeros(0)
 
     def innovations(p: np.ndarray, x0: np.ndarray, t: np.ndarray, u: np.ndarray, n_sub: np.ndarray,
                     c_idx: np.ndarray, gain: np.ndarray, y: np.ndarray, off: np.ndarray,
                     e: np.ndarray) -> None:
         x = x0.copy()
+        ny = c_idx.shape[0]
+        sel = np.asarray(c_idx, dtype=float)
+        g = np.ascontiguousarray(gain, dtype=float).reshape(-1)
         for k in range(t.shape[0]):
-            e[k] = y[k] - off - x[c_idx]
-            x = x + gain @ e[k]
+            yk = y[k] - off
+            e[k] = [innovation(j, x, yk, sel, empty, empty) for j in range(ny)]
+            x = np.array([estimate(i, x, yk, g, ny, sel, empty, empty, 1) for i in range(n)])
             if k + 1 < t.shape[0]:
                 uk = u[k]
 
