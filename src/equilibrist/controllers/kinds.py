@@ -198,6 +198,29 @@ class ControllerKind:
         hanging, only the track ends it), when the system has that task.
     linear:
         Whether ``design`` shows the whole LQG design for it (LQR, LQG).
+    loop:
+        The design's linear loop its controller is, as
+        :meth:`~equilibrist.control.linear.LinearController.from_design` and the design's
+        margins name it: ``"lqr"`` (the gain on the full state) or ``"lqg"`` (the gain on
+        the estimate of the Kalman filter of the outputs); None for a controller that is
+        not one (the playground then shows the state feedback's margins alone).
+    from_any_state:
+        Whether it brings the system up by itself from any state, with no plan and no
+        clock (the swing-up: its supervisor pumps again after a loss and catches wherever
+        the energy is right). In the playground only the track's limits (the swing-up
+        task's region) end its run, also when it was not started hanging; and since it
+        may catch a whole turn away from the operating point, a switch from it to another
+        controller brings the angles within half a turn and starts the filter at its
+        estimate. Its controller's state holds the supervisor's mode
+        (:data:`equilibrist.control.swingup_law.Z`), which the playground shows.
+    planned:
+        Whether it tracks a plan of the swing-up task (the time-varying LQR): the
+        playground plans one from the hanging start before it builds the kind (so the
+        kind needs a system with a hanging position and CasADi), and its region of
+        attraction is not a slice of starts about the upright.
+    solves_qp:
+        Whether its controller solves a QP at each sample (the MPC, built as its
+        runtime): the playground times the solves and shows them.
     open_loop:
         Whether it is the open loop (nothing to design or export).
     export:
@@ -222,6 +245,10 @@ class ControllerKind:
     noise: str = "spec"
     task: str | None = None
     linear: bool = False
+    loop: str | None = None
+    from_any_state: bool = False
+    planned: bool = False
+    solves_qp: bool = False
     open_loop: bool = False
     export: Callable[..., ExportReport] | None = None
     check_export: Callable[[ControllerRequest], None] | None = None
@@ -235,6 +262,9 @@ class ControllerKind:
         if unknown:
             raise KindError(f"controller kind {self.name!r}: unknown surface(s) "
                             f"{', '.join(sorted(unknown))} (expected {', '.join(sorted(SURFACES))})")
+        if self.loop not in (None, "lqr", "lqg"):
+            raise KindError(f"controller kind {self.name!r}: loop {self.loop!r} "
+                            "(expected 'lqr', 'lqg' or None)")
         if self.noise not in ("design", "spec"):
             raise KindError(f"controller kind {self.name!r}: noise {self.noise!r} "
                             "(expected 'design' or 'spec')")

@@ -7,5 +7,5 @@ from equilibrist.controllers.kinds import ControllerKind, linear_builder
 KIND = ControllerKind(
     name="lqg", label="LQG (Kalman filter + LQR)", help="Kalman filter on the measured outputs + LQR",
     build=linear_builder("lqg"),
-    noise="design", linear=True, order=20,
+    noise="design", linear=True, loop="lqg", order=20,
 )

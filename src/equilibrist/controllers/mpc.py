@@ -44,5 +44,5 @@ KIND = ControllerKind(
     build=build,
     options=(Option("--horizon", "prediction horizon of --controller mpc [samples] (default 30)",
                     parse=_horizon, expected="a whole number of samples >= 1", metavar="N"),),
-    check_export=check_export, order=40,
+    check_export=check_export, solves_qp=True, order=40,
 )

@@ -37,5 +37,5 @@ KIND = ControllerKind(
     build=build,
     options=(Option("--balance", "what balances after --controller swingup's catch (default lqr)",
                     choices=BALANCES),),
-    applies=applies, task="swingup", order=30,
+    applies=applies, task="swingup", from_any_state=True, order=30,
 )

@@ -36,5 +36,6 @@ KIND = ControllerKind(
              Option("--catch", "with --controller tvlqr: balance as soon as the state enters the "
                     "balancing LQR's catch region (on, default), or track the plan to its end "
                     "(off)", choices=CATCHES)),
-    surfaces=frozenset({"simulate", "export", "study", "playground"}), task="swingup", order=50,
+    surfaces=frozenset({"simulate", "export", "study", "playground"}), task="swingup", planned=True,
+    order=50,
 )
