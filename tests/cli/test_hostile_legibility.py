@@ -75,6 +75,13 @@ def test_linearize_json_has_no_negative_zero_where_the_text_prints_0(capsys, sys
     (["linearize", "cartpole", "--at", "theta=\u0661"], ["--at theta", "not a number"]),
     (["roa", "cartpole", "--samples", "1_000"], ["--samples", "'1_000'", "whole number"]),
     (["roa", "cartpole", "--seed", "1_0"], ["--seed", "'1_0'", "whole number"]),
+    (["simulate", "cartpole", "--seed", "1_0"], ["--seed", "'1_0'", "whole number"]),
+    (["batch", "cartpole", "--runs", "2", "--seed", "1_0"], ["--seed", "'1_0'", "whole number"]),
+    (["export", "cartpole", "--out", "never-written", "--seed", "1_0"],
+     ["--seed", "'1_0'", "whole number"]),
+    (["simulate", "cartpole", "--animate", "never.gif", "--fps", "1_0"], ["--fps", "'1_0'"]),
+    (["simulate", "cartpole", "--animate", "never.gif", "--max-frames", "1_0"],
+     ["--max-frames", "'1_0'"]),
 ])
 def test_a_number_with_an_underscore_is_refused_in_one_line(capsys, argv, words) -> None:
     code = main(argv)

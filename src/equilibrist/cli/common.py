@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import re
 import sys
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -13,6 +12,7 @@ from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
+from equilibrist import numbers
 from equilibrist.errors import ParameterError, UsageError
 
 if TYPE_CHECKING:
@@ -99,17 +99,11 @@ def add_json(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print JSON for scripts")
 
 
-# A number as written on a command line: digits with a point and an exponent (-0.5, 2,
-# 1e-3). Python's float() takes more, which is never meant there: 1_0 (ten), Unicode digits.
-_DECIMAL = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
-_NOT_FINITE = re.compile(r"[+-]?(?:inf|infinity|nan)", re.IGNORECASE)
-
-
 def parse_number(text: str, what: str) -> float:
     """*text* as a finite decimal number (surrounding blanks ignored); anything else, such as
     ``1_0``, is refused in one line naming *what*."""
     word = text.strip()
-    if not (_DECIMAL.fullmatch(word) or _NOT_FINITE.fullmatch(word)):
+    if not (numbers.is_decimal(word) or numbers.NOT_FINITE.fullmatch(word)):
         raise UsageError(f"{what}: {text!r} is not a number (expected a decimal such as "
                          "0.25, -3 or 1e-3)")
     value = float(word)
@@ -263,7 +257,7 @@ def format_table(header: Sequence[str], rows: Sequence[Sequence[object]]) -> str
 def parse_whole(text: str, option: str, minimum: int = 1) -> int:
     """*text* as a whole number >= *minimum* (decimal digits: int() would take ``1_0``),
     else one line naming the option."""
-    if not re.fullmatch(r"[+-]?[0-9]+", text.strip()):
+    if not numbers.is_whole(text):
         raise UsageError(f"{option} {text!r}: expected a whole number >= {minimum}")
     v = int(text)
     if v < minimum:

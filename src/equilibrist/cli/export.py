@@ -6,6 +6,7 @@ import argparse
 import math
 from typing import TYPE_CHECKING
 
+from equilibrist import numbers
 from equilibrist.cli import common
 
 if TYPE_CHECKING:
@@ -69,7 +70,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     common.add_controller(p, "export", default="lqg", help="the controller to export (default lqg)")
     p.add_argument("--duration", metavar="S", default=None,
                    help="length of the recorded test-vector run [s]")
-    p.add_argument("--seed", type=int, default=0, help="noise seed of the test-vector run")
+    p.add_argument("--seed", type=_seed, default=0, help="noise seed of the test-vector run")
     p.add_argument("--x0", metavar="NAME=VALUE,...", default=None,
                    help="start of the test-vector run (states not named at the operating point; "
                    "default: a quarter of each coordinate's design scale off, less if that falls)")
@@ -199,3 +200,10 @@ def _budget(done: ExportReport) -> dict[str, object]:
     if iterations:
         out["daqp_iterations"] = dict(iterations)
     return out
+
+
+def _seed(text: str) -> int:
+    """``--seed``: a whole number >= 0 in decimal digits (an argparse type)."""
+    if not numbers.is_whole(text) or int(text) < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number >= 0")
+    return int(text)

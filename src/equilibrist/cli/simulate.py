@@ -172,13 +172,7 @@ def _positive(text: str, option: str) -> float:
 
 
 def _seed(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise UsageError(f"--seed {text!r}: expected a whole number >= 0") from None
-    if v < 0:
-        raise UsageError(f"--seed {text!r}: expected a whole number >= 0")
-    return v
+    return common.parse_whole(text, "--seed", minimum=0)
 
 
 def _split_time(item: str, option: str) -> tuple[float, str]:

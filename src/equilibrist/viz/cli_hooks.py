@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from equilibrist import numbers
 from equilibrist.atomic import OutputError, check_output
 from equilibrist.viz.output import (
     ANIMATION_FORMATS,
@@ -71,10 +72,7 @@ MAX_FRAMES = 20_000
 
 def frame_rate(text: str) -> float:
     """Frames per second of simulated time (an argparse type)."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
+    value = float(text) if numbers.is_decimal(text) else math.nan
     if not 0 < value <= MAX_FPS:
         raise argparse.ArgumentTypeError(f"{text!r}: expected frames per second in (0, {MAX_FPS:g}]")
     return value
@@ -82,10 +80,7 @@ def frame_rate(text: str) -> float:
 
 def frame_count(text: str) -> int:
     """A number of frames (an argparse type)."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
+    value = int(text) if numbers.is_whole(text) else 0
     if not 1 <= value <= MAX_FRAMES:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number of frames from 1 to {MAX_FRAMES}")
     return value
