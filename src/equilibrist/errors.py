@@ -7,6 +7,11 @@ line turns these into one line on stderr and exit status 2.
 
 from __future__ import annotations
 
+import contextlib
+import io
+import sys
+from collections.abc import Iterator
+
 
 class EquilibristError(Exception):
     """Base of every deliberate equilibrist error."""
@@ -141,3 +146,17 @@ def _visible(ch: str) -> str:
         return _NAMED[ch]
     code = ord(ch)
     return f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}" if code < 0x10000 else f"\\U{code:08x}"
+
+
+@contextlib.contextmanager
+def outside_prints() -> Iterator[None]:
+    """What a plug-in prints while it loads: kept off stdout (which may be a command's JSON)
+    and written to stderr line by line through :func:`quote_outside`, so that it can neither
+    corrupt an output nor move or retitle the user's terminal."""
+    caught = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(caught):
+            yield
+    finally:
+        for line in caught.getvalue().splitlines():
+            print(quote_outside(line, limit=500), file=sys.stderr)

@@ -41,7 +41,7 @@ KIND = ControllerKind(name="{name}", label="fails", help="a kind whose {what} ra
 
 
 PRINTING_KIND = '''
-print("noise printed at import")
+print("noise printed at import\\x1b]0;PWNED\\x07\\x1b[2J")
 
 from equilibrist.controllers.kinds import ControllerKind, linear_builder
 
@@ -105,6 +105,9 @@ def test_what_a_kind_prints_at_import_stays_out_of_the_json(tmp_path: Path) -> N
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout)["system"] == "cartpole"  # nothing but the JSON
     assert "printed at import" in done.stderr
+    # ... and escaped there: no escape sequence reaches the terminal from a plug-in's print.
+    assert not any(c in done.stderr for c in RAW), repr(done.stderr)
+    assert "\\x1b]0;PWNED\\x07" in done.stderr
     # And the kind itself is there and runs.
     assert cli(env, "simulate", "cartpole", "--duration", "0.5", "--controller", "chatty",
                "--json").returncode == 0

@@ -29,17 +29,21 @@ module keeps its heavy imports inside ``build``.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import importlib
 import pkgutil
 import re
-import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from equilibrist.errors import ControllerError, EquilibristError, quote_exception, quote_outside
+from equilibrist.errors import (
+    ControllerError,
+    EquilibristError,
+    outside_prints,
+    quote_exception,
+    quote_outside,
+)
 
 if TYPE_CHECKING:
     from pathlib import Path
@@ -326,7 +330,7 @@ def _load() -> None:
                 f"({quote_outside(ep.value, limit=120)})"
         try:
             # What the module prints is not the command's output (stdout may be its JSON).
-            with contextlib.redirect_stdout(sys.stderr):
+            with outside_prints():
                 obj = ep.load()
         except KeyboardInterrupt:
             raise

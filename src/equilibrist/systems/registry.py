@@ -11,14 +11,18 @@ one spec per variant under one name.
 
 from __future__ import annotations
 
-import contextlib
 import importlib
 import math
 import pkgutil
-import sys
 from collections.abc import Callable
 
-from equilibrist.errors import DefinitionError, UnknownNameError, quote_exception, quote_outside
+from equilibrist.errors import (
+    DefinitionError,
+    UnknownNameError,
+    outside_prints,
+    quote_exception,
+    quote_outside,
+)
 from equilibrist.mechanics.definition import DeriveFunction, Entry
 from equilibrist.mechanics.spec import SystemSpec
 
@@ -93,7 +97,7 @@ def _load_all() -> None:
                  f"(entry point '{quote_outside(ep.name, limit=60)}')")
         try:
             # What the module prints is not the command's output (stdout may be its JSON).
-            with contextlib.redirect_stdout(sys.stderr):
+            with outside_prints():
                 module = importlib.import_module(ep.module)
         except (DefinitionError, KeyboardInterrupt):
             raise
