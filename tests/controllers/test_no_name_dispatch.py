@@ -1,8 +1,12 @@
 """No consumer above the registry asks a kind's name: a kind that is the LQG's record under
-another name (``twinlqg``) is, to the playground's session, the export and the ``hil``
-command, the LQG itself. Its independent truth is the LQG's own run, library and hello,
-which the renamed kind must reproduce to the bit; a consumer that compared the name with
-``"lqg"`` would run the open loop, refuse the export or refuse the device instead."""
+another name (``twinlqg``) is, to the playground's session, its region of attraction, the
+export and the ``hil`` command, the LQG itself. Its independent truth is the LQG's own run,
+slice, library and hello, which the renamed kind must reproduce to the bit; a consumer that
+compared the name with ``"lqg"`` would run the open loop, certify nothing, refuse the export
+or refuse the device instead. The same holds of the swing-up's record renamed
+(``twinswingup``: the track alone ends its run, and leaving it brings the angles back within
+half a turn) and of the time-varying LQR's (``twintvlqr``: offered, refused and kept out of
+the region of attraction as the time-varying LQR is)."""
 
 from __future__ import annotations
 
@@ -31,6 +35,20 @@ def twin() -> Iterator[str]:
         kinds.unregister(TWIN)
 
 
+@pytest.fixture
+def twins() -> Iterator[dict[str, str]]:
+    """The swing-up's and the time-varying LQR's records, each under another name (and
+    nothing else changed), registered in this process: ``{original: renamed}``."""
+    names = {"swingup": "twinswingup", "tvlqr": "twintvlqr"}
+    for original, renamed in names.items():
+        kinds.register(dataclasses.replace(kinds.get(original), name=renamed, order=100))
+    try:
+        yield names
+    finally:
+        for renamed in names.values():
+            kinds.unregister(renamed)
+
+
 def _session_run(controller: str) -> dict[str, np.ndarray]:
     from equilibrist.web.session import Session
     from equilibrist.web.session_design import Catalogue
@@ -54,6 +72,132 @@ def test_the_playground_runs_a_renamed_lqg_as_the_lqg(twin: str) -> None:
         np.testing.assert_array_equal(renamed[key], lqg[key])
     # The open loop is another run: the comparison above can tell them apart.
     assert not np.array_equal(off["u"], lqg["u"])
+
+
+def _slice(controller: str) -> dict[str, Any]:
+    """The playground's region of attraction of *controller* on the cart-pole: the slice's
+    frame, without what names the request (its id, the controller, its label, the time)."""
+    from equilibrist.web.session import Session
+    from equilibrist.web.session_design import Catalogue
+
+    session = Session(Catalogue.default(), "cartpole", seed=3)
+    session.settings = dataclasses.replace(session.settings, controller=controller)
+    job = session.roa_job()
+    assert job is not None
+    frame = job.run_slice()
+    return {k: v for k, v in frame.items() if k not in ("id", "controller", "label", "seconds")}
+
+
+def test_the_playground_shows_the_region_of_attraction_of_a_renamed_lqg_as_the_lqgs(
+        twin: str) -> None:
+    lqg, renamed = _slice("lqg"), _slice(twin)
+    # The LQG's slice is followed by its LQR's certificate; the renamed LQG's the same.
+    assert lqg["certificate"] == "computing"
+    assert renamed == lqg
+
+
+def test_the_playground_keeps_a_renamed_tvlqr_out_of_the_region_of_attraction(
+        twins: dict[str, str]) -> None:
+    from equilibrist.web.session import Session
+    from equilibrist.web.session_design import Catalogue, SessionError
+
+    said = {}
+    for name in ("tvlqr", twins["tvlqr"]):
+        session = Session(Catalogue.default(), "cartpole", seed=3)
+        session.settings = dataclasses.replace(session.settings, controller=name)
+        with pytest.raises(SessionError) as refused:
+            session.roa_job()
+        said[name] = str(refused.value)
+    assert "follows a swing-up plan from hanging" in said["tvlqr"]
+    assert said[twins["tvlqr"]] == said["tvlqr"]  # the same label: the same words
+
+
+@pytest.mark.parametrize("system", ["cartpole", "seesaw"])
+def test_the_playground_offers_renamed_kinds_as_their_originals(
+        system: str, twin: str, twins: dict[str, str]) -> None:
+    """The picker's entries (available, or refused with the reason) and the page's list of
+    controllers: a renamed kind is offered where and as its original is (the seesaw has no
+    hanging position: no swing-up, no plan; the cart-pole has both)."""
+    from equilibrist.web.session import Session
+    from equilibrist.web.session_design import Catalogue
+
+    described = Session(Catalogue.default(), system, seed=3).describe()
+    offered = described["controller_options"]
+    entries = {o["name"]: o for o in offered}
+    assert [o["name"] for o in offered] == list(described["controllers"])
+    for original, renamed in {"lqg": twin, **twins}.items():
+        assert renamed in described["controllers"]
+        mine, theirs = dict(entries[renamed]), dict(entries[original])
+        for entry in (mine, theirs):
+            entry.pop("name"), entry.pop("label")
+        assert mine == theirs, (renamed, mine, theirs)
+    hanging = system == "cartpole"
+    assert entries["tvlqr"]["available"] is hanging and entries["swingup"]["available"] is hanging
+
+
+def _swingup_session(controller: str) -> Any:
+    """A playground session of the cart-pole running *controller*."""
+    from equilibrist.web.session import Session
+    from equilibrist.web.session_design import Catalogue
+
+    session = Session(Catalogue.default(), "cartpole", seed=3)
+    _switch(session, controller)
+    return session
+
+
+def _switch(session: Any, controller: str) -> None:
+    from equilibrist.web.session_design import redesign
+
+    settings = session.settings.changed({"controller": controller})
+    system = session.prepare(settings)
+    session.install(settings, system, *redesign(system, settings))
+
+
+def _swingup_run(controller: str) -> dict[str, Any]:
+    """A playground run of *controller* on the cart-pole, started upright with the pendulum
+    1.7 rad away (out of the balance's region, within the track's)."""
+    session = _swingup_session(controller)
+    session.x[1] = 1.7
+    rows: dict[str, list[Any]] = {"x": [], "u": [], "mode": []}
+    for _ in range(100):
+        session._sample()
+        if session.fell is not None:
+            break
+        rows["x"].append(session.x.copy())
+        rows["u"].append(session.u_cmd.copy())
+        rows["mode"].append(session.mode)
+    out: dict[str, Any] = {k: np.array(v) for k, v in rows.items()}
+    out["fell"] = session.fell
+    return out
+
+
+def test_the_playground_runs_a_renamed_swingup_as_the_swingup(twins: dict[str, str]) -> None:
+    swingup, renamed = _swingup_run("swingup"), _swingup_run(twins["swingup"])
+    # The swing-up's own run: 1.7 rad off is not a fall (only the track ends its run).
+    assert swingup["fell"] is None and len(swingup["x"]) == 100
+    assert set(swingup["mode"]) <= {"pumping", "balancing"}
+    assert renamed["fell"] == swingup["fell"]
+    for key in ("x", "u", "mode"):
+        np.testing.assert_array_equal(renamed[key], swingup[key])
+
+
+def _leave(controller: str) -> tuple[np.ndarray, np.ndarray]:
+    """The state and the filter's estimate after a switch from *controller* to the LQR with
+    the pendulum caught a whole turn away from upright."""
+    import math
+
+    session = _swingup_session(controller)
+    session.x[1] = 2 * math.pi + 0.03
+    _switch(session, "lqr")
+    return session.x.copy(), session.loop.filter.estimate()
+
+
+def test_leaving_a_renamed_swingup_is_leaving_the_swingup(twins: dict[str, str]) -> None:
+    x, estimate = _leave("swingup")
+    assert abs(x[1] - 0.03) < 1e-12  # the swing-up's: back within half a turn
+    x_renamed, estimate_renamed = _leave(twins["swingup"])
+    np.testing.assert_array_equal(x_renamed, x)
+    np.testing.assert_array_equal(estimate_renamed, estimate)
 
 
 def test_the_export_writes_a_renamed_lqg_as_the_lqg(twin: str, tmp_path: Path) -> None:

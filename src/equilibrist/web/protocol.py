@@ -34,12 +34,14 @@ def controllers() -> tuple[str, ...]:
 
     offered = kinds.all_kinds("playground")
     names = [k.name for k in offered if not k.open_loop]
-    names.sort(key=lambda n: n != "lqg")
+    names.sort(key=lambda n: n != DEFAULT)
     return (*names, OFF) if any(k.open_loop for k in offered) else tuple(names)
 
 
 #: What the picker calls the open loop.
 OFF = "off"
+#: The controller a session starts with, first in the picker.
+DEFAULT = "lqg"
 
 
 def kind_name(controller: str) -> str:
@@ -320,4 +322,4 @@ _FIELD_CHECKS = {
     "roa": _roa,
 }
 
-__all__ = ["CONTROLLERS", "FIELDS", "MAX_MESSAGE_BYTES", "OFF", "Limits", "Message", "ProtocolError", "controllers", "kind_name", "parse"]
+__all__ = ["CONTROLLERS", "DEFAULT", "FIELDS", "MAX_MESSAGE_BYTES", "OFF", "Limits", "Message", "ProtocolError", "controllers", "kind_name", "parse"]

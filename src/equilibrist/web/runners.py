@@ -43,12 +43,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from equilibrist.errors import EquilibristError
+from equilibrist.web.protocol import kind_name
 
 if TYPE_CHECKING:
     from equilibrist.control.design_record import Design
     from equilibrist.control.mpc_runtime import MPCRuntime
     from equilibrist.control.nonlinear import NonlinearController, NonlinearRuntime
     from equilibrist.control.trajopt import Trajectory
+    from equilibrist.controllers.kinds import ControllerKind
     from equilibrist.numeric.system import System
 
 
@@ -65,9 +67,24 @@ SOLVE_WINDOW = 400
 _EMPTY = np.zeros(0)
 
 
-#: The kinds that track a plan: the session plans the swing-up before it builds them
-#: (:mod:`equilibrist.web.session_plan`).
-PLANNED = ("tvlqr",)
+def planned(controller: str) -> bool:
+    """Whether the picked *controller* tracks a plan (its record's
+    :attr:`~equilibrist.controllers.kinds.ControllerKind.planned`): the session plans the
+    swing-up before it builds it (:mod:`equilibrist.web.session_plan`)."""
+    return _record(controller).planned
+
+
+def from_any_state(controller: str) -> bool:
+    """Whether the picked *controller* brings the system up from any state (its record's
+    :attr:`~equilibrist.controllers.kinds.ControllerKind.from_any_state`: the swing-up)."""
+    return _record(controller).from_any_state
+
+
+def _record(controller: str) -> ControllerKind:
+    """The registry's record of the picker's *controller* (``off``: the open loop)."""
+    from equilibrist.controllers import kinds
+
+    return kinds.get(kind_name(controller))
 
 
 def unavailable(system: System) -> dict[str, str]:
@@ -81,7 +98,7 @@ def unavailable(system: System) -> dict[str, str]:
     out: dict[str, str] = {}
     for kind in kinds.all_kinds("playground"):
         why = kind.applies(system)
-        if why is None and kind.name in PLANNED:
+        if why is None and kind.planned:
             why = hanging_refusal(system)
             if why is None and importlib.util.find_spec("casadi") is None:
                 why = ("planning the swing-up needs CasADi with IPOPT: pip install "
@@ -147,9 +164,11 @@ class NonlinearRunner:
 
 
 class SwingUpRunner(NonlinearRunner):
-    """The swing-up: a nonlinear controller whose state holds the supervisor's mode."""
+    """The swing-up (a kind that brings the system up from any state): a nonlinear controller
+    whose state holds the supervisor's mode. Its ``controller_info`` is the swing-up's
+    (``kind`` ``"swingup"``, whatever the kind's name: what the page shows of it)."""
 
-    def __init__(self, ctrl: NonlinearController, system: System, kind: str = "swingup") -> None:
+    def __init__(self, ctrl: NonlinearController, system: System, kind: str) -> None:
         from equilibrist.control.swingup_law import MODE_BALANCE, Z
 
         super().__init__(ctrl, system, kind)
@@ -169,7 +188,8 @@ class SwingUpRunner(NonlinearRunner):
 
 
 class PlanRunner(NonlinearRunner):
-    """The time-varying LQR on a plan of the session (:data:`PLANNED`), on a clock of its own.
+    """The time-varying LQR on a plan of the session (a kind whose record is
+    :attr:`~equilibrist.controllers.kinds.ControllerKind.planned`), on a clock of its own.
 
     Its time is the plan's: it starts at the first sample after a reset or a switch, from
     the plan's beginning when the state is nearer the plan's start than its end (a run
@@ -262,7 +282,7 @@ class MPCRunner:
     busy = "the MPC's solves"
 
     def __init__(self, runtime: MPCRuntime, system: System, setup_seconds: float,
-                 kind: str = "mpc") -> None:
+                 kind: str) -> None:
         self.kind = kind
         self.runtime = runtime
         self.ctrl = runtime.ctrl
@@ -333,28 +353,34 @@ def build_runner(kind: str, system: System, design: Design) -> Runner:
     """The runner of the registry's controller *kind* built on *design* for *system*.
 
     The kind is built as ``simulate`` builds it, with the page's design
-    (:class:`~equilibrist.controllers.kinds.ControllerRequest`); a
-    ``NonlinearController`` runs by its Python runtime, the MPC by its own.
+    (:class:`~equilibrist.controllers.kinds.ControllerRequest`); the record says how it
+    runs: a kind that :attr:`~equilibrist.controllers.kinds.ControllerKind.solves_qp` by
+    the MPC's runtime (its solves timed), one that brings the system up
+    :attr:`~equilibrist.controllers.kinds.ControllerKind.from_any_state` with its
+    supervisor's mode shown, any other ``NonlinearController`` by its Python runtime.
     Raises an ``EquilibristError`` (one line) when the controller does not
-    apply or cannot be built, or is of a form the page cannot run.
+    apply or cannot be built, or is not of the form its record says.
     """
     from equilibrist.control.mpc_runtime import MPCRuntime
     from equilibrist.control.nonlinear import NonlinearController
-    from equilibrist.control.swingup import SwingUpController
     from equilibrist.controllers import kinds
 
     record = kinds.get(kind, "playground")
     request = kinds.ControllerRequest.of_design(system, design)  # the page's own, tuned there
     began = time.perf_counter()
     built = record.make(request)
-    if isinstance(built, MPCRuntime):
-        return MPCRunner(built, system, time.perf_counter() - began, kind)
-    if isinstance(built, NonlinearController):
-        if isinstance(built, SwingUpController):
+    if record.solves_qp:
+        if isinstance(built, MPCRuntime):
+            return MPCRunner(built, system, time.perf_counter() - began, kind)
+        expected = "the MPC's runtime"
+    elif isinstance(built, NonlinearController):
+        if record.from_any_state:
             return SwingUpRunner(built, system, kind)
         return NonlinearRunner(built, system, kind)
+    else:
+        expected = "a NonlinearController"
     raise EquilibristError(f"the {kind} controller is a {type(built).__name__}: the playground "
-                           "runs a NonlinearController or the MPC")
+                           f"runs it as {expected}")
 
 
 def export_folder(runner: Runner, system: System, folder: str) -> Mapping[str, str]:
@@ -368,7 +394,6 @@ def export_folder(runner: Runner, system: System, folder: str) -> Mapping[str, s
 
 
 __all__ = [
-    "PLANNED",
     "MPCRunner",
     "NonlinearRunner",
     "PlanRunner",
@@ -377,7 +402,9 @@ __all__ = [
     "build_plan_runner",
     "build_runner",
     "export_folder",
+    "from_any_state",
     "hanging_refusal",
+    "planned",
     "runner_kinds",
     "unavailable",
 ]

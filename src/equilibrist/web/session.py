@@ -59,8 +59,8 @@ import numpy as np
 # F401 are not used here: imported so that they stay importable from this module.
 from equilibrist.control import fixed
 from equilibrist.sim import integrators
-from equilibrist.web.protocol import Limits, Message, controllers
-from equilibrist.web.runners import Runner, hanging_refusal, unavailable
+from equilibrist.web.protocol import DEFAULT, Limits, Message, controllers
+from equilibrist.web.runners import Runner, from_any_state, hanging_refusal, unavailable
 from equilibrist.web.session_design import (
     Catalogue,
     SessionError,
@@ -149,7 +149,7 @@ class Session(_SessionPlan, _SessionRoa):
         spec = base.spec
         scales = {n: float(spec.design_scales.get(n, 1.0)) for n in (*base.state_names, *base.input_names)}
         params = {p.name: float(base.params[p.name]) for p in self._param_specs(base)}
-        settings = Settings("lqg", float(spec.control_rate), 1.0, 1.0,
+        settings = Settings(DEFAULT, float(spec.control_rate), 1.0, 1.0,
                             types.MappingProxyType(scales), types.MappingProxyType(params))
         system = tuned_system(base, settings)
         began = time.perf_counter()
@@ -208,12 +208,15 @@ class Session(_SessionPlan, _SessionRoa):
                       hanging=self.hang_refusal)
 
     def _apply_region(self) -> None:
-        """The region in force: the swing-up task's (the track only) while a swing-up runs
-        or the run started hanging, the system's (the balance's) otherwise."""
+        """The region in force: the swing-up task's (the track only) while a controller that
+        brings the system up from any state runs (the swing-up: its record's
+        :attr:`~equilibrist.controllers.kinds.ControllerKind.from_any_state`) or the run
+        started hanging, the system's (the balance's) otherwise."""
         from equilibrist.tasks import get_task
 
         system = self.system
-        if (self.settings.controller == "swingup" or self.hanging) and self.hang_refusal is None:
+        anywhere = from_any_state(self.settings.controller)
+        if (anywhere or self.hanging) and self.hang_refusal is None:
             region = dict(get_task(system, "swingup").region)
         else:
             region = dict(system.spec.region)
@@ -395,7 +398,9 @@ class Session(_SessionPlan, _SessionRoa):
         low, high = system.input_limits
         self.u_low, self.u_high = np.asarray(low, float), np.asarray(high, float)
         if d is not None:
-            leaving_swingup = previous_kind == "swingup" and settings.controller != "swingup"
+            # Leaving a swing-up (a controller that brings the system up from any state).
+            leaving_swingup = (from_any_state(previous_kind)
+                               and not from_any_state(settings.controller))
             if leaving_swingup:
                 # The swing-up may have caught the pendulum a turn away from the operating point.
                 self._wrap_angles()

@@ -15,7 +15,7 @@ import numpy as np
 
 from equilibrist.errors import DesignError, EquilibristError
 from equilibrist.web.protocol import MessageFields, kind_name
-from equilibrist.web.runners import PLANNED, Runner, build_plan_runner, build_runner, runner_kinds
+from equilibrist.web.runners import Runner, build_plan_runner, build_runner, planned, runner_kinds
 
 if TYPE_CHECKING:
     from equilibrist.control.design_record import Design
@@ -171,12 +171,13 @@ def describe_design(d: Design, controller: str, seconds: float,
     of building the swing-up or the MPC (*runner*) on it. ``margins`` are
     those of the loop as implemented for LQG (the Kalman filter in the loop)
     and LQR; for another controller, the design's state feedback's alone
-    (``margins_loop`` names which: ``"lqg"`` or ``"lqr"``); ``lqr_margins``
+    (``margins_loop`` names which: ``"lqg"`` or ``"lqr"``, the kind record's
+    :attr:`~equilibrist.controllers.kinds.ControllerKind.loop`); ``lqr_margins``
     are always the state feedback's.
     """
-    from equilibrist.control.interop import LOOP_CONTROLLERS
+    from equilibrist.controllers import kinds
 
-    loop = controller if controller in LOOP_CONTROLLERS else "lqr"
+    loop = kinds.get(kind_name(controller)).loop or "lqr"
     full = d.to_dict(controller=loop)
     return {
         "type": "design",
@@ -228,19 +229,19 @@ def redesign(system: System, settings: Settings, plan: Trajectory | None = None
     Returns ``(design or None, design seconds, error or None, runner or None,
     controller seconds)``; a controller that cannot be built is an error
     like a failed design (the previous controller keeps running). A kind that
-    tracks a plan (:data:`~equilibrist.web.runners.PLANNED`) is built on *plan*, the
+    tracks a plan (:attr:`~equilibrist.controllers.kinds.ControllerKind.planned`) is built on *plan*, the
     session's trajectory still valid for *system*; without one, no runner: the
     session plans first (:mod:`equilibrist.web.session_plan`).
     """
     d, seconds, error = design_for(system, settings)
     if d is None or settings.controller not in runner_kinds():
         return d, seconds, error, None, 0.0
-    planned = settings.controller in PLANNED
-    if planned and plan is None:
+    plans = planned(settings.controller)
+    if plans and plan is None:
         return d, seconds, error, None, 0.0
     began = time.perf_counter()
     try:
-        if planned and plan is not None:
+        if plans and plan is not None:
             runner: Runner = build_plan_runner(settings.controller, system, d, plan)
         else:
             runner = build_runner(settings.controller, system, d)

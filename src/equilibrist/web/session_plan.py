@@ -1,6 +1,6 @@
-"""The playground's planned swing-up: a kind that tracks a plan (the time-varying LQR,
-:data:`~equilibrist.web.runners.PLANNED`) is built on a swing-up planned from the session's
-hanging start, off the live loop's thread (:class:`PlanJob`, as the region of attraction
+"""The playground's planned swing-up: a kind that tracks a plan (the time-varying LQR, whose
+record is :attr:`~equilibrist.controllers.kinds.ControllerKind.planned`) is built on a swing-up
+planned from the session's hanging start, off the live loop's thread (:class:`PlanJob`, as the region of attraction
 is computed: :mod:`equilibrist.web.session_roa`), and the page is sent the plan's state at
 the current time, as a ghost of the system, while the live system tracks it. A base of
 :class:`equilibrist.web.session.Session`.
@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from equilibrist.errors import EquilibristError
-from equilibrist.web.runners import PLANNED, PlanRunner, Runner
+from equilibrist.web.runners import PlanRunner, Runner, planned
 from equilibrist.web.session_design import Settings, describe_design
 from equilibrist.web.session_loop import _Loop
 from equilibrist.web.session_output import DIGITS, _SessionOutput
@@ -162,7 +162,7 @@ class _SessionPlan(_SessionOutput):
         """The trajectory a redesign for *settings* builds the tracker on: the one in force
         when the planned kind stays and the plant is the same (None: plan first)."""
         runner = self.loop.runner
-        if (settings.controller in PLANNED and self.settings.controller == settings.controller
+        if (planned(settings.controller) and self.settings.controller == settings.controller
                 and isinstance(runner, PlanRunner) and runner.kind == settings.controller
                 and plant_key(system) == plant_key(self.system)):
             traj: Trajectory = runner.trajectory
@@ -176,7 +176,7 @@ class _SessionPlan(_SessionOutput):
         from equilibrist.tasks import get_task, planning_bounds
 
         kind, system = self.settings.controller, self.system
-        if kind not in PLANNED or self.loop.runner is not None or self.plan_holding:
+        if not planned(kind) or self.loop.runner is not None or self.plan_holding:
             return None
         start = self.hang_start if self.hanging and self.hang_start is not None else None
         self.reset(hang=True)

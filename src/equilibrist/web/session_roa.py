@@ -27,7 +27,7 @@ import numpy as np
 
 from equilibrist.errors import EquilibristError
 from equilibrist.web.protocol import OFF, kind_name
-from equilibrist.web.runners import PLANNED
+from equilibrist.web.runners import planned
 from equilibrist.web.session_design import SessionError, Settings, label
 from equilibrist.web.session_loop import _Loop
 
@@ -49,8 +49,6 @@ SLOW_MAX_SAMPLES = 60
 MAX_BOXES = 40_000
 #: Digits of the slice's points sent to the page.
 DIGITS = 5
-#: The controllers with a design's Riccati function to certify (the LQR's ``S``).
-CERTIFIED = ("lqr", "lqg")
 
 
 class RoaStale(Exception):
@@ -78,7 +76,12 @@ class RoaJob:
 
     @property
     def certifies(self) -> bool:
-        return self.controller in CERTIFIED
+        """Whether the controller is the design's linear loop (its record's
+        :attr:`~equilibrist.controllers.kinds.ControllerKind.loop`, LQR or LQG), whose LQR
+        has the design's Riccati function ``S`` to certify."""
+        from equilibrist.controllers import kinds
+
+        return kinds.get(kind_name(self.controller)).loop is not None
 
     def check(self, _note: str = "") -> None:
         """Raises :class:`RoaStale` when the request was superseded (also the certificate's
@@ -193,7 +196,7 @@ class _SessionRoa:
         if kind == OFF:
             raise SessionError("the controller is off: the open loop catches nothing; pick a "
                                "controller to see its region of attraction")
-        if kind in PLANNED:
+        if planned(kind):
             # The slice is of starts about the operating point, each run from rest there:
             # a tracker's starts are along its plan, which the slice does not draw.
             raise SessionError(
@@ -301,5 +304,5 @@ async def compute_roa(session: _SessionRoa, job: RoaJob) -> None:
                                   "message": failed}, True)
 
 
-__all__ = ["CERTIFIED", "DURATION", "GRID", "MAX_BOXES", "MAX_SAMPLES", "RoaJob", "RoaStale",
+__all__ = ["DURATION", "GRID", "MAX_BOXES", "MAX_SAMPLES", "RoaJob", "RoaStale",
            "compute_roa"]
