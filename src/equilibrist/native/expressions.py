@@ -26,6 +26,7 @@ from equilibrist.native.pyc import (
     c_float,
     c_int,
 )
+from equilibrist.numeric import libm
 
 
 class Expressions:
@@ -193,31 +194,23 @@ class Expressions:
         exponent = _literal(node.right, {})
         if isinstance(node.right, ast.Name) and node.right.id in self.m.constants:
             exponent = self.m.constants[node.right.id]
-        if isinstance(exponent, int) and abs(exponent) <= 64:
-            # A static power: res = 1; while e: (if e & 1: res *= val); e >>= 1; val *= val
+        if isinstance(exponent, int) and abs(exponent) <= libm.PRODUCT_POWER_MAX:
+            # A static power: the product libm.power_product writes (repeated squaring),
+            # each square a temporary; the generated Python prints the same product.
             if exponent == 0:
                 return ("1.0", "f") if tb == "f" else ("INT64_C(1)", "i")
+            if exponent < 0 and tb == "i":
+                self.fail(node, "an integer to a negative power")
             name = self.fresh()
             self.pre.append(f"const {_ctype(tb)} {name}_b = {base};")
-            res = None
-            val = f"{name}_b"
-            e = abs(exponent)
-            k = 0
-            while e:
-                if e & 1:
-                    res = val if res is None else f"({res} * {val})"
-                e >>= 1
-                if e:
-                    nxt = f"{name}_{k}"
-                    self.pre.append(f"const {_ctype(tb)} {nxt} = {val} * {val};")
-                    val = nxt
-                    k += 1
-            assert res is not None
-            if exponent < 0:
-                if tb == "i":
-                    self.fail(node, "an integer to a negative power")
-                return f"(1.0 / {res})", "f"
-            return res, tb
+            squares: list[str] = []
+
+            def square(factor: str) -> str:
+                squares.append(f"{name}_{len(squares)}")
+                self.pre.append(f"const {_ctype(tb)} {squares[-1]} = {factor} * {factor};")
+                return squares[-1]
+
+            return libm.power_product(f"{name}_b", exponent, square), ("f" if exponent < 0 else tb)
         return f"pow({base if tb == 'f' else f'((double){base})'}, {self.as_float(node.right)})", "f"
 
     def fresh(self) -> str:

@@ -11,6 +11,11 @@ whose functions are copied into the module as ``eq_sin`` and ``eq_cos``),
 not the C library's, whose result depends on the CPU it runs on: the
 generated dynamics give the same bits on every machine, in Python and
 compiled (the C core calls the C versions of the same ``eq_`` functions).
+An integer power is printed as the product the C translation computes for
+``**`` (:func:`equilibrist.numeric.libm.power_product`: ``x ** 2`` is
+``(x * x)``), not as Python's ``**``, which calls the C library's ``pow``;
+a base that is not a symbol is assigned to a ``pw_`` name first, evaluated
+once as the C's temporary is.
 
 Functions in the generated module (``x``, ``u``, ``p`` are 1-D float arrays
 in the order of the spec's states, inputs and parameters):
@@ -60,6 +65,31 @@ LIBM_REVISION = 2
 class _Printer(PythonCodePrinter):  # type: ignore[misc]
     def __init__(self) -> None:
         super().__init__({"fully_qualified_modules": True, "standard": "python3"})
+        #: Assignments the statement being printed needs first (a power's base), as lines.
+        self.hoisted: list[str] = []
+        self._bases = 0
+
+    def _print_Pow(self, expr: sp.Pow, rational: bool = False) -> str:
+        # An integer power is the product the C translation writes (libm.power_product),
+        # not Python's ``**``, which calls the C library's pow (glibc's rounds x ** 2
+        # differently from x * x at a few inputs in ten thousand). 1/x is sympy's.
+        k = expr.exp
+        if k.is_Integer and k != -1 and 0 < abs(int(k)) <= libm.PRODUCT_POWER_MAX:
+            base = self._print(expr.base)
+            if not expr.base.is_Atom:  # evaluated once, as the C's temporary is
+                name = f"pw_{self._bases}"
+                self._bases += 1
+                self.hoisted.append(f"    {name} = {base}")
+                base = name
+            return libm.power_product(base, int(k), lambda v: f"({v} * {v})")
+        text: str = super()._print_Pow(expr, rational=rational)
+        return text
+
+    def statement(self, target: object, expr: sp.Expr) -> list[str]:
+        """``target = expr`` as lines: the hoisted bases its powers need, then itself."""
+        self.hoisted = []
+        text = self.doprint(expr)
+        return [*self.hoisted, f"    {target} = {text}"]
 
     def _print_sin(self, expr: sp.Expr) -> str:
         return f"eq_sin({self._print(expr.args[0])})"
@@ -82,8 +112,11 @@ def _body(
 ) -> list[str]:
     exprs = [sp.sympify(e).xreplace(subs) for e in exprs]
     replacements, reduced = sp.cse(exprs, symbols=sp.numbered_symbols("t_"), order="none")
-    lines = [f"    {sym} = {printer.doprint(val)}" for sym, val in replacements]
-    lines += [f"    {tgt} = {printer.doprint(val)}" for tgt, val in zip(targets, reduced, strict=True)]
+    lines: list[str] = []
+    for sym, val in replacements:
+        lines += printer.statement(sym, val)
+    for tgt, val in zip(targets, reduced, strict=True):
+        lines += printer.statement(tgt, val)
     return lines
 
 

@@ -33,6 +33,7 @@ derived models is keyed by both modules' sources.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 #: The functions of the copied section, in the order they must be compiled.
@@ -289,6 +290,39 @@ def source() -> str:
 sin = eq_sin
 cos = eq_cos
 log = eq_log
+
+
+#: The largest ``|k|`` of a power ``x ** k`` (``k`` an integer literal) written as a product of
+#: ``x``: a larger one, or any other exponent, is the C library's ``pow``.
+PRODUCT_POWER_MAX = 64
+
+
+def power_product(base: str, exponent: int, square: Callable[[str], str]) -> str:
+    """The text of ``base ** exponent`` as the product both forms of a source compute: the
+    C translation (:mod:`equilibrist.native.expressions`) and the generated Python
+    (:mod:`equilibrist.numeric.codegen`) write it from here, so they evaluate the same IEEE
+    operations in the same order (CPython's ``x ** 2`` calls the C library's ``pow``, which
+    glibc 2.36 rounds differently from ``x * x`` at a few inputs in ten thousand).
+
+    Repeated squaring, ``r = 1; while e: (if e & 1: r *= v); e >>= 1; v *= v`` with the first
+    factor taken as it is (no ``1.0 *``), for ``0 < |exponent| <= PRODUCT_POWER_MAX``; a
+    negative exponent is ``1.0 / `` the product. *square* of a factor's text gives the text
+    of its square (a temporary's name, or the parenthesized product itself). ``x ** 2`` is
+    ``(x * x)`` then, ``x ** 3`` ``(x * (x * x))``, ``x ** 4`` ``((x * x) * (x * x))``.
+    """
+    if not 0 < abs(exponent) <= PRODUCT_POWER_MAX:
+        raise ValueError(f"not a power written as a product: {exponent}")
+    result: str | None = None
+    factor = base
+    e = abs(exponent)
+    while e:
+        if e & 1:
+            result = factor if result is None else f"({result} * {factor})"
+        e >>= 1
+        if e:
+            factor = square(factor)
+    assert result is not None
+    return f"(1.0 / {result})" if exponent < 0 else result
 
 
 def _c_constants() -> str:
