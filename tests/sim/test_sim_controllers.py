@@ -148,3 +148,25 @@ def test_settings_asked_again_run_the_same_and_check_each_initial_state():
         simulate(sysm, ctrl, x0=[0.0, 0.1, 0.0], **opts)
     with pytest.raises(SimulationError, match="not a finite number"):
         simulate(sysm, ctrl, x0={"theta": float("nan")}, **opts)
+
+
+def test_descriptions_from_a_design_read_the_design():
+    from equilibrist.control.design import design
+    from equilibrist.sim.controllers import LQG
+
+    d = design(cartpole(), rate=200.0)
+    lqg_d, sf_d = LQG.from_design(d), StateFeedback.from_design(d)
+    # The gains are the design's own arrays, not copies.
+    assert np.shares_memory(lqg_d.K, d.K) and np.shares_memory(lqg_d.Kf, d.Kf)
+    assert np.shares_memory(lqg_d.Ad, d.discrete.A) and np.shares_memory(lqg_d.Bd, d.discrete.B)
+    assert np.shares_memory(sf_d.K, d.K)
+    # Written out by hand, the same description and the same controller.
+    given = LQG(K=d.K, Ad=d.discrete.A, Bd=d.discrete.B, Kf=d.Kf,
+                outputs=d.plant.output_names, x_op=d.plant.x0, u_op=d.plant.u0,
+                rate=200.0, form=d.kalman_form)
+    assert given.describe() == lqg_d.describe()
+    names = d.plant.state_names
+    assert given.linear(names).fingerprint == lqg_d.linear(names).fingerprint
+    assert lqg_d.linear(names) is lqg_d.linear(names)
+    with pytest.raises(AttributeError):
+        lqg_d.K = d.K

@@ -25,10 +25,11 @@ function ``(t, y, r) -> u`` still runs, through
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from dataclasses import FrozenInstanceError, dataclass
+from typing import Any, Protocol, cast, runtime_checkable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from equilibrist.control.checks import given_text, real_array
 from equilibrist.control.controller import as_python_controller, python_controller_name
@@ -37,6 +38,7 @@ from equilibrist.control.linear import LinearController, LinearRuntime
 from equilibrist.control.nonlinear import NonlinearController
 from equilibrist.control.python_controller import PythonController, StepAdapter
 from equilibrist.errors import ControllerError, DimensionError, EquilibristError, SimulationError
+from equilibrist.numeric.linear import LinearModel
 from equilibrist.numeric.system import System
 from equilibrist.sim.signals import Signal, Value, as_signal
 
@@ -80,72 +82,157 @@ class OpenLoop:
         return {"kind": self.kind, "signal": sig}
 
 
-@dataclass(frozen=True, eq=False)
-class StateFeedback:
-    """``u = u_op - K (x - x_op) + K_c (r - r_op)`` from the full (measured) state.
+class _Description:
+    """What :class:`StateFeedback` and :class:`LQG` share: read-only, compared by identity,
+    and built into their ``LinearController`` once per plant.
 
-    ``K`` is applied at the simulation's sample rate with zero-order hold,
-    whether it was designed in continuous time or for that rate.
-    ``tracked`` names the outputs ``K_c`` makes follow the reference.
+    A description holds either the arguments its user gave (``_given``, read-only float
+    copies checked for shape) or the :class:`Design` it came from (``_given`` None), whose
+    gains it reads; it has no numbers of its own.
     """
 
-    K: np.ndarray
-    x_op: np.ndarray
-    u_op: np.ndarray
-    Kc: np.ndarray | None = None
-    tracked: tuple[str, ...] = ()
-    rate: float | None = None
-    design: Design | None = field(default=None, repr=False)
-    _forms: dict[_FormKey, LinearController] = field(default_factory=dict, init=False,
-                                                     repr=False, compare=False)
+    kind = ""
+    design: Design | None
+    _given: dict[str, Any] | None
+    _tracking: bool
+    _forms: dict[_FormKey, LinearController]
 
-    kind = "lqr"
+    def _hold(self, given: dict[str, Any] | None, design: Design | None, *,
+              tracking: bool = False) -> None:
+        """Hold the user's arguments *given*, or (None) the *design* and whether it tracks."""
+        held = {"_given": given, "design": design, "_tracking": tracking, "_forms": {}}
+        for name, value in held.items():
+            object.__setattr__(self, name, value)
 
-    def __post_init__(self) -> None:
-        x_op = _frozen(self.x_op, None, "x_op").reshape(-1)
-        u_op = _frozen(self.u_op, None, "u_op").reshape(-1)
-        n, m = x_op.size, u_op.size
-        object.__setattr__(self, "x_op", x_op)
-        object.__setattr__(self, "u_op", u_op)
-        object.__setattr__(self, "K", _frozen(np.reshape(self.K, (m, n)), (m, n), "K"))
-        _check_tracking(self, m)
+    def __setattr__(self, name: str, value: object) -> None:
+        raise FrozenInstanceError(f"cannot assign to field {name!r}")
 
-    @classmethod
-    def from_design(cls, design: Design, *, tracking: bool = False) -> StateFeedback:
-        """The design's gain (its discrete gain when it has a rate) and operating point."""
-        _check_design(design)
-        plant = design.plant
-        kc = _design_kc(design) if tracking else None
-        return cls(
-            K=design.K, x_op=plant.x0, u_op=plant.u0, Kc=kc,
-            tracked=tuple(design.tracked) if tracking else (),
-            rate=design.rate, design=design,
-        )
+    def __delattr__(self, name: str) -> None:
+        raise FrozenInstanceError(f"cannot delete field {name!r}")
+
+    def _source(self) -> Design:
+        """The design the description reads (it was made by ``from_design``)."""
+        assert self.design is not None
+        return self.design
 
     def linear(self, state_names: Sequence[str], input_names: Sequence[str] | None = None
                ) -> LinearController:
         """This controller in the one linear form, for a plant with these states and inputs."""
         key = (tuple(state_names), None if input_names is None else tuple(input_names))
         if key not in self._forms:
-            self._forms[key] = LinearController.state_feedback(
-                self.K, x_op=self.x_op, u_op=self.u_op, state_names=state_names,
-                input_names=input_names, Kc=self.Kc, tracked=self.tracked, rate=self.rate,
-                design=self.design,
-            )
+            self._forms[key] = self._build(state_names, input_names)
         return self._forms[key]
+
+    def _build(self, state_names: Sequence[str], input_names: Sequence[str] | None
+               ) -> LinearController:
+        raise NotImplementedError
 
     def runtime(self, state_names: Sequence[str]) -> LinearRuntime:
         """A Python controller doing the same as the compiled core (for checks)."""
         return self.linear(state_names).runtime()
 
+    def __repr__(self) -> str:
+        if self._given is None:
+            return f"{type(self).__name__}.from_design(<{self._source().system_key} design>, " \
+                   f"tracking={self._tracking!r})"
+        args = ", ".join(f"{k}={v!r}" for k, v in self._given.items())
+        return f"{type(self).__name__}({args})"
+
+    # -- what the user gave, or the design's --------------------------------------------------
+    @property
+    def x_op(self) -> np.ndarray:
+        """The operating point's states (the design's plant's)."""
+        if self._given is None:
+            return np.asarray(self._source().plant.x0)
+        return np.asarray(self._given["x_op"])
+
+    @property
+    def u_op(self) -> np.ndarray:
+        """The operating point's inputs (the design's plant's)."""
+        if self._given is None:
+            return np.asarray(self._source().plant.u0)
+        return np.asarray(self._given["u_op"])
+
+    @property
+    def K(self) -> np.ndarray:
+        """The state-feedback gain (the design's: its discrete gain when it has a rate)."""
+        if self._given is None:
+            return np.asarray(self._source().K)
+        return np.asarray(self._given["K"])
+
+    @property
+    def Kc(self) -> np.ndarray | None:
+        """The reference gain, None without references (the design's when it tracks)."""
+        if self._given is None:
+            return _design_kc(self._source()) if self._tracking else None
+        kc = self._given["Kc"]
+        return None if kc is None else np.asarray(kc)
+
+    @property
+    def tracked(self) -> tuple[str, ...]:
+        """The outputs ``Kc`` makes follow the reference."""
+        if self._given is None:
+            return tuple(self._source().tracked) if self._tracking else ()
+        return tuple(self._given["tracked"])
+
+
+class StateFeedback(_Description):
+    """``u = u_op - K (x - x_op) + K_c (r - r_op)`` from the full (measured) state.
+
+    ``K`` is applied at the simulation's sample rate with zero-order hold,
+    whether it was designed in continuous time or for that rate.
+    ``tracked`` names the outputs ``K_c`` makes follow the reference.
+
+    A description: :meth:`linear` builds the one
+    :class:`~equilibrist.control.linear.LinearController`
+    (:meth:`~equilibrist.control.linear.LinearController.state_feedback`) for a plant.
+    """
+
+    kind = "lqr"
+
+    def __init__(self, K: ArrayLike, x_op: ArrayLike, u_op: ArrayLike, Kc: ArrayLike | None = None,
+                 tracked: Sequence[str] = (), rate: float | None = None,
+                 design: Design | None = None) -> None:
+        xo = _frozen(x_op, None, "x_op").reshape(-1)
+        uo = _frozen(u_op, None, "u_op").reshape(-1)
+        n, m = xo.size, uo.size
+        kc, names = _tracking_args(Kc, tracked, m)
+        self._hold({"K": _frozen(np.reshape(K, (m, n)), (m, n), "K"), "x_op": xo, "u_op": uo,
+                    "Kc": kc, "tracked": names, "rate": rate}, design)
+
+    @classmethod
+    def from_design(cls, design: Design, *, tracking: bool = False) -> StateFeedback:
+        """The design's gain (its discrete gain when it has a rate) and operating point."""
+        _check_design(design)
+        if tracking:
+            _design_kc(design)
+        made = cls.__new__(cls)
+        made._hold(None, design, tracking=tracking)
+        return made
+
+    @property
+    def rate(self) -> float | None:
+        """The rate the gain was designed for (the design's), None for a continuous gain."""
+        if self._given is None:
+            return self._source().rate
+        return cast("float | None", self._given["rate"])
+
+    def _build(self, state_names: Sequence[str], input_names: Sequence[str] | None
+               ) -> LinearController:
+        return LinearController.state_feedback(
+            self.K, x_op=self.x_op, u_op=self.u_op, state_names=state_names,
+            input_names=input_names, Kc=self.Kc, tracked=self.tracked, rate=self.rate,
+            design=self.design,
+        )
+
     def describe(self) -> dict[str, object]:
+        kc = self.Kc
         return {"kind": self.kind, "K": self.K.tolist(),
-                "Kc": None if self.Kc is None else self.Kc.tolist(),
+                "Kc": None if kc is None else kc.tolist(),
                 "tracked": list(self.tracked), "rate": self.rate}
 
 
-@dataclass(frozen=True, eq=False)
-class LQG:
+class LQG(_Description):
     """Discrete Kalman filter on the measured ``outputs`` plus state feedback on its estimate.
 
     ``form`` "current": ``x_hat = x_pred + K_f (y - C x_pred)``, then
@@ -155,46 +242,40 @@ class LQG:
     actually applied (saturated, and delayed when the run delays). The filter
     starts at ``x_hat0`` (deviation; default the operating point).
     ``rate`` is the filter's sample rate, which the run must use.
-    """
 
-    K: np.ndarray
-    Ad: np.ndarray
-    Bd: np.ndarray
-    Kf: np.ndarray
-    outputs: tuple[str, ...]
-    x_op: np.ndarray
-    u_op: np.ndarray
-    rate: float
-    form: str = "current"
-    Kc: np.ndarray | None = None
-    tracked: tuple[str, ...] = ()
-    x_hat0: np.ndarray | None = None
-    design: Design | None = field(default=None, repr=False)
-    _forms: dict[_FormKey, LinearController] = field(default_factory=dict, init=False,
-                                                     repr=False, compare=False)
+    A description: :meth:`linear` builds the one
+    :class:`~equilibrist.control.linear.LinearController`
+    (:meth:`~equilibrist.control.linear.LinearController.lqg`) for a plant. Made by
+    :meth:`from_design`, it holds the design and reads ``K``, ``A_d``, ``B_d`` and ``K_f``
+    from it.
+    """
 
     kind = "lqg"
 
-    def __post_init__(self) -> None:
-        x_op = _frozen(self.x_op, None, "x_op").reshape(-1)
-        u_op = _frozen(self.u_op, None, "u_op").reshape(-1)
-        n, m, ny = x_op.size, u_op.size, len(self.outputs)
-        object.__setattr__(self, "x_op", x_op)
-        object.__setattr__(self, "u_op", u_op)
-        object.__setattr__(self, "K", _frozen(np.reshape(self.K, (m, n)), (m, n), "K"))
-        object.__setattr__(self, "Ad", _frozen(self.Ad, (n, n), "A_d"))
-        object.__setattr__(self, "Bd", _frozen(np.reshape(self.Bd, (n, m)), (n, m), "B_d"))
-        object.__setattr__(self, "Kf", _frozen(np.reshape(self.Kf, (n, ny)), (n, ny), "K_f"))
-        object.__setattr__(self, "outputs", tuple(self.outputs))
-        x0 = np.zeros(n) if self.x_hat0 is None else self.x_hat0
-        object.__setattr__(self, "x_hat0", _frozen(x0, (n,), "x_hat0"))
-        if self.form not in ("current", "predictor"):
+    def __init__(self, K: ArrayLike, Ad: ArrayLike, Bd: ArrayLike, Kf: ArrayLike, outputs: Sequence[str],
+                 x_op: ArrayLike, u_op: ArrayLike, rate: float, form: str = "current",
+                 Kc: ArrayLike | None = None, tracked: Sequence[str] = (),
+                 x_hat0: ArrayLike | None = None, design: Design | None = None) -> None:
+        xo = _frozen(x_op, None, "x_op").reshape(-1)
+        uo = _frozen(u_op, None, "u_op").reshape(-1)
+        n, m, ny = xo.size, uo.size, len(outputs)
+        given: dict[str, Any] = {
+            "K": _frozen(np.reshape(K, (m, n)), (m, n), "K"),
+            "Ad": _frozen(Ad, (n, n), "A_d"),
+            "Bd": _frozen(np.reshape(Bd, (n, m)), (n, m), "B_d"),
+            "Kf": _frozen(np.reshape(Kf, (n, ny)), (n, ny), "K_f"),
+            "outputs": tuple(outputs), "x_op": xo, "u_op": uo,
+        }
+        given["x_hat0"] = None if x_hat0 is None else _frozen(x_hat0, (n,), "x_hat0")
+        if form not in ("current", "predictor"):
             raise SimulationError(
-                f"Kalman filter form {self.form!r}: expected 'current' or 'predictor'"
+                f"Kalman filter form {form!r}: expected 'current' or 'predictor'"
             )
-        if not (np.isfinite(self.rate) and self.rate > 0):
-            raise SimulationError(f"the filter's rate must be positive, got {self.rate!r}")
-        _check_tracking(self, m)
+        if not (np.isfinite(rate) and rate > 0):
+            raise SimulationError(f"the filter's rate must be positive, got {rate!r}")
+        given["Kc"], given["tracked"] = _tracking_args(Kc, tracked, m)
+        given.update(rate=rate, form=form)
+        self._hold(given, design)
 
     @classmethod
     def from_design(cls, design: Design, *, tracking: bool = False) -> LQG:
@@ -205,26 +286,62 @@ class LQG:
                 "an LQG controller needs a design with a sample rate (its discrete Kalman "
                 "filter): design(system, rate=...)"
             )
-        plant = design.plant
-        disc = design.discrete
-        kc = _design_kc(design) if tracking else None
-        return cls(
-            K=design.K, Ad=disc.A, Bd=disc.B, Kf=design.Kf, outputs=tuple(plant.output_names),
-            x_op=plant.x0, u_op=plant.u0, rate=float(design.rate),
-            form=design.kalman_form, Kc=kc,
-            tracked=tuple(design.tracked) if tracking else (), design=design,
-        )
+        if tracking:
+            _design_kc(design)
+        made = cls.__new__(cls)
+        made._hold(None, design, tracking=tracking)
+        return made
 
-    def linear(self, state_names: Sequence[str], input_names: Sequence[str] | None = None
+    def _discrete(self) -> LinearModel:
+        disc = self._source().discrete
+        assert disc is not None  # from_design refuses a continuous design
+        return disc
+
+    @property
+    def Ad(self) -> np.ndarray:
+        """The sampled plant's ``A`` (the design's discrete plant's)."""
+        return np.asarray(self._given["Ad"] if self._given is not None else self._discrete().A)
+
+    @property
+    def Bd(self) -> np.ndarray:
+        """The sampled plant's ``B`` (the design's discrete plant's)."""
+        return np.asarray(self._given["Bd"] if self._given is not None else self._discrete().B)
+
+    @property
+    def Kf(self) -> np.ndarray:
+        """The Kalman gain (``M`` in the current form, ``L`` in the predictor form)."""
+        return np.asarray(self._given["Kf"] if self._given is not None else self._source().Kf)
+
+    @property
+    def outputs(self) -> tuple[str, ...]:
+        """The measured states, in the order of ``y``."""
+        if self._given is None:
+            return tuple(self._source().plant.output_names)
+        return cast("tuple[str, ...]", self._given["outputs"])
+
+    @property
+    def rate(self) -> float:
+        """The filter's sample rate [Hz] (the design's)."""
+        if self._given is None:
+            return float(cast(float, self._source().rate))  # from_design refuses no rate
+        return cast(float, self._given["rate"])
+
+    @property
+    def form(self) -> str:
+        """``"current"`` or ``"predictor"`` (the design's Kalman form)."""
+        if self._given is None:
+            return self._source().kalman_form
+        return cast(str, self._given["form"])
+
+    @property
+    def x_hat0(self) -> np.ndarray | None:
+        """The filter's starting estimate (deviation) the user gave; None: the operating point."""
+        if self._given is None:
+            return None
+        return cast("np.ndarray | None", self._given["x_hat0"])
+
+    def _build(self, state_names: Sequence[str], input_names: Sequence[str] | None
                ) -> LinearController:
-        """This controller in the one linear form, for a plant with these states and inputs."""
-        key = (tuple(state_names), None if input_names is None else tuple(input_names))
-        if key not in self._forms:
-            self._forms[key] = self._linear(state_names, input_names)
-        return self._forms[key]
-
-    def _linear(self, state_names: Sequence[str], input_names: Sequence[str] | None
-                ) -> LinearController:
         try:
             return LinearController.lqg(
                 self.K, Ad=self.Ad, Bd=self.Bd, Kf=self.Kf, outputs=self.outputs,
@@ -235,15 +352,12 @@ class LQG:
         except EquilibristError as exc:
             raise SimulationError(str(exc)) from exc
 
-    def runtime(self, state_names: Sequence[str]) -> LinearRuntime:
-        """A Python controller doing the same as the compiled core (for checks)."""
-        return self.linear(state_names).runtime()
-
     def describe(self) -> dict[str, object]:
+        kc = self.Kc
         return {"kind": self.kind, "form": self.form, "outputs": list(self.outputs),
                 "rate": self.rate, "K": self.K.tolist(), "Kf": self.Kf.tolist(),
                 "Ad": self.Ad.tolist(), "Bd": self.Bd.tolist(),
-                "Kc": None if self.Kc is None else self.Kc.tolist(),
+                "Kc": None if kc is None else kc.tolist(),
                 "tracked": list(self.tracked)}
 
 
@@ -261,16 +375,17 @@ def _design_kc(design: Design) -> np.ndarray:
     return np.asarray(kc, dtype=float)
 
 
-def _check_tracking(ctrl: StateFeedback | LQG, m: int) -> None:
-    if ctrl.Kc is None:
-        if ctrl.tracked:
+def _tracking_args(Kc: ArrayLike | None, tracked: Sequence[str], m: int
+                   ) -> tuple[np.ndarray | None, tuple[str, ...]]:
+    """The reference gain and tracked outputs a user gave, checked (``K_c`` read-only)."""
+    if Kc is None:
+        if tracked:
             raise SimulationError("tracked outputs given without a reference gain K_c")
-        return
-    nr = len(ctrl.tracked)
+        return None, tuple(tracked)
+    nr = len(tracked)
     if nr == 0:
         raise SimulationError("a reference gain K_c needs the names of the tracked outputs")
-    object.__setattr__(ctrl, "Kc", _frozen(np.reshape(ctrl.Kc, (m, nr)), (m, nr), "K_c"))
-    object.__setattr__(ctrl, "tracked", tuple(ctrl.tracked))
+    return _frozen(np.reshape(Kc, (m, nr)), (m, nr), "K_c"), tuple(tracked)
 
 
 BuiltIn = OpenLoop | StateFeedback | LQG
