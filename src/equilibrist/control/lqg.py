@@ -52,6 +52,12 @@ from equilibrist.numeric.linear import LinearModel
 class Compensator:
     """An output-feedback controller as a state-space system.
 
+    For a discrete design this is where the LQG's arithmetic is: the one
+    :class:`~equilibrist.control.linear.LinearController`
+    (:meth:`~equilibrist.control.linear.LinearController.lqg`) takes its blocks from these
+    matrices, so the two are one form split two ways, not two computations. A continuous
+    design (and a plant measuring other than its states) has only this matrix form.
+
     Inputs are ``u_<input>`` (the applied plant inputs), ``y_<output>`` (the
     measurements) and ``r_<tracked output>`` (references), in that order;
     outputs are the plant inputs; states ``xhat_<state>``.
