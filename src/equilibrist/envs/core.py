@@ -29,7 +29,7 @@ from equilibrist.numeric.lookup import get_system
 from equilibrist.numeric.system import System
 from equilibrist.sim import integrators, layout
 from equilibrist.sim.noise import Noise, square_root
-from equilibrist.sim.setup_steps import default_substeps
+from equilibrist.sim.setup_steps import split_period
 from equilibrist.sim.simcore import load_core
 from equilibrist.tasks import TASK_NAMES, Task, check_point, get_task
 
@@ -282,27 +282,11 @@ def build_core(
 
 def _physics_step(run_rate: float | None, physics_step: float | None, integrator: str,
                   problems: list[str]) -> tuple[float | None, int | None]:
-    """The physics step and the steps per period (the period split into steps of at most
-    1 ms by default, or one step for an adaptive integrator)."""
+    """The physics step and the steps per period, as a run splits its period
+    (:func:`~equilibrist.sim.setup_steps.split_period`), for the option ``physics_step``."""
     if run_rate is None:
         return None, None
-    period = 1.0 / run_rate
-    if physics_step is None:
-        n_sub = default_substeps(period, integrator)
-        return period / n_sub, n_sub
-    step = _positive(physics_step, "physics_step [s]", problems)
-    if step is None:
-        return None, None
-    ratio = period / step
-    k = round(ratio)
-    if k < 1 or abs(ratio - k) > 1e-9 * max(1.0, ratio):
-        sug = period / max(1, math.ceil(ratio))
-        problems.append(
-            f"physics_step {step:g} s does not divide the control period {period:g} s "
-            f"({run_rate:g} Hz): use the period divided by a whole number, e.g. {sug:.6g} s"
-        )
-        return None, None
-    return period / k, k
+    return split_period(run_rate, physics_step, integrator, problems, option="physics_step")
 
 
 def _check_options(observe: str, action_units: str, noise: bool, alive_bonus: float,

@@ -146,6 +146,31 @@ def default_substeps(period: float, integrator: str) -> int:
     return max(1, math.ceil(period / DEFAULT_MAX_STEP - 1e-9))
 
 
+def split_period(run_rate: float, physics_step: float | None, integrator: str,
+                 problems: list[str], *, option: str = "the physics step"
+                 ) -> tuple[float | None, int | None]:
+    """The physics step and the steps per control period: the integrator's default split
+    (:func:`default_substeps`), or *physics_step*, which must divide the period (else a
+    problem naming *option*, and ``(None, None)``)."""
+    period = 1.0 / run_rate
+    if physics_step is None:
+        n_sub = default_substeps(period, integrator)
+        return period / n_sub, n_sub
+    step = _positive(physics_step, f"{option.removeprefix('the ')} [s]", problems)
+    if step is None:
+        return None, None
+    ratio = period / step
+    k = round(ratio)
+    if k < 1 or abs(ratio - k) > 1e-9 * max(1.0, ratio):
+        sug = period / max(1, math.ceil(ratio))
+        problems.append(
+            f"{option} {step:g} s does not divide the control period {period:g} s "
+            f"({run_rate:g} Hz): use the period divided by a whole number, e.g. {sug:.6g} s"
+        )
+        return None, None
+    return period / k, k
+
+
 def timing(run_rate: float | None, dur: float | None, physics_step: float | None,
            integrator: str, *, runs: int, bound: float | None, threads: int,
            problems: list[str]) -> tuple[float | None, int | None, int | None]:
@@ -156,25 +181,7 @@ def timing(run_rate: float | None, dur: float | None, physics_step: float | None
     """
     h = n_sub = n_samples = None
     if run_rate is not None:
-        period = 1.0 / run_rate
-        if physics_step is None:
-            n_sub = default_substeps(period, integrator)
-            h = period / n_sub
-        else:
-            step = _positive(physics_step, "physics step [s]", problems)
-            if step is not None:
-                ratio = period / step
-                k = round(ratio)
-                if k < 1 or abs(ratio - k) > 1e-9 * max(1.0, ratio):
-                    sug = period / max(1, math.ceil(ratio))
-                    problems.append(
-                        f"the physics step {step:g} s does not divide the control period "
-                        f"{period:g} s ({run_rate:g} Hz): use the period divided by a whole "
-                        f"number, e.g. {sug:.6g} s"
-                    )
-                else:
-                    n_sub = k
-                    h = period / k
+        h, n_sub = split_period(run_rate, physics_step, integrator, problems)
         if dur is not None:
             exact = dur * run_rate
             if not math.isfinite(exact):
