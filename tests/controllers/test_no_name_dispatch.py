@@ -11,6 +11,7 @@ the region of attraction as the time-varying LQR is)."""
 from __future__ import annotations
 
 import dataclasses
+import re
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -129,10 +130,73 @@ def test_the_playground_offers_renamed_kinds_as_their_originals(
         assert renamed in described["controllers"]
         mine, theirs = dict(entries[renamed]), dict(entries[original])
         for entry in (mine, theirs):
-            entry.pop("name"), entry.pop("label")
+            entry.pop("name"), entry.pop("label"), entry.pop("short_label")
         assert mine == theirs, (renamed, mine, theirs)
     hanging = system == "cartpole"
     assert entries["tvlqr"]["available"] is hanging and entries["swingup"]["available"] is hanging
+
+
+#: The facts of its kind's record the page reads from a ``controller_options`` entry.
+FACTS = ("loop", "linear", "from_any_state", "planned", "solves_qp", "open_loop")
+
+
+def test_the_picker_entries_carry_what_the_page_reads_of_each_record(
+        twin: str, twins: dict[str, str]) -> None:
+    """Each entry of the ``system`` frame's ``controller_options`` carries its record's facts
+    (the page shows a controller by them, never by its name): a renamed kind's are its
+    original's, and the originals' are what their records say (the swing-up comes up from any
+    state, the time-varying LQR is planned, the MPC solves a QP, the LQG's loop has its
+    filter, ``off`` is the open loop)."""
+    from equilibrist.web.protocol import kind_name
+    from equilibrist.web.session import Session
+    from equilibrist.web.session_design import Catalogue
+
+    entries = {o["name"]: o for o in
+               Session(Catalogue.default(), "cartpole", seed=3).describe()["controller_options"]}
+    for name, entry in entries.items():
+        record = kinds.get(kind_name(name))
+        assert {f: entry.get(f, "missing") for f in FACTS} == \
+            {f: getattr(record, f) for f in FACTS}, name
+        assert entry.get("short_label") == record.label.split(" (")[0], name
+    for original, renamed in {"lqg": twin, **twins}.items():
+        assert {f: entries[renamed][f] for f in FACTS} == {f: entries[original][f] for f in FACTS}
+    assert entries[twins["swingup"]]["from_any_state"] is True
+    assert entries[twins["tvlqr"]]["planned"] is True
+    assert entries[twin]["loop"] == "lqg"
+    assert entries["mpc"]["solves_qp"] is True and entries["off"]["open_loop"] is True
+    assert [entries[n]["short_label"] for n in ("swingup", "tvlqr", "off")] == \
+        ["Swing-up", "Time-varying LQR", "Off"]
+
+
+def _compared_names(text: str, names: set[str]) -> list[str]:
+    """The string literals of *text* (JavaScript) that equal one of *names* and are compared:
+    beside ``===``, ``!==``, ``==`` or ``!=``, after ``case``, or in an array literal whose
+    ``includes`` is asked."""
+    literal = r"""(?:"([^"\\\n]*)"|'([^'\\\n]*)')"""
+    found = []
+    for pattern in (rf"[=!]==?\s*{literal}", rf"{literal}\s*[=!]==?", rf"\bcase\s+{literal}"):
+        for m in re.finditer(pattern, text):
+            found.append(m.group(1) if m.group(1) is not None else m.group(2))
+    for m in re.finditer(r"\[([^\[\]]*)\]\s*\.\s*includes\s*\(", text):
+        found += [a or b for a, b in re.findall(literal, m.group(1))]
+    return [s for s in found if s in names]
+
+
+def test_the_page_compares_no_kind_name() -> None:
+    """The page's scripts branch on the kinds' facts the ``system`` frame carries, never on a
+    kind's name: no string literal equal to a kind's name (or ``off``) is compared."""
+    from equilibrist import web
+    from equilibrist.web.protocol import OFF
+
+    names = {k.name for k in kinds.all_kinds()} | {OFF}
+    static = Path(web.__file__).parent / "static"
+    # The check finds what it looks for.
+    assert _compared_names('a === "lqg" || "mpc" !== b; case \'tvlqr\': ["swingup"].includes(c)',
+                           names) == ["lqg", "mpc", "tvlqr", "swingup"]
+    scripts = sorted(static.glob("*.js"))
+    assert any(p.name == "app.js" for p in scripts)
+    for path in scripts:
+        assert _compared_names(path.read_text(encoding="utf-8"), names) == [], path.name
 
 
 def _swingup_session(controller: str) -> Any:

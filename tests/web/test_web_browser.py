@@ -288,3 +288,69 @@ def test_picker_disables_swingup_where_there_is_none(page):
     assert "no hanging position" in option.get_attribute("title")
     assert page.find_element(By.CSS_SELECTOR, "#controller option[value='mpc']").is_enabled()
     assert not page.find_element(By.ID, "hang").is_enabled()
+
+
+#: A server whose registry also holds the swing-up's record under another name and label
+#: (a kind of one's own could be exactly this), started as a user's script would.
+RENAMED_SERVER = """
+import dataclasses, sys
+from equilibrist.controllers import kinds
+kinds.register(dataclasses.replace(kinds.get("swingup"), name="twinswingup",
+                                   label="Twin swing-up (a copy)", order=100))
+from equilibrist.cli.main import main
+sys.exit(main(["play", "--no-browser", "--port", "0"]))
+"""
+
+
+@pytest.fixture(scope="module")
+def renamed_server():
+    proc = subprocess.Popen([sys.executable, "-c", RENAMED_SERVER],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    line = proc.stdout.readline()
+    assert line.startswith("equilibrist playground at "), line + proc.stderr.read()
+    yield line.split()[3]
+    proc.send_signal(signal.SIGINT)
+    proc.communicate(timeout=20)
+
+
+def test_a_renamed_swingup_shows_as_the_swingup(renamed_server):
+    """The page reads what it shows of a controller from its kind's record, not its name:
+    the swing-up's record under another name is offered as a way up in the Hang button's hint,
+    needs no hint itself, and shows the swing-up's design line, status and caught note."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    driver = chromium()
+    try:
+        driver.get(renamed_server)
+        wait_for(lambda: driver.execute_script(
+            "return window.playground.frames > 10 && window.playground.design !== null"),
+            30, "the first frames")
+        message = lambda: driver.find_element(By.ID, "message").text  # noqa: E731
+        # Hanging with the LQG: the hint names every kind that brings the pole up.
+        run = frame(driver)["run"]
+        button(driver, "Hang").click()
+        wait_for(lambda: "Hanging:" in message(), 30, "the Hang hint")
+        assert message() == ("Hanging: pick Swing-up, Time-varying LQR or Twin swing-up in the "
+                             "Controller menu to bring it up.")
+        wait_for(lambda: frame(driver)["run"] > run, 30, "the hanging run")
+        Select(driver.find_element(By.ID, "controller")).select_by_value("twinswingup")
+        wait_for(lambda: driver.execute_script(
+            "const d = window.playground.design; return d && d.controller === 'twinswingup'"),
+            30, "the renamed swing-up's design")
+        info = driver.find_element(By.ID, "design-info").text
+        assert info.startswith("Twin swing-up (") and "handing over to the LQR below" in info, info
+        driver.execute_script("document.getElementById('message').textContent = ''")
+        run = frame(driver)["run"]
+        button(driver, "Hang").click()
+        wait_for(lambda: (f := frame(driver))["run"] > run and f["hanging"], 30,
+                 "the hanging run")
+        assert "Hanging:" not in message()  # it brings the pole up itself: no hint
+        wait_for(lambda: "Running (twin swing-up, started hanging)"
+                 in driver.find_element(By.ID, "status").text, 30, "the status")
+        wait_for(lambda: "(caught: the LQR balances)" in driver.find_element(By.ID, "mode").text,
+                 60, "the swing-up's caught note")
+        assert "mode: balancing" in driver.find_element(By.ID, "mode").text
+    finally:
+        driver.quit()

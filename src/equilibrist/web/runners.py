@@ -166,7 +166,8 @@ class NonlinearRunner:
 class SwingUpRunner(NonlinearRunner):
     """The swing-up (a kind that brings the system up from any state): a nonlinear controller
     whose state holds the supervisor's mode. Its ``controller_info`` is the swing-up's
-    (``kind`` ``"swingup"``, whatever the kind's name: what the page shows of it)."""
+    (its law and thresholds), ``kind`` the kind's own name: the page reads what it shows of
+    it from the kind's record (the ``system`` frame's ``controller_options``)."""
 
     def __init__(self, ctrl: NonlinearController, system: System, kind: str) -> None:
         from equilibrist.control.swingup_law import MODE_BALANCE, Z
@@ -183,7 +184,7 @@ class SwingUpRunner(NonlinearRunner):
     def describe(self) -> dict[str, object]:
         s = self.ctrl.settings
         tuning = s.get("tuning", {})
-        return {"kind": "swingup", "law": s.get("law"), "c_in": s.get("c_in"), "c_out": s.get("c_out"),
+        return {"kind": self.kind, "law": s.get("law"), "c_in": s.get("c_in"), "c_out": s.get("c_out"),
                 "tuning": dict(tuning) if isinstance(tuning, Mapping) else tuning}
 
 

@@ -66,6 +66,7 @@ from equilibrist.web.session_design import (
     SessionError,
     Settings,
     describe_design,
+    kind_facts,
     label,
     make_design,
     tuned_system,
@@ -326,7 +327,7 @@ class Session(_SessionPlan, _SessionRoa):
             "controllers": list(controllers()),
             "controller_options": [
                 {"name": c, "label": label(c), "available": c not in self.unavailable,
-                 "reason": self.unavailable.get(c)} for c in controllers()],
+                 "reason": self.unavailable.get(c), **kind_facts(c)} for c in controllers()],
             "hang": {"available": self.hang_refusal is None, "reason": self.hang_refusal},
             "settings": self.settings.to_dict(),
             "scales": scales,

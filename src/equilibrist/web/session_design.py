@@ -34,6 +34,20 @@ def label(controller: str) -> str:
     return kinds.get(kind_name(controller)).label
 
 
+def kind_facts(controller: str) -> dict[str, object]:
+    """What the page reads of a controller's kind record, to show it as it is (the mode's
+    note, the design's line, the margins' heading, the Hang button's hint) without asking
+    its name: ``short_label`` (the label before its parenthesis, the status line's word),
+    and the record's ``loop``, ``linear``, ``from_any_state``, ``planned``, ``solves_qp``
+    and ``open_loop`` (:class:`~equilibrist.controllers.kinds.ControllerKind`)."""
+    from equilibrist.controllers import kinds
+
+    kind = kinds.get(kind_name(controller))
+    return {"short_label": kind.label.split(" (", 1)[0].strip() or kind.label,
+            "loop": kind.loop, "linear": kind.linear, "from_any_state": kind.from_any_state,
+            "planned": kind.planned, "solves_qp": kind.solves_qp, "open_loop": kind.open_loop}
+
+
 class SessionError(EquilibristError, ValueError):
     """A request the session cannot carry out (download with the controller off, ...)."""
 

@@ -52,6 +52,38 @@
 
   function setConnection(text) { $("connection").textContent = text; }
 
+  // ---- the controllers' kinds ---------------------------------------------------------------
+  // What the page shows of a controller is read from its kind's record, as the system frame's
+  // controller_options carry it (loop, from_any_state, planned, solves_qp, open_loop,
+  // short_label), never from its name: a kind of one's own shows as the kind it copies.
+  function kindOf(name) {
+    const options = (state.sys && state.sys.controller_options) || [];
+    return options.find((c) => c.name === name) || {};
+  }
+  state.kindOf = kindOf;
+
+  // A kind that brings the system up from its hanging start: by itself, or along a plan.
+  const bringsUp = (k) => Boolean(k.from_any_state || k.planned);
+
+  // The kind's short name within a sentence ("Swing-up" -> "swing-up"; "LQG" stays).
+  function shortName(name) {
+    const k = kindOf(name);
+    if (k.open_loop) return "controller off";
+    const s = k.short_label || name;
+    return /^[A-Z][a-z]/.test(s) ? s[0].toLowerCase() + s.slice(1) : s;
+  }
+
+  // The loops a kind's controller can be (its record's loop), as the margins' heading names
+  // them; filtered: a Kalman filter in the loop (the state feedback's own margins shown too).
+  const LOOPS = {
+    lqg: { heading: "LQG loop as run (Kalman filter in the loop)", filtered: true },
+    lqr: { heading: "LQR loop as run (state feedback)", filtered: false },
+  };
+
+  function orList(words) {
+    return words.length < 2 ? words.join("") : `${words.slice(0, -1).join(", ")} or ${words[words.length - 1]}`;
+  }
+
   let messageTimer = null;
   function showMessage(text, sticky) {
     const el = $("message");
@@ -212,28 +244,26 @@
     });
     gains.innerHTML = html + "</tbody>";
     let info = `${d.controller.toUpperCase()} design at ${fmtNum(d.rate)} Hz, redesigned in ${d.milliseconds.toFixed(1)} ms`;
-    const ci = d.controller_info;
-    if (ci && ci.kind === "mpc") {
-      info = `MPC (horizon ${ci.horizon}, ${ci.estimator === "kalman" ? "Kalman filter in front" : "full state"}, soft bounds on ${ci.soft.join(", ") || "none"}) ` +
+    const ci = d.controller_info, kind = kindOf(d.controller);
+    if (ci && kind.solves_qp) {
+      info = `${kind.short_label} (horizon ${ci.horizon}, ${ci.estimator === "kalman" ? "Kalman filter in front" : "full state"}, soft bounds on ${ci.soft.join(", ") || "none"}) ` +
         `at ${fmtNum(d.rate)} Hz, redesigned in ${d.milliseconds.toFixed(1)} ms (design ${d.design_milliseconds.toFixed(1)} ms, QP and DAQP setup ${d.controller_milliseconds.toFixed(1)} ms)`;
-    } else if (ci && ci.kind === "swingup") {
-      info = `Swing-up (${ci.law} law; catch at V < ${fmtNum(ci.c_in)}, release at V > ${fmtNum(ci.c_out)}) handing over to the LQR below, ` +
+    } else if (ci && kind.from_any_state) {
+      info = `${kind.short_label} (${ci.law} law; catch at V < ${fmtNum(ci.c_in)}, release at V > ${fmtNum(ci.c_out)}) handing over to the LQR below, ` +
         `at ${fmtNum(d.rate)} Hz, redesigned in ${d.milliseconds.toFixed(1)} ms`;
     }
     info += d.notes.length ? ` — ${d.notes.join("; ")}` : "";
     $("design-info").textContent = info;
     // The margins of the loop as implemented (LQG: with its Kalman filter in the loop), and the
     // state feedback's alone, named apart: an LQG has no guaranteed margins.
-    const m = d.margins, lqr = d.lqr_margins;
-    const loopName = d.margins_loop === "lqg" ? "LQG loop as run (Kalman filter in the loop)"
-      : d.controller === "lqr" ? "LQR loop as run (state feedback)"
-      : "the design's state feedback alone (not this controller's loop)";
+    const m = d.margins, lqr = d.lqr_margins, loop = LOOPS[kind.loop];
+    const loopName = loop ? loop.heading : "the design's state feedback alone (not this controller's loop)";
     $("loop-margins").innerHTML = m ? (
       `<tr><th colspan="2">${esc(loopName)}</th></tr>` +
       `<tr><th>gain margin</th><td>×${fmtNum(m.gain_lower)} to ×${fmtNum(m.gain_upper)}</td></tr>` +
       `<tr><th>phase margin</th><td>${fmtNum(m.phase_margin_deg)}°</td></tr>` +
       `<tr><th>min |1 + L|</th><td>${fmtNum(m.return_difference)}</td></tr>` +
-      (d.margins_loop === "lqg" && lqr ?
+      (loop && loop.filtered && lqr ?
         `<tr><th>state feedback alone (LQR)</th><td>×${fmtNum(lqr.gain_lower)} to ×${fmtNum(lqr.gain_upper)}, ${fmtNum(lqr.phase_margin_deg)}°</td></tr>` : "")
     ) : "<tr><td>(several inputs)</td></tr>";
     drawPoles();
@@ -253,8 +283,9 @@
     ctx.clearRect(0, 0, W, H);
     const sets = [
       { poles: d.open_loop_poles, color: "#999", mark: "+" },
-      // The swing-up estimates with its own trackers, not the design's Kalman filter.
-      { poles: d.controller === "swingup" ? [] : d.estimator_poles, color: "#e8871e", mark: "o" },
+      // A kind that comes up from any state (the swing-up) estimates with its own trackers,
+      // not the design's Kalman filter.
+      { poles: kindOf(d.controller).from_any_state ? [] : d.estimator_poles, color: "#e8871e", mark: "o" },
       { poles: d.poles, color: "#3b6fb6", mark: "x" },
     ].map((s) => ({ ...s, pts: s.poles.map((p) => sPlane(p, d.rate)).filter((p) => p) }));
     let reach = 1;
@@ -379,7 +410,7 @@
       st.textContent = `Fell at t = ${f.fell.at.toFixed(2)} s: ${f.fell.state} left its region. Press Reset.`;
       st.className = "fell";
     } else {
-      st.textContent = `${f.paused ? "Paused" : "Running"} (${NAMES[f.controller] || f.controller}${f.hanging ? ", started hanging" : ""}), t = ${f.t.toFixed(2)} s`;
+      st.textContent = `${f.paused ? "Paused" : "Running"} (${shortName(f.controller)}${f.hanging ? ", started hanging" : ""}), t = ${f.t.toFixed(2)} s`;
       st.className = "";
     }
     showMode(f);
@@ -395,16 +426,16 @@
     }
   }
 
-  const NAMES = { lqg: "LQG", lqr: "LQR", swingup: "swing-up", mpc: "MPC", tvlqr: "time-varying LQR", off: "controller off" };
-
   function showMode(f) {
-    // The swing-up's supervisor (pumping or balancing), the MPC's solve times.
+    // The swing-up's supervisor (pumping or balancing), the plan's progress, the MPC's solve
+    // times: what the kind's record says its controller is.
     let mode = "";
     if (f.mode) {
+      const k = kindOf(f.controller);
       mode = `mode: ${f.mode}` + (f.mode_since > 0 ? ` since t = ${f.mode_since.toFixed(2)} s` : "");
-      if (f.controller === "swingup" && f.mode === "balancing" && f.mode_since > 0) mode += " (caught: the LQR balances)";
-      if (f.controller === "tvlqr") mode += f.mode === "tracking" ? " (following the plan: the dashed ghost)" : f.mode === "planning" ? " (holding at the start)" : " (the plan ended: the LQR balances)";
-      if (f.controller === "mpc") mode += f.mode === "constrained" ? " (a constraint is active: DAQP solves the QP)" : " (no constraint active: the LQR's move)";
+      if (k.from_any_state && f.mode === "balancing" && f.mode_since > 0) mode += " (caught: the LQR balances)";
+      if (k.planned) mode += f.mode === "tracking" ? " (following the plan: the dashed ghost)" : f.mode === "planning" ? " (holding at the start)" : " (the plan ended: the LQR balances)";
+      if (k.solves_qp) mode += f.mode === "constrained" ? " (a constraint is active: DAQP solves the QP)" : " (no constraint active: the LQR's move)";
     }
     if ($("mode").textContent !== mode) { $("mode").textContent = mode; $("chart-mode").textContent = mode; }
     const chartMode = $("chart-mode");
@@ -517,7 +548,10 @@
     $("reset").onclick = () => send({ type: "reset", kick: +$("kick").value });
     $("hang").onclick = () => {
       send({ type: "hang" });
-      if (!["swingup", "tvlqr"].includes($("controller").value)) showMessage("Hanging: pick Swing-up or Time-varying LQR in the Controller menu to bring it up.");
+      if (!bringsUp(kindOf($("controller").value))) {
+        const up = ((state.sys && state.sys.controller_options) || []).filter(bringsUp).map((c) => c.short_label);
+        if (up.length) showMessage(`Hanging: pick ${orList(up)} in the Controller menu to bring it up.`);
+      }
     };
     $("kick-now").onclick = () => send({ type: "kick", angle: +$("kick").value });
     const showKick = () => { $("kick-value").textContent = `${(+$("kick").value).toFixed(2)} ${state.sys ? state.sys.state_units[state.sys.states.indexOf(state.sys.main_state)] || "" : ""}`; };
