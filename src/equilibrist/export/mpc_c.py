@@ -92,7 +92,7 @@ if TYPE_CHECKING:
     from equilibrist.control.design_record import Design
     from equilibrist.control.mpc import MPC
     from equilibrist.control.mpc_runtime import MPCRuntime
-    from equilibrist.hil.firmware import Adapter
+    from equilibrist.export.firmware import Adapter
     from equilibrist.numeric.system import System
 
 
@@ -370,6 +370,7 @@ def export_files(built: MPCRuntime, out: str | Path, *, system: System, precisio
     *precision* ``"double"`` or ``"float"`` (DAQP in single precision, checked
     against the double controller within :func:`command_tolerance`).
     """
+    from equilibrist.export.firmware import WHAT, with_hil
     from equilibrist.export.folder import (
         EXPORT_MARKER,
         check_folder,
@@ -377,7 +378,6 @@ def export_files(built: MPCRuntime, out: str | Path, *, system: System, precisio
         write_files,
     )
     from equilibrist.export.size import controller_readme, measure
-    from equilibrist.hil.firmware import WHAT, with_hil
 
     if precision not in ("double", "float"):
         raise ExportError(f"the MPC is exported in double or float precision, not {precision!r}")
@@ -441,7 +441,7 @@ def _readme_notes(ctrl: MPC, precision: str, iterations: Mapping[str, int]) -> l
 
 def hil_adapter(built: MPCRuntime, system: System, *, precision: str = "double") -> Adapter:
     """The MPC (with its filter, if any) behind the hardware-in-the-loop interface."""
-    from equilibrist.hil.firmware import Adapter
+    from equilibrist.export.firmware import Adapter
 
     ctrl = built.ctrl
     n, m = int(ctrl.problem.n), int(ctrl.problem.m)

@@ -9,7 +9,7 @@ reflection, no final xor) over ``type``, ``seq``, ``length`` and the payload.
 A receiver hunts for the two sync bytes, so a frame broken on the line costs
 that frame only. Reals are float32 by default, float64 where both sides
 have it (the size is agreed in the hello). ``docs/hil.md`` is the reference;
-the C side (:mod:`equilibrist.hil.firmware`) implements the same.
+the C side (:mod:`equilibrist.export.firmware`) implements the same.
 """
 
 from __future__ import annotations
