@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -171,3 +173,20 @@ def test_property_batch_runs_equal_single_runs(thetas, spread, seed):
                       x0={"theta": thetas[i]}, seed=batch.seed(i), noise=noise)
     np.testing.assert_array_equal(batch.final_state[i], single.final_state)
     assert batch.fell[i] == single.fell
+
+
+def test_a_batchs_workers_change_no_other_runs_thread_count() -> None:
+    """``workers=1`` is that batch's: the thread count in force for the parallel entries
+    (the vector environments', the next batches') is what it was."""
+    from equilibrist.numeric.lookup import get_system
+    from equilibrist.sim.batch import simulate_batch
+    from equilibrist.sim.kernel import set_workers, thread_count
+
+    before = thread_count()
+    try:
+        set_workers(2)
+        simulate_batch(get_system("cartpole"), None, runs=2, duration=0.05, rate=200.0,
+                       workers=1)
+        assert thread_count() == min(2, os.cpu_count() or 1)
+    finally:
+        set_workers(before)

@@ -203,7 +203,8 @@ def _budget(done: ExportReport) -> dict[str, object]:
 
 
 def _seed(text: str) -> int:
-    """``--seed``: a whole number >= 0 in decimal digits (an argparse type)."""
-    if not numbers.is_whole(text) or int(text) < 0:
+    """``--seed``: a whole number in decimal digits (an argparse type; a negative one is
+    refused with the other checks, before any work)."""
+    if not numbers.is_whole(text):
         raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number >= 0")
     return int(text)

@@ -45,7 +45,7 @@ from equilibrist.sim.batch_inputs import (
 from equilibrist.sim.batch_python import _python_batch
 from equilibrist.sim.batch_result import BatchResult, _batch_result
 from equilibrist.sim.events import Event
-from equilibrist.sim.kernel import Kernel, set_workers, thread_count
+from equilibrist.sim.kernel import Kernel, thread_count, threads_for
 from equilibrist.sim.noise import Noise, SeedLike, describe_seed, generator_state, seed_sequence
 from equilibrist.sim.run import _progress_bar, call_interruptibly
 from equilibrist.sim.setup_checks import _has_operating_point
@@ -226,14 +226,15 @@ def _run_compiled_batch(setup: Setup, runs_in: dict[str, np.ndarray], pmat: np.n
         core.run_many(**shared, **run_arrays(slice(0, 0)), threads=thread_count())
     timing: list[float] = []
 
+    # The batch's own thread count: asking for workers changes no other run's.
+    threads = threads_for(workers)
+
     def work() -> None:
-        # The thread count belongs to the thread that calls the core.
         # The core hands the runs out one at a time (dynamic scheduling): runs that fall
         # early leave no thread idle, and the hand-out costs nothing next to a run.
-        set_workers(workers)
         t0 = time.perf_counter()
         try:
-            core.run_many(**shared, **run_arrays(slice(0, runs)), threads=thread_count())
+            core.run_many(**shared, **run_arrays(slice(0, runs)), threads=threads)
         finally:
             timing.append(time.perf_counter() - t0)
 

@@ -125,12 +125,16 @@ def thread_count() -> int:
     return _THREADS[0]
 
 
+def threads_for(workers: int | None) -> int:
+    """The thread count *workers* asks for, within the machine's cores (None: every core)."""
+    available = os.cpu_count() or 1
+    return available if workers is None else max(1, min(int(workers), available))
+
+
 def set_workers(workers: int | None) -> int:
     """Set the thread count of parallel entries (None: every core); returns it."""
-    available = os.cpu_count() or 1
-    count = available if workers is None else max(1, min(int(workers), available))
-    _THREADS[0] = count
-    return count
+    _THREADS[0] = threads_for(workers)
+    return _THREADS[0]
 
 
-__all__ = ["Kernel", "load_kernel", "set_workers", "thread_count"]
+__all__ = ["Kernel", "load_kernel", "set_workers", "thread_count", "threads_for"]
