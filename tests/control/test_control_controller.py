@@ -9,11 +9,11 @@ import pytest
 from equilibrist.control.controller import as_python_controller
 from equilibrist.control.design import design
 from equilibrist.control.linear import LinearController
-from equilibrist.control.linear_layout import LINEAR_BLOCKS, LINEAR_HEADER
 from equilibrist.control.nonlinear import NonlinearController, check_source
 from equilibrist.control.python_controller import PythonController, StepAdapter
 from equilibrist.controllers.kinds import ControllerRequest, build_controller, register_controller
 from equilibrist.errors import ControllerError
+from equilibrist.native.linear_layout import LINEAR_BLOCKS, LINEAR_HEADER
 from equilibrist.numeric.lookup import get_system
 
 

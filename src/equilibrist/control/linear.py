@@ -15,9 +15,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from equilibrist.control.linear_layout import LINEAR_BLOCKS, LINEAR_HEADER, _python_linear
 from equilibrist.control.python_controller import PythonControllerBase
 from equilibrist.errors import ControllerError, DesignError, DimensionError
+from equilibrist.native.linear_layout import LINEAR_BLOCKS, LINEAR_HEADER, _python_linear
 
 if TYPE_CHECKING:
     from equilibrist.control.design_record import Design

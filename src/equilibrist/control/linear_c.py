@@ -1,6 +1,6 @@
 """The linear controller's library in C for the exports: translated from its one definition.
 
-:func:`linear_c` is :data:`~equilibrist.control.controller.LINEAR_SOURCE` (the
+:func:`linear_c` is :data:`~equilibrist.native.linear_layout.LINEAR_SOURCE` (the
 library the simulation core compiles and :class:`LinearController` runs as
 Python) translated to C by :mod:`equilibrist.native.pyc`, with the sizes of
 one controller as literals (the core's own form for a controller of those
@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.control.linear_layout import (
+from equilibrist.native.linear_layout import (
     LINEAR_HEADER,
     LINEAR_SOURCE,
     linear_layout_source,

@@ -16,15 +16,15 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from equilibrist.control.linear import _frozen
-from equilibrist.control.linear_layout import (
+from equilibrist.control.python_controller import PythonControllerBase
+from equilibrist.errors import ControllerError
+from equilibrist.native.linear_layout import (
     LINEAR_FUNCTIONS,
     LINEAR_SOURCE,
     _python_linear,
     linear_constants,
     linear_layout_source,
 )
-from equilibrist.control.python_controller import PythonControllerBase
-from equilibrist.errors import ControllerError
 
 if TYPE_CHECKING:
     from equilibrist.native.pyc import Function, Module

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from equilibrist.control.linear_layout import Layout
+from equilibrist.native.linear_layout import Layout
 
 if TYPE_CHECKING:
     from equilibrist.control.nonlinear import NonlinearController

@@ -57,9 +57,9 @@ import numpy as np
 from equilibrist.control import fixed, swingup
 from equilibrist.control.discretize import discrete_matrices
 from equilibrist.control.kalman import KALMAN, Estimator, estimator, joseph, predict_covariance
-from equilibrist.control.linear_layout import Layout
 from equilibrist.control.nonlinear import BALANCES, CATCH_SOURCE, NonlinearController
 from equilibrist.errors import ControllerError
+from equilibrist.native.linear_layout import Layout
 
 if TYPE_CHECKING:
     from equilibrist.control.design_record import Design

@@ -8,7 +8,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from equilibrist.control.linear_c import deviation_vector, linear_c
-from equilibrist.control.linear_layout import LINEAR_HEADER
 from equilibrist.errors import ExportError
 from equilibrist.export.c_text import (
     _INDENT,
@@ -24,6 +23,7 @@ from equilibrist.export.c_text import (
     literal,
 )
 from equilibrist.export.data import ControllerData
+from equilibrist.native.linear_layout import LINEAR_HEADER
 
 
 def _header_comment(data: ControllerData, *, version: str, precision: str,

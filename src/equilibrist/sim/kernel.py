@@ -21,7 +21,7 @@ The entries (see ``core.c`` for the array conventions):
     Plain RK4 steps with the input held (playground, stepper).
 
 A linear controller runs in the core made for its *pattern*
-(:func:`~equilibrist.control.controller.linear_pattern`: its sizes, and
+(:func:`~equilibrist.native.linear_layout.linear_pattern`: its sizes, and
 which coefficients are exact zeros and ones), with the linear library
 written out term by term; an LQR and an LQG of a system are two libraries,
 each compiled once. A nonlinear controller runs in the core made for its
@@ -37,8 +37,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.control.linear_layout import linear_pattern, linear_sizes
 from equilibrist.control.nonlinear import NonlinearController
+from equilibrist.native.linear_layout import linear_pattern, linear_sizes
 from equilibrist.numeric.system import System
 
 if TYPE_CHECKING:

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from equilibrist.control.linear_layout import linear_constants
+from equilibrist.native.linear_layout import linear_constants
 
 
 @dataclass(frozen=True)

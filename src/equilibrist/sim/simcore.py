@@ -14,7 +14,7 @@ loops written once in C, with its generator and integrators from
 :class:`NativeCore` calls its entries.
 
 A linear controller's core is made for its *pattern*
-(:func:`~equilibrist.control.controller.linear_pattern`: sizes, and where
+(:func:`~equilibrist.native.linear_layout.linear_pattern`: sizes, and where
 its coefficients are exact zeros and ones), with the linear library
 written out term by term; a pattern too large for that gets the library
 with literal sizes, and any packed linear controller can run in the
@@ -31,11 +31,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from equilibrist import tasks
-from equilibrist.control.linear_layout import (
-    LINEAR_SOURCE,
-    linear_layout_source,
-    linear_unrolled_source,
-)
 from equilibrist.control.nonlinear import (
     CONTRACT_TYPES,
     NonlinearController,
@@ -44,6 +39,11 @@ from equilibrist.control.nonlinear import (
 )
 from equilibrist.native import build, pyc
 from equilibrist.native.lanes import source as lanes_section
+from equilibrist.native.linear_layout import (
+    LINEAR_SOURCE,
+    linear_layout_source,
+    linear_unrolled_source,
+)
 from equilibrist.numeric import libm
 from equilibrist.numeric.system import System
 from equilibrist.sim import integrators, layout

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.control.linear_layout import python_linear
+from equilibrist.native.linear_layout import python_linear
 from equilibrist.web.protocol import kind_name
 from equilibrist.web.runners import Runner
 
@@ -34,7 +34,7 @@ class _Linear:
         z+ = Ac z + By dy + Bu (u_applied - u_op)
 
     by the linear library's sums written out for this controller's pattern
-    (:func:`~equilibrist.control.linear_layout.python_linear`, run
+    (:func:`~equilibrist.native.linear_layout.python_linear`, run
     as Python on lists): the compiled core's sums in the core's order, so a
     session's LQG gives the bits of ``simulate`` (numpy's products follow the
     BLAS kernel of the CPU).

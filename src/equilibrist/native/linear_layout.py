@@ -1,7 +1,8 @@
 """The packed linear controller's layout, read by the simulation core, Python and C: the header
 and blocks of a packed :class:`~equilibrist.control.controller.LinearController`, the
 generic loop (:data:`LINEAR_SOURCE`), its unrolled form for small patterns, and that source
-run as plain Python (split from :mod:`equilibrist.control.controller`, which re-exports it).
+run as plain Python. It is Python shared with C, and imports nothing of ``control``: the
+controller packs its vector by it, the core and the exports translate its sources.
 """
 
 from __future__ import annotations
