@@ -17,9 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from equilibrist.control.nonlinear import CONTRACT_TYPES as _TYPES
-from equilibrist.control.nonlinear import translate_controller
 from equilibrist.native import build, pyc
+from equilibrist.native.controller_c import CONTRACT_TYPES, translate_controller
 from equilibrist.numeric import libm
 
 
@@ -33,9 +32,9 @@ def unit_source(source: str, names: tuple[str, ...]) -> str:
     ]
     for name, fn in fns.items():
         params = ", ".join(f"{'double' if t == 'f' else 'double *'} a{k}" if t == "f"
-                           else f"double *a{k}, int64_t n{k}" for k, t in enumerate(_TYPES[name]))
+                           else f"double *a{k}, int64_t n{k}" for k, t in enumerate(CONTRACT_TYPES[name]))
         args = ", ".join(f"a{k}" if t == "f" else f"a{k}, n{k}"
-                         for k, t in enumerate(_TYPES[name]))
+                         for k, t in enumerate(CONTRACT_TYPES[name]))
         parts.append(f"\nEQ_EXPORT void eq_{name}({params})\n{{\n    {fn.name}({args});\n}}\n")
     return "".join(parts)
 
@@ -49,7 +48,7 @@ class ControllerFunctions:
         for name in names:
             fn = getattr(self.lib, f"eq_{name}")
             argtypes: list[type[ctypes.c_double | ctypes.c_void_p | ctypes.c_int64]] = []
-            for t in _TYPES[name]:
+            for t in CONTRACT_TYPES[name]:
                 argtypes += [ctypes.c_double] if t == "f" else [ctypes.c_void_p, ctypes.c_int64]
             fn.argtypes = argtypes
             fn.restype = None

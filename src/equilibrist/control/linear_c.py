@@ -41,7 +41,7 @@ if TYPE_CHECKING:
 def linear_c(sizes: Mapping[str, int], real: str = "double") -> str:
     """The library in C for controllers of *sizes* (``nz, ny, nr, m, n``), in *real*
     (``"double"`` or ``"float"``): static functions ``eq_linear_*`` (needs ``<stdint.h>``)."""
-    from equilibrist.control.nonlinear import translate_controller
+    from equilibrist.native.controller_c import translate_controller
 
     fixed = {key: int(sizes[key]) for key in ("nz", "ny", "nr", "m", "n")}
     mod, _ = translate_controller(

@@ -1,6 +1,7 @@
 """Nonlinear controllers compiled into the simulation core: :class:`NonlinearController`
-and its Python runtime, the checks and C translation of a controller's source, the namespace
-it runs in as Python, and the supervisor that switches between two controllers (split from
+and its Python runtime, the checks of a controller's source (its C translation is
+:func:`equilibrist.native.controller_c.translate_controller`), the namespace it runs in
+as Python, and the supervisor that switches between two controllers (split from
 :mod:`equilibrist.control.controller`, which re-exports them).
 """
 
@@ -18,16 +19,10 @@ import numpy as np
 from equilibrist.control.linear import _frozen
 from equilibrist.control.python_controller import PythonControllerBase
 from equilibrist.errors import ControllerError
-from equilibrist.native.linear_layout import (
-    LINEAR_FUNCTIONS,
-    LINEAR_SOURCE,
-    _python_linear,
-    linear_constants,
-    linear_layout_source,
-)
+from equilibrist.native.controller_c import translate_controller
+from equilibrist.native.linear_layout import LINEAR_FUNCTIONS, _python_linear, linear_constants
 
 if TYPE_CHECKING:
-    from equilibrist.native.pyc import Function, Module
     from equilibrist.numeric.system import System
 
 # -- nonlinear controllers, compiled into the simulation core ---------------------------------
@@ -208,33 +203,7 @@ def source_reads_time(source: str) -> bool:
     return False
 
 
-#: The argument types of the contract's functions in the C translation (``t`` a float,
-#: the rest 1-D float arrays), by role.
-CONTRACT_TYPES = {
-    "output": ("f", "F1", "F1", "F1", "F1", "F1"),
-    "update": ("f", "F1", "F1", "F1", "F1", "F1", "F1"),
-    "estimate": ("f", "F1", "F1", "F1", "F1", "F1"),
-}
 _TRANSLATED: dict[str, None] = {}
-
-
-def translate_controller(source: str, roles: Mapping[str, str], *, prefix: str = "ctrl_",
-                         library: str | None = None) -> tuple[Module, dict[str, Function]]:
-    """A controller's functions translated to C (:mod:`equilibrist.native.pyc`).
-
-    *roles* maps each role of the contract (``output``, ``update``,
-    ``estimate``) to the function of *source* that plays it; the C names
-    start with *prefix*. The linear library (``linear_output``...) is in
-    scope, unless *library* gives other functions (``""``: none). Returns the
-    translated module (its :meth:`~equilibrist.native.pyc.Module.c_source`)
-    and the translated function of each role. Raises
-    :class:`~equilibrist.native.pyc.TranslationError`.
-    """
-    from equilibrist.native.pyc import Module
-
-    mod = Module(source, constants=linear_constants(), prefix=prefix,
-                 library=linear_layout_source() + LINEAR_SOURCE if library is None else library)
-    return mod, {role: mod.function(name, CONTRACT_TYPES[role]) for role, name in roles.items()}
 
 
 def _translate(source: str, wanted: Sequence[str]) -> None:

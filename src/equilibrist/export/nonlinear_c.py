@@ -123,8 +123,8 @@ class Translation:
 def translate(ctrl: NonlinearController, prefix: str) -> Translation:
     """*ctrl*'s ``output``, ``update`` (and ``estimate``) in C, every function ``static``
     and named with *prefix*, with the helpers they call."""
-    from equilibrist.control.nonlinear import translate_controller
     from equilibrist.native import pyc
+    from equilibrist.native.controller_c import translate_controller
     from equilibrist.numeric import libm
 
     wanted = ("output", "update", "estimate") if ctrl.has_estimate else ("output", "update")

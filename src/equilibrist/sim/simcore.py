@@ -31,13 +31,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from equilibrist import tasks
-from equilibrist.control.nonlinear import (
-    CONTRACT_TYPES,
-    NonlinearController,
-    check_source,
-    translate_controller,
-)
+from equilibrist.control.nonlinear import NonlinearController, check_source
 from equilibrist.native import build, pyc
+from equilibrist.native.controller_c import CONTRACT_TYPES, translate_controller
 from equilibrist.native.lanes import source as lanes_section
 from equilibrist.native.linear_layout import (
     LINEAR_SOURCE,
