@@ -1,6 +1,6 @@
 """The linear controller's library in C, on its own, against the Python controller.
 
-The C the exports write (``control.linear_c.linear_c``: the library's Python source translated
+The C the exports write (``native.linear_c.linear_c``: the library's Python source translated
 for one controller's sizes) is compiled with the export's strict flags behind a small harness
 and run on random forms of every shape (with and without a controller state, references,
 measurements): in double precision it must give the very numbers of
@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from equilibrist.control.linear import LinearController
-from equilibrist.control.linear_c import deviation_vector, linear_c
 from equilibrist.export.shared_library import build_shared_library
+from equilibrist.native.linear_c import deviation_vector, linear_c
 
 HARNESS = """
 #include <stddef.h>

@@ -467,7 +467,7 @@ def _step_c(name: str) -> list[str]:
 def _filter_c(ctrl: MPC, name: str) -> list[str]:
     """The Kalman filter in front (:func:`filter_form` in the linear library's C) and
     ``<name>_init``, ``<name>_estimate``, ``<name>_output`` and ``<name>_update``."""
-    from equilibrist.control.linear_c import deviation_vector, linear_c
+    from equilibrist.native.linear_c import deviation_vector, linear_c
 
     n, m, ny = ctrl.problem.n, ctrl.problem.m, len(ctrl.output_names)
     packed = deviation_vector(filter_form(ctrl))

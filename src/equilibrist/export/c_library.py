@@ -7,7 +7,6 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from equilibrist.control.linear_c import deviation_vector, linear_c
 from equilibrist.errors import ExportError
 from equilibrist.export.c_text import (
     _INDENT,
@@ -23,6 +22,7 @@ from equilibrist.export.c_text import (
     literal,
 )
 from equilibrist.export.data import ControllerData
+from equilibrist.native.linear_c import deviation_vector, linear_c
 from equilibrist.native.linear_layout import LINEAR_HEADER
 
 

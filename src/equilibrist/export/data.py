@@ -12,7 +12,7 @@ simulated.
 The controller is the one the simulation core runs: the design's
 :class:`~equilibrist.control.controller.LinearController` (``linear``), one
 state-space form that the C code runs with one fixed step function
-(:mod:`equilibrist.control.linear_c`). In deviation coordinates about the
+(:mod:`equilibrist.native.linear_c`). In deviation coordinates about the
 operating point ``(x0, u0)``, with ``z`` the carried prediction
 ``xhat_{k|k-1}``, it is:
 

@@ -48,7 +48,7 @@
     the design's discrete filter (``current`` or ``predictor`` form, as the
     simulated controller runs it) as generated constants of the linear
     controller form and its fixed, separately tested C code
-    (:func:`equilibrist.control.linear_c.linear_c`: ``eq_linear_estimate``,
+    (:func:`equilibrist.native.linear_c.linear_c`: ``eq_linear_estimate``,
     ``eq_linear_update``); ``<name>_output`` solves the QP at the filter's
     estimate. ``y`` are the measured outputs (absolute), ``u_applied`` the
     input that acted.

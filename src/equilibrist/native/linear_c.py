@@ -1,8 +1,8 @@
 """The linear controller's library in C for the exports: translated from its one definition.
 
 :func:`linear_c` is :data:`~equilibrist.native.linear_layout.LINEAR_SOURCE` (the
-library the simulation core compiles and :class:`LinearController` runs as
-Python) translated to C by :mod:`equilibrist.native.pyc`, with the sizes of
+library the simulation core compiles and
+:class:`~equilibrist.control.linear.LinearController` runs as Python) translated to C by :mod:`equilibrist.native.pyc`, with the sizes of
 one controller as literals (the core's own form for a controller of those
 sizes): ``eq_linear_output``, ``eq_linear_update`` and ``eq_linear_estimate``
 over the controller's packed vector (:func:`deviation_vector`), the same sums
@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from equilibrist.native.controller_c import translate_controller
 from equilibrist.native.linear_layout import (
     LINEAR_HEADER,
     LINEAR_SOURCE,
@@ -41,8 +42,6 @@ if TYPE_CHECKING:
 def linear_c(sizes: Mapping[str, int], real: str = "double") -> str:
     """The library in C for controllers of *sizes* (``nz, ny, nr, m, n``), in *real*
     (``"double"`` or ``"float"``): static functions ``eq_linear_*`` (needs ``<stdint.h>``)."""
-    from equilibrist.native.controller_c import translate_controller
-
     fixed = {key: int(sizes[key]) for key in ("nz", "ny", "nr", "m", "n")}
     mod, _ = translate_controller(
         linear_layout_source(fixed) + LINEAR_SOURCE,
