@@ -46,9 +46,9 @@ import numpy as np
 from equilibrist import get_system
 from equilibrist.control.design import design
 from equilibrist.control.mpc import MPC, mpc
-from equilibrist.control.mpc_library import library_files
 from equilibrist.control.mpc_runtime import MPCRuntime
 from equilibrist.native.daqp_library import DAQP_SOURCES
+from equilibrist.native.mpc_library import library_files
 from equilibrist.sim.run import simulate
 
 HORIZON, RATE, LIMIT, PUSH = 30, 200.0, 20.0, {"theta": 0.14}

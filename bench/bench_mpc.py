@@ -80,7 +80,7 @@ def solve_times(horizon: int = 30, repeat: int = 1) -> dict[str, object]:
     """Per-sample solve times only (thread CPU and wall), *repeat* passes over the starts."""
     import os
 
-    from equilibrist.control.mpc_problem import ITER_LIMIT
+    from equilibrist.native.daqp_library import ITER_LIMIT
 
     system = get_system("cartpole")
     d = design(system, rate=200.0)

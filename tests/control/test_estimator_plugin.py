@@ -177,7 +177,6 @@ def test_the_swing_up_hands_over_to_the_plugged_estimator(plugin) -> None:
 
 def test_the_mpc_filters_with_the_plugged_estimator(plugin) -> None:
     from equilibrist.control.mpc import mpc
-    from equilibrist.control.mpc_library import filter_form
 
     system = get_system("cartpole")
     d = design(system, rate=100.0, outputs=["x", "theta"])
@@ -185,7 +184,7 @@ def test_the_mpc_filters_with_the_plugged_estimator(plugin) -> None:
     assert ctrl.Kf is not None
     by_hand = dataclasses.replace(ctrl, Kf=0.5 * np.asarray(ctrl.Kf))
     with kalman.using_estimator(plugin.HALF):
-        np.testing.assert_array_equal(filter_form(ctrl).Ey, 0.5 * np.asarray(ctrl.Kf))
+        np.testing.assert_array_equal(ctrl.filter_form().Ey, 0.5 * np.asarray(ctrl.Kf))
         half = ctrl.runtime()  # the library it compiles holds the plugged filter
     runs = {name: simulate(system, r, duration=0.5, x0={"theta": 0.1}, seed=1,
                            noise=Noise.from_design(d))

@@ -14,9 +14,9 @@ import pytest
 from equilibrist import get_system
 from equilibrist.control.design import design
 from equilibrist.control.mpc import mpc
-from equilibrist.control.mpc_library import compiled_library, daqp_objects
 from equilibrist.control.mpc_runtime import MPCRuntime
 from equilibrist.native import daqp_library
+from equilibrist.native.mpc_library import compiled_library, daqp_objects
 from support.mpc_reference import ReferenceMPC
 
 

@@ -7,8 +7,9 @@ from __future__ import annotations
 import numpy as np
 
 from equilibrist.control.mpc import MPC
-from equilibrist.control.mpc_library import COLD_SLACK
-from equilibrist.control.mpc_problem import EPS, ITER_LIMIT, STATUS
+from equilibrist.control.mpc_problem import STATUS
+from equilibrist.native.daqp_library import EPS, ITER_LIMIT
+from equilibrist.native.mpc_library import COLD_SLACK
 
 
 class ReferenceMPC:

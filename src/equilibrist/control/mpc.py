@@ -53,8 +53,8 @@ solver: it ends on the exact optimal active set (the solution solves that
 set's KKT system to round-off, not to an iterative tolerance), and starts
 from the previous sample's working set, so a sample whose active set did
 not change costs one or two iterations. The data are factorized once; each
-sample updates only the bounds. The iteration cap :data:`ITER_LIMIT` bounds
-the solve time; a QP that ends without a solution (the cap, or a failure)
+sample updates only the bounds. The iteration cap
+(:data:`~equilibrist.native.daqp_library.ITER_LIMIT`) bounds the solve time; a QP that ends without a solution (the cap, or a failure)
 gets the clipped LQR and the next sample a cold start (counted in
 ``fallbacks``). ``exact_unconstrained=False`` on the runtime sends every
 sample to DAQP.
@@ -69,11 +69,11 @@ of them: 0.08 ms median, 0.6 ms worst per sample (bench/README.md).
 outputs are not the full state) the design's discrete Kalman filter (its
 ``current`` or ``predictor`` form) runs in front and the QP starts at its
 estimate; with ``"state"`` the measured full state is used. The filter is
-the LQG controller's own estimator (:func:`filter_form`), run by the linear
+the LQG controller's own estimator (:meth:`MPC.filter_form`), run by the linear
 controller's library.
 
 *One definition.* The runtime (:class:`MPCRuntime`) is the C library that
-``export`` writes (:mod:`equilibrist.control.mpc_library`: DAQP's sources, the
+``export`` writes (:mod:`equilibrist.native.mpc_library`: DAQP's sources, the
 generated driver and the filter), compiled once per cache folder and called
 through ctypes at every sample: the simulated MPC is the shipped one, to the
 bit. It is a :class:`~equilibrist.control.controller.PythonController`, so
@@ -91,7 +91,6 @@ import numpy as np
 # The module was split in three; every name stays importable from here. The names marked
 # F401 are not used here: imported so that they stay importable from this module.
 from equilibrist.control.mpc_problem import (
-    EPS,
     HORIZON,
     RHO_L1,
     RHO_L2,
@@ -100,9 +99,11 @@ from equilibrist.control.mpc_problem import (
 )
 from equilibrist.control.mpc_runtime import MPCRuntime
 from equilibrist.errors import ControllerError
+from equilibrist.native.daqp_library import EPS
 
 if TYPE_CHECKING:
     from equilibrist.control.design_record import Design
+    from equilibrist.control.linear import LinearController
     from equilibrist.numeric.system import System
 
 
@@ -152,6 +153,30 @@ class MPC:
     def runtime(self) -> MPCRuntime:
         """A new running controller (its own DAQP workspace)."""
         return MPCRuntime(self)
+
+    def filter_form(self) -> LinearController:
+        """The Kalman filter in front of the MPC as a linear controller: the design's LQG
+        controller (``LinearController.lqg``), whose estimator the MPC runs, so one filter serves
+        the LQG and the MPC. ``z+ = Ac z + By dy + Bu du_applied`` and ``dx = Ez z + Ey dy``: the
+        linear map of the one estimator's source (:func:`equilibrist.control.kalman.realize`, the
+        estimator of :func:`~equilibrist.control.kalman.estimator` when the library is written):
+        for the Kalman filter's ``current`` form ``Ez = I - M C``, ``Ey = M``, ``Ac = Ad Ez``,
+        ``By = Ad M``; for the ``predictor`` form ``Ez = I``, ``Ey = 0``, ``Ac = Ad - L C``,
+        ``By = L``; ``Bu = Bd`` in both. The C that runs it is the linear library's translation
+        (the LQG's own sums, to the bit), not the estimator's functions translated again: their
+        unfolded sums (``z + M e``, then ``Ad`` times that) round otherwise than the LQG's
+        precomputed products."""
+        from equilibrist.control.linear import LinearController
+
+        if self.estimator == "state" or self.Kf is None or self.design is None:
+            raise ControllerError("the MPC measures the full state: it has no Kalman filter")
+        disc = self.design.discrete
+        assert disc is not None  # mpc() takes a discrete design only
+        return LinearController.lqg(
+            self.problem.K, Ad=np.asarray(disc.A, dtype=float),
+            Bd=np.asarray(disc.B, dtype=float), Kf=self.Kf,
+            outputs=self.output_names, x_op=self.x_op, u_op=self.u_op, rate=self.rate,
+            form=self.form, state_names=self.state_names)
 
     def describe(self) -> dict[str, object]:
         p = self.problem

@@ -1,4 +1,5 @@
-"""The MPC's quadratic program: DAQP's constants and the solver's availability, and
+"""The MPC's quadratic program: DAQP's exit flags (its bound, cap and tolerance are
+:mod:`equilibrist.native.daqp_library`'s) and the solver's availability, and
 :class:`MPCProblem` (predictions, the condensed QP, the soft limits and bounds); split from
 :mod:`equilibrist.control.mpc`, which re-exports them.
 """
@@ -10,13 +11,8 @@ from functools import cached_property
 
 import numpy as np
 
-#: DAQP's bound for "no bound".
-INF = 1e30
-#: DAQP's iteration cap (a bounded solve time). A cold start of the cart-pole's QP at
-#: N = 30 takes at most about 75 iterations; a warm one a few (bench/README.md).
-ITER_LIMIT = 1000
-#: DAQP's primal feasibility tolerance (the constraints of its exact active set hold to it).
-EPS = 1e-6
+from equilibrist.native.daqp_library import INF
+
 #: DAQP's exit flags: > 0 solved.
 STATUS = {1: "solved", 2: "solved (soft)", -1: "infeasible", -2: "cycling", -3: "unbounded",
           -4: "iteration limit", -5: "nonconvex", -6: "overdetermined working set"}

@@ -1,4 +1,4 @@
-"""The MPC running: :class:`MPCRuntime`, the MPC's C library (:mod:`equilibrist.control.mpc_library`:
+"""The MPC running: :class:`MPCRuntime`, the MPC's C library (:mod:`equilibrist.native.mpc_library`:
 DAQP and the generated driver, with the Kalman filter in front as the linear controller's
 library) compiled once per cache folder and called through ctypes; split from
 :mod:`equilibrist.control.mpc`, which re-exports it.
@@ -32,7 +32,7 @@ class MPCRuntime:
     *exact_unconstrained* (default): where the LQR's trajectory meets every constraint, its
     move is the QP's minimizer and is applied without a solve; ``False`` solves every QP.
     *iter_limit*: DAQP's cap on its iterations (default
-    :data:`~equilibrist.control.mpc.ITER_LIMIT`). Each runtime loads its own copy of the library (its DAQP
+    :data:`~equilibrist.native.daqp_library.ITER_LIMIT`). Each runtime loads its own copy of the library (its DAQP
     workspace is static data).
     """
 
@@ -48,8 +48,8 @@ class MPCRuntime:
 
     def __init__(self, ctrl: MPC, *, exact_unconstrained: bool = True,
                  iter_limit: int | None = None) -> None:
-        from equilibrist.control.mpc_library import compiled_library
         from equilibrist.native.build import private
+        from equilibrist.native.mpc_library import compiled_library
 
         self.ctrl = ctrl
         self.exact_unconstrained = exact_unconstrained

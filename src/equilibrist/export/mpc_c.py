@@ -9,7 +9,7 @@
 ``<name>.h``, ``<name>.c``
     The QP of :attr:`~equilibrist.control.mpc.MPCProblem.condensed` as
     DAQP's least-distance problem, formed here
-    (:func:`~equilibrist.control.mpc_library.ldp_form`: the constraint
+    (:func:`~equilibrist.native.mpc_library.ldp_form`: the constraint
     rows times the Hessian's inverse factor, scaled to unit length, their
     offsets, the map back to the first move) as constants, the LQR's
     predictions ``Fu``, ``Fs``, the gain, the limits, and::
@@ -34,7 +34,7 @@
     ``<name>_iterations`` is DAQP's iteration count of the last step.
     With ``precision="float"`` the arithmetic is single precision (``c_float``
     is ``float``: every source compiled with ``-DDAQP_SINGLE_PRECISION``,
-    DAQP's tolerances :data:`~equilibrist.control.mpc_library.FLOAT_SETTINGS`);
+    DAQP's tolerances :data:`~equilibrist.native.mpc_library.FLOAT_SETTINGS`);
     the arguments stay ``double``.
 
     With the Kalman filter in front (``estimator="kalman"``, the default
@@ -80,13 +80,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-# The module was split in three; every name stays importable from here. The names marked
-# F401 are not used here: imported so that they stay importable from this module.
-from equilibrist.control.mpc_library import (
-    library_files,
-)
 from equilibrist.errors import ExportError
 from equilibrist.export.check import ControllerExport, Described, Steps
+
+# The module was split in three; every name stays importable from here. The names marked
+# F401 are not used here: imported so that they stay importable from this module.
+from equilibrist.native.mpc_library import (
+    library_files,
+)
 
 if TYPE_CHECKING:
     from equilibrist.control.design_record import Design
@@ -338,8 +339,8 @@ def iteration_counts(ctrl: MPC, recorded: Mapping[str, np.ndarray], *,
     operating point, each solved from an empty working set (a cold start);
     ``at_cap``: how many of those ended at the iteration cap.
     """
-    from equilibrist.control.mpc_problem import ITER_LIMIT
     from equilibrist.control.mpc_runtime import MPCRuntime
+    from equilibrist.native.daqp_library import ITER_LIMIT
     from equilibrist.numeric.lookup import system_from_key
 
     design = _design_of(ctrl)

@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from equilibrist.control.mpc_library import _daqp_c_files
+from equilibrist.native.mpc_library import _daqp_c_files
 
 if TYPE_CHECKING:
     pass

@@ -7,7 +7,7 @@ its own driver. The library carries the digest of the sources it was built
 from (``eq_daqp_digest``): a library from other sources, or none (an install
 on a machine without a compiler, where the build is optional), leaves the MPC
 to compile DAQP's objects into the cache instead
-(:func:`equilibrist.control.mpc_library.daqp_objects`).
+(:func:`equilibrist.native.mpc_library.daqp_objects`).
 
 This module imports nothing but the standard library: ``setup.py`` reads it
 by its path, before any dependency is installed.
@@ -28,6 +28,13 @@ DIGEST_SOURCE = Path(__file__).resolve().parent / "daqp_digest.c"
 #: The install's flags: as the cache's builds (``native.build.FLAGS``), no contraction and no
 #: reassociation, so the bits are the exported C's.
 INSTALL_FLAGS = ("-std=gnu99", "-O2", "-ffp-contract=off", "-fno-math-errno", "-g0")
+#: DAQP's bound for "no bound".
+INF = 1e30
+#: DAQP's iteration cap (a bounded solve time). A cold start of the cart-pole's QP at
+#: N = 30 takes at most about 75 iterations; a warm one a few (bench/README.md).
+ITER_LIMIT = 1000
+#: DAQP's primal feasibility tolerance (the constraints of its exact active set hold to it).
+EPS = 1e-6
 
 
 def c_sources() -> list[Path]:

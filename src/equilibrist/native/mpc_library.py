@@ -15,10 +15,9 @@ import numpy as np
 
 from equilibrist.errors import ExportError
 from equilibrist.native import daqp_library
-from equilibrist.native.daqp_library import DAQP_SOURCES
+from equilibrist.native.daqp_library import DAQP_SOURCES, EPS, INF, ITER_LIMIT
 
 if TYPE_CHECKING:
-    from equilibrist.control.linear import LinearController
     from equilibrist.control.mpc import MPC
     from equilibrist.control.mpc_problem import MPCProblem
 
@@ -68,8 +67,6 @@ def ldp_form(ctrl: MPC) -> dict[str, np.ndarray]:
     hold in RAM; here it is a constant (flash), and the device keeps only
     DAQP's factor of the working set and a few vectors.
     """
-    from equilibrist.control.mpc_problem import INF
-
     prob = ctrl.problem
     H, f, A = (np.asarray(a, dtype=float) for a in prob.condensed)
     nz, nv = prob.n_variables, prob.horizon * prob.m
@@ -89,32 +86,6 @@ def ldp_form(ctrl: MPC) -> dict[str, np.ndarray]:
     return {"M": rows * scale[:, None], "scale": scale, "aw": A @ w,
             "ldp_lo": ldp_lo, "ldp_hi": np.full(nz, INF),
             "rinv_top": rinv[: prob.m], "w_top": w[: prob.m]}
-
-
-def filter_form(ctrl: MPC) -> LinearController:
-    """The Kalman filter in front of the MPC as a linear controller: the design's LQG
-    controller (``LinearController.lqg``), whose estimator the MPC runs, so one filter serves
-    the LQG and the MPC. ``z+ = Ac z + By dy + Bu du_applied`` and ``dx = Ez z + Ey dy``: the
-    linear map of the one estimator's source (:func:`equilibrist.control.kalman.realize`, the
-    estimator of :func:`~equilibrist.control.kalman.estimator` when the library is written):
-    for the Kalman filter's ``current`` form ``Ez = I - M C``, ``Ey = M``, ``Ac = Ad Ez``,
-    ``By = Ad M``; for the ``predictor`` form ``Ez = I``, ``Ey = 0``, ``Ac = Ad - L C``,
-    ``By = L``; ``Bu = Bd`` in both. The C that runs it is the linear library's translation
-    (the LQG's own sums, to the bit), not the estimator's functions translated again: their
-    unfolded sums (``z + M e``, then ``Ad`` times that) round otherwise than the LQG's
-    precomputed products."""
-    from equilibrist.control.linear import LinearController
-    from equilibrist.errors import ControllerError
-
-    if ctrl.estimator == "state" or ctrl.Kf is None or ctrl.design is None:
-        raise ControllerError("the MPC measures the full state: it has no Kalman filter")
-    disc = ctrl.design.discrete
-    assert disc is not None  # mpc() takes a discrete design only
-    return LinearController.lqg(
-        ctrl.problem.K, Ad=np.asarray(disc.A, dtype=float),
-        Bd=np.asarray(disc.B, dtype=float), Kf=ctrl.Kf,
-        outputs=ctrl.output_names, x_op=ctrl.x_op, u_op=ctrl.u_op, rate=ctrl.rate,
-        form=ctrl.form, state_names=ctrl.state_names)
 
 
 #: Where the install built no DAQP library (:mod:`equilibrist.native.daqp_library`): DAQP's
@@ -163,7 +134,7 @@ def library_files(ctrl: MPC, *, name: str = "mpc", precision: str = "double",
     with ``-DDAQP_SINGLE_PRECISION`` for ``"float"``). *shortcut*: the LQR's move without a
     solve where its trajectory meets every constraint (the MPC's own; ``False`` solves every
     QP, as ``MPCRuntime(exact_unconstrained=False)``). *iter_limit*: DAQP's cap on its
-    iterations (default :data:`~equilibrist.control.mpc.ITER_LIMIT`)."""
+    iterations (default :data:`~equilibrist.native.daqp_library.ITER_LIMIT`)."""
     if not name.isidentifier():
         raise ExportError(f"the library's name must be a C identifier, got {name!r}")
     if precision not in PRECISION_TYPES:
@@ -245,8 +216,6 @@ def _source_preamble(name: str, precision: str) -> list[str]:
 def _qp_constants(ctrl: MPC, iter_limit: int | None) -> list[str]:
     """The sizes, the QP's least-distance form, the LQR's trajectory, the gain, the operating
     point and the limits, as C constants."""
-    from equilibrist.control.mpc_problem import INF, ITER_LIMIT
-
     prob = ctrl.problem
     Fu, Fs = prob.soft_predictions
     n, m, N, ns = prob.n, prob.m, prob.horizon, prob.n_soft
@@ -257,7 +226,7 @@ def _qp_constants(ctrl: MPC, iter_limit: int | None) -> list[str]:
         f"#define NV {N * m}", f"#define NSL {N * ns}", f"#define NZ {nz}", f"#define NM {nz + na}",
         f"#define BIG {INF!r}", f"#define ITER_LIMIT {ITER_LIMIT if iter_limit is None else int(iter_limit)}", "",
         "/* The condensed QP as DAQP's least-distance problem (min |u|^2/2, computed by",
-        " * equilibrist.control.mpc_library.ldp_form): its rows M (unit length), their",
+        " * equilibrist.native.mpc_library.ldp_form): its rows M (unit length), their",
         " * scales SC and offsets AW (row i bounds SC_i (b_i + AW_i)), the simple bounds of u,",
         " * and the first move's correction v_0 = RINV_TOP u - W_TOP. */",
         _array("LDP_M", ldp["M"]), _array("SC", ldp["scale"]), _array("AW", ldp["aw"]),
@@ -343,8 +312,6 @@ def _bounds_c() -> list[str]:
 def _setup_c(name: str, precision: str) -> list[str]:
     """``<name>_setup``, DAQP's problem, settings and static workspace wired up, and
     ``<name>_iterations``."""
-    from equilibrist.control.mpc_problem import EPS
-
     tolerances = FLOAT_SETTINGS if precision == "float" else {"primal_tol": EPS}
     return [
         f"int {name}_setup(void)",
@@ -465,12 +432,13 @@ def _step_c(name: str) -> list[str]:
 
 
 def _filter_c(ctrl: MPC, name: str) -> list[str]:
-    """The Kalman filter in front (:func:`filter_form` in the linear library's C) and
+    """The Kalman filter in front (:meth:`~equilibrist.control.mpc.MPC.filter_form`, in the
+    linear library's C) and
     ``<name>_init``, ``<name>_estimate``, ``<name>_output`` and ``<name>_update``."""
     from equilibrist.native.linear_c import deviation_vector, linear_c
 
     n, m, ny = ctrl.problem.n, ctrl.problem.m, len(ctrl.output_names)
-    packed = deviation_vector(filter_form(ctrl))
+    packed = deviation_vector(ctrl.filter_form())
     return [
         "#include <stdint.h>",
         linear_c({"nz": n, "ny": ny, "nr": 0, "m": m, "n": n}, "c_float"),
