@@ -22,7 +22,7 @@ __version__ = "0.1.0"
 __all__ = ["EquilibristError", "__version__", "get_system", "list_systems"]
 
 
-def get_system(name: str, **options: object) -> System:  # re-exported lazily
+def get_system(name: str, **options: object) -> System:  # imports its module on first use
     """Return the :class:`~equilibrist.numeric.system.System` called *name*."""
     from equilibrist.numeric.lookup import get_system as _get
 

@@ -19,7 +19,7 @@ states and inputs; a rig that states none gets :func:`default_scenario`.
 
 The default scenario and what the steps share are in :mod:`equilibrist.apps.tour_common`,
 the tour of one system in :mod:`equilibrist.apps.tour_systems`; this module runs
-the whole tour and writes the report. Their public names are importable from here.
+the whole tour and writes the report.
 """
 
 from __future__ import annotations

@@ -62,9 +62,6 @@ import types
 from typing import Protocol, runtime_checkable
 
 from equilibrist.control.linear import LinearController
-
-# The module was split in four; every name stays importable from here. The names marked
-# F401 are not used here: imported so that they stay importable from this module.
 from equilibrist.control.nonlinear import (
     NonlinearController,
 )

@@ -48,9 +48,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from equilibrist.control import checks
-
-# The module was split in four; every name stays importable from here. The names marked
-# F401 are not used here: imported so that they stay importable from this module.
 from equilibrist.control.design_cache import (
     _kept_on_disk,
 )

@@ -1,6 +1,6 @@
 """Designs kept on disk: a run that needs a design made before neither redoes it nor imports
-scipy (the key hashes the system, the arguments and the sources the numbers come from);
-split from :mod:`equilibrist.control.design`, which re-exports its names.
+scipy (the key hashes the system, the arguments and the sources the numbers come from); used by
+:mod:`equilibrist.control.design`.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The record of an LQG design, :class:`Design`: its gains, covariances and poles, what it
 says of itself (:meth:`Design.to_dict`, :meth:`Design.summary`) and the formatting those
-use; split from :mod:`equilibrist.control.design`, which re-exports it.
+use; used by :mod:`equilibrist.control.design`.
 """
 
 from __future__ import annotations

@@ -1,7 +1,6 @@
 """The linear controller: one discrete state-space form in deviation coordinates
 (:class:`LinearController`, see :mod:`equilibrist.control.controller`) and its Python
-runtime (:class:`LinearRuntime`); split from :mod:`equilibrist.control.controller`, which
-re-exports them.
+runtime (:class:`LinearRuntime`); used by :mod:`equilibrist.control.controller`.
 """
 
 from __future__ import annotations

@@ -88,8 +88,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-# The module was split in three; every name stays importable from here. The names marked
-# F401 are not used here: imported so that they stay importable from this module.
 from equilibrist.control.mpc_problem import (
     HORIZON,
     RHO_L1,

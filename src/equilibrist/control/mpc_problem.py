@@ -1,7 +1,6 @@
 """The MPC's quadratic program: DAQP's exit flags (its bound, cap and tolerance are
 :mod:`equilibrist.native.daqp_library`'s) and the solver's availability, and
-:class:`MPCProblem` (predictions, the condensed QP, the soft limits and bounds); split from
-:mod:`equilibrist.control.mpc`, which re-exports them.
+:class:`MPCProblem` (predictions, the condensed QP, the soft limits and bounds); used by :mod:`equilibrist.control.mpc`.
 """
 
 from __future__ import annotations

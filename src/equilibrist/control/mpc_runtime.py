@@ -1,7 +1,6 @@
 """The MPC running: :class:`MPCRuntime`, the MPC's C library (:mod:`equilibrist.native.mpc_library`:
 DAQP and the generated driver, with the Kalman filter in front as the linear controller's
-library) compiled once per cache folder and called through ctypes; split from
-:mod:`equilibrist.control.mpc`, which re-exports it.
+library) compiled once per cache folder and called through ctypes; used by :mod:`equilibrist.control.mpc`.
 
 The simulated MPC is the C that ``export`` writes, to the bit: the same driver, the same
 DAQP, the same filter, built with the same arithmetic flags (no contraction).

@@ -1,8 +1,7 @@
 """Nonlinear controllers compiled into the simulation core: :class:`NonlinearController`
 and its Python runtime, the checks of a controller's source (its C translation is
 :func:`equilibrist.native.controller_c.translate_controller`), the namespace it runs in
-as Python, and the supervisor that switches between two controllers (split from
-:mod:`equilibrist.control.controller`, which re-exports them).
+as Python, and the supervisor that switches between two controllers (used by :mod:`equilibrist.control.controller`).
 """
 
 from __future__ import annotations

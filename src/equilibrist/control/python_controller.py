@@ -1,7 +1,6 @@
 """Controllers written in Python: the :class:`PythonController` protocol, its defaults
 (:class:`PythonControllerBase`) and the adapter of the older ``step`` interface
-(:class:`StepAdapter`); split from :mod:`equilibrist.control.controller`, which re-exports
-them.
+(:class:`StepAdapter`); used by :mod:`equilibrist.control.controller`.
 """
 
 from __future__ import annotations

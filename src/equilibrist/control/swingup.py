@@ -100,9 +100,6 @@ import numpy as np
 
 from equilibrist.control import fixed
 from equilibrist.control.nonlinear import BALANCES, NonlinearController
-
-# The module was split in two; every name stays importable from here. The names marked
-# F401 are not used here: imported so that they stay importable from this module.
 from equilibrist.control.swingup_law import (
     CP_SLOTS,
     LAW_NAMES,

@@ -1,7 +1,6 @@
 """The swing-up's law as source: the layout of its parameters ``cp`` and state ``z`` (one
 place for the source, the Python and the C export), the energy-shaping law itself
-(:data:`LAW_SOURCE`), the controller's source and its namespace as Python; split from
-:mod:`equilibrist.control.swingup`, which re-exports them.
+(:data:`LAW_SOURCE`), the controller's source and its namespace as Python; used by :mod:`equilibrist.control.swingup`.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """A design's arguments: weights given or taken from the spec (Bryson's rule), the default
-process noise with its floor where a mode would be left unexcited, and the fastest rate;
-split from :mod:`equilibrist.control.design`, which re-exports them.
+process noise with its floor where a mode would be left unexcited, and the fastest rate; used by
+:mod:`equilibrist.control.design`.
 """
 
 from __future__ import annotations

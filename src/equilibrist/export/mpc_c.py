@@ -82,9 +82,6 @@ import numpy as np
 
 from equilibrist.errors import ExportError
 from equilibrist.export.check import ControllerExport, Described, Steps
-
-# The module was split in three; every name stays importable from here. The names marked
-# F401 are not used here: imported so that they stay importable from this module.
 from equilibrist.native.mpc_library import (
     library_files,
 )

@@ -1,5 +1,4 @@
-"""The exported MPC's memory footprint, measured with the C compiler and ``size``; split from
-:mod:`equilibrist.export.mpc_c`, which re-exports it. (The library compiled and called
+"""The exported MPC's memory footprint, measured with the C compiler and ``size``; used by :mod:`equilibrist.export.mpc_c`. (The library compiled and called
 through ctypes is the simulated MPC itself: :class:`~equilibrist.control.mpc.MPCRuntime`.)
 """
 

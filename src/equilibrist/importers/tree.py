@@ -10,8 +10,7 @@ refused with one line naming the element; nothing is silently dropped.
 
 MuJoCo's compiler and the checks of the compiled model's values are in
 :mod:`equilibrist.importers.mujoco_compiler`, the search for the operating point in
-:mod:`equilibrist.importers.equilibrium`; their public names are
-importable from here.
+:mod:`equilibrist.importers.equilibrium`.
 """
 
 from __future__ import annotations

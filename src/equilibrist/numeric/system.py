@@ -5,8 +5,7 @@ Its dynamics are a pure function of ``(x, u)``; the parameters are a fixed
 vector ``p`` handed to the generated functions.
 
 Finding a system by name or by the key a file records (:func:`get_system`,
-:func:`system_from_key`, ...) is in :mod:`equilibrist.numeric.lookup`; those
-functions are importable from here.
+:func:`system_from_key`, ...) is in :mod:`equilibrist.numeric.lookup`.
 """
 
 from __future__ import annotations

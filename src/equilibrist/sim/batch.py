@@ -13,8 +13,7 @@ keeps every trajectory too, after checking that they fit in memory.
 
 The batch's result is in :mod:`equilibrist.sim.batch_result`, its initial
 states, parameters and draws in :mod:`equilibrist.sim.batch_inputs`, the runs
-of a Python controller in :mod:`equilibrist.sim.batch_python`; their public
-names are importable from here.
+of a Python controller in :mod:`equilibrist.sim.batch_python`.
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ one :class:`~equilibrist.errors.SimulationError`.
 are in :mod:`equilibrist.sim.setup_steps`, the checks of single settings in
 :mod:`equilibrist.sim.setup_checks`, the bounds of a job's work in
 :mod:`equilibrist.sim.budget`, and :class:`Setup` in
-:mod:`equilibrist.sim.setup_data`; their public names are importable from here.
+:mod:`equilibrist.sim.setup_data`.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Building and checking a study's axes: the numbers, counts and values given for each
 varied quantity (a parameter, the rate, a Bryson scale, a noise, the controller...) and the
-ranges of the initial states; split from :mod:`equilibrist.study.spec`.
+ranges of the initial states; used by :mod:`equilibrist.study.spec`.
 """
 
 from __future__ import annotations

@@ -1,6 +1,5 @@
 """A study's record: the kinds and limits it takes, its error, its axes (:class:`Axis`) and
-:class:`Study` itself with its points, seeds and JSON form; split from
-:mod:`equilibrist.study.spec`, which re-exports them.
+:class:`Study` itself with its points, seeds and JSON form; used by :mod:`equilibrist.study.spec`.
 """
 
 from __future__ import annotations

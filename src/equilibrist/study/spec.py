@@ -44,8 +44,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from equilibrist.errors import nearest
-
-# The module was split in three; every name stays importable from here.
 from equilibrist.study.axes import _axis, _number, _ranges, _whole
 from equilibrist.study.record import (
     BATCH_CELLS,

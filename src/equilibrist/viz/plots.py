@@ -10,8 +10,7 @@ degrees (``degrees=False`` keeps radians). Runs are read through
 
 The plots of runs over time are in :mod:`equilibrist.viz.plots_runs`, the maps
 (regions of attraction, poles) in :mod:`equilibrist.viz.plots_maps`, what they
-share (line styles, units, figures) in :mod:`equilibrist.viz.plot_common`; all are
-importable from here.
+share (line styles, units, figures) in :mod:`equilibrist.viz.plot_common`.
 """
 
 from __future__ import annotations

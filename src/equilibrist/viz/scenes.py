@@ -21,8 +21,7 @@ its kinematic tree.
 
 The scenes are in :mod:`equilibrist.viz.scenes_planar` and
 :mod:`equilibrist.viz.scenes_3d`, what they draw with (:class:`Shape`,
-:class:`Scene`, the geometry) in :mod:`equilibrist.viz.drawing`; all are
-importable from here.
+:class:`Scene`, the geometry) in :mod:`equilibrist.viz.drawing`.
 """
 
 from __future__ import annotations

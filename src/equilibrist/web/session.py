@@ -55,8 +55,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-# The module was split in four; every name stays importable from here. The names marked
-# F401 are not used here: imported so that they stay importable from this module.
 from equilibrist.control import fixed
 from equilibrist.sim import integrators
 from equilibrist.web.protocol import DEFAULT, Limits, Message, controllers

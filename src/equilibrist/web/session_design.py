@@ -1,6 +1,5 @@
 """The playground's systems, settings and designs: the catalogue offered, the settings a page
-tunes, the tuned system and its design (and the swing-up or MPC built on it); split from
-:mod:`equilibrist.web.session`, which re-exports them.
+tunes, the tuned system and its design (and the swing-up or MPC built on it); used by :mod:`equilibrist.web.session`.
 """
 
 from __future__ import annotations

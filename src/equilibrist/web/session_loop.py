@@ -1,7 +1,6 @@
 """The controllers in force in a playground session (the one controller contract's linear
 forms, built by their kind records and run in the compiled core's order of sums; the
-swing-up, MPC or other runner) and the record of the last run; split from
-:mod:`equilibrist.web.session`.
+swing-up, MPC or other runner) and the record of the last run; used by :mod:`equilibrist.web.session`.
 """
 
 from __future__ import annotations

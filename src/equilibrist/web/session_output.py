@@ -1,7 +1,6 @@
 """What a playground session sends: the frames for the page (shapes that changed, chart
 samples, the margin to a fall) and the downloads (the last run as a result, CSV or NPZ, the
-C export of the controller in force); a base of :class:`equilibrist.web.session.Session`,
-split from that module, which re-exports its names.
+C export of the controller in force); a base of :class:`equilibrist.web.session.Session`.
 """
 
 from __future__ import annotations
