@@ -25,7 +25,8 @@ from tests.support.sim import cartpole, state_feedback
 from equilibrist import get_system
 from equilibrist.cli.main import main
 from equilibrist.control import trajopt
-from equilibrist.control.trajopt import Trajectory, load_trajectory, plan
+from equilibrist.control.trajectory_file import load_trajectory
+from equilibrist.control.trajopt import Trajectory, plan
 from equilibrist.errors import DesignError
 from equilibrist.sim import simulate
 from equilibrist.tasks import get_task

@@ -17,7 +17,8 @@ from scipy.integrate import solve_ivp
 
 from equilibrist import get_system
 from equilibrist.cli.main import main
-from equilibrist.control.trajopt import load_trajectory, plan
+from equilibrist.control.trajectory_file import load_trajectory
+from equilibrist.control.trajopt import plan
 from equilibrist.errors import DesignError
 from equilibrist.tasks import get_task
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from equilibrist.cli.main import main
-from equilibrist.control.trajopt import load_trajectory
+from equilibrist.control.trajectory_file import load_trajectory
 from equilibrist.numeric.lookup import get_system
 from equilibrist.tasks import get_task, planning_bounds
 

@@ -11,7 +11,7 @@ import pytest
 
 from equilibrist import get_system
 from equilibrist.cli.main import main
-from equilibrist.control.trajopt import load_trajectory
+from equilibrist.control.trajectory_file import load_trajectory
 from equilibrist.control.tvlqr import LAYOUT
 from equilibrist.controllers.kinds import ControllerRequest, build_controller
 from equilibrist.sim.run import simulate

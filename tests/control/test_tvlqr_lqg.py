@@ -14,7 +14,7 @@ import pytest
 
 from equilibrist import get_system
 from equilibrist.cli.main import main
-from equilibrist.control.trajopt import load_trajectory
+from equilibrist.control.trajectory_file import load_trajectory
 from equilibrist.control.tvlqr import LAYOUT_LQG, SOURCE, kalman_along
 from equilibrist.controllers.kinds import ControllerRequest, build
 from equilibrist.sim.noise import Noise

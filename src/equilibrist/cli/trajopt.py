@@ -126,13 +126,8 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from equilibrist.control.trajopt import (
-        TIMED_OUT,
-        check_guess,
-        load_trajectory,
-        plan,
-        require_casadi,
-    )
+    from equilibrist.control.trajectory_file import load_trajectory
+    from equilibrist.control.trajopt import TIMED_OUT, check_guess, plan, require_casadi
 
     require_casadi()
     knots = _count(args.knots, "--knots", 4, 2000)

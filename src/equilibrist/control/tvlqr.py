@@ -406,7 +406,7 @@ def _with_filter(system: System, traj: Trajectory, design: Design,
 
 
 def build_request(request: ControllerRequest) -> NonlinearController:
-    from equilibrist.control.trajopt import load_trajectory
+    from equilibrist.control.trajectory_file import load_trajectory
 
     path = request.options.get("trajectory")
     if path is None:
