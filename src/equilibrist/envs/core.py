@@ -29,6 +29,7 @@ from equilibrist.numeric.lookup import get_system
 from equilibrist.numeric.system import System
 from equilibrist.sim import integrators, layout
 from equilibrist.sim.noise import Noise, square_root
+from equilibrist.sim.setup_checks import positive
 from equilibrist.sim.setup_steps import split_period
 from equilibrist.sim.simcore import load_core
 from equilibrist.tasks import TASK_NAMES, Task, check_point, get_task
@@ -62,18 +63,6 @@ OPTION_DEFAULTS: dict[str, object] = {
 
 class EnvError(EquilibristError, ValueError):
     """An environment was asked for something it can not be or do."""
-
-
-def _positive(value: object, what: str, problems: list[str]) -> float | None:
-    try:
-        v = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        problems.append(f"{what} {value!r} is not a number")
-        return None
-    if not math.isfinite(v) or v <= 0:
-        problems.append(f"{what} must be a positive number, got {value!r}")
-        return None
-    return v
 
 
 def bind_system(system: object, params: Mapping[str, object] | None) -> System:
@@ -265,7 +254,7 @@ def build_core(
         except DesignError as exc:  # no equilibrium there, or a swing-up
             raise EnvError(str(exc)) from None
     problems: list[str] = []
-    run_rate = tsk.rate if rate is None else _positive(rate, "rate [Hz]", problems)
+    run_rate = tsk.rate if rate is None else positive(rate, "rate [Hz]", problems)
     wrong = integrators.check(integrator, what="integrator=")
     if wrong is not None:
         problems.append(wrong)

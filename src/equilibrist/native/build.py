@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+import importlib
 import os
 import shlex
 import shutil
@@ -59,7 +60,7 @@ def compiler() -> tuple[str, ...]:
     if words and shutil.which(words[0]) is not None:
         return tuple(words)
     try:
-        import ziglang  # noqa: F401
+        importlib.import_module("ziglang")  # the package that brings `zig cc`, if it loads
     except ImportError:
         raise BuildError(
             f"no C compiler found ({' '.join(words) or 'cc'}): install gcc (Debian: apt-get "

@@ -35,8 +35,8 @@ from equilibrist.sim.setup_checks import (
     _has_operating_point,
     _initial_state,
     _names,
-    _positive,
     check_system,
+    positive,
 )
 from equilibrist.sim.setup_data import Setup
 
@@ -157,7 +157,7 @@ def build(
     open_loop = isinstance(ctrl, LinearController) and ctrl.kind == "none"
     designed = compiled and not open_loop
 
-    dur = _positive(duration, "duration [s]", problems)
+    dur = positive(duration, "duration [s]", problems)
     # A controller may declare the rate it was written for.
     run_rate = steps.sample_rate(rate, ctrl.rate, problems)
     tol_r, tol_a = steps.solver(integrator, plant, rtol, atol, problems)

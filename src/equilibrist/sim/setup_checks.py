@@ -17,7 +17,8 @@ from equilibrist.numeric.system import System
 from equilibrist.sim.controllers import LQG, StateFeedback
 
 
-def _positive(value: object, what: str, problems: list[str]) -> float | None:
+def positive(value: object, what: str, problems: list[str]) -> float | None:
+    """*value* as a positive finite number, else None with a problem naming *what*."""
     try:
         v = float(value)  # type: ignore[arg-type]
     except (TypeError, ValueError):

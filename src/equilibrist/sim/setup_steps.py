@@ -31,8 +31,8 @@ from equilibrist.sim.setup_checks import (
     _has_operating_point,
     _initial_state,
     _names,
-    _positive,
     operating_point,
+    positive,
 )
 from equilibrist.sim.signals import Signal, as_signal
 
@@ -113,7 +113,7 @@ def sample_rate(rate: float | None, ctrl_rate: float | None, problems: list[str]
     elif rate is None:
         run_rate = float(ctrl_rate)  # type: ignore[arg-type]
     else:
-        run_rate = _positive(rate, "rate [Hz]", problems)
+        run_rate = positive(rate, "rate [Hz]", problems)
         if run_rate is not None and ctrl_rate is not None and not math.isclose(
             run_rate, float(ctrl_rate), rel_tol=1e-12
         ):
@@ -132,8 +132,8 @@ def solver(integrator: str, plant: str, rtol: float, atol: float,
         problems.append(wrong)
     if plant not in PLANTS:
         problems.append(f"plant {plant!r}: expected one of {', '.join(PLANTS)}")
-    tol_r = _positive(rtol, "rtol", problems)
-    tol_a = _positive(atol, "atol", problems)
+    tol_r = positive(rtol, "rtol", problems)
+    tol_a = positive(atol, "atol", problems)
     return tol_r, tol_a
 
 
@@ -156,7 +156,7 @@ def split_period(run_rate: float, physics_step: float | None, integrator: str,
     if physics_step is None:
         n_sub = default_substeps(period, integrator)
         return period / n_sub, n_sub
-    step = _positive(physics_step, f"{option.removeprefix('the ')} [s]", problems)
+    step = positive(physics_step, f"{option.removeprefix('the ')} [s]", problems)
     if step is None:
         return None, None
     ratio = period / step
