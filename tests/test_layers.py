@@ -133,5 +133,5 @@ def test_the_length_check_finds_a_long_function() -> None:
     """The check above can fail: it sees functions, methods and nested functions alike."""
     every = {(file, name) for file, name, _, _ in _long_functions(0)}
     assert ("control/design.py", "design") in every  # a function
-    assert ("control/certify.py", "inner") in every  # a method (of _Loop)
+    assert ("control/lyapunov_rate.py", "vdot_box") in every  # a method (of LyapunovRate)
     assert ("study/plot.py", "cell") in every  # a function inside plot_study

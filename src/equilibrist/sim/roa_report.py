@@ -110,7 +110,8 @@ def _certify(system: System, design: Design, x_op: np.ndarray, u_op: np.ndarray,
              falsify: int, controller: object, options: dict[str, object], seed: int
              ) -> tuple[Certificate | None, str | None, tuple[np.ndarray, np.ndarray] | None]:
     """The certificate and the runs started inside it (or why there is none)."""
-    from equilibrist.control.certify import CertificateUnavailable, boxes_bar, certify
+    from equilibrist.control.certify import boxes_bar, certify
+    from equilibrist.control.lyapunov_rate import CertificateUnavailable
 
     try:
         with boxes_bar(boxes, bool(options.get("progress"))) as counted:

@@ -132,7 +132,8 @@ class RoaJob:
 
     def run_certificate(self) -> dict[str, object]:
         """The ``roa`` frame of the certificate (runs in a worker thread, after the slice)."""
-        from equilibrist.control.certify import CertificateUnavailable, certify
+        from equilibrist.control.certify import certify
+        from equilibrist.control.lyapunov_rate import CertificateUnavailable
         from equilibrist.sim.roa import levels_of
 
         self.check()
