@@ -71,7 +71,8 @@ def test_the_projects_math_functions_give_the_python_bits(tmp_path: Path) -> Non
 
 def test_the_cores_plant_and_noise_give_the_x86_bits(tmp_path: Path) -> None:
     from equilibrist.numeric.lookup import get_system
-    from equilibrist.sim.simcore import load_core, unit_source
+    from equilibrist.sim.core_unit import unit_source
+    from equilibrist.sim.simcore import load_core
 
     system = get_system("cartpole")
     core = load_core(system)  # this machine's (x86-64) compiled core

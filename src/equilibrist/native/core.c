@@ -4,7 +4,7 @@
  * controller: the calling convention's constants (EQ_IO_*, EQ_REC_*... from
  * equilibrist.sim.layout; EQ_INT_* and the integrators' work rows from
  * equilibrist.sim.integrators), the run's argument struct eq_args (from
- * equilibrist.sim.simcore.FIELDS, which also gives ctypes its RunArgs), the
+ * equilibrist.sim.core_unit.FIELDS, which also gives ctypes its RunArgs), the
  * project's libm (equilibrist.numeric.libm), the system's dynamics and the
  * controller translated from their one Python definition
  * (equilibrist.native.pyc), the glue below the marker "the generated part ends
@@ -32,7 +32,7 @@
  */
 
 /* ---- the run's arrays: the struct eq_args, written before this body from
- * equilibrist.sim.simcore.FIELDS: the sample range, options, state, controller, noise,
+ * equilibrist.sim.core_unit.FIELDS: the sample range, options, state, controller, noise,
  * parameter sets, events, and the outputs. ---- */
 
 /* ---- the generator and the integrators: integrators.c, inserted here ---- */

@@ -8,7 +8,7 @@ that :mod:`equilibrist.sim.simcore` writes into each generated unit as
 (:mod:`equilibrist.sim.setup`, :mod:`equilibrist.sim.run`,
 :mod:`equilibrist.sim.batch`, :mod:`equilibrist.envs.core`) packs and reads
 the same arrays through :class:`Slots` and :class:`Blocks`. The run's
-argument struct is :data:`equilibrist.sim.simcore.FIELDS`, written from there
+argument struct is :data:`equilibrist.sim.core_unit.FIELDS`, written from there
 for C and for ctypes both.
 """
 
