@@ -29,7 +29,7 @@ Observation
     and ``observation_space.sample()`` does not overflow.
 Step
     One control period of the task's rate (``rate=`` changes it), the
-    plant integrated as :func:`equilibrist.simulate` does it: the
+    plant integrated as :func:`equilibrist.sim.simulate` does it: the
     saturated input held, RK4 physics steps of ``physics_step`` (at most
     1 ms by default), process noise held over each physics step, the
     region checked after each. ``noise=False`` removes the process and the

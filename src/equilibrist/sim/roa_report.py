@@ -4,7 +4,7 @@
 level of the LQR's ``V`` where the controller has one
 (:func:`equilibrist.control.certify.certify`), starts runs inside that level
 and checks it against every run that started inside: the figures of the
-command's JSON (docs/roa.md), and what :func:`equilibrist.viz.plots.plot_roa_slice`
+command's JSON (docs/roa.md), and what :func:`equilibrist.viz.plots_maps.plot_roa_slice`
 draws.
 """
 

@@ -261,7 +261,7 @@ def already_run(path: str, digest: str | None) -> Entry | None:
 
     With *digest*, only the content with that SHA-256; without, the latest
     content read from that path. ``None`` when this process has not run it:
-    a reader of data never runs it then (:func:`~equilibrist.numeric.system.system_from_key`).
+    a reader of data never runs it then (:func:`~equilibrist.numeric.lookup.system_from_key`).
     """
     resolved = str(Path(path).expanduser().resolve())
     found = [entry for (origin, d), entry in _FROM_FILES.items()

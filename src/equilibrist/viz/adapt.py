@@ -25,7 +25,7 @@ def system_of(key: str, params: Mapping[str, float] | None = None, *, digest: st
 
     *system*, when the user names one, is checked to be the result's; without
     it a Python system file named by the result is refused, never run
-    (:func:`~equilibrist.numeric.system.system_for_data`).
+    (:func:`~equilibrist.numeric.lookup.system_for_data`).
     """
     from equilibrist.numeric.lookup import system_for_data
 

@@ -18,7 +18,7 @@ calling convention for the session's loop:
 *Swing-up* (:mod:`equilibrist.control.swingup`): the
 :class:`~equilibrist.control.controller.NonlinearController`'s source run
 by its plain-Python runtime
-(:class:`~equilibrist.control.controller.NonlinearRuntime`). The same
+(:class:`~equilibrist.control.nonlinear.NonlinearRuntime`). The same
 functions compiled to C (:mod:`equilibrist.control.compiled`) cost less per
 sample but take a compiler run on first use, which would hold the interpreter
 that streams every other session's frames; the plain-Python sample (some
