@@ -37,7 +37,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
 from _busy import busy  # noqa: E402
 
-from equilibrist.hil.protocol import RT_PRIORITY  # noqa: E402
+from equilibrist.native.firmware import RT_PRIORITY  # noqa: E402
 
 CLI = [sys.executable, "-m", "equilibrist.cli.main"]
 

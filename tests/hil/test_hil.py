@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 
 from equilibrist.cli.main import main
-from equilibrist.hil import protocol
 from equilibrist.hil import protocol as proto
+from equilibrist.native.firmware import RT_PRIORITY
 from equilibrist.sim import SimResult
 from support import cc_cache, require
 from support.hil import FakeDevice, pty_link
@@ -269,9 +269,9 @@ def test_realtime_priority_is_held_only_inside_and_a_refusal_is_said(monkeypatch
     policy = os.sched_getscheduler(0)
     if os.geteuid() == 0:
         with hil_run.realtime_priority() as granted:
-            assert granted == f"SCHED_FIFO {protocol.RT_PRIORITY}"
+            assert granted == f"SCHED_FIFO {RT_PRIORITY}"
             assert os.sched_getscheduler(0) == os.SCHED_FIFO
-            assert os.sched_getparam(0).sched_priority == protocol.RT_PRIORITY
+            assert os.sched_getparam(0).sched_priority == RT_PRIORITY
         assert os.sched_getscheduler(0) == policy
 
     def refuse(*_: object) -> None:

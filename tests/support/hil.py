@@ -22,6 +22,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 
 from equilibrist.hil import protocol as proto
+from equilibrist.native.firmware import VERSION
 
 
 class PtyLink:
@@ -145,7 +146,7 @@ class FakeDevice(threading.Thread):
                     elif self.fault == "length":
                         self._send(proto.STEP_REPLY, f.seq, b"\0\0\0")
                     elif self.fault == "reset":
-                        self._send(proto.BOOT, 0, bytes([proto.VERSION]))
+                        self._send(proto.BOOT, 0, bytes([VERSION]))
                         started = False
                     elif self.fault == "cut" and self.link is not None:
                         time.sleep(0.05)

@@ -90,7 +90,7 @@ if TYPE_CHECKING:
     from equilibrist.control.design_record import Design
     from equilibrist.control.mpc import MPC
     from equilibrist.control.mpc_runtime import MPCRuntime
-    from equilibrist.export.firmware import Adapter
+    from equilibrist.native.firmware import Adapter
     from equilibrist.numeric.system import System
 
 
@@ -368,7 +368,6 @@ def export_files(built: MPCRuntime, out: str | Path, *, system: System, precisio
     *precision* ``"double"`` or ``"float"`` (DAQP in single precision, checked
     against the double controller within :func:`command_tolerance`).
     """
-    from equilibrist.export.firmware import WHAT, with_hil
     from equilibrist.export.folder import (
         EXPORT_MARKER,
         check_folder,
@@ -376,6 +375,7 @@ def export_files(built: MPCRuntime, out: str | Path, *, system: System, precisio
         write_files,
     )
     from equilibrist.export.size import controller_readme, measure
+    from equilibrist.native.firmware import WHAT, with_hil
 
     if precision not in ("double", "float"):
         raise ExportError(f"the MPC is exported in double or float precision, not {precision!r}")
@@ -439,7 +439,7 @@ def _readme_notes(ctrl: MPC, precision: str, iterations: Mapping[str, int]) -> l
 
 def hil_adapter(built: MPCRuntime, system: System, *, precision: str = "double") -> Adapter:
     """The MPC (with its filter, if any) behind the hardware-in-the-loop interface."""
-    from equilibrist.export.firmware import Adapter
+    from equilibrist.native.firmware import Adapter
 
     ctrl = built.ctrl
     n, m = int(ctrl.problem.n), int(ctrl.problem.m)

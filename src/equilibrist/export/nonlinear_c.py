@@ -55,7 +55,7 @@ from equilibrist.export.check import ControllerExport, Described, Steps
 
 if TYPE_CHECKING:
     from equilibrist.control.nonlinear import NonlinearController
-    from equilibrist.export.firmware import Adapter
+    from equilibrist.native.firmware import Adapter
     from equilibrist.numeric.system import System
 
 
@@ -416,7 +416,7 @@ def hil_adapter(ctrl: NonlinearController, system: System, *, name: str,
                 interface: Interface | None = None) -> Adapter:
     """The exported controller behind the hardware-in-the-loop interface (its time is the
     sample count since the reset over the rate, as in the simulation)."""
-    from equilibrist.export.firmware import Adapter
+    from equilibrist.native.firmware import Adapter
 
     iface = interface or interface_of(ctrl)
     inputs = system.input_names
@@ -450,10 +450,10 @@ def export_files(ctrl: NonlinearController, out: str | Path, *, system: System,
                  force: bool = False, name: str | None = None) -> ControllerExport:
     """The library, recorded vectors, ``make check`` and the HIL files of *ctrl* in *out*."""
     from equilibrist.export.data import c_identifier
-    from equilibrist.export.firmware import WHAT, with_hil
     from equilibrist.export.folder import check_folder, generator_version, write_files
     from equilibrist.export.size import controller_readme, measure
     from equilibrist.export.vectors import check_duration
+    from equilibrist.native.firmware import WHAT, with_hil
 
     if precision != "double":
         raise ExportError(

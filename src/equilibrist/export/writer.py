@@ -32,8 +32,8 @@ if TYPE_CHECKING:
     from equilibrist.control.linear import LinearController
     from equilibrist.control.mpc_runtime import MPCRuntime
     from equilibrist.control.nonlinear import NonlinearController
-    from equilibrist.export.firmware import Adapter
     from equilibrist.export.size import Footprint
+    from equilibrist.native.firmware import Adapter
     from equilibrist.numeric.system import System
 
     class _Options(TypedDict, total=False):
@@ -148,7 +148,7 @@ def render_measured(
 
 def hil_adapter(data: ControllerData) -> Adapter:
     """The linear controller behind the hardware-in-the-loop interface (:mod:`equilibrist.hil`)."""
-    from equilibrist.export.firmware import Adapter
+    from equilibrist.native.firmware import Adapter
 
     name, n = data.name, len(data.state_names)
     p, m, nr = len(data.measured_names), len(data.input_names), len(data.tracked_names)
@@ -171,7 +171,7 @@ def hil_adapter(data: ControllerData) -> Adapter:
 
 
 def _with_hil(files: dict[str, tuple[str, str]], data: ControllerData) -> dict[str, tuple[str, str]]:
-    from equilibrist.export.firmware import WHAT, with_hil
+    from equilibrist.native.firmware import WHAT, with_hil
 
     name = data.name
     texts = with_hil({rel: text for rel, (text, _) in files.items()}, hil_adapter(data),

@@ -9,7 +9,8 @@ reflection, no final xor) over ``type``, ``seq``, ``length`` and the payload.
 A receiver hunts for the two sync bytes, so a frame broken on the line costs
 that frame only. Reals are float32 by default, float64 where both sides
 have it (the size is agreed in the hello). ``docs/hil.md`` is the reference;
-the C side (:mod:`equilibrist.export.firmware`) implements the same.
+the C side (:mod:`equilibrist.native.firmware`, which defines the numbers both
+sides share) implements the same.
 """
 
 from __future__ import annotations
@@ -22,16 +23,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from equilibrist.errors import EquilibristError, quote_outside
+from equilibrist.native.firmware import ID_BYTES, MAX_PAYLOAD, VERSION
 
-VERSION = 1
-#: The real-time priority (``SCHED_FIFO``) both ends of a realtime run ask for, the simulator
-#: and ``hil_host``: above every normal program, below the kernel's own real-time threads (50).
-RT_PRIORITY = 20
 SYNC = b"\xeb\x90"
 HEAD = struct.Struct("<BHH")  # type, seq, length
 CRC = struct.Struct("<H")
-MAX_PAYLOAD = 1024
-ID_BYTES = 16
 
 # Host to device.
 HELLO, STEP, RESET = 0x01, 0x02, 0x03

@@ -34,7 +34,8 @@ from equilibrist.control.python_controller import PythonControllerBase
 from equilibrist.errors import quote_outside
 from equilibrist.hil import protocol as proto
 from equilibrist.hil.link import DeviceGone, SerialLink
-from equilibrist.hil.protocol import RT_PRIORITY, Hello, HILError, ProtocolError
+from equilibrist.hil.protocol import Hello, HILError, ProtocolError
+from equilibrist.native.firmware import RT_PRIORITY
 from equilibrist.sim.run import StopRun
 from equilibrist.sim.signals import as_signal
 

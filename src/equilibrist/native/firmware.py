@@ -4,7 +4,8 @@ Every export (:mod:`equilibrist.export`) adds these files beside its
 controller:
 
 ``hil_proto.h``, ``hil_proto.c``
-    The protocol (:mod:`equilibrist.hil.protocol`): CRC-16/XMODEM, frames, a
+    The protocol (its host side is :mod:`equilibrist.hil.protocol`; the
+    numbers both sides share are defined here): CRC-16/XMODEM, frames, a
     byte-fed parser, and :c:func:`hil_device_feed`, the device's whole
     behaviour (answer the hello, reset, step the controller and time it).
     The Arduino sketch and the host program both call it: one definition.
@@ -25,7 +26,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from equilibrist.hil.protocol import ID_BYTES, MAX_PAYLOAD, RT_PRIORITY, VERSION
+#: The protocol's version, said in the hello and the device's BOOT frame.
+VERSION = 1
+#: The real-time priority (``SCHED_FIFO``) both ends of a realtime run ask for, the simulator
+#: and ``hil_host``: above every normal program, below the kernel's own real-time threads (50).
+RT_PRIORITY = 20
+#: The longest payload of a frame, in bytes.
+MAX_PAYLOAD = 1024
+#: The bytes of a controller's id in the hello's reply.
+ID_BYTES = 16
 
 HEADER = "hil_proto.h"
 SOURCE = "hil_proto.c"
