@@ -131,32 +131,6 @@ def test_zero_dc_gain_is_named_not_infinite() -> None:
         reference_gain(d.plant.A, d.plant.B, d.plant.C, d.K)
 
 
-@pytest.mark.parametrize(("rate", "form"), CASES)
-def test_interop_names_and_interconnect(rate: float | None, form: str) -> None:
-    d = _design(rate, form)
-    plant = to_statespace(d.model, name="plant")
-    comp = to_statespace(d.compensator)
-    assert plant.state_labels == ["x", "theta", "x_dot", "theta_dot"]
-    assert plant.output_labels == ["x", "theta"]
-    assert comp.input_labels == ["u_F", "y_x", "y_theta", "r_x"]
-    assert comp.output_labels == ["F"]
-    assert comp.dt == (0 if rate is None else 1 / rate)
-    loop = control.interconnect(
-        [plant, comp],
-        connections=[
-            ["plant.F", "compensator.F"],
-            ["compensator.u_F", "compensator.F"],
-            ["compensator.y_x", "plant.x"],
-            ["compensator.y_theta", "plant.theta"],
-        ],
-        inplist=["compensator.r_x"],
-        outlist=["plant.x"],
-    )
-    expected = np.concatenate([d.poles, d.estimator_poles])
-    np.testing.assert_allclose(_sorted(loop.poles()), _sorted(expected), rtol=1e-6, atol=1e-8)
-    np.testing.assert_allclose(loop.dcgain(), 1.0, rtol=1e-9)
-
-
 def test_from_statespace_round_trip() -> None:
     d = _design(100.0, "current")
     back = from_statespace(

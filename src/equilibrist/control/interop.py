@@ -2,8 +2,14 @@
 
 :func:`to_statespace` carries the names of states, inputs and outputs and
 the sample period (python-control writes continuous time as ``dt = 0``),
-so that ``control.interconnect`` can wire a plant and a compensator by
-name. :func:`from_statespace` goes back to a :class:`LinearModel`; the
+so that python-control wires a plant and a compensator by name::
+
+    plant = to_statespace(d)                # the plant in the design's timebase
+    comp = to_statespace(d.compensator)     # inputs: the plant's outputs, then r_<tracked>
+    loop = control.interconnect([plant, comp], inplist=["r_x"], outlist=["x", "theta"])
+    loop = control.feedback(plant, comp[:, plant.output_labels], sign=1)  # references at zero
+
+:func:`from_statespace` goes back to a :class:`LinearModel`; the
 operating point is not part of a ``StateSpace``, so it is given (default
 zero). :func:`loop_at_input` is a design's loop as implemented, broken at
 the plant input: the system whose margins the design reports.
@@ -31,27 +37,65 @@ LOOP_CONTROLLERS = ("lqg", "lqr")
 
 
 def to_statespace(
-    model: LinearModel | Compensator, *, name: str | None = None
+    model: LinearModel | Compensator | Design, *, name: str | None = None
 ) -> control.StateSpace:
-    """A named ``control.StateSpace`` of a linear model or compensator.
+    """A named ``control.StateSpace`` of a linear model, a compensator or a design's plant.
+
+    The names are the ones the other side of the loop uses, so that
+    ``control.interconnect([to_statespace(d), to_statespace(d.compensator)],
+    inplist=[...], outlist=[...])`` closes the loop with no connection written
+    by hand: the plant's inputs are the compensator's outputs (``"F"``), the
+    plant's outputs (``"x"``, ``"theta"``) the compensator's measurement
+    inputs, and both are in the design's timebase.
 
     Parameters
     ----------
     model:
-        A :class:`LinearModel` (continuous or discrete) or a
-        :class:`~equilibrist.control.lqg.Compensator`.
+        A :class:`LinearModel` (continuous or discrete, as it is); a
+        :class:`~equilibrist.control.design_record.Design`, for its plant in
+        the design's timebase (``d.model``: the sampled plant at the design's
+        rate for a discrete design, ``d.plant`` for a continuous one), named
+        after the system; or a :class:`~equilibrist.control.lqg.Compensator`
+        in its timebase with its own command fed back inside it (the loop the
+        simulator and the C export run: the Kalman filter is fed the command
+        it computed, ``u = -K xhat``). A compensator's inputs are the measured
+        outputs, named as the plant's outputs, then the references
+        ``r_<tracked output>``; its outputs the plant's inputs; its states
+        ``xhat_<state>``.
     name:
-        The system's name in python-control (default: the model's system
-        key, or ``"compensator"``).
+        The system's name in python-control (default: the system key for a
+        model or a design, ``"compensator"`` for a compensator).
+
+    Notes
+    -----
+    A saturated actuator applies less than the command; a linear
+    interconnection has no saturation, so there the command is applied.
     """
     import control
 
-    if not isinstance(model, (LinearModel, Compensator)):
-        raise DesignError(
-            f"to_statespace needs a LinearModel or a Compensator, got {type(model).__name__}"
+    from equilibrist.control.design_record import Design
+
+    if isinstance(model, Design):
+        model = model.model
+    if isinstance(model, Compensator):
+        A, B, C, D = closed_compensator(model)
+        inputs = model.measured_names + tuple(f"r_{n}" for n in model.tracked_names)
+        return control.ss(
+            A,
+            B,
+            C,
+            D,
+            0 if model.dt is None else model.dt,
+            states=list(model.state_names),
+            inputs=list(inputs),
+            outputs=list(model.output_names),
+            name=name or "compensator",
         )
-    if name is None:
-        name = (model.system or "plant") if isinstance(model, LinearModel) else "compensator"
+    if not isinstance(model, LinearModel):
+        raise DesignError(
+            "to_statespace needs a LinearModel, a Compensator or a Design, got "
+            f"{type(model).__name__}"
+        )
     return control.ss(
         model.A,
         model.B,
@@ -61,8 +105,25 @@ def to_statespace(
         states=list(model.state_names),
         inputs=list(model.input_names),
         outputs=list(model.output_names),
-        name=name,
+        name=name or model.system or "plant",
     )
+
+
+def closed_compensator(
+    comp: Compensator,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The compensator with its command fed back: ``(A, B, C, D)`` from the measurements and
+    references ``w`` to the command ``u``.
+
+    The compensator is ``xc+ = A xc + Bu u + Bw w``, ``u = C xc + Du u + Dw w``; with
+    ``u`` its own command, ``u = (I - Du)^-1 (C xc + Dw w)`` (``Du`` is zero in every form
+    the designs make; the solve keeps the algebra general).
+    """
+    m = len(comp.plant_input_names)
+    close = np.linalg.inv(np.eye(m) - comp.D[:, :m])
+    Cu, Dwu = close @ comp.C, close @ comp.D[:, m:]
+    Bu = comp.B[:, :m]
+    return comp.A + Bu @ Cu, comp.B[:, m:] + Bu @ Dwu, Cu, Dwu
 
 
 def from_statespace(
