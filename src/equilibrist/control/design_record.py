@@ -109,6 +109,12 @@ class Design:
     estimator_poles: np.ndarray
     notes: tuple[str, ...] = field(default=())
 
+    def __repr__(self) -> str:  # one line; a notebook shows the tables (equilibrist.notebook)
+        timebase = "continuous" if self.rate is None else f"{self.rate:g} Hz"
+        slowest = max(info.time_constant for info in self.pole_table)
+        return (f"Design({self.system_key}, LQG {timebase}, K={np.round(self.K, 4).tolist()}, "
+                f"slowest pole tau={slowest:.3g} s)")
+
     # -- derived --------------------------------------------------------------------
     @property
     def dt(self) -> float | None:

@@ -93,6 +93,11 @@ class Compensator:
     Ez: np.ndarray | None = None
     Ey: np.ndarray | None = None
 
+    def __repr__(self) -> str:  # one line; a notebook shows the matrices (equilibrist.notebook)
+        timebase = "continuous" if self.dt is None else f"dt={self.dt:g} s"
+        return (f"Compensator({self.form}, {timebase}, inputs={list(self.input_names)}, "
+                f"outputs={list(self.output_names)})")
+
     @property
     def state_names(self) -> tuple[str, ...]:
         return tuple(f"xhat_{s}" for s in self.plant_state_names)

@@ -46,6 +46,11 @@ class LinearModel:
             if np.shape(mat) != shape:
                 raise DimensionError(f"{label} has shape {np.shape(mat)}, expected {shape}")
 
+    def __repr__(self) -> str:  # one line; a notebook shows the matrices (equilibrist.notebook)
+        timebase = "continuous" if self.dt is None else f"dt={self.dt:g} s"
+        return (f"LinearModel({self.system or '?'}, {timebase}, states={list(self.state_names)}, "
+                f"inputs={list(self.input_names)}, outputs={list(self.output_names)})")
+
     @property
     def n_states(self) -> int:
         return len(self.state_names)

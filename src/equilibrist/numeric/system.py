@@ -111,6 +111,10 @@ class System:
 
         return unpickle_system, portable(self)
 
+    def __repr__(self) -> str:  # one line; a notebook shows the equations (equilibrist.notebook)
+        return (f"System({self.key}: {self.spec.title}, states={list(self.state_names)}, "
+                f"inputs={list(self.input_names)})")
+
     @classmethod
     def from_definition(cls, spec: SystemSpec, derive: DeriveFunction, **params: object) -> System:
         """A system built from a spec and its derivation, with no registration.
