@@ -37,6 +37,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_run_options(p)
+    common.add_rig_options(p)
     p.add_argument("--runs", required=True, metavar="N", help="number of runs")
     common.add_items(p, "--spread", marker="=", metavar="PARAM=REL",
                    help="relative spread of a parameter (uniform)")
@@ -91,6 +92,8 @@ def run(args: argparse.Namespace) -> int:
     saved = batch.save(args.out) if args.out is not None else None
     summary = batch.summary()
     summary["seed"] = _seed(args.seed)
+    if "rig" in batch.settings:
+        summary["rig"] = batch.settings["rig"]
     if args.json:
         if saved is not None:
             summary["saved"] = str(saved)

@@ -369,3 +369,86 @@ def operating_point_option(items: Sequence[str] | None) -> dict[str, float] | No
         return None
     raw = parse_assignments(items, "--at")
     return {k: parse_number(v, f"--at {k}") for k, v in raw.items()}
+
+
+def add_rig_options(parser: argparse.ArgumentParser) -> None:
+    """A rig's effects between the plant and the controller (:mod:`equilibrist.sim.rig`),
+    every one off by default."""
+    group = parser.add_argument_group("rig effects (all off by default)")
+    group.add_argument("--torque-response", metavar="K",
+                       help="motor torque response per control period, tau = tau_prev + K "
+                       "(tau_des - tau_prev) (1 immediate, below 1 a lag)")
+    group.add_argument("--torque-time-constant", metavar="S",
+                       help="motor torque response as a first-order lag of this time constant")
+    group.add_argument("--measurement-delay", metavar="N|Ts",
+                       help="measurements N control periods late, or T seconds (0.004s, 4ms)")
+    group.add_argument("--actuation-delay", metavar="N|Ts",
+                       help="commands N control periods late, or T seconds (0.004s, 4ms)")
+    group.add_argument("--torque-noise", metavar="SIGMA",
+                       help="white noise of this standard deviation on each input's torque")
+    group.add_argument("--velocity-noise", metavar="SIGMA",
+                       help="white noise of this standard deviation on the measured velocities")
+    group.add_argument("--encoder-step", metavar="STEP",
+                       help="encoders: positions read in steps of STEP (2*pi/4096 rad for 4096 "
+                       "counts a turn), velocities by differencing them")
+    group.add_argument("--velocity-filter", metavar="HZ",
+                       help="first-order low-pass of the measured velocities, cutoff HZ")
+    group.add_argument("--perturbations", metavar="N",
+                       help="N random Gaussian torque pulses on each joint (or --perturb-joints)")
+    group.add_argument("--perturb-joints", metavar="NAME,...",
+                       help="the joints (coordinates) that --perturbations pushes (default all)")
+    group.add_argument("--perturbation-amplitude", metavar="LOW:HIGH",
+                       help="the pulses' peak torques, drawn in +-[LOW, HIGH] (default 0.5:5)")
+
+
+def _delay(text: str | None, option: str) -> tuple[int, float]:
+    """``N`` (control periods) or ``Ts``/``Tms`` (seconds) as (periods, seconds)."""
+    if text is None:
+        return 0, 0.0
+    word = text.strip()
+    if word.endswith("ms"):
+        return 0, parse_number(word[:-2], option) / 1000.0
+    if word.endswith("s"):
+        return 0, parse_number(word[:-1], option)
+    return parse_whole(word, option, minimum=0), 0.0
+
+
+def rig_option(args: argparse.Namespace) -> Any:
+    """The :class:`~equilibrist.sim.rig.Rig` the options ask for, or None (none given)."""
+    from equilibrist.sim.rig import Rig
+
+    def number(name: str, option: str) -> float | None:
+        text = getattr(args, name, None)
+        if text is None:
+            return None
+        value = parse_number(text, option)
+        if value < 0:
+            raise UsageError(f"{option} {text}: expected a number >= 0")
+        return value
+
+    kw: dict[str, Any] = {}
+    for name in ("torque_response", "torque_time_constant", "torque_noise", "velocity_noise",
+                 "encoder_step", "velocity_filter"):
+        value = number(name, "--" + name.replace("_", "-"))
+        if value is not None:
+            kw[name] = value
+    for which in ("measurement", "actuation"):
+        periods, seconds = _delay(getattr(args, f"{which}_delay", None), f"--{which}-delay")
+        if periods:
+            kw[f"{which}_delay"] = periods
+        if seconds:
+            kw[f"{which}_delay_time"] = seconds
+    if getattr(args, "perturbations", None) is not None:
+        kw["perturbations"] = parse_whole(args.perturbations, "--perturbations", minimum=0)
+    joints = parse_names(getattr(args, "perturb_joints", None), "--perturb-joints")
+    if joints is not None:
+        kw["perturbation_joints"] = joints
+    amplitude = getattr(args, "perturbation_amplitude", None)
+    if amplitude is not None:
+        lo, sep, hi = amplitude.partition(":")
+        if not sep:
+            raise UsageError(f"--perturbation-amplitude {amplitude!r}: expected LOW:HIGH")
+        kw["perturbation_amplitude"] = (parse_number(lo, "--perturbation-amplitude"),
+                                        parse_number(hi, "--perturbation-amplitude"))
+    rig = Rig(**kw)
+    return None if rig.off else rig

@@ -153,6 +153,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_run_options(p)
+    common.add_rig_options(p)
     p.add_argument("--excite", metavar="SIGNAL", help="add an excitation to the command: "
                    "chirp:AMP:F0:F1[:SWEEP] or prbs:AMP:PERIOD (see below)")
     from equilibrist.viz.cli_hooks import add_output_options
@@ -294,6 +295,9 @@ def build_run(args: argparse.Namespace) -> tuple[System, dict[str, Any]]:
         "outputs": outputs,
         "max_steps": parse_max_steps(args.max_steps),
     }
+    rig = common.rig_option(args)
+    if rig is not None:
+        options["rig"] = rig
     if kind.task is not None and kind.task in _tasks(system):
         # A swing-up starts hanging: only the task's region (the cart's track) ends it.
         from equilibrist.tasks import get_task
@@ -347,6 +351,8 @@ def run(args: argparse.Namespace) -> int:
     metrics = run_metrics(result)
     if args.json:
         out = dict(metrics)
+        if "rig" in result.settings:
+            out["rig"] = result.settings["rig"]
         if saved is not None:
             out["saved"] = str(saved)
         common.print_json(out)

@@ -89,6 +89,131 @@ static inline void eq_measure(const double *x, const int64_t *c_idx, int64_t ny,
     }
 }
 
+/* floor(v), the same bits, without a call to libm where the value is small: truncation
+ * is exact below 2^52, and a truncation above v is one too high (v = -0.0 kept). */
+static inline double eq_floor(double v)
+{
+    double t;
+    if (!(fabs(v) < 4503599627370496.0) || v == 0.0) return floor(v);
+    t = (double)(int64_t)v;
+    return t > v ? t - 1.0 : t;
+}
+
+/* ---- a rig's effects (equilibrist.sim.rig; rig_i, rig_f: layout.RIG_I, RIG_F) ---- */
+
+/* Doubles of one run's rig state (layout.rig_state_len): the motors' torques (m), the
+ * actuation's ring (m per delayed sample and one), the measurement's ring (ny per delayed
+ * sample and one), the encoders' last positions (nq), the filtered velocities (ny). */
+static inline int64_t eq_rig_len(const eq_args *a)
+{
+    if (a->rig_i == NULL) return 0;
+    return EQ_M + EQ_M * (a->rig_i[EQ_RI_ACT_DELAY] + 1)
+        + a->ny * (a->rig_i[EQ_RI_MEAS_DELAY] + 1) + a->rig_i[EQ_RI_NQ] + a->ny;
+}
+
+/* The measurement at sample k through the rig: the encoders (positions quantized to their
+ * step, velocities by differencing the quantized positions over a period: 0 at the first
+ * sample), the sensors' noise (as eq_measure), the measurement's delay (the reading of
+ * sample k - d; sample 0's before that), the velocities' noise, their low-pass filter
+ * (y_f += a (y - y_f), starting at the first reading). A velocity is the output of state
+ * nq + i for coordinate i. */
+static inline void eq_rig_measure(const eq_args *a, int64_t k, const double *x, uint64_t *rng,
+                                  double *y, double *zbuf, double *rs)
+{
+    const int64_t ny = a->ny, m = EQ_M, nq = a->rig_i[EQ_RI_NQ];
+    const int64_t da = a->rig_i[EQ_RI_ACT_DELAY], dm = a->rig_i[EQ_RI_MEAS_DELAY];
+    const double sigma = a->rig_f[EQ_RF_VEL_SIGMA];
+    double *ring = rs + m + m * (da + 1);
+    double *enc = ring + ny * (dm + 1), *filt = enc + nq;
+    int64_t j, c, nv;
+    for (j = 0; j < ny; j++) y[j] = x[a->c_idx[j]];
+    if (a->rig_i[EQ_RI_ENCODER] != 0) {
+        const double step = a->rig_f[EQ_RF_ENCODER_STEP], rate = a->fopts[EQ_FO_RATE];
+        for (j = 0; j < ny; j++) {
+            c = a->c_idx[j];
+            if (c < nq) {
+                y[j] = step * eq_floor(x[c] / step);
+            } else if (c < 2 * nq) {
+                double now = step * eq_floor(x[c - nq] / step);
+                y[j] = k == 0 ? 0.0 : (now - enc[c - nq]) * rate;
+            }
+        }
+        for (c = 0; c < nq; c++) enc[c] = step * eq_floor(x[c] / step);
+    }
+    if (a->nlv > 0) {
+        eq_normals(rng, zbuf, ny);
+        for (j = 0; j < ny; j++) {
+            double v = 0.0;
+            for (c = 0; c < ny; c++) v += a->lv[j * ny + c] * zbuf[c];
+            y[j] += v;
+        }
+    }
+    if (dm > 0) {
+        double *slot = ring + (k % (dm + 1)) * ny;
+        const double *old = ring + ((k >= dm ? k - dm : 0) % (dm + 1)) * ny;
+        for (j = 0; j < ny; j++) slot[j] = y[j];
+        for (j = 0; j < ny; j++) y[j] = old[j];
+    }
+    if (sigma > 0.0) {
+        nv = 0;
+        for (j = 0; j < ny; j++) nv += a->c_idx[j] >= nq && a->c_idx[j] < 2 * nq;
+        eq_normals(rng, zbuf, nv);
+        nv = 0;
+        for (j = 0; j < ny; j++) {
+            if (a->c_idx[j] >= nq && a->c_idx[j] < 2 * nq) y[j] += sigma * zbuf[nv++];
+        }
+    }
+    if (a->rig_i[EQ_RI_FILTER] != 0) {
+        const double fa = a->rig_f[EQ_RF_FILTER_A];
+        for (j = 0; j < ny; j++) {
+            if (a->c_idx[j] >= nq && a->c_idx[j] < 2 * nq) {
+                filt[j] = k == 0 ? y[j] : filt[j] + fa * (y[j] - filt[j]);
+                y[j] = filt[j];
+            }
+        }
+    }
+}
+
+/* The torque that acts at sample k through the rig, from the actuator's u_app: the
+ * actuation's delay (u_app of sample k - d; the operating point's input, saturated, before),
+ * the motor's response (tau = tau_prev + k (tau_des - tau_prev), tau_prev the torque that
+ * acted at the sample before, the operating point's input at the first), the torque's
+ * noise, then the limits in force (lim: low, high per input). */
+static inline void eq_rig_actuate(const eq_args *a, int64_t k, const double *u_app,
+                                  double *u_act, const double *lim, uint64_t *rng,
+                                  double *zbuf, double *rs)
+{
+    const int64_t m = EQ_M, da = a->rig_i[EQ_RI_ACT_DELAY];
+    const double sigma = a->rig_f[EQ_RF_TORQUE_SIGMA];
+    double *mot = rs, *ring = rs + m;
+    int64_t i, j;
+    if (k == 0) {
+        for (i = 0; i < m; i++) {
+            mot[i] = eq_minf(eq_maxf(a->op[EQ_N + i], lim[2 * i]), lim[2 * i + 1]);
+            for (j = 0; j <= da; j++) ring[j * m + i] = mot[i];
+        }
+    }
+    for (i = 0; i < m; i++) u_act[i] = u_app[i];
+    if (da > 0) {
+        double *slot = ring + (k % (da + 1)) * m;
+        const double *old = ring + ((k + 1) % (da + 1)) * m;
+        for (i = 0; i < m; i++) slot[i] = u_act[i];
+        for (i = 0; i < m; i++) u_act[i] = old[i];
+    }
+    if (a->rig_i[EQ_RI_RESPONSE] != 0) {
+        const double kr = a->rig_f[EQ_RF_RESPONSE_K];
+        for (i = 0; i < m; i++) u_act[i] = mot[i] + kr * (u_act[i] - mot[i]);
+    }
+    if (sigma > 0.0) {
+        eq_normals(rng, zbuf, m);
+        for (i = 0; i < m; i++) u_act[i] += sigma * zbuf[i];
+    }
+    for (i = 0; i < m; i++) {
+        u_act[i] = eq_minf(eq_maxf(u_act[i], lim[2 * i]), lim[2 * i + 1]);
+        mot[i] = u_act[i];
+    }
+}
+
 /* The scratch of one run: EQ_SCR_ROWS rows of `width` (layout.SCRATCH's, the last, wk,
  * starting the integrator's work rows). */
 #define EQ_SCR_ROWS (EQ_S_WK + EQ_STEP_ROWS)
@@ -190,17 +315,8 @@ static int eq_plain(const eq_args *a)
 {
     return a->n_sets == 1 && a->n_kicks == 0 && a->n_pulses == 0 && a->nw == 0
         && a->nlv == 0 && a->iopts[EQ_IO_INTEGRATOR] == EQ_INT_RK4
-        && a->iopts[EQ_IO_RECORD] == 0;
-}
-
-/* floor(v), the same bits, without a call to libm where the value is small: truncation
- * is exact below 2^52, and a truncation above v is one too high (v = -0.0 kept). */
-static inline double eq_floor(double v)
-{
-    double t;
-    if (!(fabs(v) < 4503599627370496.0) || v == 0.0) return floor(v);
-    t = (double)(int64_t)v;
-    return t > v ? t - 1.0 : t;
+        && a->iopts[EQ_IO_RECORD] == 0 && (a->rig_i == NULL || a->rig_i[EQ_RI_ON] == 0)
+        && a->gforce == NULL;
 }
 
 /* Whether x is in the balance box (equilibrist.tasks.balance_box: per state the deviation's
@@ -224,7 +340,8 @@ static inline int eq_in_box(const double *x, const double *op, const double *box
 static inline __attribute__((always_inline)) void
 eq_run_t(const eq_args *a, int64_t k_start, int64_t k_end, double *x, double *z, double *u_prev,
          uint64_t *rng, const double *p_sets, const double *lin_s, double *rec, double *acc,
-         int64_t *status, double *scr, int64_t width, const int plain)
+         int64_t *status, double *scr, int64_t width, double *rs, const double *gf,
+         const int plain)
 {
     const int n = EQ_N, m = EQ_M;
     const int64_t n_samples = a->iopts[EQ_IO_N_SAMPLES];
@@ -249,6 +366,10 @@ eq_run_t(const eq_args *a, int64_t k_start, int64_t k_end, double *x, double *z,
     const int64_t a_est = a->acc_cols[EQ_ACC_SUM_EST2];
     const int64_t a_peak_app = a->acc_cols[EQ_ACC_PEAK_U_APP];
     const int64_t a_last_out = a->acc_cols[EQ_ACC_LAST_OUT];
+    /* a rig's effects (u_act: the torque that acts; without them, u_app itself) */
+    const int rig = !plain && a->rig_i != NULL && a->rig_i[EQ_RI_ON] != 0;
+    double *u_act = rig ? EQ_ROW(scr, width, EQ_S_U_ACT) : u_app;
+    const int64_t nq = a->rig_i != NULL ? a->rig_i[EQ_RI_NQ] : 0;
     int64_t ps0 = eq_pset(a->p_switch, a->n_sets, k_start * n_sub);
     int64_t k, i, j;
     for (i = 0; i < a->p_len; i++) pcur[i] = p_sets[ps0 * a->p_len + i];
@@ -264,7 +385,11 @@ eq_run_t(const eq_args *a, int64_t k_start, int64_t k_end, double *x, double *z,
                                     pcur[base + 2 * i + 1]);
             }
         }
-        eq_measure(x, a->c_idx, ny, a->lv, plain ? 0 : a->nlv, rng, y, zbuf);
+        if (rig) {
+            eq_rig_measure(a, k, x, rng, y, zbuf, rs);
+        } else {
+            eq_measure(x, a->c_idx, ny, a->lv, plain ? 0 : a->nlv, rng, y, zbuf);
+        }
         t = (double)k / rate;
         eq_ctrl_output(t, z, nz, y, ny, r, nr, a->cp, ncp, u_cmd);
         if (estimates) eq_ctrl_estimate(t, z, nz, y, ny, r, nr, a->cp, ncp, xhat);
@@ -275,6 +400,7 @@ eq_run_t(const eq_args *a, int64_t k_start, int64_t k_end, double *x, double *z,
             u_app[i] = delay ? u_prev[i] : u_sat[i];
             u_prev[i] = u_sat[i];
         }
+        if (rig) eq_rig_actuate(a, k, u_app, u_act, pcur + base, rng, zbuf, rs);
         if (record) {
             double *row = rec + k * a->rec_w;
             for (i = 0; i < n; i++) {
@@ -285,14 +411,14 @@ eq_run_t(const eq_args *a, int64_t k_start, int64_t k_end, double *x, double *z,
             for (i = 0; i < m; i++) {
                 row[c_cmd + i] = u_cmd[i];
                 row[c_sat + i] = u_sat[i];
-                row[c_app + i] = u_app[i];
+                row[c_app + i] = u_act[i];
             }
         }
         if (accumulate) {
             for (i = 0; i < m; i++) {
                 acc[a_peak + i] = eq_maxf(acc[a_peak + i], fabs(u_cmd[i]));
-                acc[a_peak_app + i] = eq_maxf(acc[a_peak_app + i], fabs(u_app[i]));
-                acc[a_u2 + i] += u_app[i] * u_app[i];
+                acc[a_peak_app + i] = eq_maxf(acc[a_peak_app + i], fabs(u_act[i]));
+                acc[a_u2 + i] += u_act[i] * u_act[i];
             }
             if (saturated) acc[a_sat] += 1.0;
             for (i = 0; i < n; i++) {
@@ -320,25 +446,32 @@ eq_run_t(const eq_args *a, int64_t k_start, int64_t k_end, double *x, double *z,
             }
         }
         if (k >= n_samples) return;
-        if (eq_advance_t(a, k, x, u_app, p_sets, lin_s, rng, status, scr, width, a->stop, plain)) {
-            return;
+        if (gf != NULL) eq_gf_row = k < a->n_gforce ? gf + k * nq : NULL;
+        {
+            int ended = eq_advance_t(a, k, x, u_act, p_sets, lin_s, rng, status, scr, width,
+                                     a->stop, plain);
+            eq_gf_row = NULL;
+            if (ended) return;
         }
     }
 }
 
 static void eq_run(const eq_args *a, int64_t k_start, int64_t k_end, double *x, double *z,
                    double *u_prev, uint64_t *rng, const double *p_sets, const double *lin_s,
-                   double *rec, double *acc, int64_t *status, double *scr, int64_t width)
+                   double *rec, double *acc, int64_t *status, double *scr, int64_t width,
+                   double *rs, const double *gf)
 {
-    eq_run_t(a, k_start, k_end, x, z, u_prev, rng, p_sets, lin_s, rec, acc, status, scr, width, 0);
+    eq_run_t(a, k_start, k_end, x, z, u_prev, rng, p_sets, lin_s, rec, acc, status, scr, width,
+             rs, gf, 0);
 }
 
 static void eq_run_plain(const eq_args *a, int64_t k_start, int64_t k_end, double *x, double *z,
                          double *u_prev, uint64_t *rng, const double *p_sets,
                          const double *lin_s, double *rec, double *acc, int64_t *status,
-                         double *scr, int64_t width)
+                         double *scr, int64_t width, double *rs, const double *gf)
 {
-    eq_run_t(a, k_start, k_end, x, z, u_prev, rng, p_sets, lin_s, rec, acc, status, scr, width, 1);
+    eq_run_t(a, k_start, k_end, x, z, u_prev, rng, p_sets, lin_s, rec, acc, status, scr, width,
+             rs, gf, 1);
 }
 
 static double *eq_scratch(const eq_args *a, int64_t *width)
@@ -357,7 +490,7 @@ EQ_EXPORT int eq_run_one(const eq_args *a)
     if (scr == NULL) return -1;
     (eq_plain(a) ? eq_run_plain : eq_run)(a, a->k_start, a->k_end, a->x, a->z, a->u_prev,
                                           a->rng, a->p_sets, a->lin_s, a->rec, a->acc,
-                                          a->status, scr, width);
+                                          a->status, scr, width, a->rig_s, a->gforce);
     for (i = 0; i < EQ_N; i++) a->fell_x[i] = EQ_ROW(scr, width, EQ_S_FELL_X)[i];
     free(scr);
     return 0;
@@ -383,7 +516,8 @@ EQ_EXPORT int eq_run_many(const eq_args *a)
         int64_t width, i;
         double *scr = eq_scratch(a, &width);
         const int64_t nz1 = a->nz > 0 ? a->nz : 1;
-        double *x = (double *)malloc(sizeof(double) * (EQ_N + EQ_M + nz1 + a->acc_w));
+        const int64_t rig_len = eq_rig_len(a);
+        double *x = (double *)malloc(sizeof(double) * (EQ_N + EQ_M + nz1 + a->acc_w + rig_len));
         uint64_t rng[4];
         int64_t status[4];
         if (scr == NULL || x == NULL) {
@@ -396,6 +530,9 @@ EQ_EXPORT int eq_run_many(const eq_args *a)
             double *u_prev = x + EQ_N;
             double *z = u_prev + EQ_M;
             double *acc = z + nz1;
+            double *rs = acc + a->acc_w;
+            const double *gf = a->gforce == NULL ? NULL
+                : a->gforce + r * a->n_gforce * a->rig_i[EQ_RI_NQ];
             for (i = 0; i < EQ_N; i++) x[i] = a->x0s[r * EQ_N + i];
             for (i = 0; i < a->nz; i++) z[i] = a->z[i];
             for (i = 0; i < EQ_M; i++) u_prev[i] = 0.0;
@@ -406,7 +543,7 @@ EQ_EXPORT int eq_run_many(const eq_args *a)
                 a, 0, n_rows, x, z, u_prev, rng, a->p_sets + r * a->n_sets * a->p_len,
                 a->lin_s == NULL ? NULL : a->lin_s + r * lin_size,
                 a->rec == NULL ? NULL : a->rec + r * n_rows * a->rec_w,
-                acc, status, scr, width);
+                acc, status, scr, width, rs, gf);
             for (i = 0; i < EQ_N; i++) {
                 a->x_ends[r * EQ_N + i] = x[i];
                 a->fell_x[r * EQ_N + i] = EQ_ROW(scr, width, EQ_S_FELL_X)[i];

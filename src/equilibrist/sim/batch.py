@@ -46,6 +46,7 @@ from equilibrist.sim.batch_result import BatchResult, _batch_result
 from equilibrist.sim.events import Event
 from equilibrist.sim.kernel import Kernel, thread_count, threads_for
 from equilibrist.sim.noise import Noise, SeedLike, describe_seed, generator_state, seed_sequence
+from equilibrist.sim.rig import Rig
 from equilibrist.sim.run import _progress_bar, call_interruptibly
 from equilibrist.sim.setup_checks import _has_operating_point
 from equilibrist.sim.setup_data import Setup
@@ -85,6 +86,7 @@ def simulate_batch(
     max_memory: float | None = None,
     progress: bool = False,
     max_steps: float | None = budget.DEFAULT_MAX_STEPS,
+    rig: Rig | None = None,
 ) -> BatchResult:
     """*runs* independent runs of the same closed loop, in parallel.
 
@@ -108,6 +110,9 @@ def simulate_batch(
         The most physics steps the batch may take over all its runs
         (default :data:`~equilibrist.sim.setup.DEFAULT_MAX_STEPS`); a batch
         that needs more is refused before it starts. None: no bound.
+    rig : Rig, optional
+        A rig's effects (:mod:`equilibrist.sim.rig`), the same for every run;
+        its noise and perturbations are drawn from each run's seed.
 
     The runs are made in one call of the compiled core, which hands them
     to the threads a few at a time (so that runs that end early, having
@@ -137,12 +142,13 @@ def simulate_batch(
         system, controller, duration=duration, rate=rate, physics_step=physics_step,
         integrator=integrator, rtol=rtol, atol=atol, plant=plant, x0=template_x0, delay=delay,
         noise=noise, reference=reference, events=events, outputs=None, region=region,
-        max_steps=max_steps, runs=runs, threads=_threads(workers),
+        max_steps=max_steps, runs=runs, threads=_threads(workers), rig=rig,
     )
     _check_memory(setup, runs, record, max_memory)
     x0s = _initial_states(system, x0, runs, setup.x_op)
     pmat = _parameter_matrix(system, params, runs)
-    base_seq = seed_sequence(seed) if (noise is not None or seed is not None) else None
+    draws = noise is not None or (setup.rig is not None and setup.rig.draws)
+    base_seq = seed_sequence(seed) if (draws or seed is not None) else None
     seqs, seeds, rngs = _run_seeds(setup, base_seq, runs)
     if not setup.compiled:
         return _python_batch(setup, x0s, pmat, seqs, record, progress, workers)
@@ -152,6 +158,9 @@ def simulate_batch(
     else:
         lin_r = np.zeros((runs, p_sets_r.shape[1], 0, 0))
     runs_in = dict(x0s=x0s, rngs=rngs, p_sets_r=p_sets_r, lin_r=lin_r)
+    if setup.rig is not None and setup.rig.perturbations > 0:
+        runs_in["gforce"] = np.stack([setup.rig.pulses(system, setup.rate, setup.n_rows, s)[0]
+                                      for s in seqs if s is not None])
     return _run_compiled_batch(setup, runs_in, pmat, seeds, record=record, workers=workers,
                                progress=progress)
 
@@ -177,7 +186,8 @@ def _run_seeds(setup: Setup, base_seq: np.random.SeedSequence | None, runs: int
     description, and its generator state (zeros where the core draws nothing)."""
     # The runs' generators are made only where the core draws from them (noise); otherwise
     # each run's seed is only named (the same names, without making 10^5 SeedSequences).
-    draws = setup.lv.shape[0] > 0 or (setup.lw.ndim == 2 and setup.lw.shape[1] > 0)
+    draws = setup.lv.shape[0] > 0 or (setup.lw.ndim == 2 and setup.lw.shape[1] > 0) \
+        or (setup.rig is not None and setup.rig.draws)
     seqs: list[np.random.SeedSequence | None] = [None] * runs
     seeds: Sequence[dict[str, object] | None] = [None] * runs
     rngs = np.zeros((runs, 4), dtype=np.uint64)
@@ -207,7 +217,9 @@ def _run_compiled_batch(setup: Setup, runs_in: dict[str, np.ndarray], pmat: np.n
                 fell_xs=np.zeros((runs, n)), x_ends=np.zeros((runs, n)))
     stop = np.zeros(1, dtype=np.int64)
     core = kernel.core(setup.cp)
-    shared = dict(
+    rig_i, rig_f = setup.rig_arrays()
+    shared: dict[str, Any] = dict(
+        rig_i=rig_i, rig_f=rig_f,
         iopts=setup.iopts(record=record), fopts=setup.fopts, z0=setup.z0, op=setup.op,
         c_idx=setup.c_idx, cp=setup.cp, ref=setup.ref, uff=setup.uff, lv=setup.lv, lw=setup.lw,
         p_switch=setup.p_switch, region=setup.region, kicks=setup.kicks,

@@ -61,7 +61,8 @@ FIELDS: tuple[tuple[str, str], ...] = (
     ("pulse_value", "pf"), ("rec_cols", "pi"), ("acc_cols", "pi"), ("rec", "pf"),
     ("rec_w", "i"), ("acc", "pf"), ("status", "pi"), ("fell_x", "pf"), ("stop", "vi"),
     ("n_runs", "i"), ("n_threads", "i"), ("x0s", "pf"), ("rngs", "pu"), ("acc_w", "i"),
-    ("x_ends", "pf"), ("bal", "pf"), ("nbal", "i"),
+    ("x_ends", "pf"), ("bal", "pf"), ("nbal", "i"), ("rig_i", "pi"), ("rig_f", "pf"),
+    ("rig_s", "pf"), ("gforce", "pf"), ("n_gforce", "i"),
 )
 _C_TYPES = {"i": "int64_t", "pi": "int64_t *", "pf": "double *", "pu": "uint64_t *",
             "vi": "volatile int64_t *"}
@@ -99,9 +100,45 @@ def _body() -> str:
 
 
 _GLUE = """
+/* The generalized forces on the coordinates held over the current physics step (a rig's
+ * perturbation, equilibrist.sim.rig), or NULL: set by the core around a period's steps, per
+ * thread. f then adds M(q)^-1 tau to the accelerations, the mass matrix solved by Cholesky
+ * (eq_gforce_add); without it f is the system's own, the same bits. */
+static __thread const double *eq_gf_row = NULL;
+
+static inline void eq_gforce_add(const double *x, const double *p, const double *tau, double *out)
+{{
+#if EQ_NQ > 0
+    double mm[EQ_NQ * EQ_NQ], low[EQ_NQ * EQ_NQ], y[EQ_NQ];
+    int i, j, k;
+    {mass}((double *)x, EQ_N, (double *)p, EQ_NP, mm, EQ_NQ, EQ_NQ);
+    for (i = 0; i < EQ_NQ; i++) {{
+        for (j = 0; j <= i; j++) {{
+            double s = mm[i * EQ_NQ + j];
+            for (k = 0; k < j; k++) s -= low[i * EQ_NQ + k] * low[j * EQ_NQ + k];
+            low[i * EQ_NQ + j] = i == j ? sqrt(s) : s / low[j * EQ_NQ + j];
+        }}
+    }}
+    for (i = 0; i < EQ_NQ; i++) {{
+        double s = tau[i];
+        for (k = 0; k < i; k++) s -= low[i * EQ_NQ + k] * y[k];
+        y[i] = s / low[i * EQ_NQ + i];
+    }}
+    for (i = EQ_NQ - 1; i >= 0; i--) {{
+        double s = y[i];
+        for (k = i + 1; k < EQ_NQ; k++) s -= low[k * EQ_NQ + i] * y[k];
+        y[i] = s / low[i * EQ_NQ + i];
+    }}
+    for (i = 0; i < EQ_NQ; i++) out[EQ_NQ + i] += y[i];
+#else
+    (void)x; (void)p; (void)tau; (void)out;
+#endif
+}}
+
 static inline void eq_f(const double *x, const double *u, const double *p, double *out)
 {{
     {f}((double *)x, EQ_N, (double *)u, EQ_M, (double *)p, EQ_NP, out, EQ_N);
+    if (eq_gf_row != NULL) eq_gforce_add(x, p, eq_gf_row, out);
 }}
 
 static inline double eq_energy(const double *x, const double *p)
@@ -191,6 +228,7 @@ def unit_source(system: System, key: bytes | tuple[int, ...] | None = None,
                           library=tasks.rewards_source() if with_env else "")
     f = dynamics.function("f", ("F1", "F1", "F1", "F1"))
     energy = dynamics.function("energy", ("F1", "F1"))
+    mass = dynamics.function("mass_matrix", ("F1", "F1", "F2"))
     rewards = [dynamics.function(k.reward_function, tasks.REWARD_TYPES).name
                for k in tasks.TASK_KINDS] if with_env else []
     ctrl, names = controller_module(key, controller)
@@ -200,7 +238,7 @@ def unit_source(system: System, key: bytes | tuple[int, ...] | None = None,
         "#include <math.h>\n#include <stdint.h>\n#include <stdlib.h>\n#include <string.h>\n",
         '#define EQ_EXPORT __attribute__((visibility("default")))\n',
         f"#define EQ_N {system.n_states}\n#define EQ_M {system.n_inputs}\n"
-        f"#define EQ_NP {len(system.p)}\n",
+        f"#define EQ_NP {len(system.p)}\n#define EQ_NQ {int(system.functions.N_Q)}\n",
         _constants({**layout.constants(), **integrators.constants()}),
         struct_source(),
         libm.c_source(log=True, exp=True),
@@ -209,7 +247,7 @@ def unit_source(system: System, key: bytes | tuple[int, ...] | None = None,
         dynamics.c_source(),
         "\n/* ---- the controller, from its Python definition ---- */\n",
         ctrl.c_source(),
-        _GLUE.format(f=f.name, energy=energy.name, **names),
+        _GLUE.format(f=f.name, energy=energy.name, mass=mass.name, **names),
         _reward_dispatch(rewards) if with_env else "",
         "/* ---- the generated part ends here; the core's body follows ---- */\n",
         _body(),

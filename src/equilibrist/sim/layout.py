@@ -108,7 +108,23 @@ ACC = Blocks("ACC", (("peak_u", "m"), ("sum_u2", "m"), ("n_sat", "1"), ("peak_dx
 #: Rows of the per-run scratch array (``fell_x`` receives the state at a fall); the
 #: integrator's work rows (:func:`equilibrist.sim.integrators.work_rows`) start at ``wk``.
 SCRATCH = Slots("S", ("y", "x_hat", "u_cmd", "u_sat", "u_app", "z_new", "xprev", "ubuf", "wvec",
-                      "zbuf", "pcur", "fell_x", "wk"))
+                      "zbuf", "pcur", "fell_x", "u_act", "wk"))
+#: A rig's effects between the plant and the controller (:mod:`equilibrist.sim.rig`), in
+#: ``rig_i``: any effect at all (``on``; 0: the core's path without them), the measurement's
+#: and the actuation's delays [samples], the motor's torque response (0/1), the encoders
+#: (0/1), the velocities' low-pass filter (0/1), and the coordinates (the state is
+#: ``[q, q_dot]`` with ``nq`` of each); in ``rig_f``: the response's ``k`` per period, the
+#: torque noise's and the velocity noise's standard deviations, the encoders' step and the
+#: filter's ``a`` per period. A run's rig state (``rig_s``) is :func:`rig_state_len` doubles.
+RIG_I = Slots("RI", ("on", "meas_delay", "act_delay", "response", "encoder", "filter", "nq"))
+RIG_F = Slots("RF", ("response_k", "torque_sigma", "vel_sigma", "encoder_step", "filter_a"))
+
+
+def rig_state_len(m: int, ny: int, nq: int, act_delay: int, meas_delay: int) -> int:
+    """Doubles of one run's rig state: the motors' torques, the actuation's ring, the
+    measurement's ring, the encoders' last positions and the filtered velocities (the C's
+    ``eq_rig_len`` reads the same sizes)."""
+    return m + m * (act_delay + 1) + ny * (meas_delay + 1) + nq + ny
 #: The environments' settings (:mod:`equilibrist.envs.core` writes them): the slots of
 #: ``ci``'s head (sizes, switches, and the offsets of ``cf``'s blocks and of ``ci``'s own
 #: index blocks), of ``cf``'s head, and of a copy's ``us`` row after its four generator words.
@@ -129,7 +145,8 @@ ENV_SCRATCH = Slots("ES", ("u", "w", "zbuf", "xprev", "work"))
 def constants() -> dict[str, int]:
     """Every slot, column block and scratch row as a source constant (``_IO_DELAY = 2``...)."""
     out: dict[str, int] = {}
-    for part in (IOPTS, FOPTS, STATUS, RECORD, ACC, SCRATCH, ENV_CI, ENV_CF, ENV_SCRATCH):
+    for part in (IOPTS, FOPTS, STATUS, RECORD, ACC, SCRATCH, ENV_CI, ENV_CF, ENV_SCRATCH,
+                 RIG_I, RIG_F):
         out.update(part.constants())
     out.update({f"_US_{name.upper()}": 4 + i for i, name in enumerate(ENV_US)})
     out["_US_WIDTH"] = 4 + len(ENV_US)

@@ -43,6 +43,7 @@ from equilibrist.sim.events import Event
 from equilibrist.sim.kernel import Kernel
 from equilibrist.sim.noise import Noise, SeedLike, describe_seed, generator_state, seed_sequence
 from equilibrist.sim.result import SimResult
+from equilibrist.sim.rig import Rig
 
 # A run of at most this many physics steps (RK4 or the linear plant) is one
 # call of the compiled core in the calling thread: a few milliseconds, too
@@ -140,6 +141,7 @@ def simulate(
     progress: bool = False,
     excitation: object = None,
     max_steps: float | None = budget.DEFAULT_MAX_STEPS,
+    rig: Rig | None = None,
 ) -> SimResult:
     """Simulate *system* under *controller* for *duration* seconds.
 
@@ -198,6 +200,10 @@ def simulate(
         The most physics steps the run may take (default
         :data:`~equilibrist.sim.setup.DEFAULT_MAX_STEPS`); a run that needs
         more is refused before it starts. None: no bound.
+    rig : Rig, optional
+        A rig's effects between the plant and the controller (torque response,
+        delays, noise, encoders, perturbations: :mod:`equilibrist.sim.rig`);
+        None: none. Recorded in the result's settings (``"rig"``).
 
     Returns
     -------
@@ -207,9 +213,10 @@ def simulate(
         system, controller, duration=duration, rate=rate, physics_step=physics_step,
         integrator=integrator, rtol=rtol, atol=atol, plant=plant, x0=x0, delay=delay,
         noise=noise, reference=reference, events=events, outputs=outputs, region=region,
-        excitation=excitation, max_steps=max_steps,
+        excitation=excitation, max_steps=max_steps, rig=rig,
     )
-    seq = seed_sequence(seed) if (noise is not None or seed is not None) else None
+    draws = noise is not None or (setup.rig is not None and setup.rig.draws)
+    seq = seed_sequence(seed) if (draws or seed is not None) else None
     rng = generator_state(seq) if seq is not None else np.zeros(4, dtype=np.uint64)
     kernel = Kernel(system, setup.nonlinear)
     if setup.compiled:
@@ -236,8 +243,10 @@ def _run_compiled(setup: setup_data.Setup, kernel: Kernel, rng: np.ndarray,
     fell_x = np.zeros(n)
     stop = np.zeros(1, dtype=np.int64)
     core = kernel.core(setup.cp)
+    rig_i, rig_f = setup.rig_arrays()
+    gforce, pulses = setup.rig_forces(seq)
     # A single run's metrics come from its trajectory: nothing is accumulated.
-    arrays = dict(
+    arrays: dict[str, Any] = dict(
         iopts=setup.iopts(accumulate=False), fopts=setup.fopts, x=x, z=setup.z0.copy(),
         u_prev=np.zeros(setup.system.n_inputs), rng=rng, op=setup.op, c_idx=setup.c_idx,
         cp=setup.cp, ref=setup.ref, uff=setup.uff, lv=setup.lv, lw=setup.lw, p_sets=p_sets,
@@ -245,6 +254,7 @@ def _run_compiled(setup: setup_data.Setup, kernel: Kernel, rng: np.ndarray,
         kicks=setup.kicks, kick_value=setup.kick_value, pulses=setup.pulses,
         pulse_value=setup.pulse_value, rec_cols=setup.rec_cols, acc_cols=setup.acc_cols,
         rec=rec, acc=np.zeros(setup.acc_len), status=status, fell_x=fell_x, stop=stop,
+        rig_i=rig_i, rig_f=rig_f, rig_s=setup.rig_state(), gforce=gforce,
     )
     total = setup.n_rows
     rows, fell = layout.STATUS["rows"], layout.STATUS["fell"]
@@ -252,7 +262,7 @@ def _run_compiled(setup: setup_data.Setup, kernel: Kernel, rng: np.ndarray,
             and setup.n_samples * setup.n_sub <= _FIRST_CHUNK_STEPS:
         core.run_one(k_start=0, k_end=total, **arrays)
         return _result(setup, rec, int(status[rows]), status, fell_x, x, seq,
-                       estimates=setup.estimates)
+                       estimates=setup.estimates, pulses=pulses)
     if not kernel.compiled(setup.cp):  # compiled (or loaded) here: Ctrl-C can stop that
         core.run_one(k_start=0, k_end=0, **arrays)
 
@@ -281,7 +291,7 @@ def _run_compiled(setup: setup_data.Setup, kernel: Kernel, rng: np.ndarray,
         if bar is not None:
             bar.close()
     return _result(setup, rec, int(status[rows]), status, fell_x, x, seq,
-                   estimates=setup.estimates)
+                   estimates=setup.estimates, pulses=pulses)
 
 
 class StopRun(Exception):
@@ -396,7 +406,7 @@ def _outside(x: np.ndarray, region: np.ndarray) -> int:
 
 def _result(setup: setup_data.Setup, rec: np.ndarray, rows: int, status: np.ndarray,
             fell_x: np.ndarray, x_end: np.ndarray, seq: np.random.SeedSequence | None,
-            *, estimates: bool) -> SimResult:
+            *, estimates: bool, pulses: dict[str, object] | None = None) -> SimResult:
     """The result of a run recorded in *rec* (its first *rows* rows).
 
     The result's arrays are read-only views of *rec* (which nothing else
@@ -411,6 +421,8 @@ def _result(setup: setup_data.Setup, rec: np.ndarray, rows: int, status: np.ndar
     fell = bool(status[st["fell"]])
     settings = setup.describe()
     settings["seed"] = None if seq is None else describe_seed(seq)
+    if pulses is not None:
+        settings["rig"] = {**setup.rig.describe(), "pulses": pulses} if setup.rig else pulses
     return SimResult(
         system=sysm.key,
         system_digest=sysm.digest,

@@ -30,6 +30,8 @@ from equilibrist.sim.budget import (
 )
 from equilibrist.sim.controllers import LQG, StateFeedback
 from equilibrist.sim.noise import Noise
+from equilibrist.sim.rig import Rig
+from equilibrist.sim.rig import check as check_rig
 from equilibrist.sim.setup_checks import (
     _check_regular,
     _has_operating_point,
@@ -121,6 +123,7 @@ def build(
     max_steps: object = DEFAULT_MAX_STEPS,
     runs: int = 1,
     threads: int = 1,
+    rig: Rig | None = None,
 ) -> Setup:
     """Validate the settings of a run (collecting every problem) and pack them.
 
@@ -134,7 +137,7 @@ def build(
                     integrator=integrator, rtol=rtol, atol=atol, plant=plant, x0=x0,
                     delay=delay, noise=noise, reference=reference, events=events,
                     outputs=outputs, region=region, excitation=excitation,
-                    max_steps=max_steps, runs=runs, threads=threads)
+                    max_steps=max_steps, runs=runs, threads=threads, rig=rig)
     key = _built_key(system, controller, settings) if isinstance(system, System) else None
     if key is not None:
         entry = _BUILT.get(key)
@@ -175,6 +178,12 @@ def build(
     placed = steps.events(system, evs, h, end_time, problems)
     region_spec, reg = steps.region_of(system, region, x_op, designed, problems)
     lw, lv = steps.noise_roots(noise, n, h, outs, problems)
+    the_rig = check_rig(rig)
+    if the_rig is not None:
+        problems += the_rig.problems(system, run_rate)
+        if not compiled:
+            problems.append("a rig's effects run with a compiled controller (linear or "
+                            "nonlinear), not one written in Python")
 
     if problems or h is None or n_sub is None or n_samples is None or run_rate is None or dur is None:
         raise SimulationError("; ".join(problems) if problems else "invalid simulation settings")
@@ -202,7 +211,7 @@ def build(
         kick_value=np.array(placed.kick_value, dtype=float),
         pulses=np.array(placed.pulses, dtype=np.int64).reshape(-1, 3),
         pulse_value=np.array(placed.pulse_value, dtype=float), region=reg, region_spec=region_spec,
-        duration=float(dur), reference=track.ref_signal, excitation=excite,
+        duration=float(dur), reference=track.ref_signal, excitation=excite, rig=the_rig,
     )
     if key is not None and setup.compiled:
         if len(_BUILT) >= _BUILT_MAX:

@@ -15,6 +15,7 @@ from equilibrist.numeric.system import System
 from equilibrist.sim import events as ev
 from equilibrist.sim import integrators, layout
 from equilibrist.sim.noise import Noise
+from equilibrist.sim.rig import Rig
 
 if TYPE_CHECKING:
     from equilibrist.sim.signals import Signal
@@ -66,6 +67,7 @@ class Setup:
     duration: float
     reference: Signal | None
     excitation: Signal | None = None
+    rig: Rig | None = None
 
     @property
     def n_rows(self) -> int:
@@ -84,6 +86,25 @@ class Setup:
             n_sub=self.n_sub, estimates=int(self.estimates), accumulate=int(accumulate),
             integrator=integrators.number("linear" if self.plant == "linear" else self.integrator),
         )
+
+    def rig_arrays(self) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The core's ``rig_i`` and ``rig_f``, or (None, None) without a rig."""
+        if self.rig is None:
+            return None, None
+        return self.rig.pack(self.system, self.rate, len(self.outputs))
+
+    def rig_state(self) -> np.ndarray | None:
+        """A fresh rig state for one run (None without a rig)."""
+        if self.rig is None:
+            return None
+        return np.zeros(self.rig.state_len(self.system, self.rate, len(self.outputs)))
+
+    def rig_forces(self, seq: np.random.SeedSequence | None
+                   ) -> tuple[np.ndarray | None, dict[str, object] | None]:
+        """One run's perturbations (generalized forces per sample) and their description."""
+        if self.rig is None or self.rig.perturbations == 0 or seq is None:
+            return None, None
+        return self.rig.pulses(self.system, self.rate, self.n_rows, seq)
 
     @property
     def fopts(self) -> np.ndarray:
@@ -180,4 +201,4 @@ class Setup:
             "events": ev.describe(self.events),
             "region": {k: [lo, hi] for k, (lo, hi) in self.region_spec.items()},
             "excitation": None if self.excitation is None else self.excitation.describe(),
-        }
+        } | ({} if self.rig is None else {"rig": self.rig.describe()})

@@ -138,6 +138,17 @@ class NativeCore:
             bal=bal, nbal=0 if bal is None else 1,
         )
 
+    @staticmethod
+    def _rig(rig_i: np.ndarray | None, rig_f: np.ndarray | None,
+             gforce: np.ndarray | None) -> dict[str, object]:
+        """The rig's fields of the argument struct (none: NULL, the core's path without)."""
+        if gforce is not None and gforce.size == 0:
+            gforce = None
+        if gforce is not None and rig_i is None:
+            raise TypeError("generalized forces need the rig's options (the coordinates)")
+        return dict(rig_i=rig_i, rig_f=rig_f, gforce=gforce,
+                    n_gforce=0 if gforce is None else gforce.shape[-2])
+
     def run_one(self, k_start: int, k_end: int, iopts: np.ndarray, fopts: np.ndarray,
                 x: np.ndarray, z: np.ndarray, u_prev: np.ndarray, rng: np.ndarray,
                 op: np.ndarray, c_idx: np.ndarray, cp: np.ndarray, ref: np.ndarray,
@@ -146,9 +157,14 @@ class NativeCore:
                 kicks: np.ndarray, kick_value: np.ndarray, pulses: np.ndarray,
                 pulse_value: np.ndarray, rec_cols: np.ndarray, acc_cols: np.ndarray,
                 rec: np.ndarray, acc: np.ndarray, status: np.ndarray, fell_x: np.ndarray,
-                stop: np.ndarray) -> None:
+                stop: np.ndarray, rig_i: np.ndarray | None = None,
+                rig_f: np.ndarray | None = None, rig_s: np.ndarray | None = None,
+                gforce: np.ndarray | None = None) -> None:
         """One closed-loop run, or samples *k_start* .. *k_end* - 1 of one (``eq_run_one``:
-        *x*, *z*, *u_prev*, *rng*, *rec*, *acc*, *status*, *fell_x* written in place)."""
+        *x*, *z*, *u_prev*, *rng*, *rec*, *acc*, *status*, *fell_x* written in place; a rig's
+        effects in *rig_i*, *rig_f* (:data:`~equilibrist.sim.layout.RIG_I`, ``RIG_F``), its
+        state *rig_s* written in place, and the generalized forces *gforce*
+        ``(samples, nq)``)."""
         values = self._common(op=op, c_idx=c_idx, cp=cp, ref=ref, uff=uff, lv=lv, lw=lw,
                               p_switch=p_switch, region=region, kicks=kicks,
                               kick_value=kick_value, pulses=pulses, pulse_value=pulse_value,
@@ -164,6 +180,9 @@ class NativeCore:
                       p_sets=p_sets, p_len=p_sets.shape[1], lin_s=lin_s, rec=rec,
                       rec_w=rec.shape[1] if rec.ndim == 2 else 0, acc=acc, status=status,
                       fell_x=fell_x, stop=stop)
+        if rig_s is not None:
+            self._out(rig_s, np.float64, "rig_s")
+        values.update(self._rig(rig_i, rig_f, gforce), rig_s=rig_s)
         args, keep = self._arrays(values)
         if self.lib.eq_run_one(ctypes.byref(args)) != 0:
             raise MemoryError("the simulation core ran out of memory")
@@ -178,10 +197,13 @@ class NativeCore:
                  rec_cols: np.ndarray, acc_cols: np.ndarray, recs: np.ndarray,
                  accs: np.ndarray, statuses: np.ndarray, fell_xs: np.ndarray,
                  x_ends: np.ndarray, stop: np.ndarray, threads: int = 1,
-                 bal: np.ndarray | None = None) -> None:
+                 bal: np.ndarray | None = None, rig_i: np.ndarray | None = None,
+                 rig_f: np.ndarray | None = None, gforce: np.ndarray | None = None) -> None:
         """Independent runs from *x0s*, in parallel on *threads* threads (``eq_run_many``:
         the per-run blocks of *recs*, *accs*, *statuses*, *fell_xs*, *x_ends* written; *bal*
-        the balance box whose last exit each run's accumulators keep)."""
+        the balance box whose last exit each run's accumulators keep; a rig's effects in
+        *rig_i*, *rig_f*, and each run's generalized forces in *gforce*
+        ``(runs, samples, nq)``)."""
         values = self._common(op=op, c_idx=c_idx, cp=cp, ref=ref, uff=uff, lv=lv, lw=lw,
                               p_switch=p_switch, region=region, kicks=kicks,
                               kick_value=kick_value, pulses=pulses, pulse_value=pulse_value,
@@ -203,6 +225,7 @@ class NativeCore:
                       rec=(recs if recs.size else None), rec_w=recs.shape[2], acc=accs,
                       acc_w=accs.shape[1], status=statuses, fell_x=fell_xs, x_ends=x_ends,
                       stop=stop)
+        values.update(self._rig(rig_i, rig_f, gforce))
         args, keep = self._arrays(values)
         if self.lib.eq_run_many(ctypes.byref(args)) != 0:
             raise MemoryError("the simulation core ran out of memory")
