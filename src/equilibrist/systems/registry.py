@@ -31,7 +31,7 @@ _VARIANT_OPTION: dict[str, str] = {}
 _DEFAULT_VARIANT: dict[str, str] = {}
 _LOADED = False
 # Modules of this package that are machinery, not systems.
-_NOT_SYSTEMS = frozenset({"registry", "files"})
+_NOT_SYSTEMS = frozenset({"registry", "files", "dfki_parameters"})
 #: The entry-point group of systems of one's own (a module declaring one or more systems).
 ENTRY_POINTS = "equilibrist.systems"
 # Modules named by those entry points: their decorated derivations join the catalogue.
