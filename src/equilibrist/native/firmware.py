@@ -22,6 +22,7 @@ controller:
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 
 import numpy as np
@@ -88,6 +89,8 @@ def ctrl_header(a: Adapter) -> str:
 #define HIL_NR {a.references}
 #define HIL_NE {a.estimate}
 #define HIL_RATE {float(a.rate)!r}
+/* The rate as the hello carries it (binary64, little-endian), whatever size double has here. */
+#define HIL_RATE_BYTES {{{", ".join(f"0x{b:02x}" for b in struct.pack("<d", float(a.rate)))}}}
 #define HIL_ID "{ident}"
 
 /* Start the controller again (at power-up and on the host's reset). */
@@ -247,7 +250,7 @@ static void send_error(const hil_device *d, unsigned int seq, const char *text)
 static void answer_hello(hil_device *d, unsigned int seq, const unsigned char *p, size_t n)
 {
     unsigned char out[12 + 8 + HIL_ID_BYTES];
-    double rate = HIL_RATE;
+    static const unsigned char rate[8] = HIL_RATE_BYTES;  /* an AVR's double has 4 bytes */
     int size = 4;
     if (n >= 2 && p[1] == 8 && sizeof(double) == 8) size = 8;  /* float64 where the device has it */
     d->real_size = size;
@@ -257,7 +260,7 @@ static void answer_hello(hil_device *d, unsigned int seq, const unsigned char *p
     out[1] = (unsigned char)size;
     put_u16(out + 2, HIL_N); put_u16(out + 4, HIL_M); put_u16(out + 6, HIL_P);
     put_u16(out + 8, HIL_NR); put_u16(out + 10, HIL_NE);
-    memcpy(out + 12, &rate, 8);
+    memcpy(out + 12, rate, 8);
     memcpy(out + 20, HIL_ID, strlen(HIL_ID) < HIL_ID_BYTES ? strlen(HIL_ID) : HIL_ID_BYTES);
     hil_ctrl_init();
     hil_send(d, HIL_HELLO_REPLY, seq, out, sizeof out);
