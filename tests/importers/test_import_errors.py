@@ -79,8 +79,6 @@ CASES = {
                                                       '<joint name="a" type="ball"/>')), "ball joint 'a'"),
     "free_joint": ("bad.xml", _mjcf(_PENDULUM.replace('<joint name="a" axis="0 1 0"/>',
                                                       '<freejoint name="a"/>')), "free joint 'a'"),
-    "frictionloss": ("bad.xml", _mjcf(_PENDULUM.replace('axis="0 1 0"', 'axis="0 1 0" frictionloss="0.1"')),
-                     "frictionloss"),
     "tendon": (
         "bad.xml",
         _mjcf(_PENDULUM, '<tendon><fixed name="tie"><joint joint="a" coef="1"/></fixed></tendon>'),

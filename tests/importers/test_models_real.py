@@ -196,17 +196,18 @@ def test_every_problem_is_listed(tmp_path: Path, capsys) -> None:
     model = tmp_path / "many.xml"
     model.write_text("""<mujoco model="many">
   <worldbody>
-    <body name="a"><joint name="ja" axis="0 1 0" frictionloss="1"/>
+    <body name="a"><joint name="ja" axis="0 1 0"/>
       <inertial pos="0 0 0.5" mass="1" diaginertia="0.1 0.1 0.01"/>
-      <body name="b" pos="0 0 1"><joint name="jb" axis="0 1 0" frictionloss="1"/>
+      <body name="b" pos="0 0 1"><joint name="jb" type="ball"/>
         <inertial pos="0 0 0.5" mass="1" diaginertia="0.1 0.1 0.01"/></body></body>
   </worldbody>
   <tendon><fixed name="t"><joint joint="ja" coef="1"/></fixed></tendon>
+  <equality><joint name="e" joint1="ja"/></equality>
 </mujoco>""")
     assert main(["show", str(model)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
-    assert "tendon 't'" in err and "joint 'ja' has frictionloss" in err and "joint 'jb' has frictionloss" in err
+    assert "tendon 't'" in err and "equality constraint 'e'" in err and "ball joint 'jb'" in err
     assert "more problem" not in err
 
 

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -44,6 +45,7 @@ from equilibrist.mechanics.spec import (
     OperatingPoint,
     Parameter,
     SystemSpec,
+    friction,
     nonnegative,
     positive,
 )
@@ -78,7 +80,7 @@ FALL_ANGLE = math.pi / 2
 # rather than left deriving for hours (docs/models.md).
 MAX_COORDINATES = 4
 
-_SOURCES = ("__init__.py", "tree.py", "derive.py", "urdf.py")
+_SOURCES = ("__init__.py", "tree.py", "derive.py", "urdf.py", "urdf_clean.py")
 
 
 def _importer_source() -> bytes:
@@ -110,7 +112,8 @@ def load_model_file(file: Path, *, origin: str, content: bytes) -> Entry:
         from equilibrist.importers.urdf import read_urdf
 
         facts = read_urdf(file, content)
-        tree0 = read_tree(file, joint_order=facts.joint_order, actuators=())
+        tree0 = read_tree(file, joint_order=facts.joint_order, actuators=(), text=facts.text,
+                          stand_ins=facts.stand_ins, friction_form="atan")
         position = {j.name: k for k, j in enumerate(tree0.joints)}
         actuators = []
         for t in facts.transmissions:
@@ -120,13 +123,17 @@ def load_model_file(file: Path, *, origin: str, content: bytes) -> Entry:
                     "which the compiled model does not have"
                 )
             actuators.append(ActuatorData(t.actuator, position[t.joint], t.reduction, t.low, t.high))
-        tree = read_tree(file, joint_order=facts.joint_order, actuators=tuple(actuators))
+        tree = read_tree(file, joint_order=facts.joint_order, actuators=tuple(actuators), text=facts.text,
+                         stand_ins=facts.stand_ins, friction_form="atan")
+        tree = replace(tree, notes=tree.notes + facts.notes)
+        unlimited = tuple(t.actuator for t in facts.transmissions if not t.limited)
         kind = "URDF"
     else:
         _check_xml(file, content)
         tree = read_tree(file)
+        unlimited = ()
         kind = "MJCF"
-    spec = build_spec(tree, name=file.name, kind=kind, origin=origin)
+    spec = build_spec(tree, name=file.name, kind=kind, origin=origin, unlimited=unlimited)
 
     def derive(d: Derivation) -> SymbolicModel:
         from equilibrist.importers.derive import derive_tree
@@ -229,6 +236,19 @@ def _lyapunov(a: np.ndarray, q: np.ndarray) -> np.ndarray:
     return x.reshape(n, n, order="F")
 
 
+def _unlimited_scale(tree: Tree, k: int, scales: Sequence[float]) -> float:
+    """The design scale of actuator *k*, whose input has no limits: the force that gives its
+    joint, alone, the acceleration a tilt of every coordinate by its design scale does (at
+    the operating point, from MuJoCo's linearization); without one, that which gives it
+    1 rad/s^2 or m/s^2. Two significant digits."""
+    a, b = tree.linear
+    n = len(tree.joints)
+    j = tree.actuators[k].joint
+    accel = sum(abs(a[n + j][c]) * s for c, s in enumerate(scales)) or RATE_SCALE
+    reach = abs(b[n + j][k])
+    return float(f"{accel / reach:.2g}") if reach > 0 else 1.0
+
+
 def _check_numbers(file: Path, content: bytes, depth: int = 0) -> None:
     """Refuse, before MuJoCo reads it, a number that is not finite (``nan``,
     ``inf``) in any attribute, and an ``<include>`` that is not a regular file.
@@ -294,8 +314,9 @@ def _check_xml(file: Path, content: bytes) -> None:
         )
 
 
-def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
-    """The spec of the system of *tree* (a file called *name*)."""
+def build_spec(tree: Tree, *, name: str, kind: str, origin: str, unlimited: tuple[str, ...] = ()) -> SystemSpec:
+    """The spec of the system of *tree* (a file called *name*); *unlimited* names the
+    actuators whose input has no limits (a URDF joint without an effort limit)."""
     joints = tree.joints
     if not joints:
         raise DefinitionError(f"{name}: the model has no hinge or slide joint: nothing moves")
@@ -319,7 +340,13 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
         ))
     for j in joints:
         unit = "N*m*s/rad" if j.kind == "hinge" else "N*s/m"
-        parameters.append(nonnegative(f"{j.name}_damping", j.damping, unit, f"viscous damping of joint {j.name}"))
+        parameters.append(friction(f"{j.name}_damping", j.damping, unit, f"viscous damping of joint {j.name}"))
+    for j in joints:
+        if j.friction > 0:
+            law = "cf * atan(100 v)" if tree.friction_form == "atan" else "cf * tanh(100 v)"
+            parameters.append(friction(
+                f"{j.name}_friction", j.friction, "N*m" if j.kind == "hinge" else "N",
+                f"Coulomb friction cf of joint {j.name}", note=f"smoothed: {law}"))
     inputs = []
     taken = {*coords, *(f"{c}_dot" for c in coords), *(p.name for p in parameters)}
     scales = []
@@ -368,9 +395,19 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str) -> SystemSpec:
         for k, j in enumerate(joints)
         if j.kind == "hinge" and j.name not in tree.vertical_hinges
     }
+    if kind == "URDF":  # a URDF's joint limits bound the region (MJCF's ranges are left as they were)
+        for k, j in enumerate(joints):
+            if j.range is not None and j.range[0] < tree.key_qpos[k] < j.range[1]:
+                low, high = region.get(j.name, j.range)
+                region[j.name] = (max(low, j.range[0]), min(high, j.range[1]))
     design_scales = {j.name: HINGE_SCALE if j.kind == "hinge" else SLIDE_SCALE for j in joints}
     design_scales.update({f"{c}_dot": RATE_SCALE for c in coords})
     design_scales.update({i.name: (i.high - i.low) / 2 for i in inputs})
+    for k, (i, a) in enumerate(zip(inputs, tree.actuators, strict=True)):
+        if a.name in unlimited:
+            design_scales[i.name] = _unlimited_scale(tree, k, [design_scales[c] for c in coords])
+            scales.append(f"input {i.name} has no limits: its design scale is {design_scales[i.name]:g} "
+                          f"{i.unit}, what gives its joint the acceleration that the design scales' tilt does")
     process_noise = _process_noise(tree, [design_scales[s] for s in (*coords, *(f"{c}_dot" for c in coords))],
                                    [design_scales[i.name] for i in inputs])
     where = f"the keyframe {tree.key_name!r}" if tree.key_name else "the zero configuration"

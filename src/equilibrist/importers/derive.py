@@ -20,7 +20,8 @@ which took most of a first run's seconds (importing sympy.physics alone, a
 quarter of a second, for its units): the mass matrix from each body's
 centre-of-mass and angular-velocity Jacobians and its inertia in the world, the Coriolis and
 centrifugal terms from the mass matrix's derivatives, gravity from its
-potential; joint damping, springs and motors are each joint's generalized
+potential; joint damping, Coulomb friction (:mod:`equilibrist.mechanics.friction`),
+springs and motors are each joint's generalized
 force (the torque on the child body and its reaction on the parent, summed,
 work only through the joint's own rate); armature on the diagonal.
 
@@ -35,6 +36,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from equilibrist.importers.tree import Tree
+from equilibrist.mechanics.friction import coulomb_friction
 
 if TYPE_CHECKING:
     import sympy as sp
@@ -157,6 +159,8 @@ def derive_tree(tree: Tree, d: Derivation) -> SymbolicModel:
     for j, joint in enumerate(tree.joints):
         q = qs[j]
         generalized = -d.p[f"{joint.name}_damping"] * qds[j]
+        if joint.friction > 0:
+            generalized -= coulomb_friction(qds[j], d.p[f"{joint.name}_friction"], tree.friction_form)
         if joint.stiffness:
             generalized -= _float(joint.stiffness) * (q - _float(joint.spring_ref))
             potential += _float(joint.stiffness) * (q - _float(joint.spring_ref)) ** 2 / 2

@@ -29,10 +29,13 @@ def load_mujoco() -> Any:
     return mujoco
 
 
-def compile_model(file: Path) -> mujoco.MjModel:
-    """The compiled model of *file*; MuJoCo's error becomes one line."""
+def compile_model(file: Path, text: bytes | None = None) -> mujoco.MjModel:
+    """The compiled model of *file* (or of *text*, what was made of it); MuJoCo's error
+    becomes one line."""
     mujoco = load_mujoco()
     try:
+        if text is not None:
+            return mujoco.MjModel.from_xml_string(text.decode())
         return mujoco.MjModel.from_xml_path(str(file))
     except ValueError as exc:
         message = one_line(str(exc))

@@ -62,6 +62,10 @@ class JointData:
     damping: float
     armature: float
     limited: bool
+    # Coulomb friction (MJCF frictionloss, a URDF's <dynamics friction>), N*m or N.
+    friction: float = 0.0
+    # The joint's range where it has one (a URDF's revolute and prismatic limits).
+    range: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -125,6 +129,10 @@ class Tree:
     # noise (docs/models.md).
     linear: tuple[tuple[tuple[float, ...], ...], tuple[tuple[float, ...], ...]]
     notes: tuple[str, ...]
+    # The smooth sign of the joints' Coulomb friction (equilibrist.mechanics.friction):
+    # "tanh" for MJCF's frictionloss, which MuJoCo bounds by its value; "atan" for a URDF's
+    # friction, the form of the rigs' identified models.
+    friction_form: str = "tanh"
 
 
 def _quat_matrix(q: np.ndarray) -> np.ndarray:
@@ -145,6 +153,9 @@ def read_tree(
     *,
     joint_order: tuple[str, ...] | None = None,
     actuators: tuple[ActuatorData, ...] | None = None,
+    text: bytes | None = None,
+    stand_ins: tuple[tuple[str, float], ...] = (),
+    friction_form: str = "tanh",
 ) -> Tree:
     """Compile *file* and read its tree.
 
@@ -152,9 +163,13 @@ def read_tree(
     the compiler's own). *actuators* replaces the compiled model's (a
     URDF's transmissions, which MuJoCo's URDF reader ignores); their
     ``joint`` indices refer to the order of the compiled model's joints.
+    *text* is compiled instead of the file (a URDF made into what MuJoCo
+    reads); *stand_ins* names bodies given more inertia than they have (kg m^2
+    about each axis, taken away again); *friction_form* is the smooth sign of
+    the joints' Coulomb friction.
     """
     mujoco = load_mujoco()
-    model = compile_model(file)
+    model = compile_model(file, text)
     problems = _unmodelled(model)
     problems.extend(_not_finite(model, mujoco))
     if problems:
@@ -163,7 +178,7 @@ def read_tree(
     order = _joint_order(model, file, compiled_names, joint_order)
     position = {j: k for k, j in enumerate(order)}
     joints = _joints(model, order, compiled_names)
-    bodies = _moving_bodies(model, file, position)
+    bodies = _moving_bodies(model, file, position, dict(stand_ins))
     if actuators is None:
         actuators = _motors(model, file, position)
     sensors, ignored = _sensors(model, compiled_names)
@@ -207,6 +222,7 @@ def read_tree(
         authority=_authority(model, data, qpos, actuators, order),
         linear=_linearization(model, data, qpos, qvel, ctrl, actuators, order),
         notes=tuple(notes),
+        friction_form=friction_form,
     )
 
 
@@ -247,8 +263,6 @@ def _unmodelled(model: mujoco.MjModel) -> list[str]:
             refuse(f"ball joint {jname!r} is not modelled (only hinge and slide joints)")
         else:
             dof = int(model.jnt_dofadr[j])
-            if float(model.dof_frictionloss[dof]) > 0:
-                refuse(f"joint {jname!r} has frictionloss (dry friction), which is not modelled")
             if np.any(model.dof_dampingpoly[dof] != 0):
                 refuse(f"joint {jname!r} has nonlinear damping (dampingpoly), which is not modelled")
             if np.any(model.jnt_stiffnesspoly[j] != 0):
@@ -311,13 +325,17 @@ def _joints(model: mujoco.MjModel, order: list[int], compiled_names: list[str]) 
             damping=float(model.dof_damping[dof]),
             armature=float(model.dof_armature[dof]),
             limited=bool(model.jnt_limited[j]),
+            friction=float(model.dof_frictionloss[dof]),
+            range=(float(model.jnt_range[j, 0]), float(model.jnt_range[j, 1])) if model.jnt_limited[j] else None,
         ))
     return joints
 
 
-def _moving_bodies(model: mujoco.MjModel, file: Path, position: dict[int, int]) -> list[BodyData]:
+def _moving_bodies(model: mujoco.MjModel, file: Path, position: dict[int, int],
+                   stand_ins: dict[str, float]) -> list[BodyData]:
     """Every body that moves (welded to a body with a joint), parents first; *position*
-    maps a compiled joint's index to its place in the joints."""
+    maps a compiled joint's index to its place in the joints; *stand_ins*, the inertia
+    (kg m^2 about each axis) a body was lent for MuJoCo, taken away."""
     mujoco = load_mujoco()
     T = mujoco.mjtObj
     where = file.name
@@ -339,7 +357,7 @@ def _moving_bodies(model: mujoco.MjModel, file: Path, position: dict[int, int]) 
         principal = np.asarray(model.body_inertia[b], float)
         _check_inertia(where, name, principal)
         full = rot @ np.diag(principal) @ rot.T
-        full = (full + full.T) / 2
+        full = (full + full.T) / 2 - stand_ins.get(label, 0.0) * np.eye(3)
         parent = int(model.body_parentid[b])
         pos, quat = _vec(model.body_pos[b]), tuple(float(v) for v in model.body_quat[b])
         if parent not in index and parent != 0:

@@ -4,9 +4,18 @@ MuJoCo compiles a URDF's links and joints into the kinematic tree, but it
 ignores ``<transmission>`` elements (the actuators) and orders the joints
 by the tree rather than by the file. This module reads those few things
 with :mod:`xml.etree`: the document order of the moving joints, the
-transmissions (one joint, one actuator, a mechanical reduction), each
-joint's effort limit, and the checks that MuJoCo's reader does not make
-(a link without ``<inertial>``, a link that is the child of two joints).
+transmissions (one joint, one actuator, a mechanical reduction; ROS 1's
+legacy layout, with ``<mechanicalReduction>`` beside the ``<actuator>`` and
+no hardware interface, and the current one), each joint's effort limit, and
+the checks that MuJoCo's reader does not make (a link without ``<inertial>``,
+a link that is the child of two joints). The file is first made into the
+URDF MuJoCo's reader takes (:mod:`equilibrist.importers.urdf_clean`: the
+``world`` link, namespaces, tool-specific elements, geometry, inertias).
+
+An actuated joint without an effort limit (Drake's examples write none) is
+an input without limits, as Drake treats it: its saturation is
+:data:`UNLIMITED`, far beyond any force such a model asks for, and a note
+says so.
 """
 
 from __future__ import annotations
@@ -18,12 +27,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from equilibrist.errors import DefinitionError
+from equilibrist.importers.urdf_clean import clean_urdf
 
 # Transmission types that pass the actuator's effort straight to one joint.
 _SIMPLE = ("SimpleTransmission",)
 # Hardware interfaces that command an effort (a force or torque).
 _EFFORT = ("EffortJointInterface",)
 _MOVING = ("revolute", "continuous", "prismatic")
+# The saturation of an input whose joint has no effort limit [N*m or N].
+UNLIMITED = 1e9
 
 
 @dataclass(frozen=True)
@@ -35,12 +47,16 @@ class Transmission:
     reduction: float
     low: float
     high: float
+    limited: bool = True
 
 
 @dataclass(frozen=True)
 class UrdfFacts:
     joint_order: tuple[str, ...]  # joints that are not fixed, in document order
     transmissions: tuple[Transmission, ...]
+    text: bytes  # the URDF as MuJoCo's reader is given it
+    notes: tuple[str, ...]  # what was made of the file, and the inputs without limits
+    stand_ins: tuple[tuple[str, float], ...]  # see CleanUrdf.stand_ins
 
 
 def _text(element: ET.Element | None) -> str:
@@ -54,13 +70,8 @@ def _tail(kind: str) -> str:
 def read_urdf(file: Path, data: bytes) -> UrdfFacts:
     """The facts of the URDF *data* (the content of *file*)."""
     where = file.name
-    try:
-        # Comments carry nothing; MuJoCo's lenient parser takes a "--" in one.
-        root = ET.fromstring(re.sub(rb"<!--.*?-->", b"", data, flags=re.S))
-    except ET.ParseError as exc:
-        raise DefinitionError(f"{where}: malformed XML: {exc}") from None
-    if root.tag != "robot":
-        raise DefinitionError(f"{where}: expected a <robot> root element (URDF), found <{root.tag}>")
+    clean = clean_urdf(file, data)
+    root = clean.root
     links = {link.get("name", ""): link for link in root.findall("link")}
     joints = {j.get("name", ""): j for j in root.findall("joint")}
     # Links, children and loops.
@@ -145,10 +156,8 @@ def read_urdf(file: Path, data: bytes) -> UrdfFacts:
         limit = joints[jname].find("limit")
         effort_text = None if limit is None else limit.get("effort")
         if effort_text is None:
-            raise DefinitionError(
-                f"{where}: joint {jname!r} has no effort limit (<limit effort=...>): the limits of "
-                f"actuator {aname!r} come from it"
-            )
+            transmissions.append(Transmission(aname, jname, reduction, -UNLIMITED, UNLIMITED, limited=False))
+            continue
         try:
             effort = float(effort_text)
         except ValueError:
@@ -159,7 +168,15 @@ def read_urdf(file: Path, data: bytes) -> UrdfFacts:
         transmissions.append(Transmission(aname, jname, reduction, -bound, bound))
     if not root.findall("transmission"):
         transmissions = _effort_motors(where, root)
-    return UrdfFacts(joint_order=order, transmissions=tuple(transmissions))
+    notes = list(clean.notes)
+    free = [t for t in transmissions if not t.limited]
+    if free:
+        notes.append(
+            "joints without an effort limit, their actuators' inputs without limits (saturation at "
+            f"{UNLIMITED:g}): " + ", ".join(f"{t.joint} ({t.actuator})" for t in free)
+        )
+    return UrdfFacts(joint_order=order, transmissions=tuple(transmissions), text=clean.text,
+                     notes=tuple(notes), stand_ins=clean.stand_ins)
 
 
 def _effort_motors(where: str, root: ET.Element) -> list[Transmission]:
