@@ -67,7 +67,7 @@ def load() -> str:
 def mpc_table(passes: int, c_passes: int) -> dict[str, Any]:
     import _peers_mpc as pm
 
-    from equilibrist.export.shared_library import compiler
+    from equilibrist.native.shared_library import compiler
 
     p = pm.problem()
     exes = pm.build_c(p, compiler())

@@ -42,7 +42,7 @@ SIGNALLED = {
     # export: the MPC's recorded run, then the compiles that measure it, where it is held:
     # its files made in memory, none written yet.
     "export": (["export", "cartpole", "--controller", "mpc", "--out", "lib"],
-               "equilibrist.export.size:measure"),
+               "equilibrist.native.size:measure"),
 }
 
 

@@ -15,9 +15,10 @@ import pytest
 
 from equilibrist.control.design import design
 from equilibrist.errors import ExportError
-from equilibrist.export import c_library, c_programs, c_text
 from equilibrist.export.data import from_design
-from equilibrist.export.shared_library import STRICT_FLAGS, compile_controller, compiler
+from equilibrist.export.vectors import compile_controller
+from equilibrist.native import c_programs, c_text, linear_library
+from equilibrist.native.shared_library import STRICT_FLAGS, compiler
 from equilibrist.numeric.lookup import get_system
 from support import require
 from support.export import measurements, reference_run
@@ -143,8 +144,8 @@ def test_named_constants_are_the_designs_numbers(designs, tmp_path, precision) -
     data = from_design(d)
     name, N = data.name, data.name.upper()
     files = {
-        f"{name}.h": c_library.header(data, precision=precision, version="test"),
-        f"{name}.c": c_library.source(data, precision=precision, version="test"),
+        f"{name}.h": linear_library.header(data, precision=precision, version="test"),
+        f"{name}.c": linear_library.source(data, precision=precision, version="test"),
         "show.c": PRINT_CONSTANTS.format(name=name, N=N),
     }
     exe = _build(tmp_path, files, [f"{name}.c", "show.c"], "show")
@@ -176,8 +177,8 @@ def test_the_library_needs_no_library(designs, tmp_path) -> None:
     """No symbol of the object file is left for a library to define (no libm, no libc)."""
     for controller in ("lqg", "lqr"):
         data = from_design(designs["wheeled_pendulum", "current"], controller=controller)
-        (tmp_path / f"{data.name}.h").write_text(c_library.header(data, precision="float", version="t"))
-        (tmp_path / f"{data.name}.c").write_text(c_library.source(data, precision="float", version="t"))
+        (tmp_path / f"{data.name}.h").write_text(linear_library.header(data, precision="float", version="t"))
+        (tmp_path / f"{data.name}.c").write_text(linear_library.source(data, precision="float", version="t"))
         obj = tmp_path / f"{data.name}.o"
         subprocess.run([*compiler(), *STRICT_FLAGS, "-O2", "-c", str(tmp_path / f"{data.name}.c"),
                         "-o", str(obj)], check=True)
@@ -211,8 +212,8 @@ def test_arduino_sketch_compiles_as_cpp(designs, tmp_path) -> None:
     """The sketch against a stand-in of the Arduino core, compiled as the IDE would (C++)."""
     cxx = require("g++", "c++")
     data = from_design(designs["seesaw", "current"])
-    (tmp_path / f"{data.name}.h").write_text(c_library.header(data, precision="float", version="t"))
-    (tmp_path / f"{data.name}.c").write_text(c_library.source(data, precision="float", version="t"))
+    (tmp_path / f"{data.name}.h").write_text(linear_library.header(data, precision="float", version="t"))
+    (tmp_path / f"{data.name}.c").write_text(linear_library.source(data, precision="float", version="t"))
     (tmp_path / "sketch.cpp").write_text(c_programs.arduino_sketch(data, precision="float"))
     (tmp_path / "Arduino.h").write_text(
         "struct SerialStub { void begin(long) {} void println(const char *) {} };\n"

@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 
 from equilibrist.control.linear import LinearController
-from equilibrist.export.shared_library import build_shared_library
 from equilibrist.native.linear_c import deviation_vector, linear_c
+from equilibrist.native.shared_library import build_shared_library
 
 HARNESS = """
 #include <stddef.h>
@@ -83,7 +83,7 @@ def test_c_library_is_the_python_controller(harness, sizes):
     nz, ny, nr, m, n = sizes
     ctrl = random_form(rng, *sizes)
     # The C side reads the form's numbers rounded to its precision; so does the reference.
-    packed = np.ascontiguousarray(deviation_vector(ctrl).astype(dtype))
+    packed = np.ascontiguousarray(deviation_vector(ctrl.packed()).astype(dtype))
     np_ = ctypes.c_int64(packed.size)
 
     def ptr(a):

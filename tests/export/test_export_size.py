@@ -26,9 +26,9 @@ from equilibrist import get_system
 from equilibrist.cli.main import main
 from equilibrist.control.design import design
 from equilibrist.control.mpc import mpc
-from equilibrist.export import size as _size
 from equilibrist.export.mpc_c import FLOAT_TOLERANCE, export_mpc
-from equilibrist.export.mpc_footprint import _HEAP_PROGRAM
+from equilibrist.native import size as _size
+from equilibrist.native.mpc_footprint import _HEAP_PROGRAM
 
 RAM, FLASH = 64 * 1024, 256 * 1024
 

@@ -17,7 +17,7 @@ from equilibrist.control.design import design
 from equilibrist.control.mpc import mpc
 from equilibrist.control.mpc_runtime import MPCRuntime
 from equilibrist.export.mpc_c import export_mpc
-from equilibrist.export.mpc_footprint import footprint
+from equilibrist.native.mpc_footprint import footprint
 from equilibrist.sim.run import simulate
 from support import cc_cache
 from support.cc_cache import cached_cc, cached_measure, environment

@@ -14,12 +14,8 @@ from equilibrist import get_system
 from equilibrist.cli.main import main
 from equilibrist.control.nonlinear import NonlinearController
 from equilibrist.control.swingup import SwingUpRuntime, swingup
-from equilibrist.export.nonlinear_c import (
-    CompiledNonlinear,
-    export_files,
-    nonlinear_files,
-    recorded_vectors,
-)
+from equilibrist.export.nonlinear_c import export_files, recorded_vectors
+from equilibrist.native.nonlinear_library import CompiledNonlinear, nonlinear_files
 from equilibrist.numeric.system import System
 from equilibrist.sim.run import simulate
 from equilibrist.tasks import get_task
@@ -87,7 +83,7 @@ def _undefined_symbols(source: Path) -> set[str]:
 def test_needs_only_the_stated_math_functions(tmp_path: Path) -> None:
     """The compiled swing-up calls fabs and floor from the C library and nothing else: no
     CPU-dispatched sine or cosine (its own are in the library), no libc; its header says so."""
-    from equilibrist.export.nonlinear_c import math_functions
+    from equilibrist.native.nonlinear_library import math_functions
 
     files = nonlinear_files(swingup(get_system("cartpole")))
     for fname, text in files.items():
@@ -206,7 +202,6 @@ def _demo() -> tuple[System, NonlinearController]:
 def test_any_nonlinear_controller_exports_bit_for_bit() -> None:
     """A hand-written controller's export gives its Python runtime's commands, estimates and
     state, bit for bit, on recorded inputs (times, measurements, a reference step)."""
-    from equilibrist.export.nonlinear_c import CompiledNonlinear, recorded_vectors
 
     system, ctrl = _demo()
     vec = recorded_vectors(ctrl, system, duration=2.0, seed=3)
@@ -232,7 +227,6 @@ def test_any_nonlinear_controller_exports_bit_for_bit() -> None:
 def test_nonlinear_export_checks_and_fails_on_a_wrong_vector(tmp_path: Path) -> None:
     """``make check`` of the generic export passes, and fails once a recorded command is off
     by one unit in the last place; ``make hil-host`` builds the firmware around it."""
-    from equilibrist.export.nonlinear_c import export_files
 
     system, ctrl = _demo()
     done = export_files(ctrl, tmp_path / "demo", system=system, duration=1.0)
@@ -254,7 +248,7 @@ def test_nonlinear_export_checks_and_fails_on_a_wrong_vector(tmp_path: Path) -> 
 def test_two_exports_link_into_one_program(tmp_path: Path) -> None:
     """Every external symbol of an export carries its name: two swing-ups and the hand-written
     controller link into one program under the strict flags."""
-    from equilibrist.export.nonlinear_c import math_functions, nonlinear_files
+    from equilibrist.native.nonlinear_library import math_functions
 
     system, demo = _demo()
     # The project's own cos (equilibrist.numeric.libm), its sin unused: still no warning.

@@ -134,9 +134,9 @@ if __name__ == "__main__":
 @contextmanager
 def cached_measure(cache: Path) -> Iterator[None]:
     """An export's measurement at export (``make size`` of its files, in
-    :func:`equilibrist.export.size.measure`) through this front within the block, and
+    :func:`equilibrist.native.size.measure`) through this front within the block, and
     nothing else: the commands' other compiles (the cores) keep the real compiler."""
-    from equilibrist.export import size as _size
+    from equilibrist.native import size as _size
 
     original = _size.measure
 

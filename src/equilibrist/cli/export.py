@@ -84,8 +84,8 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from equilibrist.errors import ExportError
-    from equilibrist.export.data import c_identifier
     from equilibrist.export.folder import check_folder, check_rate
+    from equilibrist.native.c_text import c_identifier
 
     # Everything that can be checked without designing is checked first.
     rate = None if args.rate is None else check_rate(common.parse_number(args.rate, "--rate"))

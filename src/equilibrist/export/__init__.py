@@ -21,28 +21,20 @@ from typing import TYPE_CHECKING
 _LAZY = {
     "export_c": "equilibrist.export.writer",
     "Export": "equilibrist.export.writer",
-    "controller_data": "equilibrist.export.writer",
-    "ControllerData": "equilibrist.export.data",
-    "compile_controller": "equilibrist.export.shared_library",
-    "CompiledController": "equilibrist.export.shared_library",
-    "Vectors": "equilibrist.export.c_text",
+    "controller_data": "equilibrist.export.data",
+    "compile_controller": "equilibrist.export.vectors",
     "c_controller": "equilibrist.export.vectors",
     "CController": "equilibrist.export.vectors",
 }
 
 if TYPE_CHECKING:
-    from equilibrist.export.c_text import Vectors
-    from equilibrist.export.data import ControllerData, controller_data
-    from equilibrist.export.shared_library import CompiledController, compile_controller
-    from equilibrist.export.vectors import CController, c_controller
+    from equilibrist.export.data import controller_data
+    from equilibrist.export.vectors import CController, c_controller, compile_controller
     from equilibrist.export.writer import Export, export_c
 
 __all__ = [
     "CController",
-    "CompiledController",
-    "ControllerData",
     "Export",
-    "Vectors",
     "c_controller",
     "compile_controller",
     "controller_data",

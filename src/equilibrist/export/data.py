@@ -1,20 +1,12 @@
-"""What an exported controller is made of: the numbers and names of a digital controller.
+"""What an exported linear controller is made of, checked.
 
-:class:`ControllerData` is a view of the one controller value the
-simulation runs, a :class:`~equilibrist.control.linear.LinearController`
-made by its design (:func:`of_controller`, or :func:`from_design` from the
-design), checked for what the generated C code needs: sizes, finite values,
-input limits around the operating input. Everything downstream (the C
-text, the test vectors, the ctypes wrapper, the hardware-in-the-loop
-files) reads it, so the numbers that ship are the numbers that were
-simulated.
-
-The controller is the one the simulation core runs: the design's
-:class:`~equilibrist.control.controller.LinearController` (``linear``), one
-state-space form that the C code runs with one fixed step function
-(:mod:`equilibrist.native.linear_c`). In deviation coordinates about the
-operating point ``(x0, u0)``, with ``z`` the carried prediction
-``xhat_{k|k-1}``, it is:
+:func:`of_controller` makes the :class:`~equilibrist.native.linear_c.ControllerData` the C
+library is written from out of the one controller value the simulation runs, a
+:class:`~equilibrist.control.linear.LinearController` made by its design
+(:func:`from_design`), checked for what the generated C code needs: sizes, finite values,
+input limits around the operating input. The numbers that ship are the numbers that were
+simulated. In deviation coordinates about the operating point ``(x0, u0)``, with ``z`` the
+carried prediction ``xhat_{k|k-1}``, the controller is:
 
 ``lqg``, ``current`` Kalman form::
 
@@ -35,21 +27,16 @@ operating point ``(x0, u0)``, with ``z`` the carried prediction
 
 from __future__ import annotations
 
-import hashlib
 import math
-import re
-from collections.abc import Mapping
-from dataclasses import dataclass, field
-from pathlib import PurePath
 
 import numpy as np
 
 from equilibrist.control.design_record import Design
 from equilibrist.control.linear import LinearController
 from equilibrist.errors import EquilibristError, ExportError
+from equilibrist.native.linear_c import ControllerData, deviation_vector
 
 CONTROLLERS = ("lqg", "lqr")
-PRECISIONS = ("double", "float")
 FORMS = ("current", "predictor")
 
 # Largest magnitude a constant may have in single precision.
@@ -63,230 +50,6 @@ def check_controller(controller: str) -> str:
             f"controller {controller!r} is unknown: expected one of {', '.join(CONTROLLERS)}"
         )
     return controller
-
-
-def check_precision(precision: str) -> str:
-    """Return *precision* if it is ``"double"`` or ``"float"``, else raise :class:`ExportError`."""
-    if precision not in PRECISIONS:
-        raise ExportError(
-            f"precision {precision!r} is unknown: expected one of {', '.join(PRECISIONS)}"
-        )
-    return precision
-
-
-def c_identifier(text: str) -> str:
-    """*text* made into a lower-case C identifier (``gyroscope[euler=xyz]`` -> ``gyroscope_euler_xyz``).
-
-    A system file's key (its path) gives the file's own name
-    (``/home/me/robots/furuta.xml`` -> ``furuta``).
-    """
-    from equilibrist.systems.files import looks_like_path
-
-    if looks_like_path(text):
-        text = PurePath(text).stem
-    ident = re.sub(r"[^0-9A-Za-z]+", "_", text).strip("_").lower()
-    if not ident:
-        ident = "controller"
-    if ident[0].isdigit():
-        ident = "c_" + ident
-    return ident
-
-
-@dataclass(frozen=True, eq=False)
-class ControllerData:
-    """A digital controller ready to be written as C: the one linear controller the
-    simulation runs (:attr:`linear`, made by its design) and what the C text adds to it
-    (units, the design's parameters, weights and settings, for the record).
-
-    Every number is read from :attr:`linear` (and, for what the header documents but
-    the step does not run, the plant and gains of the design it carries): this is a
-    view of the controller, not a second record of it. Sizes: ``n`` states, ``m``
-    inputs, ``p`` measurements (the full state without a Kalman filter), ``nr``
-    references (``m`` when the design has a reference gain, else 0).
-
-    Attributes
-    ----------
-    linear:
-        The controller (what the C step runs), with its discrete design.
-    system:
-        The system's key (``cartpole``).
-    state_units, input_units:
-        Units of the states and inputs (``""`` where unknown).
-    params:
-        The system's parameter values the design was made with.
-    weights:
-        The design weights (``Q``, ``R``, ``QN``, ``RN``, ``G``) for the record.
-    settings:
-        The generating settings (rate, discretization, Kalman form, ...).
-    """
-
-    linear: LinearController
-    system: str
-    state_units: tuple[str, ...]
-    input_units: tuple[str, ...]
-    params: Mapping[str, float] = field(default_factory=dict)
-    weights: Mapping[str, np.ndarray] = field(default_factory=dict)
-    settings: Mapping[str, str] = field(default_factory=dict)
-
-    @property
-    def design(self) -> Design:
-        """The discrete design :attr:`linear` was made from (:func:`of_controller` checks it)."""
-        design = self.linear.design
-        if design is None or design.discrete is None or design.dt is None:
-            raise ExportError("the controller has no discrete design to export")
-        return design
-
-    @property
-    def controller(self) -> str:
-        """The controller's form as :meth:`LinearController.from_design` names it (``"lqg"``,
-        ``"lqr"``): the library's name and C prefix end with it."""
-        return self.linear.kind
-
-    @property
-    def form(self) -> str:
-        """The Kalman form (``"current"``, ``"predictor"``), ``""`` without a Kalman filter."""
-        return self.linear.form
-
-    @property
-    def filtered(self) -> bool:
-        """Whether a Kalman filter estimates the state from the measurements."""
-        return bool(self.linear.form)
-
-    @property
-    def dt(self) -> float:
-        """Sample period [s]."""
-        return float(self.design.dt)  # type: ignore[arg-type]  # checked by design
-
-    @property
-    def state_names(self) -> tuple[str, ...]:
-        return self.linear.state_names
-
-    @property
-    def input_names(self) -> tuple[str, ...]:
-        return self.linear.input_names
-
-    @property
-    def measured_names(self) -> tuple[str, ...]:
-        return self.linear.output_names
-
-    @property
-    def tracked_names(self) -> tuple[str, ...]:
-        return self.linear.tracked_names
-
-    @property
-    def measured_units(self) -> tuple[str, ...]:
-        return tuple(self.state_units[i] for i in self.measured_index)
-
-    @property
-    def x0(self) -> np.ndarray:
-        """Operating state (absolute)."""
-        return self.linear.x_op
-
-    @property
-    def u0(self) -> np.ndarray:
-        """Operating input (absolute)."""
-        return self.linear.u_op
-
-    @property
-    def y0(self) -> np.ndarray:
-        """Measurements at the operating point."""
-        return _readonly(self.C @ self.x0)
-
-    @property
-    def r0(self) -> np.ndarray:
-        """Tracked outputs at the operating point."""
-        return self.linear.r_op
-
-    @property
-    def Ad(self) -> np.ndarray:
-        """The design's discrete plant matrix."""
-        return _readonly(np.array(self.design.discrete.A, dtype=float))  # type: ignore[union-attr]
-
-    @property
-    def Bd(self) -> np.ndarray:
-        """The design's discrete input matrix."""
-        return _readonly(np.array(self.design.discrete.B, dtype=float))  # type: ignore[union-attr]
-
-    @property
-    def C(self) -> np.ndarray:
-        """The measurement matrix: a selection of the states."""
-        return _readonly(np.eye(self.n_states)[list(self.measured_index)].reshape(
-            self.n_measured, self.n_states))
-
-    @property
-    def K(self) -> np.ndarray:
-        """The state feedback (``m x n``) of the design."""
-        return _readonly(np.array(self.design.K, dtype=float))
-
-    @property
-    def Kf(self) -> np.ndarray:
-        """The Kalman filter's gain (``n x p``; zero-sized without a filter)."""
-        if not self.filtered:
-            return _readonly(np.zeros((self.n_states, 0)))
-        return _readonly(np.array(self.design.Kf, dtype=float))
-
-    @property
-    def Kc(self) -> np.ndarray:
-        """The reference gain (``m x nr``): the controller's ``Dr``."""
-        return self.linear.Dr
-
-    @property
-    def u_min(self) -> np.ndarray:
-        return _limit(self.linear.u_min)
-
-    @property
-    def u_max(self) -> np.ndarray:
-        return _limit(self.linear.u_max)
-
-    @property
-    def n_z(self) -> int:
-        """States of the controller (the Kalman prediction; 0 for LQR)."""
-        return self.linear.n_z
-
-    @property
-    def n_states(self) -> int:
-        return len(self.state_names)
-
-    @property
-    def n_inputs(self) -> int:
-        return len(self.input_names)
-
-    @property
-    def n_measured(self) -> int:
-        return len(self.measured_names)
-
-    @property
-    def n_references(self) -> int:
-        return len(self.tracked_names)
-
-    @property
-    def rate(self) -> float:
-        """Sample rate [Hz]."""
-        return 1.0 / self.dt
-
-    @property
-    def measured_index(self) -> tuple[int, ...]:
-        """Index of the state each measurement reads."""
-        return tuple(self.state_names.index(o) for o in self.measured_names)
-
-    @property
-    def name(self) -> str:
-        """The library's name and C prefix (``cartpole_lqg``)."""
-        return f"{c_identifier(self.system)}_{self.controller}"
-
-    @property
-    def fingerprint(self) -> str:
-        """12 hex digits identifying the controller's numbers and names."""
-        h = hashlib.sha256()
-        for label in ("controller", "form", "system"):
-            h.update(str(getattr(self, label)).encode())
-        for names in (self.state_names, self.input_names, self.measured_names, self.tracked_names):
-            h.update(",".join(names).encode() + b";")
-        h.update(np.float64(self.dt).tobytes())
-        for arr in (self.x0, self.u0, self.y0, self.r0, self.Ad, self.Bd, self.C, self.K,
-                    self.Kf, self.Kc, self.u_min, self.u_max):
-            h.update(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
-        return h.hexdigest()[:12]
 
 
 def _readonly(arr: np.ndarray) -> np.ndarray:
@@ -326,7 +89,12 @@ def _units(names: tuple[str, ...], default: tuple[str, ...]) -> tuple[str, ...]:
 
 
 def from_design(design: Design, *, controller: str = "lqg") -> ControllerData:
-    """The :class:`ControllerData` of a design's controller.
+    """The :class:`ControllerData` of a design's controller (:func:`linear_controller`)."""
+    return of_controller(linear_controller(design, controller=controller))
+
+
+def linear_controller(design: Design, *, controller: str = "lqg") -> LinearController:
+    """The controller a design's export runs, checked.
 
     Parameters
     ----------
@@ -361,7 +129,7 @@ def from_design(design: Design, *, controller: str = "lqg") -> ControllerData:
     except EquilibristError as exc:
         raise ExportError(f"cannot export the {controller} controller of "
                           f"{design.system_key}: {exc}") from exc
-    return of_controller(linear)
+    return linear
 
 
 def of_controller(linear: LinearController) -> ControllerData:
@@ -383,11 +151,23 @@ def of_controller(linear: LinearController) -> ControllerData:
     if problems:
         raise ExportError(f"cannot export the {linear.kind} controller of {system}: "
                           + "; ".join(problems))
-    plant = design.plant
+    plant, discrete = design.plant, design.discrete
+    assert discrete is not None  # _check_digital
+    n = linear.n_states
     return ControllerData(
-        linear=linear, system=system,
+        system=system, controller=linear.kind, form=linear.form, dt=float(design.dt or 0.0),
+        state_names=linear.state_names, input_names=linear.input_names,
+        measured_names=linear.output_names, tracked_names=linear.tracked_names,
         state_units=_units(linear.state_names, tuple(plant.state_units)),
         input_units=_units(linear.input_names, tuple(plant.input_units)),
+        x0=linear.x_op, u0=linear.u_op, r0=linear.r_op,
+        Ad=_readonly(np.array(discrete.A, dtype=float)),
+        Bd=_readonly(np.array(discrete.B, dtype=float)),
+        K=_readonly(np.array(design.K, dtype=float)),
+        Kf=_readonly(np.array(design.Kf, dtype=float) if linear.form else np.zeros((n, 0))),
+        Kc=linear.Dr, u_min=_limit(linear.u_min), u_max=_limit(linear.u_max),
+        linear=deviation_vector(linear.packed()), z0=np.asarray(linear.z0),
+        state_map=np.asarray(linear.state_map),
         params=dict(design.params), weights=_weights(design, filtered=bool(linear.form)),
         settings=_settings(design, linear))
 
@@ -478,13 +258,18 @@ def _settings(design: Design, linear: LinearController) -> dict[str, str]:
 
 
 def controller_data(design: Design | object, *, controller: str = "lqg") -> ControllerData:
-    """:func:`~equilibrist.export.data.from_design` for a discrete design.
+    """:func:`from_design` for a discrete design.
 
     Raises
     ------
     ExportError
         A continuous design (no rate), or anything :func:`from_design` refuses.
     """
+    return of_controller(checked_linear(design, controller=controller))
+
+
+def checked_linear(design: Design | object, *, controller: str = "lqg") -> LinearController:
+    """:func:`linear_controller` for a discrete design (what :func:`controller_data` reads)."""
     check_controller(controller)
     if not isinstance(design, Design):
         raise ExportError(f"design = {design!r}: expected a Design (equilibrist.control.design."
@@ -494,4 +279,4 @@ def controller_data(design: Design | object, *, controller: str = "lqg") -> Cont
             f"the design of {design.system_key} is continuous: "
             "a digital controller needs a sample rate (design it with rate=...)"
         )
-    return from_design(design, controller=controller)
+    return linear_controller(design, controller=controller)

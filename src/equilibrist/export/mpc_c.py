@@ -61,7 +61,7 @@
     (``Z_TOLERANCE`` relative); in single precision within
     :func:`command_tolerance` (:data:`FLOAT_TOLERANCE` of the widest input
     range) and ``Z_TOLERANCE_FLOAT``. ``make size`` prints the library's
-    code, static data and stack (:mod:`equilibrist.export.size`).
+    code, static data and stack (:mod:`equilibrist.native.size`).
 
 Math functions: the driver calls none; DAQP calls ``sqrt``, ``fabs`` and
 ``fmax`` from the C library's ``libm`` (linked with ``-lm``).
@@ -81,9 +81,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from equilibrist.errors import ExportError
-from equilibrist.export.check import ControllerExport, Described, Steps
+from equilibrist.export.report import ControllerExport, Described, Steps
+from equilibrist.native.make_check import check_files
 from equilibrist.native.mpc_library import (
+    check_program,
     library_files,
+    mpc_adapter,
+    precision_flags,
 )
 
 if TYPE_CHECKING:
@@ -233,8 +237,6 @@ def mpc_files(ctrl: MPC, *, name: str = "mpc", x0: dict[str, float] | None = Non
 
     *tolerance* defaults to :func:`command_tolerance` of *precision*; *vectors* (default
     :func:`record`) are the recorded run."""
-    from equilibrist.export.check import check_files
-
     kalman = ctrl.estimator == "kalman"
     files = library_files(ctrl, name=name, precision=precision)
     if vectors is None:
@@ -243,50 +245,12 @@ def mpc_files(ctrl: MPC, *, name: str = "mpc", x0: dict[str, float] | None = Non
         tolerance = command_tolerance(ctrl, precision)
     z_tolerance = Z_TOLERANCE if precision == "double" else Z_TOLERANCE_FLOAT
     n, m = ctrl.problem.n, ctrl.problem.m
+    program = check_program(name, n=n, m=m, kalman=kalman)
     if kalman:
-        program = f"""    {name}_filter f;
-    int k, i, bad = 0, bad_z = 0, iters = 0;
-    double worst = 0.0, worst_z = 0.0;
-    {name}_init(&f);
-    for (k = 0; k < N_VECTORS; ++k) {{
-        double u[{m}];
-        {name}_output(&f, vec_y[k], u);
-        if ({name}_iterations() > iters) iters = {name}_iterations();
-        for (i = 0; i < {m}; ++i) {{
-            double d = fabs(u[i] - vec_u[k][i]);
-            if (d > worst) worst = d;
-            if (d > TOLERANCE) ++bad;
-        }}
-        {name}_update(&f, vec_y[k], vec_u_applied[k]);
-        for (i = 0; i < {n}; ++i) {{
-            double d = fabs(f.z[i] - vec_z[k][i]) / (1.0 + fabs(vec_z[k][i]));
-            if (d > worst_z) worst_z = d;
-            if (d > Z_TOLERANCE) ++bad_z;
-        }}
-    }}
-    printf("%d samples, worst difference %.3g, %d beyond %.3g; "
-           "filter state: worst %.3g, %d beyond %.3g; DAQP iterations: worst %d\\n",
-           N_VECTORS, worst, bad, TOLERANCE, worst_z, bad_z, Z_TOLERANCE, iters);
-    return bad != 0 || bad_z != 0;"""
         arrays = {"y": vectors["y"], "u_applied": vectors["u_applied"], "u": vectors["u"],
                   "z": vectors["z"]}
         defines: dict[str, object] = {"TOLERANCE": tolerance, "Z_TOLERANCE": z_tolerance}
     else:
-        program = f"""    int k, i, bad = 0, iters = 0;
-    double worst = 0.0;
-    for (k = 0; k < N_VECTORS; ++k) {{
-        double u[{m}];
-        {name}_step(vec_y[k], u);
-        if ({name}_iterations() > iters) iters = {name}_iterations();
-        for (i = 0; i < {m}; ++i) {{
-            double d = fabs(u[i] - vec_u[k][i]);
-            if (d > worst) worst = d;
-            if (d > TOLERANCE) ++bad;
-        }}
-    }}
-    printf("%d samples, worst difference %.3g, %d beyond %.3g; DAQP iterations: worst %d\\n",
-           N_VECTORS, worst, bad, TOLERANCE, iters);
-    return bad != 0;"""
         arrays = {"y": vectors["y"], "u": vectors["u"]}
         defines = {"TOLERANCE": tolerance}
     checks = check_files(
@@ -302,11 +266,6 @@ def mpc_files(ctrl: MPC, *, name: str = "mpc", x0: dict[str, float] | None = Non
     return {**files, **checks}
 
 
-def precision_flags(precision: str) -> str:
-    """The compiler flags a *precision* needs beyond the defaults (DAQP's single precision)."""
-    return " -DDAQP_SINGLE_PRECISION" if precision == "float" else ""
-
-
 def command_tolerance(ctrl: MPC, precision: str = "double") -> float:
     """How far ``make check`` lets each C command be from the simulated (double) controller's:
     1e-6 input units in double; in float :data:`FLOAT_TOLERANCE` of the widest input range."""
@@ -314,10 +273,6 @@ def command_tolerance(ctrl: MPC, precision: str = "double") -> float:
         return 1e-6
     span = float(np.max(np.asarray(ctrl.problem.u_hi) - np.asarray(ctrl.problem.u_lo)))
     return FLOAT_TOLERANCE * span
-
-
-#: What :func:`export_files` returns (kept under its former name).
-MPCExport = ControllerExport
 
 
 #: The sampled states of :func:`iteration_counts`: how many, their seed, and their box (this
@@ -359,7 +314,7 @@ def iteration_counts(ctrl: MPC, recorded: Mapping[str, np.ndarray], *,
 
 
 def export_files(built: MPCRuntime, out: str | Path, *, system: System, precision: str = "double",
-                 duration: float | None = None, seed: int = 0, force: bool = False) -> MPCExport:
+                 duration: float | None = None, seed: int = 0, force: bool = False) -> ControllerExport:
     """``equilibrist export SYSTEM --controller mpc``: DAQP's sources, the driver, ``make check``,
     ``make size`` and README.txt (the footprint, DAQP's worst iteration counts).
 
@@ -374,8 +329,8 @@ def export_files(built: MPCRuntime, out: str | Path, *, system: System, precisio
         generator_version,
         write_files,
     )
-    from equilibrist.export.size import controller_readme, measure
     from equilibrist.native.firmware import WHAT, with_hil
+    from equilibrist.native.size import controller_readme, measure
 
     if precision not in ("double", "float"):
         raise ExportError(f"the MPC is exported in double or float precision, not {precision!r}")
@@ -412,7 +367,7 @@ def export_files(built: MPCRuntime, out: str | Path, *, system: System, precisio
     texts[EXPORT_MARKER] = f"written by {generator_version()}\n"
     write_files(folder, texts)
     steps = round((duration or 1.0) * ctrl.rate) + 1
-    return MPCExport(folder=folder, name="mpc", files={**files, "README.txt": "this list"},
+    return ControllerExport(folder=folder, name="mpc", files={**files, "README.txt": "this list"},
                      precision=precision, data=Described(digest, "mpc", ctrl.rate),
                      vectors=Steps(steps), footprint=footprint, size_note=why,
                      iterations=iterations)
@@ -439,31 +394,14 @@ def _readme_notes(ctrl: MPC, precision: str, iterations: Mapping[str, int]) -> l
 
 def hil_adapter(built: MPCRuntime, system: System, *, precision: str = "double") -> Adapter:
     """The MPC (with its filter, if any) behind the hardware-in-the-loop interface."""
-    from equilibrist.native.firmware import Adapter
-
     ctrl = built.ctrl
-    n, m = int(ctrl.problem.n), int(ctrl.problem.m)
     names = system.input_names
-    u_min = tuple(float(system.params[f"{i}_min"]) for i in names)
-    u_max = tuple(float(system.params[f"{i}_max"]) for i in names)
-    outputs = built.outputs or system.state_names
-    if ctrl.estimator == "kalman":
-        step = """    mpc_estimate(&hil_f, y, est);
-    (void)mpc_output(&hil_f, y, u);
-    hil_saturate(u, applied);
-    mpc_update(&hil_f, y, applied);"""
-        init, globals_ = "    (void)mpc_setup();\n    mpc_init(&hil_f);", "static mpc_filter hil_f;"
-    else:
-        step = f"""    int i;
-    (void)mpc_step(y, u);
-    for (i = 0; i < {n}; ++i) est[i] = y[i];"""
-        init, globals_ = "    (void)mpc_setup();", ""
-    return Adapter(controller_id=design_id(built), n=n, m=m, p=len(outputs), references=0,
-                   estimate=n, rate=float(ctrl.rate), u_min=u_min, u_max=u_max,
-                   includes=("mpc.h",), sources=("$(wildcard daqp/src/*.c)", "mpc.c"),
-                   globals=globals_, init=init, step=step,
-                   cflags="-std=c99 -O2 -ffp-contract=off -Idaqp/include -I."
-                   + precision_flags(precision))
+    return mpc_adapter(
+        controller_id=design_id(built), n=int(ctrl.problem.n), m=int(ctrl.problem.m),
+        p=len(built.outputs or system.state_names), rate=float(ctrl.rate),
+        u_min=tuple(float(system.params[f"{i}_min"]) for i in names),
+        u_max=tuple(float(system.params[f"{i}_max"]) for i in names),
+        kalman=ctrl.estimator == "kalman", precision=precision)
 
 
 def design_id(built: MPCRuntime) -> str:
@@ -481,13 +419,11 @@ __all__ = [
     "OVERDRIVE",
     "Z_TOLERANCE",
     "Z_TOLERANCE_FLOAT",
-    "MPCExport",
     "command_tolerance",
     "default_start",
     "export_files",
     "export_mpc",
     "iteration_counts",
     "mpc_files",
-    "precision_flags",
-    "record",
+        "record",
 ]

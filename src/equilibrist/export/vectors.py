@@ -27,14 +27,15 @@ import numpy.typing as npt
 
 from equilibrist.control.design_record import Design
 from equilibrist.errors import ExportError
-from equilibrist.export.c_text import Vectors
-from equilibrist.export.data import ControllerData, check_controller, check_precision
+from equilibrist.export.data import check_controller
+from equilibrist.native.c_text import Vectors, check_precision
+from equilibrist.native.linear_c import ControllerData
+from equilibrist.native.shared_library import CompiledController, compile_library
 from equilibrist.numeric.system import System
 
 if TYPE_CHECKING:
     from typing import TypedDict
 
-    from equilibrist.export.shared_library import CompiledController
     from equilibrist.sim.noise import Noise
     from equilibrist.sim.signals import Step
 
@@ -152,7 +153,7 @@ class CController:
     Parameters
     ----------
     compiled:
-        A loaded :class:`~equilibrist.export.shared_library.CompiledController`.
+        A loaded :class:`~equilibrist.native.shared_library.CompiledController`.
     x_estimate:
         Initial estimate (absolute state) for ``init_at``; None starts at
         the operating point (``init``), as the simulation's LQG does.
@@ -193,15 +194,40 @@ class CController:
         self.compiled.close()
 
 
+def compile_controller(design: Design | ControllerData, *, controller: str = "lqg",
+                       precision: str = "double", version: str | None = None) -> CompiledController:
+    """Generate, compile and load the C controller of *design*.
+
+    Parameters
+    ----------
+    design:
+        A discrete control-layer ``Design``, or a :class:`ControllerData`.
+    controller:
+        ``"lqg"`` or ``"lqr"`` (ignored for a :class:`ControllerData`).
+    precision:
+        ``"double"`` or ``"float"``.
+    version:
+        The generator string written into the library (default equilibrist's version).
+
+    Raises
+    ------
+    ExportError
+        A design that cannot be exported, no C compiler, code that does not compile.
+    """
+    from equilibrist.export.data import controller_data
+    from equilibrist.export.folder import generator_version
+
+    check_precision(precision)
+    data = design if isinstance(design, ControllerData) else controller_data(design, controller=controller)
+    return compile_library(data, precision=precision, version=version or generator_version())
+
+
 def c_controller(design: Design, *, controller: str = "lqg", precision: str = "double",
                  x_estimate: npt.ArrayLike | None = None) -> CController:
     """Generate, compile and load *design*'s C controller as a simulation controller.
 
-    See :func:`~equilibrist.export.shared_library.compile_controller` for the build
-    and :class:`CController` for the interface.
+    See :func:`compile_controller` for the build and :class:`CController` for the interface.
     """
-    from equilibrist.export.shared_library import compile_controller
-
     return CController(compile_controller(design, controller=controller, precision=precision),
                        x_estimate)
 
@@ -262,8 +288,8 @@ def record(design: Design, system: System, *, controller: str = "lqg", precision
            duration: float | None = None, seed: int = 0) -> Vectors:
     """Test vectors from a noisy closed-loop run of the simulation's own controller.
 
-    The simulation runs the export's own controller (:attr:`ControllerData.linear`,
-    the design's linear form, with its reference gain when it has one) on
+    The simulation runs the export's own controller
+    (:func:`~equilibrist.export.data.checked_linear`, the design's linear form, with its reference gain when it has one) on
     the nonlinear plant through the run of :func:`scenario`; the vectors
     are the measurements and references it read and the saturated commands
     it returned.
@@ -273,14 +299,14 @@ def record(design: Design, system: System, *, controller: str = "lqg", precision
     ExportError
         When the recorded run falls (the design does not hold the plant).
     """
-    from equilibrist.export.data import controller_data
+    from equilibrist.export.data import checked_linear, of_controller
     from equilibrist.sim import simulate
 
     check_controller(controller)
     check_precision(precision)
-    data = controller_data(design, controller=controller)
+    linear = checked_linear(design, controller=controller)
+    data = of_controller(linear)
     tracking = design.Kc is not None
-    linear = data.linear
     given = _START.get()
     if given is not None and given.given is not None:
         run = scenario(design, system, duration=duration, start=given.given)

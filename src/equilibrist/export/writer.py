@@ -16,14 +16,11 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from equilibrist.errors import ExportError
-from equilibrist.export import c_library, c_programs, c_text
-from equilibrist.export.data import (
-    ControllerData,
-    check_controller,
-    check_precision,
-    controller_data,
-)
+from equilibrist.export.data import check_controller, controller_data
 from equilibrist.export.folder import EXPORT_MARKER, check_folder, generator_version, write_files
+from equilibrist.native import c_programs, c_text, linear_library
+from equilibrist.native.c_text import check_precision
+from equilibrist.native.linear_c import ControllerData
 
 if TYPE_CHECKING:
     from typing import TypedDict, Unpack
@@ -32,8 +29,7 @@ if TYPE_CHECKING:
     from equilibrist.control.linear import LinearController
     from equilibrist.control.mpc_runtime import MPCRuntime
     from equilibrist.control.nonlinear import NonlinearController
-    from equilibrist.export.size import Footprint
-    from equilibrist.native.firmware import Adapter
+    from equilibrist.native.size import Footprint
     from equilibrist.numeric.system import System
 
     class _Options(TypedDict, total=False):
@@ -112,12 +108,12 @@ def render_measured(
     param_table: tuple[tuple[str, float, str, str], ...] = (),
 ) -> tuple[dict[str, tuple[str, str]], Footprint | None, str]:
     """:func:`render`, and the footprint ``make size`` printed for it (None and why not)."""
-    from equilibrist.export.size import measure, readme_lines
+    from equilibrist.native.size import measure, readme_lines
 
     name = data.name
-    head = c_library.header(data, precision=precision, version=version, title=title,
+    head = linear_library.header(data, precision=precision, version=version, title=title,
                          param_table=param_table)
-    src = c_library.source(data, precision=precision, version=version)
+    src = linear_library.source(data, precision=precision, version=version)
     files: dict[str, tuple[str, str]] = {
         f"{name}.h": (head, "the library's header: constants, units, the functions"),
         f"{name}.c": (src, "the library: init, step, estimate, version"),
@@ -146,35 +142,11 @@ def render_measured(
     return files, footprint, why
 
 
-def hil_adapter(data: ControllerData) -> Adapter:
-    """The linear controller behind the hardware-in-the-loop interface (:mod:`equilibrist.hil`)."""
-    from equilibrist.native.firmware import Adapter
-
-    name, n = data.name, len(data.state_names)
-    p, m, nr = len(data.measured_names), len(data.input_names), len(data.tracked_names)
-    real = f"{name}_real"
-    step = f"""    {real} yy[{max(p, 1)}], rr[{max(nr, 1)}], uu[{m}], xx[{n}];
-    int i;
-    for (i = 0; i < {p}; ++i) yy[i] = ({real})y[i];
-    for (i = 0; r != NULL && i < {nr}; ++i) rr[i] = ({real})r[i];
-    {name}_step(&hil_s, yy, r != NULL ? rr : NULL, uu);
-    for (i = 0; i < {m}; ++i) u[i] = (double)uu[i];
-    {name}_estimate(&hil_s, xx);
-    for (i = 0; i < {n}; ++i) est[i] = (double)xx[i];"""
-    return Adapter(
-        controller_id=data.fingerprint, n=n, m=m, p=p, references=nr, estimate=n,
-        rate=1.0 / data.dt, u_min=tuple(float(v) for v in data.u_min),
-        u_max=tuple(float(v) for v in data.u_max), includes=(f"{name}.h",),
-        sources=(f"{name}.c",), globals=f"static {name}_state hil_s;",
-        init=f"    {name}_init(&hil_s);", step=step,
-    )
-
-
 def _with_hil(files: dict[str, tuple[str, str]], data: ControllerData) -> dict[str, tuple[str, str]]:
     from equilibrist.native.firmware import WHAT, with_hil
 
     name = data.name
-    texts = with_hil({rel: text for rel, (text, _) in files.items()}, hil_adapter(data),
+    texts = with_hil({rel: text for rel, (text, _) in files.items()}, c_programs.hil_adapter(data),
                      sketch_copies=(f"{name}.h", f"{name}.c"))
     whats = {rel: what for rel, (_, what) in files.items()}
     return {rel: (text, whats.get(rel) or WHAT.get(rel) or "hardware in the loop: copy for the "
@@ -330,7 +302,7 @@ def design_id(ctrl: object) -> str:
     from equilibrist.control.mpc_runtime import MPCRuntime
     from equilibrist.control.nonlinear import NonlinearController
     from equilibrist.export.mpc_c import design_id as mpc_id
-    from equilibrist.export.nonlinear_c import design_id as nonlinear_id
+    from equilibrist.native.nonlinear_library import design_id as nonlinear_id
 
     def linear(value: LinearController) -> str:
         if value.design is not None and made_by_design(value):  # the design's library

@@ -16,6 +16,7 @@ import numpy as np
 from equilibrist.errors import ExportError
 from equilibrist.native import daqp_library
 from equilibrist.native.daqp_library import DAQP_SOURCES, EPS, INF, ITER_LIMIT
+from equilibrist.native.firmware import Adapter
 
 if TYPE_CHECKING:
     from equilibrist.control.mpc import MPC
@@ -438,7 +439,7 @@ def _filter_c(ctrl: MPC, name: str) -> list[str]:
     from equilibrist.native.linear_c import deviation_vector, linear_c
 
     n, m, ny = ctrl.problem.n, ctrl.problem.m, len(ctrl.output_names)
-    packed = deviation_vector(ctrl.filter_form())
+    packed = deviation_vector(ctrl.filter_form().packed())
     return [
         "#include <stdint.h>",
         linear_c({"nz": n, "ny": ny, "nr": 0, "m": m, "n": n}, "c_float"),
@@ -469,3 +470,79 @@ def _filter_c(ctrl: MPC, name: str) -> list[str]:
         "    eq_linear_update(0.0, f->z, NX, yy, NY, NULL, 0, ua, NU, FILTER_P, z, NX);",
         "    for (i = 0; i < NX; ++i) f->z[i] = z[i];", "}", "",
     ]
+
+
+# -- make check and hardware in the loop -----------------------------------------------------
+def precision_flags(precision: str) -> str:
+    """The compiler flags a *precision* needs beyond the defaults (DAQP's single precision)."""
+    return " -DDAQP_SINGLE_PRECISION" if precision == "float" else ""
+
+
+def check_program(name: str, *, n: int, m: int, kalman: bool) -> str:
+    """The body of ``test_<name>.c``'s ``main``: the recorded measurements through the library,
+    each command within ``TOLERANCE`` (and, with the filter, its state within
+    ``Z_TOLERANCE``, relative) of the recorded one."""
+    if kalman:
+        return f"""    {name}_filter f;
+    int k, i, bad = 0, bad_z = 0, iters = 0;
+    double worst = 0.0, worst_z = 0.0;
+    {name}_init(&f);
+    for (k = 0; k < N_VECTORS; ++k) {{
+        double u[{m}];
+        {name}_output(&f, vec_y[k], u);
+        if ({name}_iterations() > iters) iters = {name}_iterations();
+        for (i = 0; i < {m}; ++i) {{
+            double d = fabs(u[i] - vec_u[k][i]);
+            if (d > worst) worst = d;
+            if (d > TOLERANCE) ++bad;
+        }}
+        {name}_update(&f, vec_y[k], vec_u_applied[k]);
+        for (i = 0; i < {n}; ++i) {{
+            double d = fabs(f.z[i] - vec_z[k][i]) / (1.0 + fabs(vec_z[k][i]));
+            if (d > worst_z) worst_z = d;
+            if (d > Z_TOLERANCE) ++bad_z;
+        }}
+    }}
+    printf("%d samples, worst difference %.3g, %d beyond %.3g; "
+           "filter state: worst %.3g, %d beyond %.3g; DAQP iterations: worst %d\\n",
+           N_VECTORS, worst, bad, TOLERANCE, worst_z, bad_z, Z_TOLERANCE, iters);
+    return bad != 0 || bad_z != 0;"""
+    return f"""    int k, i, bad = 0, iters = 0;
+    double worst = 0.0;
+    for (k = 0; k < N_VECTORS; ++k) {{
+        double u[{m}];
+        {name}_step(vec_y[k], u);
+        if ({name}_iterations() > iters) iters = {name}_iterations();
+        for (i = 0; i < {m}; ++i) {{
+            double d = fabs(u[i] - vec_u[k][i]);
+            if (d > worst) worst = d;
+            if (d > TOLERANCE) ++bad;
+        }}
+    }}
+    printf("%d samples, worst difference %.3g, %d beyond %.3g; DAQP iterations: worst %d\\n",
+           N_VECTORS, worst, bad, TOLERANCE, iters);
+    return bad != 0;"""
+
+
+def mpc_adapter(*, controller_id: str, n: int, m: int, p: int, rate: float,
+                u_min: tuple[float, ...], u_max: tuple[float, ...], kalman: bool,
+                precision: str) -> Adapter:
+    """The library ``mpc`` (with its filter when *kalman*) behind the hardware-in-the-loop
+    interface."""
+    if kalman:
+        step = """    mpc_estimate(&hil_f, y, est);
+    (void)mpc_output(&hil_f, y, u);
+    hil_saturate(u, applied);
+    mpc_update(&hil_f, y, applied);"""
+        init, globals_ = "    (void)mpc_setup();\n    mpc_init(&hil_f);", "static mpc_filter hil_f;"
+    else:
+        step = f"""    int i;
+    (void)mpc_step(y, u);
+    for (i = 0; i < {n}; ++i) est[i] = y[i];"""
+        init, globals_ = "    (void)mpc_setup();", ""
+    return Adapter(controller_id=controller_id, n=n, m=m, p=p, references=0,
+                   estimate=n, rate=rate, u_min=u_min, u_max=u_max,
+                   includes=("mpc.h",), sources=("$(wildcard daqp/src/*.c)", "mpc.c"),
+                   globals=globals_, init=init, step=step,
+                   cflags="-std=c99 -O2 -ffp-contract=off -Idaqp/include -I."
+                   + precision_flags(precision))

@@ -1,8 +1,8 @@
 """``make size``: the embedded budget of an exported library, the same rule in every Makefile.
 
 :func:`size_rules` is the Makefile text every export appends (the linear
-LQR/LQG library's, :func:`equilibrist.export.c_programs.makefile`, and the
-one :func:`equilibrist.export.check.check_files` writes for the MPC and the
+LQR/LQG library's, :func:`equilibrist.native.c_programs.makefile`, and the
+one :func:`equilibrist.native.make_check.check_files` writes for the MPC and the
 nonlinear controllers). ``make size`` compiles the library's sources alone
 (not the test program, its vectors or the examples) with ``CFLAGS`` and
 ``-fstack-usage`` into ``size-build/`` and prints three lines::

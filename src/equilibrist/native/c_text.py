@@ -5,16 +5,32 @@ controller, and comment and string helpers."""
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import PurePath
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from equilibrist.errors import ExportError
-from equilibrist.export.data import ControllerData
+
+if TYPE_CHECKING:
+    from equilibrist.native.linear_c import ControllerData
 
 _INDENT = "    "
 _FLOAT_MAX = float(np.finfo(np.float32).max)
+#: The arithmetic a library may be written in.
+PRECISIONS = ("double", "float")
+
+
+def check_precision(precision: str) -> str:
+    """Return *precision* if it is ``"double"`` or ``"float"``, else raise :class:`ExportError`."""
+    if precision not in PRECISIONS:
+        raise ExportError(
+            f"precision {precision!r} is unknown: expected one of {', '.join(PRECISIONS)}"
+        )
+    return precision
 
 
 @dataclass(frozen=True)
@@ -81,6 +97,24 @@ def _matrix(mat: np.ndarray, precision: str, indent: str = _INDENT) -> str:
 
 
 # -- names --------------------------------------------------------------------------------
+def c_identifier(text: str) -> str:
+    """*text* made into a lower-case C identifier (``gyroscope[euler=xyz]`` -> ``gyroscope_euler_xyz``).
+
+    A system file's key (its path) gives the file's own name
+    (``/home/me/robots/furuta.xml`` -> ``furuta``).
+    """
+    from equilibrist.systems.files import looks_like_path
+
+    if looks_like_path(text):
+        text = PurePath(text).stem
+    ident = re.sub(r"[^0-9A-Za-z]+", "_", text).strip("_").lower()
+    if not ident:
+        ident = "controller"
+    if ident[0].isdigit():
+        ident = "c_" + ident
+    return ident
+
+
 @dataclass(frozen=True)
 class _Names:
     lower: str

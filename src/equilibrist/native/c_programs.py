@@ -5,9 +5,10 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-from equilibrist.export.c_text import Vectors, _matrix, _names, _unit, _vector, literal
-from equilibrist.export.data import ControllerData
-from equilibrist.export.size import BUILD, size_rules
+from equilibrist.native.c_text import Vectors, _matrix, _names, _unit, _vector, literal
+from equilibrist.native.firmware import Adapter
+from equilibrist.native.linear_c import ControllerData
+from equilibrist.native.size import BUILD, size_rules
 
 
 # -- test vectors and the test program ----------------------------------------------------
@@ -355,7 +356,7 @@ def arduino_sketch(data: ControllerData, *, precision: str = "double") -> str:
 # -- build ------------------------------------------------------------------------------
 def makefile(data: ControllerData) -> str:
     """The export's Makefile: ``make`` builds everything, ``make check`` runs the test program,
-    ``make size`` prints the library's footprint (:func:`equilibrist.export.size.size_rules`)."""
+    ``make size`` prints the library's footprint (:func:`equilibrist.native.size.size_rules`)."""
     name = data.name
     return "\n".join([
         f"# Makefile of {name}: 'make' builds the library, the desktop example and the test",
@@ -400,7 +401,7 @@ def makefile(data: ControllerData) -> str:
 def readme(data: ControllerData, *, precision: str, version: str,
            files: Mapping[str, str], footprint: Sequence[str] = ()) -> str:
     """A short README.txt listing the files of the export, then the *footprint*'s lines
-    (:func:`equilibrist.export.size.readme_lines`)."""
+    (:func:`equilibrist.native.size.readme_lines`)."""
     lines = [
         f"{data.name}: the digital {data.controller.upper()} controller of {data.system}, "
         f"{data.rate:.10g} Hz, {precision} precision.",
@@ -421,3 +422,26 @@ def readme(data: ControllerData, *, precision: str, version: str,
         *footprint,
     ]
     return "\n".join(lines)
+
+
+# -- hardware in the loop ----------------------------------------------------------------
+def hil_adapter(data: ControllerData) -> Adapter:
+    """The linear controller behind the hardware-in-the-loop interface (:mod:`equilibrist.hil`)."""
+    name, n = data.name, len(data.state_names)
+    p, m, nr = len(data.measured_names), len(data.input_names), len(data.tracked_names)
+    real = f"{name}_real"
+    step = f"""    {real} yy[{max(p, 1)}], rr[{max(nr, 1)}], uu[{m}], xx[{n}];
+    int i;
+    for (i = 0; i < {p}; ++i) yy[i] = ({real})y[i];
+    for (i = 0; r != NULL && i < {nr}; ++i) rr[i] = ({real})r[i];
+    {name}_step(&hil_s, yy, r != NULL ? rr : NULL, uu);
+    for (i = 0; i < {m}; ++i) u[i] = (double)uu[i];
+    {name}_estimate(&hil_s, xx);
+    for (i = 0; i < {n}; ++i) est[i] = (double)xx[i];"""
+    return Adapter(
+        controller_id=data.fingerprint, n=n, m=m, p=p, references=nr, estimate=n,
+        rate=1.0 / data.dt, u_min=tuple(float(v) for v in data.u_min),
+        u_max=tuple(float(v) for v in data.u_max), includes=(f"{name}.h",),
+        sources=(f"{name}.c",), globals=f"static {name}_state hil_s;",
+        init=f"    {name}_init(&hil_s);", step=step,
+    )

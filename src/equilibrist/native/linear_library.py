@@ -8,7 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from equilibrist.errors import ExportError
-from equilibrist.export.c_text import (
+from equilibrist.native.c_text import (
     _INDENT,
     _c_string,
     _comment_lines,
@@ -21,8 +21,7 @@ from equilibrist.export.c_text import (
     _vector,
     literal,
 )
-from equilibrist.export.data import ControllerData
-from equilibrist.native.linear_c import deviation_vector, linear_c
+from equilibrist.native.linear_c import ControllerData, linear_c
 from equilibrist.native.linear_layout import LINEAR_HEADER
 
 
@@ -224,7 +223,7 @@ def _header_linear_form(data: ControllerData) -> list[str]:
     pointer into it for each of its matrices."""
     nm = _names(data)
     real = nm("real")
-    packed = deviation_vector(data.linear)
+    packed = data.linear
     lines = [
         "",
         "/* The controller as one linear form (what step runs), matrices row-major:",
@@ -238,7 +237,7 @@ def _header_linear_form(data: ControllerData) -> list[str]:
         f"#define {nm.macro('N_LINEAR')} {packed.size}",
         f"extern const {real} {nm('LINEAR')}[{nm.macro('N_LINEAR')}];",
     ]
-    for label, rows, cols in _form_shapes(data):
+    for label, rows, cols in data.form_shapes:
         if rows * cols:
             at = int(packed[LINEAR_HEADER.index(label)])
             lines.append(f"#define {nm(label.upper())} ({nm('LINEAR')} + {at})"
@@ -326,9 +325,8 @@ def _source_constants(data: ControllerData, *, precision: str, version: str) -> 
         lines.append(f"const {real} {nm('KF')}[{N}][{P}] = {_matrix(data.Kf, precision)};")
     if data.n_references:
         lines.append(f"const {real} {nm('KC')}[{M}][{NR}] = {_matrix(data.Kc, precision)};")
-    packed = deviation_vector(data.linear)
     lines.append(f"const {real} {nm('LINEAR')}[{nm.macro('N_LINEAR')}] = "
-                 f"{_vector(packed, precision)};")
+                 f"{_vector(data.linear, precision)};")
     return lines
 
 
@@ -338,12 +336,10 @@ def _source_version(data: ControllerData, *, precision: str, version: str) -> li
     version_line = (
         f"{nm.lower} ({version}, design {data.fingerprint}): {_settings_string(data, precision)}"
     )
-    sizes = {"nz": data.n_z, "ny": data.n_measured, "nr": data.n_references,
-             "m": data.n_inputs, "n": data.n_states}
     return [
         "",
         "#include <stdint.h>",
-        linear_c(sizes, precision),
+        linear_c(data.sizes, precision),
         f"static const char {nm('version_text')}[] = {_c_string(version_line)};",
         "",
         f"const char *{nm('version')}(void)",
@@ -368,7 +364,7 @@ def _source_init(data: ControllerData, *, precision: str) -> list[str]:
         "    int i;",
     ]
     if data.n_z:
-        z0 = np.asarray(data.linear.z0)
+        z0 = np.asarray(data.z0)
         if np.any(z0 != 0):
             lines.append(f"    static const {real} z0[{nm.macro('N_Z')}] = {_vector(z0, precision)};")
         lines += [
@@ -398,7 +394,7 @@ def _source_init(data: ControllerData, *, precision: str) -> list[str]:
     ]
     if data.n_z:
         # z = state_map (x - x0): the state map of an LQG form is the identity.
-        smap = np.asarray(data.linear.state_map)
+        smap = np.asarray(data.state_map)
         if smap.shape == (data.n_states, data.n_states) and np.array_equal(smap, np.eye(data.n_states)):
             lines += [
                 f"    for (i = 0; i < {N}; ++i) {{",
@@ -491,9 +487,3 @@ def _source_step(data: ControllerData) -> list[str]:
     ]
     return lines
 
-
-def _form_shapes(data: ControllerData) -> list[tuple[str, int, int]]:
-    """``(name, rows, columns)`` of each matrix of the linear form."""
-    lin = data.linear
-    return [(label, int(np.shape(getattr(lin, label))[0]), int(np.shape(getattr(lin, label))[1]))
-            for label in ("Ac", "By", "Br", "Bu", "Cc", "Dy", "Dr", "Ez", "Ey")]

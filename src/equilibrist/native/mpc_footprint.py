@@ -1,17 +1,16 @@
-"""The exported MPC's memory footprint, measured with the C compiler and ``size``; used by :mod:`equilibrist.export.mpc_c`. (The library compiled and called
-through ctypes is the simulated MPC itself: :class:`~equilibrist.control.mpc.MPCRuntime`.)
+"""The exported MPC's memory footprint, measured with the C compiler and ``size``. (The
+library compiled and called through ctypes is the simulated MPC itself:
+:class:`~equilibrist.control.mpc_runtime.MPCRuntime`.)
 """
 
 from __future__ import annotations
 
+import subprocess
+import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from equilibrist.native.mpc_library import _daqp_c_files
-
-if TYPE_CHECKING:
-    pass
-
+from equilibrist.native.shared_library import compiler
 
 #: A program that sets the exported MPC up once, counting what it allocates.
 _HEAP_PROGRAM = """#include <stdio.h>
@@ -40,13 +39,8 @@ def footprint(folder: str | Path, *, name: str = "mpc", n: int = 4, m: int = 1,
     ``<name>_setup`` allocates (DAQP's workspace), counted by a program linked with
     ``malloc`` and ``calloc`` wrapped (none since DAQP's workspace is static). *n*, *m*: the
     controller's states and inputs; *precision* the library's (``"float"``: DAQP in single
-    precision). ``make size`` (:mod:`equilibrist.export.size`) prints the same code and data
+    precision). ``make size`` (:mod:`equilibrist.native.size`) prints the same code and data
     and the stack."""
-    import subprocess
-    import tempfile
-
-    from equilibrist.export.shared_library import compiler
-
     src = Path(folder)
     files = [*_daqp_c_files(src), src / f"{name}.c"]
     inc = [f"-I{src / 'daqp' / 'include'}", f"-I{src}"]

@@ -13,25 +13,19 @@
 ``Makefile``
     ``make check`` builds the test program from it and the library's
     sources and runs it; ``make size`` prints the library's code, static
-    data and stack (:func:`equilibrist.export.size.size_rules`, the rule
+    data and stack (:func:`equilibrist.native.size.size_rules`, the rule
     every export's Makefile shares); ``make clean``.
 
-:class:`ControllerExport` is what those exports return (the fields the
-command line reports). Used by the nonlinear controllers' and the MPC's exports
-(:mod:`equilibrist.export.nonlinear_c`, :mod:`equilibrist.export.mpc_c`).
+Used by the nonlinear controllers' and the MPC's exports.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from equilibrist.export.size import Footprint
+from equilibrist.native.size import BUILD, size_rules
 
 
 def c_rows(values: np.ndarray) -> str:
@@ -97,8 +91,6 @@ def check_files(
         The library's step functions, where ``make size`` starts the stack's chain
         (default ``<name>_output`` and ``<name>_update``).
     """
-    from equilibrist.export.size import BUILD, size_rules
-
     prog = (
         f"/* test_{name}.c: {what} */\n"
         "#include <math.h>\n#include <stdio.h>\n"
@@ -123,36 +115,3 @@ def check_files(
 
 
 __all__ = ["c_rows", "check_files", "vectors_header"]
-
-
-@dataclass(frozen=True)
-class Described:
-    """What the command line's report reads of an exported controller (id, kind, rate)."""
-
-    fingerprint: str
-    controller: str
-    rate: float
-
-
-@dataclass(frozen=True)
-class Steps:
-    """How many recorded samples the export's test replays."""
-
-    n_steps: int
-
-
-@dataclass(frozen=True)
-class ControllerExport:
-    """What a controller's exporter wrote (an :class:`~equilibrist.export.writer.ExportReport`)."""
-
-    folder: Path
-    name: str
-    files: Mapping[str, str]
-    precision: str
-    data: Described
-    vectors: Steps
-    #: What ``make size`` printed at export (None: not measured, see :attr:`size_note`).
-    footprint: Footprint | None = None
-    size_note: str = ""
-    #: DAQP's worst iteration counts (the MPC's export only).
-    iterations: Mapping[str, int] | None = None

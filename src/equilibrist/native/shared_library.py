@@ -1,9 +1,9 @@
 """The exported C controller, compiled and called from Python.
 
-:func:`compile_controller` writes the library that :func:`~equilibrist.export.export_c`
-ships, compiles it with the system C compiler into a temporary shared
-library (``$CC``, else ``cc``) with the export's strict flags, and loads it
-with :mod:`ctypes`. The :class:`CompiledController` it returns calls the
+:func:`compile_library` writes the linear library that the export ships,
+compiles it with the system C compiler into a temporary shared library
+(``$CC``, else ``cc``) with the export's strict flags, and loads it with
+:mod:`ctypes`. The :class:`CompiledController` it returns calls the
 library's own ``init``/``step``, so what runs in equilibrist's simulation is
 the code that runs on the robot.
 """
@@ -18,16 +18,13 @@ import subprocess
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from equilibrist.errors import ExportError
-from equilibrist.export import c_library
-from equilibrist.export.data import ControllerData, check_precision
-
-if TYPE_CHECKING:
-    from equilibrist.control.design_record import Design
+from equilibrist.native import linear_library
+from equilibrist.native.c_text import check_precision
+from equilibrist.native.linear_c import ControllerData
 
 # The flags of the export's Makefile, plus position-independent code for a shared library.
 STRICT_FLAGS = ("-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic")
@@ -182,45 +179,21 @@ class CompiledController:
         self.close()
 
 
-def compile_controller(
-    design: Design | ControllerData,
-    *,
-    controller: str = "lqg",
-    precision: str = "double",
-    version: str | None = None,
-) -> CompiledController:
-    """Generate, compile and load the C controller of *design*.
-
-    Parameters
-    ----------
-    design:
-        A discrete control-layer ``Design``, or a :class:`ControllerData`.
-    controller:
-        ``"lqg"`` or ``"lqr"`` (ignored for a :class:`ControllerData`).
-    precision:
-        ``"double"`` or ``"float"``.
-    version:
-        The generator string written into the library (default equilibrist's version).
-
-    Returns
-    -------
-    CompiledController
+def compile_library(data: ControllerData, *, precision: str, version: str) -> CompiledController:
+    """Write, compile and load *data*'s C library in *precision*, *version* its generator.
 
     Raises
     ------
     ExportError
-        A design that cannot be exported, no C compiler, code that does not compile.
+        No C compiler, or code that does not compile.
     """
-    from equilibrist.export.data import controller_data
-    from equilibrist.export.folder import generator_version
-
     check_precision(precision)
-    data = design if isinstance(design, ControllerData) else controller_data(design, controller=controller)
-    ver = version or generator_version()
     with tempfile.TemporaryDirectory(prefix="equilibrist-c-") as tmp:
         folder = Path(tmp)
-        (folder / f"{data.name}.h").write_text(c_library.header(data, precision=precision, version=ver))
-        (folder / f"{data.name}.c").write_text(c_library.source(data, precision=precision, version=ver))
+        (folder / f"{data.name}.h").write_text(
+            linear_library.header(data, precision=precision, version=version))
+        (folder / f"{data.name}.c").write_text(
+            linear_library.source(data, precision=precision, version=version))
         (folder / "equilibrist_shim.c").write_text(_SHIM.format(name=data.name))
         library = build_shared_library(
             [folder / f"{data.name}.c", folder / "equilibrist_shim.c"],
