@@ -15,11 +15,12 @@ from typing import TYPE_CHECKING
 from equilibrist.errors import EquilibristError
 
 if TYPE_CHECKING:
+    from equilibrist.controllers.loop_policy import Policy
     from equilibrist.numeric.system import System
 
 __version__ = "0.1.0"
 
-__all__ = ["EquilibristError", "__version__", "get_system", "list_systems"]
+__all__ = ["EquilibristError", "__version__", "get_system", "list_systems", "policy"]
 
 
 def get_system(name: str, **options: object) -> System:  # imports its module on first use
@@ -34,3 +35,15 @@ def list_systems() -> list[str]:
     from equilibrist.systems.registry import family_names
 
     return family_names()
+
+
+def policy(system: System | str, *, controller: str = "lqr", rate: float | None = None,
+           **options: object) -> Policy:  # imports its module on first use
+    """Any controller kind for *system* as a :class:`~equilibrist.controllers.loop_policy.Policy`
+    to step from a foreign loop (:func:`equilibrist.controllers.loop_policy.policy`)."""
+    import importlib
+
+    # By name: every layer imports this root module, and the kinds sit above most of them.
+    module = importlib.import_module("equilibrist.controllers.loop_policy")
+    made: Policy = module.policy(system, controller=controller, rate=rate, **options)
+    return made

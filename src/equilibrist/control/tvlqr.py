@@ -407,12 +407,14 @@ def _with_filter(system: System, traj: Trajectory, design: Design,
 
 def build_request(request: ControllerRequest) -> NonlinearController:
     from equilibrist.control.trajectory_file import load_trajectory
+    from equilibrist.control.trajopt import Trajectory
 
     path = request.options.get("trajectory")
     if path is None:
         raise ControllerError("--controller tvlqr tracks a planned trajectory: give --trajectory "
                               "FILE.npz (equilibrist trajopt SYSTEM --out FILE.npz)")
-    traj = load_trajectory(path)
+    # From Python, the plan itself (equilibrist.policy(..., trajectory=plan(...))).
+    traj = path if isinstance(path, Trajectory) else load_trajectory(path)
     system = request.system
     if traj.state_names != system.state_names or traj.input_names != system.input_names:
         raise ControllerError(f"{path} is a trajectory of {traj.system}, not of {system.key} "

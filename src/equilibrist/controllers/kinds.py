@@ -313,6 +313,10 @@ _KINDS: dict[str, ControllerKind] = {}
 _LOADED = False
 
 
+#: Modules of the package that are not kinds: the policy object that steps any kind.
+_NOT_KINDS = ("loop_policy",)
+
+
 def _load() -> None:
     global _LOADED
     if _LOADED:
@@ -321,7 +325,7 @@ def _load() -> None:
     package = importlib.import_module(PACKAGE)
     own = __name__.rpartition(".")[2]  # this registry, beside the kinds it lists
     for info in pkgutil.iter_modules(package.__path__):
-        if not info.name.startswith("_") and info.name != own:
+        if not info.name.startswith("_") and info.name not in (own, *_NOT_KINDS):
             _add_from(importlib.import_module(f"{PACKAGE}.{info.name}"), f"{PACKAGE}.{info.name}")
     from importlib.metadata import entry_points
 
