@@ -6,15 +6,13 @@
 >>> result = identify(cart, read_log(cart, "run.csv"), ["m_p", "b_c", "b_p"])  # doctest: +SKIP
 >>> result.params                  # every parameter, the free ones at their estimates  # doctest: +SKIP
 
-See :mod:`equilibrist.ident.fit` for the method (multiple shooting for the start, then the
-prediction errors of the model's Kalman filter) and
-:mod:`equilibrist.ident.log` for the log's format.
+The method: :mod:`equilibrist.ident.fit`; the log's format: :mod:`equilibrist.ident.log`.
 """
 
 from equilibrist.ident.fit import identify
 from equilibrist.ident.log import IdentificationError, Log, read_log
-from equilibrist.ident.params import read_params, write_params
-from equilibrist.ident.result import FORMAT, Estimate, Identification, OutputFit
+from equilibrist.ident.params import FORMAT, read_params, write_params
+from equilibrist.ident.result import Estimate, Identification, OutputFit
 from equilibrist.ident.shooting import BACKENDS
 
 __all__ = [

@@ -1,82 +1,12 @@
 """Grey-box identification of physical parameters: multiple shooting, then prediction error.
 
-The model is the system's own derived ``x_dot = f(x, u; p)``; the chosen free
-parameters (and, optionally, a constant offset per sensor) are fitted to a
-log with :func:`scipy.optimize.least_squares`, in two stages.
-
-The start: multiple shooting. The balancing systems are unstable and their
-logs are closed-loop: replaying the logged input open loop from one initial
-state diverges within a second, whatever the parameters. The log is cut into
-segments of a fraction of a second; each segment's initial state is a
-decision variable, the segment is integrated with the logged input held
-between samples (zero-order hold, as the rig applied it), and the residuals
-are
-
-- the output errors ``(y_k - y_hat_k - offset) / sigma_y`` at every sample,
-- the continuity defects ``x_{s+1} - x_end,s`` where one segment ends and the
-  next starts, whitened by the covariance the process noise builds over a
-  segment (``Q_seg``, from the linearization by Van Loan's method).
-
-Segments are kept short: by default as long as the process noise moves the
-outputs by at most half a sensor standard deviation over one segment, at
-least 5 samples. The noise levels start from the system's spec (sensor and
-process noise) and are re-estimated after a first fit: each sensor's
-variance from its residuals over their redundancy (rows minus leverage), the
-process noise's scale as the one that makes the fitted model's Kalman filter
-most likely; then the fit is repeated. This stage converges from far (the
-segments never diverge), and gives the second its start and noise levels.
-
-The estimate: prediction error. Multiple shooting is not the estimate,
-because it is biased where process noise matters: the noise acting inside a
-segment is not in its model (it is lumped at the segment's end), so the
-output errors inside a segment carry it, and in closed loop the logged input
-answers that same noise through the controller. The input the fit regresses
-on is then correlated with its residuals, and the parameters absorb the
-correlation (on the control-moment-gyroscope robot, whose process noise is
-large, the body's mass came out 1.7 standard errors high on average over 20
-logs; with 1-sample segments, 0.9 over 6 logs: shorter segments do not remove it, as the
-joint estimate of states and parameters is not the likelihood of the
-parameters). The second stage minimizes the one-step prediction errors of a
-Kalman filter of the model instead: the nonlinear model predicts over each
-sample interval (RK4, the input held), the steady-state gain of its
-linearization at the current parameters (and the current noise levels)
-corrects; the decision variables are the parameters, the offsets and the
-filter's initial state. The errors are weighted by their covariance (held
-fixed during a fit) and, at the true parameters, are white whatever the
-feedback: this is the prediction-error (innovations) form of the likelihood,
-consistent in closed loop. The noise levels (a scale of the process noise,
-each sensor's standard deviation) are then set to those that make the
-filter's errors most likely (their Gaussian likelihood, Nelder-Mead) and the
-fit is repeated until they settle.
-
-Integration: RK4 with the input held, at most ``max_step`` per step (1 ms by
-default, as the simulator), compiled in the system's C core over its generated
-``f`` (:mod:`equilibrist.ident.kernel`); ``backend="solve_ivp"`` runs the same
-loops with :func:`scipy.integrate.solve_ivp` (for comparison). The Jacobians
-are by central differences: for the shooting residuals all segments at once
-(segments are independent given their initial states), assembled sparse; for
-the filter's errors one column at a time (a handful of decision variables).
-
-Whiteness: a Ljung-Box test of the final filter's prediction errors, per
-output. White errors say the model and its noise levels explain the data.
-
-Uncertainty: the covariance of the decision variables is ``s^2 (J' J)^-1``
-at the solution (``J`` the Jacobian of the weighted prediction errors, ``s^2``
-their variance); the filter's initial state is eliminated (Schur complement)
-to give the parameters' covariance, their standard errors and correlations.
-Directions the data cannot tell apart are found from the eigen-decomposition
-of that information matrix in log-parameters, where a product or ratio
-structure (``m_p`` and ``l`` entering only as ``m_p*l``) is a null direction
-with entries ``(1, -1)``.
-
-The replay (NRMSE, the plot) is the shooting segments' integration from
-their states at the final parameters.
-
-The pieces: the answer's types in :mod:`equilibrist.ident.result`, the
-multiple-shooting stage in :mod:`equilibrist.ident.shooting`, the
-prediction-error stage in :mod:`equilibrist.ident.prediction`, the noise
-models and the Kalman gain in :mod:`equilibrist.ident.noise`, the
-uncertainty and the report's numbers in :mod:`equilibrist.ident.answer`.
+The model is the system's own derived ``x_dot = f(x, u; p)``; the free parameters (and,
+optionally, a constant offset per sensor) are fitted to a log with
+:func:`scipy.optimize.least_squares`. Multiple shooting (:mod:`equilibrist.ident.shooting`)
+converges from far on an unstable closed-loop log and gives the start and the noise levels;
+the estimate minimizes the one-step prediction errors of the model's Kalman filter
+(:mod:`equilibrist.ident.prediction`), which stay unbiased in closed loop. Why each stage,
+and how the uncertainty and the whiteness test are computed: ``docs/identification.md``.
 """
 
 from __future__ import annotations
@@ -88,12 +18,7 @@ from typing import Any
 import numpy as np
 
 from equilibrist.errors import nearest
-
-# The names marked F401 are not used here: imported so that they stay importable
-# from this module, where they were defined before it was split.
-from equilibrist.ident.answer import (
-    _answer,
-)
+from equilibrist.ident.answer import _answer
 from equilibrist.ident.log import IdentificationError, Log
 from equilibrist.ident.noise import (
     _linearization,
@@ -102,9 +27,7 @@ from equilibrist.ident.noise import (
     _state_floor,
 )
 from equilibrist.ident.prediction import _filter, _Predictor
-from equilibrist.ident.result import (
-    Identification,
-)
+from equilibrist.ident.result import Identification
 from equilibrist.ident.shooting import (
     _boundaries,
     _guess_states,
@@ -164,38 +87,14 @@ def identify(
     reestimate_noise: bool = True,
     max_nfev: int = 200,
 ) -> Identification:
-    """Fit the parameters *free* of *system* to *log* by multiple shooting.
+    """Fit the parameters *free* of *system* (known ones at their values, free ones at
+    their start values) to *log*, with a constant offset per sensor if *offsets*.
 
-    Parameters
-    ----------
-    system : System
-        The model, with every parameter at its known value and the free ones
-        at their start values.
-    log : Log
-        The measured data (:func:`equilibrist.ident.read_log`).
-    free : sequence of str
-        The physical parameters to fit.
-    offsets : bool
-        Also fit a constant offset of each sensor.
-    segment : float, optional
-        Length of the shooting segments [s]; by default the longest over
-        which process noise moves the outputs by at most half a sensor
-        standard deviation (at least 5 samples).
-    max_step : float
-        Longest RK4 step [s].
-    sensor_noise, process_noise : mapping, optional
-        Standard deviations of the sensors per output, and intensities of
-        the process noise per state rate (as in the system's spec), for the
-        first fit's weights (default: the spec's).
-    backend : {"compiled", "solve_ivp"}
-        The integrator of the segments.
-    reestimate_noise : bool
-        Re-estimate the noise levels from the first fit's residuals and fit
-        again.
-
-    Returns
-    -------
-    Identification
+    *segment* is the shooting segments' length [s], by default the longest over which the
+    process noise moves the outputs by at most half a sensor standard deviation (at least 5
+    samples). *sensor_noise* (standard deviations per output) and *process_noise* (intensities
+    per state rate) weight the first fit, by default the spec's; *reestimate_noise* refits
+    with levels estimated from the residuals. *backend* is ``"compiled"`` or ``"solve_ivp"``.
     """
     if log.system != system.key:
         raise IdentificationError(f"the log was checked against {log.system}, not {system.key}")

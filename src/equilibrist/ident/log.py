@@ -38,23 +38,8 @@ class IdentificationError(EquilibristError, ValueError):
 
 @dataclass(frozen=True, eq=False)
 class Log:
-    """A validated log of one system.
-
-    Attributes
-    ----------
-    system : str
-        The key of the system it was checked against.
-    time : ndarray, shape (n_rows,)
-        Sample times [s].
-    inputs : ndarray, shape (n_rows, n_inputs)
-        The inputs in the system's order.
-    output_names : tuple of str
-        The measured states, in the log's column order.
-    outputs : ndarray, shape (n_rows, n_outputs)
-        The measurements.
-    source : str
-        Where the log came from.
-    """
+    """A validated log of the system *system* (its key): the inputs in the system's order,
+    the measured states in the log's column order."""
 
     system: str
     time: np.ndarray

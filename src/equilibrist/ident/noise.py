@@ -1,6 +1,6 @@
 """The linear-Gaussian pieces of the fit: the noise levels to start from, the
-sampled model (Van Loan's method), the steady-state Kalman gain, and the
-inverse of an information matrix on its determined directions."""
+steady-state Kalman gain, the likelihood of prediction errors, and the inverse
+of an information matrix on its determined directions."""
 
 from __future__ import annotations
 
@@ -18,19 +18,6 @@ from equilibrist.numeric.system import System
 STRUCTURAL_RATIO = 1e-9
 
 
-def _van_loan(A: np.ndarray, GQG: np.ndarray, T: float) -> np.ndarray:
-    """``int_0^T e^(A s) GQG e^(A' s) ds`` (the design's Van Loan)."""
-    return _discretize(A, GQG, T)[1]
-
-
-def _discretize(A: np.ndarray, GQG: np.ndarray, T: float) -> tuple[np.ndarray, np.ndarray]:
-    """``e^(A T)`` and ``int_0^T e^(A s) GQG e^(A' s) ds`` (Van Loan: one exponential), as
-    the designs sample their noise (:func:`equilibrist.control.discretize.sampled_noise`)."""
-    from equilibrist.control.discretize import sampled_noise
-
-    return sampled_noise(A, GQG, T)
-
-
 class FilterFallbackWarning(UserWarning):
     """The model's Kalman filter has no steady state at some parameters: its gain there is the
     one of the process noise alone (``P = Qd``), which the warning names."""
@@ -39,14 +26,8 @@ class FilterFallbackWarning(UserWarning):
 def _steady_gain(Ad: np.ndarray, C: np.ndarray, Qd: np.ndarray,
                  R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The steady-state Kalman gain ``K`` and innovation covariance ``S`` of the sampled
-    model: the predictor's covariance from the designs' own Riccati solver (structure-
-    preserving doubling, :func:`equilibrist.control.fixed.dare` on the dual problem), else
-    scipy's DARE; the gain and ``S`` are the Kalman filter's own
-    (:func:`equilibrist.control.kalman.gain`, the one every consumer's filter has).
-
-    Where neither solver finds the stabilizing solution (the filter of the model at these
-    parameters has no steady state) the covariance falls back to ``P = Qd``, the one sample's
-    process noise: said by a :class:`FilterFallbackWarning`, not silently."""
+    model: the predictor's covariance from the designs' Riccati solver, else scipy's; where
+    neither finds a stabilizing solution, ``P = Qd`` with a :class:`FilterFallbackWarning`."""
     import warnings
 
     from scipy.linalg import solve_discrete_are
@@ -68,6 +49,15 @@ def _steady_gain(Ad: np.ndarray, C: np.ndarray, Qd: np.ndarray,
             P = Qd.copy()
     S = fixed.symmetric(fixed.mm(C, P, C.T) + R)
     return gain(P, C, R), S
+
+
+def _negative_log_likelihood(e: np.ndarray, S: np.ndarray) -> float:
+    """Twice the negative log-likelihood (less its constant) of Gaussian prediction errors
+    *e* (n_rows, ny) of covariance *S*; infinite where an error is not finite."""
+    if not np.all(np.isfinite(e)):
+        return math.inf
+    _sign, logdet = np.linalg.slogdet(S)
+    return float(e.shape[0] * logdet + np.einsum("ki,ij,kj->", e, np.linalg.inv(S), e))
 
 
 def _information_inverse(H: np.ndarray) -> np.ndarray:

@@ -10,7 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from equilibrist.ident.noise import _discretize, _steady_gain
+from equilibrist.control.discretize import sampled_noise
+from equilibrist.ident.noise import _negative_log_likelihood, _steady_gain
 from equilibrist.ident.shooting import _Unknowns
 from equilibrist.numeric.system import System
 
@@ -67,7 +68,7 @@ class _Predictor(_Unknowns):
                 self.system.functions.jac(self.x_lin, self.u_lin, p, A, B)
             if not np.all(np.isfinite(A)):
                 A = np.zeros((n, n))
-            self.memo[lin_key] = _discretize(A, np.diag(self.q), self.dt)
+            self.memo[lin_key] = sampled_noise(A, np.diag(self.q), self.dt)
         Ad, Qv = self.memo[lin_key]
         C = np.zeros((ny, n))
         C[np.arange(ny), self.c_idx] = 1.0
@@ -118,15 +119,11 @@ class _Predictor(_Unknowns):
         filter's prediction errors most likely at *z* (factors on the current ones)."""
         from scipy.optimize import minimize
 
-        n_rows = self.log.n_rows
         has_q = bool(np.any(self.q > 0))
 
         def nll(v: np.ndarray) -> float:
-            e, S = self.errors(z, math.exp(v[0]) if has_q else 1.0, self.sigma_y * np.exp(v[1:]))
-            if not np.all(np.isfinite(e)):
-                return math.inf
-            _sign, logdet = np.linalg.slogdet(S)
-            return float(n_rows * logdet + np.einsum("ki,ij,kj->", e, np.linalg.inv(S), e))
+            return _negative_log_likelihood(
+                *self.errors(z, math.exp(v[0]) if has_q else 1.0, self.sigma_y * np.exp(v[1:])))
 
         v0 = np.zeros(1 + self.ny)
         simplex = np.vstack([v0, 0.2 * np.eye(v0.size)])  # factors of 1.2 to start

@@ -11,11 +11,11 @@ import numpy as np
 
 from equilibrist.errors import nearest
 from equilibrist.ident.log import IdentificationError
+from equilibrist.ident.params import FORMAT
 
 # Lags of the Ljung-Box whiteness test, and its level.
 WHITENESS_LAGS = 20
 WHITENESS_LEVEL = 0.05
-FORMAT = "equilibrist-params-1"
 
 
 @dataclass(frozen=True)
@@ -60,31 +60,13 @@ class OutputFit:
 
 @dataclass(frozen=True, eq=False)
 class Identification:
-    """The answer of :func:`identify`.
+    """The answer of :func:`~equilibrist.ident.fit.identify`.
 
-    Attributes
-    ----------
-    system : str
-        The system's key.
-    params : mapping
-        Every parameter of the system, the free ones at their estimates.
-    estimates : tuple of Estimate
-        The free parameters, then the sensor offsets (``offset_<output>``).
-    correlation : ndarray
-        Correlation matrix of the estimates, in their order.
-    unidentifiable : tuple of str
-        The directions the data cannot tell apart, in words.
-    warnings : tuple of str
-        Everything that makes a number less trustworthy.
-    outputs : tuple of OutputFit
-        NRMSE and the whiteness test of each measured output.
-    time, measured, replayed : ndarray
-        The log's times, its measurements and the fitted model's replay
-        (each segment from its estimated initial state).
-    segment_starts : ndarray
-        The sample index where each segment starts.
-    method : mapping
-        How the fit was made (JSON-able).
+    *params* holds every parameter, the free ones at their estimates; *estimates* the free
+    parameters, then the sensor offsets (``offset_<output>``), with *correlation* in their
+    order; *unidentifiable* the directions the log cannot tell apart, in words; *replayed*
+    the fitted model's replay, each shooting segment (starting at *segment_starts*) from its
+    estimated state; *method* how the fit was made (JSON-able).
     """
 
     system: str
@@ -210,4 +192,4 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
     return "\n".join(out)
 
 
-__all__ = ["FORMAT", "WHITENESS_LAGS", "WHITENESS_LEVEL", "Estimate", "Identification", "OutputFit"]
+__all__ = ["WHITENESS_LAGS", "WHITENESS_LEVEL", "Estimate", "Identification", "OutputFit"]

@@ -12,14 +12,15 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from equilibrist.control.discretize import sampled_noise
 from equilibrist.errors import EquilibristError
 from equilibrist.ident.log import IdentificationError, Log
-from equilibrist.ident.noise import _information_inverse, _steady_gain, _van_loan
+from equilibrist.ident.noise import _information_inverse, _negative_log_likelihood, _steady_gain
 from equilibrist.numeric.system import System
 from equilibrist.sim.integrators import DEFAULT
 
@@ -122,7 +123,6 @@ class _Problem(_Unknowns):
     shoot: ShootFunction
     step_theta: np.ndarray
     step_x: np.ndarray
-    cache: dict[str, object] = field(default_factory=dict)
 
     @property
     def n_seg(self) -> int:
@@ -308,7 +308,7 @@ def _segment_samples(A: np.ndarray, q: np.ndarray, c_idx: np.ndarray, sigma_y: n
         return cap
     best = MIN_SEGMENT_SAMPLES
     for L in range(MIN_SEGMENT_SAMPLES, cap + 1):
-        Q = _van_loan(A, np.diag(q), L * dt)
+        _F, Q = sampled_noise(A, np.diag(q), L * dt)
         ratio = np.diag(Q)[c_idx] / sigma_y**2
         if np.max(ratio) > SEGMENT_NOISE_RATIO:
             break
@@ -329,7 +329,7 @@ def _whitening(A: np.ndarray, q: np.ndarray, floor: np.ndarray, durations: np.nd
     for s, T in enumerate(durations):
         key = round(float(T), 12)
         if key not in memo:
-            Q = _van_loan(A, np.diag(q), float(T)) + np.diag(floor)
+            Q = sampled_noise(A, np.diag(q), float(T))[1] + np.diag(floor)
             L = np.linalg.cholesky(Q)
             memo[key] = np.linalg.inv(L)
         out[s] = memo[key]
@@ -358,14 +358,9 @@ def _process_scale(system: System, log: Log, prob: _Problem, theta: np.ndarray, 
     fitted model's Kalman filter prediction errors."""
     from scipy.optimize import minimize_scalar
 
-    n_rows = log.n_rows
-
     def nll(log_scale: float) -> float:
-        e, S = _kalman(system, log, prob, theta, off, x0, A, q * math.exp(log_scale), floor, dt)
-        if not np.all(np.isfinite(e)):
-            return math.inf
-        _sign, logdet = np.linalg.slogdet(S)
-        return float(n_rows * logdet + np.einsum("ki,ij,kj->", e, np.linalg.inv(S), e))
+        return _negative_log_likelihood(
+            *_kalman(system, log, prob, theta, off, x0, A, q * math.exp(log_scale), floor, dt))
 
     res = minimize_scalar(nll, bounds=(math.log(1e-3), math.log(1e3)), method="bounded",
                           options={"xatol": 0.02})
@@ -384,7 +379,7 @@ def _kalman(system: System, log: Log, prob: _Problem, theta: np.ndarray, off: np
     C = np.zeros((ny, n))
     C[np.arange(ny), prob.c_idx] = 1.0
     Ad = expm(A * dt)
-    Qd = _van_loan(A, np.diag(q), dt) + np.diag(floor)
+    Qd = sampled_noise(A, np.diag(q), dt)[1] + np.diag(floor)
     gain, Sinn = _steady_gain(Ad, C, Qd, np.diag(prob.sigma_y**2))
     e = np.empty((log.n_rows, ny))
     load_shooting(system).innovations(
