@@ -274,7 +274,7 @@ class LinearController:
     def as_nonlinear(self) -> NonlinearController:
         """This controller as a :class:`NonlinearController` whose source calls the linear
         library on :meth:`packed`: the same sums in the same order, so it runs (in the core, in
-        Python, and in the C that :mod:`equilibrist.export.nonlinear_c` writes from it) to the
+        Python, and in the C that :mod:`equilibrist.native.nonlinear_library` writes from it) to the
         bit as this one. A linear controller of any making exports this way."""
         from equilibrist.control.nonlinear import NonlinearController
 
