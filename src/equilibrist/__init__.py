@@ -5,11 +5,15 @@ The package is layered; each layer imports only from the ones before it::
     mechanics -> systems -> numeric -> control -> sim -> viz / export / cli
 
 Nothing does work at import time: systems are derived (or loaded from the
-on-disk cache) when first asked for.
+on-disk cache) when first asked for. Inside IPython (Jupyter), importing the
+package tells IPython how to show its objects (:mod:`equilibrist.notebook.display`,
+by type name: nothing else is imported).
 """
 
 from __future__ import annotations
 
+import importlib
+import sys
 from typing import TYPE_CHECKING
 
 from equilibrist.errors import EquilibristError
@@ -35,6 +39,18 @@ def list_systems() -> list[str]:
     from equilibrist.systems.registry import family_names
 
     return family_names()
+
+
+def _show_in_ipython() -> None:
+    """Register the notebook display when IPython is running (its shell exists)."""
+    if "IPython" not in sys.modules:
+        return
+    # By name: every layer imports this root module (for its errors and version), and none
+    # may import the display, which sits with the applications above them.
+    importlib.import_module("equilibrist.notebook.display").register()
+
+
+_show_in_ipython()
 
 
 def policy(system: System | str, *, controller: str = "lqr", rate: float | None = None,

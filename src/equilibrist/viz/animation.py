@@ -10,9 +10,11 @@ more frames than *max_frames*.
 
 from __future__ import annotations
 
+import base64
 import math
 import subprocess
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -145,9 +147,7 @@ def render_frames(
     # The trace of a scene that draws one follows the samples, thinned to a few thousand.
     thin = max(1, len(t) // 3000)
     frames = []
-    from tqdm.auto import tqdm
-
-    bar = tqdm(total=len(times), desc=f"animating {system.key}", unit="frame", disable=not progress,
+    bar = _progress_bar()(total=len(times), desc=f"animating {system.key}", unit="frame", disable=not progress,
                leave=False)
     with bar:
         for k, i in enumerate(index):
@@ -160,6 +160,21 @@ def render_frames(
                                          note=note))
             bar.update()
     return frames, times
+
+
+def _progress_bar() -> Any:
+    """tqdm's class: its notebook bar in a Jupyter kernel that can draw it (ipywidgets), its
+    text bar elsewhere (``tqdm.auto`` alone warns "IProgress not found" in a kernel without
+    ipywidgets)."""
+    import importlib.util
+
+    if importlib.util.find_spec("ipywidgets") is None:
+        from tqdm import tqdm
+
+        return tqdm
+    from tqdm.auto import tqdm as auto
+
+    return auto
 
 
 def write_gif(frames: Sequence[np.ndarray], path: str | Path, *, frame_seconds: float) -> Path:
@@ -302,3 +317,55 @@ def animate_result(result: SimResult | Run, path: str | Path, *, system: System 
     options.setdefault("events", run.events)
     return animate(run.system, run.t, states, path, inputs=run.u, commands=run.u_command,
                    **options)
+
+
+@dataclass(frozen=True)
+class InlineAnimation:
+    """An animation held in memory to show in a notebook: an MP4 played by an HTML5 video
+    element, or an animated GIF where ffmpeg is missing.
+
+    Attributes
+    ----------
+    data : bytes
+        The file's bytes.
+    mime : str
+        ``"video/mp4"`` or ``"image/gif"``.
+    """
+
+    data: bytes
+    mime: str
+
+    def __repr__(self) -> str:
+        return f"InlineAnimation({self.mime}, {len(self.data)} bytes)"
+
+    def _repr_html_(self) -> str:
+        source = f"data:{self.mime};base64,{base64.b64encode(self.data).decode('ascii')}"
+        if self.mime == "video/mp4":
+            return f"<video controls autoplay loop muted playsinline src='{source}'></video>"
+        return f"<img src='{source}' alt='animation'/>"
+
+    def save(self, path: str | Path) -> Path:
+        """Write the animation to *path* (its suffix must match: ``.mp4`` or ``.gif``)."""
+        suffix = ".mp4" if self.mime == "video/mp4" else ".gif"
+        p = check_suffix(path, (suffix,), "animation")
+        with atomic_path(p) as tmp:
+            Path(tmp).write_bytes(self.data)
+        return p
+
+
+def animate_inline(result: SimResult | Run, *, system: System | None = None,
+                   estimates: bool = False, progress: bool = True,
+                   **options: Any) -> InlineAnimation:
+    """Animate a simulation result for a notebook: an MP4 (HTML5 video) with ffmpeg, else a GIF.
+
+    Parameters are those of :func:`animate_result` without *path*; the progress bar is
+    on by default (a notebook's widget bar in Jupyter).
+    """
+    import tempfile
+
+    suffix = ".mp4" if ffmpeg_path() is not None else ".gif"
+    with tempfile.TemporaryDirectory() as folder:
+        path = animate_result(result, Path(folder) / f"animation{suffix}", system=system,
+                              estimates=estimates, progress=progress, **options)
+        data = path.read_bytes()
+    return InlineAnimation(data, "video/mp4" if suffix == ".mp4" else "image/gif")
