@@ -5,24 +5,8 @@ library is written from out of the one controller value the simulation runs, a
 :class:`~equilibrist.control.linear.LinearController` made by its design
 (:func:`from_design`), checked for what the generated C code needs: sizes, finite values,
 input limits around the operating input. The numbers that ship are the numbers that were
-simulated. In deviation coordinates about the operating point ``(x0, u0)``, with ``z`` the
-carried prediction ``xhat_{k|k-1}``, the controller is:
-
-``lqg``, ``current`` Kalman form::
-
-    xhat = z + Kf (dy - C z)                  dy = y - y0
-    u    = u0 - K xhat + Kc (r - r0)          then saturated to [u_min, u_max]
-    z    = Ad xhat + Bd (u - u0)              with the saturated u
-
-``lqg``, ``predictor`` form::
-
-    xhat = z
-    u    = u0 - K xhat + Kc (r - r0)          saturated
-    z    = Ad z + Bd (u - u0) + Kf (dy - C z)
-
-``lqr`` (full state measured)::
-
-    u    = u0 - K (x - x0) + Kc (r - r0)      saturated
+simulated; the library's header states its equations (LQR, or LQG in the ``current`` or
+``predictor`` Kalman form).
 """
 
 from __future__ import annotations

@@ -1,74 +1,11 @@
-"""The constrained MPC as C code: DAQP's own C sources plus a generated driver.
-
-:func:`export_mpc` writes into a folder:
-
-``daqp/``
-    DAQP's C sources (``src/``, ``include/``, its MIT ``LICENSE``, release
-    0.11.0), shipped with equilibrist: the same sources the simulated
-    controller (:class:`~equilibrist.control.mpc.MPCRuntime`) is compiled from.
-``<name>.h``, ``<name>.c``
-    The QP of :attr:`~equilibrist.control.mpc.MPCProblem.condensed` as
-    DAQP's least-distance problem, formed here
-    (:func:`~equilibrist.native.mpc_library.ldp_form`: the constraint
-    rows times the Hessian's inverse factor, scaled to unit length, their
-    offsets, the map back to the first move) as constants, the LQR's
-    predictions ``Fu``, ``Fs``, the gain, the limits, and::
-
-        int <name>_setup(void);
-        int <name>_step(const double x[n], double u[m]);
-        int <name>_move(const double dx[n], double du[m]);
-        int <name>_iterations(void);
-
-    ``<name>_setup`` sets DAQP's workspace up (once, in static arrays: no
-    ``malloc``, the rows stay constants in flash; afterwards it only
-    empties the working set) and returns 0, or DAQP's negative setup flag.
-    ``<name>_step`` (which calls ``<name>_setup`` itself the first time) is
-    the MPC at the full state ``x``, computed as the simulated controller
-    computes it (the same code: :class:`~equilibrist.control.mpc.MPCRuntime`): the
-    bounds at ``dx = x - x_op``; the LQR's move exactly when the LQR's
-    trajectory meets every constraint (returns 0); else DAQP from the last
-    sample's working set (returns DAQP's exit flag: 1 or 2 solved; a
-    negative flag means no solution, and the clipped LQR's move is applied
-    and the working set emptied). ``u = u_op + clip(-K dx + v_0)``.
-    ``<name>_move`` is the same from the deviation ``dx`` (``u = u_op + du``).
-    ``<name>_iterations`` is DAQP's iteration count of the last step.
-    With ``precision="float"`` the arithmetic is single precision (``c_float``
-    is ``float``: every source compiled with ``-DDAQP_SINGLE_PRECISION``,
-    DAQP's tolerances :data:`~equilibrist.native.mpc_library.FLOAT_SETTINGS`);
-    the arguments stay ``double``.
-
-    With the Kalman filter in front (``estimator="kalman"``, the default
-    when the measured outputs are not the full state) also::
-
-        void <name>_init(<name>_filter *f);
-        int  <name>_output(const <name>_filter *f, const double y[p], double u[m]);
-        void <name>_update(<name>_filter *f, const double y[p], const double u_applied[m]);
-        void <name>_estimate(const <name>_filter *f, const double y[p], double x[n]);
-
-    the design's discrete filter (``current`` or ``predictor`` form, as the
-    simulated controller runs it) as generated constants of the linear
-    controller form and its fixed, separately tested C code
-    (:func:`equilibrist.native.linear_c.linear_c`: ``eq_linear_estimate``,
-    ``eq_linear_update``); ``<name>_output`` solves the QP at the filter's
-    estimate. ``y`` are the measured outputs (absolute), ``u_applied`` the
-    input that acted.
-``<name>_vectors.h``, ``test_<name>.c``, ``Makefile``
-    ``make check`` replays a recorded noisy closed-loop run (measurements
-    and applied inputs) through the C controller and requires each command
-    within ``tolerance`` of the simulated controller's (the same library
-    compiled by equilibrist: equal to the bit in double precision) and the
-    filter's state after each update equal to the simulated one's
-    (``Z_TOLERANCE`` relative); in single precision within
-    :func:`command_tolerance` (:data:`FLOAT_TOLERANCE` of the widest input
-    range) and ``Z_TOLERANCE_FLOAT``. ``make size`` prints the library's
-    code, static data and stack (:mod:`equilibrist.native.size`).
-
-Math functions: the driver calls none; DAQP calls ``sqrt``, ``fabs`` and
-``fmax`` from the C library's ``libm`` (linked with ``-lm``).
-Memory: :func:`footprint` measures the code and static data with ``size``
-and the heap that ``<name>_setup`` allocates by wrapping ``malloc`` (none).
-The cart-pole at 200 Hz, ``N = 30``, fits a Cortex-M4's 64 kB of RAM and
-256 kB of flash in double and in single precision (docs/export.md).
+"""The constrained MPC's export: DAQP's C sources and the generated driver
+(:func:`~equilibrist.native.mpc_library.library_files`, the library the simulated
+:class:`~equilibrist.control.mpc_runtime.MPCRuntime` runs, compiled; its C interface is
+in docs/mpc.md), a recorded noisy closed-loop run of the simulated controller as test
+vectors, ``make check`` (each command within :func:`command_tolerance` of the simulated
+one's, the filter's state within :data:`Z_TOLERANCE`, relative; in single precision
+:data:`FLOAT_TOLERANCE` of the widest input range and :data:`Z_TOLERANCE_FLOAT`),
+``make size`` and the hardware-in-the-loop files (docs/export.md).
 """
 
 from __future__ import annotations

@@ -1,38 +1,16 @@
 """``make size``: the embedded budget of an exported library, the same rule in every Makefile.
 
-:func:`size_rules` is the Makefile text every export appends (the linear
-LQR/LQG library's, :func:`equilibrist.native.c_programs.makefile`, and the
-one :func:`equilibrist.native.make_check.check_files` writes for the MPC and the
-nonlinear controllers). ``make size`` compiles the library's sources alone
-(not the test program, its vectors or the examples) with ``CFLAGS`` and
-``-fstack-usage`` into ``size-build/`` and prints three lines::
+:func:`size_rules` is the Makefile text every export appends. ``make size`` compiles the
+library's sources alone with ``CFLAGS`` and ``-fstack-usage`` into ``size-build/`` and
+prints ``code``, ``data`` and ``stack`` in bytes (POSIX sh and awk only): ``size``'s
+sums over the objects, and the deepest chain of stack frames from the step functions
+along GCC's call graph (``-fcallgraph-info=su``; each group of mutually recursive
+functions counted once, calls through a function pointer named and not followed; a
+compiler without call graphs gives the largest single frame). docs/export.md
+("Embedded budget") says what each figure holds.
 
-    code <bytes>    text + data: instructions, constants, initial values (flash)
-    data <bytes>    data + bss: the static data (RAM)
-    stack <bytes>   the deepest chain of stack frames from the step functions
-
-summed over the objects as ``size`` (binutils, Berkeley format: ``text``
-holds the constants too) and the compiler's stack-usage files report them;
-POSIX sh and awk only. A device's flash holds ``code``, its RAM ``data``,
-the deepest ``stack`` and the heap (none: no export allocates). ``stack`` sums the frames along the call
-graph that GCC writes with ``-fcallgraph-info=su`` (GCC 10 and later): the
-largest sum over the paths from the library's step functions, calls into
-the C library (``sqrt``...) not counted, each group of mutually recursive
-functions (a strongly connected component of the graph) counted once and
-named on the standard error with its frames (DAQP's pivoting:
-``daqp_pivot_last`` and the constraint updates call each other, at most
-once per constraint of the working set). Calls through a function pointer
-are not followed and are named on the standard error (DAQP's elimination of
-equality constraints, which the MPC's QP, without equalities, never runs).
-A compiler without call graphs (clang) gives the largest single frame,
-said on the standard error.
-``SIZE`` names the ``size`` program (``SIZE=arm-none-eabi-size`` with
-``CC=arm-none-eabi-gcc`` and the target's ``CFLAGS`` for a device's figures).
-
-:func:`measure` runs the rule in a scratch copy of an export's files and
-returns the three figures (:class:`Footprint`), or ``None`` where ``make`` or
-the compiler is missing: what each export publishes in its README.txt and
-``export --json``.
+:func:`measure` runs the rule in a scratch copy of an export's files and returns the
+figures (:class:`Footprint`), or ``None`` where ``make`` or the compiler is missing.
 """
 
 from __future__ import annotations

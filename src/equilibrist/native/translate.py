@@ -37,7 +37,6 @@ class Translator(Expressions):
         self.locals: dict[str, str] = {}
         self.returns: str | None = None
         self.tmp = 0
-        self.loop_depth = 0
         self.pre: list[str] = []
 
     # -- errors ------------------------------------------------------------------------------
@@ -188,9 +187,7 @@ class Translator(Expressions):
             test, _ = self.scalar(s.test)
             pre = self.pre
             self.pre = saved
-            self.loop_depth += 1
             body = self.block(s.body, depth + 1)
-            self.loop_depth -= 1
             inner = "    " * (depth + 1)
             return [f"{ind}for (;;) {{", *[inner + p for p in pre],
                     f"{inner}if (!({test})) break;", *body, f"{ind}}}"]
@@ -316,9 +313,7 @@ class Translator(Expressions):
         var = self.var(s.target.id)
         end = self.fresh()
         cmp = "<" if sign > 0 else ">"
-        self.loop_depth += 1
         body = self.block(s.body, depth + 1)
-        self.loop_depth -= 1
         return [f"{ind}{{", f"{ind}    const int64_t {end} = {stop};",
                 f"{ind}    for (int64_t {end}_i = {start}; {end}_i {cmp} {end}; {end}_i += {step}) {{",
                 f"{ind}        {var} = {end}_i;",
