@@ -69,6 +69,8 @@ def run(args: argparse.Namespace) -> int:
             "residual": lm.residual,
             # Always {"re", "im"}, as in 'design --json', whether or not any is complex.
             "poles": [{"re": _real(p.real), "im": _real(p.imag)} for p in lm.poles],
+            # What the definition says of itself (a model file: what was made of it, what is ignored).
+            "notes": list(system.spec.notes),
         })
         return 0
     print(render(system, lm))
