@@ -152,3 +152,16 @@ def test_bad_rigs_are_refused_in_one_message(loop):
         _run(loop, Rig(torque_noise=-1.0, actuation_delay=-2, perturbation_joints=("x",)))
     text = str(err.value)
     assert "torque_noise" in text and "actuation_delay" in text and "'x'" in text
+
+
+def test_pulses_on_passive_joints_dropped_when_asked(loop):
+    from equilibrist.sim.rig import actuated
+
+    system, _ctrl = loop
+    # The acrobot's motor is at the elbow, the pendubot's at the shoulder.
+    assert actuated(system).tolist() == [False, True]
+    assert actuated(get_system("pendubot")).tolist() == [True, False]
+    rig = Rig(perturbations=1, perturbation_gap=0.2, perturbation_joints=("theta1",),
+              perturb_passive=False)
+    pushed = _run(loop, rig, seed=2)
+    assert np.array_equal(pushed.states, _run(loop).states)

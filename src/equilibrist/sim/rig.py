@@ -29,6 +29,9 @@ period (the compiled core's ``eq_rig_measure`` and ``eq_rig_actuate``,
   every stage of the integrator. Their times are spread over the run as
   the benchmark spreads them (``perturbation_gap`` apart at least),
   widths and amplitudes drawn uniformly from their ranges, signs at random.
+  With ``perturb_passive=False`` the pulses drawn for a joint no input drives
+  are dropped (RealAIGym's plant multiplies the torques by its input matrix,
+  which zeroes them: its perturbation family pushes the actuated joint only).
 
 The noise is drawn from the run's generator (its seed), the pulses from a
 generator seeded by the run's seed too: a seeded run is reproducible. The
@@ -77,6 +80,7 @@ class Rig:
     perturbation_gap: float = 1.0
     perturbation_width: tuple[float, float] = (0.05, 0.1)
     perturbation_amplitude: tuple[float, float] = (0.5, 5.0)
+    perturb_passive: bool = True
 
     @property
     def off(self) -> bool:
@@ -202,6 +206,8 @@ class Rig:
             for i in range(per):
                 forces[:, joint] += amp[row, i] * np.exp(
                     -np.power(t - mu[row, i], 2.0) / (2 * sigma[row, i] ** 2.0))
+        if not self.perturb_passive:  # the drawn pulses of joints without an input dropped
+            forces[:, ~actuated(system)] = 0.0
         described = {"joints": [names[j] for j in joints], "times": mu.tolist(),
                      "widths": sigma.tolist(), "amplitudes": amp.tolist()}
         return np.ascontiguousarray(forces), described
@@ -221,6 +227,18 @@ class Rig:
         return out
 
 
+def actuated(system: System) -> np.ndarray:
+    """Per coordinate, whether an input exerts a generalized force on it (``M B`` at the
+    operating point, ``B`` the inputs' columns of the accelerations)."""
+    nq = int(system.functions.N_Q)
+    point = system.operating_point()
+    _a, b = system.jacobians(point.x, point.u)
+    mass = np.zeros((nq, nq))
+    system.functions.mass_matrix(np.asarray(point.x, dtype=float), system.p, mass)
+    forces = np.abs(mass @ np.asarray(b)[nq:, :])
+    return np.asarray(forces.max(axis=1) > 1e-9 * max(1.0, float(forces.max())))
+
+
 def check(rig: object) -> Rig | None:
     """*rig* as a :class:`Rig` (None, or one that adds nothing: None)."""
     if rig is None:
@@ -230,4 +248,4 @@ def check(rig: object) -> Rig | None:
     return None if rig.off else rig
 
 
-__all__ = ["Rig", "check"]
+__all__ = ["Rig", "actuated", "check"]
