@@ -115,7 +115,7 @@ def system_drawing(system: System) -> str | None:
     from equilibrist.viz.frames import draw_state
     from equilibrist.viz.generic import can_draw
 
-    if not can_draw(system):
+    if system.spec.drawing is None and not can_draw(system):  # no scene of its own, no points
         return None
     point = system.operating_point()
     with tempfile.TemporaryDirectory() as folder:
@@ -132,10 +132,11 @@ def system_bundle(system: System) -> Bundle:
          html.escape(p.unit), html.escape(p.meaning)]
         for p in spec.parameters
     ]
+    low, high = system.input_limits
     inputs = [
         [f"<code>{html.escape(i.name)}</code>", html.escape(i.unit), html.escape(i.meaning),
-         f"[{_number(i.low)}, {_number(i.high)}]"]
-        for i in spec.inputs
+         f"[{_number(float(low[k]))}, {_number(float(high[k]))}]"]
+        for k, i in enumerate(spec.inputs)
     ]
     states = ", ".join(f"<code>{html.escape(s)}</code>" for s in system.state_names)
     equations = system_equations(system)
