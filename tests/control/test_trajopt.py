@@ -150,3 +150,23 @@ def test_a_trajectory_file_never_runs_the_system_it_names(tmp_path: Path) -> Non
     assert not marker.exists()
     with pytest.raises(DesignError, match="not a trajectory file"):
         load_trajectory(tmp_path / "evil.py")
+
+
+def test_a_cost_on_the_rates_plans_a_slower_motion() -> None:
+    cart = get_system("cartpole")
+    task = get_task(cart, "swingup")
+    kw = dict(start=task.start, goal=task.x_op, knots=20, duration=4.0, bounds=dict(task.region))
+
+    def rates_squared(traj) -> float:  # the trapezoid over the knots
+        return float(np.trapezoid(np.sum(traj.states[:, 2:] ** 2, axis=1), traj.times))
+
+    plain = plan(cart, **kw)
+    slow = plan(cart, state_cost={"x_dot": 1.0, "theta_dot": 1.0}, **kw)
+    assert plain.converged and slow.converged
+    assert rates_squared(slow) < 0.9 * rates_squared(plain)
+    assert slow.settings["state_cost"] == {"x_dot": 1.0, "theta_dot": 1.0}
+    assert "state_cost" not in plain.settings
+    with pytest.raises(DesignError, match="expected states of cartpole"):
+        plan(cart, state_cost={"speed": 1.0}, **kw)
+    with pytest.raises(DesignError, match="non-negative number"):
+        plan(cart, state_cost={"x_dot": -1.0}, **kw)

@@ -14,7 +14,7 @@ import pytest
 
 from equilibrist import get_system
 from equilibrist.errors import ParameterError
-from equilibrist.systems.dfki_parameters import read_model_parameters
+from equilibrist.systems.dfki_parameters import read_model_parameters, settings_of
 
 IDENTIFIED = """I1: 0.031887199591513114
 I2: 0.05086984812807257
@@ -101,3 +101,19 @@ def test_a_bad_file_is_refused_in_one_line(tmp_path, text: str, words: str) -> N
     assert "\n" not in str(caught.value)
     with pytest.raises(ParameterError, match="no parameter file"):
         read_model_parameters(tmp_path / "missing.yml", robot="acrobot")
+
+
+class _RigParameters:
+    """The shape of the rig's own parameter object (double_pendulum's model_parameters)."""
+
+    m, l, r, I = [0.5, 0.6], [0.2, 0.3], [0.2, 0.25], [0.03, 0.05]
+    b, cf, tl = [0.0, -0.01], [0.0, -0.1], [0.0, 6.0]
+    Ir, gr, g = 0.0, 6.0, 9.81
+
+
+def test_the_rigs_parameter_object_gives_the_same_settings() -> None:
+    got = settings_of(_RigParameters(), robot="acrobot")
+    assert got["tau_max"] == 6.0 and got["tau_min"] == -6.0 and got["cf2"] == -0.1
+    assert get_system("dfki_double_pendulum", **got).params["b2"] == -0.01
+    with pytest.raises(ParameterError, match="tl1 = 0 is the pendubot's torque limit"):
+        settings_of(_RigParameters(), robot="pendubot")

@@ -191,11 +191,12 @@ class _Problem:
 
 def _problem(system: System, N: int, duration: float | None, duration_max: float | None,
              minimize: str, bounds: Mapping[str, tuple[float, float]], lo: np.ndarray,
-             hi: np.ndarray) -> _Problem:
+             hi: np.ndarray, state_cost: Mapping[str, float] | None = None) -> _Problem:
     """The collocation problem of *system* (cached by everything that shapes it)."""
     key = (system.digest, tuple(sorted((k, float(v)) for k, v in system.params.items())), N,
            duration, duration_max, minimize,
-           tuple(sorted((k, float(a), float(b)) for k, (a, b) in bounds.items())))
+           tuple(sorted((k, float(a), float(b)) for k, (a, b) in bounds.items())),
+           tuple(sorted((k, float(v)) for k, v in (state_cost or {}).items())))
     with _PROBLEMS_LOCK:
         if key in _PROBLEMS:
             return _PROBLEMS[key]
@@ -233,6 +234,13 @@ def _problem(system: System, N: int, duration: float | None, duration_max: float
     for i in range(m):
         effort = effort + w[i] * (h / 6) * (ca.sumsqr(U[i, :-1]) + 4 * ca.sumsqr(Um[i, :])
                                             + ca.sumsqr(U[i, 1:]))
+    # The states' weighted squares about the goal, integrated as the effort is (Simpson's
+    # rule on the knots and midpoints): only when asked, so the default problem is unchanged.
+    for name, weight in (state_cost or {}).items():
+        k = system.state_index(name)
+        effort = effort + float(weight) * (h / 6) * (
+            ca.sumsqr(X[k, :-1] - goal[k]) + 4 * ca.sumsqr(Xm[k, :] - goal[k])
+            + ca.sumsqr(X[k, 1:] - goal[k]))
     opti.minimize(effort if minimize == "effort" else T + 1e-6 * effort)
     problem = _Problem(f, opti, X, U, Um, T, start, goal)
     with _PROBLEMS_LOCK:
@@ -245,7 +253,8 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
          duration: float | None = None, duration_max: float | None = None,
          minimize: str = "effort", guess: str | Trajectory = "straight", seed: int = 0,
          bounds: Mapping[str, tuple[float, float]] | None = None,
-         max_iterations: int = 3000, max_time: float | None = MAX_TIME) -> Trajectory:
+         max_iterations: int = 3000, max_time: float | None = MAX_TIME,
+         state_cost: Mapping[str, float] | None = None) -> Trajectory:
     """Plan a motion of *system* from *start* to *goal* (absolute states).
 
     Parameters
@@ -266,6 +275,10 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
         ``{state: (low, high)}`` the motion must keep (the task's region).
     max_iterations : int
         IPOPT's iterations at most.
+    state_cost : mapping, optional
+        ``{state: weight}``: adds ``integral of weight (x_i - goal_i)^2 dt`` to the effort
+        (the rates' squares with a goal at rest: a plan that moves less fast). Weights are
+        non-negative; none by default.
     max_time : float or None
         Wall-clock seconds the solve may take, the solver's set-up for a new shape of
         problem included (default :data:`MAX_TIME`, 120; None: no limit). A solve
@@ -300,7 +313,14 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
     hi = np.array([float(system.params[f"{i}_max"]) for i in system.input_names])
     xg, ug, t_guess = _initial_guess(system, guess, start=start, goal=goal, N=N, seed=seed,
                                      duration=duration, duration_max=duration_max, lo=lo, hi=hi)
-    problem = _problem(system, N, duration, duration_max, minimize, bounds or {}, lo, hi)
+    for name, weight in (state_cost or {}).items():
+        if name not in system.state_names:
+            raise DesignError(f"state_cost names {name!r}: expected states of {system.key} "
+                              f"({', '.join(system.state_names)})")
+        if not (isinstance(weight, int | float) and math.isfinite(weight) and weight >= 0):
+            raise DesignError(f"state_cost[{name!r}] = {weight!r}: expected a non-negative number")
+    problem = _problem(system, N, duration, duration_max, minimize, bounds or {}, lo, hi,
+                       state_cost)
     f, opti, X, U, Um, T = problem.f, problem.opti, problem.X, problem.U, problem.Um, problem.T
     with problem.lock:
         opti.set_value(problem.start, start)
@@ -332,6 +352,8 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
                   "guess": guess if isinstance(guess, str) else "file", "seed": seed,
                   "duration": duration, "duration_max": duration_max,
                   "bounds": {k: list(v) for k, v in (bounds or {}).items()},
+                  **({"state_cost": {k: float(v) for k, v in state_cost.items()}}
+                     if state_cost else {}),
                   "start": start.tolist(), "goal": goal.tolist()},
         system_digest=system.digest, status=status,
     )

@@ -39,8 +39,10 @@ Parameters
     gr      6                1           each motor's gear ratio
     b1      0.001            N m s/rad   shoulder viscous friction, either sign
     b2      0.001            N m s/rad   elbow viscous friction, either sign
-    cf1     0.16             N m         shoulder Coulomb friction, cf1 atan(100 q1_dot)
-    cf2     0.12             N m         elbow Coulomb friction, cf2 atan(100 q2_dot)
+    cf1     0.16             N m         shoulder Coulomb friction, cf1 atan(100 q1_dot),
+                                         either sign
+    cf2     0.12             N m         elbow Coulomb friction, cf2 atan(100 q2_dot),
+                                         either sign
     g       9.81             m/s^2       gravity
     ======  ===============  ==========  ============================================
 
@@ -87,7 +89,6 @@ from equilibrist.mechanics.spec import (
     OperatingPoint,
     Parameter,
     SystemSpec,
-    friction,
     nonnegative,
     positive,
 )
@@ -127,6 +128,13 @@ def _damping(name: str, joint: str) -> Parameter:
                      note=_ID, dissipative=True)
 
 
+def _coulomb(name: str, joint: str, rate: str) -> Parameter:
+    # Either sign too: the benchmark's robustness runs vary it through zero.
+    return Parameter(name, MODEL_1_0[name], "N*m",
+                     f"{joint} Coulomb friction, {name} atan(100 {rate}), either sign",
+                     note=_ID, dissipative=True)
+
+
 def parameters() -> tuple[Parameter, ...]:
     """The rig's parameters with the identified values of design C.1, model 1.0."""
     v = MODEL_1_0
@@ -145,10 +153,8 @@ def parameters() -> tuple[Parameter, ...]:
         positive("gr", v["gr"], "1", "each motor's gear ratio", note=_ID),
         _damping("b1", "shoulder"),
         _damping("b2", "elbow"),
-        friction("cf1", v["cf1"], "N*m", "shoulder Coulomb friction, cf1 atan(100 q1_dot)",
-                 note=_ID),
-        friction("cf2", v["cf2"], "N*m", "elbow Coulomb friction, cf2 atan(100 q2_dot)",
-                 note=_ID),
+        _coulomb("cf1", "shoulder", "q1_dot"),
+        _coulomb("cf2", "elbow", "q2_dot"),
         positive("g", v["g"], "m/s^2", "gravitational acceleration", note=_ID),
     )
 
@@ -220,6 +226,9 @@ def _spec(robot: str, joint: str, link: str, drawing: str) -> SystemSpec:
         design_scales={"theta1": 0.1, "theta2": 0.1, "theta1_dot": 1.0, "theta2_dot": 1.0,
                        "tau": 0.5},
         sensor_noise={"theta1": _ENCODER, "theta2": _ENCODER},
+        # Random torques of some 0.01 N m sqrt(s) (the gears' cogging, cable drag): the
+        # rates wander by about 0.01 rad/s in a second.
+        process_noise={"theta1_dot": 0.01, "theta2_dot": 0.01},
         control_rate=RATE,
         hanging={"theta1": 0.0, "theta2": 0.0},
         drawing=f"equilibrist.viz.scenes_planar:{drawing}",

@@ -113,4 +113,39 @@ def read_model_parameters(path: str | Path, *, robot: str) -> dict[str, float | 
     return settings
 
 
-__all__ = ["NAMES", "ROBOTS", "parse_model_parameters", "read_model_parameters"]
+def settings_of(model_parameters: object, *, robot: str) -> dict[str, float | str]:
+    """The settings of ``dfki_double_pendulum`` as *robot* from the rig's own parameter object
+    (``double_pendulum.model.model_parameters.model_parameters``: its lists ``m``, ``l``,
+    ``r``, ``I``, ``b``, ``cf``, ``tl`` per joint, and ``Ir``, ``gr``, ``g``), as RealAIGym's
+    leaderboard scripts hold it (``mpar``).
+
+    Raises
+    ------
+    ParameterError
+        An attribute missing or not a number, a torque limit of the actuated joint that is
+        not positive.
+    """
+    if robot not in ROBOTS:
+        raise ParameterError(f"robot {quote_outside(robot, limit=40)}: expected one of "
+                             f"{', '.join(ROBOTS)}")
+    values: dict[str, float] = {}
+    try:
+        for name in ("m", "l", "r", "I", "b", "cf", "tl"):
+            pair = getattr(model_parameters, name)
+            values[f"{name}1"], values[f"{name}2"] = float(pair[0]), float(pair[1])
+        for name in ("Ir", "gr", "g"):
+            values[name] = float(getattr(model_parameters, name))
+    except (AttributeError, TypeError, ValueError, IndexError) as exc:
+        raise ParameterError(f"the rig's parameters: {quote_outside(exc, limit=120)}: expected "
+                             "the lists m, l, r, I, b, cf, tl and the numbers Ir, gr, g") from None
+    limit = values[ROBOTS[robot]]
+    if not limit > 0:
+        raise ParameterError(f"{ROBOTS[robot]} = {limit:g} is the {robot}'s torque limit: "
+                             "expected a positive number")
+    settings: dict[str, float | str] = {"robot": robot}
+    settings.update((k, v) for k, v in values.items() if k in NAMES)
+    settings["tau_min"], settings["tau_max"] = -limit, limit
+    return settings
+
+
+__all__ = ["NAMES", "ROBOTS", "parse_model_parameters", "read_model_parameters", "settings_of"]

@@ -1,0 +1,76 @@
+"""equilibrist's planned swing-up of the acrobot, as a RealAIGym leaderboard controller.
+
+A controller file of DFKI's double-pendulum benchmark (``double_pendulum``'s v2 leaderboards,
+``leaderboard/acrobot/{simulation,robustness}_v2``): it defines ``controller`` (the
+benchmark's ``AbstractController``) and ``leaderboard_config``. Copy it into a leaderboard
+folder and run the benchmark's own scripts (docs/realaigym.md)::
+
+    python calculate_leaderboard_score.py con_acrobot.py     # simulation_v2
+    python benchmark_controller.py con_acrobot.py            # robustness_v2
+
+The controller is built with equilibrist's public API from the folder's own ``mpar`` (its
+``sim_parameters.py``: the identified rig, its torque limit), so the same file serves any
+identified rig: the rig as a catalogue system (``dfki_double_pendulum``), a swing-up planned on
+it by direct collocation (``equilibrist.control.trajopt.plan``), and the time-varying LQR that
+tracks the plan and hands over to the balancing LQR (``--controller tvlqr``), stepped as the
+compiled controller through ``equilibrist.policy``.
+"""
+
+import numpy as np
+from double_pendulum.controller.abstract_controller import AbstractController
+from sim_parameters import mpar
+
+import equilibrist
+from equilibrist.control.trajopt import plan
+from equilibrist.systems.dfki_parameters import settings_of
+
+ROBOT = "acrobot"
+#: The plan: its duration [s], collocation intervals, and the weight of the rates' squares
+#: beside the torque's in its cost (a swing-up that moves no faster than it must).
+DURATION, KNOTS, RATE_COST = 2.5, 100, 0.03
+
+name = "equilibrist_tvlqr"
+leaderboard_config = {
+    "csv_path": name + "/sim_swingup.csv",
+    "name": name,
+    "simple_name": "equilibrist TVLQR",
+    "short_description": "Swing-up planned by direct collocation (IPOPT), tracked by a "
+    "time-varying LQR handing over to the LQR, compiled by equilibrist.",
+    "readme_path": f"readmes/{name}.md",
+    "username": "equilibrist",
+}
+
+
+class EquilibristController(AbstractController):
+    """An ``equilibrist.policy`` in the benchmark's controller interface."""
+
+    def __init__(self, policy, actuated):
+        super().__init__()
+        self.policy = policy
+        self.actuated = actuated
+
+    def init_(self):
+        self.policy.reset()
+
+    def reset_(self):
+        self.policy.reset()
+
+    def get_control_output_(self, x, t=None):
+        u = np.zeros(2)
+        u[self.actuated] = self.policy(0.0 if t is None else t, x)[0]
+        return u
+
+
+def build(mpar, robot, duration=DURATION, knots=KNOTS, rate_cost=RATE_COST):
+    """The benchmark controller of equilibrist's planned swing-up for the rig *mpar*."""
+    system = equilibrist.get_system("dfki_double_pendulum", **settings_of(mpar, robot=robot))
+    trajectory = plan(system, start=np.zeros(4), goal=np.array([np.pi, 0.0, 0.0, 0.0]),
+                      knots=knots, duration=duration,
+                      state_cost={"theta1_dot": rate_cost, "theta2_dot": rate_cost})
+    rate = system.spec.control_rate
+    policy = equilibrist.policy(system, controller="tvlqr", rate=rate, trajectory=trajectory)
+    return EquilibristController(policy, actuated=1 if robot == "acrobot" else 0)
+
+
+controller = build(mpar, ROBOT)
+controller.init()
