@@ -24,6 +24,7 @@ import numpy as np
 
 from equilibrist.control import fixed
 from equilibrist.control.checks import given_text, real_array
+from equilibrist.envs.learnable import Learnable, learnable
 from equilibrist.errors import DesignError, EquilibristError, UnknownNameError, nearest
 from equilibrist.numeric.lookup import get_system
 from equilibrist.numeric.system import System
@@ -57,8 +58,11 @@ US_WIDTH = 4 + len(US_SLOTS)
 OPTION_DEFAULTS: dict[str, object] = {
     "params": None, "rate": None, "physics_step": None, "observe": "outputs", "noise": True,
     "randomize": None, "action_units": "normalized", "alive_bonus": ALIVE_BONUS, "at": None,
-    "integrator": integrators.DEFAULT,
+    "integrator": integrators.DEFAULT, "version": 0, "dtype": None,
 }
+#: The task's versions: 0 the rig's own units and cost, 1 the learnable form
+#: (:mod:`equilibrist.envs.learnable`).
+VERSIONS = (0, 1)
 
 
 class EnvError(EquilibristError, ValueError):
@@ -114,6 +118,12 @@ class Core:
     at:
         The states of the balance task's operating point (``{state: value}``), or None for
         the canonical one; the expert designs there too.
+    version:
+        The task's version: 0 (the rig's units, the task's cost) or 1 (``learnable``).
+    dtype:
+        The observations' and the spaces' floating type.
+    learnable:
+        Version 1's observation and reward (None for version 0).
     """
 
     system: System
@@ -130,6 +140,9 @@ class Core:
     randomize: Mapping[str, float]
     alive_bonus: float
     at: Mapping[str, float] | None
+    version: int
+    dtype: np.dtype[np.floating]
+    learnable: Learnable | None
     kernel: NativeCore
     c_idx: np.ndarray
     lv: np.ndarray
@@ -150,7 +163,13 @@ class Core:
 
     @property
     def n_obs(self) -> int:
+        """The core's raw observation components (before version 1's scaling)."""
         return len(self.observation_names)
+
+    @property
+    def agent_observation_names(self) -> tuple[str, ...]:
+        """What each component of an agent's observation is."""
+        return self.observation_names if self.learnable is None else self.learnable.names
 
     @property
     def limits(self) -> tuple[np.ndarray, np.ndarray]:
@@ -166,7 +185,7 @@ class Core:
                              zip(self.system.input_names, lo, hi, strict=True))
         else:
             span = f"{names} in [-1, 1] onto their limits"
-        return f"{m} real number(s) ({span}; beyond the range, saturated), float64"
+        return f"{m} real number(s) ({span}; beyond the range, saturated), {self.dtype.name}"
 
     def physical_input(self, action: np.ndarray) -> np.ndarray:
         """The saturated input an action applies (as the core computes it)."""
@@ -237,6 +256,8 @@ def build_core(
     alive_bonus: float = ALIVE_BONUS,
     at: Mapping[str, object] | None = None,
     integrator: str = integrators.DEFAULT,
+    version: int = 0,
+    dtype: object = None,
     lanes: bool = False,
 ) -> Core:
     """Validate an environment's options (every problem at once) and pack them. *lanes*:
@@ -262,11 +283,12 @@ def build_core(
     h, n_sub = _physics_step(run_rate, physics_step, integrator, problems)
     bonus = _check_options(observe, action_units, noise, alive_bonus, problems)
     rnd = _randomization(sysm, randomize, problems)
+    float_type = _version_dtype(version, dtype, problems)
     if problems or run_rate is None or h is None or n_sub is None or bonus is None:
         raise EnvError("; ".join(problems) if problems else "invalid environment settings")
     return _packed(sysm, tsk, point, run_rate=run_rate, h=h, n_sub=n_sub, integrator=integrator,
                    observe=observe, noise=noise, rnd=rnd, action_units=action_units,
-                   bonus=bonus, lanes=lanes)
+                   bonus=bonus, lanes=lanes, version=int(version), dtype=float_type)
 
 
 def _physics_step(run_rate: float | None, physics_step: float | None, integrator: str,
@@ -297,6 +319,25 @@ def _check_options(observe: str, action_units: str, noise: bool, alive_bonus: fl
         problems.append(f"alive_bonus={alive_bonus!r}: expected a finite number (reward per second)")
         return None
     return bonus
+
+
+def _version_dtype(version: object, dtype: object, problems: list[str]) -> np.dtype[np.floating]:
+    """The option ``dtype`` (float32 by default from version 1 on, float64 before), checked
+    with ``version``."""
+    if isinstance(version, bool) or version not in VERSIONS:
+        problems.append(f"version={version!r}: expected one of {', '.join(map(str, VERSIONS))}")
+        version = 0
+    if dtype is None:
+        return np.dtype(np.float32 if version else np.float64)
+    try:
+        given = np.dtype(dtype)  # type: ignore[call-overload]
+    except TypeError:
+        given = None
+    if given not in (np.dtype(np.float32), np.dtype(np.float64)):
+        problems.append(f"dtype={dtype!r}: expected numpy.float32 or numpy.float64")
+        return np.dtype(np.float64)
+    out: np.dtype[np.floating] = given
+    return out
 
 
 def _randomization(sysm: System, randomize: Mapping[str, object] | None,
@@ -336,7 +377,8 @@ def _randomization(sysm: System, randomize: Mapping[str, object] | None,
 
 def _packed(sysm: System, tsk: Task, point: dict[str, float] | None, *, run_rate: float,
             h: float, n_sub: int, integrator: str, observe: str, noise: bool,
-            rnd: dict[str, float], action_units: str, bonus: float, lanes: bool) -> Core:
+            rnd: dict[str, float], action_units: str, bonus: float, lanes: bool, version: int,
+            dtype: np.dtype[np.floating]) -> Core:
     """The validated settings packed into the core's arrays (``ci``, ``cf``)."""
     names = sysm.state_names
     n = sysm.n_states
@@ -386,7 +428,9 @@ def _packed(sysm: System, tsk: Task, point: dict[str, float] | None, *, run_rate
         n_samples=int(n_samples), integrator=integrator, observe=observe,
         observation_names=tuple(names) if observe == "state" else outputs,
         action_units=action_units, noise=spec_noise, randomize=dict(rnd), alive_bonus=bonus,
-        at=point,
+        at=point, version=version, dtype=dtype,
+        learnable=learnable(sysm, tsk, names if observe == "state" else outputs, dtype)
+        if version else None,
         kernel=load_core(sysm, lanes=lanes and integrators.get(integrator).lanes), c_idx=c_idx, lv=np.ascontiguousarray(lv),
         lw=np.ascontiguousarray(lw), region=region,
         op=op, sc=sc, hang=hang, p_nom=p_nom, rnd_idx=rnd_idx, rnd_spread=rnd_spread,
@@ -395,6 +439,7 @@ def _packed(sysm: System, tsk: Task, point: dict[str, float] | None, *, run_rate
 
 
 _F64 = np.dtype(np.float64)
+_F32 = np.dtype(np.float32)
 
 
 def as_actions(value: object, shape: tuple[int, int] | tuple[int], core: Core, what: str) -> np.ndarray:
@@ -408,6 +453,8 @@ def as_actions(value: object, shape: tuple[int, int] | tuple[int], core: Core, w
     if type(value) is np.ndarray and value.dtype is _F64 and value.flags.c_contiguous \
             and value.shape == shape:
         return value  # as fast as numpy's own conversion was: a step takes microseconds
+    if type(value) is np.ndarray and value.dtype is _F32 and value.shape == shape:
+        return value.astype(np.float64)  # a float32 policy's actions
     per = core.action_text()
     expected = (f"expected {per}, shape {shape}" if len(shape) == 1
                 else f"expected shape {shape} (num_envs, inputs), each row {per}")

@@ -27,6 +27,7 @@ if TYPE_CHECKING:
 
     from equilibrist.viz.frames import FrameRenderer
 
+_F64 = np.dtype(np.float64)
 # Backends of matplotlib that draw to files only.
 _FILE_BACKENDS = frozenset({"agg", "pdf", "ps", "svg", "pgf", "cairo", "template"})
 
@@ -57,12 +58,15 @@ def drawing_problem(core: Core) -> str | None:
 
 def _spaces(core: Core) -> tuple[spaces.Box, spaces.Box]:
     m = core.system.n_inputs
+    dtype = core.dtype.type
     if core.action_units == "physical":
         lo, hi = core.limits
-        action = spaces.Box(lo.astype(np.float64), hi.astype(np.float64), (m,), np.float64)
+        action = spaces.Box(lo.astype(dtype), hi.astype(dtype), (m,), dtype)
     else:
-        action = spaces.Box(-1.0, 1.0, (m,), np.float64)
-    observation = spaces.Box(-FINITE, FINITE, (core.n_obs,), np.float64)
+        action = spaces.Box(-1.0, 1.0, (m,), dtype)
+    # Half the largest number of the type: any finite value, and sample() does not overflow.
+    bound = FINITE if dtype is np.float64 else float(np.finfo(dtype).max) / 2
+    observation = spaces.Box(-bound, bound, (len(core.agent_observation_names),), dtype)
     return action, observation
 
 
@@ -225,6 +229,7 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         self._n = n
         self._renderer = Renderer(core, render_mode) if render_mode is not None else None
         self._step_fn: object = None
+        self._learnable = core.learnable
 
     # -- the episode --------------------------------------------------------------
     @property
@@ -281,6 +286,10 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         self._us[0, :4] = generator_state(np.random.SeedSequence(noise_seed))
         self._u[:] = core.task.u_op
         obs = self._steps.begin_one()
+        if self._learnable is not None:
+            obs = self._learnable.observe(obs)
+        elif core.dtype is not _F64:
+            obs = obs.astype(core.dtype)
         self._ready = True
         info: dict[str, object] = {"state": self._x.copy(), "noise_seed": noise_seed}
         if core.randomize:
@@ -298,9 +307,17 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         steps = self._steps
         steps.a[0] = a
         reward, status = steps.step_one()
-        obs = steps.obs[0].copy()
         if status == 3:
             raise EnvError(f"action {a.tolist()} is not a finite number")
+        learn = self._learnable
+        if learn is not None:
+            obs = learn.observe(steps.obs[0])
+            u = self.core.physical_input(a)
+            reward = float(learn.reward(self._x[None, :], u[None, :])[0])
+        elif self.core.dtype is _F64:
+            obs = steps.obs[0].copy()
+        else:
+            obs = steps.obs[0].astype(self.core.dtype)
         if self._renderer is not None:
             self._u = self.core.physical_input(a)
             if self.render_mode == "human":

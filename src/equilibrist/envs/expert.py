@@ -69,7 +69,8 @@ class Expert:
     def __call__(self, observation: np.ndarray) -> np.ndarray:
         """The action for *observation* (the environment's units); the controller advances."""
         core = self.core
-        y = np.asarray(observation, dtype=float)
+        y = (np.asarray(observation, dtype=float) if core.learnable is None
+             else core.learnable.raw(observation))
         t = self._k / core.rate
         u = np.asarray(self.runtime.output(t, y, self._r), dtype=float)
         lo, hi = core.limits
@@ -77,8 +78,8 @@ class Expert:
         self.runtime.update(t, y, self._r, applied)
         self._k += 1
         if core.action_units == "physical":
-            return applied
-        action: np.ndarray = 2.0 * (applied - lo) / (hi - lo) - 1.0
+            return applied.astype(core.dtype)
+        action: np.ndarray = (2.0 * (applied - lo) / (hi - lo) - 1.0).astype(core.dtype)
         return action
 
 

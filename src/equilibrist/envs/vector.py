@@ -77,6 +77,7 @@ RESLOWED = 1.5
 PROBE_STEPS = 3
 PROBE_SHARE = 20.0
 SMOOTHING = 0.25
+_F64 = np.dtype(np.float64)
 # Looked up once: a step of few copies takes a few microseconds in all.
 _copyto = np.copyto
 
@@ -155,6 +156,9 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._obs_shape = (N, core.n_obs)
         self._flags_shape = (2, N)
         self._renderer = Renderer(core, "rgb_array") if render_mode is not None else None
+        self._learnable = core.learnable
+        # The copies whose episode ended at the last step: this step restarts them.
+        self._due = np.zeros(N, dtype=np.bool_)
 
     # -- state of the copies ---------------------------------------------------------
     @property
@@ -204,7 +208,35 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             self._seed(seed)
         obs = self._steps.reset_many()
         self._step_fn = self._ways  # set, it also says reset was called
-        return obs, {"state": self.states}
+        self._due[:] = False
+        return self._observed(obs), self._reset_info(np.ones(self.num_envs, dtype=np.bool_))
+
+    def restart(self, mask: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start the copies *mask* now (those whose episode ended at the last step), each
+        from its own generator as its next step would: every copy's observation (the
+        others' as the last step gave them) and the restarted copies' info. A trainer
+        that resets in the step that ends an episode (Stable-Baselines3) calls it."""
+        if self._step_fn is None:
+            raise EnvError("call reset() before restart()")
+        rows = np.flatnonzero(mask)
+        self._steps.reset_rows(rows)
+        self._due[rows] = False
+        return self._observed(self._steps.obs.copy()), self._reset_info(np.asarray(mask, bool))
+
+    def _reset_info(self, mask: np.ndarray) -> dict[str, Any]:
+        """The info of the copies *mask* that (re)started, with Gymnasium's ``_key`` masks:
+        the true start ``state`` and ``noise_seed``, the copy's generator's four words
+        after its start was drawn (the stream its episode's noise comes from)."""
+        return {"state": self.states, "_state": mask.copy(),
+                "noise_seed": self._us[:, :4].copy(), "_noise_seed": mask.copy()}
+
+    def _observed(self, obs: np.ndarray) -> np.ndarray:
+        """The observations an agent gets of the core's *obs* (scaled from version 1 on)."""
+        if self._learnable is not None:
+            return self._learnable.observe(obs)
+        if self.core.dtype is not _F64:
+            return obs.astype(self.core.dtype)
+        return obs
 
     def step(
         self, actions: object
@@ -230,7 +262,16 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             self._actions = a.copy()
         # Fresh arrays every step, as Gymnasium's own vector environments return.
         flags = steps.flags.copy()
-        return steps.obs.copy(), steps.rewards.copy(), flags[0], flags[1], {}
+        restarted = self._due
+        self._due = flags[0] | flags[1]
+        info: dict[str, Any] = self._reset_info(restarted) if restarted.any() else {}
+        learn = self._learnable
+        if learn is None:
+            obs = steps.obs.copy() if self.core.dtype is _F64 else steps.obs.astype(self.core.dtype)
+            return obs, steps.rewards.copy(), flags[0], flags[1], info
+        rewards = learn.reward(self.core.state_of(self._fs), self.core.physical_input(a))
+        rewards[restarted] = 0.0
+        return learn.observe(steps.obs), rewards, flags[0], flags[1], info
 
     def _timed_step(self) -> int:
         """A step on one thread or on all, whichever has been faster lately

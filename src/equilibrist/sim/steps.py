@@ -122,6 +122,16 @@ class EnvSteps:
         first: np.ndarray = self.obs[0].copy()
         return first
 
+    def reset_rows(self, rows: np.ndarray) -> None:
+        """The copies *rows* (indices) drawn from their own generators and started now, each
+        observed into its row of :attr:`obs` (the others untouched): a trainer's
+        same-step reset of the copies whose episode just ended."""
+        _a, fs, us, obs, _r, _f, cf, ci, _st = self._p
+        fw, uw, ow = self.fs.strides[0], self.us.strides[0], self.obs.strides[0]
+        reset = self.core.lib.eq_env_reset_many
+        for r in rows.tolist():
+            reset(fs + r * fw, us + r * uw, obs + r * ow, self.n_obs, 1, cf, ci)
+
     def reset_many(self) -> np.ndarray:
         """Every copy drawn and started: the first observations (a new array)."""
         _a, fs, us, obs, _r, _f, cf, ci, _st = self._p
