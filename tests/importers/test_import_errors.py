@@ -121,6 +121,22 @@ CASES = {
 </robot>""",
         "loop",
     ),
+    "entity_declaration": (
+        "bad.urdf",
+        '<?xml version="1.0"?>\n<!DOCTYPE robot [<!ENTITY m "1">]>\n'
+        + _URDF_HEAD.split("\n", 1)[1].replace('<mass value="1"/>', '<mass value="&m;"/>') + _URDF_JOINT
+        + "</robot>",
+        "entities (<!ENTITY>), which are not expanded",
+    ),
+    "world_as_child": (
+        "bad.urdf",
+        _URDF_HEAD + _URDF_JOINT
+        + '  <joint name="up" type="fixed"><parent link="l1"/><child link="world"/></joint>\n</robot>',
+        "joint 'up' makes the link 'world' a child",
+    ),
+    "namespaced_root_not_robot": (
+        "bad.urdf", '<model xmlns="https://drake.mit.edu" name="x"/>', "expected a <robot> root element",
+    ),
     "keyframe_length": (
         "bad.xml", _mjcf(_PENDULUM, '<keyframe><key name="balance" qpos="0 0 0"/></keyframe>'),
         "keyframe 'balance'",

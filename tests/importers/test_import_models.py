@@ -228,3 +228,38 @@ def test_pendubot_urdf_gives_the_catalogue_pendubot() -> None:
         xc[0] += np.pi
         assert np.allclose(imported.f(x, u), catalogue.f(xc, u), rtol=1e-12, atol=1e-12)
     assert imported.input_limits[1][0] == catalogue.input_limits[1][0] == 10.0
+
+
+def test_mjcf_frictionloss_and_armature_are_mujocos(tmp_path: Path) -> None:
+    # MuJoCo's frictionloss is dry friction bounded by its value (a constraint, here at
+    # speeds where it saturates), armature a rotor inertia on the joint's diagonal: the
+    # derived model's tanh(100 v) law and its mass matrix give MuJoCo's accelerations.
+    path = tmp_path / "rotor.xml"
+    path.write_text("""<mujoco model="rotor">
+  <worldbody>
+    <body name="l1">
+      <joint name="a" axis="0 1 0" frictionloss="0.3" armature="0.05" damping="0.02"/>
+      <inertial pos="0 0 0.5" mass="1" diaginertia="0.1 0.1 0.01"/>
+      <body name="l2" pos="0 0 1">
+        <joint name="b" axis="0 1 0" frictionloss="0.07" armature="0.2"/>
+        <inertial pos="0 0 0.4" mass="0.5" diaginertia="0.03 0.03 0.002"/>
+      </body>
+    </body>
+  </worldbody>
+  <actuator><motor name="m" joint="a" ctrlrange="-2 2"/></actuator>
+</mujoco>""")
+    system = get_system(str(path))
+    assert {p.name: p.default for p in system.spec.parameters if p.dissipative} == {
+        "a_damping": 0.02, "b_damping": 0.0, "a_friction": 0.3, "b_friction": 0.07}
+    model = mujoco.MjModel.from_xml_path(str(path))
+    data = mujoco.MjData(model)
+    rng = np.random.default_rng(3)
+    for _ in range(10):
+        q = rng.uniform(-2, 2, 2)
+        v = rng.choice([-1.0, 1.0], 2) * rng.uniform(0.5, 3.0, 2)
+        u = rng.uniform(-2, 2, 1)
+        data.qpos[:], data.qvel[:], data.ctrl[:] = q, v, u
+        mujoco.mj_forward(model, data)
+        assert np.allclose(data.qfrc_constraint, -np.array([0.3, 0.07]) * np.sign(v), rtol=1e-9, atol=0)
+        got = system.f(np.concatenate([q, v]), u)[2:]
+        assert np.abs(got - data.qacc).max() <= 1e-9 * max(1.0, np.abs(data.qacc).max())
