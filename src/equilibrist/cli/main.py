@@ -26,7 +26,7 @@ from equilibrist.errors import EquilibristError, quote_outside
 
 # Order of the subcommands in --help; modules not listed come after.
 _ORDER = ("systems", "show", "dynamics", "linearize", "linkage", "design", "simulate", "batch", "sweep", "identify",
-          "roa", "robustness", "plot", "animate", "export", "demo")
+          "roa", "robustness", "plot", "animate", "export", "pil", "demo")
 
 
 class _Parser(argparse.ArgumentParser):
