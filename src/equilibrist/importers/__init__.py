@@ -16,7 +16,9 @@ The system that results is an ordinary :class:`~equilibrist.numeric.system.Syste
   ``gear * u``, limits from ``ctrlrange``), or URDF transmissions (force
   ``mechanicalReduction * u``, limits the joint's effort over the reduction);
 * parameters: ``g``, ``<body>_mass`` of every moving body (its inertia scales
-  with it), ``<joint>_damping`` of every joint, and the input limits;
+  with it), ``<joint>_damping`` of every joint, ``<joint>_friction`` of each
+  joint with Coulomb friction (MJCF ``frictionloss``, URDF ``<dynamics
+  friction>``), and the input limits;
 * operating point: the keyframe named ``balance``, else the first keyframe,
   else the zero configuration;
 * outputs: the joints of MJCF ``jointpos`` sensors (their ``noise`` the
@@ -24,8 +26,10 @@ The system that results is an ordinary :class:`~equilibrist.numeric.system.Syste
 * defaults for design and simulation: see ``docs/models.md``.
 
 What the file has and equilibrist does not model (ball and free joints,
-tendons, equality constraints, dry friction, actuators other than motors,
-fluid forces) is refused with one line naming the element. Contacts and
+tendons, equality constraints, actuators other than motors, fluid forces)
+is refused with one line naming the element. A URDF is first made into what
+MuJoCo's reader takes (:mod:`.urdf_clean`: the ``world`` link, namespaces,
+tool-specific elements, geometry, massless links), saying so in notes. Contacts and
 joint limits are not modelled; ``equilibrist show`` says so.
 """
 
