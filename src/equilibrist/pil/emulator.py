@@ -158,3 +158,5 @@ def emulate(firmware: Firmware) -> Iterator[Emulation]:
                 process.wait()
         for reader in readers:
             reader.join(5)
+        for stream in (process.stdout, process.stderr):
+            stream.close()
