@@ -113,6 +113,10 @@ def tour_controlled(
         images[2:2] = planned_images(system, sub, slug, notes, width=size[0], height=size[1],
                                      fps=fps, max_frames=max_frames, progress=progress,
                                      energy=energy)
+        if system.name == "acrobot":
+            from equilibrist.apps.robustness_demo import robustness_images
+
+            images += robustness_images(system, sub, slug)
     roa_fact = None
     if system.key in ROA_SYSTEMS:
         roa_image, roa_fact = _roa(system, d, sub, slug)
