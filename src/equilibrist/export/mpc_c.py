@@ -59,13 +59,10 @@ def default_start(ctrl: MPC, system: System) -> dict[str, float]:
     system of the catalogue with an input exports and passes ``make check``
     from it.
     """
-    from equilibrist.export.vectors import START_FRACTION
+    from equilibrist.export.vectors import displaced
 
-    scales = system.spec.design_scales
-    coordinates = system.spec.coordinates
     names = ctrl.state_names
-    dx = np.array([START_FRACTION * float(scales[k]) if k in coordinates and scales.get(k) else 0.0
-                   for k in names])
+    dx = displaced(np.zeros(len(names)), names, system)
     prob = ctrl.problem
     du = -ctrl.K @ dx
     room = np.where(du > 0, prob.u_hi, -prob.u_lo) / np.maximum(np.abs(du), 1e-300)

@@ -33,7 +33,7 @@ def default_start(ctrl: NonlinearController, system: System) -> np.ndarray:
     ``settings["start"]``, as ``simulate`` starts it), else the controller's operating point
     with each coordinate that has a design scale displaced by a quarter of it (as the linear
     exports' runs)."""
-    from equilibrist.export.vectors import START_FRACTION
+    from equilibrist.export.vectors import displaced
 
     planned = ctrl.settings.get("start") if isinstance(ctrl.settings, Mapping) else None
     if isinstance(planned, Mapping) and set(planned) <= set(ctrl.state_names):
@@ -41,13 +41,7 @@ def default_start(ctrl: NonlinearController, system: System) -> np.ndarray:
         for state, value in planned.items():
             x[ctrl.state_names.index(state)] = float(value)
         return x
-    scales = system.spec.design_scales
-    coordinates = system.spec.coordinates
-    x = np.array(ctrl.x_op, dtype=float)
-    for i, state in enumerate(ctrl.state_names):
-        if state in coordinates and scales.get(state):
-            x[i] += START_FRACTION * float(scales[state])
-    return x
+    return displaced(ctrl.x_op, ctrl.state_names, system)
 
 
 def recorded_vectors(ctrl: NonlinearController, system: System, *, duration: float = 4.0,

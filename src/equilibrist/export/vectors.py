@@ -16,7 +16,7 @@ millionths of the activity over a noisy run).
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from contextvars import ContextVar
 from dataclasses import dataclass, field
@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from equilibrist.control.design_record import Design
-from equilibrist.errors import ExportError
+from equilibrist.errors import ExportError, nearest
 from equilibrist.export.data import check_controller
 from equilibrist.native.c_text import Vectors, check_precision
 from equilibrist.native.linear_c import ControllerData
@@ -60,6 +60,18 @@ STEP_FRACTION = 0.5
 # Samples of a recorded run at most: the test program holds them as text (10,000 samples
 # are 50 s at 200 Hz, a header of a few MB); more only makes the run and the build slow.
 MAX_SAMPLES = 10_000
+
+
+def displaced(x: npt.ArrayLike, names: Sequence[str], system: System, *,
+              fraction: float = START_FRACTION) -> np.ndarray:
+    """*x* (states *names*) with each coordinate that has a design scale displaced by
+    *fraction* of it: where every recorded run starts by default."""
+    scales, coordinates = system.spec.design_scales, system.spec.coordinates
+    out = np.array(x, dtype=float)
+    for i, name in enumerate(names):
+        if name in coordinates and scales.get(name):
+            out[i] += fraction * float(scales[name])
+    return out
 
 
 def check_duration(duration: object, rate: float, option: str = "duration") -> float | None:
@@ -250,20 +262,15 @@ def scenario(design: Design, system: System, *, duration: float | None = None,
     scales = system.spec.design_scales
     given = check_duration(duration, design.rate)
     length = DEFAULT_DURATION if given is None else given
-    x0 = np.array(plant.x0, dtype=float)
-    coordinates = system.spec.coordinates
-    if start is not None:
-        from equilibrist.errors import nearest
-
+    if start is None:
+        x0 = displaced(plant.x0, plant.state_names, system, fraction=fraction)
+    else:
+        x0 = np.array(plant.x0, dtype=float)
         for name, value in start.items():
             if name not in plant.state_names:
                 raise ExportError(f"--x0 {name}: {design.system_key} has no state {name!r}: "
                                   f"{nearest(name, plant.state_names)}")
             x0[plant.state_names.index(name)] = float(value)
-    else:
-        for i, name in enumerate(plant.state_names):
-            if name in coordinates and scales.get(name):
-                x0[i] += fraction * float(scales[name])
     reference = None
     if design.Kc is not None:
         r0 = np.asarray(design.r0, dtype=float)

@@ -9,7 +9,7 @@ ships is the one simulated.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
@@ -18,9 +18,68 @@ from equilibrist.native import daqp_library
 from equilibrist.native.daqp_library import DAQP_SOURCES, EPS, INF, ITER_LIMIT
 from equilibrist.native.firmware import Adapter
 
-if TYPE_CHECKING:
-    from equilibrist.control.mpc import MPC
-    from equilibrist.control.mpc_problem import MPCProblem
+
+class MPCProblem(Protocol):
+    """The MPC's condensed QP as the library reads it
+    (:class:`~equilibrist.control.mpc_problem.MPCProblem` has these)."""
+
+    @property
+    def n(self) -> int: ...
+    @property
+    def m(self) -> int: ...
+    @property
+    def horizon(self) -> int: ...
+    @property
+    def n_soft(self) -> int: ...
+    @property
+    def n_variables(self) -> int: ...
+    @property
+    def condensed(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+    @property
+    def soft_predictions(self) -> tuple[np.ndarray, np.ndarray]: ...
+    @property
+    def K(self) -> np.ndarray: ...
+    @property
+    def u_lo(self) -> np.ndarray: ...
+    @property
+    def u_hi(self) -> np.ndarray: ...
+    @property
+    def soft_lo(self) -> np.ndarray: ...
+    @property
+    def soft_hi(self) -> np.ndarray: ...
+    @property
+    def soft_index(self) -> tuple[int, ...]: ...
+
+
+class Packed(Protocol):
+    """A linear controller as its packed vector (:mod:`equilibrist.native.linear_layout`)."""
+
+    def packed(self) -> np.ndarray: ...
+
+
+class MPC(Protocol):
+    """The MPC as the library reads it (:class:`~equilibrist.control.mpc.MPC` has these):
+    its QP, operating point, names and the Kalman filter in front."""
+
+    @property
+    def problem(self) -> MPCProblem: ...
+    @property
+    def x_op(self) -> np.ndarray: ...
+    @property
+    def u_op(self) -> np.ndarray: ...
+    @property
+    def rate(self) -> float: ...
+    @property
+    def state_names(self) -> tuple[str, ...]: ...
+    @property
+    def input_names(self) -> tuple[str, ...]: ...
+    @property
+    def output_names(self) -> tuple[str, ...]: ...
+    @property
+    def estimator(self) -> str: ...
+    @property
+    def form(self) -> str: ...
+    def filter_form(self) -> Packed: ...
 
 
 #: DAQP's sense of a constraint active at its lower bound (DAQP_ACTIVE + DAQP_LOWER): a cold
