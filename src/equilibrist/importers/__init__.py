@@ -240,6 +240,37 @@ def _lyapunov(a: np.ndarray, q: np.ndarray) -> np.ndarray:
     return x.reshape(n, n, order="F")
 
 
+def _frictions(tree: Tree) -> list[Parameter]:
+    """Each joint's viscous damping, and the Coulomb friction of those that have one."""
+    out = []
+    for j in tree.joints:
+        unit = "N*m*s/rad" if j.kind == "hinge" else "N*s/m"
+        out.append(friction(f"{j.name}_damping", j.damping, unit, f"viscous damping of joint {j.name}"))
+    for j in tree.joints:
+        if j.friction > 0:
+            law = "cf * atan(100 v)" if tree.friction_form == "atan" else "cf * tanh(100 v)"
+            out.append(friction(
+                f"{j.name}_friction", j.friction, "N*m" if j.kind == "hinge" else "N",
+                f"Coulomb friction cf of joint {j.name}", note=f"smoothed: {law}"))
+    return out
+
+
+def _region(tree: Tree, kind: str) -> dict[str, tuple[float, float]]:
+    """Where a balancing run counts as fallen: each hinge that can fall, the fall angle about
+    the operating point; a URDF's joint limits bound it (MJCF's ranges are left as they were)."""
+    region = {
+        j.name: (tree.key_qpos[k] - FALL_ANGLE, tree.key_qpos[k] + FALL_ANGLE)
+        for k, j in enumerate(tree.joints)
+        if j.kind == "hinge" and j.name not in tree.vertical_hinges
+    }
+    if kind == "URDF":
+        for k, j in enumerate(tree.joints):
+            if j.range is not None and j.range[0] < tree.key_qpos[k] < j.range[1]:
+                low, high = region.get(j.name, j.range)
+                region[j.name] = (max(low, j.range[0]), min(high, j.range[1]))
+    return region
+
+
 def _unlimited_scale(tree: Tree, k: int, scales: Sequence[float]) -> float:
     """The design scale of actuator *k*, whose input has no limits: the force that gives its
     joint, alone, the acceleration a tilt of every coordinate by its design scale does (at
@@ -342,15 +373,7 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str, unlimited: tupl
             f"{b.name}_mass", b.mass, "kg", f"mass of body {b.label} (its inertia scales with it)",
             note=f"{b.mass:g} kg in the file",
         ))
-    for j in joints:
-        unit = "N*m*s/rad" if j.kind == "hinge" else "N*s/m"
-        parameters.append(friction(f"{j.name}_damping", j.damping, unit, f"viscous damping of joint {j.name}"))
-    for j in joints:
-        if j.friction > 0:
-            law = "cf * atan(100 v)" if tree.friction_form == "atan" else "cf * tanh(100 v)"
-            parameters.append(friction(
-                f"{j.name}_friction", j.friction, "N*m" if j.kind == "hinge" else "N",
-                f"Coulomb friction cf of joint {j.name}", note=f"smoothed: {law}"))
+    parameters += _frictions(tree)
     inputs = []
     taken = {*coords, *(f"{c}_dot" for c in coords), *(p.name for p in parameters)}
     scales = []
@@ -394,16 +417,7 @@ def build_spec(tree: Tree, *, name: str, kind: str, origin: str, unlimited: tupl
         inputs={i.name: a.gain * v for i, a, v in zip(inputs, tree.actuators, tree.key_ctrl, strict=True)},
         free=free,
     )
-    region = {
-        j.name: (tree.key_qpos[k] - FALL_ANGLE, tree.key_qpos[k] + FALL_ANGLE)
-        for k, j in enumerate(joints)
-        if j.kind == "hinge" and j.name not in tree.vertical_hinges
-    }
-    if kind == "URDF":  # a URDF's joint limits bound the region (MJCF's ranges are left as they were)
-        for k, j in enumerate(joints):
-            if j.range is not None and j.range[0] < tree.key_qpos[k] < j.range[1]:
-                low, high = region.get(j.name, j.range)
-                region[j.name] = (max(low, j.range[0]), min(high, j.range[1]))
+    region = _region(tree, kind)
     design_scales = {j.name: HINGE_SCALE if j.kind == "hinge" else SLIDE_SCALE for j in joints}
     design_scales.update({f"{c}_dot": RATE_SCALE for c in coords})
     design_scales.update({i.name: (i.high - i.low) / 2 for i in inputs})
