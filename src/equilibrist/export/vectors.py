@@ -27,7 +27,7 @@ import numpy.typing as npt
 
 from equilibrist.control.design_record import Design
 from equilibrist.errors import ExportError, nearest
-from equilibrist.export.data import check_controller
+from equilibrist.export.data import check_controller, checked_linear, controller_data, of_controller
 from equilibrist.native.c_text import Vectors, check_precision
 from equilibrist.native.linear_c import ControllerData
 from equilibrist.native.shared_library import CompiledController, compile_library
@@ -226,7 +226,6 @@ def compile_controller(design: Design | ControllerData, *, controller: str = "lq
     ExportError
         A design that cannot be exported, no C compiler, code that does not compile.
     """
-    from equilibrist.export.data import controller_data
     from equilibrist.export.folder import generator_version
 
     check_precision(precision)
@@ -296,17 +295,16 @@ def record(design: Design, system: System, *, controller: str = "lqg", precision
     """Test vectors from a noisy closed-loop run of the simulation's own controller.
 
     The simulation runs the export's own controller
-    (:func:`~equilibrist.export.data.checked_linear`, the design's linear form, with its reference gain when it has one) on
-    the nonlinear plant through the run of :func:`scenario`; the vectors
-    are the measurements and references it read and the saturated commands
-    it returned.
+    (:func:`~equilibrist.export.data.checked_linear`: the design's linear form, with its
+    reference gain when it has one) on the nonlinear plant through the run of
+    :func:`scenario`; the vectors are the measurements and references it read and the
+    saturated commands it returned.
 
     Raises
     ------
     ExportError
         When the recorded run falls (the design does not hold the plant).
     """
-    from equilibrist.export.data import checked_linear, of_controller
     from equilibrist.sim import simulate
 
     check_controller(controller)
