@@ -25,9 +25,10 @@ from equilibrist.control.trajopt import plan
 from equilibrist.systems.dfki_parameters import settings_of
 
 ROBOT = "pendubot"
-#: The plan: its duration [s], collocation intervals, and the weight of the rates' squares
-#: beside the torque's in its cost (a swing-up that moves no faster than it must).
-DURATION, KNOTS, RATE_COST = 2.5, 100, 0.03
+#: The plan: its duration [s], collocation intervals, the weight of the rates' squares beside
+#: the torque's in its cost (a swing-up that moves no faster than it must), and of the
+#: torque's rate squared (a smooth command).
+DURATION, KNOTS, RATE_COST, SMOOTHING = 2.0, 100, 0.1, 0.0
 
 name = "equilibrist_tvlqr"
 leaderboard_config = {
@@ -61,12 +62,14 @@ class EquilibristController(AbstractController):
         return u
 
 
-def build(mpar, robot, duration=DURATION, knots=KNOTS, rate_cost=RATE_COST):
+def build(mpar, robot, duration=DURATION, knots=KNOTS, rate_cost=RATE_COST,
+          smoothing=SMOOTHING):
     """The benchmark controller of equilibrist's planned swing-up for the rig *mpar*."""
     system = equilibrist.get_system("dfki_double_pendulum", **settings_of(mpar, robot=robot))
     trajectory = plan(system, start=np.zeros(4), goal=np.array([np.pi, 0.0, 0.0, 0.0]),
                       knots=knots, duration=duration,
-                      state_cost={"theta1_dot": rate_cost, "theta2_dot": rate_cost})
+                      state_cost={"theta1_dot": rate_cost, "theta2_dot": rate_cost},
+                      input_rate_cost={"tau": smoothing})
     rate = system.spec.control_rate
     policy = equilibrist.policy(system, controller="tvlqr", rate=rate, trajectory=trajectory)
     return EquilibristController(policy, actuated=1 if robot == "acrobot" else 0)

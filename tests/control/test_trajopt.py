@@ -152,7 +152,7 @@ def test_a_trajectory_file_never_runs_the_system_it_names(tmp_path: Path) -> Non
         load_trajectory(tmp_path / "evil.py")
 
 
-def test_a_cost_on_the_rates_plans_a_slower_motion() -> None:
+def test_costs_on_the_rates_plan_a_slower_motion_and_a_smoother_input() -> None:
     cart = get_system("cartpole")
     task = get_task(cart, "swingup")
     kw = dict(start=task.start, goal=task.x_op, knots=20, duration=4.0, bounds=dict(task.region))
@@ -166,7 +166,12 @@ def test_a_cost_on_the_rates_plans_a_slower_motion() -> None:
     assert rates_squared(slow) < 0.9 * rates_squared(plain)
     assert slow.settings["state_cost"] == {"x_dot": 1.0, "theta_dot": 1.0}
     assert "state_cost" not in plain.settings
-    with pytest.raises(DesignError, match="expected states of cartpole"):
+    smooth = plan(cart, input_rate_cost={"F": 0.01}, **kw)
+    assert smooth.converged
+    assert np.sum(np.diff(smooth.inputs[:, 0]) ** 2) < 0.9 * np.sum(np.diff(plain.inputs[:, 0]) ** 2)
+    with pytest.raises(DesignError, match="expected one of cartpole's"):
         plan(cart, state_cost={"speed": 1.0}, **kw)
+    with pytest.raises(DesignError, match="expected one of cartpole's"):
+        plan(cart, input_rate_cost={"tau": 1.0}, **kw)
     with pytest.raises(DesignError, match="non-negative number"):
         plan(cart, state_cost={"x_dot": -1.0}, **kw)

@@ -70,6 +70,7 @@ def _ranges(items: list[str]) -> dict[str, tuple[float, float]]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from equilibrist.cli.simulate import start_of
     from equilibrist.sim.batch import simulate_batch
     from equilibrist.sim.batch_inputs import child_seed, sample_uniform
     from equilibrist.sim.noise import seed_sequence
@@ -83,6 +84,12 @@ def run(args: argparse.Namespace) -> int:
               for k, v in common.parse_assignments(args.spread, "--spread").items()}
     base = seed_sequence(_seed(args.seed))
     x_op, _ = operating_point(system, options["controller"])
+    # A tracked plan's runs start where the plan starts (the states no --x0 range names).
+    planned = start_of(options, {})
+    if planned:
+        x_op = x_op.copy()
+        for i, name in enumerate(system.state_names):
+            x_op[i] = float(planned.get(name, x_op[i]))
     x0s, params = sample_uniform(system, runs, ranges=_ranges(args.x0), spread=spread,
                                  seed=child_seed(base, 0), x_op=x_op)
     options["seed"] = child_seed(base, 1)

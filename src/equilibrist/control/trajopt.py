@@ -191,12 +191,14 @@ class _Problem:
 
 def _problem(system: System, N: int, duration: float | None, duration_max: float | None,
              minimize: str, bounds: Mapping[str, tuple[float, float]], lo: np.ndarray,
-             hi: np.ndarray, state_cost: Mapping[str, float] | None = None) -> _Problem:
+             hi: np.ndarray, state_cost: Mapping[str, float] | None = None,
+             input_rate_cost: Mapping[str, float] | None = None) -> _Problem:
     """The collocation problem of *system* (cached by everything that shapes it)."""
     key = (system.digest, tuple(sorted((k, float(v)) for k, v in system.params.items())), N,
            duration, duration_max, minimize,
            tuple(sorted((k, float(a), float(b)) for k, (a, b) in bounds.items())),
-           tuple(sorted((k, float(v)) for k, v in (state_cost or {}).items())))
+           tuple(sorted((k, float(v)) for k, v in (state_cost or {}).items())),
+           tuple(sorted((k, float(v)) for k, v in (input_rate_cost or {}).items())))
     with _PROBLEMS_LOCK:
         if key in _PROBLEMS:
             return _PROBLEMS[key]
@@ -241,6 +243,12 @@ def _problem(system: System, N: int, duration: float | None, duration_max: float
         effort = effort + float(weight) * (h / 6) * (
             ca.sumsqr(X[k, :-1] - goal[k]) + 4 * ca.sumsqr(Xm[k, :] - goal[k])
             + ca.sumsqr(X[k, 1:] - goal[k]))
+    # The inputs' rates squared, from the differences of the samples (knot, midpoint, knot...)
+    # half an interval apart: a smoother motor command.
+    for name, weight in (input_rate_cost or {}).items():
+        i = system.input_names.index(name)
+        samples = ca.vertcat(ca.vec(ca.vertcat(U[i, :-1], Um[i, :])), U[i, N])
+        effort = effort + float(weight) * ca.sumsqr(ca.diff(samples)) / (h / 2)
     opti.minimize(effort if minimize == "effort" else T + 1e-6 * effort)
     problem = _Problem(f, opti, X, U, Um, T, start, goal)
     with _PROBLEMS_LOCK:
@@ -254,7 +262,8 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
          minimize: str = "effort", guess: str | Trajectory = "straight", seed: int = 0,
          bounds: Mapping[str, tuple[float, float]] | None = None,
          max_iterations: int = 3000, max_time: float | None = MAX_TIME,
-         state_cost: Mapping[str, float] | None = None) -> Trajectory:
+         state_cost: Mapping[str, float] | None = None,
+         input_rate_cost: Mapping[str, float] | None = None) -> Trajectory:
     """Plan a motion of *system* from *start* to *goal* (absolute states).
 
     Parameters
@@ -279,6 +288,9 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
         ``{state: weight}``: adds ``integral of weight (x_i - goal_i)^2 dt`` to the effort
         (the rates' squares with a goal at rest: a plan that moves less fast). Weights are
         non-negative; none by default.
+    input_rate_cost : mapping, optional
+        ``{input: weight}``: adds ``integral of weight (du_i/dt)^2 dt`` (from the differences
+        of the input's samples, half an interval apart): a smoother command. None by default.
     max_time : float or None
         Wall-clock seconds the solve may take, the solver's set-up for a new shape of
         problem included (default :data:`MAX_TIME`, 120; None: no limit). A solve
@@ -313,14 +325,17 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
     hi = np.array([float(system.params[f"{i}_max"]) for i in system.input_names])
     xg, ug, t_guess = _initial_guess(system, guess, start=start, goal=goal, N=N, seed=seed,
                                      duration=duration, duration_max=duration_max, lo=lo, hi=hi)
-    for name, weight in (state_cost or {}).items():
-        if name not in system.state_names:
-            raise DesignError(f"state_cost names {name!r}: expected states of {system.key} "
-                              f"({', '.join(system.state_names)})")
-        if not (isinstance(weight, int | float) and math.isfinite(weight) and weight >= 0):
-            raise DesignError(f"state_cost[{name!r}] = {weight!r}: expected a non-negative number")
+    for label, costs, names in (("state_cost", state_cost, system.state_names),
+                                ("input_rate_cost", input_rate_cost, system.input_names)):
+        for name, weight in (costs or {}).items():
+            if name not in names:
+                raise DesignError(f"{label} names {name!r}: expected one of {system.key}'s "
+                                  f"({', '.join(names)})")
+            if not (isinstance(weight, int | float) and math.isfinite(weight) and weight >= 0):
+                raise DesignError(f"{label}[{name!r}] = {weight!r}: expected a non-negative "
+                                  "number")
     problem = _problem(system, N, duration, duration_max, minimize, bounds or {}, lo, hi,
-                       state_cost)
+                       state_cost, input_rate_cost)
     f, opti, X, U, Um, T = problem.f, problem.opti, problem.X, problem.U, problem.Um, problem.T
     with problem.lock:
         opti.set_value(problem.start, start)
@@ -354,6 +369,8 @@ def plan(system: System, *, start: np.ndarray, goal: np.ndarray, knots: int = 60
                   "bounds": {k: list(v) for k, v in (bounds or {}).items()},
                   **({"state_cost": {k: float(v) for k, v in state_cost.items()}}
                      if state_cost else {}),
+                  **({"input_rate_cost": {k: float(v) for k, v in input_rate_cost.items()}}
+                     if input_rate_cost else {}),
                   "start": start.tolist(), "goal": goal.tolist()},
         system_digest=system.digest, status=status,
     )
