@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed-stamp
 # Workers for the test suite: both cores of a CI machine.
 JOBS ?= 2
 
-.PHONY: demo test lint bench clean derived
+.PHONY: demo test lint bench clean derived docs
 
 # setup.py builds DAQP's vendored sources at install: a change to them installs again.
 $(STAMP): pyproject.toml setup.py $(wildcard src/equilibrist/native/daqp/src/*.c) \
@@ -38,6 +38,11 @@ test: $(STAMP)
 	$(PY) -m pytest -n $(JOBS) -q --durations=15; tests=$$?; \
 	wait $$types; typed=$$?; echo "mypy src/equilibrist:"; cat $(VENV)/mypy.log; \
 	exit $$(( tests != 0 ? tests : typed ))
+
+# The documentation site from docs/ and the tutorials (MkDocs, the API reference from the
+# docstrings), warnings as errors, into build/site; tests/test_docs_site.py builds it too.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests bench examples setup.py

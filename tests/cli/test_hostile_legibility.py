@@ -169,12 +169,12 @@ def test_roa_shows_progress_bars_on_a_terminal(capsys, monkeypatch, terminal, ex
         assert made == []
 
 
-# -- the README's commands run as pasted --------------------------------------------------
+# -- the tour's commands (docs/tour.md) run as pasted ------------------------------------
 
 def _readme_commands(word: str) -> list[str]:
     from pathlib import Path
 
-    text = (Path(__file__).parents[2] / "README.md").read_text()
+    text = (Path(__file__).parents[2] / "docs" / "tour.md").read_text()
     blocks = re.findall(r"```sh\n(.*?)```", text, flags=re.S)
     return [line for block in blocks for line in block.splitlines()
             if line.startswith("equilibrist ") and word in line]
