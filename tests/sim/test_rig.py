@@ -165,3 +165,23 @@ def test_pulses_on_passive_joints_dropped_when_asked(loop):
               perturb_passive=False)
     pushed = _run(loop, rig, seed=2)
     assert np.array_equal(pushed.states, _run(loop).states)
+
+
+def test_a_controller_in_python_meets_the_same_rig(loop):
+    system, _ = loop
+    k, d = 0.4, 3
+
+    def push(t, y, r):
+        return [2.0 if t < 0.5 else -1.0]
+
+    res = simulate(system, push, duration=1.0, rate=RATE, x0=START,
+                   rig=Rig(torque_response=k, measurement_delay=d, perturbations=1,
+                           perturbation_gap=0.2, perturbation_amplitude=(0.1, 0.2)), seed=1)
+    want, prev = [], 0.0
+    for u in res.saturated[:, 0]:
+        prev = prev + k * (u - prev)
+        want.append(prev)
+    np.testing.assert_allclose(res.applied[:, 0], want, rtol=0, atol=1e-12)
+    idx = [res.state_names.index(o) for o in res.output_names]
+    np.testing.assert_array_equal(res.measurements[d:], res.states[:-d, idx])
+    assert "pulses" in res.settings["rig"]

@@ -577,17 +577,39 @@ EQ_EXPORT int64_t eq_scratch_width(int64_t p_len, int64_t ny, int64_t nw)
     return eq_width(p_len, ny, nw, 0);
 }
 
-/* The physics steps after sample k (the Python-controller path); 1 if it fell. */
+/* The physics steps after sample k (the Python-controller path); 1 if it fell. A rig's
+ * generalized forces (a->gforce, a->n_gforce rows of a->rig_i's nq) act as in eq_run_t. */
 EQ_EXPORT int eq_advance_one(const eq_args *a, int64_t k, const double *u_app, double *scr)
 {
     const int64_t width = eq_width(a->p_len, a->ny, a->nw, 0);
     double *pcur = EQ_ROW(scr, width, EQ_S_PCUR);
     int64_t ps = eq_pset(a->p_switch, a->n_sets, k * a->iopts[EQ_IO_N_SUB]);
     int64_t i;
+    int ended;
     static volatile int64_t no_stop = 0;
     for (i = 0; i < a->p_len; i++) pcur[i] = a->p_sets[ps * a->p_len + i];
-    return eq_advance(a, k, a->x, u_app, a->p_sets, a->lin_s, a->rng, a->status, scr, width,
-                      &no_stop);
+    if (a->gforce != NULL && k < a->n_gforce) eq_gf_row = a->gforce + k * a->rig_i[EQ_RI_NQ];
+    ended = eq_advance(a, k, a->x, u_app, a->p_sets, a->lin_s, a->rng, a->status, scr, width,
+                       &no_stop);
+    eq_gf_row = NULL;
+    return ended;
+}
+
+/* The measurement at sample k through a rig (the Python-controller path: eq_rig_measure). */
+EQ_EXPORT void eq_rig_measure_one(const eq_args *a, int64_t k, const double *x, uint64_t *rng,
+                                  double *y, double *rs)
+{
+    double zbuf[a->ny + 2];
+    eq_rig_measure(a, k, x, rng, y, zbuf, rs);
+}
+
+/* The torque that acts at sample k through a rig (the Python-controller path:
+ * eq_rig_actuate; lim: low, high per input). */
+EQ_EXPORT void eq_rig_actuate_one(const eq_args *a, int64_t k, const double *u_app,
+                                  double *u_act, const double *lim, uint64_t *rng, double *rs)
+{
+    double zbuf[EQ_M + 2];
+    eq_rig_actuate(a, k, u_app, u_act, lim, rng, zbuf, rs);
 }
 
 /* n_steps RK4 steps of length h from x (in place) with u held. */

@@ -327,18 +327,33 @@ def _run_python(setup: setup_data.Setup, kernel: Kernel, rng: np.ndarray,
     u_buf = np.zeros(m)  # the input held over a period, as the core reads it
     core = kernel.generic
     measure = core.measurer(x=x, c_idx=setup.c_idx, lv=setup.lv, rng=rng, y=y)
+    rig_i, rig_f = setup.rig_arrays()
+    gforce, pulses = setup.rig_forces(seq)
     advance = core.advancer(
         x=x, u_app=u_buf, op=setup.op, p_sets=p_sets, p_switch=setup.p_switch, lin_s=lin,
         region=setup.region, kicks=setup.kicks, kick_value=setup.kick_value, pulses=setup.pulses,
         pulse_value=setup.pulse_value, lw=setup.lw, rng=rng, iopts=iopts, fopts=fopts,
-        status=status, scr=scr)
+        status=status, scr=scr, rig_i=rig_i, gforce=gforce)
+    # A rig's effects around the controller: the same C as the compiled loop's.
+    rig_on = rig_i is not None and bool(rig_i[layout.RIG_I["on"]])
+    u_rig, u_act, lim = np.zeros(m), np.zeros(m), np.zeros(2 * m)
+    if rig_on:
+        assert rig_i is not None and rig_f is not None
+        rig_state = setup.rig_state()
+        assert rig_state is not None
+        rig_measure, rig_actuate = core.rig_steps(
+            x=x, c_idx=setup.c_idx, lv=setup.lv, op=setup.op, fopts=fopts, rig_i=rig_i,
+            rig_f=rig_f, rig_s=rig_state, rng=rng, y=y, u_app=u_rig, u_act=u_act, lim=lim)
     u_prev = None
     has_estimate = False
     bar = _progress_bar(setup.n_rows, progress, "samples")
     rows = 0
     try:
         for k in range(setup.n_rows):
-            measure()
+            if rig_on:
+                rig_measure(k)
+            else:
+                measure()
             t = float(setup.times[k])
             r = setup.ref[k].copy()
             try:
@@ -359,6 +374,12 @@ def _run_python(setup: setup_data.Setup, kernel: Kernel, rng: np.ndarray,
                 u_prev = np.minimum(np.maximum(setup.u_op, lo), hi)
             u_app = u_prev if setup.delay else u_sat
             u_prev = u_sat
+            acted = u_app
+            if rig_on:
+                u_rig[:] = u_app
+                lim[0::2], lim[1::2] = lo, hi
+                rig_actuate(k)
+                acted = u_act.copy()
             try:
                 ctrl.update(t, y.copy(), r, u_app.copy())
             except StopRun:
@@ -373,7 +394,7 @@ def _run_python(setup: setup_data.Setup, kernel: Kernel, rng: np.ndarray,
             rec[k, cols["y"]] = y
             rec[k, cols["u_cmd"]] = u_cmd
             rec[k, cols["u_sat"]] = u_sat
-            rec[k, cols["u_app"]] = u_app
+            rec[k, cols["u_app"]] = acted
             rows = k + 1
             if bar is not None and k % 1000 == 0:
                 bar.update(k + 1 - bar.n)
@@ -386,7 +407,7 @@ def _run_python(setup: setup_data.Setup, kernel: Kernel, rng: np.ndarray,
                     break
             if k >= setup.n_samples:
                 break
-            u_buf[:] = u_app
+            u_buf[:] = acted
             if advance(k):
                 break
     finally:
@@ -394,7 +415,7 @@ def _run_python(setup: setup_data.Setup, kernel: Kernel, rng: np.ndarray,
             bar.close()
     status[layout.STATUS["rows"]] = rows
     return _result(setup, rec, rows, status, scr[fell_row, :n].copy(), x, seq,
-                   estimates=has_estimate)
+                   estimates=has_estimate, pulses=pulses)
 
 
 def _outside(x: np.ndarray, region: np.ndarray) -> int:

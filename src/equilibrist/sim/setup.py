@@ -181,9 +181,6 @@ def build(
     the_rig = check_rig(rig)
     if the_rig is not None:
         problems += the_rig.problems(system, run_rate)
-        if not compiled:
-            problems.append("a rig's effects run with a compiled controller (linear or "
-                            "nonlinear), not one written in Python")
 
     if problems or h is None or n_sub is None or n_samples is None or run_rate is None or dur is None:
         raise SimulationError("; ".join(problems) if problems else "invalid simulation settings")

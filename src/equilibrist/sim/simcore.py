@@ -62,6 +62,10 @@ class NativeCore:
         lib.eq_scratch_width.argtypes = [i64, i64, i64]
         lib.eq_scratch_width.restype = i64
         lib.eq_advance_one.argtypes = [args_p, i64, vp, vp]
+        lib.eq_rig_measure_one.argtypes = [args_p, i64, vp, vp, vp, vp]
+        lib.eq_rig_measure_one.restype = None
+        lib.eq_rig_actuate_one.argtypes = [args_p, i64, vp, vp, vp, vp, vp]
+        lib.eq_rig_actuate_one.restype = None
         lib.eq_advance_one.restype = ctypes.c_int
         lib.eq_rk4_steps.argtypes = [vp, vp, vp, ctypes.c_double, i64]
         lib.eq_rk4_steps.restype = None
@@ -250,6 +254,37 @@ class NativeCore:
 
         return measure
 
+    def rig_steps(self, *, x: np.ndarray, c_idx: np.ndarray, lv: np.ndarray, op: np.ndarray,
+                  fopts: np.ndarray, rig_i: np.ndarray, rig_f: np.ndarray, rig_s: np.ndarray,
+                  rng: np.ndarray, y: np.ndarray, u_app: np.ndarray, u_act: np.ndarray,
+                  lim: np.ndarray) -> tuple[Callable[[int], None], Callable[[int], None]]:
+        """``measure(k)`` (the sensors of *x* through the rig into *y*) and ``actuate(k)``
+        (the torque that acts for *u_app*, within the limits *lim* (low, high per input),
+        into *u_act*): a rig's effects around a controller written in Python, the same
+        as the compiled loop's (the arrays kept by reference, their addresses taken once)."""
+        for arr, dtype, what in ((x, np.float64, "x"), (rng, np.uint64, "rng"),
+                                 (y, np.float64, "y"), (u_app, np.float64, "u_app"),
+                                 (u_act, np.float64, "u_act"), (lim, np.float64, "lim"),
+                                 (rig_s, np.float64, "rig_s")):
+            self._out(arr, dtype, what)
+        lv = np.asarray(lv, dtype=float)
+        values = dict(c_idx=c_idx, ny=len(c_idx), lv=lv, nlv=lv.shape[0] if lv.ndim == 2 else 0,
+                      op=op, fopts=fopts, rig_i=rig_i, rig_f=rig_f)
+        args, keep = self._arrays(values)
+        pargs = ctypes.byref(args)
+        measure_fn, actuate_fn = self.lib.eq_rig_measure_one, self.lib.eq_rig_actuate_one
+        px, prng, py, ps = _ptr(x), _ptr(rng), _ptr(y), _ptr(rig_s)
+        pu, pa, pl = _ptr(u_app), _ptr(u_act), _ptr(lim)
+        held = (args, keep, x, rng, y, rig_s, u_app, u_act, lim)
+
+        def measure(k: int, _held: object = held) -> None:
+            measure_fn(pargs, k, px, prng, py, ps)
+
+        def actuate(k: int, _held: object = held) -> None:
+            actuate_fn(pargs, k, pu, pa, pl, prng, ps)
+
+        return measure, actuate
+
     def scratch(self, p_len: int, ny: int, nw: int) -> np.ndarray:
         width = int(self.lib.eq_scratch_width(p_len, ny, nw))
         return np.zeros((int(self.lib.eq_scratch_rows()), width))
@@ -259,10 +294,12 @@ class NativeCore:
                  region: np.ndarray, kicks: np.ndarray, kick_value: np.ndarray,
                  pulses: np.ndarray, pulse_value: np.ndarray, lw: np.ndarray, rng: np.ndarray,
                  iopts: np.ndarray, fopts: np.ndarray, status: np.ndarray,
-                 scr: np.ndarray) -> Callable[[int], bool]:
+                 scr: np.ndarray, rig_i: np.ndarray | None = None,
+                 gforce: np.ndarray | None = None) -> Callable[[int], bool]:
         """``advance(k)``: the physics steps after sample *k* with the input in *u_app* held
-        (True if the state left its region). The arrays are kept by reference and their
-        addresses taken once: write the input into *u_app* before each call."""
+        (True if the state left its region; a rig's generalized forces *gforce* acting). The
+        arrays are kept by reference and their addresses taken once: write the input into
+        *u_app* before each call."""
         for arr, dtype, what in ((x, np.float64, "x"), (u_app, np.float64, "u_app"),
                                  (rng, np.uint64, "rng"), (status, np.int64, "status"),
                                  (scr, np.float64, "the scratch")):
@@ -275,6 +312,7 @@ class NativeCore:
                       lin_s=lin_s, region=region, kicks=kicks, n_kicks=len(kicks),
                       kick_value=kick_value, pulses=pulses, n_pulses=len(pulses),
                       pulse_value=pulse_value, rng=rng, status=status, ny=0, nz=0)
+        values.update(self._rig(rig_i, None, gforce))
         args, keep = self._arrays(values)
         fn = self.lib.eq_advance_one
         pargs, u, sc = ctypes.byref(args), _ptr(u_app), _ptr(scr)
