@@ -96,8 +96,6 @@ def test_the_uno_runs_the_sketch_within_float32_and_counts_its_cycles(kind: str)
     for step in run.steps:
         assert step.emulator_count is not None
         assert abs(step.count - step.emulator_count) <= 8
-    if kind != "lqr":  # a step of a float LQR is thousands of cycles, an LQG's more
-        assert int(run.counts.max()) > int(_pil("lqr", "uno").counts.max())
 
 
 @pytest.mark.slow
@@ -116,8 +114,8 @@ def test_every_kind_runs_on_the_cortex_m4f_as_simulate(kind: str, tmp_path: Path
 def test_the_float_export_on_the_fpu_is_float32_close() -> None:
     run = _pil("lqg", "cortex-m4f", "--precision", "float")
     _same_commands(run, 1e-4)
-    # The FPU's single precision takes fewer instructions than double in software.
-    assert int(run.counts.max()) < int(_pil("lqg", "cortex-m4f").counts.max())
+    # Not the bits of double: the chip ran single precision.
+    assert run.max_deviation is not None and run.max_deviation > 0
 
 
 def _upright_plan(folder: Path) -> str:

@@ -74,7 +74,10 @@ def firmware_for(controller: object, *, system: System, target: Target, precisio
         return found
     with tempfile.TemporaryDirectory(prefix="equilibrist-pil-") as tmp:
         folder = Path(tmp) / "export"
-        report = export_controller(controller, folder, system=system, precision=precision)
+        # The export's recorded run is not in the firmware: ten samples of it are enough.
+        rate = float(getattr(controller, "rate", 0.0) or system.spec.control_rate)
+        report = export_controller(controller, folder, system=system, precision=precision,
+                                   duration=10.0 / rate)
         try:
             firmware = build(sketch_sources(folder), target)
         except DoesNotFit as exc:
