@@ -54,6 +54,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--excite", metavar="SIGNAL", help="add an identification experiment to the "
                    "device's command: chirp:AMP:F0:F1[:SWEEP] or prbs:AMP:PERIOD (as simulate's)")
     add_run_options(p)
+    common.add_rig_options(p)
     add_output_options(p)
     p.set_defaults(func=run)
 
