@@ -229,8 +229,10 @@ def robustness(system: System, controller: object, *, x0: object = None,
     settings: dict[str, object] = {
         "rate": rate, "duration": duration, "repetitions": repetitions,
         "perturbation_runs": perturbation_runs, "filter_cutoff": filter_cutoff,
-        "goal": goal_x.tolist(), "x0": None if x0 is None else np.asarray(
-            list(x0.values()) if isinstance(x0, Mapping) else x0, dtype=float).tolist(),
+        "goal": goal_x.tolist(),
+        "x0": None if x0 is None else ({k: float(v) for k, v in x0.items()}
+                                       if isinstance(x0, Mapping)
+                                       else np.asarray(x0, dtype=float).tolist()),
         "tolerance": [POSITION_TOLERANCE] * nq + [VELOCITY_TOLERANCE] * nq}
     return Robustness(system.key, out, settings, time.perf_counter() - start)
 
