@@ -78,10 +78,12 @@ class Firmware:
 
 @dataclass(frozen=True)
 class Sources:
-    """What a firmware is built from: C files by name, include folders, defines."""
+    """What a firmware is built from: C files by name and defines; and the library's static
+    data as the export measured it on this machine (``make size``), where it did."""
 
     files: dict[str, str]
     defines: tuple[str, ...] = ()
+    host_data: int | None = None
 
 
 def sketch_sources(export_folder: Path) -> Sources:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
 import tempfile
 import time
 from collections.abc import Mapping
@@ -22,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from equilibrist.pil.emulator import START_TIMEOUT, StepFigure, emulate
-from equilibrist.pil.firmware import Firmware, build, cached, sketch_sources
+from equilibrist.pil.firmware import Firmware, Sources, build, sketch_sources
 from equilibrist.pil.targets import DoesNotFit, Target
 
 if TYPE_CHECKING:
@@ -50,47 +51,61 @@ def _code_digest() -> str:
     return h.hexdigest()
 
 
-def firmware_for(controller: object, *, system: System, target: Target, precision: str,
-                 label: str) -> Firmware:
-    """The firmware of *controller* for *target*: its export's sketch built with the chip's
-    toolchain. Looked up by the controller's design id, the precision and the code that writes
-    the sources, so that a warm cache neither exports nor compiles."""
+def sources_for(controller: object, *, system: System, precision: str) -> Sources:
+    """The export's sketch of *controller*, what every target's firmware is built from.
+
+    Kept in the cache folder by the controller's design id, the precision and
+    the code that writes the sources, so that a warm cache does not export
+    again (for this target or another)."""
+    import json
+
     from equilibrist import __version__
     from equilibrist.export.writer import design_id, export_controller
-
-    target.check_tools()
-    ident = design_id(controller)
-    index_key = hashlib.sha256("\0".join(
-        (str(_INDEX_REVISION), __version__, target.name, precision, ident, system.key,
-         _code_digest())).encode()).hexdigest()[:32]
     from equilibrist.pil.firmware import _folder
 
-    index = _folder() / f"index-{index_key}"
+    key = hashlib.sha256("\0".join(
+        (str(_INDEX_REVISION), __version__, precision, design_id(controller), system.key,
+         _code_digest())).encode()).hexdigest()[:32]
+    path = _folder() / f"sources-{key}.json"
     try:
-        found = cached(index.read_text().strip(), target)
-    except OSError:
-        found = None
-    if found is not None:
-        return found
+        kept = json.loads(path.read_text())
+        return Sources(files=dict(kept["files"]), defines=tuple(kept["defines"]),
+                       host_data=kept["host_data"])
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
     with tempfile.TemporaryDirectory(prefix="equilibrist-pil-") as tmp:
         folder = Path(tmp) / "export"
         # The export's recorded run is not in the firmware: ten samples of it are enough.
         rate = float(getattr(controller, "rate", 0.0) or system.spec.control_rate)
         report = export_controller(controller, folder, system=system, precision=precision,
                                    duration=10.0 / rate)
-        try:
-            firmware = build(sketch_sources(folder), target)
-        except DoesNotFit as exc:
-            footprint = getattr(report, "footprint", None)
-            data = ("" if footprint is None else
-                    f"its static data is {footprint.data:,} bytes in float64 (make size on this "
-                    f"machine), over the {target.ram_bytes:,} bytes of RAM; ")
-            raise DoesNotFit(f"{label} does not fit the {target.name} ({target.chip}): {data}"
-                             f"{exc}") from None
-    staged = index.with_name(index.name + ".tmp")
-    staged.write_text(firmware.folder.name[len(target.name) + 1:])
-    staged.replace(index)
-    return firmware
+        footprint = getattr(report, "footprint", None)
+        found = sketch_sources(folder)
+    sources = Sources(files=found.files, defines=found.defines,
+                      host_data=None if footprint is None else int(footprint.data))
+    with tempfile.NamedTemporaryFile("w", dir=path.parent, prefix=".sources-", delete=False) as f:
+        json.dump({"files": sources.files, "defines": list(sources.defines),
+                   "host_data": sources.host_data}, f)
+    os.replace(f.name, path)
+    return sources
+
+
+def firmware_for(controller: object, *, system: System, target: Target, precision: str,
+                 label: str) -> Firmware:
+    """The firmware of *controller* for *target*: its export's sketch (:func:`sources_for`)
+    built with the chip's toolchain (cached by content: a warm cache neither exports nor
+    compiles). A firmware that cannot fit the chip raises :class:`DoesNotFit` with the
+    figures that decided it."""
+    target.check_tools()
+    sources = sources_for(controller, system=system, precision=precision)
+    try:
+        return build(sources, target)
+    except DoesNotFit as exc:
+        data = ("" if sources.host_data is None else
+                f"its static data is {sources.host_data:,} bytes in float64 (make size on this "
+                f"machine), over the {target.ram_bytes:,} bytes of RAM; ")
+        raise DoesNotFit(f"{label} does not fit the {target.name} ({target.chip}): {data}"
+                         f"{exc}") from None
 
 
 def check_fits(firmware: Firmware, label: str) -> None:
