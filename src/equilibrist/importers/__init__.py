@@ -111,11 +111,12 @@ def load_model_file(file: Path, *, origin: str, content: bytes) -> Entry:
         equilibrist does not model; the message is one line naming it.
     """
     suffix = file.suffix.lower()
-    _check_numbers(file, content)
     if suffix == ".urdf":
         from equilibrist.importers.urdf import read_urdf
 
         facts = read_urdf(file, content)
+        # The numbers MuJoCo will read: a tool's element that is dropped is not checked.
+        _check_numbers(file, facts.text)
         tree0 = read_tree(file, joint_order=facts.joint_order, actuators=(), text=facts.text,
                           stand_ins=facts.stand_ins, friction_form="atan")
         position = {j.name: k for k, j in enumerate(tree0.joints)}
@@ -133,6 +134,7 @@ def load_model_file(file: Path, *, origin: str, content: bytes) -> Entry:
         unlimited = tuple(t.actuator for t in facts.transmissions if not t.limited)
         kind = "URDF"
     else:
+        _check_numbers(file, content)
         _check_xml(file, content)
         tree = read_tree(file)
         unlimited = ()
