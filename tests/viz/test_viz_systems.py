@@ -45,7 +45,7 @@ def _two_runs_and_poles(system):
         x0 = runs["nominal"].states[0]
         poles = {"linearized at the start": np.linalg.eigvals(system.linearize(x0).A)}
         return runs, poles
-    d = design(system, rate=100.0)
+    d = design(system, rate=system.spec.control_rate)  # a rate every rig's modes allow
     x_op = np.array(system.operating_point().x, float)
     angle = next((i for i, u in enumerate(system.state_units) if u == "rad"), 0)
     runs = {}

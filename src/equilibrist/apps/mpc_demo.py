@@ -1,20 +1,11 @@
 """The demo's constrained MPC: where it keeps the cart-pole on its track and the clipped LQR does not.
 
-The cart-pole at :data:`RATE` with a horizon of :data:`HORIZON` samples
-(0.8 s ahead), the track constrained to :data:`TRACK` (5 cm inside the
-1 m end) and the fall region :data:`REGION`. Both controllers measure the
-full state and share the design (Bryson's weights at 50 Hz); the LQR's
-command is clipped at the input limits, the MPC's respects them by
-construction.
-
-* :func:`track_case`: the cart at the centre moving at 2 m/s. The clipped
-  LQR runs off the track; the MPC brakes in time and balances.
-* :func:`regions`: a grid of starts (cart at the centre, initial cart speed
-  by pole angle), which each controller keeps up and on the track.
-
-The tour (:mod:`equilibrist.apps.tour`) puts both into the cart-pole's
-section of the report; ``bench/bench_mpc.py`` prints the counts and saves
-the same figure as ``docs/images/mpc_roa.png``.
+Both controllers measure the full state and share the design; the LQR's command is clipped
+at the input limits, the MPC's respects them by construction. :func:`track_case` starts the
+cart at the centre at 2 m/s (the clipped LQR runs off the track, the MPC brakes in time);
+:func:`regions` is a grid of starts each controller keeps up and on the track. The tour puts
+both into the cart-pole's section; ``bench/bench_mpc.py`` saves the same figure as
+``docs/images/mpc_roa.png``.
 """
 
 from __future__ import annotations

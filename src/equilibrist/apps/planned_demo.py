@@ -1,20 +1,11 @@
 """The demo's planned swing-up: planned by trajectory optimization, tracked by the time-varying LQR.
 
-Called by the tour (:mod:`equilibrist.apps.tour`) beside the energy-shaping
-swing-up (:mod:`equilibrist.apps.swingup_demo`) for the systems of
-:data:`PLANNED`: from the same hanging start (the task ``swingup``'s
-distribution, the same seed), the swing-up is planned as ``equilibrist
-trajopt`` plans it (Hermite-Simpson collocation, IPOPT; :data:`KNOTS`
-intervals over the system's :data:`PLANNED` duration, within the task's
-state bounds less their margin: the cart-pole within 70 % of its track),
-tracked by the time-varying LQR (``--controller tvlqr``) at the task's rate
-with the rig's sensor and process noise, and compared with the energy
-shaping run of the same start. Writes ``planned_swingup.gif`` (the tracked
-run, drawn to scale) and ``planned_swingup.png`` (the plan, dashed, against
-the tracked run: the coordinates and the input over time).
-
-Needs CasADi (``pip install 'equilibrist[trajopt]'``); without it the
-section gets a note instead of the two pictures.
+For the systems of :data:`PLANNED`, from the energy-shaping demo's hanging start (the same
+seed): the swing-up planned as ``equilibrist trajopt`` plans it (within the task's state
+bounds less their margin), tracked by ``--controller tvlqr`` with the rig's noise, compared
+with the energy-shaping run. Writes ``planned_swingup.gif`` and ``planned_swingup.png``
+(the plan, dashed, against the tracked run). Needs CasADi
+(``pip install 'equilibrist[trajopt]'``); without it the section gets a note instead.
 """
 
 from __future__ import annotations

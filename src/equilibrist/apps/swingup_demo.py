@@ -1,12 +1,5 @@
-"""The demo's swing-up: one seeded swing-up from hanging, animated, for each rig that has one.
-
-Called by the tour (:mod:`equilibrist.apps.tour`) for the systems of
-``equilibrist.control.swingup.swingup_laws()`` (a swing-up in their definition): the
-swing-up controller of the
-system's default design, started from the task ``swingup``'s distribution
-(seed fixed), with the design's sensor and process noise, for the task's
-duration, drawn to scale.
-"""
+"""The demo's swing-up: one seeded swing-up from hanging, animated, for each rig that has one
+(its default design's swing-up controller, from the task ``swingup``'s start, with noise)."""
 
 from __future__ import annotations
 
@@ -50,11 +43,8 @@ def energy_run(system: System, *,
 def swingup_animation(system: System, folder: Path, *, width: int, height: int, fps: float,
                       max_frames: int | None = None, progress: bool = False,
                       duration: float | None = None) -> tuple[Path, str, SimResult]:
-    """Simulate (:func:`energy_run`) and animate a swing-up of *system* into
-    ``folder/swingup.gif``.
-
-    Returns the file, a one-line caption (swing-up time or what went wrong) and the run.
-    """
+    """Animate :func:`energy_run` into ``folder/swingup.gif``: the file, a one-line caption
+    and the run."""
     from equilibrist.viz.animation import animate_result
 
     run, ctrl = energy_run(system, duration=duration)

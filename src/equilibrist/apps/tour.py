@@ -1,25 +1,13 @@
 """The main job: a tour of the catalogue (what ``equilibrist demo`` runs).
 
-For each system with an input: design its default controller (digital LQG
-at the rig's control rate), simulate a realistic run on the nonlinear plant
-(sensor and process noise, actuator saturation, a step of the reference
-where the system tracks one, a push in the middle), and, for comparison,
-the ideal loop (LQR on the true state, no noise). For the gyroscope, which
-has no input: a steady precession (started at the slow rate of
-``steady_precession_rates``) and a nutating one (released without
-precession). Each system gets plots, an animation and a section of the
-report's ``index.html``; the cart-pole, the rotary pendulum and the
-reaction-wheel pendulum also get their LQR's region of attraction, estimated
-and certified (as ``equilibrist roa`` finds it), and the cart-pole a
-Monte-Carlo fan over uncertain parameters.
-
-The scenarios (how far off upright a run starts, how hard the push is) are
-part of each rig's definition (``SystemSpec.scenario``), in the units of its
-states and inputs; a rig that states none gets :func:`default_scenario`.
-
-The default scenario and what the steps share are in :mod:`equilibrist.apps.tour_common`,
-the tour of one system in :mod:`equilibrist.apps.tour_systems`; this module runs
-the whole tour and writes the report.
+For each system with an input: its default controller (digital LQG at the rig's rate) on a
+realistic run of the nonlinear plant (noise, saturation, a reference step, a push) and the
+ideal loop beside it; for the gyroscope, which has no input, a steady and a nutating
+precession. Each system gets plots, an animation and a section of the report's
+``index.html``; the rigs of ``ROA_SYSTEMS`` their LQR's region of attraction, the cart-pole
+a Monte-Carlo fan. The scenarios are part of each rig's definition
+(``SystemSpec.scenario``). One system's tour is in :mod:`equilibrist.apps.tour_systems`;
+this module runs the whole tour and writes the report.
 """
 
 from __future__ import annotations
@@ -111,44 +99,16 @@ def run_tour(
     then: Callable[[Path], object] | None = None,
     then_writes: Sequence[str] = (),
 ) -> list[Outcome]:
-    """Run the demo on *systems* and write the report folder.
+    """Run the demo on *systems* and write the report folder *folder* (``index.html`` and
+    one sub-folder per system; an existing folder is replaced only as
+    :func:`check_report_folder` allows, whatever it holds with *force*); the outcomes in the
+    order of *systems*.
 
-    Parameters
-    ----------
-    systems : sequence of System
-        The bound systems to show, in order.
-    folder : str or pathlib.Path
-        The report folder (``index.html`` and one sub-folder per system). Its
-        parent must exist; an existing folder is replaced only as
-        :func:`check_report_folder` allows.
-    size, fps, max_frames :
-        Animation frame size, rate and cap.
-    extras : sequence of str
-        Systems (by name) that also get a region of attraction and a
-        Monte-Carlo fan.
-    jobs : int
-        Systems toured at once, each in its own process (on a fresh machine
-        most of the time goes to compiling each system's simulation core,
-        which one process does on one core).
-    progress : bool
-        Progress bars for steps that take more than a second.
-    log : callable, optional
-        Receives one line per system as it is done.
-    at : mapping, optional
-        ``{state: value}``: design at the equilibrium with these states and run each
-        scenario about it (``equilibrist demo SYSTEM --at``; one system's states).
-    force : bool
-        Replace an existing folder whatever it holds.
-    then : callable, optional
-        Called with the finished report's (staged) folder before it is put in
-        place: the demo adds its study there.
-    then_writes : sequence of str
-        The names *then* adds at the top of the folder.
-
-    Returns
-    -------
-    list of Outcome
-        In the order of *systems*.
+    *extras* names the systems that also get a region of attraction and a Monte-Carlo fan;
+    *jobs* systems are toured at once, each in its own process. *at* (``{state: value}``)
+    designs at the equilibrium with these states and runs each scenario about it. *then* is
+    called with the staged folder before it is put in place (the demo adds its study
+    there), and *then_writes* names what it adds at the top of the folder.
     """
     target = Path(folder)
     writes = {"index.html", *(_slug(_label(s)) for s in systems), *then_writes}

@@ -57,32 +57,11 @@ def tour_controlled(
     progress: bool = False,
     at: Mapping[str, float] | None = None,
 ) -> Outcome:
-    """Design, simulate, plot and animate one system with an input.
+    """Design, simulate, plot and animate one system with an input into ``folder/<slug>``.
 
-    Parameters
-    ----------
-    system : equilibrist.numeric.system.System
-        The system.
-    folder : pathlib.Path
-        The report folder; this system's files go into ``folder / <slug>``.
-    scenario : Scenario, optional
-        What to do (default: the rig's own, ``SystemSpec.scenario``, or :func:`default_scenario`).
-    size : (int, int)
-        Animation frame size in pixels.
-    fps, max_frames : float, int
-        Animation frame rate and cap.
-    extras : bool
-        Also run a Monte-Carlo batch (the systems of :data:`ROA_SYSTEMS` get their region of
-        attraction in any case).
-    progress : bool
-        Progress bars for the slow steps.
-    at : mapping, optional
-        States of the operating point to design at and run about (``design(at=...)``);
-        None: the canonical one.
-
-    Returns
-    -------
-    Outcome
+    *scenario* defaults to the rig's own (``SystemSpec.scenario``) or :func:`default_scenario`;
+    *extras* adds a Monte-Carlo batch (the systems of :data:`ROA_SYSTEMS` get their region
+    of attraction in any case); *at* names states of the operating point to design at.
     """
     from equilibrist.control import design
     from equilibrist.sim import StateFeedback

@@ -1,35 +1,10 @@
 """One point of a study: its design, its batch of runs, its metrics (one table row).
 
-Metrics of a point (columns of the table; NaN where a metric does not apply):
-
-``runs``, ``stayed_up``, ``fraction_up``
-    Runs made and how many never left the system's region.
-``fell_at_median``
-    Median time of a fall among the runs that fell [s].
-``settled_fraction``, ``settling_p50``, ``settling_p90``, ``settling_max``
-    Settling time of each run as :meth:`SimResult.metrics` defines it (the
-    measured outputs back within 2 % of their largest deviation, or their
-    noise floor); a run that fell or never settles counts as ``inf``, so a
-    percentile is ``inf`` when more than that share did not settle. The
-    percentiles are sample values (``inverted_cdf``), never interpolated.
-``peak_input_p50.<input>``, ``peak_input_max.<input>``
-    The median and the largest over runs of each run's peak ``|command|``.
-``time_saturated_mean``, ``time_saturated_max``
-    Time with a command outside the actuator's limits [s].
-``cost_mean``, ``cost_p90``
-    Quadratic cost ``T * sum_k (dx' Q dx + du' R du)`` over each run that
-    stayed up, with the *spec's* Bryson weights (the same for every point,
-    whatever weights the point's design used, so costs compare across
-    points); ``dx``, ``du`` are the state and applied input from the
-    operating point, ``T`` the sample period.
-``roa_fraction``
-    Share of the region-of-attraction grid caught (with ``roa``).
-``steps``
-    Physics steps integrated for the point.
-``status``, ``error``
-    ``ok``; ``design failed`` or ``invalid point`` or ``simulation failed``
-    with the reason in ``error`` (null when ok): a failing point is recorded,
-    never fatal.
+The columns are listed in ``docs/studies.md`` ("The table"); NaN where a metric does not
+apply. Percentiles are sample values (``inverted_cdf``), never interpolated; a run that
+fell or never settles has an infinite settling time. The cost is
+``T * sum_k (dx' Q dx + du' R du)`` from the operating point with the *spec's* Bryson
+weights, so that costs compare across points.
 """
 
 from __future__ import annotations
@@ -74,11 +49,8 @@ def _quantile(values: np.ndarray, q: float) -> float:
 
 def settling_times(states: np.ndarray, times: np.ndarray, watched: Sequence[int],
                    x_op: np.ndarray) -> np.ndarray:
-    """Settling time of each run of ``states`` (runs, rows, n): ``inf`` if never settled.
-
-    The rule of :meth:`~equilibrist.sim.result.SimResult.metrics`, vectorized
-    over runs that ran to the end (all rows present).
-    """
+    """Settling time of each run of ``states`` (runs, rows, n), ``inf`` if never settled:
+    the rule of :meth:`~equilibrist.sim.result.SimResult.metrics` over runs that ran to the end."""
     runs, rows = states.shape[0], states.shape[1]
     settle_idx = np.zeros(runs, dtype=np.int64)
     settled = np.ones(runs, dtype=bool)
@@ -355,10 +327,6 @@ def evaluate_chunk(study: Study, chunk: int, chunk_size: int, *,
 
 def chunk_task(study_json: str, chunk: int, chunk_size: int,
                threads: int) -> list[dict[str, object]]:
-    """A chunk as a cluster task: plain arguments in, plain rows out.
-
-    The worker rebuilds the study from its description, loads the compiled
-    core from the on-disk cache on its first chunk and keeps it for the next.
-    """
+    """A chunk as a cluster task: plain arguments in, plain rows out."""
     study = Study.from_json(study_json)
     return evaluate_chunk(study, chunk, chunk_size, threads=threads)

@@ -69,21 +69,9 @@ def plot_study(
     where: Mapping[str, str] | None = None,
     dpi: float = 100.0,
 ) -> Path:
-    """Draw *metric* over *x* (and *y*) of the study's table; returns the file.
-
-    Parameters
-    ----------
-    table : pyarrow.Table
-        The study's table (:func:`~equilibrist.study.read_study`).
-    metric : str
-        A numeric column (``fraction_up``, ``settling_p90``, ``cost_mean``, ...).
-    x, y : str, optional
-        Varied quantities; default the first (and second) of the study.
-    agg : str
-        How rows that share the shown values are combined.
-    where : mapping name -> value text, optional
-        Keep only the rows with these values of other varied quantities.
-    """
+    """Draw *metric* (a numeric column) over the varied quantities *x* (and *y*), by default
+    the study's first two, into *path*; *where* keeps the rows with these values of other
+    quantities, *agg* combines the rows that share the shown values."""
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -113,10 +101,7 @@ def plot_study(
     def cell(mask: np.ndarray) -> float:
         v = values[mask & keep]
         v = v[~np.isnan(v)]
-        if v.size == 0:
-            return math.nan
-        out = float(fn(v))
-        return out
+        return float(fn(v)) if v.size else math.nan
 
     if y is None:
         _draw_line(ax, xs, values, keep, cell, x=x, log=axes[x].log, metric=metric)

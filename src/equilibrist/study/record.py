@@ -62,22 +62,10 @@ class StudyError(EquilibristError, ValueError):
 
 @dataclass(frozen=True)
 class Axis:
-    """One varied quantity.
-
-    Attributes
-    ----------
-    name : str
-        As written: ``m_p``, ``rate``, ``q.theta``, ``controller``, ...
-    kind : str
-        ``parameter``, ``rate``, ``q``, ``r``, ``controller``, ``noise`` or ``delay``.
-    values : tuple
-        The grid's values (a random sample's list to draw from), or empty
-        for a range of a random sample.
-    low, high : float or None
-        The range of a random sample (None for a list).
-    log : bool
-        Geometric spacing (grid) or log-uniform draws (sample).
-    """
+    """One varied quantity, named as written (``m_p``, ``q.theta``...), of *kind*
+    ``parameter``, ``rate``, ``q``, ``r``, ``controller``, ``noise`` or ``delay``: the grid's
+    *values* (a random sample's list to draw from), or for a random sample's range *low* and
+    *high* (*log*: geometric spacing or log-uniform draws)."""
 
     name: str
     kind: str
@@ -90,10 +78,6 @@ class Axis:
     def target(self) -> str:
         """The state, input or parameter the axis acts on (its name for the others)."""
         return self.name.split(".", 1)[1] if self.kind in ("q", "r") else self.name
-
-    @property
-    def is_text(self) -> bool:
-        return self.kind == "controller"
 
     def to_dict(self) -> dict[str, object]:
         return {"name": self.name, "kind": self.kind, "values": list(self.values),

@@ -1,30 +1,18 @@
-"""Running a study: on the local cores, on a local Dask cluster, or on a cluster.
+"""Running a study: on the local cores, on a local Dask cluster (``workers``), or on a
+cluster (``scheduler``); ``docs/studies.md`` says how each divides the cores.
 
-* Local (no ``workers``, no ``scheduler``): chunks run one after the other
-  in this process, each point's batch on all cores (the core's threads). Dask is
-  not imported.
-* ``workers=N``: a ``distributed.LocalCluster`` of N worker processes with
-  one Dask thread each, started and stopped here; each task's batch runs on
-  ``threads`` threads (default ``cores // N``, at least 1) so that
-  workers times threads never exceeds the cores.
-* ``scheduler="tcp://host:8786"``: an existing cluster. Each task runs on
-  ``threads`` threads (default 1: start the workers with as many Dask
-  threads as the node has cores, ``dask worker --nthreads``).
-
-A chunk is one task (``equilibrist.study.compute.chunk_task``): the study's
-description and the chunk's number in, the chunk's rows out. The driver
-writes each finished chunk to the parts folder as it arrives. A worker that
-dies has its tasks run again elsewhere by the scheduler; since every random
-draw comes from the study's seed and the point's index, the rows are the
-same. Workers load the compiled core from the on-disk cache (the driver
-builds it first, so a local cluster's workers never compile).
+A chunk is one task (:func:`~equilibrist.study.compute.chunk_task`), written to the parts
+folder as it arrives. A worker that dies has its tasks run again elsewhere; since every
+random draw comes from the study's seed and the point's index, the rows are the same. The
+driver builds the compiled core first, so a local cluster's workers never compile.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
@@ -108,31 +96,12 @@ def run_study(
 ) -> StudyRun:
     """Run *study* and write its table to *out* (Parquet).
 
-    Parameters
-    ----------
-    resume : bool
-        Continue an interrupted study from ``<out>.parts`` (only the
-        missing chunks are computed).
-    workers : int, optional
-        Start a local Dask cluster of this many worker processes.
-    scheduler : str, optional
-        Address of an existing Dask scheduler (``tcp://host:8786``).
-    threads : int, optional
-        threads per batch (see the module docstring for the defaults).
-    chunk_size : int, optional
-        Points per chunk (task); default :func:`default_chunk_size`.
-    progress : bool
-        A progress bar on stderr.
-    on_chunk : callable(chunk, done), optional
-        Called after each chunk is written, with the number of chunks written so far.
-    client : distributed.Client, optional
-        Use this client (an existing cluster) instead of *scheduler*.
-    force : bool
-        Replace an existing *out* that is not a study table (without it,
-        such a file is refused: it is the user's, not equilibrist's).
-
-    A ``KeyboardInterrupt`` stops the study at once; the chunks already
-    written stay in ``<out>.parts`` for ``resume=True``.
+    *resume* continues from ``<out>.parts`` (only the missing chunks are computed).
+    *threads* is the threads per batch (default: all cores locally, ``cores // workers``
+    on a local cluster, 1 on a cluster); *client* is a Dask client to use instead of
+    *scheduler*; *on_chunk(chunk, done)* is called after each chunk is written; *force*
+    replaces an *out* that is not a study table (the user's file, refused without it).
+    A ``KeyboardInterrupt`` stops at once; the chunks written stay for ``resume=True``.
     """
     require_pyarrow()
     out = Path(out)
@@ -260,44 +229,38 @@ def _distributed() -> ModuleType:
     return distributed
 
 
-class _local_cluster:
-    def __init__(self, workers: int) -> None:
-        self.workers = workers
+@contextlib.contextmanager
+def _local_cluster(workers: int) -> Iterator[Any]:  # the distributed.Client
+    import logging
 
-    def __enter__(self) -> Any:  # the distributed.Client
-        import logging
-
-        distributed = _distributed()
-        self.cluster = distributed.LocalCluster(
-            n_workers=self.workers, threads_per_worker=1, processes=True,
-            # ":0": its HTTP endpoint on a free port, never clashing with another cluster.
-            dashboard_address=":0", silence_logs=logging.ERROR,
-        )
-        self.client = distributed.Client(self.cluster)
-        return self.client
-
-    def __exit__(self, *exc: object) -> None:
+    distributed = _distributed()
+    cluster = distributed.LocalCluster(
+        n_workers=workers, threads_per_worker=1, processes=True,
+        # ":0": its HTTP endpoint on a free port, never clashing with another cluster.
+        dashboard_address=":0", silence_logs=logging.ERROR,
+    )
+    client = distributed.Client(cluster)
+    try:
+        yield client
+    finally:
         # Short timeouts: after Ctrl-C the workers are stopped, not waited for.
         try:
-            self.client.close(timeout=5)
+            client.close(timeout=5)
         finally:
-            self.cluster.close(timeout=10)
+            cluster.close(timeout=10)
 
 
-class _connect:
-    def __init__(self, address: str) -> None:
-        self.address = address
-
-    def __enter__(self) -> Any:  # the distributed.Client
-        distributed = _distributed()
-        try:
-            self.client = distributed.Client(self.address, timeout="20s")
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise StudyError(f"--scheduler {self.address}: cannot connect ({exc})") from None
-        return self.client
-
-    def __exit__(self, *exc: object) -> None:
-        self.client.close()
+@contextlib.contextmanager
+def _connect(address: str) -> Iterator[Any]:  # the distributed.Client
+    distributed = _distributed()
+    try:
+        client = distributed.Client(address, timeout="20s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise StudyError(f"--scheduler {address}: cannot connect ({exc})") from None
+    try:
+        yield client
+    finally:
+        client.close()
 
 
 def _run_on(client: Any, study: Study, store: Store, todo: list[int], threads: int,

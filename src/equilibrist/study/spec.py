@@ -1,33 +1,10 @@
 """What a study is: the quantities varied, the points, the runs per point.
 
-A study is a grid (every combination of the varied quantities' values) or
-a random sample (``sample = N`` points drawn uniformly within the ranges)
-over any mix of
-
-=====================  =============================================================
-name                   what varies
-=====================  =============================================================
-a parameter (``m_p``)  the plant's physical parameter (validated against its range)
-``rate``               the controller's sample rate [Hz] (design and simulation)
-``q.<state>``          Bryson scale of a state: its largest acceptable deviation, in
-                       the state's unit; the LQR weight is ``1 / scale**2``
-``r.<input>``          Bryson scale of an input, in the input's unit
-``controller``         a controller kind offered to studies (``lqr``, ``lqg``, ``mpc``,
-                       ``swingup``, a kind of one's own: :mod:`equilibrist.controllers.kinds`)
-``noise``              scale of the noise's standard deviations (0 = no noise; the
-                       design keeps the spec's covariances)
-``delay``              0 or 1: each command applied one sample late
-=====================  =============================================================
-
-times ``runs`` closed-loop runs per point (initial states uniform in the
-``x0`` ranges, parameters uniform within ``nominal * (1 +- spread)`` around
-the point's values, process and sensor noise).
-
-Values on the command line: ``NAME=LOW:HIGH:N`` (N values evenly spaced,
-both ends included), ``NAME=LOW:HIGH:N:log`` (geometrically spaced),
-``NAME=V1,V2,...`` (a list) or ``NAME=V``. With ``sample = N`` a range is
-``NAME=LOW:HIGH`` (``:log`` draws log-uniformly) and a list is drawn from
-with equal chances.
+A study is a grid (every combination of the varied quantities' values) or a random sample
+(``sample = N`` points drawn within the ranges) over physical parameters, ``rate``,
+``q.<state>`` and ``r.<input>`` (Bryson scales), ``controller``, ``noise`` and ``delay``,
+times ``runs`` closed-loop runs per point; the quantities and the values' forms are in
+``docs/studies.md``.
 
 Determinism: everything random in point ``i`` comes from
 ``numpy.random.SeedSequence(seed, spawn_key=(i, k))`` (``k = 0`` the
@@ -40,6 +17,7 @@ order in which points finish.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -83,49 +61,22 @@ def make_study(
     batch_size: int | None = None,
     controller_options: Mapping[str, object] | None = None,
 ) -> Study:
-    """A validated :class:`Study`; every problem is collected and raised at once.
+    """A validated :class:`Study`; every problem is collected and raised at once
+    (:class:`StudyError`).
 
-    Parameters
-    ----------
-    system : str
-        Catalogue name (``settings`` picks a variant and fixed parameters).
-    vary : mapping or pairs name -> values
-        Varied quantities (see the module docstring); text as on the
-        command line, a list, or a mapping ``{low, high, n, log}``.
-    sample : int, optional
-        Draw this many random points instead of the full grid.
-    runs : int
-        Closed-loop runs per point.
-    x0 : mapping state -> (low, high) or "LOW:HIGH" or value
-        Initial-state ranges (absolute; the other states at the operating point).
-    spread : mapping parameter -> relative spread
-    controller, noise, delay, rate :
-        Values of the quantities that are not varied (``rate`` defaults to
-        the rig's control rate; ``noise`` is a scale or ``on``/``off``).
-    design_for : ``point`` or ``nominal``
-        Design each point's controller for its own parameters, or keep the
-        nominal design (robustness of one design to the plant's variation).
-    metrics : ``full`` or ``basic``
-        ``full`` adds settling times and the quadratic cost (the runs'
-        trajectories are kept batch by batch for them).
-    roa : mapping state -> "LOW:HIGH:N" or (low, high, n)
-        A grid of initial states run per point to estimate the region of
-        attraction (``roa_fraction``, the share of the grid caught).
-    batch_size : int, optional
-        Runs per compiled batch (default: as many as fit in about 32 MB of
-        trajectories). Part of the study: the noise seeds follow it.
-    controller_options : mapping key -> value, optional
-        The controllers' own options by key, as their flags without dashes
-        (``trajectory = "up.npz"`` and ``balance = "lqg"`` for ``tvlqr``,
-        ``horizon`` for ``mpc``): each must be an option of one of the
-        study's controllers and is checked as the command line checks it;
-        each point's kind takes those that are its own. A file (a
-        ``FILE...`` option) is recorded as an absolute path.
-
-    Raises
-    ------
-    StudyError
-        Naming every problem.
+    *vary* maps each varied quantity to its values (text as on the command line, a list, or
+    ``{low, high, n, log}``); *sample* draws that many random points instead of the grid.
+    *x0* gives the initial states' absolute ranges (the other states at the operating
+    point), *spread* each parameter's relative spread around the point's value.
+    *controller*, *noise* (a scale, or ``on``/``off``), *delay* and *rate* (default: the
+    rig's) are the values of the quantities not varied. *design_for* ``"nominal"`` keeps one
+    nominal design at every point instead of designing for each point's parameters.
+    *metrics* ``"full"`` adds settling times and the quadratic cost. *roa* is a grid of
+    initial states run per point (``roa_fraction``, the share caught). *batch_size* is the
+    runs per compiled batch (default: about 32 MB of trajectories); the noise seeds follow
+    it. *controller_options* are the kinds' own options by key (``trajectory``,
+    ``horizon``...), checked as the command line checks them; a file is recorded as an
+    absolute path.
     """
     fixed, sysm = _study_system(system, settings)
     spec = sysm.spec
@@ -179,7 +130,7 @@ def make_study(
     size = _whole(batch_size, "batch_size", problems)
     if problems or size is None:
         raise StudyError("; ".join(problems))
-    return _replace_batch(study, min(size, n_runs))
+    return replace(study, batch_size=min(size, n_runs))
 
 
 def _study_system(system: str,
@@ -311,12 +262,6 @@ def _is_file(option: object) -> bool:
     return "FILE" in str(getattr(option, "metavar", None) or "")
 
 
-def _replace_batch(study: Study, size: int) -> Study:
-    from dataclasses import replace
-
-    return replace(study, batch_size=size)
-
-
 # -- study files ------------------------------------------------------------------------
 
 _FILE_KEYS = ("system", "set", "vary", "sample", "runs", "duration", "x0", "spread", "seed",
@@ -325,35 +270,14 @@ _FILE_KEYS = ("system", "set", "vary", "sample", "runs", "duration", "x0", "spre
 
 
 def load_study_file(path: str | Path, *, system: str | None = None) -> Study:
-    """A study from a TOML file (the keys of :func:`make_study`, ``system`` first).
+    """A study from a TOML file (the keys of :func:`make_study`, ``system`` first; the
+    format with examples in ``docs/studies.md``).
 
     A study file that names a Python system file never runs it: the user
     names that file as *system* (``equilibrist sweep FILE.py --study
     study.toml``), and its content must be the content of the file the study
     names where that one can still be read. *system* given with a study of a
     catalogue system must be that system.
-
-    Example::
-
-        system = "cartpole"
-        runs = 1000
-        duration = 5
-        seed = 1
-        [vary]
-        m_p = "0.5:2:16"            # or {low = 0.5, high = 2, n = 16}
-        rate = [50, 100, 200, 500]
-        controller = ["lqr", "lqg"]
-        [x0]
-        theta = "-0.3:0.3"          # or [-0.3, 0.3]
-        [spread]
-        l = 0.05
-
-    A controller's own options are a table (a file in it relative to the study file)::
-
-        controller = "tvlqr"
-        [controller_options]
-        trajectory = "up.npz"       # equilibrist trajopt cartpole --out up.npz
-        balance = "lqg"
     """
     import tomllib
 

@@ -1,20 +1,12 @@
 """The study's table on disk: Parquet parts written atomically, then one file.
 
-While a study runs, each finished chunk of points is written to
-``<out>.parts/chunk-NNNNNN.parquet`` through a temporary file and a rename,
-so a part is either complete or absent; ``<out>.parts/study.json`` holds
-the study's description and the chunk size. When every chunk is there, the
-parts are concatenated in point order into ``<out>`` (again a temporary
-file and a rename) and the parts folder is removed. ``--resume`` reads the
-parts folder, checks that it belongs to the same study, and computes only
-the chunks that are missing.
-
-The table: one row per point, columns ``point``, the varied quantities,
-``status``, ``error``, the metrics of :mod:`equilibrist.study.compute`.
-The file's key-value metadata holds ``equilibrist.format``,
-``equilibrist.study`` (the description, canonical JSON) and
-``equilibrist.versions``. Nothing that depends on the run (times, hosts,
-workers) is written, so the file is the same bytes however it was made.
+Each finished chunk of points is written to ``<out>.parts/chunk-NNNNNN.parquet`` through a
+temporary file and a rename; ``<out>.parts/study.json`` holds the study's description and
+the chunk size (what ``--resume`` checks). When every chunk is there, the parts are
+concatenated in point order into ``<out>`` and the folder is removed. The file's metadata
+holds ``equilibrist.format``, ``equilibrist.study`` (canonical JSON) and
+``equilibrist.versions``; nothing that depends on the run (times, hosts, workers) is
+written, so the file is the same bytes however it was made.
 """
 
 from __future__ import annotations
@@ -194,11 +186,8 @@ class Store:
         return self.out
 
     def remove(self) -> None:
-        """Remove the parts folder's own files, and the folder when nothing else is in it.
-
-        Only the names the store writes (the manifest, the parts, their
-        temporary files) are removed: a file the user put there stays.
-        """
+        """Remove the parts folder's own files (the manifest, the parts, their temporary
+        files), and the folder when nothing the user put there is left in it."""
         if not self.dir.is_dir():
             return
         for path in self.dir.iterdir():
@@ -212,12 +201,8 @@ class Store:
 
 
 def check_out(out: Path, *, force: bool = False, resume: bool = False) -> None:
-    """Refuse to replace a file at *out* that is not a study table, unless *force*.
-
-    A study table ('equilibrist sweep' wrote it) is replaced by the new one;
-    any other file is the user's. With *resume*, a table is what the study
-    continues from, so anything else is refused even with *force*.
-    """
+    """Refuse to replace a file at *out* that is not a study table (the user's), unless
+    *force*; with *resume* anything but a table is refused, even with *force*."""
     if not out.exists() and not out.is_symlink():
         return
     if out.is_dir():

@@ -19,19 +19,6 @@ _EVENT_NAMES = {"kick": "push", "pulse": "push", "impulse": "push",
                 "parameter_change": "parameters change"}
 
 
-def system_of(key: str, params: Mapping[str, float] | None = None, *, digest: str | None = None,
-              system: System | None = None, source: str = "the result") -> System:
-    """The bound system of a saved result's *key* (``"gyroscope[euler=xyz]"``) with *params*.
-
-    *system*, when the user names one, is checked to be the result's; without
-    it a Python system file named by the result is refused, never run
-    (:func:`~equilibrist.numeric.lookup.system_for_data`).
-    """
-    from equilibrist.numeric.lookup import system_for_data
-
-    return system_for_data(key, params, digest=digest, system=system, source=source)
-
-
 def _number(value: object) -> float:
     """*value* of a result's settings as a float (a :class:`VizError` when it is none)."""
     if not isinstance(value, SupportsFloat | str):
@@ -62,6 +49,7 @@ def _label(settings: Mapping[str, object]) -> str:
 
 def run_from_result(result: SimResult, *, system: System | None = None, label: str | None = None) -> Run:
     """The :class:`Run` of a :class:`~equilibrist.sim.SimResult`."""
+    from equilibrist.numeric.lookup import system_for_data
     from equilibrist.sim.result import SimResult
 
     if not isinstance(result, SimResult):
@@ -69,7 +57,9 @@ def run_from_result(result: SimResult, *, system: System | None = None, label: s
             f"cannot show a {type(result).__name__}: it is not a simulation result "
             "(equilibrist.sim.simulate returns one; SimResult.load reads a saved one)"
         )
-    system = system_of(result.system, result.params, digest=result.system_digest, system=system)
+    # A Python system file named by the result is refused, never run, unless *system* is it.
+    system = system_for_data(result.system, result.params, digest=result.system_digest,
+                             system=system, source="the result")
     settings = dict(result.settings)
     events = []
     listed = settings.get("events") or ()

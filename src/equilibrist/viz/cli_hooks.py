@@ -109,23 +109,8 @@ def add_output_options(parser: argparse.ArgumentParser) -> None:
 
 def handle_outputs(args: argparse.Namespace, result: SimResult, *,
                    system: System | None = None) -> list[Path]:
-    """Write the pictures that *args* asks for of *result*.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        Parsed arguments of a parser given :func:`add_output_options`.
-    result : equilibrist.sim.SimResult
-        The run.
-    system : equilibrist.numeric.system.System, optional
-        The system simulated (default: rebuilt from the result).
-
-    Returns
-    -------
-    list of pathlib.Path
-        The files written (each is also named on stderr, so that the
-        command's own output, JSON included, stays clean).
-    """
+    """Write the pictures that *args* (of :func:`add_output_options`) asks for of *result*;
+    each file is named on stderr, so that the command's own output (JSON) stays clean."""
     written: list[Path] = []
     if getattr(args, "plot", None) is None and getattr(args, "animate", None) is None:
         return written

@@ -30,31 +30,13 @@ COLORS: dict[str, str] = {
 
 @dataclass(frozen=True)
 class Shape:
-    """One element of a drawing.
+    """One element of a drawing, keeping its *key* from frame to frame.
 
-    Attributes
-    ----------
-    key : str
-        Stable name of the element (the same element keeps its key from
-        frame to frame).
-    kind : str
-        ``"fill"`` (closed polygon), ``"line"`` (polyline), ``"hline"`` (a
-        horizontal line across the picture at ``points[0, 1]``) or
-        ``"text"`` (``text`` placed at ``points[0]``).
-    points : numpy.ndarray
-        ``(n, 2)`` world coordinates; may be empty (the element is hidden).
-    color : str
-        Face colour of a fill, colour of a line or text.
-    width : float
-        Line width in points (edge width of a fill).
-    z : float
-        Drawing order (higher on top).
-    bounds : bool
-        Whether the element counts when the picture's extent is chosen.
-    text : str
-        The text of a ``"text"`` element.
-    edge : str or None
-        Edge colour of a fill (None: no edge).
+    *kind* is ``"fill"`` (closed polygon), ``"line"`` (polyline), ``"hline"`` (a horizontal
+    line across the picture at ``points[0, 1]``) or ``"text"`` (*text* at ``points[0]``);
+    *points* are ``(n, 2)`` world coordinates, empty to hide the element. *width* is in
+    points (a fill's edge, in *edge* colour), *z* the drawing order (higher on top), and
+    *bounds* whether the element counts when the picture's extent is chosen.
     """
 
     key: str
@@ -93,15 +75,6 @@ def rect(cx: float, y0: float, width: float, height: float) -> np.ndarray:
     """Axis-aligned rectangle with bottom centre ``(cx, y0)``."""
     return _pts((cx - width / 2, y0), (cx + width / 2, y0),
                 (cx + width / 2, y0 + height), (cx - width / 2, y0 + height))
-
-
-def rotate(points: np.ndarray, angle: float, about: Sequence[float] = (0.0, 0.0)) -> np.ndarray:
-    """Rotate *points* counter-clockwise by *angle* about *about*."""
-    c, s = math.cos(angle), math.sin(angle)
-    o = np.asarray(about, float)
-    p = np.asarray(points, float) - o
-    turned: np.ndarray = np.column_stack([c * p[:, 0] - s * p[:, 1], s * p[:, 0] + c * p[:, 1]]) + o
-    return turned
 
 
 def arrow(start: np.ndarray | Sequence[float], vector: np.ndarray | Sequence[float],
@@ -213,18 +186,9 @@ def _torque(key: str, center: np.ndarray, radius: float, frac: float, width: flo
 
 
 class Scene:
-    """The drawing of one system.
-
-    Parameters
-    ----------
-    system : equilibrist.numeric.system.System
-        The bound system: its parameters give the drawing's dimensions and
-        its input limits the scale of the input arrows.
-
-    Notes
-    -----
-    Subclasses implement :meth:`shapes`. ``trail`` is the sequence of states
-    up to the one drawn, for scenes that draw a trace (the gyroscope).
+    """The drawing of one *system* (its parameters give the dimensions, its input limits the
+    scale of the input arrows). Subclasses implement :meth:`shapes`; ``trail`` is the
+    sequence of states up to the one drawn, for scenes that draw a trace (the gyroscope).
     """
 
     #: What the picture shows, one line.
@@ -263,16 +227,8 @@ class Scene:
         raise NotImplementedError
 
     def extent(self, states: np.ndarray, inputs: np.ndarray | None = None) -> tuple[float, float, float, float]:
-        """``(xmin, xmax, ymin, ymax)`` that shows every state of *states*.
-
-        Parameters
-        ----------
-        states : numpy.ndarray
-            ``(n_steps, n_states)``; up to 80 evenly spaced ones are drawn
-            to find the extent.
-        inputs : numpy.ndarray, optional
-            ``(n_steps, n_inputs)`` matching *states* (the arrows count).
-        """
+        """``(xmin, xmax, ymin, ymax)`` that shows every state of *states* (up to 80 evenly
+        spaced ones are drawn to find it) with its *inputs*' arrows."""
         states = np.atleast_2d(np.asarray(states, float))
         n = len(states)
         pick = np.unique(np.linspace(0, n - 1, min(n, 80)).round().astype(int))

@@ -56,24 +56,9 @@ class _DrawOptions(TypedDict, total=False):
 
 
 class FrameRenderer:
-    """Render one system's drawing, one state at a time.
-
-    Parameters
-    ----------
-    system : equilibrist.numeric.system.System
-        The bound system (its parameters size the drawing).
-    extent : tuple of float, optional
-        ``(xmin, xmax, ymin, ymax)`` of the world shown; by default that of
-        *states*.
-    states, inputs : numpy.ndarray, optional
-        Time-major arrays of the run to be shown, used for the default
-        extent.
-    width, height : int
-        Size of the picture in pixels.
-    title : str, optional
-        Title line (default: the system's title and key).
-    input_names, input_units : sequence of str, optional
-        Names and units of the gauges (default: the system's inputs).
+    """Render one system's drawing, one state at a time, *width* x *height* pixels, of the
+    world *extent* ``(xmin, xmax, ymin, ymax)`` (default: what the run's *states* and
+    *inputs* need).
     """
 
     def __init__(
@@ -263,26 +248,10 @@ class FrameRenderer:
         speed: float = 1.0,
         note: str = "",
     ) -> None:
-        """Update the figure to state *x*.
-
-        Parameters
-        ----------
-        x : numpy.ndarray
-            The state.
-        u : numpy.ndarray, optional
-            The input applied to the plant (after saturation).
-        command : numpy.ndarray, optional
-            The input the controller asked for (before saturation); shown as
-            a dotted mark on the gauge when it differs from *u*.
-        t : float, optional
-            Time stamp.
-        trail : numpy.ndarray, optional
-            The states up to *x* (for scenes that draw a trace).
-        speed : float
-            Playback speed, shown under the time stamp when it is not 1.
-        note : str
-            What is happening now (``"push +120"``), shown in red.
-        """
+        """Update the figure to state *x* with the input *u* applied; *command* (before
+        saturation) is a dotted mark on the gauge where it differs from *u*; *trail* is the
+        states up to *x*; *speed*, when not 1, is shown under the time stamp *t*; *note*
+        (``"push +120"``) is shown in red."""
         x = np.asarray(x, float)
         uu = None if u is None else np.atleast_1d(np.asarray(u, float))
         for shape in self.scene.shapes(x, uu, trail):
@@ -379,30 +348,8 @@ def draw_state(
     height: int = 360,
     extent: tuple[float, float, float, float] | None = None,
 ) -> Path:
-    """Draw one state of *system* to a PNG or SVG file.
-
-    Parameters
-    ----------
-    system : equilibrist.numeric.system.System
-        The bound system.
-    x : array_like
-        Its state.
-    path : str or pathlib.Path
-        Output file; ``.png`` or ``.svg``.
-    u : array_like, optional
-        The input, shown on the gauges and as an arrow.
-    t : float, optional
-        Time stamp.
-    width, height : int
-        Size in pixels.
-    extent : tuple of float, optional
-        World extent shown (default: the drawing of *x* itself).
-
-    Returns
-    -------
-    pathlib.Path
-        The file written.
-    """
+    """Draw one state *x* of *system* (with its input *u*) to a PNG or SVG file; *extent*
+    defaults to the drawing of *x* itself."""
     x = np.asarray(x, float)
     renderer = FrameRenderer(system, extent=extent, states=x[None, :],
                              inputs=None if u is None else np.atleast_2d(u), width=width, height=height)

@@ -35,22 +35,7 @@ def check_suffix(path: str | Path, allowed: tuple[str, ...], what: str) -> Path:
 
 
 def save_figure(figure: Figure, path: str | Path, *, dpi: float | None = None) -> Path:
-    """Save a matplotlib *figure* as PNG or SVG (by suffix); its folder must exist.
-
-    Parameters
-    ----------
-    figure : matplotlib.figure.Figure
-        The figure.
-    path : str or pathlib.Path
-        Output file, ``.png`` or ``.svg``.
-    dpi : float, optional
-        Resolution of a PNG (default: the figure's).
-
-    Returns
-    -------
-    pathlib.Path
-        The file written.
-    """
+    """Save a matplotlib *figure* as PNG or SVG (by suffix) into an existing folder."""
     p = check_suffix(path, FIGURE_FORMATS, "figure")
     # Reproducible files: no date in an SVG, no software version in a PNG.
     metadata: dict[str, None] = {"Date": None} if p.suffix.lower() == ".svg" else {"Software": None}

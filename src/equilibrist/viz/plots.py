@@ -42,7 +42,8 @@ if TYPE_CHECKING:
 def plot_batch(batch: object, path: str | Path | None = None, *, degrees: bool = True,
                title: str | None = None, dpi: float = 100.0,
                system: System | None = None) -> Figure:
-    """The picture of a batch of runs (``equilibrist.sim.BatchResult``).
+    """The picture of a batch of runs (``equilibrist.sim.BatchResult``; a result that holds
+    one in ``.batch`` is unwrapped).
 
     With the runs' trajectories (a batch run with ``record=True``): the
     Monte-Carlo fan (:func:`plot_fan`). Without them (a saved batch): the
@@ -50,27 +51,10 @@ def plot_batch(batch: object, path: str | Path | None = None, *, degrees: bool =
     then parameters; two varied quantities give a region-of-attraction map
     (:func:`plot_region_of_attraction`), one gives the peak input against
     it, none the peak input of each run.
-
-    Parameters
-    ----------
-    batch : equilibrist.sim.BatchResult or MonteCarloResult or RegionOfAttraction
-        The batch (a result that holds one in ``.batch`` is unwrapped).
-    path : str or pathlib.Path, optional
-        Save the figure there.
-    degrees : bool
-        Show angles in degrees.
-    title : str, optional
-        Figure title.
-    dpi : float
-        Resolution.
-
-    Returns
-    -------
-    matplotlib.figure.Figure
     """
+    from equilibrist.numeric.lookup import system_for_data
     from equilibrist.sim.batch import MonteCarloResult, RegionOfAttraction
     from equilibrist.sim.batch_result import BatchResult
-    from equilibrist.viz.adapt import system_of
 
     if isinstance(batch, MonteCarloResult | RegionOfAttraction):
         batch = batch.batch
@@ -80,7 +64,8 @@ def plot_batch(batch: object, path: str | Path | None = None, *, degrees: bool =
     if batch.trajectories is not None:
         return plot_fan([batch.run(i) for i in range(batch.runs)], path, degrees=degrees,
                         title=title, dpi=dpi)
-    system = system_of(batch.system, digest=batch.system_digest, system=system, source="the batch")
+    system = system_for_data(batch.system, None, digest=batch.system_digest, system=system,
+                             source="the batch")
     units = {p.name: p.unit for p in system.spec.all_parameters}
     units.update(zip(system.state_names, system.state_units, strict=True))
     varied: list[tuple[str, np.ndarray]] = []

@@ -45,33 +45,9 @@ def plot_region_of_attraction(
     height: float = 4.5,
     dpi: float = 100.0,
 ) -> Figure:
-    """Map of the initial conditions from which the controller recovers.
-
-    Parameters
-    ----------
-    x_values, y_values : sequence of float
-        The two varied initial-condition components of each run.
-    stayed_up : sequence of bool
-        Whether each run stayed in its region (recovered).
-    path : str or pathlib.Path, optional
-        Save the figure there.
-    x_name, y_name, x_unit, y_unit : str
-        Names and units of the two components (the states varied).
-    degrees : bool
-        Show angles in degrees.
-    title : str, optional
-        Figure title.
-    width, height, dpi : float
-        Figure size and resolution.
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-
-    Notes
-    -----
-    When the points form a full grid, the map is drawn as cells; otherwise
-    as a scatter of points.
+    """Map of the initial conditions (*x_values*, *y_values* of the states *x_name*,
+    *y_name*) from which the controller recovers (*stayed_up*): cells when the points form a
+    full grid, else a scatter of points.
     """
     fig = _figure(width, height, dpi)
     _region_axes(fig, fig.add_subplot(), x_values, y_values, stayed_up, x_name=x_name,
@@ -95,20 +71,9 @@ def plot_regions_side_by_side(
     height: float = 4.3,
     dpi: float = 100.0,
 ) -> Figure:
-    """Regions of attraction of several controllers over the same starts, side by side.
-
-    Parameters
-    ----------
-    maps : mapping of label to (x values, y values, stayed up)
-        Each controller's map, as :func:`plot_region_of_attraction` takes it;
-        each panel is titled with its label and how many starts it kept.
-    path, x_name, y_name, x_unit, y_unit, degrees, title, width, height, dpi
-        As for :func:`plot_region_of_attraction`.
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-    """
+    """Regions of attraction of several controllers over the same starts, side by side:
+    *maps* holds each controller's map by label, as :func:`plot_region_of_attraction` takes
+    it; each panel is titled with its label and how many starts it kept."""
     if not maps:
         raise VizError("regions side by side need at least one map")
     fig = _figure(width, height, dpi)
@@ -187,27 +152,9 @@ def plot_poles(
     height: float = 4.5,
     dpi: float = 100.0,
 ) -> Figure:
-    """Pole map: open loop, state feedback and estimator.
-
-    Parameters
-    ----------
-    source : equilibrist.control.Design or mapping
-        A design (its open-loop, state-feedback and estimator poles), or a
-        mapping of label to an array of poles.
-    path : str or pathlib.Path, optional
-        Save the figure there.
-    discrete : bool, optional
-        Poles in the z-plane (with the unit circle) rather than the
-        s-plane; a design says it itself.
-    title : str, optional
-        Figure title.
-    width, height, dpi : float
-        Figure size and resolution.
-
-    Returns
-    -------
-    matplotlib.figure.Figure
-    """
+    """Pole map: a design's open-loop, state-feedback and estimator poles, or a mapping of
+    label to poles; *discrete* draws the z-plane with the unit circle (a design says it
+    itself) rather than the s-plane."""
     if isinstance(source, Mapping):
         sets = {str(k): np.atleast_1d(np.asarray(v, complex)) for k, v in source.items()}
         is_discrete = bool(discrete)

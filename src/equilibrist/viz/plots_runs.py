@@ -82,36 +82,16 @@ def plot_response(
 ) -> Figure:
     """Time response of one run: states, estimates vs truth, inputs.
 
-    Each coordinate has a row (its rate beside it): the true state, the
+    Each coordinate has a row (its rate beside it, with *rates*): the true state, the
     estimate (dashed), the measurements (grey dots) when the state is
     measured, the reference (dash-dot) when it is tracked, and the operating
     point (dotted). Each input has a row: the input applied, the command
     before saturation (dotted), the limits (red dashed) and the samples in
     saturation (shaded). Marked events (a push) are vertical lines.
 
-    Parameters
-    ----------
-    result : equilibrist.sim.SimResult or Run
-        The run.
-    path : str or pathlib.Path, optional
-        Save the figure there (``.png`` or ``.svg``).
-    states : sequence of str, optional
-        Coordinates to show (default: all).
-    rates : bool
-        Show each coordinate's rate beside it.
-    degrees : bool
-        Show angles in degrees.
-    title : str, optional
-        Figure title (default: the system's title and the run's label).
-    width, row_height, dpi : float
-        Size of the figure in inches (per row) and its resolution.
-    system : equilibrist.numeric.system.System, optional
-        The simulated system (default: rebuilt from the result's key, which
-        never runs a Python system file: name such a system here).
-
-    Returns
-    -------
-    matplotlib.figure.Figure
+    *states* picks the coordinates shown (default: all). *system* is the simulated system
+    (default: rebuilt from the result's key, which never runs a Python system file: name
+    such a system here). The conventions of every plot are in :mod:`equilibrist.viz.plots`.
     """
     run = as_run(result, system=system)
     pairs = _state_pairs(run.state_names)
@@ -157,9 +137,7 @@ def plot_response(
         if run.u_command is not None:
             ax.plot(run.t, run.u_command[:, j], **COMMAND, label="command")
         ax.plot(run.t, run.u[:, j], **APPLIED, label="applied")  # type: ignore[index]
-        for v in (low[j], high[j]):
-            if math.isfinite(v):
-                ax.axhline(v, **LIMIT, label="limits" if v == low[j] else None)
+        _limit_lines(ax, low[j], high[j])
         if u_op is not None and len(u_op):
             ax.axhline(u_op[j], **OPERATING)
         if sat is not None and sat[:, j].any():
@@ -204,34 +182,9 @@ def plot_comparison(
     dpi: float = 100.0,
     system: System | None = None,
 ) -> Figure:
-    """Several runs of the same system overlaid, one colour per run.
-
-    For comparisons such as linear vs nonlinear plant, LQR vs LQG, nominal
-    vs perturbed parameters.
-
-    Parameters
-    ----------
-    results : sequence of results or mapping of label to result
-        The runs (each a simulation result or a Run); a mapping's keys are
-        the legend labels, else each run's own label.
-    path : str or pathlib.Path, optional
-        Save the figure there.
-    states : sequence of str, optional
-        States to show (default: the coordinates).
-    inputs : bool
-        Show the inputs applied (and their limits).
-    degrees : bool
-        Show angles in degrees.
-    title : str, optional
-        Figure title.
-    width, row_height, dpi : float
-        Figure size and resolution.
-    system : equilibrist.numeric.system.System, optional
-        The simulated system, as for :func:`plot_response`.
-
-    Returns
-    -------
-    matplotlib.figure.Figure
+    """Several runs of the same system overlaid, one colour per run (a mapping's keys are
+    the legend labels, else each run's own label): the coordinates, or *states*, and with
+    *inputs* the inputs applied and their limits. *system* as for :func:`plot_response`.
     """
     items = results.items() if isinstance(results, Mapping) else [(None, r) for r in results]
     runs = [as_run(r, label=lab, system=system) for lab, r in items]
@@ -241,13 +194,8 @@ def plot_comparison(
     for r in runs[1:]:
         if r.state_names != first.state_names:
             raise VizError(f"cannot compare runs of {first.key} and {r.key}: their states differ")
-    names = list(states) if states is not None else [c for c, _ in _state_pairs(first.state_names)]
-    for s in names:
-        first._index(s)
-    n_in = len(first.input_names) if inputs and all(r.u is not None for r in runs) else 0
-    rows = len(names) + n_in
-    fig = _figure(width, max(2.0, row_height * rows + 0.6), dpi)
-    axes = fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
+    names, n_in, fig, axes = _rows(runs, states, inputs=inputs, width=width,
+                                   row_height=row_height, dpi=dpi)
     colors = _colors(len(runs))
     for k, run in enumerate(runs):
         label = run.label or f"run {k + 1}"
@@ -263,9 +211,7 @@ def plot_comparison(
     low, high = first.system.input_limits if n_in else (np.zeros(0), np.zeros(0))
     for j in range(n_in):
         ax = axes[len(names) + j]
-        for v in (low[j], high[j]):
-            if math.isfinite(v):
-                ax.axhline(v, **LIMIT, label="limits" if v == low[j] else None)
+        _limit_lines(ax, low[j], high[j])
         ax.set_ylabel(axis_label(first.input_names[j], first.input_units[j]))
     for ax in axes:
         ax.grid(alpha=0.3)
@@ -273,6 +219,26 @@ def plot_comparison(
     _legend(fig, list(axes))
     _title(fig, title or f"{first.system.spec.title or first.key}: comparison")
     return _finish(fig, path)
+
+
+def _rows(runs: Sequence[Run], states: Sequence[str] | None, *, inputs: bool, width: float,
+          row_height: float, dpi: float) -> tuple[list[str], int, Figure, np.ndarray]:
+    """The states shown (default: the coordinates, checked), the inputs shown (only when
+    every run has them), and a figure with a row for each."""
+    first = runs[0]
+    names = list(states) if states is not None else [c for c, _ in _state_pairs(first.state_names)]
+    for s in names:
+        first._index(s)
+    n_in = len(first.input_names) if inputs and all(r.u is not None for r in runs) else 0
+    rows = len(names) + n_in
+    fig = _figure(width, max(2.0, row_height * rows + 0.6), dpi)
+    return names, n_in, fig, fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
+
+
+def _limit_lines(ax: Axes, low: float, high: float, *, label_each: bool = False) -> None:
+    for v in (low, high):
+        if math.isfinite(v):
+            ax.axhline(v, **LIMIT, label="limits" if label_each or v == low else None)
 
 
 def _colors(n: int) -> list[str]:
@@ -296,47 +262,19 @@ def plot_fan(
 ) -> Figure:
     """Monte-Carlo fan: the spread of many runs over time.
 
-    For each state shown, the median, the 25-75 % and 5-95 % bands over the
-    runs at each time, and up to *max_traces* individual runs as thin lines
+    For each state shown (default: the coordinates), the median, the 25-75 % and 5-95 % bands
+    over the runs at each time, and up to *max_traces* individual runs as thin lines
     (runs that fell in red). Runs sampled at other times are interpolated
     onto the first run's times (a run that ended early counts until it
-    ended).
-
-    Parameters
-    ----------
-    results : iterable of results
-        The runs of a batch (simulation results or Runs).
-    path : str or pathlib.Path, optional
-        Save the figure there.
-    states : sequence of str, optional
-        States to show (default: the coordinates).
-    inputs : bool
-        Show the inputs' fan too.
-    degrees : bool
-        Show angles in degrees.
-    title : str, optional
-        Figure title.
-    max_traces : int
-        Individual runs drawn at most.
-    width, row_height, dpi : float
-        Figure size and resolution.
-
-    Returns
-    -------
-    matplotlib.figure.Figure
+    ended). With *inputs*, the inputs' fan too.
     """
     runs = [as_run(r) for r in results]
     if not runs:
         raise VizError("a fan plot needs at least one run")
     first = runs[0]
-    names = list(states) if states is not None else [c for c, _ in _state_pairs(first.state_names)]
-    for s in names:
-        first._index(s)
-    n_in = len(first.input_names) if inputs and all(r.u is not None for r in runs) else 0
-    rows = len(names) + n_in
+    names, n_in, fig, axes = _rows(runs, states, inputs=inputs, width=width,
+                                   row_height=row_height, dpi=dpi)
     t = first.t
-    fig = _figure(width, max(2.0, row_height * rows + 0.6), dpi)
-    axes = fig.subplots(rows, 1, sharex=True, squeeze=False)[:, 0]
 
     def stack(get: Callable[[Run], np.ndarray], col: int) -> np.ndarray:
         out = np.full((len(runs), len(t)), np.nan)
@@ -377,9 +315,7 @@ def plot_fan(
     if n_in:
         low, high = first.system.input_limits
         for j in range(n_in):
-            for v in (low[j], high[j]):
-                if math.isfinite(v):
-                    axes[len(names) + j].axhline(v, **LIMIT, label="limits")
+            _limit_lines(axes[len(names) + j], low[j], high[j], label_each=True)
     axes[-1].set_xlabel("time [s]")
     _legend(fig, list(axes))
     n_fell = sum(fell)

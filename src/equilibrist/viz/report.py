@@ -28,29 +28,9 @@ class Image:
 
 @dataclass(frozen=True)
 class Section:
-    """One system's part of the report.
-
-    Attributes
-    ----------
-    anchor : str
-        HTML id of the section.
-    title : str
-        Heading.
-    subtitle : str
-        The system's key and a one-line description.
-    story : sequence of str
-        Paragraphs that say what was done and what happened, in plain words.
-    images : sequence of Image
-        Animation and plots.
-    facts : sequence of (str, str)
-        Label and value of the run's key numbers.
-    equations : str
-        Equations of motion as pretty text.
-    equations_latex : str
-        The same as LaTeX source.
-    notes : sequence of str
-        Anything that went wrong or was chosen on the reader's behalf.
-    """
+    """One system's part of the report, under the HTML id *anchor*: the *story* in plain
+    words, the *facts* (label, value) of the run, the equations of motion as text and as
+    LaTeX source, and *notes* on what went wrong or was chosen on the reader's behalf."""
 
     anchor: str
     title: str
@@ -139,28 +119,8 @@ def write_index(
     sections: Sequence[Section],
     footer: str = "",
 ) -> Path:
-    """Write ``index.html`` into *folder*.
-
-    Parameters
-    ----------
-    folder : str or pathlib.Path
-        The report folder (created if missing); image paths are relative to it.
-    title : str
-        Page title.
-    intro : sequence of str
-        Opening paragraphs (how the runs were made, how to read the page).
-    summary_header, summary_rows : sequences
-        The summary table; the first cell of each row links to the section
-        of the same position in *sections*.
-    sections : sequence of Section
-        One per system.
-    footer : str
-        Closing line (how the report was made).
-
-    Returns
-    -------
-    pathlib.Path
-        The page written.
+    """Write ``index.html`` into *folder* (created if missing; image paths are relative to
+    it). The first cell of each summary row links to the section of the same position.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)

@@ -25,36 +25,13 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True, eq=False)
 class Run:
-    """One run, as the viz layer reads it.
+    """One run, as the viz layer reads it: every array time-major, ``(n_steps, k)``.
 
-    Attributes
-    ----------
-    system : equilibrist.numeric.system.System
-        The bound system that was simulated.
-    t : numpy.ndarray
-        ``(n_steps,)`` sample times [s].
-    x : numpy.ndarray
-        ``(n_steps, n_states)`` true states.
-    u : numpy.ndarray or None
-        ``(n_steps, n_inputs)`` inputs applied (after saturation).
-    u_command : numpy.ndarray or None
-        ``(n_steps, n_inputs)`` inputs asked for (before saturation).
-    estimate : numpy.ndarray or None
-        ``(n_steps, n_states)`` estimated states.
-    y : numpy.ndarray or None
-        ``(n_steps, n_outputs)`` measurements, named by ``output_names``.
-    reference : numpy.ndarray or None
-        ``(n_steps, n_tracked)`` reference of the tracked outputs, named by
-        ``reference_names`` (absolute values, comparable with the states).
-    label : str
-        How the run is called in legends.
-    events : tuple of (float, str)
-        Marked instants (a push), drawn as vertical lines.
-    fell : bool or None
-        Whether the system left its region (None: unknown).
-    x_op, u_op : numpy.ndarray or None
-        The operating point the controller held (None: unknown; the plots
-        then ask the system for its canonical one).
+    *u* is the input applied (after saturation), *u_command* the one asked for; *y* the
+    measurements named by *output_names*; *reference* the tracked outputs' absolute
+    reference, named by *reference_names*; *events* marked instants (a push); *fell* None
+    when unknown; *x_op*, *u_op* the operating point the controller held (None: the plots
+    ask the system for its canonical one). Arrays that are absent are None.
     """
 
     system: System
@@ -93,13 +70,7 @@ class Run:
         x_op: object | None = None,
         u_op: object | None = None,
     ) -> Run:
-        """A run from time-major arrays, checked against the system's sizes.
-
-        Raises
-        ------
-        VizError
-            Arrays whose shapes do not match the times and the system.
-        """
+        """A run from time-major arrays, checked against the system's sizes (:class:`VizError`)."""
         tt = np.asarray(t, float).reshape(-1)
         n, ns, ni = len(tt), len(system.state_names), len(system.input_names)
         problems: list[str] = []
@@ -186,18 +157,8 @@ class Run:
 
 
 def as_run(result: SimResult | Run, *, system: System | None = None, label: str | None = None) -> Run:
-    """The :class:`Run` view of a simulation result (or a Run itself).
-
-    Parameters
-    ----------
-    result : equilibrist.sim.SimResult or Run
-        The result to show.
-    system : equilibrist.numeric.system.System, optional
-        The simulated system; by default rebuilt from the result's system
-        name and parameters.
-    label : str, optional
-        Legend label (default: the result's own, else the system's key).
-    """
+    """The :class:`Run` view of a simulation result (or a Run itself); *system* defaults to
+    the one rebuilt from the result's name and parameters, *label* to the result's own."""
     if isinstance(result, Run):
         return result if label is None else result.with_label(label)
     from equilibrist.viz import adapt as _adapt
