@@ -165,11 +165,14 @@ def translate(ctrl: Source, prefix: str) -> Translation:
     code = mod.c_source()
     parts = []
     if re.search(r"\beq_(sin|cos|log|exp)\(", code):
-        # The project's own sin, cos (and log, exp): static, the unused one kept quiet.
-        parts += [libm.c_source(log=re.search(r"\beq_(log|exp)\(", code) is not None,
-                                exp=re.search(r"\beq_exp\(", code) is not None),
+        # The project's own sin, cos (and log, exp; exp needs log's constants, so log comes
+        # with it): static, the unused ones kept quiet.
+        log = re.search(r"\beq_(log|exp)\(", code) is not None
+        parts += [libm.c_source(log=log, exp=re.search(r"\beq_exp\(", code) is not None),
                   f"\nstatic inline void {prefix}_libm_used(void)\n{{\n"
-                  "    (void)eq_sin;\n    (void)eq_cos;\n}\n"]
+                  "    (void)eq_sin;\n    (void)eq_cos;\n"
+                  + ("    (void)eq_log;\n" if log and not re.search(r"\beq_log\(", code) else "")
+                  + "}\n"]
     prelude = _prelude(code)
     if prelude:
         parts += ["\n/* Python's rules for min, max, % and // (equilibrist.native.pyc). */\n",
