@@ -198,3 +198,37 @@ def test_point_masses_and_massless_links_are_merged_and_named() -> None:
     assert any(n.startswith("mesh files not found, ignored") and "./meshes/Weight.obj" in n for n in rig.spec.notes)
     # revolute limits of +-3.1415926 bound nothing tighter than the fall angle around the hanging pose
     assert rig.spec.region["Joint1"] == pytest.approx((-math.pi / 2, math.pi / 2))
+
+
+def test_tool_specific_content_is_named_never_read(tmp_path: Path) -> None:
+    from equilibrist.importers import load_model_file
+
+    path = tmp_path / "tools.urdf"
+    path.write_text("""<?xml version="1.0"?>
+<robot name="tools" xmlns:drake="http://drake.mit.edu" xmlns:xacro="http://www.ros.org/wiki/xacro">
+  <link name="base"><drake:proximity_properties><drake:mu_static value="inf"/></drake:proximity_properties></link>
+  <link name="arm" drake:collision_filter="all">
+    <inertial><origin xyz="0 0 -0.5"/><mass value="1"/>
+      <inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial>
+  </link>
+  <joint name="theta" type="continuous"><parent link="base"/><child link="arm"/><axis xyz="0 1 0"/>
+    <limit effort="2" velocity="1"/></joint>
+  <gazebo reference="arm"><plugin name="p" filename="lib.so" period="nan"/></gazebo>
+  <gazebo reference="base"><mu1>0.2</mu1></gazebo>
+  <ros2_control name="hw" type="system"><hardware><plugin>mock</plugin></hardware></ros2_control>
+  <xacro:macro name="m"/>
+  <transmission name="t">
+    <type>transmission_interface/SimpleTransmission</type>
+    <joint name="theta"><hardwareInterface>hardware_interface/EffortJointInterface</hardwareInterface></joint>
+    <actuator name="motor"><mechanicalReduction>2</mechanicalReduction></actuator>
+  </transmission>
+</robot>
+""")
+    entry = load_model_file(path, origin=str(path), content=path.read_bytes())
+    ignored = [n for n in entry.spec.notes if n.startswith("not URDF, ignored: ")]
+    assert ignored == ["not URDF, ignored: element <proximity_properties> (namespace http://drake.mit.edu), "
+                       "attribute 'collision_filter' (namespace http://drake.mit.edu), element <gazebo>, "
+                       "element <ros2_control>, element <macro> (namespace http://www.ros.org/wiki/xacro)"]
+    assert entry.spec.input_names == ("motor",)
+    # The input is the torque at the joint (2 * the actuator's effort), within the joint's effort limit.
+    assert (entry.spec.inputs[0].low, entry.spec.inputs[0].high) == (-2.0, 2.0)
