@@ -54,10 +54,10 @@ def plot_robustness(card: Mapping[str, Any], path: str | Path | None = None) -> 
     per = families.get("model", {}).get("parameters", {})
     for k, (pname, succ) in enumerate(per.items()):
         ok = np.asarray(succ, dtype=float)
-        xs = np.linspace(0.75, 1.25, len(ok)) if len(ok) else ok
+        xs = np.linspace(0.0, 1.0, len(ok)) if len(ok) else ok
         model.plot(xs, ok + 0.02 * k, marker="o", markersize=3, label=pname)
-    model.set_xlabel("parameter value, from the lowest to the highest of its range "
-                     "(0.75 to 1.25 of nominal for a relative range)")
+    model.set_xlabel("share of the parameter's range (0.75 to 1.25 of nominal for a relative "
+                     "range; the rig's Ir 0 to 1e-4, b -0.1 to 0.1, cf -0.2 to 0.2)")
     model.set_ylabel("success (1) or not (0)")
     model.set_ylim(-0.1, 1.3)
     if model.lines:
