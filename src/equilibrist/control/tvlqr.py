@@ -85,6 +85,10 @@ LAYOUT_LQG = Layout("TV", ("steps", "knots", "rate", "n", "m", "ny", "current", 
     ("A", ("steps", "n", "n")), ("B", ("steps", "n", "m")), ("F", ("steps", "n", "ny")),
     ("Ad", ("n", "n")), ("Bd", ("n", "m")), ("Kf", ("n", "ny")), ("S_end", ("n", "n"))))
 
+#: ``balance="lqr"`` with its angles wrapped (``wrap=True``): the same, and each state's
+#: period (``2 pi`` for an angle, 0 for a state compared as it is).
+LAYOUT_WRAP = Layout("TV", LAYOUT.slots, (*LAYOUT.blocks, ("period", ("n",))))
+
 #: The layout of each ``balance``.
 LAYOUTS = {"lqr": LAYOUT, "lqg": LAYOUT_LQG}
 
@@ -132,6 +136,62 @@ def output(t, z, y, r, params, u_out):
 def update(t, z, y, r, u_applied, params, z_out):
     z_out[0] = tvlqr_caught(t, z, y, params)
 '''
+
+
+#: ``balance="lqr"`` with ``wrap=True``: every deviation from the plan or the balance taken
+#: modulo its state's period into ``[-period/2, period/2)``, so an angle a turn away is where
+#: it is (a rig that swung over, or was pushed over, is caught upright again).
+SOURCE_WRAP = LAYOUT_WRAP.source() + CATCH_SOURCE + _LAW + '''
+
+def tv_dev(j, y, params, of):
+    d = y[j] - params[of + j]
+    period = params[tv_at(params, TV_O_PERIOD) + j]
+    if period > 0.0:
+        d = d - period * math.floor(d / period + 0.5)
+    return d
+
+
+def catch_dev(i, t, z, y, params):
+    return tv_dev(i, y, params, tv_at(params, TV_O_X_OP))
+
+
+def tvlqr_caught(t, z, y, params):
+    if tv_sample(t, params) >= tv_at(params, TV_STEPS) or z[0] >= 0.5:
+        return 1.0
+    n = tv_at(params, TV_N)
+    v = catch_level(t, z, y, params, params[tv_at(params, TV_O_S_END):], n)
+    return catch_mode(0, v, params[TV_LEVEL], params[TV_LEVEL])
+
+
+def output(t, z, y, r, params, u_out):
+    n = tv_at(params, TV_N)
+    m = tv_at(params, TV_M)
+    k = tv_sample(t, params)
+    ox = tv_at(params, TV_O_X_OP)
+    ou = tv_at(params, TV_O_U_OP)
+    og = tv_at(params, TV_O_K_END)
+    if tvlqr_caught(t, z, y, params) < 0.5:
+        ox = tv_at(params, TV_O_XS) + k * n
+        ou = tv_at(params, TV_O_US) + k * m
+        og = tv_at(params, TV_O_GAINS) + k * m * n
+    for i in range(m):
+        acc = params[ou + i]
+        for j in range(n):
+            acc -= params[og + i * n + j] * tv_dev(j, y, params, ox)
+        u_out[i] = acc
+
+
+def update(t, z, y, r, u_applied, params, z_out):
+    z_out[0] = tvlqr_caught(t, z, y, params)
+'''
+
+
+def periods(system: System) -> np.ndarray:
+    """Each state's period for ``wrap=True``: ``2 pi`` for a coordinate in radians (a turn
+    of a revolute joint), 0 for the others (lengths, rates)."""
+    return np.array([2 * np.pi if name in system.spec.coordinates
+                     and system.spec.state_unit(name) == "rad" else 0.0
+                     for name in system.state_names])
 
 
 def lqg_source(est: Estimator | None = None) -> str:
@@ -215,7 +275,7 @@ SOURCE_LQG = lqg_source(KALMAN)
 def plan_samples(ctrl: NonlinearController) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(t, states, inputs)``: the plan as the tracker *ctrl* samples it (at its rate, from
     its tables: the Hermite interpolant of the knots)."""
-    layout = LAYOUTS[str(ctrl.settings["balance"])]
+    layout = LAYOUT_WRAP if ctrl.settings.get("wrap") else LAYOUTS[str(ctrl.settings["balance"])]
     p = np.asarray(ctrl.params, dtype=float)
     steps, rate = int(p[layout.slots.index("steps")]), float(p[layout.slots.index("rate")])
     return np.arange(steps + 1) / rate, layout.read(p, "xs"), layout.read(p, "us")
@@ -237,15 +297,19 @@ def _hermite_states(system: System, traj: Trajectory, t: np.ndarray) -> np.ndarr
 def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np.ndarray,
           S_end: np.ndarray, K_end: np.ndarray, x_op: np.ndarray, u_op: np.ndarray,
           balance: str = "lqr", design: Design | None = None, P0: np.ndarray | None = None,
-          catch: bool = True) -> NonlinearController:
+          catch: bool = True, wrap: bool = False) -> NonlinearController:
     """The time-varying LQR along *traj* at *rate*, handing over to ``K_end`` at the end.
 
     ``balance="lqr"`` acts on the full measured state; ``"lqg"`` on the estimate of
     *design*'s Kalman filter from its outputs, time-varying along the plan from the
     a-priori covariance *P0* (default :func:`start_covariance`), then the design's
     (see the module docstring). With *catch* the balancing stage takes over as soon as
-    the state (its estimate) enters :func:`catch_region` before the plan ends.
+    the state (its estimate) enters :func:`catch_region` before the plan ends. With *wrap*
+    (``balance="lqr"`` only) the angles' deviations are taken modulo a turn
+    (:data:`SOURCE_WRAP`).
     """
+    if wrap and balance != "lqr":
+        raise ControllerError("--wrap on wraps the full state's angles: it takes --balance lqr")
     if balance not in BALANCES:
         raise ControllerError(f"--balance {balance!r}: expected one of {', '.join(BALANCES)}")
     if balance == "lqg" and design is None:
@@ -286,17 +350,19 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
         assert design is not None
         return _with_filter(system, traj, design, plant[::-1], xs, us, gains, rate=rate,
                             x_op=x_op, u_op=u_op, K_end=K_end, S_end=S_end, level=level, P0=P0)
-    params = LAYOUT.pack({"steps": steps, "knots": steps + 1, "rate": rate, "n": n, "m": m,
-                          "level": level},
-                         {"xs": xs, "us": us, "gains": gains, "x_op": x_op, "u_op": u_op,
-                          "K_end": K_end, "S_end": S_end})
+    blocks = {"xs": xs, "us": us, "gains": gains, "x_op": x_op, "u_op": u_op, "K_end": K_end,
+              "S_end": S_end}
+    sizes = {"steps": steps, "knots": steps + 1, "rate": rate, "n": n, "m": m, "level": level}
+    params = (LAYOUT_WRAP.pack(sizes, {**blocks, "period": periods(system)}) if wrap
+              else LAYOUT.pack(sizes, blocks))
     return NonlinearController(
-        name="tvlqr", source=SOURCE, params=params, z0=np.zeros(1), rate=float(rate),
+        name="tvlqr", source=SOURCE_WRAP if wrap else SOURCE, params=params, z0=np.zeros(1),
+        rate=float(rate),
         x_op=x_op, u_op=u_op, state_names=system.state_names, input_names=system.input_names,
         output_names=system.state_names,
         settings={"kind": "tvlqr", "trajectory_duration": traj.duration, "samples": steps,
                   "start": dict(zip(system.state_names, traj.states[0].tolist(), strict=True)),
-                  "balance": "lqr", "catch_level": level},
+                  "balance": "lqr", "catch_level": level, **({"wrap": True} if wrap else {})},
     )
 
 
@@ -427,6 +493,9 @@ def build_request(request: ControllerRequest) -> NonlinearController:
     catch = str(request.options.get("catch", "on"))
     if catch not in ("on", "off"):
         raise ControllerError(f"--catch {catch!r}: expected on or off")
+    wrap = str(request.options.get("wrap", "off"))
+    if wrap not in ("on", "off"):
+        raise ControllerError(f"--wrap {wrap!r}: expected on or off")
     return tvlqr(system, traj, rate=rate, Q=design.Q, R=design.R, S_end=design.S, K_end=design.K,
                  x_op=design.plant.x0, u_op=design.plant.u0, balance=balance, design=design,
-                 catch=catch == "on")
+                 catch=catch == "on", wrap=wrap == "on")

@@ -17,6 +17,8 @@ if TYPE_CHECKING:
 BALANCES = ("lqr", "lqg")
 #: What ``--catch`` takes: hand over inside the catch region before the plan ends, or not.
 CATCHES = ("on", "off")
+#: What ``--wrap`` takes: the angles' deviations modulo a turn, or as they are.
+WRAPS = ("on", "off")
 
 
 def build(request: ControllerRequest) -> NonlinearController:
@@ -35,7 +37,10 @@ KIND = ControllerKind(
                     "design's outputs through its Kalman filter (lqg)", choices=BALANCES),
              Option("--catch", "with --controller tvlqr: balance as soon as the state enters the "
                     "balancing LQR's catch region (on, default), or track the plan to its end "
-                    "(off)", choices=CATCHES)),
+                    "(off)", choices=CATCHES),
+             Option("--wrap", "with --controller tvlqr --balance lqr: compare the angles modulo "
+                    "a turn (on), so a rig that swung over is caught upright again, or as they "
+                    "are (off, default)", choices=WRAPS)),
     surfaces=frozenset({"simulate", "export", "study", "playground"}), task="swingup", planned=True,
     order=50,
 )
