@@ -200,8 +200,6 @@ def readme_lines(footprint: Footprint | None, why: str = "", *, heap: str = "non
     ]
 
 
-
-
 def controller_readme(title: str, files: Mapping[str, str], *, footprint: Footprint | None,
                       why: str = "", heap: str = "none", notes: Sequence[str] = ()) -> str:
     """README.txt of a controller's export (the MPC's, the nonlinear controllers'): what it
