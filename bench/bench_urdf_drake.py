@@ -123,6 +123,7 @@ def main() -> int:
     ap.add_argument("--drake", default=str(HERE / "_peers" / "drake" / "bin" / "python"),
                     help="a Python with pydrake (bench/peers_drake.sh makes one)")
     ap.add_argument("--states", type=int, default=200)
+    ap.add_argument("files", nargs="*", type=Path, help="more URDF files to compare (held out)")
     args = ap.parse_args()
     if not Path(args.drake).exists():
         print(f"no Drake at {args.drake}: run bash bench/peers_drake.sh first", file=sys.stderr)
@@ -134,7 +135,7 @@ def main() -> int:
         peer.stdin.write(json.dumps({"find": name}) + "\n")
         peer.stdin.flush()
         files.append(Path(json.loads(peer.stdout.readline())["path"]))
-    files += [ROOT / "tests" / "models" / name for name in OURS]
+    files += [ROOT / "tests" / "models" / name for name in OURS] + list(args.files)
     rng = np.random.default_rng(47)
     rows = [compare(peer, f, rng, args.states) for f in files]
     peer.stdin.close()
