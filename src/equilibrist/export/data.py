@@ -150,7 +150,7 @@ def of_controller(linear: LinearController) -> ControllerData:
         K=_readonly(np.array(design.K, dtype=float)),
         Kf=_readonly(np.array(design.Kf, dtype=float) if linear.form else np.zeros((n, 0))),
         Kc=linear.Dr, u_min=_limit(linear.u_min), u_max=_limit(linear.u_max),
-        linear=deviation_vector(linear.packed()), z0=np.asarray(linear.z0),
+        packed=deviation_vector(linear.packed()), z0=np.asarray(linear.z0),
         state_map=np.asarray(linear.state_map),
         params=dict(design.params), weights=_weights(design, filtered=bool(linear.form)),
         settings=_settings(design, linear))

@@ -74,7 +74,7 @@ def deviation_vector(packed: np.ndarray) -> np.ndarray:
 class ControllerData:
     """A digital linear controller ready to be written as C.
 
-    ``linear`` is the controller's packed form (:mod:`equilibrist.native.linear_layout`,
+    ``packed`` is the controller's packed form (:mod:`equilibrist.native.linear_layout`,
     its estimate in deviations: :func:`deviation_vector`), what the C step runs; the
     design's plant and gains (``Ad``, ``Bd``, ``K``, ``Kf``, ``Kc``) are the header's
     record. ``z0`` is the controller's state at the start and ``state_map`` the map from
@@ -103,7 +103,7 @@ class ControllerData:
     Kc: np.ndarray
     u_min: np.ndarray
     u_max: np.ndarray
-    linear: np.ndarray
+    packed: np.ndarray
     z0: np.ndarray
     state_map: np.ndarray
     params: Mapping[str, float] = field(default_factory=dict)
@@ -133,7 +133,7 @@ class ControllerData:
     @property
     def sizes(self) -> dict[str, int]:
         """The linear form's sizes (``nz``, ``ny``, ``nr``, ``m``, ``n``), from its header."""
-        return {key: int(self.linear[LINEAR_HEADER.index(key)])
+        return {key: int(self.packed[LINEAR_HEADER.index(key)])
                 for key in ("nz", "ny", "nr", "m", "n")}
 
     @property

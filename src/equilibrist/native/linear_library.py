@@ -223,7 +223,7 @@ def _header_linear_form(data: ControllerData) -> list[str]:
     pointer into it for each of its matrices."""
     nm = _names(data)
     real = nm("real")
-    packed = data.linear
+    packed = data.packed
     lines = [
         "",
         "/* The controller as one linear form (what step runs), matrices row-major:",
@@ -326,7 +326,7 @@ def _source_constants(data: ControllerData, *, precision: str, version: str) -> 
     if data.n_references:
         lines.append(f"const {real} {nm('KC')}[{M}][{NR}] = {_matrix(data.Kc, precision)};")
     lines.append(f"const {real} {nm('LINEAR')}[{nm.macro('N_LINEAR')}] = "
-                 f"{_vector(data.linear, precision)};")
+                 f"{_vector(data.packed, precision)};")
     return lines
 
 
