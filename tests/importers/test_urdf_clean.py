@@ -165,6 +165,7 @@ def test_ros_cartpole_legacy_transmission_friction_and_limits() -> None:
     assert {k: p.default for k, p in frictions.items()} == {"slider_friction": 0.5, "hinge_friction": 0.01}
     assert all(p.dissipative for p in frictions.values())
     assert spec.region["slider"] == (-0.8, 0.8)  # the rail's limits
+    assert "joints with a range that is not enforced: slider [-0.8, 0.8]" in spec.notes  # continuous: none
     assert spec.region["hinge"] == (-math.pi / 2, math.pi / 2)  # continuous: the fall angle only
     notes = "\n".join(spec.notes)
     assert "not URDF, ignored: element <gazebo>\n" in notes

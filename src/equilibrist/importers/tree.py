@@ -200,7 +200,7 @@ def read_tree(
 
     notes = ["contacts and joint limits (range) are not modelled: the model is the free motion "
              "of the kinematic tree"]
-    limited = [j.name for j in joints if j.limited]
+    limited = [f"{j.name} [{j.range[0]:.6g}, {j.range[1]:.6g}]" for j in joints if j.range is not None]
     if limited:
         notes.append(f"joints with a range that is not enforced: {', '.join(limited)}")
     if ignored:
