@@ -64,19 +64,6 @@ def test_a_step_over_its_period_is_a_fault(tmp_path: Path,
     assert out.exists()
 
 
-@pytest.mark.slow
-def test_the_mpc_does_not_fit_the_uno_in_one_line(tmp_path: Path,
-                                                  capsys: pytest.CaptureFixture[str]) -> None:
-    _tools("uno")
-    out = tmp_path / "run.npz"
-    assert main(["pil", "cartpole", "--controller", "mpc", "--target", "uno", "--duration",
-                 "0.05", "--out", str(out)]) == 2
-    lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 1 and "MPC does not fit the uno" in lines[0]
-    assert "bytes of RAM" in lines[0] and "2,048" in lines[0]
-    assert not out.exists()
-
-
 @pytest.mark.parametrize(("argv", "said"), [
     (["--target", "pdp11"], "--target"),
     (["--target", "uno", "--timeout", "0"], "--timeout 0"),
