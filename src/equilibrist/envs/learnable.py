@@ -12,7 +12,9 @@ Observation
     deviation the design tolerates): ``(y - y_op) / scale``. In the swing-up,
     each coordinate that hangs is observed as ``cos(q - q_op), sin(q - q_op)``
     instead (an angle that winds up has no bounded scaled form). float32 by
-    default (``dtype=numpy.float64`` on request).
+    default (``dtype=numpy.float64`` on request). The map is
+    :func:`equilibrist.controllers.network.observation_map`, which a trained
+    policy run as a controller reads too.
 Reward
     dm_control's cart-pole reward, read on every rig through its definition:
     ``upright * centered * small_control * small_velocity`` in ``[0, 1]`` per
@@ -45,6 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from equilibrist.controllers.network import observation_map
 from equilibrist.numeric.system import System
 from equilibrist.tasks import Task
 
@@ -159,11 +162,7 @@ def learnable(system: System, task: Task, observed: tuple[str, ...],
     scales = np.asarray(task.state_scales, dtype=float)
     x_op = np.asarray(task.x_op, dtype=float)
     hanging = tuple(system.spec.hanging or {})
-    trig_coords = set(hanging) if task.name == "swingup" else set()
-    idx = [names.index(o) for o in observed]
-    obs_names: list[str] = []
-    for o in observed:
-        obs_names += [f"cos({o})", f"sin({o})"] if o in trig_coords else [o]
+    seen = observation_map(system, task, observed)
     coords = tuple(system.spec.coordinates)
     posture = [c for c in coords if c in system.spec.region or c in hanging]
     region = system.spec.region
@@ -176,9 +175,8 @@ def learnable(system: System, task: Task, observed: tuple[str, ...],
     others = [names.index(c) for c in coords if c not in posture]
     lo_u, hi_u = system.input_limits
     return Learnable(
-        dtype=np.dtype(dtype), names=tuple(obs_names),
-        obs_offset=x_op[idx], obs_gain=1.0 / scales[idx],
-        obs_trig=np.array([o in trig_coords for o in observed], dtype=bool),
+        dtype=np.dtype(dtype), names=seen.names, obs_offset=seen.offset, obs_gain=seen.gain,
+        obs_trig=seen.trig,
         x_op=x_op, u_op=np.asarray(task.u_op, dtype=float),
         u_half=0.5 * (np.asarray(hi_u, dtype=float) - np.asarray(lo_u, dtype=float)),
         hang=np.array([i for i, c in enumerate(posture) if c in hanging], dtype=np.int64),
