@@ -78,8 +78,10 @@ def _acrobot() -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
 
 
 def _pendulum() -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
-    # Two point masses on one arm: 0.4 kg at 0.6 m and 0.5 kg at 0.45 m.
-    bodies: list[Body] = [(0.4, 0.0, [1], [([1], [-0.6, 0])], []), (0.5, 0.0, [1], [([1], [-0.45, 0])], [])]
+    # Two point masses on one arm: 0.4 kg at 0.6 m and 0.5 kg at 0.45 m; a rotor of
+    # 0.0005 kg m^2 through a 6:1 gear (Drake's reflected inertia, Ir * gr^2).
+    bodies: list[Body] = [(0.4, 0.0, [1], [([1], [-0.6, 0])], []), (0.5, 0.0, [1], [([1], [-0.45, 0])], []),
+                          (0.0, 0.0005 * 6**2, [1], [], [])]
     return _planar(bodies, 0, lambda q, qd: np.array([-0.1 * qd[0] + U[0]]), 1)
 
 
@@ -193,6 +195,7 @@ def test_point_masses_and_massless_links_are_merged_and_named() -> None:
     assert "not URDF, ignored: attribute 'drake_ignore', element <gazebo>" in notes
     assert "links fixed to a moving link with no mass or no rotational inertia, merged into it: arm_com" in notes
     assert [p.name for p in pendulum.spec.parameters] == ["g", "arm_mass", "theta_damping"]
+    assert any(n.startswith("rotor inertia through the gear") and n.endswith("theta 0.018") for n in notes)
     assert pendulum.params["arm_mass"] == pytest.approx(0.9, abs=1e-15)
     rig = get_system(str(MODELS / "rig_double_pendulum.urdf"))
     assert any(n.endswith("merged into it: Weight") for n in rig.spec.notes)

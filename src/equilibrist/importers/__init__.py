@@ -118,7 +118,7 @@ def load_model_file(file: Path, *, origin: str, content: bytes) -> Entry:
         # The numbers MuJoCo will read: a tool's element that is dropped is not checked.
         _check_numbers(file, facts.text)
         tree0 = read_tree(file, joint_order=facts.joint_order, actuators=(), text=facts.text,
-                          stand_ins=facts.stand_ins, friction_form="atan")
+                          stand_ins=facts.stand_ins, friction_form="atan", rotor_inertias=facts.rotor_inertias)
         position = {j.name: k for k, j in enumerate(tree0.joints)}
         actuators = []
         for t in facts.transmissions:
@@ -129,7 +129,7 @@ def load_model_file(file: Path, *, origin: str, content: bytes) -> Entry:
                 )
             actuators.append(ActuatorData(t.actuator, position[t.joint], t.reduction, t.low, t.high))
         tree = read_tree(file, joint_order=facts.joint_order, actuators=tuple(actuators), text=facts.text,
-                         stand_ins=facts.stand_ins, friction_form="atan")
+                         stand_ins=facts.stand_ins, friction_form="atan", rotor_inertias=facts.rotor_inertias)
         tree = replace(tree, notes=tree.notes + facts.notes)
         unlimited = tuple(t.actuator for t in facts.transmissions if not t.limited)
         kind = "URDF"

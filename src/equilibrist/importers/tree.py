@@ -15,7 +15,7 @@ MuJoCo's compiler and the checks of the compiled model's values are in
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -156,6 +156,7 @@ def read_tree(
     text: bytes | None = None,
     stand_ins: tuple[tuple[str, float], ...] = (),
     friction_form: str = "tanh",
+    rotor_inertias: tuple[tuple[str, float], ...] = (),
 ) -> Tree:
     """Compile *file* and read its tree.
 
@@ -166,7 +167,8 @@ def read_tree(
     *text* is compiled instead of the file (a URDF made into what MuJoCo
     reads); *stand_ins* names bodies given more inertia than they have (kg m^2
     about each axis, taken away again); *friction_form* is the smooth sign of
-    the joints' Coulomb friction.
+    the joints' Coulomb friction; *rotor_inertias* adds reflected inertia to joints'
+    armature (a URDF's Drake rotor inertia through its gear).
     """
     mujoco = load_mujoco()
     model = compile_model(file, text)
@@ -178,6 +180,8 @@ def read_tree(
     order = _joint_order(model, file, compiled_names, joint_order)
     position = {j: k for k, j in enumerate(order)}
     joints = _joints(model, order, compiled_names)
+    extra = dict(rotor_inertias)
+    joints = [replace(j, armature=j.armature + extra[j.name]) if j.name in extra else j for j in joints]
     bodies = _moving_bodies(model, file, position, dict(stand_ins))
     if actuators is None:
         actuators = _motors(model, file, position)

@@ -57,6 +57,7 @@ class UrdfFacts:
     text: bytes  # the URDF as MuJoCo's reader is given it
     notes: tuple[str, ...]  # what was made of the file, and the inputs without limits
     stand_ins: tuple[tuple[str, float], ...]  # see CleanUrdf.stand_ins
+    rotor_inertias: tuple[tuple[str, float], ...]  # see CleanUrdf.rotor_inertias
 
 
 def _text(element: ET.Element | None) -> str:
@@ -176,7 +177,7 @@ def read_urdf(file: Path, data: bytes) -> UrdfFacts:
             f"{UNLIMITED:g}): " + ", ".join(f"{t.joint} ({t.actuator})" for t in free)
         )
     return UrdfFacts(joint_order=order, transmissions=tuple(transmissions), text=clean.text,
-                     notes=tuple(notes), stand_ins=clean.stand_ins)
+                     notes=tuple(notes), stand_ins=clean.stand_ins, rotor_inertias=clean.rotor_inertias)
 
 
 def _effort_motors(where: str, root: ET.Element) -> list[Transmission]:

@@ -8,6 +8,9 @@ notes (the system's ``notes``, ``show --json`` too), never silently:
   or not, the ROS and Drake convention) is a joint to the world; a fixed one
   places the base. The ``world`` link is replaced by an empty root link
   (MuJoCo's own world body is called ``world``), its inertial ignored;
+* Drake's rotor inertia: an actuator's ``<drake:rotor_inertia value>`` through
+  its ``<drake:gear_ratio value>`` is the reflected inertia ``Ir * gr**2`` on
+  its joint, as Drake's MultibodyPlant adds it (:attr:`CleanUrdf.rotor_inertias`);
 * XML namespaces: the root's own (``<robot xmlns="https://drake.mit.edu">``)
   is taken as URDF's; elements and attributes of other namespaces and those
   that are not URDF (``drake_ignore``, ``<gazebo>``, ``<frame>``,
@@ -93,6 +96,8 @@ class CleanUrdf:
     # Moving links MuJoCo is given more inertia than they have: (link, kg m^2 added about
     # each axis), to be taken away from the compiled body's inertia.
     stand_ins: tuple[tuple[str, float], ...]
+    # Joints with Drake's reflected rotor inertia: (joint, Ir * gr**2 in kg m^2 or kg).
+    rotor_inertias: tuple[tuple[str, float], ...] = ()
 
 
 def parse_urdf(where: str, data: bytes) -> ET.Element:
@@ -154,7 +159,13 @@ def clean_urdf(file: Path, data: bytes) -> CleanUrdf:
     root.tag = "robot"
     notes: list[str] = []
     ignored: dict[str, None] = {}
+    rotors = _rotor_inertias(where, root)
+    if rotors:
+        notes.append("rotor inertia through the gear (drake:rotor_inertia * drake:gear_ratio^2) on "
+                     + ", ".join(f"{j} {v:g}" for j, v in rotors))
     _prune(root, _SCHEMA, namespace, ignored)
+    for key in [k for k in ignored if "drake.mit.edu" in k and k.split()[1] in ("<rotor_inertia>", "<gear_ratio>")]:
+        del ignored[key]  # read above
     if namespace:
         notes.append(f"the root's XML namespace {namespace} is read as URDF's")
     if ignored:
@@ -164,7 +175,38 @@ def clean_urdf(file: Path, data: bytes) -> CleanUrdf:
         notes.append("mesh files not found, ignored (geometry is not modelled): " + ", ".join(missing))
     _world(where, root, notes)
     stand_ins = _inertials(root, notes)
-    return CleanUrdf(root=root, text=ET.tostring(root), notes=tuple(notes), stand_ins=stand_ins)
+    return CleanUrdf(root=root, text=ET.tostring(root), notes=tuple(notes), stand_ins=stand_ins,
+                     rotor_inertias=rotors)
+
+
+def _rotor_inertias(where: str, root: ET.Element) -> tuple[tuple[str, float], ...]:
+    """Drake's reflected rotor inertia of each transmission's joint, ``Ir * gr**2``."""
+    out: dict[str, float] = {}
+    for t in root:
+        if not isinstance(t.tag, str) or _split(t.tag)[1] != "transmission":
+            continue
+        joint = next((e.get("name", "") for e in t if isinstance(e.tag, str) and _split(e.tag)[1] == "joint"), "")
+        values = {"rotor_inertia": 0.0, "gear_ratio": 1.0}
+        for element in t.iter():
+            space, local = _split(element.tag) if isinstance(element.tag, str) else ("", "")
+            if "drake.mit.edu" in space and local in values:
+                text = element.get("value", "")
+                try:
+                    values[local] = float(text)
+                except ValueError:
+                    raise DefinitionError(
+                        f"{where}: transmission {t.get('name', '')!r}: drake:{local} value {text!r} "
+                        "is not a number"
+                    ) from None
+                if not (math.isfinite(values[local]) and values[local] >= 0):
+                    raise DefinitionError(
+                        f"{where}: transmission {t.get('name', '')!r}: drake:{local} value {text!r}: "
+                        "expected a finite number >= 0"
+                    )
+        reflected = values["rotor_inertia"] * values["gear_ratio"] ** 2
+        if joint and reflected > 0:
+            out[joint] = out.get(joint, 0.0) + reflected
+    return tuple(out.items())
 
 
 def _drop_geometry(file: Path, root: ET.Element) -> list[str]:
