@@ -34,7 +34,7 @@ from typing import IO
 from equilibrist.errors import quote_outside
 from equilibrist.pil import boards
 from equilibrist.pil.firmware import Firmware, _folder
-from equilibrist.pil.targets import PILError
+from equilibrist.pil.targets import PILError, Target
 
 #: How long the emulator may take to open its pseudo-terminal [s].
 START_TIMEOUT = 20.0
@@ -100,8 +100,8 @@ def command(firmware: Firmware) -> list[str]:
             "-icount", f"shift={shift},align=off,sleep=on", "-kernel", str(firmware.image)]
 
 
-def _read(stream: IO[str], emulation: Emulation, found: list[str],
-          ready: threading.Event) -> None:
+def _read(stream: IO[str], emulation: Emulation, found: list[str], ready: threading.Event,
+          target: Target) -> None:
     for raw in stream:
         line = raw.strip()
         avr, arm = _AVR_STEP.match(line), _ARM_STEP.match(line)
@@ -111,7 +111,7 @@ def _read(stream: IO[str], emulation: Emulation, found: list[str],
             continue
         if arm is not None:
             count, stack, heap = (int(v) for v in arm.groups())
-            emulation.steps.append(StepFigure(count, None, stack, heap))
+            emulation.steps.append(StepFigure(target.count_of(count), None, stack, heap))
             continue
         pty = _PTY.search(line)
         if pty is not None and not ready.is_set():
@@ -134,8 +134,8 @@ def emulate(firmware: Firmware) -> Iterator[Emulation]:
     found: list[str] = []
     ready = threading.Event()
     assert process.stdout is not None and process.stderr is not None
-    readers = [threading.Thread(target=_read, args=(s, emulation, found, ready), daemon=True)
-               for s in (process.stdout, process.stderr)]
+    readers = [threading.Thread(target=_read, args=(s, emulation, found, ready, firmware.target),
+                                daemon=True) for s in (process.stdout, process.stderr)]
     for reader in readers:
         reader.start()
     try:
