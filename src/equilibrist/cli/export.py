@@ -67,7 +67,8 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.add_argument("--out", metavar="DIR", default=None,
                    help="output folder (default ./<system>_<controller>)")
     common.add_design_options(p)
-    common.add_controller(p, "export", default="lqg", help="the controller to export (default lqg)")
+    common.add_controller(p, "export", default=None,
+                          help="the controller to export (default lqg; policy with --policy)")
     p.add_argument("--duration", metavar="S", default=None,
                    help="length of the recorded test-vector run [s]")
     p.add_argument("--seed", type=_seed, default=0, help="noise seed of the test-vector run")
@@ -96,6 +97,8 @@ def run(args: argparse.Namespace) -> int:
             raise ExportError(f"--duration must be a positive number of seconds, got {duration:g}")
     from equilibrist.controllers import kinds
 
+    # --policy FILE alone exports the trained network (--controller policy).
+    args.controller = args.controller or ("policy" if getattr(args, "policy", None) else "lqg")
     record = kinds.get(args.controller, "export")
     if record.open_loop:
         raise ExportError(f"--controller {args.controller} is the open loop: there is no "

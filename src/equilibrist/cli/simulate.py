@@ -249,7 +249,9 @@ def build_run(args: argparse.Namespace) -> tuple[System, dict[str, Any]]:
     rate = (_positive(args.rate, "--rate") if args.rate is not None
             else float(system.spec.control_rate))
     step = None if args.physics_step is None else _positive(args.physics_step, "--physics-step")
-    name = args.controller or ("lqg" if system.n_inputs else "none")
+    # --policy FILE alone runs the trained network (--controller policy).
+    name = args.controller or ("policy" if getattr(args, "policy", None)
+                               else "lqg" if system.n_inputs else "none")
     from equilibrist.controllers import kinds
 
     kind = kinds.get(name, "simulate")
