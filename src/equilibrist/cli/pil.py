@@ -13,9 +13,13 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 from equilibrist.cli import common
 from equilibrist.errors import ExportError, UsageError
+
+if TYPE_CHECKING:
+    from equilibrist.pil.run import PILRun
 
 _EPILOG = """\
 Targets: uno (ATmega328P at 16 MHz: avr-gcc and simavr; cycles exact; double
@@ -111,10 +115,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _print_report(done: object, key: str, saved: object) -> None:
-    from equilibrist.pil.run import PILRun
-
-    assert isinstance(done, PILRun)
+def _print_report(done: PILRun, key: str, saved: object) -> None:
     f = done.figures()
     t = done.target
     result = done.result

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from equilibrist.errors import quote_outside
 from equilibrist.pil.emulator import START_TIMEOUT, StepFigure, emulate
 from equilibrist.pil.firmware import Firmware, Sources, build, sketch_sources
 from equilibrist.pil.targets import DoesNotFit, Target
@@ -277,6 +278,10 @@ def run_pil(system: System, controller: object, firmware: Firmware, *, label: st
                                   u_op=system.operating_point().u, timeout=timeout)
         _connect(device)
         done = run_hil(system, device, x0=x0, **run_options)
+    if done.fault is not None and emulation.other:
+        # What the emulator said as it ended (simavr's harness: the firmware crashed).
+        done = replace(done, fault=f"{done.fault} (the emulator: "
+                                  f"{quote_outside(emulation.other[-1])})")
     simulated = simulate(system, controller, x0=x0, **options)
     run = PILRun(hil=done, target=target, firmware=firmware, steps=tuple(emulation.steps),
                  rate=rate, simulated=simulated, label=label, precision=precision)
