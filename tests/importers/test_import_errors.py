@@ -121,6 +121,14 @@ CASES = {
 </robot>""",
         "loop",
     ),
+    "negative_frictionloss": (
+        "bad.xml", _mjcf(_PENDULUM.replace('axis="0 1 0"', 'axis="0 1 0" frictionloss="-0.1"')),
+        "joint 'a' has friction (frictionloss) -0.1: expected >= 0",
+    ),
+    "negative_urdf_friction": (
+        "bad.urdf", _URDF_HEAD + _URDF_JOINT.replace("</joint>", '<dynamics friction="-0.2"/></joint>') + "</robot>",
+        "joint 'j1' has friction (frictionloss) -0.2: expected >= 0",
+    ),
     "entity_declaration": (
         "bad.urdf",
         '<?xml version="1.0"?>\n<!DOCTYPE robot [<!ENTITY m "1">]>\n'

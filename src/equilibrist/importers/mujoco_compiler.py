@@ -92,6 +92,7 @@ _FINITE = (
     ("qpos_spring", None, None, "joint springref"),
     ("dof_damping", "dof", "mjOBJ_JOINT", "damping"),
     ("dof_armature", "dof", "mjOBJ_JOINT", "armature"),
+    ("dof_frictionloss", "dof", "mjOBJ_JOINT", "friction (frictionloss)"),
     ("body_pos", "body", "mjOBJ_BODY", "pos"),
     ("body_quat", "body", "mjOBJ_BODY", "orientation"),
     ("body_ipos", "body", "mjOBJ_BODY", "centre of mass (inertial pos)"),
@@ -136,7 +137,7 @@ def _not_finite(model: mujoco.MjModel, mujoco: Any) -> list[str]:
             problems.append(f"{label}: {what} is not a finite number "
                             f"({' '.join(f'{v:g}' for v in rows[i])})")
     for field, what in (("dof_damping", "damping"), ("dof_armature", "armature"),
-                        ("jnt_stiffness", "stiffness")):
+                        ("jnt_stiffness", "stiffness"), ("dof_frictionloss", "friction (frictionloss)")):
         values = np.asarray(getattr(model, field), float)
         for i in np.flatnonzero(values < 0):
             j = int(model.dof_jntid[i]) if field.startswith("dof") else int(i)
