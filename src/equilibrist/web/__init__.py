@@ -1,19 +1,11 @@
 """The local playground: a live web page to watch a system balance, push it and tune it.
 
-``equilibrist play`` serves it (:mod:`equilibrist.cli.play`, through :mod:`equilibrist.web.server`). The server
-(:mod:`equilibrist.web.app`, Starlette over uvicorn) runs one
-:class:`~equilibrist.web.session.Session` per browser tab: the system's
-compiled core in real time at the control rate, the controller redesigned
-live as the page tunes it. The page (``static/``) is plain JavaScript on a
-canvas, with the vendored uPlot for the strip charts; it needs no network
-beyond the server. The message protocol is in ``docs/playground.md`` and
-:mod:`equilibrist.web.protocol`.
-
-:func:`play` serves it from a script, for systems given as values (a
-script's own definition among them).
-
-Importing this package does no work; the server's libraries are imported
-when an app is made, with an error naming the extra to install when missing.
+``equilibrist play`` and :func:`play` serve it (:mod:`equilibrist.web.server`): one
+:class:`~equilibrist.web.session.Session` per browser tab, the system's compiled core in
+real time, the controller redesigned live as the page tunes it; the page (``static/``) is
+plain JavaScript with the vendored uPlot, needing no network beyond the server. The
+protocol: ``docs/playground.md``. Importing this package does no work; the server's
+libraries are imported when an app is made, with an error naming the extra when missing.
 """
 
 from __future__ import annotations

@@ -1,29 +1,12 @@
-"""The playground's ASGI application (Starlette): the page, its files, the socket, the downloads.
+"""The playground's ASGI application (Starlette): the page (``GET /``), its files
+(``/static``, uPlot vendored), one session per socket (``WS /ws``, the protocol of
+``docs/playground.md``), and the downloads (``GET /download/{token}/{kind}``: the C export
+of the controller in force, the last run as CSV or NPZ; no client value names a file).
 
-Routes:
-
-``GET /``
-    The page (``static/index.html``).
-``GET /static/...``
-    The page's scripts, styles and the vendored uPlot (no CDN).
-``WS /ws``
-    One session per connection (the protocol: ``docs/playground.md``).
-``GET /download/{token}/{kind}``
-    ``kind`` one of ``controller.zip`` (the C export of the controller in
-    force), ``run.csv``, ``run.npz`` (the last run) of the session whose
-    token the ``system`` frame gave; no client value names a file.
-
-Safety: every request must name this server in its ``Host`` header (the
-loopback names and the address it was bound to, with its port: a page of
-another site whose name resolves to this machine, DNS rebinding, is refused
-with a 400), a socket's ``Origin`` must be one of those addresses too (a
-socket opened by another site's page is refused before its session starts;
-a client that sends no ``Origin``, which browsers always send, is let in),
-at most ``max_sessions`` sessions, at most ``MESSAGE_RATE``
-messages per second per session (a burst of ``MESSAGE_BURST``; beyond it
-messages are dropped with one error frame per second), every message
-checked by :mod:`equilibrist.web.protocol`, and a session's resources freed
-when its socket closes.
+Safety (``docs/playground.md``, "Safety"): a request's ``Host`` and a socket's ``Origin``
+must name this server (:class:`HostCheck`, against DNS rebinding), at most
+``max_sessions`` sessions and :data:`MESSAGE_RATE` messages a second per session, every
+message checked by :mod:`equilibrist.web.protocol`, a session freed when its socket closes.
 """
 
 from __future__ import annotations
@@ -147,16 +130,11 @@ def _is_address(name: str) -> bool:
 
 @dataclass(frozen=True)
 class HostCheck:
-    """The ``Host`` and ``Origin`` a request to the playground may carry.
-
-    A page of another site can be served from a name that its DNS points at
-    this machine (DNS rebinding): the browser then sends that name as the
-    ``Host`` and the ``Origin``. Only the names of this server are accepted:
-    the loopback names (:data:`LOOPBACK_NAMES`) and the address it was bound
-    to, each with the port it serves (``port`` None: any port, for an app
-    served by another runner). A server bound to every interface (``0.0.0.0``,
-    ``::``) also answers to any IP address with its port: a page reaching it
-    by address has no name that DNS could turn to this machine.
+    """The ``Host`` and ``Origin`` a request to the playground may carry: the loopback
+    names and the address it was bound to, with the port it serves (``port`` None: any
+    port, for an app served by another runner). A server bound to every interface also
+    answers to any IP address with its port: a page reaching it by address has no name that
+    DNS could turn to this machine.
     """
 
     names: frozenset[str]
@@ -198,11 +176,8 @@ class HostCheck:
         return None
 
     def origin_refusal(self, value: str | None) -> str | None:
-        """Why a socket opened with ``Origin`` *value* is refused (None: it is not).
-
-        No ``Origin`` is accepted: browsers always send one with a socket, so
-        a request without one comes from a program, not from a page.
-        """
+        """Why a socket opened with ``Origin`` *value* is refused (None: it is not). No
+        ``Origin`` is accepted: browsers always send one, so that is a program, not a page."""
         if value is None:
             return None
         scheme, sep, rest = value.strip().lower().partition("://")
@@ -253,23 +228,11 @@ def create_app(
     host: str = "127.0.0.1",
     port: int | None = None,
 ) -> Starlette:
-    """The playground application (a Starlette app).
-
-    Parameters
-    ----------
-    catalogue:
-        The systems offered (default: the catalogue's systems with an input).
-    system:
-        The system a new page starts with (default: the first offered, or
-        the cart-pole when offered).
-    max_sessions:
-        Sessions served at once; one more gets an error frame and is closed.
-    seed:
-        Seed of the first session's noise (tests); each later one gets the next.
-    host, port:
-        The address the server is bound to and its port: requests must name
-        one of its addresses in their ``Host`` (:class:`HostCheck`); *port*
-        None accepts any port (an app served by a runner that picks it).
+    """The playground application (a Starlette app) offering *catalogue* (default: the
+    catalogue's systems with an input), a new page starting with *system* (default: the
+    cart-pole when offered, else the first). One session beyond *max_sessions* gets an error
+    frame and is closed; *seed* seeds the first session's noise (each later one the next).
+    Requests must name *host* (and *port*, None: any) in their ``Host`` (:class:`HostCheck`).
     """
     from equilibrist.web import require
 
@@ -306,7 +269,6 @@ def create_app(
     check = HostCheck.serving(host, port)
     app = Starlette(routes=routes, middleware=[Middleware(_Guard, check=check)])
     app.state.playground = state
-    app.state.host_check = check
     return app
 
 
@@ -444,15 +406,10 @@ async def _stream(ws: WebSocket, session: Session) -> None:
 
 
 async def _receive(ws: WebSocket, session: Session) -> None:
-    """Take the session's messages until its socket closes.
-
-    A reader takes every message as it arrives (the rate limit counts them
-    there) and a worker acts on them one at a time, in order. The socket's
-    close ends both at once, also while the worker waits for a redesign (that
-    thread runs out on its own and its result is dropped): a closed tab, or a
-    server stopping on Ctrl-C, does not wait for the designs its messages asked
-    for.
-    """
+    """Take the session's messages until its socket closes: a reader takes each as it
+    arrives (the rate limit counts them there), a worker acts on them one at a time, in
+    order. The socket's close ends both at once, also while the worker waits for a redesign
+    (that thread runs out and its result is dropped)."""
     from starlette.websockets import WebSocketDisconnect
 
     inbox: asyncio.Queue[str | bytes] = asyncio.Queue()
@@ -493,14 +450,9 @@ async def _read(ws: WebSocket, inbox: asyncio.Queue[str | bytes]) -> None:
 
 
 async def _work(ws: WebSocket, session: Session, inbox: asyncio.Queue[str | bytes]) -> None:
-    """Check and carry out the queued messages, one at a time.
-
-    Each is checked against the limits in force when its turn comes (a
-    ``select`` changes them for the messages after it). A region of attraction
-    is computed aside (:func:`~equilibrist.web.session_roa.compute_roa`), and so is
-    the plan a tracking kind needs (:func:`~equilibrist.web.session_plan.compute_plan`):
-    the messages after them do not wait for them.
-    """
+    """Check and carry out the queued messages, one at a time, each against the limits in
+    force when its turn comes (a ``select`` changes them). A region of attraction and the
+    plan a tracking kind needs are computed aside: the messages after them do not wait."""
     designing = 0
     jobs: set[asyncio.Task[None]] = set()
     try:

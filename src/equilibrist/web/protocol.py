@@ -86,22 +86,10 @@ class ProtocolError(EquilibristError, ValueError):
 
 @dataclass(frozen=True)
 class Limits:
-    """What the session in its current state accepts.
-
-    Attributes
-    ----------
-    systems:
-        Names the system picker offers.
-    scales:
-        ``{state or input name: (low, high)}`` of the Bryson scales.
-    params:
-        ``{parameter name: (low, high)}`` of the tunable physical parameters.
-    unavailable:
-        ``{controller: reason}`` of the :data:`CONTROLLERS` that do not apply
-        to the system (a ``tune`` asking for one is refused with the reason).
-    hanging:
-        Why the system cannot be started hanging (``hang`` is refused with
-        it); None when it can.
+    """What the session in its current state accepts: the systems offered, the ranges
+    ``(low, high)`` of the Bryson *scales* and the tunable *params*, the controllers that
+    do not apply with the reason a ``tune`` asking for one is refused with, and why ``hang``
+    is refused (None: it is not).
     """
 
     systems: tuple[str, ...]
@@ -177,15 +165,7 @@ def _named_numbers(
 
 
 def parse(text: str | bytes, limits: Limits) -> Message:
-    """The :class:`Message` in the text frame *text*, checked against *limits*.
-
-    Raises
-    ------
-    ProtocolError
-        A frame that is too long, not JSON, not an object; an unknown type
-        or field; a missing field; a value of the wrong type, not finite or
-        out of its range; a name the session does not offer.
-    """
+    """The :class:`Message` in the text frame *text*, checked against *limits*."""
     if isinstance(text, bytes):
         raise ProtocolError("binary frames are not part of the protocol: send JSON text")
     if len(text) > MAX_MESSAGE_BYTES or len(text.encode("utf-8", "replace")) > MAX_MESSAGE_BYTES:
@@ -218,10 +198,7 @@ def parse(text: str | bytes, limits: Limits) -> Message:
         raise ProtocolError(f"{kind} message lacks {', '.join(missing)}")
     seq: int | None = None
     if "seq" in data:
-        raw = data["seq"]
-        if isinstance(raw, bool) or not isinstance(raw, int) or not SEQ_RANGE[0] <= raw <= SEQ_RANGE[1]:
-            raise ProtocolError(f"seq must be an integer from 0 to 2^53, got {_short(raw)}")
-        seq = raw
+        seq = _counter(data["seq"], "seq")
     fields = _FIELD_CHECKS[kind](data, limits)
     return Message(kind, fields, seq)
 
@@ -294,19 +271,18 @@ def _pause(data: dict[str, object], limits: Limits) -> MessageFields:
     return {"paused": value}
 
 
-def _full(data: dict[str, object], limits: Limits) -> MessageFields:
-    return {}
-
-
-def _roa(data: dict[str, object], limits: Limits) -> MessageFields:
+def _nothing(data: dict[str, object], limits: Limits) -> MessageFields:
     return {}
 
 
 def _seen(data: dict[str, object], limits: Limits) -> MessageFields:
-    raw = data["frame"]
+    return {"frame": _counter(data["frame"], "frame")}
+
+
+def _counter(raw: object, what: str) -> int:
     if isinstance(raw, bool) or not isinstance(raw, int) or not SEQ_RANGE[0] <= raw <= SEQ_RANGE[1]:
-        raise ProtocolError(f"frame must be an integer from 0 to 2^53, got {_short(raw)}")
-    return {"frame": raw}
+        raise ProtocolError(f"{what} must be an integer from 0 to 2^53, got {_short(raw)}")
+    return raw
 
 
 _FIELD_CHECKS = {
@@ -317,9 +293,9 @@ _FIELD_CHECKS = {
     "reset": _reset,
     "hang": _hang,
     "pause": _pause,
-    "full": _full,
+    "full": _nothing,
     "seen": _seen,
-    "roa": _roa,
+    "roa": _nothing,
 }
 
 __all__ = ["CONTROLLERS", "DEFAULT", "FIELDS", "MAX_MESSAGE_BYTES", "OFF", "Limits", "Message", "ProtocolError", "controllers", "kind_name", "parse"]

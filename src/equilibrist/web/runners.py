@@ -1,36 +1,13 @@
 """The playground's nonlinear and optimizing controllers, run sample by sample.
 
-LQR and LQG run in :mod:`equilibrist.web.session` as the linear contract's
-state-space form. The swing-up and the MPC are built here from the same
-design the page tuned, and each is wrapped in a small runner with one
-calling convention for the session's loop:
-
-``output(t, y)``
-    The command for the measurement *y* (the runner's :attr:`outputs`);
-    :attr:`estimate` then holds the controller's state estimate.
-``update(t, y, u_applied)``
-    Advance the controller's own state with the saturated command.
-``adopt(previous)``
-    Take over the running state of the previous runner of the same kind
-    (after a redesign), so that a retune does not restart a swing-up or
-    empty the MPC's filter.
-
-*Swing-up* (:mod:`equilibrist.control.swingup`): the
-:class:`~equilibrist.control.controller.NonlinearController`'s source run
-by its plain-Python runtime
-(:class:`~equilibrist.control.nonlinear.NonlinearRuntime`). The same
-functions compiled to C (:mod:`equilibrist.control.compiled`) cost less per
-sample but take a compiler run on first use, which would hold the interpreter
-that streams every other session's frames; the plain-Python sample (some
-40 microseconds on the cart-pole, 200 Hz) is under 1 % of a core.
-The supervisor's mode (pumping or balancing) is the controller state's
-``mode`` slot.
-
-*MPC* (:mod:`equilibrist.control.mpc`): the constrained MPC of the design
-(Kalman filter in front where the sensors do not measure the full state),
-DAQP solving its QP at every sample where the LQR's own move does not
-meet every constraint. The runner keeps the last solve times for the page
-(median and worst over the last :data:`SOLVE_WINDOW` samples).
+LQR and LQG run in :mod:`equilibrist.web.session` as the linear contract's state-space
+form. Every other kind is built here from the design the page tuned and wrapped in a
+runner with one calling convention for the session's loop: ``output(t, y)`` (then
+:attr:`estimate` holds the controller's estimate), ``update(t, y, u_applied)``, and
+``adopt(previous)``, which takes over the previous runner's running state after a retune.
+A nonlinear controller runs in its plain-Python runtime: compiling it would hold the
+interpreter that streams every other session's frames, and a sample costs under 1 % of a
+core. The MPC keeps its last solve times for the page (``docs/playground.md``).
 """
 
 from __future__ import annotations
@@ -351,16 +328,11 @@ Runner = NonlinearRunner | MPCRunner
 
 
 def build_runner(kind: str, system: System, design: Design) -> Runner:
-    """The runner of the registry's controller *kind* built on *design* for *system*.
-
-    The kind is built as ``simulate`` builds it, with the page's design
-    (:class:`~equilibrist.controllers.kinds.ControllerRequest`); the record says how it
-    runs: a kind that :attr:`~equilibrist.controllers.kinds.ControllerKind.solves_qp` by
-    the MPC's runtime (its solves timed), one that brings the system up
-    :attr:`~equilibrist.controllers.kinds.ControllerKind.from_any_state` with its
-    supervisor's mode shown, any other ``NonlinearController`` by its Python runtime.
-    Raises an ``EquilibristError`` (one line) when the controller does not
-    apply or cannot be built, or is not of the form its record says.
+    """The runner of the registry's controller *kind* built as ``simulate`` builds it, on the
+    page's *design* for *system*; the record says how it runs (``solves_qp``: the MPC's
+    runtime, solves timed; ``from_any_state``: with its supervisor's mode shown; else the
+    ``NonlinearController``'s Python runtime). One-line ``EquilibristError`` when it does not
+    apply, cannot be built, or is not of the form its record says.
     """
     from equilibrist.control.mpc_runtime import MPCRuntime
     from equilibrist.control.nonlinear import NonlinearController

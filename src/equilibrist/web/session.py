@@ -3,46 +3,17 @@
 A :class:`Session` holds the plant's state, the controller in force and the
 settings the page tuned. The server calls :meth:`Session.advance_to` with
 the wall-clock time before each frame; the session runs every controller
-sample due by then (measure with noise, control, saturate, integrate the
-nonlinear plant on the system's compiled core, check the region), and
-:meth:`Session.frame` describes the latest state for the page: the drawing's
-shapes (only those that changed since the last frame), the new samples for
-the strip charts, the margin to a fall.
+sample due by then, and :meth:`Session.frame` describes the latest state for
+the page (the shapes that changed, the new chart samples, the margin to a fall).
 
-How a sample runs (the rig as the simulator runs it, :mod:`equilibrist.sim.run`):
-
-1. the sensors read the design's outputs with the rig's sensor noise times
-   the ``noise`` setting;
-2. the controller: ``"lqg"`` the design's discrete Kalman filter and LQR
-   gain, ``"lqr"`` the gain on the true state (both as the one controller
-   contract, :class:`~equilibrist.control.controller.LinearController`,
-   run in numpy); ``"off"`` holds the operating point's input;
-3. the actuator saturates the command at the input limits (the ``limit``
-   setting scales the rig's limits);
-4. a push adds to the first input for its duration, beyond the limits (as
-   ``--push`` of ``equilibrist simulate``);
-5. the plant advances one control period in RK4 steps of at most 1 ms on the
-   compiled core, as ``simulate`` advances it around a Python controller
-   (:class:`~equilibrist.sim.steps.PlantSteps`): the process noise the
-   spec gives on the state rates is white noise of ``simulate``'s model
-   (:meth:`~equilibrist.sim.noise.Noise.from_spec`), held over each physics
-   step, and the sensors' noise is drawn from the same generator: with the
-   controller off and the same seed, a session's run is ``simulate``'s, bit
-   for bit;
-6. a state outside the system's region ends the run ("fell"); the page
-   offers Reset.
-
-Every change of a setting redesigns (:func:`equilibrist.control.design.design`
-on the tuned system) outside the simulation's thread; a design that fails
-leaves the controller in force running and is reported as a message. A
-change of a physical parameter acts on the plant at once, also when the
-design for it fails (the rig changed; its controller did not).
-
-The Bryson scales, physical parameters and rate are the design's; the
-LQR weights are ``Q = diag(1 / scale^2)``, ``R = diag(1 / scale^2)``; the
-measurement noise the Kalman filter assumes follows the ``noise`` setting
-(with a floor of 5 % of the rig's, so that the filter stays well posed when
-the sensors are made perfect).
+A sample is the rig as the simulator runs it (``docs/playground.md``, "What the page does"):
+sensors with the rig's noise times the ``noise`` setting, the controller, the actuator's
+saturation, a push beyond the limits, one control period of the plant on the compiled core
+(:class:`~equilibrist.sim.steps.PlantSteps`, whose noise is drawn as ``simulate`` draws it:
+with the controller off and the same seed, a session's run is ``simulate``'s bit for bit),
+and the region's check. Every change of a setting redesigns outside the simulation's
+thread; a design that fails leaves the controller in force running, while a changed
+physical parameter acts on the plant at once.
 """
 
 from __future__ import annotations
@@ -69,10 +40,7 @@ from equilibrist.web.session_design import (
     make_design,
     tuned_system,
 )
-from equilibrist.web.session_loop import (
-    _Loop,
-    _Record,
-)
+from equilibrist.web.session_loop import _Loop, _Record
 from equilibrist.web.session_plan import _SessionPlan
 from equilibrist.web.session_roa import _SessionRoa
 
@@ -107,17 +75,8 @@ LAG_WARN_EVERY = 5.0
 
 
 class Session(_SessionPlan, _SessionRoa):
-    """One browser tab's running system (see the module docstring).
-
-    Parameters
-    ----------
-    catalogue:
-        The systems offered.
-    system:
-        The name of the first system.
-    seed:
-        Seed of the noise (fresh entropy when None).
-    """
+    """One browser tab's running system: the *catalogue*'s *system* first, its noise seeded
+    by *seed* (fresh entropy when None)."""
 
     def __init__(self, catalogue: Catalogue, system: str, *, seed: int | None = None) -> None:
         self.catalogue = catalogue
@@ -451,14 +410,6 @@ class Session(_SessionPlan, _SessionRoa):
         if skipped:  # stalled (a slow machine, a debugger): skip ahead
             self.wall0 += (due - limit) / self.settings.rate
             due = limit
-        if self.loop.runner is None:
-            for _ in range(max(0, due)):
-                self._sample()
-                self.k_since += 1
-                if self.fell is not None:
-                    break
-            return max(0, due)
-        # A swing-up or an MPC: the page is told when the samples cost more than their time.
         began = time.perf_counter()
         for _ in range(max(0, due)):
             self._sample()
@@ -466,7 +417,9 @@ class Session(_SessionPlan, _SessionRoa):
             if self.fell is not None:
                 break
         spent = time.perf_counter() - began
-        if (due >= 4 and spent > LAG_SHARE * due * self.period) or skipped:
+        # A swing-up or an MPC: the page is told when the samples cost more than their time.
+        if self.loop.runner is not None and (
+                (due >= 4 and spent > LAG_SHARE * due * self.period) or skipped):
             self._warn_lag(spent / max(due, 1), skipped)
         return max(0, due)
 

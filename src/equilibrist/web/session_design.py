@@ -56,13 +56,9 @@ class SessionError(EquilibristError, ValueError):
 
 @dataclass
 class Catalogue:
-    """The systems a server offers, each built once and shared by the sessions.
-
-    *names* are catalogue names or a user's model file given on the command
-    line; the page can only pick among them. :meth:`of` offers systems given as
-    values (a script's own, defined with ``System.from_definition``, with its
-    parameter values): the server runs in the script's process, which knows them.
-    """
+    """The systems a server offers (catalogue names or a user's model file; the page can only
+    pick among them), each built once and shared by the sessions. :meth:`of` offers systems
+    given as values (a script's own), which the server's process knows."""
 
     names: tuple[str, ...]
     _systems: dict[str, System] = field(default_factory=dict, repr=False)
@@ -178,15 +174,10 @@ def make_design(system: System, settings: Settings) -> Design:
 def describe_design(d: Design, controller: str, seconds: float,
                     runner: Runner | None = None,
                     controller_seconds: float = 0.0) -> dict[str, object]:
-    """The ``design`` frame: gains, poles, margins (JSON-ready).
-
-    *seconds* is the time of the LQG design, *controller_seconds* the time
-    of building the swing-up or the MPC (*runner*) on it. ``margins`` are
-    those of the loop as implemented for LQG (the Kalman filter in the loop)
-    and LQR; for another controller, the design's state feedback's alone
-    (``margins_loop`` names which: ``"lqg"`` or ``"lqr"``, the kind record's
-    :attr:`~equilibrist.controllers.kinds.ControllerKind.loop`); ``lqr_margins``
-    are always the state feedback's.
+    """The ``design`` frame: gains, poles, margins (JSON-ready), with the times of the
+    design (*seconds*) and of building the *runner* on it (*controller_seconds*).
+    ``margins`` are those of the loop the kind record names (``margins_loop``: ``"lqg"``, the
+    Kalman filter in the loop, or ``"lqr"``); ``lqr_margins`` always the state feedback's.
     """
     from equilibrist.controllers import kinds
 
@@ -196,21 +187,10 @@ def describe_design(d: Design, controller: str, seconds: float,
         "type": "design",
         "controller": controller,
         "rate": d.rate,
-        "states": full["states"],
-        "inputs": full["inputs"],
-        "outputs": full["outputs"],
-        "K": full["K"],
-        "Kf": full["Kf"],
-        "poles": full["poles"],
-        "estimator_poles": full["estimator_poles"],
-        "open_loop_poles": full["open_loop_poles"],
-        "pole_table": full["pole_table"],
-        "margins": full["margins"],
+        **{k: full[k] for k in ("states", "inputs", "outputs", "K", "Kf", "poles",
+                                "estimator_poles", "open_loop_poles", "pole_table", "margins")},
         "margins_loop": loop,
-        "lqr_margins": full["lqr_margins"],
-        "notes": full["notes"],
-        "x0": full["x0"],
-        "u0": full["u0"],
+        **{k: full[k] for k in ("lqr_margins", "notes", "x0", "u0")},
         "milliseconds": round((seconds + controller_seconds) * 1e3, 2),
         "design_milliseconds": round(seconds * 1e3, 2),
         "controller_milliseconds": round(controller_seconds * 1e3, 2),
@@ -237,14 +217,11 @@ def design_for(system: System, settings: Settings) -> tuple[Design | None, float
 
 def redesign(system: System, settings: Settings, plan: Trajectory | None = None
              ) -> tuple[Design | None, float, str | None, Runner | None, float]:
-    """Design for *settings*, and build the swing-up or MPC on the design when it is asked for.
-
-    Returns ``(design or None, design seconds, error or None, runner or None,
-    controller seconds)``; a controller that cannot be built is an error
-    like a failed design (the previous controller keeps running). A kind that
-    tracks a plan (:attr:`~equilibrist.controllers.kinds.ControllerKind.planned`) is built on *plan*, the
-    session's trajectory still valid for *system*; without one, no runner: the
-    session plans first (:mod:`equilibrist.web.session_plan`).
+    """Design for *settings*, and build the kind's runner on the design when it asks for one:
+    ``(design or None, design seconds, error or None, runner or None, controller seconds)``.
+    A controller that cannot be built is an error like a failed design. A kind that tracks
+    a plan is built on *plan* (the session's, still valid for *system*); without one, no
+    runner: the session plans first (:mod:`equilibrist.web.session_plan`).
     """
     d, seconds, error = design_for(system, settings)
     if d is None or settings.controller not in runner_kinds():

@@ -106,10 +106,7 @@ class _SessionOutput:
             if self.sent_shapes.get(s.key) == sig:
                 continue  # unchanged since the last frame: the page keeps it
             self.sent_shapes[s.key] = sig
-            pts = np.round(raw, DIGITS)
-            # NaN (a break in a polyline) goes out as null.
-            flat = [None if math.isnan(v) else v for v in pts.reshape(-1).tolist()]
-            shapes.append({"key": s.key, "kind": s.kind, "points": flat, "color": s.color,
+            shapes.append({"key": s.key, "kind": s.kind, "points": wire_points(raw), "color": s.color,
                            "width": s.width, "z": s.z, "text": s.text, "edge": s.edge,
                            "bounds": s.bounds})
         self.frame_no += 1
@@ -238,6 +235,13 @@ class _SessionOutput:
             folder = Path(tmp) / top
             export_folder(runner, self.system, str(folder))
             return _zip_folder(folder, top)
+
+
+def wire_points(points: object) -> list[float | None]:
+    """A shape's points as the page gets them: flat, rounded to :data:`DIGITS`, a NaN (a
+    break in a polyline) as null."""
+    pts = np.round(np.asarray(points, float), DIGITS).reshape(-1).tolist()
+    return [None if math.isnan(v) else v for v in pts]
 
 
 def _zip_folder(folder: Path, top: str) -> bytes:

@@ -1,29 +1,18 @@
-"""The playground's planned swing-up: a kind that tracks a plan (the time-varying LQR, whose
-record is :attr:`~equilibrist.controllers.kinds.ControllerKind.planned`) is built on a swing-up
-planned from the session's hanging start, off the live loop's thread (:class:`PlanJob`, as the region of attraction
-is computed: :mod:`equilibrist.web.session_roa`), and the page is sent the plan's state at
-the current time, as a ghost of the system, while the live system tracks it. A base of
-:class:`equilibrist.web.session.Session`.
+"""The playground's planned swing-up; a base of :class:`equilibrist.web.session.Session`.
 
-When the time-varying LQR is picked, the session goes to the hanging start (that of the
-run in force when it started hanging, else a new one drawn from the swing-up task) and holds
-there while the plan is made (``plan`` frame ``planning``): Hermite-Simpson collocation
-solved by IPOPT (:func:`equilibrist.control.trajopt.plan`, :data:`KNOTS` intervals over the
-system's duration of :data:`equilibrist.apps.planned_demo.PLANNED`, within the task's state
-bounds less their margin), then the tracker on the page's design. The run then starts at the
-plan's start (``plan`` frame ``ready``) and each frame carries ``ghost``: the drawing's moving
-shapes at the plan's state at the plan's time, until the plan ends and the balancing LQR
-holds the system up. A plan that fails is an ``error`` frame (and a ``plan`` frame
-``failed``); the controller is then off and the session goes on. A retune that leaves the
-plant as it was rebuilds the tracker on the same plan, at the same plan time; a change of
-the plant (a physical parameter, the input limits) plans again. ``Hang`` starts the plan
-again from a new hanging start (the tracker takes up the small difference); ``Reset``
-(upright) balances with the plan's end.
+A kind that tracks a plan (its record is
+:attr:`~equilibrist.controllers.kinds.ControllerKind.planned`) is built on a swing-up planned
+from the session's hanging start, off the live loop's thread (:class:`PlanJob`), while the
+run holds there (``plan`` frame ``planning``); then the run starts at the plan's start
+(``ready``) and each frame carries ``ghost``, the drawing's moving shapes at the plan's
+state, until the balancing LQR takes over. A plan that fails is an ``error`` frame and a
+``plan`` frame ``failed``, the controller off. A retune that leaves the plant as it was
+keeps the plan and its time; a changed plant plans again. The behaviour the page shows:
+``docs/playground.md``, "Planned swing-up".
 """
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections.abc import Callable
@@ -36,8 +25,8 @@ from equilibrist.errors import EquilibristError
 from equilibrist.web.runners import PlanRunner, Runner, planned
 from equilibrist.web.session_design import Settings, describe_design
 from equilibrist.web.session_loop import _Loop
-from equilibrist.web.session_output import DIGITS, _SessionOutput
-from equilibrist.web.session_roa import _in_thread
+from equilibrist.web.session_output import _SessionOutput, wire_points
+from equilibrist.web.session_roa import Superseded, _in_thread
 
 if TYPE_CHECKING:
     from equilibrist.control.design_record import Design
@@ -53,10 +42,6 @@ DEFAULT_DURATION = 5.0
 CACHE = 4
 #: What a kept plan is looked up by: the plant's parameters, the start, the duration.
 PlanKey = tuple[tuple[tuple[str, float], ...], tuple[float, ...], float]
-
-
-class PlanStale(Exception):
-    """The request was superseded (another system, controller or setting; a closed page)."""
 
 
 def plant_key(system: System) -> tuple[tuple[str, float], ...]:
@@ -82,7 +67,7 @@ class PlanJob:
 
     def check(self) -> None:
         if not self.alive():
-            raise PlanStale(self.id)
+            raise Superseded(self.id)
 
     @property
     def key(self) -> PlanKey:
@@ -260,10 +245,8 @@ class _SessionPlan(_SessionOutput):
         for s in self.scene.shapes(*at):
             if s.key not in keys:
                 continue
-            pts = np.round(np.asarray(s.points, float), DIGITS).reshape(-1).tolist()
             out.append({"key": s.key, "kind": s.kind, "z": s.z, "color": s.color,
-                        "width": s.width, "edge": s.edge,
-                        "points": [None if math.isnan(v) else v for v in pts]})
+                        "width": s.width, "edge": s.edge, "points": wire_points(s.points)})
         return out, runner.tau
 
     def frame(self) -> dict[str, object]:
@@ -282,7 +265,7 @@ async def compute_plan(session: _SessionPlan, job: PlanJob) -> None:
     result = None
     try:
         result = await _in_thread(job.run, _PLAN_LOCK)
-    except PlanStale:
+    except Superseded:
         return
     except EquilibristError as exc:
         failed = str(exc)
@@ -291,4 +274,4 @@ async def compute_plan(session: _SessionPlan, job: PlanJob) -> None:
     session.plan_deliver(job, result, failed)
 
 
-__all__ = ["CACHE", "KNOTS", "PlanJob", "PlanStale", "compute_plan", "plant_key"]
+__all__ = ["CACHE", "KNOTS", "PlanJob", "compute_plan", "plant_key"]

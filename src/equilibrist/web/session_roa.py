@@ -1,15 +1,10 @@
-"""The playground's region of attraction: the slice of the loop in force, estimated from the
-real loop as ``equilibrist roa`` estimates it, and the certified level of its LQR; computed
-off the live loop's thread (:class:`RoaJob`), a result superseded by a change of system,
-controller or setting dropped. A base of :class:`equilibrist.web.session.Session`.
+"""The playground's region of attraction; a base of :class:`equilibrist.web.session.Session`.
 
-The slice is ``roa``'s default one (:func:`equilibrist.sim.roa.default_slice`: the first
-coordinate of the system's fall region and its rate, the other states at the operating
-point, over :func:`~equilibrist.sim.roa.default_bounds`), with a budget that answers in a
-second or two (:data:`GRID`, :data:`MAX_SAMPLES`, runs of :data:`DURATION` s, one physics
-step a control period, no noise, one thread). For LQR and LQG the certificate
-(:func:`equilibrist.control.certify.certify`, :data:`MAX_BOXES` boxes) follows in its own
-message: it takes several seconds.
+The slice of the loop in force, estimated from the real loop as ``equilibrist roa``
+estimates it (its default slice, with a budget that answers in a second or two: no noise,
+one thread), and for LQR and LQG the certified level of the LQR, which follows in its own
+message; computed off the live loop's thread (:class:`RoaJob`), a result superseded by a
+change of system, controller or setting dropped.
 """
 
 from __future__ import annotations
@@ -51,8 +46,9 @@ MAX_BOXES = 40_000
 DIGITS = 5
 
 
-class RoaStale(Exception):
-    """The request was superseded (another system, controller or setting; a closed page)."""
+class Superseded(Exception):
+    """A computation's request was superseded (another system, controller or setting; a
+    closed page)."""
 
 
 @dataclass(eq=False)
@@ -84,10 +80,10 @@ class RoaJob:
         return kinds.get(kind_name(self.controller)).loop is not None
 
     def check(self, _note: str = "") -> None:
-        """Raises :class:`RoaStale` when the request was superseded (also the certificate's
+        """Raises :class:`Superseded` when the request was superseded (also the certificate's
         progress callback: it stops there)."""
         if not self.alive():
-            raise RoaStale(self.id)
+            raise Superseded(self.id)
 
     def _controller(self) -> object:
         from equilibrist.controllers import kinds
@@ -294,7 +290,7 @@ async def compute_roa(session: _SessionRoa, job: RoaJob) -> None:
         if session.roa_deliver(job, message, last) and not last:
             message = await _in_thread(job.run_certificate, _CERTIFICATE_LOCK)
             session.roa_deliver(job, message, True)
-    except RoaStale:
+    except Superseded:
         pass
     except EquilibristError as exc:
         failed = str(exc)
@@ -305,5 +301,5 @@ async def compute_roa(session: _SessionRoa, job: RoaJob) -> None:
                                   "message": failed}, True)
 
 
-__all__ = ["DURATION", "GRID", "MAX_BOXES", "MAX_SAMPLES", "RoaJob", "RoaStale",
+__all__ = ["DURATION", "GRID", "MAX_BOXES", "MAX_SAMPLES", "RoaJob", "Superseded",
            "compute_roa"]

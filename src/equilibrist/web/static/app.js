@@ -152,21 +152,20 @@
     $("message").textContent = "";
   }
 
-  function logSlider(parent, { id, label, unit, low, high, value, onChange, fmt, title }) {
+  // A labelled range input and its value; *range* in this order (a value set first is clamped).
+  function slider(parent, { id, label, unit, value, onChange, fmt, title }, range, toValue) {
     const row = document.createElement("div");
     row.className = "slider";
     if (title) row.title = title;
     const lab = document.createElement("label");
     lab.htmlFor = id; lab.textContent = label;
     const input = document.createElement("input");
-    input.type = "range"; input.id = id; input.min = "0"; input.max = "1000"; input.step = "1";
+    input.type = "range"; input.id = id;
+    for (const [k, v] of Object.entries(range)) input[k] = String(v);
     input.setAttribute("aria-label", label);
     const out = document.createElement("output");
     out.className = "value"; out.htmlFor = id;
-    const toValue = (pos) => low * Math.pow(high / low, pos / 1000);
-    const toPos = (v) => Math.round(1000 * Math.log(v / low) / Math.log(high / low));
     const show = (v) => { out.textContent = `${(fmt || fmtNum)(v)} ${unit || ""}`.trim(); };
-    input.value = String(toPos(value));
     show(value);
     input.addEventListener("input", () => { const v = toValue(+input.value); show(v); onChange(v); });
     row.append(lab, input, out);
@@ -174,23 +173,16 @@
     return input;
   }
 
-  function linSlider(parent, { id, label, unit, low, high, step, value, onChange }) {
-    const row = document.createElement("div");
-    row.className = "slider";
-    const lab = document.createElement("label");
-    lab.htmlFor = id; lab.textContent = label;
-    const input = document.createElement("input");
-    input.type = "range"; input.id = id; input.min = String(low); input.max = String(high);
-    input.step = String(step); input.value = String(value);
-    input.setAttribute("aria-label", label);
-    const out = document.createElement("output");
-    out.className = "value"; out.htmlFor = id;
-    const show = (v) => { out.textContent = `${fmtNum(v)} ${unit || ""}`.trim(); };
-    show(value);
-    input.addEventListener("input", () => { show(+input.value); onChange(+input.value); });
-    row.append(lab, input, out);
-    parent.appendChild(row);
-    return input;
+  function logSlider(parent, o) {
+    const { low, high, value } = o;
+    const pos = Math.round(1000 * Math.log(value / low) / Math.log(high / low));
+    return slider(parent, o, { min: 0, max: 1000, step: 1, value: pos },
+      (p) => low * Math.pow(high / low, p / 1000));
+  }
+
+  function linSlider(parent, o) {
+    return slider(parent, { ...o, fmt: null }, { min: o.low, max: o.high, step: o.step, value: o.value },
+      (v) => v);
   }
 
   function buildSliders(sys) {
@@ -361,8 +353,9 @@
   function appendSamples(s) {
     const d = state.data;
     if (!d || !s.t.length) return;
+    const columns = [d.t, ...d.x, ...d.xhat, ...d.u];
     if (d.t.length && s.t[0] < d.t[d.t.length - 1]) { // a reset: time starts again
-      d.t.length = 0; d.x.forEach((a) => (a.length = 0)); d.xhat.forEach((a) => (a.length = 0)); d.u.forEach((a) => (a.length = 0));
+      columns.forEach((a) => (a.length = 0));
     }
     for (let k = 0; k < s.t.length; k++) {
       d.t.push(s.t[k]);
@@ -373,9 +366,7 @@
     const tmin = d.t[d.t.length - 1] - WINDOW;
     let cut = 0;
     while (cut < d.t.length && d.t[cut] < tmin) cut++;
-    if (cut) {
-      d.t.splice(0, cut); d.x.forEach((a) => a.splice(0, cut)); d.xhat.forEach((a) => a.splice(0, cut)); d.u.forEach((a) => a.splice(0, cut));
-    }
+    if (cut) columns.forEach((a) => a.splice(0, cut));
   }
 
   function buildReadout(sys) {
@@ -399,11 +390,10 @@
     appendSamples(f.samples);
     state.fell = f.fell;
     drawScene();
-    const sys = state.sys;
-    if (sys) {
-      f.x.forEach((v, i) => { const el = $(`x-${i}`); if (el) el.textContent = fmtNum(v); });
-      f.xhat.forEach((v, i) => { const el = $(`xhat-${i}`); if (el) el.textContent = fmtNum(v); });
-      f.u.forEach((v, j) => { const el = $(`u-${j}`); if (el) el.textContent = fmtNum(v); });
+    if (state.sys) {
+      for (const [id, values] of [["x", f.x], ["xhat", f.xhat], ["u", f.u]]) {
+        values.forEach((v, i) => { const el = $(`${id}-${i}`); if (el) el.textContent = fmtNum(v); });
+      }
     }
     const st = $("status");
     if (f.fell) {
@@ -462,17 +452,32 @@
   }
   state.transform = transform;  // for the ghost of the plan (ghost.js)
 
-  function follow() {
-    // Keep the drawing in view: pan when the bounded parts leave the middle of the picture.
+  // The horizontal span [lo, hi] of the drawing's bounded filled parts (infinite: none).
+  function fillSpan() {
     let lo = Infinity, hi = -Infinity;
     for (const s of state.shapes.values()) {
       if (!s.bounds || s.kind !== "fill") continue;
-      for (let i = 0; i < s.points.length; i += 2) {
-        const v = s.points[i];
-        if (v === null) continue;
-        if (v < lo) lo = v; if (v > hi) hi = v;
-      }
+      for (let i = 0; i < s.points.length; i += 2) if (s.points[i] !== null) { lo = Math.min(lo, s.points[i]); hi = Math.max(hi, s.points[i]); }
     }
+    return [lo, hi];
+  }
+
+  // The polyline of flat points *p* (a null breaks it); *each(x, y)* sees each pixel point.
+  function tracePath(ctx, T, p, each) {
+    ctx.beginPath();
+    let pen = false;
+    for (let i = 0; i < p.length; i += 2) {
+      if (p[i] === null || p[i + 1] === null) { pen = false; continue; }
+      const [x, y] = T.toPx(p[i], p[i + 1]);
+      if (each) each(x, y);
+      if (pen) ctx.lineTo(x, y); else { ctx.moveTo(x, y); pen = true; }
+    }
+  }
+  state.tracePath = tracePath;  // for the ghost of the plan (ghost.js)
+
+  function follow() {
+    // Keep the drawing in view: pan when the bounded parts leave the middle of the picture.
+    const [lo, hi] = fillSpan();
     if (!isFinite(lo)) return;
     const [x0, x1] = state.view, w = x1 - x0, margin = 0.1 * w;
     let shift = 0;
@@ -500,13 +505,7 @@
         const [x, y] = T.toPx(p[0], p[1]);
         ctx.fillStyle = s.color; ctx.font = "12px sans-serif"; ctx.fillText(s.text, x, y);
       } else {
-        ctx.beginPath();
-        let pen = false;
-        for (let i = 0; i < p.length; i += 2) {
-          if (p[i] === null || p[i + 1] === null) { pen = false; continue; }
-          const [x, y] = T.toPx(p[i], p[i + 1]);
-          if (pen) ctx.lineTo(x, y); else { ctx.moveTo(x, y); pen = true; }
-        }
+        tracePath(ctx, T, p);
         if (s.kind === "fill") {
           ctx.closePath(); ctx.fillStyle = s.color; ctx.fill();
           if (s.edge) { ctx.strokeStyle = s.edge; ctx.lineWidth = s.width * pt; ctx.stroke(); }
@@ -533,11 +532,7 @@
     return [(ev.clientX - r.left) * cv.width / r.width, (ev.clientY - r.top) * cv.height / r.height];
   }
   function bodyCentre() {
-    let lo = Infinity, hi = -Infinity;
-    for (const s of state.shapes.values()) {
-      if (!s.bounds || s.kind !== "fill") continue;
-      for (let i = 0; i < s.points.length; i += 2) if (s.points[i] !== null) { lo = Math.min(lo, s.points[i]); hi = Math.max(hi, s.points[i]); }
-    }
+    const [lo, hi] = fillSpan();
     return isFinite(lo) ? (lo + hi) / 2 : 0;
   }
 

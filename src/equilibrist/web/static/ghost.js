@@ -35,15 +35,7 @@
     let sx = 0, sy = 0, k = 0;
     ctx.save();
     for (const s of [...f.ghost].sort((a, b) => a.z - b.z)) {
-      const p = s.points;
-      ctx.beginPath();
-      let pen = false;
-      for (let i = 0; i < p.length; i += 2) {
-        if (p[i] === null || p[i + 1] === null) { pen = false; continue; }
-        const [x, y] = T.toPx(p[i], p[i + 1]);
-        sx += x; sy += y; k += 1;
-        if (pen) ctx.lineTo(x, y); else { ctx.moveTo(x, y); pen = true; }
-      }
+      pg.tracePath(ctx, T, s.points, (x, y) => { sx += x; sy += y; k += 1; });
       ctx.setLineDash([5, 4]);
       ctx.strokeStyle = GHOST;
       if (s.kind === "fill") {

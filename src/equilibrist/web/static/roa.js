@@ -17,17 +17,12 @@
 
   function status(text) { $("roa-status").textContent = text; }
 
-  function show() {
-    view.open = true;
-    $("roa-view").hidden = false;
-    $("roa-open").setAttribute("aria-expanded", "true");
+  function setOpen(open) {
+    view.open = open;
+    $("roa-view").hidden = !open;
+    $("roa-open").setAttribute("aria-expanded", String(open));
   }
-
-  function close() {
-    view.open = false;
-    $("roa-view").hidden = true;
-    $("roa-open").setAttribute("aria-expanded", "false");
-  }
+  const show = () => setOpen(true), close = () => setOpen(false);
 
   function clear(text) {
     view.slice = null; view.cert = null; view.note = null; view.image = null; view.trail = [];
