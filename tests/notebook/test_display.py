@@ -155,3 +155,13 @@ def test_an_animation_plays_inline_as_a_video() -> None:
     assert shown.data[4:8] == b"ftyp"  # the MP4 file's first box
     page = shown._repr_html_()
     assert page.startswith("<video") and "base64," in page
+
+
+def test_a_study_shows_its_summary_plot(show: DisplayFormatter, tmp_path) -> None:
+    from equilibrist.study import make_study, run_study
+
+    study = make_study("cartpole", vary={"m_p": [0.1, 0.2]}, runs=2, duration=0.2,
+                       x0={"theta": [-0.05, 0.05]}, metrics="basic")
+    done = run_study(study, tmp_path / "study.parquet")
+    width, height = _png_size(_bundle(show, done)["image/png"])
+    assert width > 200 and height > 150

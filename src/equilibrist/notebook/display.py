@@ -1,5 +1,5 @@
 """How each object a user holds shows in Jupyter: the MIME bundles of systems, linear
-models, designs, compensators, results, batches and figures.
+models, designs, compensators, results, batches, studies and figures.
 
 :func:`register` tells IPython's display formatter about the types by their module and
 name, so that nothing is imported until an object of that type is shown; ``import
@@ -29,6 +29,7 @@ if TYPE_CHECKING:
     from equilibrist.sim.batch import MonteCarloResult, RegionOfAttraction
     from equilibrist.sim.batch_result import BatchResult
     from equilibrist.sim.result import SimResult
+    from equilibrist.study.runner import StudyRun
 
 Bundle = dict[str, str]
 
@@ -257,6 +258,20 @@ def batch_bundle(batch: BatchResult | MonteCarloResult | RegionOfAttraction) -> 
     return figure_bundle(plot_batch(batch, dpi=INLINE_DPI))
 
 
+def study_bundle(run: StudyRun) -> Bundle:
+    """A study that ran: its first metric over the quantities it varied (its summary plot)."""
+    import tempfile
+    from pathlib import Path
+
+    from equilibrist.study.plot import plot_study
+    from equilibrist.study.store import read_study
+
+    table, study = read_study(run.out)
+    with tempfile.TemporaryDirectory() as folder:
+        path = plot_study(table, study, Path(folder) / "study.png", dpi=INLINE_DPI)
+        return {"image/png": base64.b64encode(path.read_bytes()).decode("ascii")}
+
+
 #: What shows each type: (module, class name, the function making its bundle).
 FORMATTERS: tuple[tuple[str, str, Callable[..., Bundle]], ...] = (
     ("equilibrist.numeric.system", "System", system_bundle),
@@ -267,6 +282,7 @@ FORMATTERS: tuple[tuple[str, str, Callable[..., Bundle]], ...] = (
     ("equilibrist.sim.batch_result", "BatchResult", batch_bundle),
     ("equilibrist.sim.batch", "MonteCarloResult", batch_bundle),
     ("equilibrist.sim.batch", "RegionOfAttraction", batch_bundle),
+    ("equilibrist.study.runner", "StudyRun", study_bundle),
     ("matplotlib.figure", "Figure", figure_bundle),
 )
 
