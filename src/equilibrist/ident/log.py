@@ -1,21 +1,10 @@
 """A rig's log: the time, the inputs and the measured outputs, checked against a system.
 
-The format (what ``equilibrist simulate --out run.csv`` writes, and what a
-rig's logger is asked to write): a CSV file with one header row, then one
-row per sample, comma-separated.
-
-- ``t``: the sample time [s], strictly increasing;
-- one column per input of the system, named as the system names it (the
-  input that acted on the plant from this sample to the next: zero-order
-  hold);
-- one column per measured output, named after the state it measures.
-
-A header may carry the unit in brackets (``theta [rad]``); a unit given
-must be the system's (SYSTEMS.md). Lines starting with ``#`` are comments.
-Columns that a simulated run adds beside the log (``<state>_true``,
-``<state>_hat``, ``<input>_commanded``, ``<input>_saturated``,
-``<output>_reference``) are recognised and not used; any other column is an
-error, so a log of another system is never fitted by mistake.
+A CSV file (``docs/identification.md``, "The log"): a header row, then one row a sample:
+``t`` strictly increasing, one column per input (held until the next sample), one per
+measured state; a unit given in brackets must be the system's, ``#`` starts a comment. The
+columns a simulated run adds (:data:`EXTRA_SUFFIXES`) are recognised and not used; any
+other column is an error, so a log of another system is never fitted by mistake.
 """
 
 from __future__ import annotations

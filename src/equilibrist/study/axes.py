@@ -6,7 +6,7 @@ ranges of the initial states; used by :mod:`equilibrist.study.spec`.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -58,6 +58,22 @@ def _whole(value: object, what: str, problems: list[str], *, minimum: int = 1) -
     return v
 
 
+def _low_high(parts: Sequence[object], what: str, shown: str, problems: list[str], *,
+              counted: bool) -> tuple[float, float, int | None] | None:
+    """``LOW``, ``HIGH`` (and ``N`` when *counted*) of a range's *parts*, or None after
+    saying what is wrong (a reversed range among it)."""
+    before = len(problems)
+    lo = _number(parts[0], f"{what} LOW", problems)
+    hi = _number(parts[1], f"{what} HIGH", problems)
+    n = _whole(parts[2], f"{what} N", problems) if counted else None
+    if len(problems) > before or lo is None or hi is None:
+        return None
+    if lo > hi:
+        problems.append(f"{shown}: reversed range, LOW {lo:g} is above HIGH {hi:g}")
+        return None
+    return lo, hi, n
+
+
 def _parse_values(name: str, value: object, sampled: bool, problems: list[str]
                   ) -> tuple[tuple[object, ...], float | None, float | None, bool] | None:
     """``(values, low, high, log)`` of an axis from its text, list or table."""
@@ -102,15 +118,10 @@ def _parse_values(name: str, value: object, sampled: bool, problems: list[str]
                  if sampled and len(parts) == 3 else "")
         problems.append(f"{what}={text}: expected {form}{extra}")
         return None
-    before = len(problems)
-    lo = _number(parts[0], f"{what} LOW", problems)
-    hi = _number(parts[1], f"{what} HIGH", problems)
-    count = None if sampled else _whole(parts[2], f"{what} N", problems)
-    if len(problems) > before or lo is None or hi is None:
+    bounds = _low_high(parts, what, f"{what}={text}", problems, counted=not sampled)
+    if bounds is None:
         return None
-    if lo > hi:
-        problems.append(f"{what}={text}: reversed range, LOW {lo:g} is above HIGH {hi:g}")
-        return None
+    lo, hi, count = bounds
     if lo == hi:
         problems.append(f"{what}={text}: empty range, LOW equals HIGH (give one value as {name}={lo:g})")
         return None
@@ -226,16 +237,11 @@ def _ranges(system: System, given: Mapping[str, object], option: str, problems: 
         if len(parts) != (3 if counted else 2):
             problems.append(f"{option} {name}={value}: expected {form}")
             continue
-        before = len(problems)
-        lo = _number(parts[0], f"{option} {name} LOW", problems)
-        hi = _number(parts[1], f"{option} {name} HIGH", problems)
-        n = _whole(parts[2], f"{option} {name} N", problems) if counted else 1
-        if len(problems) > before or lo is None or hi is None or n is None:
-            continue
-        if lo > hi:
-            problems.append(f"{option} {name}={value}: reversed range, LOW {lo:g} is above HIGH {hi:g}")
-            continue
-        out[name] = (lo, hi, n) if counted else (lo, hi)
+        bounds = _low_high(parts, f"{option} {name}", f"{option} {name}={value}", problems,
+                           counted=counted)
+        if bounds is not None:
+            lo, hi, n = bounds
+            out[name] = (lo, hi, n) if n is not None else (lo, hi)
     if counted and out:
         cells = math.prod(int(v[2]) for v in out.values())
         if cells > MAX_ROA_STATES:

@@ -1,21 +1,12 @@
 """The drawing of a system that has no hand-drawn scene: its kinematic tree.
 
-A derivation that records the mechanism's points (joint anchors and centres
-of mass, :attr:`~equilibrist.mechanics.model.SymbolicModel.points`) and the
-links between them can be drawn without a picture made for it: every model
-read from an MJCF or URDF file records them. The links are drawn as bars
-between the points, each centre of mass as a disc whose area grows with the
-body's share of the mass, each joint anchor as a pivot.
-
-The picture is a projection onto one of the planes xz, yz or xy of the
-model's world: the plane the motion is in when the points move in one
-(nothing moves along the third axis, however the rig was drawn: z up, or
-y up), else the one in which the points move most (a vertical one, xz or
-yz, when it shows at least 80 % of the most). The motion is
-sampled at fixed, seeded states around the operating point (each
-coordinate up to its fall region, or 0.5 rad or 0.25 m either side), so the
-view does not depend on the run being shown and stays the same from frame
-to frame. The input gauges are drawn by the frame renderer.
+A derivation that records the mechanism's points and links (every MJCF or URDF model) is
+drawn as bars between the points, each centre of mass a disc whose area grows with the
+body's share of the mass, each joint anchor a pivot. The picture is a projection onto the
+plane the motion is in (nothing moves along the third world axis), else the one in which
+the points move most (a vertical one when it shows at least 80 % of the most); the motion
+is sampled at fixed, seeded states around the operating point, so the view stays the same
+from frame to frame, whatever run is shown.
 """
 
 from __future__ import annotations
