@@ -74,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--timeout {args.timeout}: expected seconds in (0, 60]")
     target = get(args.target)
     target.check_tools()
-    kind = kinds.get(args.controller or "lqg")
+    # --policy FILE alone runs the trained network, as simulate does.
+    kind = kinds.get(args.controller or ("policy" if getattr(args, "policy", None) else "lqg"))
     if kind.open_loop:
         raise UsageError(f"--controller {kind.name} is the open loop: there is no controller "
                          "on a chip")

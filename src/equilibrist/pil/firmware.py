@@ -233,12 +233,13 @@ def _compile(work: Path, target: Target, defines: tuple[str, ...]) -> tuple[int,
     _run([cxx, *flags, *_CXX_FLAGS, *defines, "-I.", "-x", "c++", "-include", HEADER,
           "-c", SKETCH, "-o", "sketch.o"], work, what)
     objects.append("sketch.o")
-    try:
+    linked = subprocess.run([cc, *flags, *link, "-o", "firmware.elf", *objects, "-lm"], cwd=work,
+                            capture_output=True, text=True, timeout=600, check=False)
+    if linked.returncode != 0:
+        over = re.findall(r"region `(\w+)' overflowed by (\d+) bytes", linked.stderr)
+        if over:
+            raise DoesNotFit(_overflow(work, size, objects, over, target))
         _run([cc, *flags, *link, "-o", "firmware.elf", *objects, "-lm"], work, what)
-    except PILError as exc:
-        if "overflow" in str(exc):
-            raise DoesNotFit(str(exc)) from None
-        raise
     text, data, bss = (int(v) for v in _run([size, "firmware.elf"], work, what)
                        .splitlines()[1].split()[:3])
     paint = 0
@@ -251,3 +252,14 @@ def _compile(work: Path, target: Target, defines: tuple[str, ...]) -> tuple[int,
             raise PILError(f"{what}: the linked firmware has no _end symbol")
         paint = int(match.group(1), 16) & 0xFFFF
     return text + data, data + bss, paint
+
+
+def _overflow(work: Path, size: str, objects: list[str], over: list[tuple[str, str]],
+              target: Target) -> str:
+    """The linker's refusal in figures: what the objects need against the chip's memories."""
+    totals = _run([size, "-t", *objects], work, "measuring the objects").splitlines()[-1].split()
+    text, data, bss = (int(v) for v in totals[:3])
+    said = ", ".join(f"region {name} overflowed by {int(n):,} bytes" for name, n in over)
+    return (f"the objects need {text + data:,} bytes of flash (of {target.flash_bytes:,}) and "
+            f"{data + bss:,} of static RAM (of {target.ram_bytes:,}), before the C library's; "
+            f"the linker: {said}")

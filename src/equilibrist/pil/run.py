@@ -102,7 +102,7 @@ def firmware_for(controller: object, *, system: System, target: Target, precisio
     try:
         return build(sources, target)
     except DoesNotFit as exc:
-        data = ("" if sources.host_data is None else
+        data = ("" if sources.host_data is None or sources.host_data <= target.ram_bytes else
                 f"its static data is {sources.host_data:,} bytes in float64 (make size on this "
                 f"machine), over the {target.ram_bytes:,} bytes of RAM; ")
         raise DoesNotFit(f"{label} does not fit the {target.name} ({target.chip}): {data}"
