@@ -21,11 +21,13 @@ from support import require
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind", ["lqr", "lqg", "swingup", "mpc", "tvlqr"])
+@pytest.mark.parametrize("kind", ["lqr", "lqg", "swingup", "mpc", "tvlqr", "policy"])
 def test_every_kind_runs_on_the_cortex_m4f_as_simulate(kind: str, tmp_path: Path) -> None:
     extra: tuple[str, ...] = ()
     if kind == "tvlqr":
         extra = ("--trajectory", _upright_plan(tmp_path))
+    if kind == "policy":
+        extra = ("--policy", _network(tmp_path))
     run = pil(kind, "cortex-m4f", *extra)
     same_commands(run, 1e-9)  # double in the export, float64 on the link
     figures_are_the_chips(run, 168_000_000, 1_048_576, 131_072)
@@ -71,3 +73,15 @@ def _upright_plan(folder: Path) -> str:
         mid_inputs=np.tile(op.u, (knots, 1)), converged=True, cost=0.0, max_defect=0.0,
         solve_time=0.0, iterations=0, solver="held")
     return str(plan.save(folder / "upright.npz"))
+
+
+def _network(folder: Path) -> str:
+    """A small trained-policy network (a PyTorch state dict, 2 x 8 tanh units)."""
+    import torch
+
+    torch.manual_seed(0)
+    net = torch.nn.Sequential(torch.nn.Linear(4, 8), torch.nn.Tanh(), torch.nn.Linear(8, 8),
+                              torch.nn.Tanh(), torch.nn.Linear(8, 1))
+    path = folder / "policy.pt"
+    torch.save(net.state_dict(), path)
+    return str(path)
