@@ -18,7 +18,7 @@ from support import require
 DURATION = "0.05"
 
 
-def pil(kind: str, target: str, *extra: str) -> PILRun:
+def pil(kind: str, target: str, *extra: str, timeout: float = 20.0) -> PILRun:
     for tool, _ in get(target).tools:
         require(tool)
     args = build_parser("pil").parse_args(
@@ -32,7 +32,7 @@ def pil(kind: str, target: str, *extra: str) -> PILRun:
     check_fits(firmware, kind)
     x0 = start_of({"controller": controller}, parse_x0(args.x0))
     return run_pil(system, controller, firmware, label=kind, precision=precision,
-                   options=options, x0=x0, timeout=20)
+                   options=options, x0=x0, timeout=timeout)
 
 
 def elf_sections(path: Path) -> tuple[int, int]:

@@ -23,3 +23,39 @@ def test_the_uno_runs_the_sketch_within_float32_and_counts_its_cycles(kind: str)
     for step in run.steps:
         assert step.emulator_count is not None
         assert abs(step.count - step.emulator_count) <= 8
+
+
+@pytest.mark.slow
+def test_a_chip_that_stops_answering_ends_the_run_as_hil_says(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The emulator stopped (SIGSTOP) after the third step, as a hung board: the lockstep ends
+    on hil's fault, with the samples so far, and the emulator is stopped for good after."""
+    import os
+    import signal
+    import threading
+    import time
+    from contextlib import contextmanager
+
+    from equilibrist.pil import run as pil_run
+    from equilibrist.pil.emulator import emulate
+
+    @contextmanager
+    def hanging(firmware):  # type: ignore[no-untyped-def]
+        with emulate(firmware) as emulation:
+            def stop() -> None:
+                while len(emulation.steps) < 3 and emulation.process.poll() is None:
+                    time.sleep(0.001)
+                os.kill(emulation.process.pid, signal.SIGSTOP)
+
+            watcher = threading.Thread(target=stop, daemon=True)
+            watcher.start()
+            try:
+                yield emulation
+            finally:
+                watcher.join(5)
+                os.kill(emulation.process.pid, signal.SIGCONT)
+
+    monkeypatch.setattr(pil_run, "emulate", hanging)
+    run = pil("lqr", "uno", timeout=0.5)
+    assert run.fault is not None and "did not answer within 0.5 s" in run.fault
+    assert 3 <= run.result.n_rows < 11 and len(run.steps) >= 3
