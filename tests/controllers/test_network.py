@@ -96,3 +96,24 @@ def test_bad_files_are_one_line(tmp_path) -> None:
     torch.save(_mlp(3, torch.nn.Tanh, seed=0).state_dict(), wrong)
     with pytest.raises(KindError, match=r"takes 3 observation\(s\).*4 \(balance\), 5 \(swingup\)"):
         network_controller(get_system("cartpole"), read_network(wrong), rate=200.0)
+
+
+def test_policy_alone_picks_the_kind_on_the_command_line(tmp_path, capsys) -> None:
+    """``--policy FILE`` without ``--controller`` runs the network; a missing file is one
+    line and exit status 2, and nothing is written."""
+    import json
+
+    from equilibrist.cli.main import main
+
+    path = tmp_path / "net.pt"
+    torch.save(_mlp(4, torch.nn.Tanh, seed=2).state_dict(), path)
+    runs = []
+    for args in (["--policy", str(path)], ["--controller", "policy", "--policy", str(path)], []):
+        assert main(["simulate", "cartpole", *args, "--duration", "0.2", "--json"]) == 0
+        runs.append(json.loads(capsys.readouterr().out))
+    assert runs[0] == runs[1] != runs[2]  # the network's run, not the default LQG's
+    assert main(["export", "cartpole", "--policy", str(tmp_path / "none.zip"),
+                 "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no such file" in err[0]
+    assert not (tmp_path / "out").exists()
