@@ -20,6 +20,9 @@ $(STAMP): pyproject.toml setup.py $(wildcard src/equilibrist/native/daqp/src/*.c
 	@# write its caches (PYTHONDONTWRITEBYTECODE), every process would otherwise compile
 	@# sympy, scipy and the rest again (6 s of CPU before a plan, each time).
 	$(PY) -m pip install --quiet uv
+	@# The rl extra (in dev) brings PyPI's Linux PyTorch with its CUDA libraries (about 5 GB;
+	@# its libraries link them, so they cannot be left out, and the CPU-only index is not
+	@# PyPI): from a warm uv cache they are linked in seconds, byte-compiled in about 30 s.
 	$(VENV)/bin/uv pip install --quiet --compile-bytecode --python $(PY) -e '.[dev]'
 	$(PY) -m compileall -q src/equilibrist
 	@touch $(STAMP)
