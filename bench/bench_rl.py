@@ -12,7 +12,8 @@ swing-up) on the same starts. The curves go to ``--out`` (JSON) and a figure
 
 Usage: ``python bench/bench_rl.py ppo [--seeds 0 1 2] [--steps N] [--every N]``
 (``sac`` for the swing-up); ``python bench/bench_rl.py policy-c``: an exported 2x64 policy's
-C step time, ``make check`` and ``make size``. Goals: PPO balances the cart-pole within
+C step time, ``make check`` and ``make size``; ``python bench/bench_rl.py throughput``: PPO's
+training steps per second over 16 copies, the adapter against ``DummyVecEnv``. Goals: PPO balances the cart-pole within
 100,000 steps (no episode ends early, the return >= 0.9 of the LQG's on the same starts),
 on every seed; the exported policy steps in under 20 us and equals PyTorch's forward
 pass to 1e-6.
@@ -155,14 +156,47 @@ def policy_step(folder: Path) -> dict[str, float]:
     return {"us_per_step": us, "max_abs_error": float(np.abs(got - want).max())}
 
 
+def throughput(copies: int = 16, rollouts: int = 6) -> dict[str, float]:
+    """PPO's training steps per second on *copies* copies of ``cartpole-balance-v1``: the
+    adapter over the native vector environment against Stable-Baselines3's ``DummyVecEnv``
+    of as many single environments (``make_vec_env``), the same PPO (rollouts of 128 steps a
+    copy, one epoch), one thread, the best of interleaved repetitions."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from equilibrist.envs.sb3 import sb3_vec_env
+
+    torch.set_num_threads(1)
+    env_id = "equilibrist/cartpole-balance-v1"
+    makers = {"adapter": lambda: sb3_vec_env(env_id, num_envs=copies, seed=0),
+              "DummyVecEnv": lambda: make_vec_env(env_id, n_envs=copies, seed=0)}
+    best = dict.fromkeys(makers, 0.0)
+    steps = copies * 128 * rollouts
+    for _ in range(3):
+        for name, make in makers.items():
+            model = PPO("MlpPolicy", make(), n_steps=128, batch_size=copies * 128, n_epochs=1,
+                        seed=0, device="cpu")
+            model.learn(copies * 128)  # warm
+            start = time.perf_counter()
+            model.learn(steps, reset_num_timesteps=False)
+            best[name] = max(best[name], steps / (time.perf_counter() - start))
+    print(f"PPO on {copies} copies: adapter {best['adapter']:,.0f} steps/s, DummyVecEnv "
+          f"{best['DummyVecEnv']:,.0f} steps/s, ratio {best['adapter'] / best['DummyVecEnv']:.2f}")
+    return best
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("recipe", choices=[*sorted(RECIPES), "policy-c"])
+    parser.add_argument("recipe", choices=[*sorted(RECIPES), "policy-c", "throughput"])
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--steps", type=int, default=None)
     parser.add_argument("--every", type=int, default=10_000)
     parser.add_argument("--out", default=None)
     args = parser.parse_args()
+    if args.recipe == "throughput":
+        throughput()
+        return
     if args.recipe == "policy-c":
         import tempfile
 
