@@ -7,7 +7,11 @@ that has an input and for each task it offers (:mod:`equilibrist.tasks`):
     e.g. ``equilibrist/cartpole-balance-v0``, ``equilibrist/cartpole-swingup-v0``;
 ``equilibrist/balance-v0``, ``equilibrist/swingup-v0``
     the task on a system given by name or file:
-    ``gymnasium.make("equilibrist/balance-v0", system="robot.xml")``.
+    ``gymnasium.make("equilibrist/balance-v0", system="robot.xml")``;
+``...-v1``
+    each of them as a task to learn (:mod:`equilibrist.envs.learnable`): the
+    whole state observed in Bryson units, float32 spaces, dm_control's
+    cart-pole reward in ``[0, 1]`` per step. What follows is ``-v0``'s.
 
 ``gymnasium.make("equilibrist.envs:equilibrist/cartpole-balance-v0")``
 imports this package by itself. Every id has a native vector environment:

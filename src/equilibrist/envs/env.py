@@ -188,6 +188,11 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         itself bounded by its limits.
     alive_bonus : float
         Balance reward per second inside the region.
+    version : {0, 1}
+        The task's version: 1 is the learnable form (:mod:`equilibrist.envs.learnable`),
+        what the ``-v1`` ids pass.
+    dtype : numpy.float32 or numpy.float64, optional
+        The spaces' and observations' type (default float64, float32 from version 1).
     at : mapping, optional
         ``{state: value}``: the balance task about the equilibrium with these
         states (its other components solved, as ``design(at=...)``): the
