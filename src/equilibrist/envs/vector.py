@@ -157,8 +157,8 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._flags_shape = (2, N)
         self._renderer = Renderer(core, "rgb_array") if render_mode is not None else None
         self._learnable = core.learnable
-        # The copies whose episode ended at the last step: this step restarts them.
-        self._due = np.zeros(N, dtype=np.bool_)
+        # The copies whose episode ended at the last step (this step restarts them), or None.
+        self._due: np.ndarray | None = None
 
     # -- state of the copies ---------------------------------------------------------
     @property
@@ -208,7 +208,7 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             self._seed(seed)
         obs = self._steps.reset_many()
         self._step_fn = self._ways  # set, it also says reset was called
-        self._due[:] = False
+        self._due = None
         return self._observed(obs), self._reset_info(np.ones(self.num_envs, dtype=np.bool_))
 
     def restart(self, mask: np.ndarray) -> tuple[np.ndarray, dict[str, Any]]:
@@ -220,7 +220,10 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             raise EnvError("call reset() before restart()")
         rows = np.flatnonzero(mask)
         self._steps.reset_rows(rows)
-        self._due[rows] = False
+        if self._due is not None:
+            self._due[rows] = False
+            if not self._due.any():
+                self._due = None
         return self._observed(self._steps.obs.copy()), self._reset_info(np.asarray(mask, bool))
 
     def _reset_info(self, mask: np.ndarray) -> dict[str, Any]:
@@ -262,15 +265,17 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
             self._actions = a.copy()
         # Fresh arrays every step, as Gymnasium's own vector environments return.
         flags = steps.flags.copy()
+        # One test a step when no copy ends (a step of 16 copies takes microseconds).
         restarted = self._due
-        self._due = flags[0] | flags[1]
-        info: dict[str, Any] = self._reset_info(restarted) if restarted.any() else {}
+        self._due = flags[0] | flags[1] if flags.any() else None
+        info: dict[str, Any] = {} if restarted is None else self._reset_info(restarted)
         learn = self._learnable
         if learn is None:
             obs = steps.obs.copy() if self.core.dtype is _F64 else steps.obs.astype(self.core.dtype)
             return obs, steps.rewards.copy(), flags[0], flags[1], info
         rewards = learn.reward(self.core.state_of(self._fs), self.core.physical_input(a))
-        rewards[restarted] = 0.0
+        if restarted is not None:
+            rewards[restarted] = 0.0
         return learn.observe(steps.obs), rewards, flags[0], flags[1], info
 
     def _timed_step(self) -> int:
