@@ -1,4 +1,5 @@
-"""Processor in the loop on the Cortex-M4F: every kind in QEMU, in lockstep, against ``simulate``.
+"""Processor in the loop on the Cortex-M4F: every kind in QEMU, in lockstep, against ``simulate``
+(the MPC in ``test_run_mpc.py``).
 
 The independent truths: ``simulate`` of the same controller in Python (the chip's commands
 equal it within the chip's precision: float64 on the Cortex-M4F with the export in double,
@@ -15,13 +16,9 @@ import numpy as np
 import pytest
 from pil_runs import figures_are_the_chips, pil, same_commands
 
-from equilibrist.cli.main import main
-from equilibrist.pil.targets import get
-from support import require
-
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind", ["lqr", "lqg", "swingup", "mpc", "tvlqr", "policy"])
+@pytest.mark.parametrize("kind", ["lqr", "lqg", "swingup", "tvlqr", "policy"])
 def test_every_kind_runs_on_the_cortex_m4f_as_simulate(kind: str, tmp_path: Path) -> None:
     extra: tuple[str, ...] = ()
     if kind == "tvlqr":
@@ -32,22 +29,6 @@ def test_every_kind_runs_on_the_cortex_m4f_as_simulate(kind: str, tmp_path: Path
     same_commands(run, 1e-9)  # double in the export, float64 on the link
     figures_are_the_chips(run, 168_000_000, 1_048_576, 131_072)
     assert run.figures()["cycles_exact"] is False and run.fits
-
-
-@pytest.mark.slow
-def test_the_mpc_does_not_fit_the_uno_in_one_line(tmp_path: Path,
-                                                  capsys: pytest.CaptureFixture[str]) -> None:
-    """After the MPC's run on the Cortex-M4F (this module's order): the same export's sketch,
-    from the cache, refused by the Uno's compiler, said in one line with its figures."""
-    for tool, _ in get("uno").tools:
-        require(tool)
-    out = tmp_path / "run.npz"
-    assert main(["pil", "cartpole", "--controller", "mpc", "--target", "uno", "--duration",
-                 "0.05", "--out", str(out)]) == 2
-    lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 1 and "MPC does not fit the uno" in lines[0]
-    assert "bytes of RAM" in lines[0] and "2,048" in lines[0]
-    assert not out.exists()
 
 
 @pytest.mark.slow

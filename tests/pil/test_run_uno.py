@@ -58,4 +58,5 @@ def test_a_chip_that_stops_answering_ends_the_run_as_hil_says(
     monkeypatch.setattr(pil_run, "emulate", hanging)
     run = pil("lqr", "uno", timeout=0.5)
     assert run.fault is not None and "did not answer within 0.5 s" in run.fault
-    assert 3 <= run.result.n_rows < 11 and len(run.steps) >= 3
+    # The third step measured; its answer may or may not have left before the stop.
+    assert 2 <= run.result.n_rows < 11 and len(run.steps) >= 3

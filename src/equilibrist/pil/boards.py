@@ -639,7 +639,7 @@ SECTIONS
     .data : {{ _sdata = .; *(.data*) . = ALIGN(4); _edata = .; }} > RAM AT > FLASH
     .bss (NOLOAD) : {{ _sbss = .; *(.bss*) *(COMMON) . = ALIGN(4); _ebss = .; }} > RAM
     _end = .;
-    end = .;  /* the heap (malloc: DAQP's workspace) grows from here towards the stack */
+    end = .;  /* the heap (malloc) grows from here towards the stack */
     ASSERT(_ebss <= _stack_bottom, "the firmware's static data overlap its stack")
 }}
 """

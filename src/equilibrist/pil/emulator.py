@@ -33,7 +33,7 @@ from typing import IO
 
 from equilibrist.errors import quote_outside
 from equilibrist.pil import boards
-from equilibrist.pil.firmware import Firmware, _folder
+from equilibrist.pil.firmware import Firmware, cache_folder
 from equilibrist.pil.targets import PILError, Target
 
 #: How long the emulator may take to open its pseudo-terminal [s].
@@ -70,10 +70,10 @@ def harness() -> str:
         raise PILError("--target uno needs a C compiler for its simavr harness: install gcc "
                        "(Debian: apt-get install gcc)")
     digest = hashlib.sha256(boards.SIMAVR_HARNESS.encode()).hexdigest()[:16]
-    program = _folder() / f"pil_simavr-{digest}"
+    program = cache_folder() / f"pil_simavr-{digest}"
     if program.exists():
         return str(program)
-    work = Path(tempfile.mkdtemp(prefix=".build-simavr-", dir=_folder()))
+    work = Path(tempfile.mkdtemp(prefix=".build-simavr-", dir=cache_folder()))
     try:
         (work / "pil_simavr.c").write_text(boards.SIMAVR_HARNESS)
         done = subprocess.run(["cc", "-O2", "-o", "pil_simavr", "pil_simavr.c", "-lsimavr"],

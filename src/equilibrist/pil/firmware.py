@@ -141,7 +141,8 @@ def _version(command: str) -> str:
     return (done.stdout.splitlines() or [command])[0]
 
 
-def _folder() -> Path:
+def cache_folder() -> Path:
+    """``pil/`` in the cache folder: the export's sketches, the firmware, the simavr harness."""
     from equilibrist.numeric.cache import cache_dir
 
     folder = cache_dir() / "pil"
@@ -165,7 +166,7 @@ def firmware_key(sources: Sources, target: Target) -> str:
 
 def cached(key: str, target: Target) -> Firmware | None:
     """The firmware of *key* from the cache, or None."""
-    folder = _folder() / f"{target.name}-{key}"
+    folder = cache_folder() / f"{target.name}-{key}"
     try:
         meta = json.loads((folder / "firmware.json").read_text())
         return Firmware(target=target, folder=folder, flash_bytes=int(meta["flash_bytes"]),
@@ -181,7 +182,7 @@ def build(sources: Sources, target: Target) -> Firmware:
     done = cached(key, target)
     if done is not None:
         return done
-    root = _folder()
+    root = cache_folder()
     work = Path(tempfile.mkdtemp(prefix=f".build-{target.name}-", dir=root))
     try:
         for name, text in {**sources.files, **_board(target)}.items():

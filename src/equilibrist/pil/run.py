@@ -62,12 +62,12 @@ def sources_for(controller: object, *, system: System, precision: str) -> Source
 
     from equilibrist import __version__
     from equilibrist.export.writer import design_id, export_controller
-    from equilibrist.pil.firmware import _folder
+    from equilibrist.pil.firmware import cache_folder
 
     key = hashlib.sha256("\0".join(
         (str(_INDEX_REVISION), __version__, precision, design_id(controller), system.key,
          _code_digest())).encode()).hexdigest()[:32]
-    path = _folder() / f"sources-{key}.json"
+    path = cache_folder() / f"sources-{key}.json"
     try:
         kept = json.loads(path.read_text())
         return Sources(files=dict(kept["files"]), defines=tuple(kept["defines"]),
@@ -153,7 +153,7 @@ class PILRun:
 
     @property
     def heap_bytes(self) -> int:
-        """What the firmware allocated (DAQP's workspace) [bytes]."""
+        """What the firmware allocated with ``malloc`` (the Cortex-M's heap) [bytes]."""
         return max((s.heap_bytes for s in self.steps), default=0)
 
     @property
