@@ -16,6 +16,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 LONGEST_FIRST = (
     "test_ident_coverage.py", "test_hostile_cli.py", "test_hostile.py", "test_web_browser.py",
     "test_viz_systems.py", "test_viz_results.py", "test_hil.py", "test_swingup.py",
+    "test_run.py", "test_run_mpc.py",
     "test_mpc_export.py", "test_tvlqr.py", "test_web_protocol.py", "test_roa_certify.py",
     "test_export_size.py", "test_tvlqr_lqg.py", "test_web_tvlqr.py", "test_bits_cpu.py",
     "test_sim_systems.py", "test_sim_batch.py", "test_models_real.py", "test_user_systems.py",
