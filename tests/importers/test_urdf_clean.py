@@ -236,3 +236,14 @@ def test_tool_specific_content_is_named_never_read(tmp_path: Path) -> None:
     assert entry.spec.input_names == ("motor",)
     # The input is the torque at the joint (2 * the actuator's effort), within the joint's effort limit.
     assert (entry.spec.inputs[0].low, entry.spec.inputs[0].high) == (-2.0, 2.0)
+
+
+@pytest.mark.parametrize("encoding", ["utf-8", "utf-16"])
+def test_entity_declarations_are_refused_in_any_encoding(encoding: str) -> None:
+    from equilibrist.errors import DefinitionError
+    from equilibrist.importers.urdf_clean import parse_urdf
+
+    doc = (f'<?xml version="1.0" encoding="{encoding}"?>\n'
+           '<!DOCTYPE robot [<!ENTITY a "aaaaaaaaaa"><!ENTITY b "&a;&a;&a;&a;">]>\n<robot name="x">&b;</robot>')
+    with pytest.raises(DefinitionError, match=r"declares XML entities \(<!ENTITY>\), which are not expanded"):
+        parse_urdf("x.urdf", doc.encode(encoding))

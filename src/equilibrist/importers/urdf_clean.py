@@ -104,7 +104,7 @@ def parse_urdf(where: str, data: bytes) -> ET.Element:
     """The document's root element; entity declarations and malformed XML refused."""
     # Comments carry nothing; MuJoCo's lenient parser takes a "--" in one.
     stripped = re.sub(rb"<!--.*?-->", b"", data, flags=re.S)
-    if re.search(rb"<!ENTITY", stripped):
+    if _declares_entities(stripped):
         raise DefinitionError(
             f"{where}: the document declares XML entities (<!ENTITY>), which are not expanded: "
             "expected a URDF without a DOCTYPE's entities"
@@ -113,6 +113,29 @@ def parse_urdf(where: str, data: bytes) -> ET.Element:
         return ET.fromstring(stripped)
     except ET.ParseError as exc:
         raise DefinitionError(f"{where}: malformed XML: {exc}") from None
+
+
+class _EntityDeclared(Exception):
+    pass
+
+
+def _declares_entities(data: bytes) -> bool:
+    """Whether the document declares an entity: expat's own reading, whatever the encoding,
+    stopped at the first declaration (before any use could expand it)."""
+    from xml.parsers import expat
+
+    def refuse(*_: object) -> None:
+        raise _EntityDeclared
+
+    parser = expat.ParserCreate()
+    parser.EntityDeclHandler = refuse
+    try:
+        parser.Parse(data, True)
+    except _EntityDeclared:
+        return True
+    except expat.ExpatError:
+        return False  # malformed: ElementTree says where
+    return False
 
 
 def _split(tag: str) -> tuple[str, str]:
