@@ -136,6 +136,12 @@ CASES = {
         + "</robot>",
         "entities (<!ENTITY>), which are not expanded",
     ),
+    "entity_declaration_mjcf": (
+        "bad.xml",
+        '<?xml version="1.0"?>\n<!DOCTYPE mujoco [<!ENTITY m "1">]>\n'
+        + _mjcf(_PENDULUM.replace('mass="1"', 'mass="&m;"')),
+        "entities (<!ENTITY>), which are not expanded",
+    ),
     "world_as_child": (
         "bad.urdf",
         _URDF_HEAD + _URDF_JOINT

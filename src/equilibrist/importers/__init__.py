@@ -297,6 +297,9 @@ def _check_numbers(file: Path, content: bytes, depth: int = 0) -> None:
     import stat
     import xml.etree.ElementTree as ET
 
+    from equilibrist.importers.urdf_clean import refuse_entities
+
+    refuse_entities(file.name, content)  # before anything could expand one
     try:
         root = ET.fromstring(content)
     except ET.ParseError:

@@ -104,15 +104,20 @@ def parse_urdf(where: str, data: bytes) -> ET.Element:
     """The document's root element; entity declarations and malformed XML refused."""
     # Comments carry nothing; MuJoCo's lenient parser takes a "--" in one.
     stripped = re.sub(rb"<!--.*?-->", b"", data, flags=re.S)
-    if _declares_entities(stripped):
-        raise DefinitionError(
-            f"{where}: the document declares XML entities (<!ENTITY>), which are not expanded: "
-            "expected a URDF without a DOCTYPE's entities"
-        )
+    refuse_entities(where, stripped)
     try:
         return ET.fromstring(stripped)
     except ET.ParseError as exc:
         raise DefinitionError(f"{where}: malformed XML: {exc}") from None
+
+
+def refuse_entities(where: str, data: bytes) -> None:
+    """Refuse a document that declares XML entities (MJCF's too): none is ever expanded."""
+    if _declares_entities(data):
+        raise DefinitionError(
+            f"{where}: the document declares XML entities (<!ENTITY>), which are not expanded: "
+            "expected a model file without a DOCTYPE's entities"
+        )
 
 
 class _EntityDeclared(Exception):
