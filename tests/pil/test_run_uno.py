@@ -7,8 +7,20 @@ firmware's count of its Timer1, the ELF's section headers beside the linker's ``
 
 from __future__ import annotations
 
+import os
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 import pytest
 from pil_runs import figures_are_the_chips, pil, same_commands
+
+from equilibrist.pil import run as pil_run
+from equilibrist.pil.emulator import Emulation, emulate
+from equilibrist.pil.firmware import Firmware
+from equilibrist.pil.run import PILRun
 
 
 @pytest.mark.slow
@@ -29,34 +41,41 @@ def test_the_uno_runs_the_sketch_within_float32_and_counts_its_cycles(kind: str)
 def test_a_chip_that_stops_answering_ends_the_run_as_hil_says(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """The emulator stopped (SIGSTOP) after the third step, as a hung board: the lockstep ends
-    on hil's fault, with the samples so far, and the emulator is stopped for good after."""
-    import os
-    import signal
-    import threading
-    import time
-    from contextlib import contextmanager
-
-    from equilibrist.pil import run as pil_run
-    from equilibrist.pil.emulator import emulate
-
-    @contextmanager
-    def hanging(firmware):  # type: ignore[no-untyped-def]
-        with emulate(firmware) as emulation:
-            def stop() -> None:
-                while len(emulation.steps) < 3 and emulation.process.poll() is None:
-                    time.sleep(0.001)
-                os.kill(emulation.process.pid, signal.SIGSTOP)
-
-            watcher = threading.Thread(target=stop, daemon=True)
-            watcher.start()
-            try:
-                yield emulation
-            finally:
-                watcher.join(5)
-                os.kill(emulation.process.pid, signal.SIGCONT)
-
-    monkeypatch.setattr(pil_run, "emulate", hanging)
-    run = pil("lqr", "uno", timeout=0.5)
+    on hil's fault, with the samples so far."""
+    run = _interrupted(monkeypatch, signal.SIGSTOP)
     assert run.fault is not None and "did not answer within 0.5 s" in run.fault
     # The third step measured; its answer may or may not have left before the stop.
     assert 2 <= run.result.n_rows < 11 and len(run.steps) >= 3
+
+
+def _interrupted(monkeypatch: pytest.MonkeyPatch, sig: signal.Signals) -> PILRun:
+    """The Uno's LQR, with *sig* sent to its emulator once the firmware measured three steps."""
+
+    @contextmanager
+    def signalled(firmware: Firmware) -> Iterator[Emulation]:
+        with emulate(firmware) as emulation:
+            def send() -> None:
+                while len(emulation.steps) < 3 and emulation.process.poll() is None:
+                    time.sleep(0.001)
+                os.kill(emulation.process.pid, sig)
+
+            sender = threading.Thread(target=send, daemon=True)
+            sender.start()
+            try:
+                yield emulation
+            finally:
+                sender.join(5)
+                os.kill(emulation.process.pid, signal.SIGCONT)
+
+    monkeypatch.setattr(pil_run, "emulate", signalled)
+    return pil("lqr", "uno", timeout=0.5)
+
+
+@pytest.mark.slow
+def test_a_chip_that_resets_mid_run_ends_the_run_as_hil_says(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The chip reset (simavr's harness on SIGUSR1, as a brown-out) after the third step: it
+    starts again and says so, and the lockstep ends on hil's fault."""
+    run = _interrupted(monkeypatch, signal.SIGUSR1)
+    assert run.fault is not None and "reset during the run" in run.fault
+    assert 2 <= run.result.n_rows < 11
