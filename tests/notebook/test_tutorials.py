@@ -47,3 +47,10 @@ def test_tutorial_runs_top_to_bottom(path: Path, tmp_path: Path) -> None:
         errors = [o.get("text", "") for o in cell.outputs
                   if o.output_type == "stream" and o.name == "stderr"]
         assert errors == [], f"{path.name}: {cell.source[:60]!r} wrote to stderr: {errors}"
+        # A value shows itself (a picture, a table, a video), once: never as its bare text.
+        pictures = [o for o in cell.outputs if "image/png" in o.get("data", {})]
+        assert len(pictures) <= 1, f"{path.name}: {cell.source[:60]!r} shows a picture twice"
+        for output in cell.outputs:
+            plain = output.get("data", {}).get("text/plain", "")
+            assert not plain.startswith("<Figure size"), f"{path.name}: a figure shown as text"
+            assert " object at 0x" not in plain, f"{path.name}: {plain[:80]}"
