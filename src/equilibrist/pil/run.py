@@ -1,7 +1,7 @@
 """A processor-in-the-loop run: the firmware in its emulator closes the loop in lockstep.
 
-:func:`firmware_for` exports the controller and builds its sketch for the
-target (cached); :func:`run_pil` runs the firmware in the emulator and
+:func:`sources_for` exports the controller's sketch, :func:`firmware_for`
+builds it for the target (both cached); :func:`run_pil` runs the firmware in the emulator and
 closes the loop over the emulated UART with :mod:`equilibrist.hil`'s link
 and lockstep (:class:`~equilibrist.hil.run.DeviceController`), then runs
 ``simulate`` with the same controller in Python and compares the commands.
@@ -28,11 +28,13 @@ from equilibrist.pil.firmware import Firmware, Sources, build, sketch_sources
 from equilibrist.pil.targets import DoesNotFit, Target
 
 if TYPE_CHECKING:
+    from equilibrist.control.controller import AnyController
+    from equilibrist.hil.protocol import Hello
     from equilibrist.hil.run import DeviceController, HILRun
     from equilibrist.numeric.system import System
     from equilibrist.sim.result import SimResult
 
-#: Bumped when what :func:`firmware_for` keys its lookup on changes.
+#: Bumped when what :func:`sources_for` keys its lookup on changes.
 _INDEX_REVISION = 1
 
 
@@ -225,14 +227,14 @@ class PILRun:
                 f"{100 * worst / self.budget_cycles:.1f} %")
 
 
-def host_hello(system: System, controller: object, *, target: Target, rate: float,
-               tracking: bool) -> tuple[Any, tuple[str, ...]]:
+def host_hello(system: System, controller: AnyController, *, target: Target, rate: float,
+               tracking: bool) -> tuple[Hello, tuple[str, ...]]:
     """The host's hello for *controller* on *target*, and the outputs the device reads."""
     from equilibrist.control.controller import measured_outputs
     from equilibrist.export.writer import design_id
     from equilibrist.hil.protocol import Hello
 
-    outputs = measured_outputs(controller) or tuple(system.spec.outputs)  # type: ignore[arg-type]
+    outputs = measured_outputs(controller) or tuple(system.spec.outputs)
     nr = len(getattr(controller, "tracked_names", ())) if tracking else 0
     hello = Hello(real_size=target.payload_bytes, n=system.n_states, m=system.n_inputs,
                   p=len(outputs), references=nr, estimate=0, rate=float(rate),
@@ -255,7 +257,7 @@ def _connect(device: DeviceController) -> None:
                 raise
 
 
-def run_pil(system: System, controller: object, firmware: Firmware, *, label: str,
+def run_pil(system: System, controller: AnyController, firmware: Firmware, *, label: str,
             precision: str, options: Mapping[str, Any], x0: Mapping[str, float] | None = None,
             timeout: float = 1.0) -> PILRun:
     """Run *firmware* in its emulator against *system* in lockstep, and ``simulate`` beside it.
