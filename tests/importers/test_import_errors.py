@@ -142,6 +142,13 @@ CASES = {
         + _mjcf(_PENDULUM.replace('mass="1"', 'mass="&m;"')),
         "entities (<!ENTITY>), which are not expanded",
     ),
+    "bad_number_in_a_merged_link": (
+        "bad.urdf",
+        _URDF_HEAD + _URDF_JOINT
+        + '  <link name="tip"><inertial><mass value="0"/><origin xyz="0 0 one"/></inertial></link>\n'
+        + '  <joint name="tip_mount" type="fixed"><parent link="l1"/><child link="tip"/></joint>\n</robot>',
+        "<origin> xyz='0 0 one': expected 3 numbers separated by spaces",
+    ),
     "world_as_child": (
         "bad.urdf",
         _URDF_HEAD + _URDF_JOINT

@@ -202,7 +202,10 @@ def clean_urdf(file: Path, data: bytes) -> CleanUrdf:
     if missing:
         notes.append("mesh files not found, ignored (geometry is not modelled): " + ", ".join(missing))
     _world(where, root, notes)
-    stand_ins = _inertials(root, notes)
+    try:
+        stand_ins = _inertials(root, notes)
+    except DefinitionError as exc:
+        raise DefinitionError(f"{where}: {exc}") from None
     return CleanUrdf(root=root, text=ET.tostring(root), notes=tuple(notes), stand_ins=stand_ins,
                      rotor_inertias=rotors)
 
@@ -286,8 +289,8 @@ def _world(where: str, root: ET.Element, notes: list[str]) -> None:
         )
 
 
-def _rpy(text: str | None) -> np.ndarray:
-    r, p, y = _numbers(text, 3)
+def _rpy(origin: ET.Element | None) -> np.ndarray:
+    r, p, y = _numbers(origin, "rpy", 3)
     rx = np.array([[1, 0, 0], [0, math.cos(r), -math.sin(r)], [0, math.sin(r), math.cos(r)]])
     ry = np.array([[math.cos(p), 0, math.sin(p)], [0, 1, 0], [-math.sin(p), 0, math.cos(p)]])
     rz = np.array([[math.cos(y), -math.sin(y), 0], [math.sin(y), math.cos(y), 0], [0, 0, 1]])
@@ -295,14 +298,22 @@ def _rpy(text: str | None) -> np.ndarray:
     return rotation
 
 
-def _numbers(text: str | None, n: int) -> list[float]:
+def _numbers(element: ET.Element | None, key: str, n: int) -> list[float]:
+    """The *n* numbers of *element*'s attribute *key* (zeros where it is not given)."""
+    text = None if element is None else element.get(key)
     if not text:
         return [0.0] * n
     try:
         values = [float(v) for v in text.split()]
     except ValueError:
         values = []
-    return values if len(values) == n else [0.0] * n  # MuJoCo's reader names a bad value
+    if len(values) != n:
+        assert element is not None
+        raise DefinitionError(
+            f"<{element.tag}> {key}={text!r}: expected "
+            + ("a number" if n == 1 else f"{n} numbers separated by spaces")
+        )
+    return values
 
 
 def _read_inertial(link: ET.Element) -> tuple[float, np.ndarray, np.ndarray] | None:
@@ -310,15 +321,14 @@ def _read_inertial(link: ET.Element) -> tuple[float, np.ndarray, np.ndarray] | N
     inertial = link.find("inertial")
     if inertial is None:
         return None
-    mass_element = inertial.find("mass")
-    mass = _numbers(None if mass_element is None else mass_element.get("value"), 1)[0]
+    mass = _numbers(inertial.find("mass"), "value", 1)[0]
     origin = inertial.find("origin")
-    com = np.array(_numbers(None if origin is None else origin.get("xyz"), 3))
-    rotation = _rpy(None if origin is None else origin.get("rpy"))
+    com = np.array(_numbers(origin, "xyz", 3))
+    rotation = _rpy(origin)
     tensor = inertial.find("inertia")
 
     def get(key: str) -> float:
-        return 0.0 if tensor is None else _numbers(tensor.get(key), 1)[0]
+        return _numbers(tensor, key, 1)[0]
 
     local = np.array([[get("ixx"), get("ixy"), get("ixz")],
                       [get("ixy"), get("iyy"), get("iyz")],
@@ -387,8 +397,8 @@ def _inertials(root: ET.Element, notes: list[str]) -> tuple[tuple[str, float], .
                 or not _singular(read[0], read[2]) or static(parent):
             continue
         origin = joint.find("origin")
-        rotation = _rpy(None if origin is None else origin.get("rpy"))
-        offset = np.array(_numbers(None if origin is None else origin.get("xyz"), 3))
+        rotation = _rpy(origin)
+        offset = np.array(_numbers(origin, "xyz", 3))
         mass_c, com_c = read[0], offset + rotation @ read[1]
         inertia_c = rotation @ read[2] @ rotation.T
         host = _read_inertial(links[parent]) or (0.0, np.zeros(3), np.zeros((3, 3)))
