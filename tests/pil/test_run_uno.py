@@ -31,10 +31,12 @@ def test_the_uno_runs_the_sketch_within_float32_and_counts_its_cycles(kind: str)
     figures_are_the_chips(run, 16_000_000, 32_768, 2_048)
     assert run.figures()["cycles_exact"] is True and run.fits
     # The firmware's count of its Timer1 against simavr's own cycle counter, step by step:
-    # the two windows differ by the marks' own instructions (a few cycles).
+    # the two windows differ by the marks' own instructions (6 cycles), and by Timer1's
+    # overflow interrupt (about 40) in the rare step where it falls between a mark and a
+    # reading of the timer.
     for step in run.steps:
         assert step.emulator_count is not None
-        assert abs(step.count - step.emulator_count) <= 8
+        assert abs(step.count - step.emulator_count) <= 64
 
 
 @pytest.mark.slow
