@@ -387,6 +387,7 @@ def _inertials(root: ET.Element, notes: list[str]) -> tuple[tuple[str, float], .
     for name in sorted(links, key=depth, reverse=True):  # leaves first
         link = links[name]
         if static(name):
+            _read_inertial(link)  # its numbers checked all the same
             for old in link.findall("inertial"):
                 link.remove(old)
             continue
