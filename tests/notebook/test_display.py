@@ -72,8 +72,11 @@ def _cells(table_html: str) -> list[list[str]]:
     return [re.findall(r"<t[hd]>(.*?)</t[hd]>", row) for row in rows]
 
 
-def test_outside_ipython_nothing_is_registered() -> None:
+def test_outside_ipython_or_in_a_terminal_nothing_is_registered() -> None:
     assert not register(types.SimpleNamespace())
+    terminal = DisplayFormatter(active_types=["text/plain"])  # what a terminal's IPython shows
+    assert not register(types.SimpleNamespace(display_formatter=terminal))
+    assert "text/html" not in terminal.format(_design(None))[0]
 
 
 def test_a_system_shows_its_equations_parameters_and_drawing(show: DisplayFormatter) -> None:

@@ -54,3 +54,6 @@ def test_tutorial_runs_top_to_bottom(path: Path, tmp_path: Path) -> None:
             plain = output.get("data", {}).get("text/plain", "")
             assert not plain.startswith("<Figure size"), f"{path.name}: a figure shown as text"
             assert " object at 0x" not in plain, f"{path.name}: {plain[:80]}"
+    rich = [o for c in notebook.cells if c.cell_type == "code" for o in c.outputs
+            if {"text/html", "image/png"} & set(o.get("data", {}))]
+    assert rich, f"{path.name}: nothing shown but text"

@@ -290,8 +290,9 @@ FORMATTERS: tuple[tuple[str, str, Callable[..., Bundle]], ...] = (
 def register(shell: object | None = None) -> bool:
     """Register the bundles with IPython's display formatter (*shell*: the running one).
 
-    Returns False outside IPython. Types are named by module and class, so registering
-    imports none of them.
+    Returns False outside IPython, and in a terminal's IPython (it shows text only: a
+    plot made for each result shown would be thrown away). Types are named by module and
+    class, so registering imports none of them.
     """
     if shell is None:
         try:
@@ -299,8 +300,9 @@ def register(shell: object | None = None) -> bool:
         except ImportError:
             return False
         shell = get_ipython()
-    formatter = getattr(getattr(shell, "display_formatter", None), "mimebundle_formatter", None)
-    if formatter is None:
+    display = getattr(shell, "display_formatter", None)
+    formatter = getattr(display, "mimebundle_formatter", None)
+    if formatter is None or "text/html" not in getattr(display, "active_types", ()):
         return False
     for module, name, bundle in FORMATTERS:
         formatter.for_type_by_name(module, name, bundle)
