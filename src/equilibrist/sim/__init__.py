@@ -12,7 +12,8 @@ cached on disk by content (:mod:`equilibrist.sim.kernel`, :mod:`equilibrist.nati
   a :class:`PythonController` is called from Python; :class:`OpenLoop`,
   :class:`StateFeedback` and :class:`LQG` describe linear ones; an object
   with the older ``step(t, y, r)`` or a function still runs;
-* :class:`Noise`; events :class:`Kick`, :class:`Pulse`, :class:`Impulse`,
+* :class:`Noise`; :class:`Rig` (a rig's effects: torque response, delays, noise,
+  encoders, perturbations); events :class:`Kick`, :class:`Pulse`, :class:`Impulse`,
   :class:`ParameterChange`; reference signals :class:`Step`, :class:`Ramp`,
   :class:`Square`, :class:`Samples`;
 * :class:`Stepper` -- the plant alone, stepped with a held input.
@@ -46,6 +47,7 @@ _WHERE = {
     "ParameterChange": "equilibrist.sim.events",
     "Pulse": "equilibrist.sim.events",
     "Noise": "equilibrist.sim.noise",
+    "Rig": "equilibrist.sim.rig",
     "SimResult": "equilibrist.sim.result",
     "simulate": "equilibrist.sim.run",
     "Constant": "equilibrist.sim.signals",
@@ -72,6 +74,7 @@ if TYPE_CHECKING:
     from equilibrist.sim.events import Impulse, Kick, ParameterChange, Pulse
     from equilibrist.sim.noise import Noise
     from equilibrist.sim.result import SimResult
+    from equilibrist.sim.rig import Rig
     from equilibrist.sim.run import simulate
     from equilibrist.sim.signals import Constant, Ramp, Samples, Square, Step
     from equilibrist.sim.stepper import Stepper
@@ -97,6 +100,7 @@ __all__ = [
     "PythonControllerBase",
     "Ramp",
     "RegionOfAttraction",
+    "Rig",
     "Samples",
     "SimResult",
     "Square",
