@@ -46,6 +46,16 @@ FAMILIES = ("model", "measurement_noise", "u_noise", "u_responsiveness", "delay"
 
 def _environment() -> dict[str, str]:
     env = dict(os.environ, MPLBACKEND="Agg")
+    # The simulation board renders a video through matplotlib's ffmpeg writer, which looks
+    # for ffmpeg on the PATH: imageio-ffmpeg's binary, under that name, if there is no other.
+    if shutil.which("ffmpeg") is None:
+        import tempfile
+
+        import imageio_ffmpeg
+
+        folder = Path(tempfile.mkdtemp(prefix="ffmpeg-"))
+        (folder / "ffmpeg").symlink_to(imageio_ffmpeg.get_ffmpeg_exe())
+        env["PATH"] = f"{folder}{os.pathsep}{env.get('PATH', '')}"
     src = str(HERE.parent / "src")
     env["PYTHONPATH"] = src + os.pathsep + env.get("PYTHONPATH", "") if env.get("PYTHONPATH") \
         else src
@@ -57,8 +67,7 @@ def board(benchmark: Path, robot: str, which: str) -> float:
     folder = benchmark / "leaderboard" / robot / f"{which}_v2"
     con = f"con_{robot}.py"
     shutil.copy(EXAMPLES / con, folder / con)
-    name = "equilibrist_tvlqr"
-    data = folder / "data" / name
+    data = folder / "data" / robot  # the scripts' data/<file name without con_>
     if data.exists():
         shutil.rmtree(data)  # the scripts reuse a run they find
     script = "calculate_leaderboard_score.py" if which == "simulation" else \
