@@ -183,11 +183,21 @@ def build(sources: Sources, target: Target) -> Firmware:
     if done is not None:
         return done
     root = cache_folder()
+    refused = root / f"{target.name}-{key}.does-not-fit"
+    if refused.exists():  # a firmware that cannot fit is refused again without a build
+        raise DoesNotFit(refused.read_text())
     work = Path(tempfile.mkdtemp(prefix=f".build-{target.name}-", dir=root))
     try:
         for name, text in {**sources.files, **_board(target)}.items():
             (work / name).write_text(text)
-        flash, ram, paint = _compile(work, target, sources.defines)
+        try:
+            flash, ram, paint = _compile(work, target, sources.defines)
+        except DoesNotFit as exc:
+            with tempfile.NamedTemporaryFile("w", dir=root, prefix=".refused-",
+                                             delete=False) as f:
+                f.write(str(exc))
+            os.replace(f.name, refused)
+            raise
         (work / "firmware.json").write_text(json.dumps(
             {"flash_bytes": flash, "ram_bytes": ram, "paint_start": paint}))
         final = root / f"{target.name}-{key}"
