@@ -50,10 +50,10 @@ def make_model(config: dict[str, Any], seed: int) -> SAC:
                **config["hyperparameters"])
 
 
-def evaluate(policy: Any, config: dict[str, Any], seeds: list[int]
+def evaluate(policy: Any, config: dict[str, Any], seeds: list[int], **env_options: Any
              ) -> tuple[list[float], list[int]]:
     """Each start's return and length under *policy* (observation -> action)."""
-    env = make_env(config)
+    env = make_env(config, **env_options)
     returns, lengths = [], []
     for seed in seeds:
         obs, _ = env.reset(seed=seed)
@@ -76,8 +76,9 @@ def agent(model: SAC) -> Any:
 
 
 def expert_scores(config: dict[str, Any], seeds: list[int]) -> list[float]:
-    env = make_env(config)
-    return evaluate(expert(env, config["expert"]), config, seeds)[0]
+    """The expert on the same starts; the swing-up measures the rig's sensors."""
+    env = make_env(config, observe="outputs")
+    return evaluate(expert(env, config["expert"]), config, seeds, observe="outputs")[0]
 
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
