@@ -11,7 +11,6 @@ from __future__ import annotations
 import re
 import socket
 import subprocess
-import threading
 import time
 
 import numpy as np
@@ -21,7 +20,7 @@ from equilibrist.cli.main import build_parser
 from equilibrist.cli.simulate import build_run
 from equilibrist.hil import protocol as proto
 from equilibrist.hil.link import SerialLink
-from equilibrist.pil.emulator import command
+from equilibrist.pil.emulator import emulate
 from equilibrist.pil.run import firmware_for
 from equilibrist.pil.targets import get
 from support import require
@@ -92,25 +91,12 @@ def test_the_firmwares_count_is_qemus_instruction_count(chip: str) -> None:
                              text=True, check=True).stdout
     entry = int(re.search(r"^([0-9a-f]+) T hil_ctrl_step$", symbols, re.M).group(1), 16)  # type: ignore[union-attr]
     port = _free_port()
-    qemu = subprocess.Popen([*command(firmware), "-gdb", f"tcp:127.0.0.1:{port}", "-S"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    counts: list[int] = []
-    try:
-        assert qemu.stdout is not None and qemu.stderr is not None
-        pty = re.search(r"/dev/pts/\d+", qemu.stdout.readline()).group(0)  # type: ignore[union-attr]
-        stderr = qemu.stderr
-
-        def read_counts() -> None:
-            for line in stderr:
-                if line.startswith("step "):
-                    counts.append(int(line.split()[1]))
-
-        threading.Thread(target=read_counts, daemon=True).start()
+    with emulate(firmware, extra=("-gdb", f"tcp:127.0.0.1:{port}", "-S")) as emulation:
         gdb = Remote(port)
         gdb.ask("?")
         gdb.send("c")
         y = np.array([0.01, 0.1, -0.02, 0.3])
-        with SerialLink(pty) as link:
+        with SerialLink(emulation.port) as link:
             hello = proto.Hello(real_size=4, n=4, m=1, p=4, references=0, estimate=0,
                                 rate=200.0, controller_id="")
             _ask(link, proto.HELLO, hello.pack(), proto.HELLO_REPLY, tries=20)
@@ -134,18 +120,13 @@ def test_the_firmwares_count_is_qemus_instruction_count(chip: str) -> None:
             second = _receive(link, proto.STEP_REPLY)
             gdb.sock.close()
         assert first[:-4] == second[:-4]  # an LQR has no state: the same answer (but its time)
-    finally:
-        qemu.terminate()
-        qemu.wait(10)
-        for stream in (qemu.stdout, qemu.stderr):
-            if stream is not None:
-                stream.close()
-    # The firmware's count of the first step (its timer's ticks, as pil reads them); the
-    # stepped one is the controller's instructions to its return: the call's branch is the
-    # instruction more the firmware counts.
+    counts = [s.count for s in emulation.steps]  # all read once the emulator has ended
+    # The firmware's count of the first step (as pil reads it: instructions from the timer's
+    # ticks); the stepped one is the controller's instructions to its return: the call's
+    # branch is the instruction more the firmware counts.
     assert counts, "the firmware reported no step"
     assert 100 < stepped < 10_000
-    assert abs(target.count_of(counts[0]) - stepped) <= 2
+    assert abs(counts[0] - stepped) <= 2
 
 
 def _ask(link: SerialLink, kind: int, payload: bytes, answer: int, tries: int = 1) -> bytes:

@@ -5,7 +5,7 @@
   the ATmega328P at 16 MHz, its USART0 bridged to a pseudo-terminal, its
   cycle counter read at the firmware's marks.
 - ``cortex-m4f``, ``cortex-m0``: QEMU (``netduinoplus2``, ``microbit``) with
-  ``-serial pty`` and ``-icount``, so that the virtual clock is the
+  its UART on a pseudo-terminal made here (QEMU holds its master end) and ``-icount``, so that the virtual clock is the
   instruction count (the timers the firmware reads count instructions, and
   no answer depends on how busy the host is); the firmware's figures come
   by semihosting on QEMU's standard error.
@@ -25,7 +25,8 @@ import subprocess
 import tempfile
 import threading
 import time
-from collections.abc import Iterator
+import tty
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -89,14 +90,20 @@ def harness() -> str:
     return str(program)
 
 
-def command(firmware: Firmware) -> list[str]:
-    """The emulator's command line for *firmware*."""
+def command(firmware: Firmware, *, link_fd: int | None = None) -> list[str]:
+    """The emulator's command line for *firmware*: QEMU's UART on the pseudo-terminal whose
+    master end is the file descriptor *link_fd* (passed to QEMU, which holds it as a serial
+    device: the link is open from the start, where QEMU's own ``-serial pty`` looks for a
+    program on its end once a second)."""
     name = firmware.target.name
     if name == "uno":
         return [harness(), str(firmware.image), str(firmware.paint_start)]
+    if link_fd is None:
+        raise PILError(f"--target {name}: QEMU needs the link's file descriptor")
     machine, shift = ("netduinoplus2", 0) if name == "cortex-m4f" else ("microbit", 7)
     return ["qemu-system-arm", "-M", machine, "-nographic", "-monitor", "none",
-            "-serial", "pty", "-semihosting-config", "enable=on,target=native",
+            "-add-fd", f"fd={link_fd},set=1", "-chardev", "serial,id=link,path=/dev/fdset/1",
+            "-serial", "chardev:link", "-semihosting-config", "enable=on,target=native",
             "-icount", f"shift={shift},align=off,sleep=on", "-kernel", str(firmware.image)]
 
 
@@ -122,17 +129,31 @@ def _read(stream: IO[str], emulation: Emulation, found: list[str], ready: thread
 
 
 @contextmanager
-def emulate(firmware: Firmware) -> Iterator[Emulation]:
-    """Run *firmware* in its emulator while inside; the emulation's port and figures."""
-    argv = command(firmware)
+def emulate(firmware: Firmware, *, extra: Sequence[str] = ()) -> Iterator[Emulation]:
+    """Run *firmware* in its emulator while inside (with *extra* arguments: QEMU's ``-gdb``);
+    the emulation's port and figures."""
+    link: tuple[int, int] | None = None
+    if firmware.target.name != "uno":
+        master, slave = os.openpty()
+        tty.setraw(slave)
+        link = (master, slave)
+    argv = [*command(firmware, link_fd=None if link is None else link[0]), *extra]
     try:
         process = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                   stderr=subprocess.PIPE, text=True, bufsize=1)
+                                   stderr=subprocess.PIPE, text=True, bufsize=1,
+                                   pass_fds=() if link is None else (link[0],))
     except OSError as exc:
+        if link is not None:
+            os.close(link[0])
+            os.close(link[1])
         raise PILError(f"the emulator {argv[0]} could not start ({exc.strerror})") from None
     emulation = Emulation(port="", process=process)
     found: list[str] = []
     ready = threading.Event()
+    if link is not None:
+        os.close(link[0])  # QEMU's now
+        found.append(os.ttyname(link[1]))
+        ready.set()
     assert process.stdout is not None and process.stderr is not None
     readers = [threading.Thread(target=_read, args=(s, emulation, found, ready, firmware.target),
                                 daemon=True) for s in (process.stdout, process.stderr)]
@@ -156,6 +177,8 @@ def emulate(firmware: Firmware) -> Iterator[Emulation]:
             except subprocess.TimeoutExpired:
                 process.kill()
                 process.wait()
+        if link is not None:
+            os.close(link[1])
         for reader in readers:
             reader.join(5)
         for stream in (process.stdout, process.stderr):
