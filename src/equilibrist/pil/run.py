@@ -243,8 +243,8 @@ def host_hello(system: System, controller: AnyController, *, target: Target, rat
 
 
 def _connect(device: DeviceController) -> None:
-    """The hellos, asked again while the emulator has not yet served its port (QEMU looks
-    for a program on its pseudo-terminal once a second)."""
+    """The hellos, asked again while the emulator is still starting (on a busy machine it
+    may take longer than a device's usual hello time)."""
     from equilibrist.hil.run import HILRefused
 
     deadline = time.monotonic() + START_TIMEOUT
