@@ -2,7 +2,7 @@
 Debian's cross compiler (``aarch64-linux-gnu-gcc``) and run under ``qemu-aarch64``, give the
 x86-64 results to the bit (docs/reproducibility.md). CI installs both (.ci/run).
 
-What runs on the other architecture: the project's sin, cos, log and exp; the system's
+What runs on the other architecture: the project's sin, cos, log, exp, atan and tanh; the system's
 generated dynamics integrated by the core's RK4 with a held input; the core's normal
 deviates (xoshiro256** and the polar method); an exported LQG controller and an exported
 swing-up (its trigonometry the project's own) replaying their recorded test vectors.
@@ -48,15 +48,16 @@ def test_the_projects_math_functions_give_the_python_bits(tmp_path: Path) -> Non
     xs = np.concatenate([xs, np.arange(-40, 40) * (np.pi / 2), [0.0, -0.0, 1e-300, 7.5e5]])
     (tmp_path / "in.bin").write_bytes(xs.tobytes())
     (tmp_path / "m.c").write_text("#include <math.h>\n#include <stdio.h>\n"
-                                  + libm.c_source(log=True, exp=True) + textwrap.dedent("""
+                                  + libm.c_source(log=True, exp=True, atan=True, tanh=True)
+                                  + textwrap.dedent("""
         int main(void)
         {
-            double x, y[4];
+            double x, y[6];
             FILE *in = fopen("in.bin", "rb"), *out = fopen("out.bin", "wb");
             while (fread(&x, sizeof x, 1, in) == 1) {
                 y[0] = eq_sin(x); y[1] = eq_cos(x); y[2] = eq_log(fabs(x));
-                y[3] = eq_exp(x * 1e-2);
-                fwrite(y, sizeof y[0], 4, out);
+                y[3] = eq_exp(x * 1e-2); y[4] = eq_atan(x * 0.1); y[5] = eq_tanh(x * 0.1);
+                fwrite(y, sizeof y[0], 6, out);
             }
             fclose(in); fclose(out);
             return 0;
@@ -65,7 +66,8 @@ def test_the_projects_math_functions_give_the_python_bits(tmp_path: Path) -> Non
     exe = _build(tmp_path, [tmp_path / "m.c"], "m")
     assert _run(exe, tmp_path).returncode == 0
     want = np.array([[libm.sin(float(x)), libm.cos(float(x)), libm.log(abs(float(x))),
-                      libm.eq_exp(float(x) * 1e-2)] for x in xs])
+                      libm.eq_exp(float(x) * 1e-2), libm.eq_atan(float(x) * 0.1),
+                      libm.eq_tanh(float(x) * 0.1)] for x in xs])
     assert (tmp_path / "out.bin").read_bytes() == want.tobytes()
 
 

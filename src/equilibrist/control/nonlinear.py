@@ -149,7 +149,8 @@ def contract_namespace() -> dict[str, Any]:
 
     namespace: dict[str, Any] = {"math": math, "np": np, **linear_constants(),
                                  "eq_sin": libm.eq_sin, "eq_cos": libm.eq_cos,
-                                 "eq_log": libm.eq_log, "eq_exp": libm.eq_exp}
+                                 "eq_log": libm.eq_log, "eq_exp": libm.eq_exp,
+                                 "eq_atan": libm.eq_atan, "eq_tanh": libm.eq_tanh}
     namespace.update(_python_linear())
     return namespace
 

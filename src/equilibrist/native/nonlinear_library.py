@@ -164,11 +164,13 @@ def translate(ctrl: Source, prefix: str) -> Translation:
         raise ExportError(f"the {ctrl.name} controller's source: {exc}") from None
     code = mod.c_source()
     parts = []
-    if re.search(r"\beq_(sin|cos|log|exp)\(", code):
+    if re.search(r"\beq_(sin|cos|log|exp|atan|tanh)\(", code):
         # The project's own sin, cos (and log, exp; exp needs log's constants, so log comes
         # with it): static, the unused ones kept quiet.
         log = re.search(r"\beq_(log|exp)\(", code) is not None
-        parts += [libm.c_source(log=log, exp=re.search(r"\beq_exp\(", code) is not None),
+        parts += [libm.c_source(log=log, exp=re.search(r"\beq_exp\(", code) is not None,
+                                atan=re.search(r"\beq_atan\(", code) is not None,
+                                tanh=re.search(r"\beq_tanh\(", code) is not None),
                   f"\nstatic inline void {prefix}_libm_used(void)\n{{\n"
                   "    (void)eq_sin;\n    (void)eq_cos;\n"
                   + ("    (void)eq_log;\n" if log and not re.search(r"\beq_log\(", code) else "")

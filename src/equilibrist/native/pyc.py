@@ -18,8 +18,8 @@ rules (so a run in the C core gives the same bits on every machine):
   ``b if b > a else a``); ``int(x)`` truncates; ``abs`` of a float is
   ``fabs``;
 - ``math``'s functions are the C library's of the same name, the project's
-  ``eq_sin``/``eq_cos``/``eq_log``/``eq_exp`` are :mod:`equilibrist.numeric.libm`'s C
-  versions;
+  ``eq_sin``/``eq_cos``/``eq_log``/``eq_exp``/``eq_atan``/``eq_tanh`` are
+  :mod:`equilibrist.numeric.libm`'s C versions;
 - every intermediate is a C ``double`` expression fully parenthesized in
   Python's evaluation order, compiled with ``-ffp-contract=off`` and
   without ``-ffast-math`` (no fused multiply-add, no reassociation).
@@ -64,7 +64,7 @@ _MATH = {
 _MATH_BOOL = {"isfinite": "isfinite", "isnan": "isnan", "isinf": "isinf"}
 _MATH_CONST = {"pi": "3.141592653589793", "e": "2.718281828459045", "inf": "INFINITY",
                "nan": "NAN", "tau": "6.283185307179586"}
-_LIBM = ("eq_sin", "eq_cos", "eq_log", "eq_exp")
+_LIBM = ("eq_sin", "eq_cos", "eq_log", "eq_exp", "eq_atan", "eq_tanh")
 
 #: C helpers the translated functions call (written once into every unit by :func:`prelude`).
 PRELUDE = r"""

@@ -7,7 +7,8 @@ the simulation core. Common
 subexpressions are eliminated once, across each function's outputs.
 
 Sines and cosines are the project's own (:mod:`equilibrist.numeric.libm`,
-whose functions are copied into the module as ``eq_sin`` and ``eq_cos``),
+whose functions are copied into the module as ``eq_sin`` and ``eq_cos``;
+``eq_atan`` and ``eq_tanh`` too, into a module that calls them),
 not the C library's, whose result depends on the CPU it runs on: the
 generated dynamics give the same bits on every machine, in Python and
 compiled (the C core calls the C versions of the same ``eq_`` functions).
@@ -68,6 +69,8 @@ class _Printer(PythonCodePrinter):  # type: ignore[misc]
         #: Assignments the statement being printed needs first (a power's base), as lines.
         self.hoisted: list[str] = []
         self._bases = 0
+        #: The sections of libm besides the body that the printed text calls.
+        self.sections: set[str] = set()
 
     def _print_Pow(self, expr: sp.Pow, rational: bool = False) -> str:
         # An integer power is the product the C translation writes (libm.power_product),
@@ -96,6 +99,17 @@ class _Printer(PythonCodePrinter):  # type: ignore[misc]
 
     def _print_cos(self, expr: sp.Expr) -> str:
         return f"eq_cos({self._print(expr.args[0])})"
+
+    # atan and tanh (a smooth Coulomb friction's) are the project's too: glibc picks atan by
+    # the CPU's features, and another C library's tanh may round differently. Their sections
+    # of libm are copied only into a module that calls them (see generate_source).
+    def _print_atan(self, expr: sp.Expr) -> str:
+        self.sections.add("atan")
+        return f"eq_atan({self._print(expr.args[0])})"
+
+    def _print_tanh(self, expr: sp.Expr) -> str:
+        self.sections.add("tanh")
+        return f"eq_tanh({self._print(expr.args[0])})"
 
 
 def _safe_names(model: SymbolicModel) -> dict[sp.Symbol, sp.Symbol]:
@@ -203,6 +217,10 @@ def generate_source(model: SymbolicModel) -> str:
     out += ["    return None", ""]
     if model.M is not None:
         out += _scalar_functions(model, subs, printer)
+    libm_at = out.index("def f(x, u, p, out):") - 1
+    for section in (s for s in libm.SECTIONS[1:] if s in printer.sections):
+        out[libm_at:libm_at] = [f"# {section} of equilibrist.numeric.libm.", libm.source(section), ""]
+        libm_at += 3
     return "\n".join(out)
 
 

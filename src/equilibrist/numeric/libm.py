@@ -1,4 +1,5 @@
-"""The project's own ``sin``, ``cos`` and ``log``: the same bits on every CPU.
+"""The project's own ``sin``, ``cos``, ``log``, ``exp``, ``atan`` and ``tanh``: the same bits
+on every CPU.
 
 The C library's ``sin``, ``cos``, ``log`` (and ``exp``, ``pow``, ``atan2``,
 ``tan``) are chosen at load time by the CPU's features: glibc on x86-64
@@ -20,10 +21,17 @@ argument of ``sin`` and ``cos`` with ``|x| < 2**20 * pi / 2`` (about
 accuracy (fdlibm's Payne-Hanek path is not ported: no angle of a
 balancing rig comes near).
 
+``atan`` is fdlibm's ``s_atan.c`` (within 1 ulp: 0.73 at worst in the
+tests against mpmath), ``tanh`` fdlibm's ``s_tanh.c`` over its ``s_expm1.c``
+(within 2.5 ulp, as fdlibm's; the form glibc keeps), for the smooth
+Coulomb friction of :mod:`equilibrist.mechanics.friction`: glibc picks
+``atan`` by the CPU too.
+
 The section below the marker is copied verbatim into every generated
 numeric module (:mod:`equilibrist.numeric.codegen`), so the generated
 ``f`` calls these functions under the names ``eq_sin`` and ``eq_cos`` as
-plain Python; the C core (:mod:`equilibrist.native`) translates ``f`` with
+plain Python (the ``atan`` and ``tanh`` sections only into a module that
+calls ``eq_atan`` or ``eq_tanh``, so a model without them keeps its text); the C core (:mod:`equilibrist.native`) translates ``f`` with
 the calls kept and links :func:`c_source`, the same functions in C. Edit
 the section only together with ``REVISION`` in
 :mod:`equilibrist.numeric.codegen` and :func:`c_source`: the cache of
@@ -38,6 +46,10 @@ from pathlib import Path
 
 #: The functions of the copied section, in the order they must be compiled.
 FUNCTIONS = ("eq_ksin", "eq_kcos", "eq_rem_pio2", "eq_sin", "eq_cos", "eq_log")
+
+#: The copied sections: the body, in every generated module; each other one only in a module
+#: that calls its function (``eq_atan``, ``eq_tanh``), so that a model without them keeps its text.
+SECTIONS = ("body", "atan", "tanh")
 
 _MARKER = "# ---8<--- libm body"
 
@@ -204,6 +216,168 @@ def eq_log(x: float) -> float:
 # ---8<--- end of libm body
 
 
+# ---8<--- libm atan: copied into a generated module that calls eq_atan
+
+# fdlibm's arctangent (s_atan.c, as in musl src/math/atan.c). Its tests of the high word
+# are comparisons with the doubles whose low word is zero (exact: no bit access needed).
+EQ_ATANHI0 = 4.63647609000806093515e-01  # atan(0.5) hi
+EQ_ATANHI1 = 7.85398163397448278999e-01  # atan(1.0) hi
+EQ_ATANHI2 = 9.82793723247329054082e-01  # atan(1.5) hi
+EQ_ATANHI3 = 1.57079632679489655800e00  # atan(inf) hi
+EQ_ATANLO0 = 2.26987774529616870924e-17
+EQ_ATANLO1 = 3.06161699786838301793e-17
+EQ_ATANLO2 = 1.39033110312309984516e-17
+EQ_ATANLO3 = 6.12323399573676603587e-17
+EQ_AT0 = 3.33333333333329318027e-01
+EQ_AT1 = -1.99999999998764832476e-01
+EQ_AT2 = 1.42857142725034663711e-01
+EQ_AT3 = -1.11111104054623557880e-01
+EQ_AT4 = 9.09088713343650656196e-02
+EQ_AT5 = -7.69187620504482999495e-02
+EQ_AT6 = 6.66107313738753120669e-02
+EQ_AT7 = -5.83357013379057348645e-02
+EQ_AT8 = 4.97687799461593236017e-02
+EQ_AT9 = -3.65315727442169155270e-02
+EQ_AT10 = 1.62858201153657823623e-02
+EQ_ATAN_HUGE = 7.378697629483821e19  # 2**66 (high word 0x44100000)
+EQ_ATAN_TINY = 7.450580596923828e-09  # 2**-27 (0x3e400000)
+EQ_ATAN_7_16 = 0.4375  # 0x3fdc0000
+EQ_ATAN_11_16 = 0.6875  # 0x3fe60000
+EQ_ATAN_19_16 = 1.1875  # 0x3ff30000
+EQ_ATAN_39_16 = 2.4375  # 0x40038000
+
+
+def eq_katan(x: float) -> float:
+    """fdlibm's ``s1 + s2``: atan(x) = x - x (s1 + s2) for |x| <= 7/16."""
+    z = x * x
+    w = z * z
+    s1 = z * (EQ_AT0 + w * (EQ_AT2 + w * (EQ_AT4 + w * (EQ_AT6 + w * (EQ_AT8 + w * EQ_AT10)))))
+    s2 = w * (EQ_AT1 + w * (EQ_AT3 + w * (EQ_AT5 + w * (EQ_AT7 + w * EQ_AT9))))
+    return s1 + s2
+
+
+def eq_atan(x: float) -> float:
+    """atan(x), the same bits on every CPU (fdlibm's, within 1 ulp)."""
+    a = abs(x)
+    if not (a < EQ_ATAN_HUGE):  # |x| >= 2**66, or nan
+        if math.isnan(a):
+            return x
+        return -EQ_ATANHI3 if x < 0.0 else EQ_ATANHI3
+    if a < EQ_ATAN_7_16:
+        if a < EQ_ATAN_TINY:
+            return x
+        return x - x * eq_katan(x)
+    if a < EQ_ATAN_19_16:
+        if a < EQ_ATAN_11_16:
+            hi = EQ_ATANHI0
+            lo = EQ_ATANLO0
+            r = (2.0 * a - 1.0) / (2.0 + a)
+        else:
+            hi = EQ_ATANHI1
+            lo = EQ_ATANLO1
+            r = (a - 1.0) / (a + 1.0)
+    elif a < EQ_ATAN_39_16:
+        hi = EQ_ATANHI2
+        lo = EQ_ATANLO2
+        r = (a - 1.5) / (1.0 + 1.5 * a)
+    else:
+        hi = EQ_ATANHI3
+        lo = EQ_ATANLO3
+        r = -1.0 / a
+    z = hi - (r * eq_katan(r) - lo - r)
+    return -z if x < 0.0 else z
+
+
+# ---8<--- end of libm atan
+
+
+# ---8<--- libm tanh: copied into a generated module that calls eq_tanh
+
+# fdlibm's tanh (s_tanh.c) over fdlibm's expm1 (s_expm1.c), as Sun wrote them (and glibc
+# keeps them); ``math.ldexp`` (exact) scales by 2**k where fdlibm adds k to the exponent.
+EQ_TANH_BIG = 22.0  # 0x40360000
+EQ_TWO_M55 = 2.7755575615628914e-17  # 0x3c800000
+EQ_EXPM1_HALF_LN2 = 0.3465735912322998  # |x| > 0.5 ln2: high word above 0x3fd62e42
+EQ_EXPM1_3HALF_LN2 = 1.0397205352783203  # 0x3ff0a2b2: about 1.5 ln2
+EQ_EXPM1_TINY = 5.551115123125783e-17  # 2**-54 (0x3c900000)
+EQ_EXPM1_INVLN2 = 1.44269504088896338700e00
+EQ_Q1 = -3.33333333333331316428e-02
+EQ_Q2 = 1.58730158725481460165e-03
+EQ_Q3 = -7.93650757867487942473e-05
+EQ_Q4 = 4.00821782732936239552e-06
+EQ_Q5 = -2.01099218183624371326e-07
+
+
+def eq_expm1(x: float) -> float:
+    """e**x - 1 for finite ``|x| < 56 ln2`` (fdlibm's expm1; the range tanh calls it in)."""
+    a = abs(x)
+    if a >= EQ_EXPM1_HALF_LN2:
+        if a < EQ_EXPM1_3HALF_LN2:
+            if x > 0.0:
+                hi = x - EQ_LN2_HI
+                lo = EQ_LN2_LO
+                k = 1
+            else:
+                hi = x + EQ_LN2_HI
+                lo = -EQ_LN2_LO
+                k = -1
+        else:
+            k = int(EQ_EXPM1_INVLN2 * x + (0.5 if x > 0.0 else -0.5))  # C's (int): toward zero
+            t = float(k)
+            hi = x - t * EQ_LN2_HI  # exact
+            lo = t * EQ_LN2_LO
+        r = hi - lo
+        c = (hi - r) - lo
+    elif a < EQ_EXPM1_TINY:
+        return x
+    else:
+        k = 0
+        r = x
+        c = 0.0
+    hfx = 0.5 * r
+    hxs = r * hfx
+    r1 = 1.0 + hxs * (EQ_Q1 + hxs * (EQ_Q2 + hxs * (EQ_Q3 + hxs * (EQ_Q4 + hxs * EQ_Q5))))
+    t = 3.0 - r1 * hfx
+    e = hxs * ((r1 - t) / (6.0 - r * t))
+    if k == 0:
+        return r - (r * e - hxs)
+    e = r * (e - c) - c
+    e = e - hxs
+    if k == -1:
+        return 0.5 * (r - e) - 0.5
+    if k == 1:
+        if r < -0.25:
+            return -2.0 * (e - (r + 0.5))
+        return 1.0 + 2.0 * (r - e)
+    if k <= -2 or k > 56:
+        return math.ldexp(1.0 - (e - r), k) - 1.0
+    if k < 20:
+        return math.ldexp((1.0 - math.ldexp(1.0, -k)) - (e - r), k)
+    return math.ldexp((r - (e + math.ldexp(1.0, -k))) + 1.0, k)
+
+
+def eq_tanh(x: float) -> float:
+    """tanh(x), the same bits on every CPU (fdlibm's)."""
+    a = abs(x)
+    if a < EQ_TANH_BIG:
+        if a < EQ_TWO_M55:
+            return x
+        if a >= 1.0:
+            t = eq_expm1(2.0 * a)
+            z = 1.0 - 2.0 / (t + 2.0)
+        else:
+            t = eq_expm1(-2.0 * a)
+            z = -t / (t + 2.0)
+    elif math.isnan(a):
+        return x
+    else:
+        z = 1.0
+    return -z if x < 0.0 else z
+
+
+# ---8<--- end of libm tanh
+
+
 # fdlibm's exp (musl src/math/exp.c), for the C core's own use (the adaptive integrator's
 # step-size control): not copied into generated modules.
 EXP_P1 = 1.66666666666666019037e-01
@@ -278,18 +452,24 @@ static double {p}eq_exp(double x)
 """
 
 
-def source() -> str:
-    """The section above, as copied into each generated module."""
+def source(section: str = "body") -> str:
+    """A section above, as copied into a generated module: ``"body"`` (``sin``, ``cos``,
+    ``log``: every module), ``"atan"`` or ``"tanh"`` (a module that calls ``eq_atan`` or
+    ``eq_tanh``, after the body)."""
+    if section not in SECTIONS:
+        raise ValueError(f"no libm section {section!r}: expected one of {', '.join(SECTIONS)}")
     text = Path(__file__).read_text()
-    start = text.index("\n" + _MARKER)
+    start = text.index(f"\n{_MARKER if section == 'body' else '# ---8<--- libm ' + section}")
     start = text.index("\n", start + 1) + 1
-    end = text.index("\n# ---8<--- end of libm body")
+    end = text.index(f"\n# ---8<--- end of libm {section}")
     return text[start:end].strip() + "\n"
 
 
 sin = eq_sin
 cos = eq_cos
 log = eq_log
+atan = eq_atan
+tanh = eq_tanh
 
 
 #: The largest ``|k|`` of a power ``x ** k`` (``k`` an integer literal) written as a product of
@@ -358,20 +538,23 @@ def kernel_c(part: str, type_name: str = "double") -> str:
     return _KERNELS_C[part].format(t=type_name)
 
 
-def c_source(prefix: str = "", *, log: bool = False, exp: bool = False) -> str:
+def c_source(prefix: str = "", *, log: bool = False, exp: bool = False, atan: bool = False,
+             tanh: bool = False) -> str:
     """The same functions in C99, operation for operation (``static``; needs ``<math.h>``
     for ``fabs`` and ``frexp``, both exact).
 
     Compiled with ``-ffp-contract=off`` (no fused multiply-add; GCC's default in
     ISO C mode, not clang's) and without ``-ffast-math``, they give the bits of
     the Python version. *prefix* goes before each function's name;
-    ``eq_log`` only with *log* (an unused static function is a warning).
+    ``eq_log`` only with *log*, ``eq_exp`` with *exp*, ``eq_atan`` with *atan*, ``eq_tanh``
+    with *tanh* (an unused static function is a warning).
     """
     body = _c_kernels(prefix) + _c_rem_pio2(prefix) + _c_sin_cos(prefix)
     head = ("/* sin, cos, log of equilibrist.numeric.libm (fdlibm's kernels, as in musl): the\n"
             " * simulation's bits on every CPU. Compile with -ffp-contract=off, never -ffast-math. */\n")
     return (head + _c_constants() + "\n" + body + (_c_log(prefix) if log else "")
-            + (EXP_C.format(p=prefix) if exp else ""))
+            + (EXP_C.format(p=prefix) if exp else "") + (ATAN_C.format(p=prefix) if atan else "")
+            + (TANH_C.format(p=prefix) if tanh else ""))
 
 
 def _c_kernels(p: str) -> str:
@@ -526,5 +709,141 @@ static double {p}eq_log(double x)
     r = t2 + t1;
     dk = (double)k;
     return s * (hfsq + r) + dk * EQ_LN2_LO - hfsq + f + dk * EQ_LN2_HI;
+}}
+"""
+
+
+# The arctangent and tanh sections above, operation for operation.
+ATAN_C = """
+static double {p}eq_katan(double x)
+{{
+    double z = x * x;
+    double w = z * z;
+    double s1 = z * (EQ_AT0 + w * (EQ_AT2 + w * (EQ_AT4 + w * (EQ_AT6 + w * (EQ_AT8 + w * EQ_AT10)))));
+    double s2 = w * (EQ_AT1 + w * (EQ_AT3 + w * (EQ_AT5 + w * (EQ_AT7 + w * EQ_AT9))));
+    return s1 + s2;
+}}
+
+static double {p}eq_atan(double x)
+{{
+    double a = fabs(x);
+    double hi, lo, r, z;
+    if (!(a < EQ_ATAN_HUGE)) {{
+        if (a != a) {{
+            return x;
+        }}
+        return x < 0.0 ? -EQ_ATANHI3 : EQ_ATANHI3;
+    }}
+    if (a < EQ_ATAN_7_16) {{
+        if (a < EQ_ATAN_TINY) {{
+            return x;
+        }}
+        return x - x * {p}eq_katan(x);
+    }}
+    if (a < EQ_ATAN_19_16) {{
+        if (a < EQ_ATAN_11_16) {{
+            hi = EQ_ATANHI0;
+            lo = EQ_ATANLO0;
+            r = (2.0 * a - 1.0) / (2.0 + a);
+        }} else {{
+            hi = EQ_ATANHI1;
+            lo = EQ_ATANLO1;
+            r = (a - 1.0) / (a + 1.0);
+        }}
+    }} else if (a < EQ_ATAN_39_16) {{
+        hi = EQ_ATANHI2;
+        lo = EQ_ATANLO2;
+        r = (a - 1.5) / (1.0 + 1.5 * a);
+    }} else {{
+        hi = EQ_ATANHI3;
+        lo = EQ_ATANLO3;
+        r = -1.0 / a;
+    }}
+    z = hi - (r * {p}eq_katan(r) - lo - r);
+    return x < 0.0 ? -z : z;
+}}
+"""
+
+TANH_C = """
+static double {p}eq_expm1(double x)
+{{
+    double a = fabs(x);
+    double hi, lo, r, c, t, hfx, hxs, r1, e;
+    int k;
+    if (a >= EQ_EXPM1_HALF_LN2) {{
+        if (a < EQ_EXPM1_3HALF_LN2) {{
+            if (x > 0.0) {{
+                hi = x - EQ_LN2_HI;
+                lo = EQ_LN2_LO;
+                k = 1;
+            }} else {{
+                hi = x + EQ_LN2_HI;
+                lo = -EQ_LN2_LO;
+                k = -1;
+            }}
+        }} else {{
+            k = (int)(EQ_EXPM1_INVLN2 * x + (x > 0.0 ? 0.5 : -0.5));
+            t = (double)k;
+            hi = x - t * EQ_LN2_HI;
+            lo = t * EQ_LN2_LO;
+        }}
+        r = hi - lo;
+        c = (hi - r) - lo;
+    }} else if (a < EQ_EXPM1_TINY) {{
+        return x;
+    }} else {{
+        k = 0;
+        r = x;
+        c = 0.0;
+    }}
+    hfx = 0.5 * r;
+    hxs = r * hfx;
+    r1 = 1.0 + hxs * (EQ_Q1 + hxs * (EQ_Q2 + hxs * (EQ_Q3 + hxs * (EQ_Q4 + hxs * EQ_Q5))));
+    t = 3.0 - r1 * hfx;
+    e = hxs * ((r1 - t) / (6.0 - r * t));
+    if (k == 0) {{
+        return r - (r * e - hxs);
+    }}
+    e = r * (e - c) - c;
+    e = e - hxs;
+    if (k == -1) {{
+        return 0.5 * (r - e) - 0.5;
+    }}
+    if (k == 1) {{
+        if (r < -0.25) {{
+            return -2.0 * (e - (r + 0.5));
+        }}
+        return 1.0 + 2.0 * (r - e);
+    }}
+    if (k <= -2 || k > 56) {{
+        return ldexp(1.0 - (e - r), k) - 1.0;
+    }}
+    if (k < 20) {{
+        return ldexp((1.0 - ldexp(1.0, -k)) - (e - r), k);
+    }}
+    return ldexp((r - (e + ldexp(1.0, -k))) + 1.0, k);
+}}
+
+static double {p}eq_tanh(double x)
+{{
+    double a = fabs(x);
+    double t, z;
+    if (a < EQ_TANH_BIG) {{
+        if (a < EQ_TWO_M55) {{
+            return x;
+        }}
+        if (a >= 1.0) {{
+            t = {p}eq_expm1(2.0 * a);
+            z = 1.0 - 2.0 / (t + 2.0);
+        }} else {{
+            t = {p}eq_expm1(-2.0 * a);
+            z = -t / (t + 2.0);
+        }}
+    }} else if (a != a) {{
+        return x;
+    }} else {{
+        z = 1.0;
+    }}
+    return x < 0.0 ? -z : z;
 }}
 """

@@ -1,0 +1,115 @@
+"""The project's atan and tanh: Python and C give the same bits, both close to the exact value.
+
+glibc picks ``atan`` by the CPU's features (and another C library's ``tanh`` may round
+differently), so the derived models' smooth Coulomb friction calls the project's own
+(:mod:`equilibrist.numeric.libm`, fdlibm's ``s_atan.c``, ``s_tanh.c`` and ``s_expm1.c``). The
+Python form and its C transcription are compared bit for bit, compiled by the system's C
+compiler with the core's flags; both are compared with mpmath's value at 120 bits.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import mpmath
+import numpy as np
+import pytest
+
+from equilibrist.numeric import cache, libm
+from equilibrist.systems import registry
+
+
+def _arguments() -> np.ndarray:
+    """Every branch of both functions: each of atan's reduction intervals and its edges, tanh's
+    and expm1's, tiny, subnormal, huge, infinite, NaN and signed zeros."""
+    rng = np.random.default_rng(20261207)
+    edges = [0.0, 2.0**-1074, 2.0**-1022, 2.0**-55, 2.0**-54, 2.0**-27, 0.4375, 0.6875, 1.0,
+             1.1875, 2.4375, 0.34657359, 1.0397205, 22.0, 2.0**66, 1.7976931348623157e308]
+    near = [math.nextafter(e, d) for e in edges for d in (0.0, math.inf)]
+    values = np.concatenate([
+        rng.uniform(-3.0, 3.0, 20000),
+        rng.uniform(-30.0, 30.0, 5000),
+        np.exp2(rng.uniform(-1074.0, 1023.0, 5000)),
+        np.array(edges + near + [math.inf, math.nan]),
+    ])
+    return np.concatenate([values, -values])
+
+
+def _c_values(xs: np.ndarray, tmp: Path) -> np.ndarray:
+    cc = shutil.which("cc")
+    assert cc is not None, "a C compiler (cc) is needed"
+    (tmp / "m.c").write_text(
+        "#include <math.h>\n#include <stdio.h>\n" + libm.c_source(atan=True, tanh=True) + """
+int main(void)
+{
+    double x, y[2];
+    while (fread(&x, sizeof x, 1, stdin) == 1) {
+        y[0] = eq_atan(x);
+        y[1] = eq_tanh(x);
+        fwrite(y, sizeof y[0], 2, stdout);
+    }
+    return 0;
+}
+""")
+    # The core's flags (equilibrist.native.build): no contraction, no -ffast-math.
+    subprocess.run([cc, "-std=c99", "-O2", "-ffp-contract=off", "-Wall", "-Wno-unused-function",
+                    "-Werror", str(tmp / "m.c"), "-o", str(tmp / "m"), "-lm"], check=True)
+    out = subprocess.run([str(tmp / "m")], input=xs.tobytes(), capture_output=True, check=True)
+    return np.frombuffer(out.stdout, dtype=float).reshape(-1, 2)
+
+
+def test_python_and_c_give_the_same_bits(tmp_path: Path) -> None:
+    xs = _arguments()
+    c = _c_values(xs, tmp_path)
+    python = np.array([[libm.eq_atan(float(x)), libm.eq_tanh(float(x))] for x in xs])
+    assert python.tobytes() == c.tobytes()
+
+
+def test_the_special_values() -> None:
+    for fn in (libm.eq_atan, libm.eq_tanh):
+        assert math.copysign(1.0, fn(0.0)) == 1.0 and math.copysign(1.0, fn(-0.0)) == -1.0
+        assert math.isnan(fn(math.nan))
+        assert fn(5e-324) == 5e-324 and fn(-5e-324) == -5e-324
+    assert libm.eq_atan(math.inf) == -libm.eq_atan(-math.inf) == math.pi / 2
+    assert libm.eq_atan(1e300) == math.pi / 2  # pi/2 rounded: atan's limit
+    assert libm.eq_tanh(math.inf) == -libm.eq_tanh(-math.inf) == libm.eq_tanh(30.0) == 1.0
+
+
+def _ulps(got: float, exact: mpmath.mpf) -> float:
+    if math.isinf(got) or math.isnan(got):
+        return math.inf
+    nearest = float(exact)
+    return float(abs(mpmath.mpf(got) - exact) / mpmath.mpf(math.ulp(nearest)))
+
+
+@pytest.mark.parametrize(("name", "bound"), [("atan", 1.0), ("tanh", 2.5)])
+def test_within_a_few_ulps_of_mpmath(name: str, bound: float) -> None:
+    """atan within 1 ulp of the exact value (fdlibm's bound), tanh within fdlibm's 2.5."""
+    fn = getattr(libm, f"eq_{name}")
+    exact = getattr(mpmath, name)
+    rng = np.random.default_rng(7)
+    xs = np.concatenate([rng.uniform(-3.0, 3.0, 2500), np.exp2(rng.uniform(-60.0, 70.0, 1500)),
+                         [0.4375, 0.6875, 1.1875, 2.4375, 0.34657359, 1.0397205, 21.9]])
+    with mpmath.workprec(120):
+        worst = max(_ulps(fn(float(x)), exact(mpmath.mpf(float(x)))) for x in np.concatenate([xs, -xs]))
+    assert worst <= bound, worst
+
+
+def test_the_shipped_models_call_no_rounded_c_library_function() -> None:
+    """Every shipped model's math is the project's: of ``math``, only exact functions (frexp,
+    ldexp, isnan); its atan and tanh the project's; a model with friction calls ``eq_atan``."""
+    uses_atan = []
+    for entry in registry.all_entries():
+        path = cache.packaged_path(entry)
+        assert path is not None and path.is_file(), path
+        text = path.read_text()
+        called = set(re.findall(r"\bmath\.(\w+)\(", text))
+        assert called <= {"frexp", "ldexp", "isnan"}, (path.name, called)
+        if "eq_atan(" in text:
+            assert "def eq_atan(" in text
+            uses_atan.append(entry.spec.key)
+    assert any(key.startswith("dfki_double_pendulum") for key in uses_atan), uses_atan
