@@ -9,11 +9,9 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
-import sys
-import time
 
 import pytest
+from tests.support.signals import signal_while_working, start_held, when_held
 
 from equilibrist.cli.main import main
 from equilibrist.study import make_study, run_study
@@ -76,9 +74,10 @@ def test_a_worker_killed_mid_study_changes_nothing(tmp_path, local_table, cluste
     assert out.read_bytes() == local_table.read_bytes()
 
 
-# Long enough per chunk (300 runs of 3 s) that the study is still running when
-# the interrupt arrives after its second chunk.
-LONG = ["--vary", "m_p=0.1:0.4:12", "--runs", "300", "--duration", "3", "--x0",
+# Twelve chunks (one value of m_p each); the interrupted command is held in its third
+# (tests.support.signals.start_held), so the interrupt comes after exactly two chunks are
+# written and while it works, whatever the machine's speed: the chunks can be small.
+LONG = ["--vary", "m_p=0.1:0.4:12", "--runs", "10", "--duration", "1", "--x0",
         "theta=-0.25:0.25", "--metrics", "basic", "--seed", "9", "--no-progress"]
 
 
@@ -88,22 +87,14 @@ def test_an_interrupted_study_resumes_to_the_same_bytes(tmp_path, capsys):
     assert main(["sweep", "cartpole", *LONG, "--out", str(whole)]) == 0
     out = tmp_path / "resumed.parquet"
     parts = tmp_path / "resumed.parquet.parts"
-    cmd = [sys.executable, "-m", "equilibrist.cli.main", "sweep", "cartpole", *LONG,
-           "--chunk-size", "1", "--out", str(out)]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and proc.poll() is None:
-        if len(list(parts.glob("chunk-*.parquet"))) >= 2:
-            break
-        time.sleep(0.01)
-    assert proc.poll() is None, proc.communicate()
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
-    assert proc.returncode == 130, err
-    assert "--resume" in err
+    proc = start_held(["sweep", "cartpole", *LONG, "--chunk-size", "1", "--out", str(out)],
+                      tmp_path, "equilibrist.study.runner:evaluate_chunk", after=2)
+    code, _, err, _ = signal_while_working(proc, signal.SIGINT, when_held)
+    assert code == 130, err.decode()
+    assert "--resume" in err.decode()
     assert not out.exists()
     done_before = {int(p.stem.split("-")[1]) for p in parts.glob("chunk-*.parquet")}
-    assert 2 <= len(done_before) < 12
+    assert done_before == {0, 1}
     assert not list(parts.glob(".*.tmp"))
     capsys.readouterr()
     assert main(["sweep", "cartpole", *LONG, "--chunk-size", "1", "--out", str(out),

@@ -25,32 +25,39 @@ def start(argv: list[str], folder: Path) -> subprocess.Popen[bytes]:
 #: What a held command prints on stdout when it reaches the function it is held in.
 HELD = b"held in "
 
-# ``equilibrist ARGV`` (after the two words MODULE FUNCTION) with MODULE.FUNCTION replaced
-# by one that says so on stdout and then waits for good: the command is stopped at a known
-# point of its work, whatever the machine's speed. The command's own signal handlers are
-# those it sets itself (main() with no arguments, as the console script runs it).
+# ``equilibrist ARGV`` (after the three words MODULE FUNCTION CALLS) with MODULE.FUNCTION
+# replaced by one that lets its first CALLS calls through, then says so on stdout and waits
+# for good: the command is stopped at a known point of its work, whatever the machine's
+# speed. The command's own signal handlers are those it sets itself (main() with no
+# arguments, as the console script runs it).
 _HOLD = """\
 import importlib, sys, time
-module, name = sys.argv[1:3]
-del sys.argv[1:3]
+module, name, calls = sys.argv[1], sys.argv[2], int(sys.argv[3])
+del sys.argv[1:4]
+owner = importlib.import_module(module)
+original = getattr(owner, name)
 
 def held(*args, **kwargs):
+    global calls
+    if calls > 0:
+        calls -= 1
+        return original(*args, **kwargs)
     print(f"held in {module}.{name}", flush=True)
     while True:
         time.sleep(3600)
 
-setattr(importlib.import_module(module), name, held)
+setattr(owner, name, held)
 from equilibrist.cli.main import main
 sys.exit(main())
 """
 
 
-def start_held(argv: list[str], folder: Path, at: str) -> subprocess.Popen[bytes]:
+def start_held(argv: list[str], folder: Path, at: str, *, after: int = 0) -> subprocess.Popen[bytes]:
     """``equilibrist ARGV`` in *folder* as :func:`start`, held for good where it calls *at*
-    (``"module:function"``, looked up in the module when called): it prints :data:`HELD` and
-    the name on stdout there (:func:`when_held`)."""
+    (``"module:function"``, looked up in the module when called) once *after* calls have
+    run through: it prints :data:`HELD` and the name on stdout there (:func:`when_held`)."""
     module, _, name = at.partition(":")
-    return subprocess.Popen([sys.executable, "-c", _HOLD, module, name, *argv],
+    return subprocess.Popen([sys.executable, "-c", _HOLD, module, name, str(after), *argv],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=folder)
 
 
