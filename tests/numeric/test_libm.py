@@ -113,3 +113,32 @@ def test_the_shipped_models_call_no_rounded_c_library_function() -> None:
             assert "def eq_atan(" in text
             uses_atan.append(entry.spec.key)
     assert any(key.startswith("dfki_double_pendulum") for key in uses_atan), uses_atan
+
+
+def test_a_model_with_friction_is_the_same_bits_in_python_and_compiled() -> None:
+    """The DFKI pendulum's ``f`` (``cf atan(100 q_dot)`` at each joint) at rates that take
+    atan through each of its branches, in the shipped Python and in the compiled core."""
+    from equilibrist.numeric.lookup import system_from_key
+    from equilibrist.sim.simcore import load_core
+
+    key = "dfki_double_pendulum[robot=acrobot]"
+    entry = next(e for e in registry.all_entries() if e.spec.key == key)
+    path = cache.packaged_path(entry)
+    assert path is not None
+    namespace: dict[str, object] = {"__name__": "shipped_dfki"}
+    exec(compile(path.read_text(), str(path), "exec"), namespace)  # the package's own file
+    f = namespace["f"]
+    system = system_from_key(key)
+    core = load_core(system)
+    rng = np.random.default_rng(11)
+    p = np.array(system.p, dtype=float)
+    mine, theirs = np.empty(4), np.empty(4)
+    differ = 0
+    for _ in range(1000):
+        rates = rng.choice((-1.0, 1.0), 2) * np.exp2(rng.uniform(-40.0, 4.0, 2))  # 100 v: 1e-10..1600
+        x = np.concatenate([rng.uniform(-3.0, 3.0, 2), rates])
+        u = rng.uniform(-2.0, 2.0, 1)
+        f(x, u, p, mine)  # type: ignore[operator]
+        core.f(x, u, p, theirs)
+        differ += mine.tobytes() != theirs.tobytes()
+    assert differ == 0
