@@ -9,10 +9,13 @@ compiler with the core's flags; both are compared with mpmath's value at 120 bit
 
 from __future__ import annotations
 
+import json
 import math
+import os
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import mpmath
@@ -142,3 +145,63 @@ def test_a_model_with_friction_is_the_same_bits_in_python_and_compiled() -> None
         core.f(x, u, p, theirs)
         differ += mine.tobytes() != theirs.tobytes()
     assert differ == 0
+
+
+#: Arguments at which glibc 2.36's atan and tanh round differently with FMA and AVX2 than on its
+#: SSE2 paths (found by comparing four million arguments in [-5, 5] and 2**[-20, 20] under the
+#: two settings: 1,541 of them for atan, 853 for tanh).
+GLIBC_DIFFERS = {"atan": ["0x1.4a3d2c25a20d4p-4", "0x1.0830fd9b8c6d4p-4", "0x1.68058a5cf5d33p-4"],
+                 "tanh": ["-0x1.2e546d1e41e60p-3", "0x1.17287f89bf380p-4", "-0x1.391726227cf00p-3"]}
+#: glibc's SSE2 paths on the same machine (as tests/sim/test_bits_cpu.py sets them).
+TUNED_DOWN = "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F,-AVX512VL,-AVX512DQ,-AVX512BW"
+
+_PROBE = """
+import json, math, sys
+import numpy as np
+from equilibrist.numeric import libm
+from equilibrist.numeric.lookup import get_system
+from equilibrist.sim.simcore import load_core
+args = json.loads(sys.argv[1])
+out = {name: [[getattr(math, name)(float.fromhex(h)).hex(),
+               getattr(libm, "eq_" + name)(float.fromhex(h)).hex()] for h in hs]
+       for name, hs in args.items()}
+system = get_system("dfki_double_pendulum")
+core = load_core(system)
+rows = []
+for h in args["atan"]:  # atan(100 v) at those arguments, at both joints
+    x = np.array([0.3, -0.2, float.fromhex(h) / 100.0, -float.fromhex(h) / 100.0])
+    a, b = np.empty(4), np.empty(4)
+    system.functions.f(x, np.array([0.5]), system.p, a)
+    core.f(x, np.array([0.5]), system.p, b)
+    rows.append([v.hex() for v in (*a, *b)])
+out["f"] = rows
+print(json.dumps(out))
+"""
+
+
+def test_the_other_cpu_setting_changes_glibc_and_not_the_model() -> None:
+    """Under glibc's SSE2 paths, its atan and tanh change at the arguments above (on a CPU with
+    FMA, whose paths they are); the project's, and the friction model's f in Python and
+    compiled, give the same bits under both settings."""
+
+    def run(tunables: str | None) -> dict[str, list[list[str]]]:
+        env = {k: v for k, v in os.environ.items() if k != "GLIBC_TUNABLES"}
+        if tunables is not None:
+            env["GLIBC_TUNABLES"] = tunables
+        proc = subprocess.run([sys.executable, "-c", _PROBE, json.dumps(GLIBC_DIFFERS)], env=env,
+                              capture_output=True, text=True, check=False)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        result: dict[str, list[list[str]]] = json.loads(proc.stdout)
+        return result
+
+    here, there = run(None), run(TUNED_DOWN)
+    for name in GLIBC_DIFFERS:
+        assert [ours for _, ours in here[name]] == [ours for _, ours in there[name]]
+        for (glibc_here, ours), (glibc_there, _) in zip(here[name], there[name], strict=True):
+            assert ours in (glibc_here, glibc_there)  # both within an ulp: one of the two
+    assert here["f"] == there["f"]
+    assert all(row[:4] == row[4:] for row in here["f"])  # Python and compiled
+    flags = Path("/proc/cpuinfo").read_text() if Path("/proc/cpuinfo").exists() else ""
+    if re.search(r"\bfma\b", flags) and re.search(r"\bavx2\b", flags):
+        differ = sum(a[0] != b[0] for n in GLIBC_DIFFERS for a, b in zip(here[n], there[n], strict=True))
+        assert differ > 0, "the tunable changed nothing: glibc's dispatch was not exercised"
