@@ -100,8 +100,8 @@ class _Printer(PythonCodePrinter):  # type: ignore[misc]
     def _print_cos(self, expr: sp.Expr) -> str:
         return f"eq_cos({self._print(expr.args[0])})"
 
-    # atan and tanh (a smooth Coulomb friction's) are the project's too: glibc picks atan by
-    # the CPU's features, and another C library's tanh may round differently. Their sections
+    # atan and tanh (a smooth Coulomb friction's) are the project's too: glibc's round
+    # differently on its FMA and SSE2 paths (tests/numeric/test_libm.py). Their sections
     # of libm are copied only into a module that calls them (see generate_source).
     def _print_atan(self, expr: sp.Expr) -> str:
         self.sections.add("atan")

@@ -24,8 +24,8 @@ balancing rig comes near).
 ``atan`` is fdlibm's ``s_atan.c`` (within 1 ulp: 0.73 at worst in the
 tests against mpmath), ``tanh`` fdlibm's ``s_tanh.c`` over its ``s_expm1.c``
 (within 2.5 ulp, as fdlibm's; the form glibc keeps), for the smooth
-Coulomb friction of :mod:`equilibrist.mechanics.friction`: glibc picks
-``atan`` by the CPU too.
+Coulomb friction of :mod:`equilibrist.mechanics.friction`: glibc 2.36's
+``atan`` and ``tanh`` round differently on its FMA and SSE2 paths too.
 
 The section below the marker is copied verbatim into every generated
 numeric module (:mod:`equilibrist.numeric.codegen`), so the generated
