@@ -167,10 +167,10 @@ def test_a_scheduler_address_that_is_not_one_is_refused(tmp_path, capsys, addres
 def test_more_workers_than_cores_are_refused(tmp_path, capsys, monkeypatch) -> None:
     from equilibrist.study import runner
 
-    def never(self):
+    def never(workers):
         raise AssertionError("a local cluster was started")
 
-    monkeypatch.setattr(runner._local_cluster, "__enter__", never)
+    monkeypatch.setattr(runner, "_local_cluster", never)
     out = tmp_path / "table.parquet"
     code = main([*SWEEP, "--out", str(out), "--workers", "1000"])
     _one_line(code, capsys.readouterr().err, "--workers 1000", "cores")
