@@ -40,9 +40,14 @@ def _make(env_id: str, **kwargs: object) -> EquilibristEnv:
 def test_every_system_with_an_input_has_an_id_per_task() -> None:
     expected = set()
     for name in registry.family_names():
-        system = get_system(name)
-        for task in task_names(system):
-            expected.add(f"equilibrist/{name}-{task}-v0")
+        # A family's variants have an id each, named after the variant (dfki_double_pendulum_acrobot).
+        variants = registry.variants(name)
+        option = registry.variant_option(name)
+        for variant in variants or (None,):
+            system = get_system(name, **({option: variant} if variant else {}))
+            label = f"{name}_{variant}" if variant else name
+            for task in task_names(system):
+                expected.add(f"equilibrist/{label}-{task}-v0")
     assert expected == set(CATALOGUE_IDS)
     assert "equilibrist/cartpole-swingup-v0" in expected
     assert {"equilibrist/balance-v0", "equilibrist/swingup-v0"} <= set(envs.env_ids())

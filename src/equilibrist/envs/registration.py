@@ -68,9 +68,9 @@ def register_all() -> None:
     for version, options in VERSION_OPTIONS.items():
         for env_id, (spec, task, _v) in _catalogue(version).items():
             kwargs: dict[str, object] = {"system": _system_arg(spec), "task": task, **options}
-            if spec.variant is not None:
-                kwargs["params"] = {}
-                kwargs["system"] = spec.key
+            if spec.variant is not None:  # the family by name, its variant by its option
+                option, variant = spec.variant
+                kwargs["params"] = {option: variant}
             _register(env_id, kwargs)
         for task in TASK_NAMES:
             _register(f"{NAMESPACE}/{task}-v{version}", {"task": task, **options})
