@@ -42,7 +42,7 @@ from __future__ import annotations
 import math
 import types
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -230,6 +230,11 @@ def _operating_plant(
     repeated = sorted({n for n in names if names.count(n) > 1})
     if repeated:
         raise DesignError(f"outputs lists {', '.join(repeated)} more than once")
+    # A smooth Coulomb law's slope at rest (100 cf) is no damping a controller can count on:
+    # the plant is linearized with it at zero, at the same operating point (it acts at rest).
+    coulomb = {p.name: 0.0 for p in system.spec.all_parameters if p.coulomb}
+    given = system
+    system = system.with_params(**coulomb) if coulomb else system
     if at:
         eq = system.equilibrium(state={k: float(v) for k, v in at.items()})
         if eq.residual > 1e-6 * (1.0 + float(np.max(np.abs(eq.x)))):
@@ -241,6 +246,8 @@ def _operating_plant(
         plant = system.linearize(eq.x, eq.u, outputs=names)
     else:
         plant = system.linearize(outputs=names)
+    if coulomb:
+        plant = replace(plant, params=given.params)
     n = plant.n_states
     if rate_hz is not None and rate_hz > MAX_RATE:
         # Past this the sampled plant is the identity to double precision (an

@@ -253,7 +253,7 @@ def _frictions(tree: Tree) -> list[Parameter]:
             law = "cf * atan(100 v)" if tree.friction_form == "atan" else "cf * tanh(100 v)"
             out.append(friction(
                 f"{j.name}_friction", j.friction, "N*m" if j.kind == "hinge" else "N",
-                f"Coulomb friction cf of joint {j.name}", note=f"smoothed: {law}"))
+                f"Coulomb friction cf of joint {j.name}", note=f"smoothed: {law}", coulomb=True))
     return out
 
 

@@ -28,6 +28,9 @@ class Parameter:
     ``dissipative``: the parameter only takes energy out of the system (a
     friction): with every dissipative parameter at zero and no input, the
     system's energy is conserved (the contract test checks both ways).
+    ``coulomb``: a Coulomb friction in a smooth law (:mod:`equilibrist.mechanics.friction`),
+    whose steep slope at rest is no damping a controller can count on: designs linearize
+    with it at zero (the friction then acts on the loop as the disturbance it is).
     """
 
     name: str
@@ -40,6 +43,7 @@ class Parameter:
     high_open: bool = False
     note: str = ""
     dissipative: bool = False
+    coulomb: bool = False
 
     def __post_init__(self) -> None:
         # A spec is refused where it is written: a default outside its own
@@ -95,9 +99,11 @@ def nonnegative(name: str, default: float, unit: str, meaning: str, note: str = 
     return Parameter(name, default, unit, meaning, low=0.0, note=note)
 
 
-def friction(name: str, default: float, unit: str, meaning: str, note: str = "") -> Parameter:
+def friction(name: str, default: float, unit: str, meaning: str, note: str = "", *,
+             coulomb: bool = False) -> Parameter:
     """A friction: non-negative, and dissipative (see :class:`Parameter`)."""
-    return Parameter(name, default, unit, meaning, low=0.0, note=note, dissipative=True)
+    return Parameter(name, default, unit, meaning, low=0.0, note=note, dissipative=True,
+                     coulomb=coulomb)
 
 
 @dataclass(frozen=True)

@@ -35,21 +35,23 @@ Parameters
     r2      0.2557           m           elbow to link 2 centre of mass
     I1      0.03189          kg m^2      link 1 inertia about the shoulder
     I2      0.05087          kg m^2      link 2 inertia about the elbow
-    Ir      6.287e-05        kg m^2      each motor's rotor inertia, before its gear
+    Ir      0 (6.287e-05)    kg m^2      each motor's rotor inertia, before its gear
     gr      6                1           each motor's gear ratio
-    b1      0.001            N m s/rad   shoulder viscous friction, either sign
-    b2      0.001            N m s/rad   elbow viscous friction, either sign
-    cf1     0.16             N m         shoulder Coulomb friction, cf1 atan(100 q1_dot),
+    b1      0 (0.001)        N m s/rad   shoulder viscous friction, either sign
+    b2      0 (0.001)        N m s/rad   elbow viscous friction, either sign
+    cf1     0 (0.16)         N m         shoulder Coulomb friction, cf1 atan(100 q1_dot),
                                          either sign
-    cf2     0.12             N m         elbow Coulomb friction, cf2 atan(100 q2_dot),
+    cf2     0 (0.12)         N m         elbow Coulomb friction, cf2 atan(100 q2_dot),
                                          either sign
     g       9.81             m/s^2       gravity
     ======  ===============  ==========  ============================================
 
     ``tau`` is limited to +-6 N m, the torque limit of RealAIGym's v2 boards (the
-    motors' own is 10 N m: ``--set tau_max=10``). The boards' simulation sets ``Ir``,
-    ``b`` and ``cf`` to zero (``--set Ir=0 --set b1=0 --set b2=0 --set cf1=0 --set
-    cf2=0``). The smooth Coulomb law acts as a viscous ``100 cf`` in a linearization at
+    motors' own is 10 N m: ``--set tau_max=10``). ``Ir``, ``b`` and ``cf`` default to zero,
+    as the boards' simulation sets them (the identified values in parentheses: ``--set
+    Ir=6.287e-05 --set b1=0.001 --set b2=0.001 --set cf1=0.16 --set cf2=0.12``, or the
+    model's parameter file): with them the default LQR at +-6 N m loses the rig from a
+    0.01 rad tilt, as a linear design that does not know the friction must. The smooth Coulomb law acts as a viscous ``100 cf`` in a linearization at
     rest. Inertias about the joints below ``m r^2`` (no rigid body, as identifications may
     give) are taken as they are: the equations need only ``M`` definite.
 
@@ -108,6 +110,11 @@ MODEL_1_0: dict[str, float] = {
     "b1": 0.001, "b2": 0.001, "cf1": 0.16, "cf2": 0.12, "g": 9.81,
 }
 
+#: The catalogue's defaults: model 1.0 with the rotors and the frictions at zero, as
+#: RealAIGym's v2 boards simulate the rig (the identified values: ``MODEL_1_0``).
+DEFAULTS: dict[str, float] = {**MODEL_1_0, "Ir": 0.0, "b1": 0.0, "b2": 0.0, "cf1": 0.0,
+                              "cf2": 0.0}
+
 #: The torque limit of the actuated joint on RealAIGym's v2 boards [N*m] (the file's
 #: ``tl1``, ``tl2`` are the motors' 10 N*m).
 TORQUE_LIMIT = 6.0
@@ -123,21 +130,21 @@ _ENCODER = 2.0 * math.pi / (6 * 2**14) / math.sqrt(12.0)
 def _damping(name: str, joint: str) -> Parameter:
     # Identified damping may come out negative (the benchmark varies it through zero): any
     # finite value is taken; it is a friction of the energy contract (zero: conserved).
-    return Parameter(name, MODEL_1_0[name], "N*m*s/rad",
+    return Parameter(name, DEFAULTS[name], "N*m*s/rad",
                      f"{joint} viscous friction (torque -{name} q_dot on the joint), either sign",
                      note=_ID, dissipative=True)
 
 
 def _coulomb(name: str, joint: str, rate: str) -> Parameter:
     # Either sign too: the benchmark's robustness runs vary it through zero.
-    return Parameter(name, MODEL_1_0[name], "N*m",
+    return Parameter(name, DEFAULTS[name], "N*m",
                      f"{joint} Coulomb friction, {name} atan(100 {rate}), either sign",
-                     note=_ID, dissipative=True)
+                     note=_ID, dissipative=True, coulomb=True)
 
 
 def parameters() -> tuple[Parameter, ...]:
     """The rig's parameters with the identified values of design C.1, model 1.0."""
-    v = MODEL_1_0
+    v = DEFAULTS
     return (
         positive("m1", v["m1"], "kg", "link 1 mass (with the elbow's motor)", note=_ID),
         positive("m2", v["m2"], "kg", "link 2 mass", note=_ID),
@@ -149,7 +156,7 @@ def parameters() -> tuple[Parameter, ...]:
         positive("I1", v["I1"], "kg*m^2", "link 1 inertia about the shoulder", note=_ID),
         positive("I2", v["I2"], "kg*m^2", "link 2 inertia about the elbow", note=_ID),
         nonnegative("Ir", v["Ir"], "kg*m^2", "each motor's rotor inertia (before its gear)",
-                    note=_ID),
+                    note=f"{_ID}: {MODEL_1_0['Ir']:g}; 0 on the v2 boards"),
         positive("gr", v["gr"], "1", "each motor's gear ratio", note=_ID),
         _damping("b1", "shoulder"),
         _damping("b2", "elbow"),
