@@ -38,7 +38,9 @@ def test_tutorial_is_stored_without_outputs(path: Path) -> None:
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
 def test_tutorial_runs_top_to_bottom(path: Path, tmp_path: Path) -> None:
     notebook = nbformat.read(path, as_version=4)
-    client = NotebookClient(notebook, timeout=600, kernel_name="python3",
+    # A cell's own bound (the longest takes seconds); ipykernel 7 could leave a started
+    # kernel silent for good, which is why the notebook extra keeps ipykernel below 7.
+    client = NotebookClient(notebook, timeout=300, kernel_name="python3",
                             resources={"metadata": {"path": str(tmp_path)}})
     client.execute()  # raises CellExecutionError naming the cell that failed
     for cell in notebook.cells:
