@@ -101,11 +101,9 @@ def tv_at(params, slot):
     return int(params[slot])
 '''
 
-SOURCE = LAYOUT.source() + CATCH_SOURCE + _LAW + '''
-
-def catch_dev(i, t, z, y, params):
-    return y[i] - params[tv_at(params, TV_O_X_OP) + i]
-
+# The tracker's catch and command, shared by both forms below: only how a state's
+# deviation from the plan is taken differs ({deviation}).
+_TRACK = '''
 
 def tvlqr_caught(t, z, y, params):
     if tv_sample(t, params) >= tv_at(params, TV_STEPS) or z[0] >= 0.5:
@@ -129,13 +127,19 @@ def output(t, z, y, r, params, u_out):
     for i in range(m):
         acc = params[ou + i]
         for j in range(n):
-            acc -= params[og + i * n + j] * (y[j] - params[ox + j])
+            acc -= params[og + i * n + j] * {deviation}
         u_out[i] = acc
 
 
 def update(t, z, y, r, u_applied, params, z_out):
     z_out[0] = tvlqr_caught(t, z, y, params)
 '''
+
+SOURCE = LAYOUT.source() + CATCH_SOURCE + _LAW + '''
+
+def catch_dev(i, t, z, y, params):
+    return y[i] - params[tv_at(params, TV_O_X_OP) + i]
+''' + _TRACK.replace("{deviation}", "(y[j] - params[ox + j])")
 
 
 #: ``balance="lqr"`` with ``wrap=True``: every deviation from the plan or the balance taken
@@ -153,37 +157,7 @@ def tv_dev(j, y, params, of):
 
 def catch_dev(i, t, z, y, params):
     return tv_dev(i, y, params, tv_at(params, TV_O_X_OP))
-
-
-def tvlqr_caught(t, z, y, params):
-    if tv_sample(t, params) >= tv_at(params, TV_STEPS) or z[0] >= 0.5:
-        return 1.0
-    n = tv_at(params, TV_N)
-    v = catch_level(t, z, y, params, params[tv_at(params, TV_O_S_END):], n)
-    return catch_mode(0, v, params[TV_LEVEL], params[TV_LEVEL])
-
-
-def output(t, z, y, r, params, u_out):
-    n = tv_at(params, TV_N)
-    m = tv_at(params, TV_M)
-    k = tv_sample(t, params)
-    ox = tv_at(params, TV_O_X_OP)
-    ou = tv_at(params, TV_O_U_OP)
-    og = tv_at(params, TV_O_K_END)
-    if tvlqr_caught(t, z, y, params) < 0.5:
-        ox = tv_at(params, TV_O_XS) + k * n
-        ou = tv_at(params, TV_O_US) + k * m
-        og = tv_at(params, TV_O_GAINS) + k * m * n
-    for i in range(m):
-        acc = params[ou + i]
-        for j in range(n):
-            acc -= params[og + i * n + j] * tv_dev(j, y, params, ox)
-        u_out[i] = acc
-
-
-def update(t, z, y, r, u_applied, params, z_out):
-    z_out[0] = tvlqr_caught(t, z, y, params)
-'''
+''' + _TRACK.replace("{deviation}", "tv_dev(j, y, params, ox)")
 
 
 def periods(system: System) -> np.ndarray:
