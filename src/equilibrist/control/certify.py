@@ -1,41 +1,14 @@
 """A certified region of attraction: the largest level set of the LQR's ``V`` that provably shrinks.
 
-For a state feedback ``u = sat(u_op - K (x - x_op))`` (the LQR, or the
-LQG's state feedback) and the Riccati solution ``S`` of its design,
-:func:`certify` finds a level ``rho`` such that on the whole set
-``{x : V(x) = (x - x_op)' S (x - x_op) <= rho}`` the derivative of ``V``
-along the **exact** equations of motion (the derived sympy model, not a
-polynomial fit) with the input's **saturation** is negative (outside a ball
-about the operating point whose radius the rounding of the operating point
-sets, 1e-15 or so): the set is invariant and every start in it is caught.
-
-Method: interval branch-and-bound. In coordinates ``z`` with ``dx = T z``
-(``T = L^-T``, ``S = L L'``) the level set is a ball. It is covered by
-boxes; on each box an enclosure of ``dV/dt`` is computed in interval
-arithmetic rounded outward (:mod:`equilibrist.numeric.interval`): the
-direct enclosure, intersected with the mean-value form (the enclosure at the
-box's centre plus the enclosure of the gradient over the box times the box's
-half-widths; the saturation's slope is ``[0, 1]`` where the box straddles a
-limit, its Clarke gradient). A box whose upper bound is negative is proven;
-the others are split in ``2^n``. Near the operating point boxes cannot
-prove anything (``dV/dt`` vanishes there to second order); a ball of radius
-``r0`` is proven at once instead: ``dV/dt = 2 z'T'S f0 + z' sym(T'S M T) z``
-with ``M`` the mean of the closed loop's Jacobian along the segment, inside
-its enclosure over the box ``[-r0, r0]^n``, so ``dV/dt <= Lambda |z|^2 +
-b |z|`` with ``Lambda`` the bound of the largest eigenvalue of that interval
-matrix (Weyl: the midpoint's plus the radius's norm) and ``b`` the
-enclosure of ``2 |T'S f(x_op, u_op)|``.
-
-Where a box cannot be proven down to the finest width (a true violation
-of the decrease, or a boundary the boxes do not resolve), the radius
-retreats below it. ``rho`` is also held to the system's fall region (the
-ellipsoid inside it).
-
-What it assumes: the feedback acts continuously (the zero-order hold of the
-sampled loop and an estimator in front are not in the proof); the model's
-parameters are the doubles the simulation uses. The estimate of
-``equilibrist roa`` (the sampled, saturated loop at the rig's rate) is run
-inside the certified set to check it (docs/roa.md).
+For a state feedback ``u = sat(u_op - K (x - x_op))`` (the LQR, or the LQG's state feedback)
+and the Riccati solution ``S`` of its design, :func:`certify` finds a level ``rho`` such that
+on the whole set ``{x : (x - x_op)' S (x - x_op) <= rho}`` the derivative of ``V`` along the
+exact equations of motion with the input's saturation is negative (outside a ball about the
+operating point whose radius the rounding of the operating point sets): the set is invariant
+and every start in it is caught. The method (interval branch-and-bound in the coordinates
+where the level set is a ball, :mod:`equilibrist.numeric.interval`), what it assumes (a
+continuous feedback, the simulation's parameters) and how ``equilibrist roa`` checks it are
+in docs/roa.md.
 """
 
 from __future__ import annotations

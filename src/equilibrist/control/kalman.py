@@ -32,15 +32,9 @@ returns a new one. Estimates may be batched: ``x`` of shape ``(n,)`` or
 covariance does not depend on the data and is shared.
 
 The filter as it runs, sample by sample, is one source (:data:`ESTIMATOR_SOURCE`, the
-:class:`Estimator` of :func:`estimator`): Python in the subset
-:mod:`equilibrist.native.pyc` translates, run as C in the simulation core and in every
-export, and as plain Python (:func:`estimator_namespace`). Every consumer reads it: the
-time-varying LQR's filter along its plan and the swing-up's hand-over embed its functions in
-their controllers' sources; the LQG's linear form (and so the MPC's filter in front, the
-LQG's) is that source's linear map, read off column by column (:func:`realize`); the
-identification's prediction errors correct with its Python form. The covariances and gains
-of the filter (:func:`gain`, :func:`joseph`, :func:`predict_covariance`) are written once
-below, in :mod:`equilibrist.control.fixed`'s order.
+:class:`Estimator` of :func:`estimator`), read by every consumer (docs/controllers.md, "The
+estimator and the catch"); its covariances and gains (:func:`gain`, :func:`joseph`,
+:func:`predict_covariance`) are written once below, in :mod:`equilibrist.control.fixed`'s order.
 """
 
 from __future__ import annotations

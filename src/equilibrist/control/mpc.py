@@ -1,83 +1,23 @@
 """Constrained linear model predictive control (MPC), solved exactly by DAQP.
 
-At every sample the controller solves, for the deviation ``dx_0`` of the
-(estimated) state from the operating point, the quadratic program
+At every sample the controller solves a QP over the horizon for the deviation of the
+(estimated) state from the operating point and applies its first move (receding horizon):
+the design's sampled linearization, weights and Riccati solution as terminal cost, hard
+input limits, soft state bounds with an exact L1 plus L2 slack penalty, a bound the state
+already violates widened to the LQR's own trajectory (:meth:`MPCProblem.soft_limits`). The
+moves are the LQR plus a correction and the states are eliminated
+(:attr:`MPCProblem.condensed`, :meth:`MPCProblem.qp_bounds`); when the LQR's trajectory meets
+every constraint the QP is not called (``exact_unconstrained=False`` on the runtime sends
+every sample to DAQP), and a QP without a solution gets the clipped LQR (counted in
+``fallbacks``). docs/mpc.md writes the problem out and says why each choice was made (and
+why not OSQP).
 
-.. math::
-
-    \\min \\sum_{k=0}^{N-1} (dx_k' Q dx_k + du_k' R du_k) + dx_N' P dx_N
-          + \\sum_{k=1}^{N} (\\rho_1 1's_k + \\rho_2 s_k's_k)
-
-    dx_{k+1} = A_d dx_k + B_d du_k,\\quad
-    u_{min} - u_{op} \\le du_k \\le u_{max} - u_{op}\\ \\text{(hard)},\\quad
-    lo - s_k \\le C_s dx_k \\le hi + s_k,\\ s_k \\ge 0\\ \\text{(soft)}
-
-and applies ``u = u_op + du_0`` (receding horizon). ``A_d, B_d`` are the
-design's zero-order-hold sampled linearization, ``Q`` and ``R`` its weights
-(``--q``, ``--r``; Bryson's rule by default), ``P`` the discrete Riccati
-solution ``S`` of the same weights: with no constraint active the
-minimizer is the discrete LQR's ``du_0 = -K dx_0`` whatever the horizon.
-
-*Soft state constraints* (the cart's track ``|x| <= x_max``, the system's
-region of each angle) carry a slack ``s_k`` per constrained state and step,
-penalized by ``rho_1 s + rho_2 s^2``. The L1 weight ``rho_1`` makes the
-penalty exact: as long as a trajectory that meets the constraints exists,
-the slack stays zero; the L2 weight keeps the problem strictly convex.
-Defaults: ``rho_1 = 100`` and ``rho_2 = 4`` times the largest diagonal
-entry of ``Q``. The input limits are hard: the command never leaves them.
-
-*A bound already violated.* A soft bound that the (estimated) state
-violates now cannot be met in the first samples, and on a non-minimum-phase
-plant (the cart-pole: returning a cart starts by moving it further out) a
-short horizon with a heavy slack penalty then prefers plans that keep the
-violation small over the next samples and lose the cart for good (a cart
-carried past the track's end by a 250 N push ran away to 12 m at 200 Hz, ``N = 30``).
-So such a bound is widened over the horizon to the LQR's own trajectory
-from the current state (:meth:`MPCProblem.soft_limits`): the LQR's return is
-always a plan with zero slack, and the QP only improves on it.
-Bounds the state meets keep their full weight.
-
-*The QP.* The moves are written ``du_k = -K dx_k + v_k`` (the LQR plus a
-correction) and the states are eliminated (:attr:`MPCProblem.condensed`):
-the variables are the ``N m`` corrections and the ``N`` slack vectors, the
-Hessian is block diagonal (``2 (R + B'PB)`` per move: the Riccati
-solution absorbs the states' cost) and only the constraints' bounds depend
-on ``dx_0`` (:meth:`MPCProblem.qp_bounds`).
-
-*Solver.* First the unconstrained case is solved exactly: the LQR's own
-trajectory from ``dx_0`` (``v = 0``) minimizes the quadratic part of the
-cost, so when it meets every constraint over the horizon (slack zero) it
-is the QP's minimizer, and the controller applies ``-K dx_0`` to
-round-off without calling the solver. Otherwise DAQP, a dual active-set
-solver: it ends on the exact optimal active set (the solution solves that
-set's KKT system to round-off, not to an iterative tolerance), and starts
-from the previous sample's working set, so a sample whose active set did
-not change costs one or two iterations. The data are factorized once; each
-sample updates only the bounds. The iteration cap
-(:data:`~equilibrist.native.daqp_library.ITER_LIMIT`) bounds the solve time; a QP that ends without a solution (the cap, or a failure)
-gets the clipped LQR and the next sample a cold start (counted in
-``fallbacks``). ``exact_unconstrained=False`` on the runtime sends every
-sample to DAQP.
-
-An earlier release solved the sparse form of the same QP with OSQP (ADMM).
-Its slack penalty's scale made ADMM slow: on the cart-pole at 200 Hz,
-``N = 30``, about two thirds of the constrained samples stopped at its
-iteration cap with first moves up to 70 N from the optimum. DAQP solves all
-of them: 0.08 ms median, 0.6 ms worst per sample (bench/README.md).
-
-*Estimator.* With ``estimator="kalman"`` (the default when the measured
-outputs are not the full state) the design's discrete Kalman filter (its
-``current`` or ``predictor`` form) runs in front and the QP starts at its
-estimate; with ``"state"`` the measured full state is used. The filter is
-the LQG controller's own estimator (:meth:`MPC.filter_form`), run by the linear
-controller's library.
-
-*One definition.* The runtime (:class:`MPCRuntime`) is the C library that
-``export`` writes (:mod:`equilibrist.native.mpc_library`: DAQP's sources, the
-generated driver and the filter), compiled once per cache folder and called
-through ctypes at every sample: the simulated MPC is the shipped one, to the
-bit. It is a :class:`~equilibrist.control.controller.PythonController`, so
-batches of it run in worker processes.
+The runtime (:class:`MPCRuntime`) is the C library that ``export`` writes
+(:mod:`equilibrist.native.mpc_library`: DAQP's sources, the generated driver and the filter,
+the LQG's own estimator, :meth:`MPC.filter_form`), compiled once per cache folder and called
+through ctypes at every sample: the simulated MPC is the shipped one, to the bit. It is a
+:class:`~equilibrist.control.controller.PythonController`, so batches of it run in worker
+processes.
 """
 
 from __future__ import annotations
