@@ -160,6 +160,51 @@ def catch_dev(i, t, z, y, params):
 ''' + _TRACK.replace("{deviation}", "tv_dev(j, y, params, ox)")
 
 
+#: ``balance="lqr"`` with rates differenced from the measured angles (``rates="differenced"``):
+#: the wrapped layout (every period 0 without ``wrap``) and the number of coordinates.
+LAYOUT_DIFF = Layout("TV", (*LAYOUT.slots, "nq"), LAYOUT_WRAP.blocks)
+
+#: ``rates="differenced"``: the rates the law uses are not the measured ones but second-order
+#: backward differences of the measured angles, ``(3 q_k - 4 q_k-1 + q_k-2) T^-1 / 2`` (exact
+#: for a parabola), as a rig computes them from its encoders: noise on the measured rates never
+#: reaches the torque. The state keeps the last two angle readings and how many there are; until
+#: there are two, the measured rates are used. Every deviation is taken as ``wrap`` says (a
+#: period of 0 compares a state as it is).
+SOURCE_DIFF = LAYOUT_DIFF.source() + CATCH_SOURCE + _LAW + '''
+
+def tv_y(j, z, y, params):
+    nq = tv_at(params, TV_NQ)
+    if j < nq or z[1 + 2 * nq] < 1.5:
+        return y[j]
+    i = j - nq
+    return (3.0 * y[i] - 4.0 * z[1 + i] + z[1 + nq + i]) * (params[TV_RATE] / 2.0)
+
+
+def tv_dev(j, z, y, params, of):
+    d = tv_y(j, z, y, params) - params[of + j]
+    period = params[tv_at(params, TV_O_PERIOD) + j]
+    if period > 0.0:
+        d = d - period * math.floor(d / period + 0.5)
+    return d
+
+
+def catch_dev(i, t, z, y, params):
+    return tv_dev(i, z, y, params, tv_at(params, TV_O_X_OP))
+''' + _TRACK.replace("{deviation}", "tv_dev(j, z, y, params, ox)").replace(
+    "    z_out[0] = tvlqr_caught(t, z, y, params)\n", '''    z_out[0] = tvlqr_caught(t, z, y, params)
+    nq = tv_at(params, TV_NQ)
+    for i in range(nq):
+        z_out[1 + i] = y[i]
+        z_out[1 + nq + i] = z[1 + i]
+    z_out[1 + 2 * nq] = z[1 + 2 * nq] + 1.0
+    if z_out[1 + 2 * nq] > 2.0:
+        z_out[1 + 2 * nq] = 2.0
+''')
+
+#: What ``rates`` takes: the measured rates as the loop hands them, or differenced.
+RATES = ("measured", "differenced")
+
+
 def periods(system: System) -> np.ndarray:
     """Each state's period for ``wrap=True``: ``2 pi`` for a coordinate in radians (a turn
     of a revolute joint), 0 for the others (lengths, rates)."""
@@ -249,7 +294,9 @@ SOURCE_LQG = lqg_source(KALMAN)
 def plan_samples(ctrl: NonlinearController) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(t, states, inputs)``: the plan as the tracker *ctrl* samples it (at its rate, from
     its tables: the Hermite interpolant of the knots)."""
-    layout = LAYOUT_WRAP if ctrl.settings.get("wrap") else LAYOUTS[str(ctrl.settings["balance"])]
+    layout = (LAYOUT_DIFF if ctrl.settings.get("rates") == "differenced"
+              else LAYOUT_WRAP if ctrl.settings.get("wrap")
+              else LAYOUTS[str(ctrl.settings["balance"])])
     p = np.asarray(ctrl.params, dtype=float)
     steps, rate = int(p[layout.slots.index("steps")]), float(p[layout.slots.index("rate")])
     return np.arange(steps + 1) / rate, layout.read(p, "xs"), layout.read(p, "us")
@@ -271,7 +318,8 @@ def _hermite_states(system: System, traj: Trajectory, t: np.ndarray) -> np.ndarr
 def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np.ndarray,
           S_end: np.ndarray, K_end: np.ndarray, x_op: np.ndarray, u_op: np.ndarray,
           balance: str = "lqr", design: Design | None = None, P0: np.ndarray | None = None,
-          catch: bool = True, wrap: bool = False) -> NonlinearController:
+          catch: bool = True, wrap: bool = False,
+          rates: str = "measured") -> NonlinearController:
     """The time-varying LQR along *traj* at *rate*, handing over to ``K_end`` at the end.
 
     ``balance="lqr"`` acts on the full measured state; ``"lqg"`` on the estimate of
@@ -280,8 +328,14 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     (see the module docstring). With *catch* the balancing stage takes over as soon as
     the state (its estimate) enters :func:`catch_region` before the plan ends. With *wrap*
     (``balance="lqr"`` only) the angles' deviations are taken modulo a turn
-    (:data:`SOURCE_WRAP`).
+    (:data:`SOURCE_WRAP`). With ``rates="differenced"`` (``balance="lqr"`` only) the law's
+    rates are differenced from the measured angles (:data:`SOURCE_DIFF`).
     """
+    if rates not in RATES:
+        raise ControllerError(f"--rates {rates!r}: expected one of {', '.join(RATES)}")
+    if rates == "differenced" and balance != "lqr":
+        raise ControllerError("--rates differenced differences the full state's angles: it "
+                              "takes --balance lqr")
     if wrap and balance != "lqr":
         raise ControllerError("--wrap on wraps the full state's angles: it takes --balance lqr")
     if balance not in BALANCES:
@@ -327,16 +381,29 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     blocks = {"xs": xs, "us": us, "gains": gains, "x_op": x_op, "u_op": u_op, "K_end": K_end,
               "S_end": S_end}
     sizes = {"steps": steps, "knots": steps + 1, "rate": rate, "n": n, "m": m, "level": level}
-    params = (LAYOUT_WRAP.pack(sizes, {**blocks, "period": periods(system)}) if wrap
-              else LAYOUT.pack(sizes, blocks))
+    nq = int(system.functions.N_Q)
+    differenced = rates == "differenced"
+    if differenced and (nq == 0 or n != 2 * nq):
+        raise ControllerError(f"--rates differenced needs a state [q, q_dot]: {system.key}'s is "
+                              f"{', '.join(system.state_names)}")
+    if differenced:
+        period = periods(system) if wrap else np.zeros(n)
+        params = LAYOUT_DIFF.pack({**sizes, "nq": nq}, {**blocks, "period": period})
+    elif wrap:
+        params = LAYOUT_WRAP.pack(sizes, {**blocks, "period": periods(system)})
+    else:
+        params = LAYOUT.pack(sizes, blocks)
+    source = SOURCE_DIFF if differenced else SOURCE_WRAP if wrap else SOURCE
     return NonlinearController(
-        name="tvlqr", source=SOURCE_WRAP if wrap else SOURCE, params=params, z0=np.zeros(1),
+        name="tvlqr", source=source, params=params,
+        z0=np.zeros(2 + 2 * nq) if differenced else np.zeros(1),
         rate=float(rate),
         x_op=x_op, u_op=u_op, state_names=system.state_names, input_names=system.input_names,
         output_names=system.state_names,
         settings={"kind": "tvlqr", "trajectory_duration": traj.duration, "samples": steps,
                   "start": dict(zip(system.state_names, traj.states[0].tolist(), strict=True)),
-                  "balance": "lqr", "catch_level": level, **({"wrap": True} if wrap else {})},
+                  "balance": "lqr", "catch_level": level, **({"wrap": True} if wrap else {}),
+                  **({"rates": "differenced"} if differenced else {})},
     )
 
 
@@ -470,6 +537,7 @@ def build_request(request: ControllerRequest) -> NonlinearController:
     wrap = str(request.options.get("wrap", "off"))
     if wrap not in ("on", "off"):
         raise ControllerError(f"--wrap {wrap!r}: expected on or off")
+    rates = str(request.options.get("rates", "measured"))
     return tvlqr(system, traj, rate=rate, Q=design.Q, R=design.R, S_end=design.S, K_end=design.K,
                  x_op=design.plant.x0, u_op=design.plant.u0, balance=balance, design=design,
-                 catch=catch == "on", wrap=wrap == "on")
+                 catch=catch == "on", wrap=wrap == "on", rates=rates)

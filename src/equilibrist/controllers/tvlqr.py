@@ -19,6 +19,10 @@ BALANCES = ("lqr", "lqg")
 CATCHES = ("on", "off")
 #: What ``--wrap`` takes: the angles' deviations modulo a turn, or as they are.
 WRAPS = ("on", "off")
+#: What ``--rates`` takes: the measured rates, or rates differenced from the measured angles.
+#: The same tuple as :data:`equilibrist.control.tvlqr.RATES` (listing the kinds imports no
+#: numerics).
+RATES = ("measured", "differenced")
 
 
 def build(request: ControllerRequest) -> NonlinearController:
@@ -40,7 +44,11 @@ KIND = ControllerKind(
                     "(off)", choices=CATCHES),
              Option("--wrap", "with --controller tvlqr --balance lqr: compare the angles modulo "
                     "a turn (on), so a rig that swung over is caught upright again, or as they "
-                    "are (off, default)", choices=WRAPS)),
+                    "are (off, default)", choices=WRAPS),
+             Option("--rates", "with --controller tvlqr --balance lqr: the measured rates "
+                    "(measured, default) or rates differenced from the measured angles, "
+                    "(3 q_k - 4 q_k-1 + q_k-2) / (2 T), as a rig computes them from its encoders "
+                    "(differenced)", choices=RATES)),
     surfaces=frozenset({"simulate", "export", "study", "playground"}), task="swingup", planned=True,
     order=50,
 )
