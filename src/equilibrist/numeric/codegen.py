@@ -6,17 +6,12 @@ translated operation for operation to C (:mod:`equilibrist.native.pyc`), in
 the simulation core. Common
 subexpressions are eliminated once, across each function's outputs.
 
-Sines and cosines are the project's own (:mod:`equilibrist.numeric.libm`,
-whose functions are copied into the module as ``eq_sin`` and ``eq_cos``;
-``eq_atan`` and ``eq_tanh`` too, into a module that calls them),
-not the C library's, whose result depends on the CPU it runs on: the
-generated dynamics give the same bits on every machine, in Python and
-compiled (the C core calls the C versions of the same ``eq_`` functions).
-An integer power is printed as the product the C translation computes for
-``**`` (:func:`equilibrist.numeric.libm.power_product`: ``x ** 2`` is
-``(x * x)``), not as Python's ``**``, which calls the C library's ``pow``;
-a base that is not a symbol is assigned to a ``pw_`` name first, evaluated
-once as the C's temporary is.
+Sines and cosines (and ``eq_atan``, ``eq_tanh`` in a module that calls them) are the
+project's own, copied into the module from :mod:`equilibrist.numeric.libm`, and an integer
+power is printed as the product the C translation computes for ``**``
+(:func:`equilibrist.numeric.libm.power_product`; a base that is not a symbol is assigned to a
+``pw_`` name first, evaluated once as the C's temporary is): the generated dynamics give the
+same bits on every machine, in Python and compiled (docs/reproducibility.md).
 
 Functions in the generated module (``x``, ``u``, ``p`` are 1-D float arrays
 in the order of the spec's states, inputs and parameters):

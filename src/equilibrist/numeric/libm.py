@@ -1,31 +1,16 @@
 """The project's own ``sin``, ``cos``, ``log``, ``exp``, ``atan`` and ``tanh``: the same bits
 on every CPU.
 
-The C library's ``sin``, ``cos``, ``log`` (and ``exp``, ``pow``, ``atan2``,
-``tan``) are chosen at load time by the CPU's features: glibc on x86-64
-picks ``__sin_fma`` on a CPU with FMA and AVX2, ``__sin_avx`` or
-``__sin_sse2`` elsewhere (and ``GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA``
-picks another on the same CPU). Those variants round differently for a few
-inputs in ten thousand, so a trajectory that calls them is not the same to
-the bit on two machines. The functions here are written with plain IEEE
-double operations (``+ - * /``, comparisons, the exact ``math.frexp``), in
-an order the code fixes, so Python and the C core (which contracts nothing
-without ``fastmath``) give the same bits on every CPU.
-
-They are the kernels of fdlibm (Sun Microsystems, 1993), as kept in musl:
-``__sin``, ``__cos`` and ``__rem_pio2``'s Cody-Waite reduction (three
-steps, 118 bits of pi/2), and ``log``. Within 1 ulp of the exact value
-(checked against mpmath in tests/sim/test_bits_cpu.py) for every finite
-argument of ``sin`` and ``cos`` with ``|x| < 2**20 * pi / 2`` (about
-1.6e6 rad); beyond that the reduction is still deterministic but loses
-accuracy (fdlibm's Payne-Hanek path is not ported: no angle of a
-balancing rig comes near).
-
-``atan`` is fdlibm's ``s_atan.c`` (within 1 ulp: 0.73 at worst in the
-tests against mpmath), ``tanh`` fdlibm's ``s_tanh.c`` over its ``s_expm1.c``
-(within 2.5 ulp, as fdlibm's; the form glibc keeps), for the smooth
-Coulomb friction of :mod:`equilibrist.mechanics.friction`: glibc 2.36's
-``atan`` and ``tanh`` round differently on its FMA and SSE2 paths too.
+The C library's ``sin``, ``cos``, ``log``, ``atan``, ``tanh``... are chosen at load time by
+the CPU's features and round differently for a few inputs in ten thousand
+(docs/reproducibility.md). The functions here are fdlibm's kernels (Sun
+Microsystems, 1993, as kept in musl: ``__sin``, ``__cos``, ``__rem_pio2``'s
+Cody-Waite reduction in three steps of 118 bits of pi/2, ``log``, ``s_atan.c``,
+``s_tanh.c`` over ``s_expm1.c``) written with plain IEEE double operations in
+an order the code fixes, so Python and the C core give the same bits on every
+CPU. Their accuracy against mpmath is in docs/reproducibility.md; beyond
+``|x| < 2**20 * pi / 2`` the reduction stays deterministic but loses accuracy
+(fdlibm's Payne-Hanek path is not ported: no angle of a balancing rig comes near).
 
 The section below the marker is copied verbatim into every generated
 numeric module (:mod:`equilibrist.numeric.codegen`), so the generated
