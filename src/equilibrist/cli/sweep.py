@@ -25,7 +25,10 @@ unit; the LQR weight is 1/scale^2), controller (lqr,lqg,mpc,swingup...), noise (
 noise's standard deviations; 0 = none) and delay (0,1: commands one sample
 late). Values: LOW:HIGH:N (evenly spaced, both ends), LOW:HIGH:N:log
 (geometric), V1,V2,... or V. The grid is every combination; --sample random:N
-draws N points instead (then a range is LOW:HIGH).
+draws N points instead (then a range is LOW:HIGH). A controller KIND:VALUE
+gives VALUE to the kind's first option: controller=lqr,policy:ppo.zip
+compares a trained network (--policy FILE) with the LQR, the table naming it
+by its file's name; tvlqr:PLAN.npz, mpc:HORIZON likewise.
 
 Each point: the controller designed (for the point's parameters, or the
 nominal ones with --design-for nominal; a failed design is a row with status

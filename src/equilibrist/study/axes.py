@@ -11,15 +11,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.errors import nearest
+from equilibrist.errors import nearest, quote_outside
+from equilibrist.study.choice import check_choice
 from equilibrist.study.record import (
     MAX_POINTS,
     MAX_ROA_STATES,
     SPECIAL,
     Axis,
     AxisValue,
-    _does_not_apply,
-    controllers,
 )
 
 if TYPE_CHECKING:
@@ -160,26 +159,15 @@ def _axis(system: System, name: str, value: object, sampled: bool,
                    *(f"r.{i}" for i in system.input_names)]
         problems.append(f"--vary: unknown quantity {name!r} of {system.key} ({nearest(name, choices)})")
         return None
+    if kind == "controller":
+        return _controller_axis(system, value, problems)
     parsed = _parse_values(name, value, sampled, problems)
     if parsed is None:
         return None
     raw, low, high, log = parsed
     before = len(problems)
     values: list[AxisValue] = []
-    if kind == "controller":
-        for v in raw:
-            text = str(v).strip().lower()
-            if text not in controllers():
-                problems.append(f"--vary controller: {v!r} is not a controller (expected one "
-                                f"of {', '.join(controllers())})")
-            else:
-                why = _does_not_apply(text, system)
-                if why is not None:
-                    problems.append(f"--vary controller: {why}")
-            values.append(text)
-        if low is not None:
-            problems.append("--vary controller: expected a list of controllers (lqr,lqg)")
-    elif kind == "delay":
+    if kind == "delay":
         for v in raw:
             text = str(v).strip().lower()
             if text not in ("0", "1", "true", "false", "0.0", "1.0"):
@@ -215,6 +203,35 @@ def _axis(system: System, name: str, value: object, sampled: bool,
         problems.append(f"--vary {name}: a value is given twice")
         return None
     return Axis(name, kind, tuple(values), low, high, log)
+
+
+def _controller_axis(system: System, value: object, problems: list[str]) -> Axis | None:
+    """The controllers' axis: a list of ``KIND`` or ``KIND:VALUE`` (:mod:`equilibrist.study.choice`;
+    a value's ``:`` is not a range's), no two named alike in the table."""
+    if isinstance(value, str):
+        raw: list[object] = [t.strip() for t in value.split(",")]
+    elif isinstance(value, (list, tuple)):
+        raw = list(value)
+    else:
+        raw = [value]
+    if not raw or not all(str(v).strip() for v in raw):
+        problems.append(f"--vary controller={value}: expected a list of controllers "
+                        "(lqr,lqg,policy:FILE)")
+        return None
+    before = len(problems)
+    choices = [check_choice(system, v, "--vary controller", problems) for v in raw]
+    if len(problems) > before:
+        return None
+    found = [c for c in choices if c is not None]
+    labels = [c.label for c in found]
+    for label in sorted({la for la in labels if labels.count(la) > 1}):
+        same = [c.text for c in found if c.label == label]
+        problems.append(f"--vary controller: '{quote_outside(label)}' is given twice"
+                        + ("" if len(set(same)) == 1 else " (two files of one name: the table "
+                           "names a file by its name, so give them different names)"))
+    if len(problems) > before:
+        return None
+    return Axis("controller", "controller", tuple(c.text for c in found))
 
 
 def _ranges(system: System, given: Mapping[str, object], option: str, problems: list[str], *,

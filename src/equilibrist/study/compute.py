@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, NotRequired, TypedDict
 import numpy as np
 
 from equilibrist.errors import EquilibristError
+from equilibrist.study.choice import parse_choice
 from equilibrist.study.record import Axis, AxisValue, Study, kind_options
 
 if TYPE_CHECKING:
@@ -129,7 +130,10 @@ def evaluate_point(study: Study, index: int, *,
     except EquilibristError as exc:
         return failed("invalid point", exc)
     rate = float(values.get("rate", study.rate))
-    kind = str(values.get("controller", study.controller))
+    choice = parse_choice(str(values.get("controller", study.controller)))
+    kind = choice.kind
+    if "controller" in values:  # the table names a file by its name (policy:ppo.zip)
+        row["controller"] = choice.label
     noise_scale = float(values.get("noise", study.noise))
     delay = bool(values.get("delay", study.delay))
     base = plant if study.design_for == "point" else nominal
@@ -142,7 +146,7 @@ def evaluate_point(study: Study, index: int, *,
     try:
         # The point's design, made above, and the kind's own options (a plan to track...).
         request = registry.ControllerRequest.of_design(
-            base, d, options=kind_options(kind, study.controller_options))
+            base, d, options=kind_options(kind, choice.options(dict(study.controller_options))))
         controller = record.make(request)
     except EquilibristError as exc:
         return failed("design failed", exc)

@@ -41,8 +41,9 @@ def _column(table: pa.Table, name: str) -> np.ndarray:
 
 
 def _matches(value: float | str | bool, text: str, kind: str) -> bool:
-    if kind == "controller":
-        return str(value) == text.lower()
+    if kind == "controller":  # the kind's name in any case; a file's name as it is
+        name, sep, rest = text.partition(":")
+        return str(value) == name.strip().lower() + sep + rest.strip()
     if kind == "delay":
         return bool(value) == (text.lower() in ("1", "true"))
     try:

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 
 from equilibrist.errors import nearest
 from equilibrist.study.axes import _axis, _number, _ranges, _whole
+from equilibrist.study.choice import check_builds, check_choice, is_file, parse_choice
 from equilibrist.study.record import (
     BATCH_CELLS,
     DESIGN_FOR,
@@ -32,7 +33,6 @@ from equilibrist.study.record import (
     Axis,
     Study,
     StudyError,
-    _does_not_apply,
     controllers,
 )
 
@@ -91,11 +91,9 @@ def make_study(
     if dur is not None and dur <= 0:
         problems.append(f"--duration must be positive, got {dur:g}")
     seed_v = _whole(seed, "--seed", problems, minimum=0)
-    if controller not in controllers():
-        problems.append(f"--controller {controller!r}: expected one of {', '.join(controllers())}")
-    elif _does_not_apply(controller, sysm) is not None:
-        problems.append(f"--controller {controller}: {_does_not_apply(controller, sysm)}")
-    kinds_used = [controller] + [str(v) for a in axes if a.kind == "controller" for v in a.values]
+    chosen = check_choice(sysm, controller, "--controller", problems)
+    choices = [parse_choice(str(v)) for a in axes if a.kind == "controller" for v in a.values]
+    kinds_used = [c.kind for c in (chosen, *choices) if c is not None]
     options_v = _controller_options(controller_options or {}, kinds_used, problems)
     noise_v = _noise_scale(noise, problems)
     rate_v = float(spec.control_rate) if rate is None else _number(rate, "--rate", problems)
@@ -112,12 +110,18 @@ def make_study(
         _check_run_samples(dur, _rates(rate_v, axes), problems)
     if problems:
         raise StudyError("; ".join(problems))
+    assert chosen is not None and rate_v is not None
+    for what, choice in (("--controller", chosen),
+                         *(("--vary controller", c) for c in choices)):
+        check_builds(sysm, choice, rate=rate_v, options=options_v, what=what, problems=problems)
+    if problems:
+        raise StudyError("; ".join(problems))
     assert n_runs is not None and dur is not None and seed_v is not None
-    assert noise_v is not None and rate_v is not None
+    assert noise_v is not None
     study = Study(
         system=system, settings=fixed, axes=tuple(axes), sample=n_sample, runs=n_runs,
         duration=dur, x0={k: (v[0], v[1]) for k, v in x0_r.items()}, spread=spread_v,
-        seed=seed_v, controller=controller,
+        seed=seed_v, controller=chosen.text,
         noise=noise_v, delay=bool(delay), rate=rate_v, design_for=design_for, metrics=metrics,
         roa={k: (lo, hi, int(n)) for k, (lo, hi, n) in roa_r.items()}, batch_size=1,
         controller_options=options_v,
@@ -249,17 +253,13 @@ def _controller_options(given: Mapping[str, object], kinds_used: Sequence[str],
         except kinds.KindError as exc:
             problems.append(f"controller_options {key}: {exc}")
             continue
-        if any(_is_file(o) for o in options):
+        if any(is_file(o) for o in options):
             text = str(Path(text).expanduser().resolve())
             if not Path(text).is_file():
                 problems.append(f"controller_options {key}: no file {text!r}")
                 continue
         out[str(key)] = text
     return out
-
-
-def _is_file(option: object) -> bool:
-    return "FILE" in str(getattr(option, "metavar", None) or "")
 
 
 # -- study files ------------------------------------------------------------------------
@@ -306,6 +306,13 @@ def load_study_file(path: str | Path, *, system: str | None = None) -> Study:
     kwargs = {k: v for k, v in data.items() if k not in ("system", "sample")}
     if "controller_options" in data:
         kwargs["controller_options"] = _files_beside(p, data["controller_options"])
+    if "controller" in data:
+        kwargs["controller"] = _choice_beside(p, data["controller"])
+    if isinstance(data.get("vary"), Mapping) and "controller" in data["vary"]:
+        listed = data["vary"]["controller"]
+        items = listed.split(",") if isinstance(listed, str) else listed
+        kwargs["vary"] = {**data["vary"], "controller": [_choice_beside(p, v) for v in items]
+                          if isinstance(items, list) else items}
     return make_study(_named_system(p, str(data["system"]), system), sample=sample, **kwargs)
 
 
@@ -313,12 +320,27 @@ def _files_beside(study_file: Path, options: Mapping[str, object]) -> dict[str, 
     """*options* with each relative file of a ``FILE...`` option read from the study file's folder."""
     from equilibrist.controllers import kinds
 
-    files = {o.key for o in kinds.options() if _is_file(o)}
+    files = {o.key for o in kinds.options() if is_file(o)}
     out = dict(options)
     for key, value in options.items():
         if key in files and isinstance(value, str) and not Path(value).expanduser().is_absolute():
             out[key] = str(study_file.parent / value)
     return out
+
+
+def _choice_beside(study_file: Path, value: object) -> object:
+    """A controller ``KIND:FILE`` of a study file with a relative file read from beside it."""
+    from equilibrist.controllers import kinds
+
+    if not isinstance(value, str):
+        return value
+    choice = parse_choice(value)
+    if choice.value is None or choice.kind not in controllers():
+        return value
+    first = kinds.get(choice.kind).options[:1]
+    if not (first and is_file(first[0])) or Path(choice.value).expanduser().is_absolute():
+        return value
+    return f"{choice.kind}:{study_file.parent / choice.value}"
 
 
 def _named_system(study_file: Path, recorded: str, named: str | None) -> str:
