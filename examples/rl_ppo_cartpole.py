@@ -21,6 +21,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 from stable_baselines3 import PPO
+from stable_baselines3.common.logger import Logger
 
 import equilibrist.envs  # noqa: F401  (registers the environments)
 from equilibrist.envs.expert import expert
@@ -44,8 +45,11 @@ def make_env(config: dict[str, Any], **overrides: Any) -> gym.Env:
 
 def make_model(config: dict[str, Any], seed: int) -> PPO:
     torch.set_num_threads(1)  # the same numbers on every run
-    return PPO(config["policy"], make_env(config), seed=seed, device="cpu",
-               **config["hyperparameters"])
+    model = PPO(config["policy"], make_env(config), seed=seed, device="cpu",
+                **config["hyperparameters"])
+    # Stable-Baselines3's own logger makes an empty folder in /tmp for every model it trains.
+    model.set_logger(Logger(folder=None, output_formats=[]))
+    return model
 
 
 def evaluate(policy: Any, config: dict[str, Any], seeds: list[int], **env_options: Any

@@ -1,16 +1,18 @@
-"""Stable-Baselines3's SAC, with its default hyperparameters, learns the cart-pole's swing-up.
+"""Stable-Baselines3's SAC, with its default hyperparameters, learns a swing-up: the
+cart-pole's, or the acrobot's.
 
-``SAC("MlpPolicy", env)`` on ``equilibrist/cartpole-swingup-v1`` at a control rate of
+``SAC("MlpPolicy", env)`` on ``equilibrist/<task>-swingup-v1`` at a control rate of
 50 Hz (a step of 20 ms: SAC's discount of 0.99 then looks two seconds ahead, about one
 swing), from hanging to balanced: the swing-up's reward is the balance's (dm_control's
-cart-pole reward in [0, 1] per step), observations in Bryson units with the pole's angle
-as its cosine and sine, 750 steps in an episode of 15 s. It is scored with its
-deterministic policy on fixed starts, beside the same policy untrained and the project's
-energy swing-up (``envs.expert(env, "swingup")``) on the same starts. The whole
-configuration is ``CONFIG``.
+cart-pole reward in [0, 1] per step; on the acrobot both links must be up), observations
+in Bryson units with each hanging angle as its cosine and sine, 750 steps in an episode of
+15 s. It is scored with its deterministic policy on fixed starts, beside the same policy
+untrained and the project's energy swing-up (``envs.expert(env, "swingup")``) on the same
+starts. Each task's whole configuration is its entry in ``CONFIGS``.
 
-Run as it is for the full training (300,000 steps: an hour or more on one core), or
-``--steps 3000`` for a short one. Needs ``pip install 'equilibrist[rl]'``.
+``python examples/rl_sac_swingup.py [cartpole|acrobot]`` runs the full training (300,000
+steps: hours on one core), ``--steps 3000`` a short one. Needs
+``pip install 'equilibrist[rl]'``.
 """
 
 from __future__ import annotations
@@ -23,20 +25,34 @@ import gymnasium as gym
 import numpy as np
 import torch
 from stable_baselines3 import SAC
+from stable_baselines3.common.logger import Logger
 
 import equilibrist.envs  # noqa: F401  (registers the environments)
 from equilibrist.envs.expert import expert
 
-CONFIG: dict[str, Any] = {
-    "env_id": "equilibrist/cartpole-swingup-v1",
-    "env_options": {"rate": 50.0},
-    "algorithm": "SAC",
-    "policy": "MlpPolicy",
-    "hyperparameters": {},  # Stable-Baselines3's defaults
-    "steps": 300_000,
-    "seed": 0,
-    "eval_seeds": [100, 101, 102],
-    "expert": "swingup",
+CONFIGS: dict[str, dict[str, Any]] = {
+    "cartpole": {
+        "env_id": "equilibrist/cartpole-swingup-v1",
+        "env_options": {"rate": 50.0},
+        "algorithm": "SAC",
+        "policy": "MlpPolicy",
+        "hyperparameters": {},  # Stable-Baselines3's defaults
+        "steps": 300_000,
+        "seed": 0,
+        "eval_seeds": [100, 101, 102],
+        "expert": "swingup",
+    },
+    "acrobot": {
+        "env_id": "equilibrist/acrobot-swingup-v1",
+        "env_options": {"rate": 50.0},
+        "algorithm": "SAC",
+        "policy": "MlpPolicy",
+        "hyperparameters": {},  # Stable-Baselines3's defaults
+        "steps": 300_000,
+        "seed": 0,
+        "eval_seeds": [100, 101, 102],
+        "expert": "swingup",
+    },
 }
 
 
@@ -46,8 +62,11 @@ def make_env(config: dict[str, Any], **overrides: Any) -> gym.Env:
 
 def make_model(config: dict[str, Any], seed: int) -> SAC:
     torch.set_num_threads(1)  # the same numbers on every run
-    return SAC(config["policy"], make_env(config), seed=seed, device="cpu",
-               **config["hyperparameters"])
+    model = SAC(config["policy"], make_env(config), seed=seed, device="cpu",
+                **config["hyperparameters"])
+    # Stable-Baselines3's own logger makes an empty folder in /tmp for every model it trains.
+    model.set_logger(Logger(folder=None, output_formats=[]))
+    return model
 
 
 def evaluate(policy: Any, config: dict[str, Any], seeds: list[int], **env_options: Any
@@ -83,21 +102,24 @@ def expert_scores(config: dict[str, Any], seeds: list[int]) -> list[float]:
 
 def main(argv: list[str] | None = None) -> dict[str, Any]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=CONFIG["steps"])
-    parser.add_argument("--seed", type=int, default=CONFIG["seed"])
+    parser.add_argument("task", nargs="?", choices=sorted(CONFIGS), default="cartpole")
+    parser.add_argument("--steps", type=int, default=None)
+    parser.add_argument("--seed", type=int, default=None)
     args = parser.parse_args(argv)
-    seeds = CONFIG["eval_seeds"]
-    model = make_model(CONFIG, args.seed)
-    before, _ = evaluate(agent(model), CONFIG, seeds)
+    config = CONFIGS[args.task]
+    steps = config["steps"] if args.steps is None else args.steps
+    seeds = config["eval_seeds"]
+    model = make_model(config, config["seed"] if args.seed is None else args.seed)
+    before, _ = evaluate(agent(model), config, seeds)
     start = time.perf_counter()
-    model.learn(args.steps)
+    model.learn(steps)
     seconds = time.perf_counter() - start
-    after, lengths = evaluate(agent(model), CONFIG, seeds)
-    swingup = expert_scores(CONFIG, seeds)
-    print(f"{CONFIG['algorithm']} on {CONFIG['env_id']}, {args.steps} steps in {seconds:.0f} s")
+    after, lengths = evaluate(agent(model), config, seeds)
+    swingup = expert_scores(config, seeds)
+    print(f"{config['algorithm']} on {config['env_id']}, {steps} steps in {seconds:.0f} s")
     print(f"  untrained: returns {np.round(before, 1).tolist()}")
     print(f"  trained:   returns {np.round(after, 1).tolist()}, lengths {lengths}")
-    print(f"  {CONFIG['expert']}:   returns {np.round(swingup, 1).tolist()}")
+    print(f"  {config['expert']}:   returns {np.round(swingup, 1).tolist()}")
     return {"before": before, "after": after, "expert": swingup, "lengths": lengths}
 
 
