@@ -164,6 +164,7 @@ def throughput(copies: int = 16, rollouts: int = 6) -> dict[str, float]:
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.logger import Logger
 
     from equilibrist.envs.sb3 import sb3_vec_env
 
@@ -177,6 +178,7 @@ def throughput(copies: int = 16, rollouts: int = 6) -> dict[str, float]:
         for name, make in makers.items():
             model = PPO("MlpPolicy", make(), n_steps=128, batch_size=copies * 128, n_epochs=1,
                         seed=0, device="cpu")
+            model.set_logger(Logger(folder=None, output_formats=[]))  # no folder in /tmp
             model.learn(copies * 128)  # warm
             start = time.perf_counter()
             model.learn(steps, reset_num_timesteps=False)
