@@ -237,9 +237,11 @@ def dlqr(
     )
 
 
-def _estimator_args(
-    A: object, G: object, C: object, QN: object, RN: object
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _estimator(
+    A: object, G: object, C: object, QN: object, RN: object, *, discrete: bool,
+    state_names: Sequence[str] | None, output_names: Sequence[str] | None,
+) -> LQESolution:
+    """The estimator as the dual regulator: ``(A', C', G QN G', RN)``, its gain transposed."""
     Am = checks.square(A, "A")
     n = Am.shape[0]
     Cm = checks.with_columns(C, "C", n, "one per state")
@@ -252,7 +254,10 @@ def _estimator_args(
         checks.weight_problems(QNm, "QN", definite=False)
         + checks.weight_problems(RNm, "RN", definite=True)
     )
-    return Am, Cm, checks.symmetric(fixed.mm(Gm, QNm, Gm.T)), RNm
+    W = checks.symmetric(fixed.mm(Gm, QNm, Gm.T))
+    K, P, E = _solve(Am.T, Cm.T, W, RNm, discrete=discrete, estimator=True,
+                     state_names=state_names, input_names=output_names)
+    return LQESolution(K.T, P, E)
 
 
 def lqe(
@@ -285,18 +290,8 @@ def lqe(
         As :func:`lqr`, with ``(A, C)`` detectability (unobservable modes
         named) and the noise exciting every marginal mode.
     """
-    Am, Cm, W, RNm = _estimator_args(A, G, C, QN, RN)
-    K, P, E = _solve(
-        Am.T,
-        Cm.T,
-        W,
-        RNm,
-        discrete=False,
-        estimator=True,
-        state_names=state_names,
-        input_names=output_names,
-    )
-    return LQESolution(K.T, P, E)
+    return _estimator(A, G, C, QN, RN, discrete=False, state_names=state_names,
+                      output_names=output_names)
 
 
 def dlqe(
@@ -322,18 +317,8 @@ def dlqe(
         ``L = A M`` the predictor gain with ``M = P C'(C P C' + RN)^-1`` the
         current-form gain, and ``E`` the eigenvalues of ``A - L C``.
     """
-    Am, Cm, W, RNm = _estimator_args(A, G, C, QN, RN)
-    K, P, E = _solve(
-        Am.T,
-        Cm.T,
-        W,
-        RNm,
-        discrete=True,
-        estimator=True,
-        state_names=state_names,
-        input_names=output_names,
-    )
-    return LQESolution(K.T, P, E)
+    return _estimator(A, G, C, QN, RN, discrete=True, state_names=state_names,
+                      output_names=output_names)
 
 
 def current_gain(P: np.ndarray, C: np.ndarray, RN: np.ndarray) -> np.ndarray:
