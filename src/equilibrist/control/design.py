@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import math
 import types
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -373,17 +373,12 @@ def _solved(
     Cr = plant.C[:m] if tracked else None
     Kc: np.ndarray | None = None
     kc_note = ""
+    gain_rule: Callable[..., np.ndarray]  # the continuous or the sampled reference gain
     if rate_hz is None:
         K, S, E = lqr(plant.A, plant.B, Q, R, state_names=states)
         Kf, P, Ef = lqe(plant.A, Gm, plant.C, QN, RN, state_names=states, output_names=names)
         disc, Qd, Rd = None, None, None
-        if Cr is not None:
-            try:
-                Kc = reference_gain(
-                    plant.A, plant.B, Cr, K, tracked_names=tracked, input_names=inputs
-                )
-            except DesignError as exc:
-                kc_note = str(exc)
+        Ar, Br, gain_rule = plant.A, plant.B, reference_gain
     else:
         dt = 1.0 / rate_hz
         disc = discretize(plant, dt, method=discretization)
@@ -391,14 +386,13 @@ def _solved(
         K, S, E = dlqr(disc.A, disc.B, Q, R, state_names=states)
         L, P, Ef = dlqe(disc.A, np.eye(n), disc.C, Qd, Rd, state_names=states, output_names=names)
         Kf = current_gain(P, disc.C, Rd) if kalman_form == "current" else L
-        if Cr is not None:
-            try:
-                Kc = discrete_reference_gain(
-                    disc.A, disc.B, Cr, K, tracked_names=tracked, input_names=inputs
-                )
-            except DesignError as exc:
-                kc_note = str(exc)
-    if Cr is None:
+        Ar, Br, gain_rule = disc.A, disc.B, discrete_reference_gain
+    if Cr is not None:
+        try:
+            Kc = gain_rule(Ar, Br, Cr, K, tracked_names=tracked, input_names=inputs)
+        except DesignError as exc:
+            kc_note = str(exc)
+    else:
         kc_note = (
             f"{len(names)} measured output(s) for {m} inputs: the reference gain tracks the "
             f"first {m} outputs"
