@@ -178,3 +178,23 @@ def test_gymnasiums_vector_wrappers_take_it() -> None:
     assert term.any() and not trunc.any()
     np.testing.assert_allclose(info["episode"]["r"][term], totals[term], rtol=1e-12)
     assert info["_episode"].tolist() == term.tolist()
+
+
+def test_acrobot_swingup_pays_for_both_links_up_not_for_hanging() -> None:
+    """On the acrobot the elbow's relative angle is 0 hanging as well as upright: the
+    reward multiplies the links' uprightness (both angles hang in the swing-up, each
+    scored ``(1 + cos(q - q_op)) / 2``, written out here), so hanging still pays nothing
+    and upright, still and unforced pays 1."""
+    env = _make("equilibrist/acrobot-swingup-v1")
+    learnable = env.core.learnable
+    assert learnable is not None
+
+    def reward(theta1: float, theta2: float) -> float:
+        # still and unforced: the other factors are 1
+        return (1 + math.cos(theta1 - math.pi)) / 2 * (1 + math.cos(theta2)) / 2
+
+    for theta1, theta2 in ((0.0, 0.0), (math.pi, 0.0), (math.pi - 0.3, 0.4), (2.0, -1.0)):
+        x = np.array([[theta1, theta2, 0.0, 0.0]])
+        got = float(learnable.reward(x, np.zeros((1, 1)))[0])
+        assert got == pytest.approx(reward(theta1, theta2), rel=1e-12, abs=1e-15)
+    assert float(learnable.reward(np.zeros((1, 4)), np.zeros((1, 1)))[0]) == 0.0

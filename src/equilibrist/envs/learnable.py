@@ -20,10 +20,13 @@ Reward
     ``upright * centered * small_control * small_velocity`` in ``[0, 1]`` per
     step, so that the maximum return is the number of steps of an episode:
 
-    * ``upright``: the mean over the posture coordinates (those that hang, and
-      those whose leaving the region is a fall) of ``(1 + cos(q - q_op)) / 2``
+    * ``upright``: the product over the posture coordinates (those that hang,
+      and those whose leaving the region is a fall) of ``(1 + cos(q - q_op)) / 2``
       for a coordinate that hangs, else the Gaussian tolerance of its deviation
-      (1 at the operating point, 0.1 at the region's bound);
+      (1 at the operating point, 0.1 at the region's bound). A product, not
+      dm_control's mean over poles: a relative angle (the acrobot's elbow) is at
+      its operating value hanging too, and a mean paid half the reward for
+      hanging still;
     * ``centered``: ``(1 + t) / 2`` with ``t`` the mean Gaussian tolerance of the
       other coordinates' scaled deviations (0.1 at two Bryson scales);
     * ``small_control``: ``(4 + t) / 5`` with ``t = 1 - a^2`` (0 beyond), ``a``
@@ -142,7 +145,7 @@ class Learnable:
         upright = gaussian_tolerance(d[:, self.posture] / self.posture_margin)
         if self.hang.size:
             upright[:, self.hang] = 0.5 * (1.0 + np.cos(d[:, self.posture[self.hang]]))
-        r = upright.mean(axis=1)
+        r = upright.prod(axis=1)
         if self.others.size:
             r = r * 0.5 * (1.0 + gaussian_tolerance(
                 d[:, self.others] * self.other_gain).mean(axis=1))
