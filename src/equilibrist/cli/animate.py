@@ -21,14 +21,12 @@ file it names.
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     from equilibrist.viz.cli_hooks import add_animation_options
 
-    p = sub.add_parser(
-        "animate",
+    p = common.command(
+        sub, "animate",
         help="animate a saved run (GIF; MP4 where ffmpeg is installed)",
         description="Animate a run saved by 'equilibrist simulate --out', drawn to scale "
         "from its states, with a time stamp and the input applied.",
-        epilog=_EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+        epilog=_EPILOG)
     p.add_argument("file", metavar="RESULT_FILE", help="a run saved by 'equilibrist simulate --out'")
     p.add_argument("--out", "-o", metavar="FILE", help="the animation (.gif or .mp4)")
     add_animation_options(p)

@@ -28,14 +28,12 @@ time_saturated, peak_dev_STATE). --max-steps bounds runs x physics steps.
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser(
-        "batch",
+    p = common.command(
+        sub, "batch",
         help="run many simulations at once (initial states, parameters, seeds)",
         description="Run N closed-loop simulations with random initial states and "
         "perturbed parameters, in parallel.",
-        epilog=_EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+        epilog=_EPILOG)
     add_run_options(p)
     common.add_rig_options(p)
     p.add_argument("--runs", required=True, metavar="N", help="number of runs")

@@ -72,6 +72,13 @@ def take_strays(args: argparse.Namespace) -> None:
         raise UsageError("the following arguments are required: SYSTEM")
 
 
+def command(sub: argparse._SubParsersAction[argparse.ArgumentParser], name: str, *, help: str,
+            description: str, epilog: str) -> argparse.ArgumentParser:
+    """A command's parser whose description and epilog keep their lines as written."""
+    return sub.add_parser(name, help=help, description=description, epilog=epilog,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
 def add_system(parser: argparse.ArgumentParser) -> None:
     parser.set_defaults(needs_system=True)
     parser.add_argument(

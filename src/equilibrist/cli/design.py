@@ -41,14 +41,12 @@ controller that does not apply to the system is refused in one line.
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser(
-        "design",
+    p = common.command(
+        sub, "design",
         help="design LQR + Kalman (LQG) controllers at an operating point",
         description="Design an LQR state feedback, a Kalman estimator and a reference gain "
         "for a system at its canonical operating point, continuous or sampled at --rate.",
-        epilog=_EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+        epilog=_EPILOG)
     common.add_system(p)
     p.add_argument("--rate", metavar="HZ", help="sample rate of a discrete design [Hz]")
     common.add_design_options(p)

@@ -47,14 +47,12 @@ as for 'equilibrist design'.
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser(
-        "export",
+    p = common.command(
+        sub, "export",
         help="export the digital controller as a tested C99 library",
         description="Design the digital LQG (or LQR) controller of a system and write it as a "
         "self-contained C99 library with examples, test vectors, a test program and a Makefile.",
-        epilog=_EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+        epilog=_EPILOG)
     common.add_system(p)
     p.add_argument("--rate", metavar="HZ", default=None,
                    help="sample rate [Hz] (default: the system's control rate)")

@@ -39,14 +39,12 @@ writes the parameters for 'design', 'simulate' and 'export' (--params).
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser(
-        "identify",
+    p = common.command(
+        sub, "identify",
         help="fit physical parameters of a system to a logged run (grey-box, multiple shooting)",
         description="Fit the chosen physical parameters of a system's derived model to a log "
         "of the rig (time, inputs, measured outputs) by multiple shooting.",
-        epilog=_EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+        epilog=_EPILOG)
     common.add_system(p)
     p.add_argument("log", metavar="LOG.csv", help="the log: t, one column per input, one per "
                    "measured output")

@@ -42,14 +42,12 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     from equilibrist.pil.targets import TARGETS
     from equilibrist.viz.cli_hooks import add_output_options
 
-    p = sub.add_parser(
-        "pil",
+    p = common.command(
+        sub, "pil",
         help="processor in the loop: the exported controller on an emulated microcontroller",
         description="Build the exported controller into firmware for a microcontroller, run it "
         "in the chip's emulator and close the loop in lockstep with the simulated plant.",
-        epilog=_EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+        epilog=_EPILOG)
     p.add_argument("--target", required=True, choices=tuple(TARGETS),
                    help="the microcontroller: " + ", ".join(TARGETS))
     p.add_argument("--precision", choices=("double", "float", "float64", "float32"),

@@ -31,15 +31,13 @@ a data file never runs the Python file it names (docs/models.md).
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser(
-        "plot",
+    p = common.command(
+        sub, "plot",
         help="plot saved results: a time response, a comparison, a batch's outcomes",
         description="Plot saved simulation results: one file gives its time response "
         "(states, estimates, measurements, reference, inputs with their limits); several "
         "files give a comparison; a saved batch gives the outcome of each run.",
-        epilog=_EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+        epilog=_EPILOG)
     p.add_argument("files", nargs="+", metavar="RESULT_FILE",
                    help="a result saved by 'equilibrist simulate --out' or 'batch --out'")
     p.add_argument("--out", "-o", metavar="FILE", help="the picture (.png or .svg)")

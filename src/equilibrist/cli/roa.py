@@ -62,11 +62,11 @@ FIRST_GRID_RUNS = (24 + 1) ** 2
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser(
-        "roa", help="region of attraction: the largest tilt and push recovered, a slice",
+    p = common.command(
+        sub, "roa", help="region of attraction: the largest tilt and push recovered, a slice",
         description="Estimate the region of attraction of a closed loop from the real loop: "
         "a 2-D slice refined along its boundary, the largest tilt and the largest push.",
-        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+        epilog=_EPILOG)
     common.add_system(p)
     common.add_controller(p, "simulate", default=None,
                           help="the controller (default lqg, lqr shown best with --noise off)")

@@ -145,13 +145,11 @@ def check_out(args: argparse.Namespace, what: str) -> None:
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    p = sub.add_parser(
-        "simulate",
+    p = common.command(
+        sub, "simulate",
         help="simulate a closed loop with a digital controller, noise and saturation",
         description="Simulate one closed-loop run of a system as a rig runs it.",
-        epilog=_EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+        epilog=_EPILOG)
     add_run_options(p)
     common.add_rig_options(p)
     p.add_argument("--excite", metavar="SIGNAL", help="add an excitation to the command: "
@@ -239,6 +237,13 @@ def _stdout_is_pipe() -> bool:
         return True
 
 
+def controller_name(args: argparse.Namespace, system: System) -> str:
+    """The kind the options name: ``--controller``, else the trained network of ``--policy
+    FILE`` alone, else the LQG (the open loop for a system without input)."""
+    return str(args.controller or ("policy" if getattr(args, "policy", None)
+                                   else "lqg" if system.n_inputs else "none"))
+
+
 def build_run(args: argparse.Namespace) -> tuple[System, dict[str, Any]]:
     """The system and the keyword arguments of ``simulate`` from the options."""
     from equilibrist.sim.noise import Noise
@@ -249,9 +254,7 @@ def build_run(args: argparse.Namespace) -> tuple[System, dict[str, Any]]:
     rate = (_positive(args.rate, "--rate") if args.rate is not None
             else float(system.spec.control_rate))
     step = None if args.physics_step is None else _positive(args.physics_step, "--physics-step")
-    # --policy FILE alone runs the trained network (--controller policy).
-    name = args.controller or ("policy" if getattr(args, "policy", None)
-                               else "lqg" if system.n_inputs else "none")
+    name = controller_name(args, system)
     from equilibrist.controllers import kinds
 
     kind = kinds.get(name, "simulate")

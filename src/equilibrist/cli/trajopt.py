@@ -52,14 +52,12 @@ numbers before reading it (docs/trajopt.md).
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     from equilibrist.viz.cli_hooks import add_output_options
 
-    p = sub.add_parser(
-        "trajopt",
+    p = common.command(
+        sub, "trajopt",
         help="plan a swing-up or a transfer by direct collocation (CasADi + IPOPT)",
         description="Plan an optimal motion of a system under its input limits and its task's "
         "state bounds, by direct collocation of its derived dynamics.",
-        epilog=_EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+        epilog=_EPILOG)
     common.add_system(p)
     p.add_argument("--task", choices=("swingup",), help="the task planned (default swingup)")
     p.add_argument("--to", metavar="NAME=VALUE,...", help="a transfer to these state values")
