@@ -15,7 +15,7 @@ import pytest
 
 from equilibrist.control.design import design
 from equilibrist.errors import ExportError
-from equilibrist.export.data import from_design
+from equilibrist.export.data import controller_data
 from equilibrist.export.vectors import compile_controller
 from equilibrist.native import c_programs, c_text, linear_library
 from equilibrist.native.shared_library import STRICT_FLAGS, compiler
@@ -141,7 +141,7 @@ def _build(folder: Path, files: dict[str, str], sources: list[str], exe: str) ->
 @pytest.mark.parametrize("precision", ["double", "float"])
 def test_named_constants_are_the_designs_numbers(designs, tmp_path, precision) -> None:
     d = designs["ball_beam", "current"]
-    data = from_design(d)
+    data = controller_data(d)
     name, N = data.name, data.name.upper()
     files = {
         f"{name}.h": linear_library.header(data, precision=precision, version="test"),
@@ -176,7 +176,7 @@ def test_named_constants_are_the_designs_numbers(designs, tmp_path, precision) -
 def test_the_library_needs_no_library(designs, tmp_path) -> None:
     """No symbol of the object file is left for a library to define (no libm, no libc)."""
     for controller in ("lqg", "lqr"):
-        data = from_design(designs["wheeled_pendulum", "current"], controller=controller)
+        data = controller_data(designs["wheeled_pendulum", "current"], controller=controller)
         (tmp_path / f"{data.name}.h").write_text(linear_library.header(data, precision="float", version="t"))
         (tmp_path / f"{data.name}.c").write_text(linear_library.source(data, precision="float", version="t"))
         obj = tmp_path / f"{data.name}.o"
@@ -200,8 +200,6 @@ def test_literals_read_back_exactly() -> None:
 
 
 def test_a_continuous_design_or_no_input_is_refused() -> None:
-    from equilibrist.export.data import controller_data
-
     with pytest.raises(ExportError, match="sample rate"):
         controller_data(design(get_system("cartpole")))
     with pytest.raises(ExportError, match="controller 'pid' is unknown"):
@@ -211,7 +209,7 @@ def test_a_continuous_design_or_no_input_is_refused() -> None:
 def test_arduino_sketch_compiles_as_cpp(designs, tmp_path) -> None:
     """The sketch against a stand-in of the Arduino core, compiled as the IDE would (C++)."""
     cxx = require("g++", "c++")
-    data = from_design(designs["seesaw", "current"])
+    data = controller_data(designs["seesaw", "current"])
     (tmp_path / f"{data.name}.h").write_text(linear_library.header(data, precision="float", version="t"))
     (tmp_path / f"{data.name}.c").write_text(linear_library.source(data, precision="float", version="t"))
     (tmp_path / "sketch.cpp").write_text(c_programs.arduino_sketch(data, precision="float"))

@@ -16,7 +16,7 @@ import pytest
 
 from equilibrist.control.design import design
 from equilibrist.errors import ExportError
-from equilibrist.export.data import from_design
+from equilibrist.export.data import controller_data
 from equilibrist.export.vectors import make_vectors
 from equilibrist.export.writer import export_c
 from equilibrist.numeric.lookup import get_system
@@ -35,7 +35,7 @@ def _reference(data, ys, rs):
 
 
 def _vectors(d, controller: str, precision: str, *, n_steps: int = 300, spoil: float = 0.0):
-    data = from_design(d, controller=controller)
+    data = controller_data(d, controller=controller)
     ys, rs = measurements(data, n_steps, seed=5)
     us = _reference(data, ys, rs)
     vec = make_vectors(data, ys, rs, us, data.x0, precision=precision)

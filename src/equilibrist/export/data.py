@@ -3,7 +3,7 @@
 :func:`of_controller` makes the :class:`~equilibrist.native.linear_c.ControllerData` the C
 library is written from out of the one controller value the simulation runs, a
 :class:`~equilibrist.control.linear.LinearController` made by its design
-(:func:`from_design`), checked for what the generated C code needs: sizes, finite values,
+(:func:`controller_data`), checked for what the generated C code needs: sizes, finite values,
 input limits around the operating input. The numbers that ship are the numbers that were
 simulated; the library's header states its equations (LQR, or LQG in the ``current`` or
 ``predictor`` Kalman form).
@@ -72,50 +72,6 @@ def _units(names: tuple[str, ...], default: tuple[str, ...]) -> tuple[str, ...]:
     return tuple("" for _ in names)
 
 
-def from_design(design: Design, *, controller: str = "lqg") -> ControllerData:
-    """The :class:`ControllerData` of a design's controller (:func:`linear_controller`)."""
-    return of_controller(linear_controller(design, controller=controller))
-
-
-def linear_controller(design: Design, *, controller: str = "lqg") -> LinearController:
-    """The controller a design's export runs, checked.
-
-    Parameters
-    ----------
-    design:
-        A control-layer ``Design``: its controller (with its reference gain when it has
-        one) is :meth:`LinearController.from_design`'s, limited to the parameters'
-        input limits.
-    controller:
-        ``"lqg"`` (measurements through the Kalman filter) or ``"lqr"``
-        (the full state measured, no estimator).
-
-    Raises
-    ------
-    ExportError
-        A system without an input, an unknown controller, a design whose
-        matrices are not finite or not of matching sizes, an operating
-        input outside the input limits. Every problem is named at once.
-    """
-    check_controller(controller)
-    _check_digital(design)
-    problems = _design_problems(design)
-    if problems:
-        raise ExportError(f"cannot export the {controller} controller of {design.system_key}: "
-                          + "; ".join(problems))
-    params = dict(design.params)
-    names = design.plant.input_names
-    try:
-        linear = LinearController.from_design(
-            design, kind=controller, tracking=design.Kc is not None,
-            u_min=[float(params.get(f"{i}_min", -math.inf)) for i in names],
-            u_max=[float(params.get(f"{i}_max", math.inf)) for i in names])
-    except EquilibristError as exc:
-        raise ExportError(f"cannot export the {controller} controller of "
-                          f"{design.system_key}: {exc}") from exc
-    return linear
-
-
 def of_controller(linear: LinearController) -> ControllerData:
     """The :class:`ControllerData` of *linear*, a controller its discrete design made
     (:meth:`LinearController.from_design`): the view the C library is written from.
@@ -123,7 +79,7 @@ def of_controller(linear: LinearController) -> ControllerData:
     Raises
     ------
     ExportError
-        A controller without a discrete design, or anything :func:`from_design` refuses.
+        A controller without a discrete design, or anything :func:`checked_linear` refuses.
     """
     design = linear.design
     if not isinstance(design, Design):
@@ -242,18 +198,30 @@ def _settings(design: Design, linear: LinearController) -> dict[str, str]:
 
 
 def controller_data(design: Design | object, *, controller: str = "lqg") -> ControllerData:
-    """:func:`from_design` for a discrete design.
-
-    Raises
-    ------
-    ExportError
-        A continuous design (no rate), or anything :func:`from_design` refuses.
-    """
+    """The :class:`ControllerData` of a discrete design's controller (:func:`checked_linear`)."""
     return of_controller(checked_linear(design, controller=controller))
 
 
 def checked_linear(design: Design | object, *, controller: str = "lqg") -> LinearController:
-    """:func:`linear_controller` for a discrete design (what :func:`controller_data` reads)."""
+    """The controller a discrete design's export runs, checked.
+
+    Parameters
+    ----------
+    design:
+        A control-layer ``Design`` with a rate: its controller (with its reference gain
+        when it has one) is :meth:`LinearController.from_design`'s, limited to the
+        parameters' input limits.
+    controller:
+        ``"lqg"`` (measurements through the Kalman filter) or ``"lqr"``
+        (the full state measured, no estimator).
+
+    Raises
+    ------
+    ExportError
+        Not a design, a continuous design, a system without an input, an unknown
+        controller, a design whose matrices are not finite or not of matching sizes, an
+        operating input outside the input limits. Every problem is named at once.
+    """
     check_controller(controller)
     if not isinstance(design, Design):
         raise ExportError(f"design = {design!r}: expected a Design (equilibrist.control.design."
@@ -263,4 +231,19 @@ def checked_linear(design: Design | object, *, controller: str = "lqg") -> Linea
             f"the design of {design.system_key} is continuous: "
             "a digital controller needs a sample rate (design it with rate=...)"
         )
-    return linear_controller(design, controller=controller)
+    _check_digital(design)
+    problems = _design_problems(design)
+    if problems:
+        raise ExportError(f"cannot export the {controller} controller of {design.system_key}: "
+                          + "; ".join(problems))
+    params = dict(design.params)
+    names = design.plant.input_names
+    try:
+        linear = LinearController.from_design(
+            design, kind=controller, tracking=design.Kc is not None,
+            u_min=[float(params.get(f"{i}_min", -math.inf)) for i in names],
+            u_max=[float(params.get(f"{i}_max", math.inf)) for i in names])
+    except EquilibristError as exc:
+        raise ExportError(f"cannot export the {controller} controller of "
+                          f"{design.system_key}: {exc}") from exc
+    return linear
