@@ -10,13 +10,20 @@ as training time), beside the recipe's expert (the LQG on the sensors, or the en
 swing-up) on the same starts. The curves go to ``--out`` (JSON) and a figure
 (``docs/images/rl_<recipe>.png``).
 
-Usage: ``python bench/bench_rl.py ppo [--seeds 0 1 2] [--steps N] [--every N]``
-(``sac`` for the swing-up); ``python bench/bench_rl.py policy-c``: an exported 2x64 policy's
-C step time, ``make check`` and ``make size``; ``python bench/bench_rl.py throughput``: PPO's
-training steps per second over 16 copies, the adapter against ``DummyVecEnv``. Goals: PPO balances the cart-pole within
-100,000 steps (no episode ends early, the return >= 0.9 of the LQG's on the same starts),
-on every seed; the exported policy steps in under 20 us and equals PyTorch's forward
-pass to 1e-6.
+Usage: ``python bench/bench_rl.py ppo [--env ID] [--seeds 0 1 2] [--steps N] [--every N]``
+(``--env equilibrist/furuta-balance-v1``: the same recipe on another balance task; ``sac``
+for the swing-up, ``--env equilibrist/acrobot-swingup-v1`` for the acrobot's entry of the
+recipe); ``python bench/bench_rl.py plot a.json b.json --name ppo_furuta``: one figure of
+seeds run apart; ``python bench/bench_rl.py race``: PPO's defaults on Gymnasium's
+CartPole-v1 and on ``cartpole-balance-v1`` side by side (two processes, seed after seed),
+the training wall time until each is solved; ``python bench/bench_rl.py policy-c``: an
+exported 2x64 policy's C step time, ``make check`` and ``make size``; ``python
+bench/bench_rl.py throughput``: PPO's training steps per second over 16 copies, the adapter
+against ``DummyVecEnv``. Goals: PPO balances the cart-pole within 100,000 steps and the
+acrobot, Furuta and reaction-wheel pendulums within 300,000 (no episode ends early, the
+return >= 0.9 of the LQG's on the same starts), on every seed, and solves the cart-pole
+no slower in wall time than CartPole-v1; the exported policy steps in under 20 us and
+equals PyTorch's forward pass to 1e-6.
 """
 
 from __future__ import annotations
@@ -35,8 +42,19 @@ RECIPES = {"ppo": ROOT / "examples" / "rl_ppo_cartpole.py",
            "sac": ROOT / "examples" / "rl_sac_swingup.py"}
 
 
-def run(recipe: dict[str, Any], seed: int, steps: int, every: int) -> list[dict[str, Any]]:
-    config = recipe["CONFIG"]
+def recipe_config(recipe: dict[str, Any], env_id: str | None) -> dict[str, Any]:
+    """The recipe's configuration for *env_id*: its own entry in ``CONFIGS`` (one a task),
+    else its ``CONFIG`` with the id replaced."""
+    if "CONFIGS" in recipe:
+        configs: dict[str, dict[str, Any]] = recipe["CONFIGS"]
+        return configs[system_of(env_id) if env_id else next(iter(configs))]
+    config: dict[str, Any] = recipe["CONFIG"]
+    return {**config, "env_id": env_id} if env_id else config
+
+
+def run(recipe: dict[str, Any], config: dict[str, Any], seed: int, steps: int, every: int,
+        save: Any = None) -> list[dict[str, Any]]:
+    """One seed's curve; *save* (if given) is called with the curve after each point."""
     model = recipe["make_model"](config, seed)
     seeds = config["eval_seeds"]
     returns, lengths = recipe["evaluate"](recipe["agent"](model), config, seeds)
@@ -53,7 +71,14 @@ def run(recipe: dict[str, Any], seed: int, steps: int, every: int) -> list[dict[
                       "lengths": lengths})
         print(f"  seed {seed}: {done:>7} steps {trained:7.0f} s  returns "
               f"{np.round(returns, 1).tolist()} lengths {lengths}", flush=True)
+        if save is not None:
+            save(curve)
     return curve
+
+
+def system_of(env_id: str) -> str:
+    """``equilibrist/furuta-balance-v1`` -> ``furuta``."""
+    return env_id.rsplit("/", maxsplit=1)[-1].split("-", maxsplit=1)[0]
 
 
 def plot(result: dict[str, Any], path: Path) -> None:
@@ -188,16 +213,141 @@ def throughput(copies: int = 16, rollouts: int = 6) -> dict[str, float]:
     return best
 
 
+#: The race: Gymnasium's CartPole-v1 against the project's balance task, PPO's defaults.
+RACE_IDS = ("CartPole-v1", "equilibrist/cartpole-balance-v1")
+
+
+def _race_one(env_id: str, seed: int, max_steps: int, target: dict[str, float]
+              ) -> dict[str, Any]:
+    """Train PPO (defaults, one thread) on *env_id*, scoring its deterministic policy on
+    seeds 100-102 after every rollout (2,048 steps), until it is solved: CartPole-v1's mean
+    return 500; ours: no episode ends early and the return at least 0.9 of the LQG's."""
+    import gymnasium as gym
+    import torch
+    from stable_baselines3 import PPO
+
+    import equilibrist.envs  # noqa: F401  (registers the environments)
+
+    torch.set_num_threads(1)
+    env = gym.make(env_id)
+    limit = int(env.spec.max_episode_steps or env.unwrapped.core.n_samples)
+    model = PPO("MlpPolicy", env, seed=seed, device="cpu")
+    scoring = gym.make(env_id)
+    points = []
+    trained = 0.0
+    start_all = time.perf_counter()
+    while model.num_timesteps < max_steps:
+        start = time.perf_counter()
+        model.learn(model.n_steps, reset_num_timesteps=False)
+        trained += time.perf_counter() - start
+        returns, lengths = [], []
+        for start_seed in (100, 101, 102):
+            obs, _ = scoring.reset(seed=start_seed)
+            total, n, done = 0.0, 0, False
+            while not done:
+                obs, reward, terminated, truncated, _ = scoring.step(
+                    model.predict(obs, deterministic=True)[0])
+                total += float(reward)
+                n += 1
+                done = terminated or truncated
+            returns.append(total)
+            lengths.append(n)
+        solved = (min(lengths) == limit
+                  and float(np.mean(returns)) >= target["fraction"] * target["reference"])
+        points.append({"steps": model.num_timesteps, "seconds": trained,
+                       "wall": time.perf_counter() - start_all, "returns": returns,
+                       "lengths": lengths, "solved": solved})
+        if solved:
+            break
+    return {"env_id": env_id, "seed": seed, "points": points,
+            "solved_at": points[-1]["steps"] if points[-1]["solved"] else None,
+            "seconds": points[-1]["seconds"], "wall": points[-1]["wall"]}
+
+
+def race(seeds: list[int], max_steps: int, out: Path) -> dict[str, Any]:
+    """PPO's defaults on CartPole-v1 and on ``cartpole-balance-v1`` side by side (two
+    processes at once, one a task, seed after seed): the training wall time until each is
+    solved."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    recipe = runpy.run_path(str(RECIPES["ppo"]))
+    config = recipe["CONFIG"]
+    lqg = float(np.mean(recipe["expert_scores"](config, config["eval_seeds"])))
+    targets = {"CartPole-v1": {"reference": 500.0, "fraction": 1.0},
+               "equilibrist/cartpole-balance-v1": {"reference": lqg, "fraction": 0.9}}
+    result: dict[str, Any] = {"targets": targets, "runs": []}
+    with ProcessPoolExecutor(2) as pool:
+        for seed in seeds:
+            jobs = [pool.submit(_race_one, env_id, seed, max_steps, targets[env_id])
+                    for env_id in RACE_IDS]
+            for job in jobs:
+                run_ = job.result()
+                result["runs"].append(run_)
+                print(f"  {run_['env_id']:<34} seed {seed}: solved at {run_['solved_at']} steps, "
+                      f"{run_['seconds']:.0f} s of training ({run_['wall']:.0f} s with scoring)",
+                      flush=True)
+            out.write_text(json.dumps(result, indent=1))
+    return result
+
+
+def plot_race(result: dict[str, Any], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.4), sharey=True)
+    colors = dict(zip(RACE_IDS, ("C0", "C3"), strict=True))
+    for run_ in result["runs"]:
+        target = result["targets"][run_["env_id"]]["reference"]
+        frac = [float(np.mean(p["returns"])) / target for p in run_["points"]]
+        label = run_["env_id"] if run_["seed"] == result["runs"][0]["seed"] else None
+        axes[0].plot([p["steps"] for p in run_["points"]], frac, color=colors[run_["env_id"]],
+                     label=label, alpha=0.8)
+        axes[1].plot([p["seconds"] for p in run_["points"]], frac,
+                     color=colors[run_["env_id"]], alpha=0.8)
+    for ax in axes:
+        ax.axhline(1.0, color="0.6", ls=":")
+        ax.grid(alpha=0.3)
+    axes[0].set_xlabel("environment steps")
+    axes[1].set_xlabel("training wall time [s] (one thread, side by side)")
+    axes[0].set_ylabel("return / reference (500; the LQG's)")
+    axes[0].legend(fontsize=8, loc="lower right")
+    fig.suptitle("PPO (Stable-Baselines3 defaults) until solved, 3 seeds", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+
+
+def plot_merged(paths: list[str], name: str) -> None:
+    """One figure from the curves of several runs' JSON files (seeds run apart)."""
+    results = [json.loads(Path(p).read_text()) for p in paths]
+    merged = {**results[0], "curves": {k: v for r in results for k, v in r["curves"].items()}}
+    plot(merged, ROOT / "docs" / "images" / f"rl_{name}.png")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("recipe", choices=[*sorted(RECIPES), "policy-c", "throughput"])
+    parser.add_argument("recipe", choices=[*sorted(RECIPES), "policy-c", "throughput", "race",
+                                           "plot"])
+    parser.add_argument("files", nargs="*", help="plot: the runs' JSON files to draw as one")
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--steps", type=int, default=None)
     parser.add_argument("--every", type=int, default=10_000)
     parser.add_argument("--out", default=None)
+    parser.add_argument("--env", default=None,
+                        help="another task for the recipe (equilibrist/furuta-balance-v1)")
+    parser.add_argument("--name", default="ppo", help="plot: the figure's name (rl_NAME.png)")
     args = parser.parse_args()
     if args.recipe == "throughput":
         throughput()
+        return
+    if args.recipe == "race":
+        out = Path(args.out or "rl_race.json")
+        plot_race(race(args.seeds, args.steps or 200_000, out), ROOT / "docs" / "images"
+                  / "rl_race.png")
+        return
+    if args.recipe == "plot":
+        plot_merged(args.files, args.name)
         return
     if args.recipe == "policy-c":
         import tempfile
@@ -206,20 +356,27 @@ def main() -> None:
             policy_step(Path(tmp))
         return
     recipe = runpy.run_path(str(RECIPES[args.recipe]))
-    config = recipe["CONFIG"]
+    config = recipe_config(recipe, args.env)
     steps = args.steps or config["steps"]
     expert = recipe["expert_scores"](config, config["eval_seeds"])
     env = recipe["make_env"](config)
     max_return = float(env.unwrapped.core.n_samples)
     print(f"{config['algorithm']} on {config['env_id']} {config['env_options']}: {steps} steps; "
           f"{config['expert']} returns {np.round(expert, 1).tolist()} (maximum {max_return:g})")
-    curves = {str(seed): run(recipe, seed, steps, args.every) for seed in args.seeds}
+    name = args.recipe if not args.env else f"{args.recipe}_{system_of(args.env)}"
+    curves: dict[str, list[dict[str, Any]]] = {}
     result = {"algorithm": config["algorithm"], "env_id": config["env_id"],
               "env_options": config["env_options"], "expert_kind": config["expert"],
               "expert": expert, "max_return": max_return, "curves": curves}
-    out = Path(args.out or f"rl_{args.recipe}.json")
-    out.write_text(json.dumps(result, indent=1))
-    plot(result, ROOT / "docs" / "images" / f"rl_{args.recipe}.png")
+    out = Path(args.out or f"rl_{name}.json")
+
+    for seed in args.seeds:
+        def save(curve: list[dict[str, Any]], key: str = str(seed)) -> None:
+            curves[key] = curve
+            out.write_text(json.dumps(result, indent=1))
+
+        save(run(recipe, config, seed, steps, args.every, save))
+    plot(result, ROOT / "docs" / "images" / f"rl_{name}.png")
     for seed, curve in curves.items():
         last = curve[-1]
         ratio = float(np.mean(last["returns"]) / np.mean(expert))

@@ -24,27 +24,31 @@ def test_example_runs(script: Path, tmp_path: Path) -> None:
     assert proc.stdout.strip(), "an example should show its result"
 
 
-#: Each recipe's short version: its own script and configuration, fewer steps, and what
-#: changes so that a few thousand steps carry enough to learn from.
+#: Each recipe's short version (script, task): its own script and configuration, fewer
+#: steps, and what changes so that a few thousand steps carry enough to learn from.
 SHORT = {
     # At 50 Hz a step is 20 ms: 4,096 steps are 80 s of balancing attempts (20 s at 200 Hz).
-    "rl_ppo_cartpole": {"steps": 4096, "env_options": {"rate": 50.0}},
-    "rl_sac_swingup": {"steps": 1000, "hyperparameters": {
+    ("rl_ppo_cartpole", None): {"steps": 4096, "env_options": {"rate": 50.0}},
+    ("rl_sac_swingup", "cartpole"): {"steps": 1000, "hyperparameters": {
         "batch_size": 64, "policy_kwargs": {"net_arch": [64, 64]}}},
 }
 
 
+def test_every_recipe_has_a_short_version() -> None:
+    assert {p.stem for p in RECIPES} == {stem for stem, _task in SHORT}
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("script", RECIPES, ids=[p.stem for p in RECIPES])
-def test_recipe_learns_in_a_short_run(script: Path, capsys: pytest.CaptureFixture[str]) -> None:
+@pytest.mark.parametrize(("stem", "task"), list(SHORT), ids=[f"{s}-{t}" for s, t in SHORT])
+def test_recipe_learns_in_a_short_run(stem: str, task: str | None) -> None:
     """The recipe's short version: after a few thousand steps its deterministic policy earns
     more on the recipe's fixed starts than the same policy untrained (fixed seeds, one
     thread: the same numbers on every run)."""
     import runpy
 
-    recipe = runpy.run_path(str(script))
-    config = recipe["CONFIG"]
-    short = SHORT[script.stem]
+    recipe = runpy.run_path(str(next(p for p in RECIPES if p.stem == stem)))
+    config = dict(recipe["CONFIG"] if task is None else recipe["CONFIGS"][task])
+    short = SHORT[stem, task]
     config["env_options"] = {**config["env_options"], **short.get("env_options", {})}
     config["hyperparameters"] = {**config["hyperparameters"], **short.get("hyperparameters", {})}
     model = recipe["make_model"](config, config["seed"])
