@@ -11,30 +11,20 @@ from __future__ import annotations
 
 import json
 
-import numpy as np
 import pyarrow.parquet as pq
 import pytest
 import torch
 
 from equilibrist.cli.main import main
-from equilibrist.control.design import design
-from equilibrist.numeric.lookup import get_system
 from equilibrist.study import make_study, read_study
+from support.networks import cartpole_lqr_network
 
-SCALES = np.array([0.5, 0.2, 1.0, 1.0])  # the cart-pole's Bryson scales (its -v1 observation)
-F_MAX = 200.0  # its force limit [N]: the action 1 is 200 N
-RATE = 200.0
+RATE = 200.0  # the cart-pole's control rate, the study's
 METRICS = ("fraction_up", "settling_p50", "settling_max", "cost_mean", "peak_input_max.F")
 
 
 def _lqr_as_network(path, gain: float = 1.0) -> None:
-    """u = -K x as the layer a = W (x / SCALES) + b, u = F_MAX * a."""
-    k = design(get_system("cartpole"), rate=RATE).K
-    layer = torch.nn.Linear(4, 1).double()
-    with torch.no_grad():
-        layer.weight.copy_(torch.from_numpy(-gain * k * SCALES / F_MAX))
-        layer.bias.zero_()
-    torch.save(torch.nn.Sequential(layer).state_dict(), path)
+    cartpole_lqr_network(path, rate=RATE, gain=gain)
 
 
 def test_a_policy_is_a_value_of_the_controller_axis_named_by_its_file(tmp_path, capsys):

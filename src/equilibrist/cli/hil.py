@@ -63,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
     from equilibrist.cli.simulate import (
         build_run,
         check_out,
+        controller_name,
         parse_excitation,
         parse_x0,
         run_metrics,
@@ -85,11 +86,11 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--baud {args.baud!r}: expected a whole number of bits per second") from None
     if not 50 <= baud <= 20_000_000:
         raise UsageError(f"--baud {baud}: expected 50 to 20000000 bits per second")
-    kind = kinds.get(args.controller or "lqg")
+    system, options = build_run(args)
+    kind = kinds.get(controller_name(args, system))  # --policy FILE alone: the network
     if kind.open_loop:
         raise UsageError(f"--controller {kind.name} is the open loop: there is no controller "
                          "on a device")
-    system, options = build_run(args)
     simulated = options.pop("controller")
     try:
         controller_id = design_id(simulated)

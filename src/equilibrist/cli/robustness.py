@@ -64,7 +64,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 
 def run(args: argparse.Namespace) -> int:
-    from equilibrist.cli.simulate import build_run, parse_x0, start_of
+    from equilibrist.cli.simulate import build_run, controller_name, parse_x0, start_of
     from equilibrist.controllers import kinds
     from equilibrist.study.robustness import FAMILIES, robustness
 
@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--filter-cutoff {args.filter_cutoff}: expected a frequency > 0")
     system, options = build_run(args)
     x0: dict[str, float] = start_of(options, parse_x0(args.x0))
-    kind = kinds.get(args.controller or ("lqg" if system.n_inputs else "none"), "simulate")
+    kind = kinds.get(controller_name(args, system), "simulate")
     if not x0 and kind.task is not None and system.spec.hanging:
         x0 = {name: float(value) for name, value in system.spec.hanging.items()}
     card = robustness(system, options["controller"], x0=x0 or None, rate=float(options["rate"]),
@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
 
         plot_robustness(card.describe(), plot)
     if args.json:
-        common.print_json(card.describe())
+        common.print_json({"controller": kind.name, **card.describe()})
         return 0
     rows = [(name, f"{score:.3f}") for name, score in card.scores.items()]
     print(f"{system.key}, {kind.name}: benchmark score {card.benchmark_score:.3f} "
