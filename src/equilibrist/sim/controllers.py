@@ -115,6 +115,20 @@ class _Description:
         assert self.design is not None
         return self.design
 
+    def _read(self, key: str, of_design: Callable[[Design], Any]) -> Any:
+        """The argument *key* the user gave, or what *of_design* reads of the design."""
+        return of_design(self._source()) if self._given is None else self._given[key]
+
+    @classmethod
+    def _of_design(cls, design: Design, *, tracking: bool) -> Any:
+        """A description that reads *design* (checked, and its reference gain with *tracking*)."""
+        _check_design(design)
+        if tracking:
+            _design_kc(design)
+        made = cls.__new__(cls)
+        made._hold(None, design, tracking=tracking)
+        return made
+
     def linear(self, state_names: Sequence[str], input_names: Sequence[str] | None = None
                ) -> LinearController:
         """This controller in the one linear form, for a plant with these states and inputs."""
@@ -142,38 +156,28 @@ class _Description:
     @property
     def x_op(self) -> np.ndarray:
         """The operating point's states (the design's plant's)."""
-        if self._given is None:
-            return np.asarray(self._source().plant.x0)
-        return np.asarray(self._given["x_op"])
+        return np.asarray(self._read("x_op", lambda d: d.plant.x0))
 
     @property
     def u_op(self) -> np.ndarray:
         """The operating point's inputs (the design's plant's)."""
-        if self._given is None:
-            return np.asarray(self._source().plant.u0)
-        return np.asarray(self._given["u_op"])
+        return np.asarray(self._read("u_op", lambda d: d.plant.u0))
 
     @property
     def K(self) -> np.ndarray:
         """The state-feedback gain (the design's: its discrete gain when it has a rate)."""
-        if self._given is None:
-            return np.asarray(self._source().K)
-        return np.asarray(self._given["K"])
+        return np.asarray(self._read("K", lambda d: d.K))
 
     @property
     def Kc(self) -> np.ndarray | None:
         """The reference gain, None without references (the design's when it tracks)."""
-        if self._given is None:
-            return _design_kc(self._source()) if self._tracking else None
-        kc = self._given["Kc"]
+        kc = self._read("Kc", lambda d: _design_kc(d) if self._tracking else None)
         return None if kc is None else np.asarray(kc)
 
     @property
     def tracked(self) -> tuple[str, ...]:
         """The outputs ``Kc`` makes follow the reference."""
-        if self._given is None:
-            return tuple(self._source().tracked) if self._tracking else ()
-        return tuple(self._given["tracked"])
+        return tuple(self._read("tracked", lambda d: d.tracked if self._tracking else ()))
 
 
 class StateFeedback(_Description):
@@ -203,19 +207,12 @@ class StateFeedback(_Description):
     @classmethod
     def from_design(cls, design: Design, *, tracking: bool = False) -> StateFeedback:
         """The design's gain (its discrete gain when it has a rate) and operating point."""
-        _check_design(design)
-        if tracking:
-            _design_kc(design)
-        made = cls.__new__(cls)
-        made._hold(None, design, tracking=tracking)
-        return made
+        return cast(StateFeedback, cls._of_design(design, tracking=tracking))
 
     @property
     def rate(self) -> float | None:
         """The rate the gain was designed for (the design's), None for a continuous gain."""
-        if self._given is None:
-            return self._source().rate
-        return cast("float | None", self._given["rate"])
+        return cast("float | None", self._read("rate", lambda d: d.rate))
 
     def _build(self, state_names: Sequence[str], input_names: Sequence[str] | None
                ) -> LinearController:
@@ -286,11 +283,7 @@ class LQG(_Description):
                 "an LQG controller needs a design with a sample rate (its discrete Kalman "
                 "filter): design(system, rate=...)"
             )
-        if tracking:
-            _design_kc(design)
-        made = cls.__new__(cls)
-        made._hold(None, design, tracking=tracking)
-        return made
+        return cast(LQG, cls._of_design(design, tracking=tracking))
 
     def _discrete(self) -> LinearModel:
         disc = self._source().discrete
@@ -300,45 +293,37 @@ class LQG(_Description):
     @property
     def Ad(self) -> np.ndarray:
         """The sampled plant's ``A`` (the design's discrete plant's)."""
-        return np.asarray(self._given["Ad"] if self._given is not None else self._discrete().A)
+        return np.asarray(self._read("Ad", lambda d: self._discrete().A))
 
     @property
     def Bd(self) -> np.ndarray:
         """The sampled plant's ``B`` (the design's discrete plant's)."""
-        return np.asarray(self._given["Bd"] if self._given is not None else self._discrete().B)
+        return np.asarray(self._read("Bd", lambda d: self._discrete().B))
 
     @property
     def Kf(self) -> np.ndarray:
         """The Kalman gain (``M`` in the current form, ``L`` in the predictor form)."""
-        return np.asarray(self._given["Kf"] if self._given is not None else self._source().Kf)
+        return np.asarray(self._read("Kf", lambda d: d.Kf))
 
     @property
     def outputs(self) -> tuple[str, ...]:
         """The measured states, in the order of ``y``."""
-        if self._given is None:
-            return tuple(self._source().plant.output_names)
-        return cast("tuple[str, ...]", self._given["outputs"])
+        return tuple(self._read("outputs", lambda d: d.plant.output_names))
 
     @property
     def rate(self) -> float:
-        """The filter's sample rate [Hz] (the design's)."""
-        if self._given is None:
-            return float(cast(float, self._source().rate))  # from_design refuses no rate
-        return cast(float, self._given["rate"])
+        """The filter's sample rate [Hz] (the design's; from_design refuses a design without)."""
+        return cast(float, self._read("rate", lambda d: float(cast(float, d.rate))))
 
     @property
     def form(self) -> str:
         """``"current"`` or ``"predictor"`` (the design's Kalman form)."""
-        if self._given is None:
-            return self._source().kalman_form
-        return cast(str, self._given["form"])
+        return cast(str, self._read("form", lambda d: d.kalman_form))
 
     @property
     def x_hat0(self) -> np.ndarray | None:
         """The filter's starting estimate (deviation) the user gave; None: the operating point."""
-        if self._given is None:
-            return None
-        return cast("np.ndarray | None", self._given["x_hat0"])
+        return cast("np.ndarray | None", self._read("x_hat0", lambda d: None))
 
     def _build(self, state_names: Sequence[str], input_names: Sequence[str] | None
                ) -> LinearController:
