@@ -50,6 +50,7 @@ bits on every CPU).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -315,11 +316,40 @@ def _hermite_states(system: System, traj: Trajectory, t: np.ndarray) -> np.ndarr
     return states
 
 
+def shared_gains(models: Sequence[System], xs: np.ndarray, us: np.ndarray, *, dt: float,
+                  Q: np.ndarray, R: np.ndarray, S_end: np.ndarray) -> np.ndarray:
+    """The gains shared by several plants along one plan: each sample's gain minimizes the sum
+    of the plants' costs-to-go (each plant linearized at the plan's state and input), each
+    plant's cost-to-go then propagated under that gain,
+
+        K_k = (sum_i R + B_i' S_i B_i)^-1 sum_i B_i' S_i A_i,
+        S_i = Q + K_k' R K_k + (A_i - B_i K_k)' S_i (A_i - B_i K_k),
+
+    from the balancing LQR's ``S_end`` for every plant."""
+    n, m = xs.shape[1], us.shape[1]
+    steps = xs.shape[0] - 1
+    S = [np.array(S_end, dtype=float) for _ in models]
+    gains = np.zeros((steps, m, n))
+    for k in range(steps - 1, -1, -1):
+        sampled = [discrete_matrices(*p.jacobians(xs[k], us[k]), dt) for p in models]
+        G = np.zeros((m, m))
+        H = np.zeros((m, n))
+        for (Ad, Bd), Si in zip(sampled, S, strict=True):
+            G = G + (R + fixed.mm(Bd.T, Si, Bd))
+            H = H + fixed.mm(Bd.T, Si, Ad)
+        Kk = fixed.solve(G, H)
+        for i, (Ad, Bd) in enumerate(sampled):
+            closed = Ad - fixed.matmul(Bd, Kk)
+            S[i] = fixed.symmetric(Q + fixed.mm(Kk.T, R, Kk) + fixed.mm(closed.T, S[i], closed))
+        gains[k] = Kk
+    return gains
+
+
 def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np.ndarray,
           S_end: np.ndarray, K_end: np.ndarray, x_op: np.ndarray, u_op: np.ndarray,
           balance: str = "lqr", design: Design | None = None, P0: np.ndarray | None = None,
           catch: bool = True, wrap: bool = False,
-          rates: str = "measured") -> NonlinearController:
+          rates: str = "measured", plants: Sequence[System] = ()) -> NonlinearController:
     """The time-varying LQR along *traj* at *rate*, handing over to ``K_end`` at the end.
 
     ``balance="lqr"`` acts on the full measured state; ``"lqg"`` on the estimate of
@@ -329,7 +359,9 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     the state (its estimate) enters :func:`catch_region` before the plan ends. With *wrap*
     (``balance="lqr"`` only) the angles' deviations are taken modulo a turn
     (:data:`SOURCE_WRAP`). With ``rates="differenced"`` (``balance="lqr"`` only) the law's
-    rates are differenced from the measured angles (:data:`SOURCE_DIFF`).
+    rates are differenced from the measured angles (:data:`SOURCE_DIFF`). With *plants*
+    (the same system with other parameters: a spread the rig may be anywhere in), the gains
+    are shared by *system* and them (:func:`shared_gains`).
     """
     if rates not in RATES:
         raise ControllerError(f"--rates {rates!r}: expected one of {', '.join(RATES)}")
@@ -358,11 +390,15 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     S = np.array(S_end, dtype=float)
     gains = np.zeros((steps, m, n))
     plant: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    if plants:
+        gains = shared_gains([system, *plants], xs, us, dt=dt, Q=Q, R=R, S_end=S)
     for k in range(steps - 1, -1, -1):
         A, B = system.jacobians(xs[k], us[k])
         Ad, Bd = discrete_matrices(A, B, dt)
         if balance == "lqg":
             plant.append((A, Ad, Bd))
+        if plants:
+            continue
         # In the fixed order of control.fixed, as every sampled design: the same bits on
         # every CPU (numpy's @ and LAPACK follow the BLAS kernel the CPU selects).
         G = R + fixed.mm(Bd.T, S, Bd)
