@@ -201,10 +201,6 @@ class LinearController:
     def output_index(self) -> tuple[int, ...]:
         return tuple(self.state_names.index(o) for o in self.output_names)
 
-    @property
-    def tracked_index(self) -> tuple[int, ...]:
-        return tuple(self.state_names.index(o) for o in self.tracked_names)
-
     # -- the numbers the compiled core and the C code read -------------------------------------
     def packed(self) -> np.ndarray:
         """The controller as one float vector: :data:`LINEAR_HEADER`, then :data:`LINEAR_BLOCKS`.
