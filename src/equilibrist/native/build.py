@@ -1,24 +1,13 @@
 """Compile a generated C unit into a shared library, cached by content, and load it.
 
-The library's name is the hash of everything that shapes it: the unit's
-source, the compiler's identity (its command and ``--version``), the flags
-and this module's :data:`REVISION`. So a change in any of them makes a new
-library, and an unchanged one is loaded from the cache folder
-(:func:`equilibrist.numeric.cache.cache_dir`, ``native/``) in milliseconds.
-
-- **Atomic, and once**: each build compiles into a file of its own and
-  renames it into place; a process about to build a library first takes an
-  exclusive lock on its name (``flock`` on ``<library>.lock``, where the
-  system has it), so a second process that wants the same library at the
-  same time (the test suite's workers, the demo's, a batch's) waits and
-  loads the first one's instead of compiling it again.
-- **Checked**: beside each library a ``.sha256`` file holds its digest; a
-  library whose bytes no longer match (a damaged cache), or that the loader
-  refuses, is built again.
-- **Compiler**: ``$CC``, else ``cc``; where neither exists, the C compiler
-  of the ``ziglang`` package (``pip install ziglang``) if it is installed.
-  OpenMP (``-fopenmp``) where the compiler has it, else the batch entry
-  runs its runs one after another.
+The library's name is the hash of everything that shapes it: the unit's source, the
+compiler's identity (its command and ``--version``), the flags and this module's
+:data:`REVISION`, so an unchanged one is loaded from the cache folder
+(:func:`equilibrist.numeric.cache.cache_dir`, ``native/``) in milliseconds. A build is
+atomic and done once (a file of its own renamed into place, under a ``flock`` on
+``<library>.lock``), checked (a ``.sha256`` beside each library), and uses ``$CC``, ``cc``
+or the ``ziglang`` package's compiler, with OpenMP where the compiler has it: docs/core.md,
+"Compiled in about a second, cached by content".
 """
 
 from __future__ import annotations

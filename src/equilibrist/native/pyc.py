@@ -1,29 +1,11 @@
 """Python to C: the numeric subset the compiled core runs, translated operation for operation.
 
 The generated dynamics (:mod:`equilibrist.numeric.codegen`) and the
-controllers' sources (the linear library of
-:mod:`equilibrist.control.controller`, a nonlinear controller's
-``output``/``update``/``estimate``) are plain Python over floats, integers
-and 1-D or 2-D arrays: the one definition that runs in Python as the
-reference. This module turns such a function into a C99 function that
-performs the same IEEE operations in the same order, with fixed typing
-rules (so a run in the C core gives the same bits on every machine):
-
-- integers are ``int64_t``, floats ``double``; ``/`` is a float division,
-  ``//`` and ``%`` follow Python's signs (for floats, CPython's
-  ``fmod``-based rule); ``x ** k`` with an integer literal ``k`` is
-  computed by repeated squaring (``r = 1; while k: if k & 1: r *= x;
-  k >>= 1; x *= x``), any other power with ``pow``;
-- ``min`` and ``max`` keep Python's rule for ties and NaN (``max(a, b)`` is
-  ``b if b > a else a``); ``int(x)`` truncates; ``abs`` of a float is
-  ``fabs``;
-- ``math``'s functions are the C library's of the same name, the project's
-  ``eq_sin``/``eq_cos``/``eq_log``/``eq_exp``/``eq_atan``/``eq_tanh`` are
-  :mod:`equilibrist.numeric.libm`'s C versions;
-- every intermediate is a C ``double`` expression fully parenthesized in
-  Python's evaluation order, compiled with ``-ffp-contract=off`` and
-  without ``-ffast-math`` (no fused multiply-add, no reassociation).
-
+controllers' sources are plain Python over floats, integers and 1-D or 2-D
+arrays: the one definition that runs in Python as the reference. This module
+turns such a function into a C99 function that performs the same IEEE
+operations in the same order, with fixed typing rules (docs/core.md lists them
+and the subset; a run in the C core gives the same bits on every machine).
 What it does not know it refuses with :class:`TranslationError`, naming
 the construct and its line, instead of guessing.
 
