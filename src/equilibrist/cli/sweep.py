@@ -31,8 +31,9 @@ compares a trained network (--policy FILE) with the LQR, the table naming it
 by its file's name; tvlqr:PLAN.npz, mpc:HORIZON likewise.
 
 Each point: the controller designed (for the point's parameters, or the
-nominal ones with --design-for nominal; a failed design is a row with status
-'design failed' and the reason, never fatal), --runs runs with initial states
+nominal ones with --design-for nominal: the system with its --set values, a
+parameter both set and varied among them; a failed design is a row with
+status 'design failed' and the reason, never fatal), --runs runs with initial states
 uniform in the --x0 ranges and parameters within (1 +- REL) of the point's
 (--spread), and the metrics: fraction_up, settling_p50/p90/max, peak input,
 time saturated, the quadratic cost, roa_fraction with --roa STATE=LOW:HIGH:N.

@@ -70,7 +70,9 @@ def make_study(
     point), *spread* each parameter's relative spread around the point's value.
     *controller*, *noise* (a scale, or ``on``/``off``), *delay* and *rate* (default: the
     rig's) are the values of the quantities not varied. *design_for* ``"nominal"`` keeps one
-    nominal design at every point instead of designing for each point's parameters.
+    nominal design at every point instead of designing for each point's parameters: the
+    design of the system with *settings*, whose value of a parameter also varied is the
+    nominal one (the points run the varied values).
     *metrics* ``"full"`` adds settling times and the quadratic cost. *roa* is a grid of
     initial states run per point (``roa_fraction``, the share caught). *batch_size* is the
     runs per compiled batch (default: about 32 MB of trajectories); the noise seeds follow
@@ -85,7 +87,7 @@ def make_study(
     n_sample = None
     if sampled:
         n_sample = _whole(sample, "--sample random:N", problems)
-    axes = _axes(sysm, vary, fixed=fixed, sampled=sampled, problems=problems)
+    axes = _axes(sysm, vary, sampled=sampled, problems=problems)
     n_runs = _whole(runs, "--runs", problems)
     dur = _number(duration, "--duration", problems)
     if dur is not None and dur <= 0:
@@ -158,17 +160,16 @@ def _study_system(system: str,
 
 
 def _axes(sysm: System, vary: Mapping[str, object] | Sequence[tuple[str, object]], *,
-          fixed: Mapping[str, object], sampled: bool, problems: list[str]) -> list[Axis]:
-    """The varied quantities' axes; a quantity given twice, or also fixed, is a problem."""
+          sampled: bool, problems: list[str]) -> list[Axis]:
+    """The varied quantities' axes; a quantity given twice is a problem. A parameter both
+    varied and set (``--set m2=0.6 --vary m2=0.5:0.7:5``) runs at the varied values, and the
+    set value is the nominal plant's (its design with ``--design-for nominal``)."""
     items = list(vary.items()) if isinstance(vary, Mapping) else list(vary)
     names = [n for n, _ in items]
     for n in sorted({n for n in names if names.count(n) > 1}):
         problems.append(f"--vary {n} is given twice")
     axes = []
     for name, value in items:
-        if name in fixed:
-            problems.append(f"--vary {name}: it is also fixed with --set")
-            continue
         ax = _axis(sysm, str(name).strip(), value, sampled, problems)
         if ax is not None:
             axes.append(ax)
