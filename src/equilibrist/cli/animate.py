@@ -48,9 +48,7 @@ def run(args: argparse.Namespace) -> int:
 
     src = Path(args.file)
     out = check_suffix(args.out, ANIMATION_FORMATS, "--out") if args.out else src.with_suffix(".gif")
-    speed = common.parse_number(args.speed, "--speed")
-    if speed <= 0:
-        raise UsageError(f"--speed must be positive, got {args.speed}")
+    speed = common.parse_positive(args.speed, "--speed")
     if args.fps <= 0 or args.max_frames < 1:
         raise UsageError("--fps must be positive and --max-frames at least 1")
     result = load_result(src)

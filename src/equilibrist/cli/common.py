@@ -119,6 +119,14 @@ def parse_number(text: str, what: str) -> float:
     return value
 
 
+def parse_positive(text: str, option: str) -> float:
+    """*text* as a finite number above zero, else one line naming *option*."""
+    value = parse_number(text, option)
+    if value <= 0:
+        raise UsageError(f"{option} must be positive, got {text}")
+    return value
+
+
 def parse_assignments(items: Iterable[str], option: str) -> dict[str, str]:
     """``["a=1", "b=2"]`` -> ``{"a": "1", "b": "2"}``; malformed items are refused."""
     out: dict[str, str] = {}

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
 from equilibrist.cli import common
@@ -74,15 +73,6 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     p.set_defaults(func=run)
 
 
-def _positive(text: str | None, option: str) -> float | None:
-    if text is None:
-        return None
-    v = common.parse_number(text, option)
-    if not (math.isfinite(v) and v > 0):
-        raise UsageError(f"{option} must be positive, got {text}")
-    return v
-
-
 def _levels(items: list[str], option: str, *, positive: bool = False) -> dict[str, float]:
     raw = common.parse_assignments(items, option)
     out = {}
@@ -125,8 +115,9 @@ def run(args: argparse.Namespace) -> int:
     # Everything that can be checked before the fit is checked first, so
     # that a mistake costs no time and nothing is half-written.
     free = common.parse_names(args.free, "--free") or ()
-    segment = _positive(args.segment, "--segment")
-    max_step = _positive(args.max_step, "--max-step")
+    segment = None if args.segment is None else common.parse_positive(args.segment, "--segment")
+    max_step = (None if args.max_step is None
+                else common.parse_positive(args.max_step, "--max-step"))
     sensor = _levels(args.sensor_noise or [], "--sensor-noise", positive=True)
     process = _levels(args.process_noise or [], "--process-noise")
     if args.out is not None and Path(args.out).suffix != ".json":

@@ -160,16 +160,12 @@ def run(args: argparse.Namespace) -> int:
     falsify = common.parse_whole(args.falsify, "--falsify", 0)
     seed = common.parse_whole(args.seed, "--seed", 0)
     max_steps = parse_max_steps(args.max_steps)
-    duration = common.parse_number(args.duration, "--duration")
-    if not (math.isfinite(duration) and duration > 0):
-        raise UsageError(f"--duration {args.duration}: expected a positive number of seconds")
+    duration = common.parse_positive(args.duration, "--duration")
     system = common.load_system(args)
     if system.n_inputs == 0:
         raise UsageError(f"{system.key} has no input: there is no loop to catch anything")
-    rate = (common.parse_number(args.rate, "--rate") if args.rate is not None
+    rate = (common.parse_positive(args.rate, "--rate") if args.rate is not None
             else float(system.spec.control_rate))
-    if not (math.isfinite(rate) and rate > 0):
-        raise UsageError(f"--rate {args.rate}: expected a positive rate in Hz")
     name = args.controller or "lqg"
     kind = kinds.get(name, "simulate")
     if kind.open_loop:
@@ -194,10 +190,7 @@ def run(args: argparse.Namespace) -> int:
                                   "progress": show_progress(args) and sys.stderr.isatty()}
     step = None
     if args.physics_step is not None:
-        step = common.parse_number(args.physics_step, "--physics-step")
-        if not (math.isfinite(step) and step > 0):
-            raise UsageError(f"--physics-step {args.physics_step}: expected a positive "
-                                    "number of seconds")
+        step = common.parse_positive(args.physics_step, "--physics-step")
         options["physics_step"] = step
     runs = max(samples, FIRST_GRID_RUNS) + SEARCH_RUNS + (falsify if args.certify == "on" else 0)
     _check_work(runs, duration=duration, rate=rate, physics_step=step, max_steps=max_steps)

@@ -163,13 +163,6 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 # -- parsing ---------------------------------------------------------------------
 
 
-def _positive(text: str, option: str) -> float:
-    v = common.parse_number(text, option)
-    if v <= 0:
-        raise UsageError(f"{option} must be positive, got {text}")
-    return v
-
-
 def _seed(text: str) -> int:
     return common.parse_whole(text, "--seed", minimum=0)
 
@@ -195,7 +188,7 @@ def parse_events(args: argparse.Namespace, system: System) -> list[Event]:
         if len(parts) > 2:
             raise UsageError(f"--push {item!r}: expected T:VALUE[:DURATION]")
         value = common.parse_number(parts[0], "--push value")
-        duration = 0.1 if len(parts) == 1 else _positive(parts[1], "--push duration")
+        duration = 0.1 if len(parts) == 1 else common.parse_positive(parts[1], "--push duration")
         events.append(Pulse(t, value, duration))
     for item in args.kick:
         t, rest = _split_time(item, "--kick")
@@ -250,10 +243,10 @@ def build_run(args: argparse.Namespace) -> tuple[System, dict[str, Any]]:
     from equilibrist.sim.signals import parse_signal
 
     system = common.load_system(args)
-    duration = _positive(args.duration, "--duration")
-    rate = (_positive(args.rate, "--rate") if args.rate is not None
+    duration = common.parse_positive(args.duration, "--duration")
+    rate = (common.parse_positive(args.rate, "--rate") if args.rate is not None
             else float(system.spec.control_rate))
-    step = None if args.physics_step is None else _positive(args.physics_step, "--physics-step")
+    step = None if args.physics_step is None else common.parse_positive(args.physics_step, "--physics-step")
     name = controller_name(args, system)
     from equilibrist.controllers import kinds
 
