@@ -8,29 +8,10 @@ symbolic equations of motion from it by Lagrange's equations written out in
 matrices (:mod:`.derive`). A URDF's ``<transmission>`` elements, which MuJoCo
 ignores, are read with :mod:`xml.etree` (:mod:`.urdf`).
 
-The system that results is an ordinary :class:`~equilibrist.numeric.system.System`:
-
-* states: the joints (hinge or slide) in document order, named by joint
-  name, then their rates ``<joint>_dot``;
-* inputs: MJCF ``<motor>`` actuators in document order (generalized force
-  ``gear * u``, limits from ``ctrlrange``), or URDF transmissions (force
-  ``mechanicalReduction * u``, limits the joint's effort over the reduction);
-* parameters: ``g``, ``<body>_mass`` of every moving body (its inertia scales
-  with it), ``<joint>_damping`` of every joint, ``<joint>_friction`` of each
-  joint with Coulomb friction (MJCF ``frictionloss``, URDF ``<dynamics
-  friction>``), and the input limits;
-* operating point: the keyframe named ``balance``, else the first keyframe,
-  else the zero configuration;
-* outputs: the joints of MJCF ``jointpos`` sensors (their ``noise`` the
-  sensor's standard deviation), else every joint;
-* defaults for design and simulation: see ``docs/models.md``.
-
-What the file has and equilibrist does not model (ball and free joints,
-tendons, equality constraints, actuators other than motors, fluid forces)
-is refused with one line naming the element. A URDF is first made into what
-MuJoCo's reader takes (:mod:`.urdf_clean`: the ``world`` link, namespaces,
-tool-specific elements, geometry, massless links), saying so in notes. Contacts and
-joint limits are not modelled; ``equilibrist show`` says so.
+The system that results is an ordinary :class:`~equilibrist.numeric.system.System`: its
+states, inputs, parameters, operating point, outputs and defaults, what is refused with one
+line naming the element and what is not modelled are in docs/models.md. A URDF is first made
+into what MuJoCo's reader takes (:mod:`.urdf_clean`), saying so in notes.
 """
 
 from __future__ import annotations
