@@ -175,7 +175,9 @@ def test_registered_and_refused_where_it_does_not_apply() -> None:
         build_controller("swingup", ControllerRequest(system=get_system("ball_beam"), rate=None))
     assert "\n" not in str(info.value)
     assert swingup_laws() == {"cartpole": "cart", "reaction_wheel_pendulum": "wheel",
-                              "furuta": "rotary", "acrobot": "acrobot"}
+                              "furuta": "rotary", "acrobot": "acrobot", "pendubot": "pendubot",
+                              "dfki_double_pendulum[robot=acrobot]": "acrobot",
+                              "dfki_double_pendulum[robot=pendubot]": "pendubot"}
 
 
 def test_demo_animates_a_swing_up(tmp_path: object) -> None:

@@ -29,29 +29,57 @@ saturated by the actuator and its centering terms are small (``dE/dt =
 -c k_E (E - E0) |theta_dot cos theta|`` with ``c > 0``); it stops rising
 when ``E`` reaches ``E0`` (default 0: the upright's energy).
 
-*Energy shaping on the collocated joint* for the acrobot (Xin and Kaneda,
-"Analysis of the energy-based swing-up control of the Acrobot", Int. J.
-Robust Nonlinear Control 17 (2007), on the partial feedback
-linearization of Spong 1995, "The swing up control problem for the acrobot",
-IEEE Control Systems 15). ``E`` is the total energy from upright, which
-changes at the rate ``dE/dt = tau theta2_dot``. The elbow's torque is the one
-that makes ``V = k_E (E - E0)^2 / 2 + k_D theta2_dot^2 / 2 + k_P theta2^2 / 2``
-fall as ``dV/dt = -k_V theta2_dot^2``:
-``tau = (-(k_V theta2_dot + k_P theta2) det M + k_D (M11 (h2 + g2) - M12 (h1
-+ g1))) / (k_E (E - E0) det M + k_D M11)`` (``M`` the inertia matrix, ``h``
-the velocity terms, ``g`` gravity's). The acrobot thus tends to the upright's
-energy with the elbow straight and still: link 1 swinging as one rigid
-pendulum on the homoclinic orbit, which comes to upright slowly and straight
-through the balance's catch region. The denominator keeps its sign for
-``k_D > k_E (E0 - E_hanging) max(det M / M11)`` (about 40 for the catalogue's
-acrobot); the default ``k_D = 30`` lies below that bound, for a faster
-start from hanging: at the hanging energy it holds while ``|theta2| < 1.4
-rad``, and more widely as ``E`` rises; where the denominator passes through
-zero the motor's limit bounds the command. (In trials on the catalogue's
-acrobot, with Gymnasium's heavy links ``I1 = I2 = 1 kg m^2``, Spong's
-own reference for the elbow, ``alpha atan(theta1_dot)`` under a stiff PD,
-and a PD with an energy term left the energy oscillating below the
-upright's: the two links traded it rather than gained it.)
+*Energy shaping on the collocated joint* for the acrobot and the pendubot
+(Xin and Kaneda, "Analysis of the energy-based swing-up control of the
+Acrobot", Int. J. Robust Nonlinear Control 17 (2007); Fantoni, Lozano and
+Spong, "Energy based control of the Pendubot", IEEE Trans. Automatic Control
+45 (2000); both on the partial feedback linearization of Spong 1995, "The
+swing up control problem for the acrobot", IEEE Control Systems 15). ``E``
+is the total energy from upright; with the motor at joint ``a`` (the
+acrobot's elbow, the pendubot's shoulder) it changes at the rate ``dE/dt =
+tau qa_dot``. The motor's torque is the one that makes
+``V = k_E (E - E0)^2 / 2 + k_D qa_dot^2 / 2 + k_P qa~^2 / 2`` (``qa~`` the
+actuated joint's distance from upright) fall as ``dV/dt = -k_V qa_dot^2``:
+``tau = (-(k_V qa_dot + k_P qa~) det M + k_D (M_bb hg_a - M_ab hg_b)) /
+(k_E (E - E0) det M + k_D M_bb)`` (``M`` the inertia matrix, ``hg`` the
+velocity and gravity terms, ``b`` the passive joint). The rig tends to the
+upright's energy with the actuated joint upright and still: the acrobot's
+link 1 swinging as one rigid pendulum on its homoclinic orbit, the
+pendubot's link 2 on its own above a still link 1.
+
+*Gains in the rig's own scales.* Only the ratios ``k_D / k_E``, ``k_P / k_E``
+and ``k_V / k_E`` shape the law, and each has a scale of the rig
+(:func:`plant_scales`, from its generated energy and mass matrix):
+
+* ``k_D``: the denominator keeps its sign on every state the energy may
+  reach (``E >= E_min(q2)``, the lowest the rig hangs with that bend) when
+  ``k_D / k_E > max over q2 of (E_up - E_min(q2)) det M / M_bb`` (Xin and
+  Kaneda's condition); ``k_d_bound`` is ``k_D`` over that bound.
+* ``k_P``: at rest ``tau`` is gravity's torque ``G_a`` on the actuated joint
+  where gravity leaves the passive joint still, and the law rests there when
+  ``k_P qa~ = -k_E (E - E0) G_a``: ``k_P`` above ``k_E max(-(E - E0) G_a /
+  qa~)`` over those points leaves the closed loop no resting point but
+  hanging and upright (``2 b1 b2`` for the acrobot, ``b1``, ``b2`` the links'
+  gravity torques, met bending a little off hanging); ``k_p_bound`` is ``k_P``
+  over it. The pendubot has no such point to push away; its ``k_P`` is stated
+  by the torque it asks hanging at rest half a turn from upright:
+  ``k_P pi = k_p_torque k_E lift torque_room`` (``k_p_torque`` of the motor's
+  room, ``lift = E_up - E_hanging``).
+* ``k_V = 2 zeta sqrt(k_P k_D)``: near the end, where ``E - E0`` is small,
+  the actuated joint obeys ``k_D qa_ddot + k_V qa_dot + k_P qa~ = 0``, of
+  damping ratio ``zeta``.
+
+The default tunings (the rigs' definitions) state ``k_d_bound``,
+``k_p_bound`` (or ``k_p_torque``) and ``zeta``: one tuning swings up the
+catalogue's acrobot (1 kg m^2 links, 20 N m) and DFKI's (0.05 kg m^2, 6 N m).
+
+*Pump from rest.* Hanging at rest every term of the acrobot's law is zero
+(a rate, a bend or a force of a rig at rest), so it would never move; a weak
+shoulder motor cannot lift the pendubot's links by pushing. Below the energy
+``E_hanging + kick_energy lift`` the motor pushes with ``kick`` of its room
+along the actuated joint's rate (along its angle when the rate is zero, up
+when both are): ``dE/dt = kick |qa_dot| >= 0``, so the energy rises
+monotonically out of that pit and the law takes over.
 
 *Supervisor.* The balancing controller is the design's discrete LQR
 ``u = u_op - K (x_hat - x_op)`` (Riccati solution ``S``). Its catch region
@@ -114,6 +142,8 @@ from equilibrist.control.swingup_law import (
 from equilibrist.errors import ControllerError
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from equilibrist.control.design_record import Design
     from equilibrist.mechanics.spec import SwingUp
     from equilibrist.numeric.system import System
@@ -155,11 +185,20 @@ class SwingUpTuning:
     accel:
         The acceleration the rate estimator tracks (its process noise) [rad/s^2 or m/s^2].
     k_d:
-        The acrobot's ``k_D``, the weight of the elbow's kinetic term in ``V``.
+        The two-link laws' ``k_D``, the weight of the actuated joint's kinetic term in ``V``.
+    kick, kick_energy:
+        The two-link laws' pump from rest: below ``kick_energy`` of the lift above hanging,
+        the torque ``kick`` (a share of the motor's room to its limit) along the actuated
+        joint's rate. 0: no pump.
+    k_d_bound, k_p_bound, k_p_torque, zeta:
+        The two-link laws' gains in the rig's own scales (:class:`PlantScales`), in place of
+        ``k_d``, ``k_p``, ``k_v`` (``k_d_bound > 0`` selects them): ``k_E = k_energy / lift``,
+        ``k_D = k_d_bound k_E damping_bound``, ``k_P = k_E (k_p_bound stiffness_bound +
+        k_p_torque lift torque / pi)``, ``k_V = 2 zeta sqrt(k_P k_D)``.
     """
 
     k_energy: float
-    a_max: float
+    a_max: float = 0.0
     e0: float = 0.0
     k_x: float = 0.0
     k_v: float = 0.0
@@ -168,13 +207,20 @@ class SwingUpTuning:
     release_factor: float = 4.0
     accel: float = 20.0
     k_d: float = 0.0
+    kick: float = 0.0
+    kick_energy: float = 0.0
+    k_d_bound: float = 0.0
+    k_p_bound: float = 0.0
+    k_p_torque: float = 0.0
+    zeta: float = 0.0
 
 
 def swingup_laws() -> dict[str, str]:
-    """The catalogue's systems with a swing-up (``spec.swingup``), and the law of each."""
+    """The catalogue's systems (their keys, a variant's with its option) with a swing-up
+    (``spec.swingup``), and the law of each."""
     from equilibrist.systems.registry import all_entries
 
-    return {e.spec.name: e.spec.swingup.law for e in all_entries() if e.spec.swingup is not None}
+    return {e.spec.key: e.spec.swingup.law for e in all_entries() if e.spec.swingup is not None}
 
 
 def _stated(system: System) -> SwingUp:
@@ -272,7 +318,8 @@ def swingup(
     rate: float | None = None,
     balance: str = "lqr",
 ) -> SwingUpController:
-    """The swing-up controller of *system* (cart-pole, reaction wheel, rotary pendulum, acrobot).
+    """The swing-up controller of *system* (cart-pole, reaction wheel, rotary pendulum, acrobot,
+    pendubot).
 
     Parameters
     ----------
@@ -354,7 +401,7 @@ def swingup(
         "u_min": lo[0], "u_max": hi[0], "u_op": u_op[0],
         "lqg": 1.0 if balance == "lqg" else 0.0,
         "current": 1.0 if design.kalman_form == "current" else 0.0,
-        "e_up": 0.0, "n": n, "nq": nq, "np": phys.size,
+        "e_up": 0.0, "kick": 0.0, "e_kick": 0.0, "n": n, "nq": nq, "np": phys.size,
     }
     blocks = {
         "x_op": x_op, "K": K[0], "S": S,
@@ -374,12 +421,163 @@ def swingup(
     }
     source = controller_source(law, physics_source(system), n, nq)
     # The energy measured from upright: the law's own at the operating point, at rest.
-    cp[CP_SLOTS.index("e_up")] = python_namespace(source)["su_energy"](*x_op, cp)
+    su_energy = python_namespace(source)["su_energy"]
+    cp[CP_SLOTS.index("e_up")] = su_energy(*x_op, cp)
+    if law in ACTUATED:
+        scaled = _collocated_gains(system, source, cp, law, tune)
+        for slot, value in scaled.items():
+            cp[CP_SLOTS.index(slot)] = value
+        settings["gains"] = scaled
     return SwingUpController(
         name="swingup", source=source, params=cp, z0=np.zeros(z_layout(n)["end"]),
         rate=hz, x_op=x_op, u_op=u_op, state_names=names, input_names=system.input_names,
         output_names=tuple(names[:nq]), has_estimate=True, settings=settings,
     )
+
+
+#: The two-link laws and the joint each drives (0: the shoulder, 1: the elbow).
+ACTUATED = {"acrobot": 1, "pendubot": 0}
+
+
+@dataclass(frozen=True)
+class PlantScales:
+    """A two-link rig's own scales, which its swing-up's gains are stated in (docs/swingup.md).
+
+    The rig's potential is a first harmonic in the shoulder's angle at every bend ``q2``:
+    ``P(q1, q2) = c - R(q2) cos(q1 - phi(q2))``, so the lowest the rig can hang with that
+    bend is ``c - R(q2)``, and ``R(0) = b1 + b2``, ``R(pi) = |b1 - b2|`` give the two links'
+    gravity torques ``b1`` (link 1's, with link 2's mass at the elbow) and ``b2`` (link 2's).
+
+    Attributes
+    ----------
+    lift:
+        The energy from hanging at rest to upright at rest [J].
+    damping_bound:
+        ``max over q2 of (E_up - c + R(q2)) det M / M_bb`` [J kg m^2] (``b`` the passive
+        joint): above ``k_E`` times it, ``k_D`` keeps the law's denominator from zero at every
+        state the energy function allows (Xin and Kaneda's condition on ``k_D``).
+    stiffness_bound:
+        ``(2 / pi) min(b1, b2)^2`` [J^2]: above ``k_E`` times it, ``k_P`` leaves the closed
+        loop no resting point but hanging and upright (Xin and Kaneda's condition on ``k_P``).
+    torque:
+        The motor's room from its operating torque to its nearer limit [N m].
+    """
+
+    lift: float
+    damping_bound: float
+    stiffness_bound: float
+    torque: float
+
+
+def plant_scales(system: System, source: str, cp: np.ndarray, law: str) -> PlantScales:
+    """*system*'s scales (:class:`PlantScales`) for the two-link law *law*, from the law's own
+    physics (its generated ``scalar_mass`` and ``scalar_energy`` on the parameters *cp*), in
+    plain float arithmetic on fixed grids of 1 degree (the same bits on every CPU)."""
+    from equilibrist.control.swingup_law import cp_layout
+
+    ns = python_namespace(source)
+    a = ACTUATED[law]
+    b = 1 - a
+    at = cp_layout(4, 2, int(cp[CP_SLOTS.index("np")]))
+    x_op = [float(v) for v in cp[at["x_op"]:at["x_op"] + 4]]
+    hang = _hanging(system, np.asarray(x_op))
+    mass = ns["scalar_mass"]
+    pot = _Potential(ns["scalar_energy"], cp, at["phys"])
+    e_up = pot(x_op[0], x_op[1])
+    lift = e_up - pot(float(hang[0]), float(hang[1]))
+    step = 2.0 * math.pi / 360
+    worst = 0.0
+    for k in range(360):
+        bend = -math.pi + k * step
+        m = [[float(mass(i, j, 0.0, bend, 0.0, 0.0, cp, at["phys"])) for j in (0, 1)]
+             for i in (0, 1)]
+        # The lowest the rig hangs with this bend: c - R of the potential's harmonic in q1.
+        c, r, _phase = _harmonic(pot.along([0.0, bend], 0))
+        det = m[0][0] * m[1][1] - m[0][1] * m[0][1]
+        worst = max(worst, (e_up - c + r) * det / m[b][b])
+    # The closed loop's resting points: the actuated joint at qa, the passive one where
+    # gravity leaves it still (an extreme of the potential's harmonic in its angle), the motor
+    # holding gravity's torque there; the law rests there when kp qa~ = -ke (E - E0) torque.
+    stiff = 0.0
+    for k in range(1, 360):
+        distance = -math.pi + k * step
+        if k == 180:  # upright: no distance to hold
+            continue
+        q = [0.0, 0.0]
+        q[a] = x_op[a] + distance
+        _c, _r, still = _harmonic(pot.along(q, b))
+        for rest in (still, still + math.pi):
+            q[b] = rest
+            _c, r, phase = _harmonic(pot.along(q, a))
+            torque = r * math.sin(q[a] - phase)
+            stiff = max(stiff, -(pot(q[0], q[1]) - e_up) * torque / distance)
+    lo, hi = (float(v[0]) for v in system.input_limits)
+    u_op = float(cp[CP_SLOTS.index("u_op")])
+    return PlantScales(lift=lift, damping_bound=worst, stiffness_bound=stiff,
+                       torque=min(hi - u_op, u_op - lo))
+
+
+@dataclass(frozen=True)
+class _Potential:
+    """The rig's energy at rest at ``(q1, q2)``: its generated ``scalar_energy``."""
+
+    energy: Callable[..., float]
+    cp: np.ndarray
+    phys: int
+
+    def __call__(self, q1: float, q2: float) -> float:
+        return float(self.energy(q1, q2, 0.0, 0.0, self.cp, self.phys))
+
+    def along(self, q: list[float], i: int) -> Callable[[float], float]:
+        """The potential as a function of angle *i*, the other held at *q*'s."""
+        held = list(q)
+
+        def at(v: float) -> float:
+            point = list(held)
+            point[i] = v
+            return self(point[0], point[1])
+
+        return at
+
+
+def _harmonic(fn: Callable[[float], float]) -> tuple[float, float, float]:
+    """``(c, R, phi)`` of a first harmonic ``fn(v) = c - R cos(v - phi)`` (a two-link rig's
+    potential in either angle, the other held), from its values at 0, pi/2 and pi."""
+    p0, p1, p2 = fn(0.0), fn(0.5 * math.pi), fn(math.pi)
+    c = 0.5 * (p0 + p2)
+    return c, math.hypot(0.5 * (p2 - p0), c - p1), math.atan2(c - p1, 0.5 * (p2 - p0))
+
+
+def _collocated_gains(system: System, source: str, cp: np.ndarray, law: str,
+                      tune: SwingUpTuning) -> dict[str, float]:
+    """The two-link law's gains in the plant's units: as *tune* states them, or (with
+    ``k_d_bound``) from the plant's own scales (:func:`plant_scales`; docs/swingup.md)."""
+    sc = plant_scales(system, source, cp, law)
+    out = {"ke": tune.k_energy, "kd": tune.k_d, "kp": tune.k_p, "kv": tune.k_v}
+    if tune.k_d_bound > 0.0:
+        if tune.k_d or tune.k_p or tune.k_v:
+            raise ControllerError("the swing-up's tuning states k_d_bound and k_d, k_p or k_v: "
+                                  "expected the gains in the plant's scales or in its units, "
+                                  "not both")
+        ke = tune.k_energy / sc.lift
+        kd = tune.k_d_bound * ke * sc.damping_bound
+        kp = ke * (tune.k_p_bound * sc.stiffness_bound
+                   + tune.k_p_torque * sc.lift * sc.torque / math.pi)
+        out = {"ke": ke, "kd": kd, "kp": kp, "kv": 2.0 * tune.zeta * math.sqrt(kp * kd)}
+    out["kick"] = tune.kick * sc.torque
+    # The kick acts while the energy is within kick_energy of the lift above hanging.
+    out["e_kick"] = -sc.lift * (1.0 - tune.kick_energy) - tune.e0
+    return out
+
+
+def _hanging(system: System, x_op: np.ndarray) -> np.ndarray:
+    """*system* hanging at rest (``spec.hanging``'s coordinates, the others at *x_op*)."""
+    x = np.array(x_op, dtype=float)
+    nq = len(system.spec.coordinates)
+    x[nq:] = 0.0
+    for name, value in (system.spec.hanging or {}).items():
+        x[system.spec.coordinates.index(name)] = float(value)
+    return x
 
 
 class SwingUpController(NonlinearController):

@@ -19,7 +19,8 @@ if TYPE_CHECKING:
 # --- layout of the parameters ``cp`` and of the state ``z`` (one place: the source,
 # the Python runtime and the C export read these) -----------------------------------
 CP_SLOTS = ("T", "ke", "amax", "e0", "kx", "kv", "kp", "c_in", "c_out", "alpha",
-            "beta", "u_min", "u_max", "u_op", "kd", "lqg", "current", "e_up", "n", "nq", "np")
+            "beta", "u_min", "u_max", "u_op", "kd", "lqg", "current", "e_up", "kick", "e_kick",
+            "n", "nq", "np")
 #: The parameters: the slots, then the blocks, their sizes in the system's states ``n``, its
 #: coordinates ``nq`` (what the rig measures: the filter's outputs, one per coordinate, zero
 #: gains for a coordinate the design does not measure) and its parameters ``np``. The last
@@ -247,6 +248,50 @@ def su_pump(x0, x1, x2, x3, p):
 """ + body
 
 
+def _collocated(a: int) -> str:
+    """The body of the two-link rigs' law with the motor at joint *a* (0: the shoulder, the
+    pendubot's; 1: the elbow, the acrobot's) and joint ``b`` passive: Spong's collocated
+    partial feedback linearization under Xin and Kaneda's (acrobot) and Fantoni, Lozano and
+    Spong's (pendubot) energy function, and the kick from rest."""
+    b = 1 - a
+    return f"""    # The pump from rest: near the bottom at rest the law's torque vanishes (its every
+    # term is a rate, a bend or a force of a rig at rest), and a weak motor cannot lift a
+    # link by pushing: below the energy e_kick the motor pushes with the torque kick along
+    # the actuated joint's rate (along its angle when it is still, up when both are zero),
+    # so dE/dt = kick |rate| >= 0 until the energy has risen out of that pit.
+    if p[SU_KICK] != 0.0 and e < p[SU_E_KICK]:
+        s = su_sign(x{a + 2})
+        if s == 0.0:
+            s = su_sign(x{a})
+        if s == 0.0:
+            s = 1.0
+        return p[SU_KICK] * s
+    # The actuated joint's distance from upright, and its rate.
+    qa = su_wrap(x{a} - p[SU_X_OP + {a}])
+    va = x{a + 2}
+    t2 = su_wrap(x1)
+    maa = scalar_mass({a}, {a}, x0, t2, x2, x3, p, ph)
+    mab = scalar_mass(0, 1, x0, t2, x2, x3, p, ph)
+    mbb = scalar_mass({b}, {b}, x0, t2, x2, x3, p, ph)
+    det = maa * mbb - mab * mab
+    # The bias and gravity terms hg of M q_ddot + hg = B tau: minus M times the accelerations
+    # without torque.
+    aa = scalar_qdd({a}, x0, t2, x2, x3, 0.0, p, ph)
+    ab = scalar_qdd({b}, x0, t2, x2, x3, 0.0, p, ph)
+    hga = -(maa * aa + mab * ab)
+    hgb = -(mab * aa + mbb * ab)
+    # V = ke (E - E0)^2 / 2 + kd va^2 / 2 + kp qa^2 / 2 falls as dV/dt = -kv va^2 (while the
+    # motor is not saturated): dE/dt = tau va, and the actuated joint's acceleration is
+    # (mbb (tau - hga) + mab hgb) / det.
+    kd = p[SU_KD]
+    num = -(p[SU_KV] * va + p[SU_KP] * qa) * det + kd * (mbb * hga - mab * hgb)
+    den = ke * e * det + kd * mbb
+    if den == 0.0:
+        return 0.0
+    return num / den
+"""
+
+
 #: Each law's energy and pumping term, as source (``su_energy``, ``su_pump``): the controller's
 #: source is the common part (:data:`LAW_SOURCE`), the law its system's definition names
 #: (``spec.swingup.law``), with no branch on a law number, and the system's generated functions
@@ -264,26 +309,8 @@ LAW_SOURCES = {
 """),
     "rotary": _PENDULUM_ENERGY + _pump("""    return su_clip(ke * e * su_sign(x3 * eq_cos(x1)), -amax, amax) - p[SU_KV] * x2
 """),
-    "acrobot": _TOTAL_ENERGY + _pump("""    t2 = su_wrap(x1)
-    m11 = scalar_mass(0, 0, x0, t2, x2, x3, p, ph)
-    m12 = scalar_mass(0, 1, x0, t2, x2, x3, p, ph)
-    m22 = scalar_mass(1, 1, x0, t2, x2, x3, p, ph)
-    det = m11 * m22 - m12 * m12
-    # The bias and gravity terms hg of M q_ddot + hg = B tau: minus M times the accelerations
-    # without torque.
-    a1 = scalar_qdd(0, x0, t2, x2, x3, 0.0, p, ph)
-    a2 = scalar_qdd(1, x0, t2, x2, x3, 0.0, p, ph)
-    hg1 = -(m11 * a1 + m12 * a2)
-    hg2 = -(m12 * a1 + m22 * a2)
-    # Xin and Kaneda's energy law: V = ke (E - E0)^2 / 2 + kd x3^2 / 2 + kp t2^2 / 2
-    # falls as dV/dt = -kv x3^2 (while the motor is not saturated).
-    kd = p[SU_KD]
-    num = -(p[SU_KV] * x3 + p[SU_KP] * t2) * det + kd * (m11 * hg2 - m12 * hg1)
-    den = ke * e * det + kd * m11
-    if den == 0.0:
-        return 0.0
-    return num / den
-"""),
+    "acrobot": _TOTAL_ENERGY + _pump(_collocated(1)),
+    "pendubot": _TOTAL_ENERGY + _pump(_collocated(0)),
 }
 LAW_NAMES = tuple(LAW_SOURCES)
 

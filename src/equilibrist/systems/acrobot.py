@@ -75,6 +75,18 @@ if TYPE_CHECKING:  # sympy is imported only when the model is derived
 # 4096-count encoders: the quantization step, uniform noise of std step / sqrt(12).
 _ENCODER = 2.0 * math.pi / 4096 / math.sqrt(12.0)
 
+
+#: The acrobot's swing-up gains, in the rig's own scales (``control/swingup.py``'s
+#: ``plant_scales``, docs/swingup.md): k_D and k_P as shares of the bounds of Xin and Kaneda's
+#: conditions (``k_d_bound``, ``k_p_bound``: the catalogue acrobot's former k_D = 30, k_P = 60),
+#: the damping ratio ``zeta`` of the elbow's loop, and the pump from rest: a quarter of the
+#: motor's room (``kick``) until the energy has risen by a hundredth of the lift
+#: (``kick_energy``). One tuning for the catalogue's acrobot and DFKI's, whatever their size.
+SWINGUP_GAINS: dict[str, float] = {
+    "k_energy": 1.0, "k_d_bound": 1.0, "k_p_bound": 0.42, "zeta": 0.35,
+    "kick": 0.25, "kick_energy": 0.01, "release_factor": 20.0,
+}
+
 SPEC = SystemSpec(
     name="acrobot",
     title="Acrobot (two links, elbow actuated)",
@@ -107,8 +119,7 @@ SPEC = SystemSpec(
     control_rate=200.0,
     # Both joints are offset at the start of a swing-up.
     hanging={"theta1": 0.0, "theta2": 0.0},
-    swingup=SwingUp("acrobot", {"k_energy": 1.0, "a_max": 20.0, "k_p": 60.0, "k_v": 30.0,
-                                "k_d": 30.0, "release_factor": 20.0}),
+    swingup=SwingUp("acrobot", SWINGUP_GAINS),
     drawing="equilibrist.viz.scenes_planar:AcrobotScene",
     position=11,
 )

@@ -90,10 +90,13 @@ from equilibrist.mechanics.spec import (
     Input,
     OperatingPoint,
     Parameter,
+    SwingUp,
     SystemSpec,
     nonnegative,
     positive,
 )
+from equilibrist.systems.acrobot import SWINGUP_GAINS as ACROBOT_GAINS
+from equilibrist.systems.pendubot import SWINGUP_GAINS as PENDUBOT_GAINS
 from equilibrist.systems.registry import register
 
 if TYPE_CHECKING:  # sympy is imported only when the model is derived
@@ -207,7 +210,8 @@ def _derive(d: Derivation, *, shoulder: bool) -> SymbolicModel:
         links=[("shoulder", "elbow"), ("elbow", "tip")])
 
 
-def _spec(robot: str, joint: str, link: str, drawing: str) -> SystemSpec:
+def _spec(robot: str, joint: str, link: str, drawing: str,
+          gains: dict[str, float]) -> SystemSpec:
     """The spec of one variant: the motor at *joint*, turning *link*."""
     return SystemSpec(
         name="dfki_double_pendulum",
@@ -238,13 +242,17 @@ def _spec(robot: str, joint: str, link: str, drawing: str) -> SystemSpec:
         process_noise={"theta1_dot": 0.01, "theta2_dot": 0.01},
         control_rate=RATE,
         hanging={"theta1": 0.0, "theta2": 0.0},
+        swingup=SwingUp(robot, dict(gains)),
         drawing=f"equilibrist.viz.scenes_planar:{drawing}",
         position=13,
     )
 
 
-SPEC_ACROBOT = _spec("acrobot", "elbow", "link 2", "AcrobotScene")
-SPEC_PENDUBOT = _spec("pendubot", "shoulder", "link 1", "TwoLinkScene")
+# The acrobot's LQR at +-6 N m catches from a thin ellipse (232 N m per radian of link 1): the
+# supervisor catches at 50 times its saturation level, where the saturating LQR still holds.
+SPEC_ACROBOT = _spec("acrobot", "elbow", "link 2", "AcrobotScene",
+                     {**ACROBOT_GAINS, "catch_fraction": 50.0})
+SPEC_PENDUBOT = _spec("pendubot", "shoulder", "link 1", "TwoLinkScene", PENDUBOT_GAINS)
 
 
 @register(SPEC_ACROBOT, default=True)

@@ -44,8 +44,9 @@ Sensors and rate
 Operating point
     Both links upright (``theta1 = pi``, ``theta2 = 0``), at rest,
     ``tau = 0``. Default outputs ``[theta1, theta2]`` (the two encoders).
-    SYSTEMS.md asks no swing-up of the pendubot, so it states no hanging
-    configuration.
+    A swing-up starts hanging, ``theta1 = theta2 = 0``: Fantoni, Lozano and
+    Spong's energy law on the shoulder's collocated partial feedback
+    linearization, its gains in the rig's own scales (docs/swingup.md).
 
 Source
     Not in the seeds. Coordinates and defaults of Gymnasium ``Acrobot-v1``;
@@ -59,7 +60,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING
 
-from equilibrist.mechanics.spec import Input, OperatingPoint, SystemSpec
+from equilibrist.mechanics.spec import Input, OperatingPoint, SwingUp, SystemSpec
 from equilibrist.systems import _two_link
 from equilibrist.systems.registry import register
 
@@ -68,6 +69,13 @@ if TYPE_CHECKING:  # sympy is imported only when the model is derived
 
 # 4096-count encoders: the quantization step, uniform noise of std step / sqrt(12).
 _ENCODER = 2.0 * math.pi / 4096 / math.sqrt(12.0)
+#: The pendubot's swing-up gains, in the rig's own scales (as the acrobot's): k_D at 1.3 times its bound, k_P such that hanging at rest (half a turn
+#: from upright) the law's stiffness asks 0.3 of the motor's room (``k_p_torque``), and the
+#: pump with the whole room until the energy has risen by 0.3 of the lift.
+SWINGUP_GAINS: dict[str, float] = {
+    "k_energy": 1.0, "k_d_bound": 1.3, "k_p_torque": 0.3, "zeta": 0.5,
+    "kick": 1.0, "kick_energy": 0.3, "release_factor": 20.0,
+}
 
 SPEC = SystemSpec(
     name="pendubot",
@@ -98,6 +106,9 @@ SPEC = SystemSpec(
     # few degrees about upright.
     process_noise={"theta1_dot": 0.01, "theta2_dot": 0.01},
     control_rate=200.0,
+    # Both joints are offset at the start of a swing-up.
+    hanging={"theta1": 0.0, "theta2": 0.0},
+    swingup=SwingUp("pendubot", SWINGUP_GAINS),
     drawing="equilibrist.viz.scenes_planar:TwoLinkScene",
     position=12,
 )
