@@ -30,16 +30,22 @@ ROBOT = "pendubot"
 #: The plan: its duration [s], collocation intervals, the weight of the rates' squares beside
 #: the torque's in its cost (a swing-up that moves no faster than it must), and of the
 #: torque's rate squared (a smooth command).
-DURATION, KNOTS, RATE_COST, SMOOTHING = 2.0, 100, 0.1, 0.0
+DURATION, KNOTS, RATE_COST, SMOOTHING = 2.0, 100, 0.2, 0.1
 #: Compare the angles modulo a turn (a rig pushed over is caught upright again).
 WRAP = "on"
+#: Hand over to the balancing LQR as soon as the state is in its catch region ("on"), or at
+#: the plan's end ("off": the tracker's gains end in the LQR's, no jump of the torque).
+CATCH = "off"
 #: The rates the controller uses: "differenced" from the measured angles (second-order
-#: backward differences, as a rig computes them from its encoders: no noise of the
-#: measured rates gets in), or "measured" as the loop hands them.
+#: backward differences, (3 q_k - 4 q_k-1 + q_k-2) / (2 dt), as a rig computes them from
+#: its encoders, inside the compiled controller: no noise of the measured rates gets in),
+#: or "measured" as the loop hands them.
 VELOCITY = "differenced"
-#: The torque's weight in the trackers' LQR cost (the states' by Bryson's rule, the
-#: rig's design scales): higher, gentler gains.
-TORQUE_WEIGHT = 4.0
+#: The trackers' LQR cost: the torque's weight (higher, gentler gains) and the states'
+#: (``theta1, theta2, theta1_dot, theta2_dot``; None: Bryson's rule on the rig's design
+#: scales, 100, 100, 1, 1).
+TORQUE_WEIGHT = 8.0
+STATE_WEIGHTS = (25.0, 25.0, 1.0, 1.0)
 
 # The leaderboard scripts keep a run under data/<the file's name without con_>.
 name = os.path.splitext(os.path.basename(__file__))[0][len("con_"):]
@@ -57,36 +63,26 @@ leaderboard_config = {
 class EquilibristController(AbstractController):
     """An ``equilibrist.policy`` in the benchmark's controller interface."""
 
-    def __init__(self, policy, actuated, velocity=VELOCITY):
+    def __init__(self, policy, actuated):
         super().__init__()
         self.policy = policy
         self.actuated = actuated
-        self.velocity = velocity
-        self.previous = []  # the last two measured angle pairs, the newest first
 
     def init_(self):
         self.policy.reset()
-        self.previous = []
 
     def reset_(self):
         self.init_()
 
     def get_control_output_(self, x, t=None):
-        y = np.array(x, dtype=float)
-        if self.velocity == "differenced":
-            angles = y[:2].copy()
-            if len(self.previous) == 2:
-                # (3 q_k - 4 q_k-1 + q_k-2) / (2 dt): exact for a parabola.
-                y[2:] = (3 * angles - 4 * self.previous[0] + self.previous[1]) * (
-                    self.policy.rate / 2)
-            self.previous = [angles, *self.previous[:1]]
         u = np.zeros(2)
-        u[self.actuated] = self.policy(0.0 if t is None else t, y)[0]
+        u[self.actuated] = self.policy(0.0 if t is None else t, np.asarray(x, dtype=float))[0]
         return u
 
 
 def build(mpar, robot, duration=DURATION, knots=KNOTS, rate_cost=RATE_COST,
-          smoothing=SMOOTHING, wrap=WRAP, torque_weight=TORQUE_WEIGHT):
+          smoothing=SMOOTHING, wrap=WRAP, catch=CATCH, velocity=VELOCITY,
+          torque_weight=TORQUE_WEIGHT, state_weights=STATE_WEIGHTS):
     """The benchmark controller of equilibrist's planned swing-up for the rig *mpar*."""
     system = equilibrist.get_system("dfki_double_pendulum", **settings_of(mpar, robot=robot))
     trajectory = plan(system, start=np.zeros(4), goal=np.array([np.pi, 0.0, 0.0, 0.0]),
@@ -94,8 +90,10 @@ def build(mpar, robot, duration=DURATION, knots=KNOTS, rate_cost=RATE_COST,
                       state_cost={"theta1_dot": rate_cost, "theta2_dot": rate_cost},
                       input_rate_cost={"tau": smoothing})
     rate = system.spec.control_rate
+    weights = {} if state_weights is None else {"q": list(state_weights)}
     policy = equilibrist.policy(system, controller="tvlqr", rate=rate, trajectory=trajectory,
-                                wrap=wrap, r=[torque_weight])
+                                wrap=wrap, catch=catch, rates=velocity, r=[torque_weight],
+                                **weights)
     return EquilibristController(policy, actuated=1 if robot == "acrobot" else 0)
 
 
