@@ -30,6 +30,7 @@ from equilibrist.numeric.lookup import get_system
 from equilibrist.numeric.system import System
 from equilibrist.sim import integrators, layout
 from equilibrist.sim.noise import Noise, square_root
+from equilibrist.sim.rig import Rig
 from equilibrist.sim.setup_checks import positive
 from equilibrist.sim.setup_steps import split_period
 from equilibrist.sim.simcore import load_core
@@ -58,7 +59,7 @@ US_WIDTH = 4 + len(US_SLOTS)
 OPTION_DEFAULTS: dict[str, object] = {
     "params": None, "rate": None, "physics_step": None, "observe": "outputs", "noise": True,
     "randomize": None, "action_units": "normalized", "alive_bonus": ALIVE_BONUS, "at": None,
-    "integrator": integrators.DEFAULT, "version": 0, "dtype": None,
+    "integrator": integrators.DEFAULT, "version": 0, "dtype": None, "rig": None,
 }
 #: The task's versions: 0 the rig's own units and cost, 1 the learnable form
 #: (:mod:`equilibrist.envs.learnable`).
@@ -124,6 +125,11 @@ class Core:
         The observations' and the spaces' floating type.
     learnable:
         Version 1's observation and reward (None for version 0).
+    rig:
+        A rig's effects between the plant and the agent (:class:`~equilibrist.sim.rig.Rig`:
+        torque response, delays, torque and velocity noise, encoders, perturbations), or
+        None. With one, each copy's episode is the loop ``simulate`` runs around a controller
+        written in Python, a sample a step (:class:`RigEpisode`).
     """
 
     system: System
@@ -143,6 +149,7 @@ class Core:
     version: int
     dtype: np.dtype[np.floating]
     learnable: Learnable | None
+    rig: Rig | None
     kernel: NativeCore
     c_idx: np.ndarray
     lv: np.ndarray
@@ -239,7 +246,19 @@ class Core:
             "randomize": dict(self.randomize),
             "alive_bonus": self.alive_bonus,
             "at": dict(self.at) if self.at else None,
+            "rig": self.rig.describe() if self.rig is not None else None,
         }
+
+    def draw_episode(self, generator: np.random.Generator) -> tuple[np.ndarray, np.ndarray, int]:
+        """An episode's start drawn from *generator*, in this order: the initial state from
+        the task's distribution, the randomized parameters, the noise seed (an integer:
+        ``simulate(..., seed=it)`` draws the same noise)."""
+        x0 = self.task.draw_initial(generator)
+        p = self.p_nom.copy()
+        if self.rnd_idx.size:
+            p[self.rnd_idx] *= 1.0 + self.rnd_spread * generator.uniform(-1.0, 1.0,
+                                                                         self.rnd_idx.size)
+        return np.asarray(x0, dtype=float), p, int(generator.integers(0, 2**63 - 1))
 
 
 def build_core(
@@ -258,6 +277,7 @@ def build_core(
     integrator: str = integrators.DEFAULT,
     version: int = 0,
     dtype: object = None,
+    rig: object = None,
     lanes: bool = False,
 ) -> Core:
     """Validate an environment's options (every problem at once) and pack them. *lanes*:
@@ -284,11 +304,37 @@ def build_core(
     bonus = _check_options(observe, action_units, noise, alive_bonus, problems)
     rnd = _randomization(sysm, randomize, problems)
     float_type = _version_dtype(version, dtype, problems)
+    effects = _rig(sysm, rig, run_rate, problems)
     if problems or run_rate is None or h is None or n_sub is None or bonus is None:
         raise EnvError("; ".join(problems) if problems else "invalid environment settings")
     return _packed(sysm, tsk, point, run_rate=run_rate, h=h, n_sub=n_sub, integrator=integrator,
                    observe=observe, noise=noise, rnd=rnd, action_units=action_units,
-                   bonus=bonus, lanes=lanes, version=int(version), dtype=float_type)
+                   bonus=bonus, lanes=lanes, version=int(version), dtype=float_type,
+                   rig=effects)
+
+
+def _rig(sysm: System, rig: object, rate: float | None, problems: list[str]) -> Rig | None:
+    """The option ``rig``: a :class:`~equilibrist.sim.rig.Rig` or a mapping of its options
+    (``{"torque_response": 0.5, "measurement_delay": 2}``), checked on *sysm* at *rate*;
+    None for none (or one that adds nothing)."""
+    if rig is None:
+        return None
+    if isinstance(rig, Mapping):
+        known = [f for f in Rig.__dataclass_fields__]
+        unknown = [k for k in rig if k not in known]
+        if unknown:
+            problems.extend(f"rig: unknown effect {k!r} ({nearest(str(k), known)})"
+                            for k in unknown)
+            return None
+        values = {k: tuple(v) if isinstance(v, list) else v for k, v in rig.items()}
+        rig = Rig(**values)  # type: ignore[arg-type]
+    if not isinstance(rig, Rig):
+        problems.append(f"rig: expected an equilibrist.sim.rig.Rig or a mapping of its options, "
+                        f"got {type(rig).__name__}")
+        return None
+    found = rig.problems(sysm, rate)
+    problems.extend(found)
+    return None if found or rig.off else rig
 
 
 def _physics_step(run_rate: float | None, physics_step: float | None, integrator: str,
@@ -378,7 +424,7 @@ def _randomization(sysm: System, randomize: Mapping[str, object] | None,
 def _packed(sysm: System, tsk: Task, point: dict[str, float] | None, *, run_rate: float,
             h: float, n_sub: int, integrator: str, observe: str, noise: bool,
             rnd: dict[str, float], action_units: str, bonus: float, lanes: bool, version: int,
-            dtype: np.dtype[np.floating]) -> Core:
+            dtype: np.dtype[np.floating], rig: Rig | None = None) -> Core:
     """The validated settings packed into the core's arrays (``ci``, ``cf``)."""
     names = sysm.state_names
     n = sysm.n_states
@@ -430,12 +476,107 @@ def _packed(sysm: System, tsk: Task, point: dict[str, float] | None, *, run_rate
         action_units=action_units, noise=spec_noise, randomize=dict(rnd), alive_bonus=bonus,
         at=point, version=version, dtype=dtype,
         learnable=learnable(sysm, tsk, names if observe == "state" else outputs, dtype)
-        if version else None,
+        if version else None, rig=rig,
         kernel=load_core(sysm, lanes=lanes and integrators.get(integrator).lanes), c_idx=c_idx, lv=np.ascontiguousarray(lv),
         lw=np.ascontiguousarray(lw), region=region,
         op=op, sc=sc, hang=hang, p_nom=p_nom, rnd_idx=rnd_idx, rnd_spread=rnd_spread,
         ci=ci, cf=cf,
     )
+
+
+def _hold(t: float, y: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The agent's place in a run's settings: its actions come through :meth:`RigEpisode.step`."""
+    raise AssertionError("an episode's actions come from its steps")
+
+
+class RigEpisode:
+    """One copy's episode through a rig: the loop ``simulate`` runs around a controller
+    written in Python (``equilibrist.sim.run``: the core's ``eq_rig_measure_one``, its
+    advance with the rig's generalized forces, ``eq_rig_actuate_one``), one sample a step,
+    the agent's action in the controller's place. An episode started at *x0* with the
+    parameters *p* and the noise seed *noise_seed* and ``simulate(system, controller, x0=x0,
+    seed=noise_seed, noise=core.noise, rig=core.rig, region=core.task.region, ...)`` whose
+    controller returns the same actions step the same numbers: states, measurements and the
+    torques that acted.
+
+    The reward is the task's (its Python form, :func:`~equilibrist.tasks.python_reward`,
+    the source the core translates) on the state at the end of the period and the torque
+    that acted during it.
+    """
+
+    def __init__(self, core: Core, x0: np.ndarray, p: np.ndarray, noise_seed: int) -> None:
+        from equilibrist.sim import setup as sim_setup
+        from equilibrist.sim.kernel import Kernel
+        from equilibrist.sim.noise import generator_state, seed_sequence
+        from equilibrist.tasks import python_reward, task_kind
+
+        system = core.system
+        if core.rnd_idx.size:
+            names = system.spec.parameter_names
+            system = system.with_params(**{names[i]: float(p[i]) for i in core.rnd_idx})
+        outputs = tuple(system.state_names[int(i)] for i in core.c_idx)
+        setup = sim_setup.build(
+            system, _hold, duration=core.n_samples / core.rate, rate=core.rate,
+            physics_step=core.physics_step, integrator=core.integrator, rtol=integrators.RTOL,
+            atol=integrators.ATOL, plant="nonlinear", x0=x0, delay=False, noise=core.noise,
+            reference=None, events=(), outputs=outputs, region=core.task.region, rig=core.rig)
+        seq = seed_sequence(noise_seed)
+        self._rng = generator_state(seq)
+        kernel = Kernel(system, setup.nonlinear)
+        n, m = system.n_states, system.n_inputs
+        self.core, self.system, self.setup = core, system, setup
+        self.x = setup.x0.copy()
+        self.y = np.empty(len(outputs))
+        self.k = 0
+        p_sets = setup.p_sets(np.array(system.p))
+        base = len(system.spec.parameter_names) - 2 * m
+        self._lim = np.zeros(2 * m)
+        self._lim[0::2], self._lim[1::2] = p_sets[0, base::2][:m], p_sets[0, base + 1::2][:m]
+        self._u_buf, self._u_rig, self.acted = np.zeros(m), np.zeros(m), np.zeros(m)
+        iopts, fopts = setup.iopts(), setup.fopts
+        generic = kernel.generic
+        scr = kernel.scratch(p_len=p_sets.shape[1], ny=len(outputs), nw=setup.lw.shape[1])
+        self._status = np.zeros(len(layout.STATUS), dtype=np.int64)
+        rig_i, rig_f = setup.rig_arrays()
+        gforce, _pulses = setup.rig_forces(seq)
+        self._advance = generic.advancer(
+            x=self.x, u_app=self._u_buf, op=setup.op, p_sets=p_sets, p_switch=setup.p_switch,
+            lin_s=setup.linear_blocks(p_sets), region=setup.region, kicks=setup.kicks,
+            kick_value=setup.kick_value, pulses=setup.pulses, pulse_value=setup.pulse_value,
+            lw=setup.lw, rng=self._rng, iopts=iopts, fopts=fopts, status=self._status, scr=scr,
+            rig_i=rig_i, gforce=gforce)
+        rig_state = setup.rig_state()
+        assert rig_i is not None and rig_f is not None and rig_state is not None
+        self._measure, self._actuate = generic.rig_steps(
+            x=self.x, c_idx=setup.c_idx, lv=setup.lv, op=setup.op, fopts=fopts, rig_i=rig_i,
+            rig_f=rig_f, rig_s=rig_state, rng=self._rng, y=self.y, u_app=self._u_rig,
+            u_act=self.acted, lim=self._lim)
+        self._reward = python_reward(task_kind(core.task.name), system)
+        self._p = np.array(system.p, dtype=float)
+        energy = system.functions.energy
+        self._eref = np.array([energy(core.op[:n], self._p),
+                               energy(np.asarray(core.task.start, dtype=float), self._p)])
+        self._iscale = 1.0 / core.sc
+        self._measure(0)
+
+    def observation(self) -> np.ndarray:
+        """What the agent observes now: the measurement through the rig, or the state."""
+        return self.x.copy() if self.core.observe == "state" else self.y.copy()
+
+    def step(self, u: np.ndarray) -> tuple[float, int]:
+        """One period with the input *u* (within its limits) commanded: the reward and the
+        status (0 running, 1 fell, 2 out of time)."""
+        k = self.k
+        self._u_rig[:] = u
+        self._actuate(k)
+        self._u_buf[:] = self.acted
+        fell = self._advance(k)
+        self.k = k + 1
+        self._measure(self.k)
+        core = self.core
+        reward = float(self._reward(self.x, self.acted, self._p, core.op, self._iscale,
+                                    core.hang, self._eref, 1.0 / core.rate, core.alive_bonus))
+        return reward, 1 if fell else (2 if self.k >= core.n_samples else 0)
 
 
 _F64 = np.dtype(np.float64)

@@ -16,7 +16,15 @@ import numpy as np
 from gymnasium import spaces
 
 from equilibrist.control.checks import given_text, real_array
-from equilibrist.envs.core import FINITE, OPTION_DEFAULTS, Core, EnvError, as_actions, build_core
+from equilibrist.envs.core import (
+    FINITE,
+    OPTION_DEFAULTS,
+    Core,
+    EnvError,
+    RigEpisode,
+    as_actions,
+    build_core,
+)
 from equilibrist.errors import DimensionError, nearest
 from equilibrist.sim.noise import generator_state
 from equilibrist.sim.steps import EnvSteps
@@ -199,6 +207,14 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         start, the reward's cost and the region move there, and
         :func:`~equilibrist.envs.expert` designs there. Default: the
         canonical operating point.
+    rig : Rig or mapping, optional
+        A rig's effects between the plant and the agent
+        (:class:`~equilibrist.sim.rig.Rig`, or its options as a mapping:
+        ``{"torque_response": 0.5, "measurement_delay": 2}``): each episode
+        steps the loop ``simulate`` runs with that rig
+        (:class:`~equilibrist.envs.core.RigEpisode`), and ``simulate(...,
+        rig=rig, seed=info["noise_seed"])`` of the same actions is the same
+        numbers.
 
     The options (:data:`~equilibrist.envs.core.OPTION_DEFAULTS`) are the
     vector environment's too; an unknown one is an :class:`EnvError`.
@@ -235,6 +251,8 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         self._renderer = Renderer(core, render_mode) if render_mode is not None else None
         self._step_fn: object = None
         self._learnable = core.learnable
+        #: The episode through the rig (a rig's environment steps it instead of the core).
+        self._episode: RigEpisode | None = None
 
     # -- the episode --------------------------------------------------------------
     @property
@@ -267,13 +285,7 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         """
         super().reset(seed=seed)
         core = self.core
-        x0 = core.task.draw_initial(self.np_random)
-        p = core.p_nom.copy()
-        if core.rnd_idx.size:
-            p[core.rnd_idx] *= 1.0 + core.rnd_spread * self.np_random.uniform(
-                -1.0, 1.0, core.rnd_idx.size
-            )
-        noise_seed = int(self.np_random.integers(0, 2**63 - 1))
+        x0, p, noise_seed = core.draw_episode(self.np_random)
         for key in options or {}:
             if key != "state":
                 raise EnvError(f"reset options: unknown option {key!r} (expected 'state')")
@@ -290,7 +302,12 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         self._p[:] = p
         self._us[0, :4] = generator_state(np.random.SeedSequence(noise_seed))
         self._u[:] = core.task.u_op
-        obs = self._steps.begin_one()
+        if core.rig is not None:
+            self._episode = RigEpisode(core, self._x.copy(), p, noise_seed)
+            self._us[0, 4] = 0
+            obs = self._episode.observation()
+        else:
+            obs = self._steps.begin_one()
         if self._learnable is not None:
             obs = self._learnable.observe(obs)
         elif core.dtype is not _F64:
@@ -309,6 +326,8 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         if not self._ready:
             raise EnvError("call reset() before step()")
         a = as_actions(action, self._ashape, self.core, "action")
+        if self._episode is not None:
+            return self._rig_step(a)
         steps = self._steps
         steps.a[0] = a
         reward, status = steps.step_one()
@@ -327,6 +346,28 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
             self._u = self.core.physical_input(a)
             if self.render_mode == "human":
                 self.render()
+        return obs, reward, status == 1, status == 2, {}
+
+    def _rig_step(self, a: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        """:meth:`step` through the rig: the episode's sample with the action's input."""
+        episode = self._episode
+        assert episode is not None
+        if not np.all(np.isfinite(a)):
+            raise EnvError(f"action {a.tolist()} is not a finite number")
+        u = self.core.physical_input(a)
+        reward, status = episode.step(u)
+        self._x[:] = episode.x
+        self._us[0, 4] = episode.k
+        self._u = episode.acted.copy()
+        obs = episode.observation()
+        learn = self._learnable
+        if learn is not None:
+            reward = float(learn.reward(self._x[None, :], self._u[None, :])[0])
+            obs = learn.observe(obs)
+        elif self.core.dtype is not _F64:
+            obs = obs.astype(self.core.dtype)
+        if self.render_mode == "human":
+            self.render()
         return obs, reward, status == 1, status == 2, {}
 
     # -- pictures -------------------------------------------------------------------

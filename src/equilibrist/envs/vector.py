@@ -19,6 +19,12 @@ the state of its own xoshiro256** generator (a list of seeds gives copy
 draws, at every reset of the copy, its initial state and its randomized
 parameters, then the noise of its episode. ``reset()`` without a seed
 continues every copy's stream.
+
+With a rig (the option ``rig``), each copy steps the loop ``simulate`` runs
+with that rig (:class:`~equilibrist.envs.core.RigEpisode`), one copy after
+the other in Python: copy ``i`` is the single environment reset with
+``seed + i`` (or ``seeds[i]``), the same numbers, and its ``noise_seed``
+(in the reset's info) is the integer ``simulate(..., seed=...)`` takes.
 """
 
 from __future__ import annotations
@@ -33,7 +39,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from equilibrist.envs.core import EnvError, as_actions
+from equilibrist.envs.core import Core, EnvError, RigEpisode, as_actions
 from equilibrist.envs.env import Renderer, _spaces, open_core
 from equilibrist.sim.steps import EnvSteps
 
@@ -159,6 +165,8 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         self._learnable = core.learnable
         # The copies whose episode ended at the last step (this step restarts them), or None.
         self._due: np.ndarray | None = None
+        #: The copies' episodes through the rig (a rig's environment steps them instead).
+        self._rig = _RigCopies(core, self._fs, self._us) if core.rig is not None else None
 
     # -- state of the copies ---------------------------------------------------------
     @property
@@ -206,6 +214,13 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
                 None if first is None else int(first)
             )
             self._seed(seed)
+            if self._rig is not None:
+                self._rig.seed(seed)
+        if self._rig is not None:
+            self._step_fn = self._ways
+            self._due = None
+            obs = self._rig.start(np.ones(self.num_envs, dtype=np.bool_))
+            return self._observed(obs), self._rig.info(np.ones(self.num_envs, dtype=np.bool_))
         obs = self._steps.reset_many()
         self._step_fn = self._ways  # set, it also says reset was called
         self._due = None
@@ -219,12 +234,18 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         if self._step_fn is None:
             raise EnvError("call reset() before restart()")
         rows = np.flatnonzero(mask)
-        self._steps.reset_rows(rows)
+        if self._rig is not None:
+            obs = self._rig.start(np.asarray(mask, bool))
+        else:
+            self._steps.reset_rows(rows)
+            obs = self._steps.obs.copy()
         if self._due is not None:
             self._due[rows] = False
             if not self._due.any():
                 self._due = None
-        return self._observed(self._steps.obs.copy()), self._reset_info(np.asarray(mask, bool))
+        if self._rig is not None:
+            return self._observed(obs), self._rig.info(np.asarray(mask, bool))
+        return self._observed(obs), self._reset_info(np.asarray(mask, bool))
 
     def _reset_info(self, mask: np.ndarray) -> dict[str, Any]:
         """The info of the copies *mask* that (re)started, with Gymnasium's ``_key`` masks:
@@ -249,6 +270,8 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         if step is None:
             raise EnvError("call reset() before step()")
         a = as_actions(actions, self._ashape, self.core, "actions")
+        if self._rig is not None:
+            return self._rig_step(a)
         steps = self._steps
         _copyto(steps.a, a)
         if self.parallel:
@@ -277,6 +300,27 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
         if restarted is not None:
             rewards[restarted] = 0.0
         return learn.observe(steps.obs), rewards, flags[0], flags[1], info
+
+    def _rig_step(self, a: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """:meth:`step` through the rig: every copy's episode a sample, those whose episode
+        ended at the last step restarted instead (reward 0, their action ignored)."""
+        assert self._rig is not None
+        if not np.all(np.isfinite(a)):
+            raise EnvError("an action is not a finite number (no copy was stepped)")
+        if self._renderer is not None:
+            self._actions = a.copy()
+        restarted = self._due
+        obs, rewards, flags = self._rig.step(a, restarted)
+        self._due = flags[0] | flags[1] if flags.any() else None
+        info: dict[str, Any] = {} if restarted is None else self._rig.info(restarted)
+        learn = self._learnable
+        if learn is None:
+            return self._observed(obs), rewards, flags[0], flags[1], info
+        rewards = learn.reward(self.core.state_of(self._fs), self._rig.acted)
+        if restarted is not None:
+            rewards[restarted] = 0.0
+        return learn.observe(obs), rewards, flags[0], flags[1], info
 
     def _timed_step(self) -> int:
         """A step on one thread or on all, whichever has been faster lately
@@ -382,6 +426,79 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
     def close_extras(self, **kwargs: object) -> None:
         if self._renderer is not None:
             self._renderer.close()
+
+
+class _RigCopies:
+    """The copies of a vector environment with a rig: each its own generator and
+    :class:`~equilibrist.envs.core.RigEpisode`, the single environment's, stepped in turn;
+    their states, parameters and periods taken written into the copies' rows."""
+
+    def __init__(self, core: Core, fs: np.ndarray, us: np.ndarray) -> None:
+        self.core, self._fs, self._us = core, fs, us
+        n = len(fs)
+        self._generators = [seeding.np_random(None)[0] for _ in range(n)]
+        self._episodes: list[RigEpisode | None] = [None] * n
+        self._noise_seeds = np.zeros(n, dtype=np.int64)
+        self.acted = np.zeros((n, core.system.n_inputs))
+
+    def seed(self, seed: int | Sequence[int] | None) -> None:
+        """Copy ``i``'s generator: the single environment's of ``seed + i`` (or ``seed[i]``)."""
+        n = len(self._fs)
+        if seed is None:
+            seeds: list[int | None] = [None] * n
+        elif isinstance(seed, int | np.integer):
+            seeds = [int(seed) + i for i in range(n)]
+        else:
+            seeds = [int(s) for s in seed]
+        self._generators = [seeding.np_random(s)[0] for s in seeds]
+
+    def start(self, mask: np.ndarray) -> np.ndarray:
+        """Start the copies *mask* from their generators; every copy's observation."""
+        core = self.core
+        for i in np.flatnonzero(mask):
+            x0, p, noise_seed = core.draw_episode(self._generators[i])
+            self._episodes[i] = RigEpisode(core, x0, p, noise_seed)
+            self._noise_seeds[i] = noise_seed
+            core.params_of(self._fs)[i] = p
+            self._write(int(i))
+        return self._observations()
+
+    def _write(self, i: int) -> None:
+        episode = self._episodes[i]
+        assert episode is not None
+        self.core.state_of(self._fs)[i] = episode.x
+        self._us[i, 4] = episode.k
+        self.acted[i] = episode.acted
+
+    def _observations(self) -> np.ndarray:
+        return np.array([e.observation() for e in self._episodes if e is not None])
+
+    def info(self, mask: np.ndarray) -> dict[str, Any]:
+        """The restarted copies' start ``state`` and ``noise_seed``, with Gymnasium's masks."""
+        return {"state": self.core.state_of(self._fs).copy(), "_state": mask.copy(),
+                "noise_seed": self._noise_seeds.copy(), "_noise_seed": mask.copy()}
+
+    def step(self, a: np.ndarray, restarted: np.ndarray | None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every copy a period with the actions *a* (the copies *restarted* start again):
+        the observations, the rewards and the flags (terminated, truncated)."""
+        n = len(self._fs)
+        rewards = np.zeros(n)
+        flags = np.zeros((2, n), dtype=np.bool_)
+        again = np.zeros(n, dtype=np.bool_) if restarted is None else restarted
+        u = self.core.physical_input(a)
+        for i in range(n):
+            if again[i]:
+                continue
+            episode = self._episodes[i]
+            assert episode is not None
+            rewards[i], status = episode.step(u[i])
+            self._write(i)
+            if status:
+                flags[status - 1, i] = True
+        if again.any():
+            self.start(again)
+        return self._observations(), rewards, flags
 
 
 __all__ = ["EquilibristVectorEnv"]
