@@ -9,9 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import nbformat
 import pytest
-from nbclient import NotebookClient
 
 TUTORIALS = Path(__file__).resolve().parents[2] / "docs" / "tutorials"
 NOTEBOOKS = sorted(TUTORIALS.glob("*.ipynb"))
@@ -24,6 +22,8 @@ def test_there_are_four_to_six_tutorials_numbered_in_order() -> None:
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
 def test_tutorial_is_stored_without_outputs(path: Path) -> None:
+    import nbformat  # here, not at collection: its schema check's imports cost seconds of CPU
+
     notebook = nbformat.read(path, as_version=4)
     nbformat.validate(notebook)
     for cell in notebook.cells:
@@ -37,6 +37,9 @@ def test_tutorial_is_stored_without_outputs(path: Path) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
 def test_tutorial_runs_top_to_bottom(path: Path, tmp_path: Path) -> None:
+    import nbformat
+    from nbclient import NotebookClient
+
     notebook = nbformat.read(path, as_version=4)
     # A cell's own bound (the longest takes seconds); ipykernel 7 could leave a started
     # kernel silent for good, which is why the notebook extra keeps ipykernel below 7.
