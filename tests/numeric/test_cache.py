@@ -147,12 +147,42 @@ def _step_in_a_process(folder) -> tuple[list[float], str]:
     return ast.literal_eval(proc.stdout.strip()), proc.stderr
 
 
+def _step_here(folder) -> list[float]:
+    """:data:`_STEP_SCRIPT`'s numbers from *folder* in this process, as a fresh process gets
+    them: the libraries loaded so far (by path, and the cores by system) are forgotten
+    within the call, so the core is looked up in *folder* and built there if it is not whole
+    (the build's own checks; :func:`_step_in_a_process` pays Python's start for the same)."""
+    from equilibrist import get_system
+    from equilibrist.native import build
+    from equilibrist.sim import simcore
+    from equilibrist.sim.kernel import load_kernel
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("EQUILIBRIST_CACHE", str(folder))
+        patch.setattr(build, "_LOADED", {})
+        patch.setattr(simcore, "_CORES", {})
+        system = get_system("cartpole")
+        x = np.array([0.0, 0.1, 0.0, 0.0])
+        load_kernel(system).rk4_steps(x, np.array([0.5]), np.array(system.p, dtype=float),
+                                      0.001, 100)
+    return x.tolist()
+
+
 @pytest.fixture(scope="module")
 def compiled_cache(tmp_path_factory):
     folder = tmp_path_factory.mktemp("pristine")
     folder.chmod(0o700)
     numbers, _ = _step_in_a_process(folder)
     return folder, numbers
+
+
+def test_a_core_loaded_in_this_process_equals_a_fresh_process(compiled_cache) -> None:
+    """What the damage tests below rely on: :func:`_step_here` on a whole cache gets a fresh
+    process's numbers, and compiles nothing (the folder's library is loaded as it is)."""
+    pristine, expected = compiled_cache
+    before = {p.name: p.stat().st_mtime_ns for p in pristine.glob("native/*")}
+    assert _step_here(pristine) == expected
+    assert {p.name: p.stat().st_mtime_ns for p in pristine.glob("native/*")} == before
 
 
 def _truncate(path) -> None:
@@ -183,8 +213,8 @@ def test_damaged_compiled_core_is_rebuilt(compiled_cache, tmp_path, damage) -> N
     assert damaged, pattern
     for path in damaged:
         harm(path)
-    numbers, _ = _step_in_a_process(folder)
-    assert numbers == expected  # the same numbers, to the bit
+    numbers = _step_here(folder)
+    assert numbers == expected  # the same numbers, to the bit, as a fresh process's
     for lib in folder.glob("native/*.so"):  # rebuilt whole, its digest beside it
         digest = lib.with_suffix(".so.sha256").read_text().strip()
         assert digest == hashlib.sha256(lib.read_bytes()).hexdigest(), lib.name
