@@ -198,3 +198,33 @@ def test_acrobot_swingup_pays_for_both_links_up_not_for_hanging() -> None:
         got = float(learnable.reward(x, np.zeros((1, 1)))[0])
         assert got == pytest.approx(reward(theta1, theta2), rel=1e-12, abs=1e-15)
     assert float(learnable.reward(np.zeros((1, 4)), np.zeros((1, 1)))[0]) == 0.0
+
+
+def _slowest_growth(env_id: str) -> float:
+    """The slowest unstable mode's growth rate [1/s] at the operating point, from central
+    differences of the rig's ``f`` (not its symbolic Jacobian)."""
+    core = _make(env_id).core
+    system, x0, u0 = core.system, np.asarray(core.task.x_op), np.asarray(core.task.u_op)
+    step = 1e-6
+    a = np.column_stack([(system.f(x0 + step * e, u0) - system.f(x0 - step * e, u0)) / (2 * step)
+                         for e in np.eye(len(x0))])
+    return float(min(e.real for e in np.linalg.eigvals(a) if e.real > 0.1))
+
+
+def test_the_learnable_rate_lets_the_discount_see_the_slowest_fall() -> None:
+    """``-v1`` slows a rig whose slowest unstable mode the default discount (100 steps)
+    would not see for 1.5 time constants: the acrobot (1.9 /s) from 200 Hz to 100 Hz; the
+    cart-pole (4.0 /s), Furuta (12.7 /s) and the reaction wheel keep their rates; ``-v0``
+    and an explicit ``rate`` are as they were."""
+    growth = _slowest_growth("equilibrist/acrobot-balance-v1")
+    assert 1.8 < growth < 2.0
+    assert 100 / 200 * growth < 1.5 <= 100 / 100 * growth  # 200 Hz too short, 100 Hz enough
+    assert _make("equilibrist/acrobot-balance-v1").core.rate == 100.0
+    assert _make("equilibrist/acrobot-balance-v1").core.n_samples == 1000
+    assert _make("equilibrist/acrobot-balance-v0").core.rate == 200.0
+    assert _make("equilibrist/acrobot-balance-v1", rate=50.0).core.rate == 50.0
+    for env_id, rate in (("cartpole", 200.0), ("furuta", 500.0),
+                         ("reaction_wheel_pendulum", 200.0)):
+        full = f"equilibrist/{env_id}-balance-v1"
+        assert 100 / rate * _slowest_growth(full) >= 1.5
+        assert _make(full).core.rate == rate

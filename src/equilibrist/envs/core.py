@@ -24,7 +24,7 @@ import numpy as np
 
 from equilibrist.control import fixed
 from equilibrist.control.checks import given_text, real_array
-from equilibrist.envs.learnable import Learnable, learnable
+from equilibrist.envs.learnable import Learnable, learnable, learnable_rate
 from equilibrist.errors import DesignError, EquilibristError, UnknownNameError, nearest
 from equilibrist.numeric.lookup import get_system
 from equilibrist.numeric.system import System
@@ -295,7 +295,10 @@ def build_core(
         except DesignError as exc:  # no equilibrium there, or a swing-up
             raise EnvError(str(exc)) from None
     problems: list[str] = []
-    run_rate = tsk.rate if rate is None else positive(rate, "rate [Hz]", problems)
+    if rate is None:  # the learnable form may slow a rig that falls slowly (learnable_rate)
+        run_rate: float | None = learnable_rate(sysm, tsk) if version == 1 else tsk.rate
+    else:
+        run_rate = positive(rate, "rate [Hz]", problems)
     wrong = integrators.check(integrator, what="integrator=")
     if wrong is not None:
         problems.append(wrong)

@@ -38,6 +38,16 @@ Reward
     ``bounds=(0, 0)``; quadratic for the input). The reward is read at the
     state reached and the input applied, as ``-v0``'s.
 
+Rate
+    The rig's control rate, divided by the smallest whole number that lets the
+    trainers' default discount (0.99: a horizon of about 100 steps) span
+    :data:`HORIZON_TIME_CONSTANTS` time constants of the slowest unstable mode
+    of the linearization at the operating point (:func:`learnable_rate`; at
+    least :data:`LOWEST_RATE`). A rig that falls slowly (the acrobot, 1.9 /s)
+    is otherwise decided beyond what its agent's discount sees: at 200 Hz
+    PPO's defaults never balance it, at a quarter of that they do.
+    Gymnasium's MuJoCo balance tasks run at 20-25 Hz for the same reason.
+
 This module holds that form as a value (:class:`Learnable`) that the single
 and the vector environment both apply to the core's raw observations and
 states; the core's step, its bits and ``-v0`` are untouched.
@@ -60,6 +70,29 @@ VALUE_AT_MARGIN = 0.1
 CENTERED_MARGIN = 2.0
 VELOCITY_MARGIN = 5.0
 _GAUSS = math.sqrt(-2.0 * math.log(VALUE_AT_MARGIN))
+#: The steps the trainers' default discount looks ahead: ``1 / (1 - 0.99)``.
+HORIZON_STEPS = 100.0
+#: The time constants of the slowest unstable mode that horizon spans at least.
+HORIZON_TIME_CONSTANTS = 1.5
+#: The lowest rate a task is slowed to [Hz] (Gymnasium's InvertedDoublePendulum's).
+LOWEST_RATE = 20.0
+
+
+def learnable_rate(system: System, task: Task) -> float:
+    """The ``-v1`` form's control rate of *task* on *system* [Hz]: the task's rate divided
+    by the smallest whole number ``n`` for which ``HORIZON_STEPS`` periods last at least
+    ``HORIZON_TIME_CONSTANTS / s``, with ``s`` the slowest growth rate [1/s] among the
+    unstable eigenvalues of the linearization at the task's operating point (those that
+    grow more than e-fold in an episode; the task's rate where none does), no lower than
+    ``LOWEST_RATE``."""
+    a, _b = system.jacobians(task.x_op, task.u_op)
+    # A mode that grows less than e-fold in an episode decides nothing within it.
+    growth = [float(e.real) for e in np.linalg.eigvals(a) if e.real * task.duration > 1.0]
+    if not growth:
+        return task.rate
+    n = math.ceil(task.rate * HORIZON_TIME_CONSTANTS / (HORIZON_STEPS * min(growth)) - 1e-9)
+    n = max(1, min(n, math.floor(task.rate / LOWEST_RATE)))
+    return task.rate / n
 
 
 def gaussian_tolerance(d: np.ndarray) -> np.ndarray:
@@ -193,4 +226,5 @@ def learnable(system: System, task: Task, observed: tuple[str, ...],
     )
 
 
-__all__ = ["Learnable", "gaussian_tolerance", "learnable", "quadratic_tolerance"]
+__all__ = ["Learnable", "gaussian_tolerance", "learnable", "learnable_rate",
+           "quadratic_tolerance"]
