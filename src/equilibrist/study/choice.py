@@ -121,9 +121,11 @@ def check_choice(system: System, value: object, what: str, problems: list[str]) 
 
 def check_builds(system: System, choice: Choice, *, rate: float, options: dict[str, str],
                  what: str, problems: list[str]) -> None:
-    """Build the controller of a *choice* that names a file once, at *system* (the study's
-    nominal plant), so a file that is not what its kind reads (a network, a plan) is
-    refused before the study runs, not found by every point."""
+    """Build the controller of a *choice* whose value is a file (``policy:FILE``) once, at
+    *system* (the study's nominal plant), so a file that is not what its kind reads (a
+    network, a plan) is refused before the study runs, not found by every point. (A file
+    of the study's ``controller_options`` is checked to exist only: building a tracked
+    plan's filter takes seconds.)"""
     from equilibrist.controllers import kinds
     from equilibrist.errors import EquilibristError
     from equilibrist.study.record import kind_options

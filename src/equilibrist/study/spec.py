@@ -113,8 +113,8 @@ def make_study(
     if problems:
         raise StudyError("; ".join(problems))
     assert chosen is not None and rate_v is not None
-    for what, choice in (("--controller", chosen),
-                         *(("--vary controller", c) for c in choices)):
+    axis = [("--vary controller", c) for c in choices]
+    for what, choice in ([] if axis else [("--controller", chosen)]) + axis:
         check_builds(sysm, choice, rate=rate_v, options=options_v, what=what, problems=problems)
     if problems:
         raise StudyError("; ".join(problems))
