@@ -68,7 +68,8 @@ SEQ_RANGE = (0, 2**53)
 # The fields each message type takes (besides "type" and "seq"), and which are required.
 FIELDS: dict[str, tuple[frozenset[str], frozenset[str]]] = {
     "select": (frozenset({"system"}), frozenset({"system"})),
-    "tune": (frozenset({"controller", "rate", "noise", "limit", "scales", "params"}), frozenset()),
+    "tune": (frozenset({"controller", "rate", "noise", "limit", "scales", "params", "rig"}),
+             frozenset()),
     "push": (frozenset({"size", "duration"}), frozenset({"size"})),
     "kick": (frozenset({"angle"}), frozenset({"angle"})),
     "reset": (frozenset({"kick"}), frozenset()),
@@ -109,6 +110,7 @@ class MessageFields(TypedDict, total=False):
     limit: float
     scales: dict[str, float]
     params: dict[str, float]
+    rig: dict[str, float]
     size: float
     duration: float
     angle: float
@@ -216,7 +218,8 @@ def _tune(data: dict[str, object], limits: Limits) -> MessageFields:
     out: MessageFields = {}
     if len(data) - ("seq" in data) <= 1:
         raise ProtocolError(
-            "tune message changes nothing: give controller, rate, noise, limit, scales or params"
+            "tune message changes nothing: give controller, rate, noise, limit, scales, params "
+            "or rig"
         )
     if "controller" in data:
         c = data["controller"]
@@ -238,6 +241,41 @@ def _tune(data: dict[str, object], limits: Limits) -> MessageFields:
         out["scales"] = _named_numbers(data["scales"], "scales", limits.scales)
     if "params" in data:
         out["params"] = _named_numbers(data["params"], "params", limits.params)
+    if "rig" in data:
+        out["rig"] = _rig(data["rig"])
+    return out
+
+
+#: The rig's effects a session takes and the numbers each may be: whole numbers of samples
+#: (the delays in samples) or finite numbers (the others) within these ranges.
+RIG_RANGES: dict[str, tuple[float, float]] = {
+    "torque_response": (0.01, 2.0), "torque_time_constant": (1e-4, 10.0),
+    "measurement_delay": (0, 100), "measurement_delay_time": (0.0, 1.0),
+    "actuation_delay": (0, 100), "actuation_delay_time": (0.0, 1.0),
+    "torque_noise": (0.0, 1e3), "velocity_noise": (0.0, 1e3), "encoder_step": (0.0, 1.0),
+    "velocity_filter": (0.0, 1e4),
+}
+_WHOLE = frozenset({"measurement_delay", "actuation_delay"})
+
+
+def _rig(raw: object) -> dict[str, float]:
+    """The ``rig`` field: an object of the rig's effects (an empty one: none)."""
+    if not isinstance(raw, dict):
+        raise ProtocolError(f"rig must be an object of the rig's effects, got {_short(raw)}")
+    out: dict[str, float] = {}
+    for name, value in raw.items():
+        if name not in RIG_RANGES:
+            raise ProtocolError(f"rig has no effect {_short(name)}: expected one of "
+                                f"{', '.join(RIG_RANGES)} (random pushes: the page's push)")
+        low, high = RIG_RANGES[name]
+        number = _number(value, f"rig.{name}", low, high)
+        if name in _WHOLE:
+            if number != int(number):
+                raise ProtocolError(f"rig.{name} must be a whole number of samples, got "
+                                    f"{_short(value)}")
+            out[name] = int(number)
+        else:
+            out[name] = number
     return out
 
 

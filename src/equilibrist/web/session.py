@@ -11,7 +11,8 @@ sensors with the rig's noise times the ``noise`` setting, the controller, the ac
 saturation, a push beyond the limits, one control period of the plant on the compiled core
 (:class:`~equilibrist.sim.steps.PlantSteps`, whose noise is drawn as ``simulate`` draws it:
 with the controller off and the same seed, a session's run is ``simulate``'s bit for bit),
-and the region's check. Every change of a setting redesigns outside the simulation's
+and the region's check. With a rig's effects (the ``rig`` setting), the sensors and the
+actuator go through them as ``simulate``'s do (:mod:`equilibrist.web.session_plant`). Every change of a setting redesigns outside the simulation's
 thread; a design that fails leaves the controller in force running, while a changed
 physical parameter acts on the plant at once.
 """
@@ -48,8 +49,8 @@ if TYPE_CHECKING:
     from equilibrist.control.design_record import Design
     from equilibrist.mechanics.spec import Parameter
     from equilibrist.numeric.system import System
-    from equilibrist.sim.steps import PlantSteps
     from equilibrist.viz.drawing import Scene
+    from equilibrist.web.session_plant import Plant
 
 #: Longest catch-up after a stall [s]: beyond it the simulation skips ahead.
 MAX_CATCH_UP = 0.25
@@ -87,7 +88,8 @@ class Session(_SessionPlan, _SessionRoa):
         from equilibrist.sim.noise import generator_state, seed_sequence
 
         self.core_rng = generator_state(seed_sequence(seed))
-        self.plant: PlantSteps | None = None  # the core's plant steps, rebuilt after any change
+        self.plant: Plant | None = None  # the core's plant steps, rebuilt after any change
+        self.plant_x: np.ndarray | None = None  # the state array the plant's steps are bound to
         self.paused = False
         self.busy = False  # True while another thread rebuilds the session
         self.frame_no = 0  # frames made
@@ -139,6 +141,7 @@ class Session(_SessionPlan, _SessionRoa):
         # The core was built (or loaded) above, in the thread that builds the session, not
         # at the first sample on the server's event loop; the plant's steps bind to it now.
         self.plant = self._plant_steps()
+        self.plant_x = self.x
 
     @staticmethod
     def _param_specs(base: System) -> list[Parameter]:
@@ -329,7 +332,13 @@ class Session(_SessionPlan, _SessionRoa):
             self.messages.append(self.describe())
             self.messages.append(self.design_message)
         elif message.type == "tune":
-            return self.settings.changed(f)
+            settings = self.settings.changed(f)
+            rig = settings.rig_effects()
+            if rig is not None:
+                problems = rig.problems(self.system, settings.rate)
+                if problems:
+                    raise SessionError("; ".join(problems))
+            return settings
         return None
 
     def prepare(self, settings: Settings) -> System:
@@ -347,7 +356,7 @@ class Session(_SessionPlan, _SessionRoa):
             # The previous controller stays, with its own rate.
             settings = Settings(self.settings.controller if error else settings.controller,
                                 self.settings.rate, settings.noise, settings.limit,
-                                settings.scales, settings.params)
+                                settings.scales, settings.params, settings.rig)
             rate_changed = False
         self.system = system
         self.settings = settings
@@ -441,11 +450,13 @@ class Session(_SessionPlan, _SessionRoa):
                         + ": lower the control rate"),
         })
 
-    def _plant_steps(self) -> PlantSteps:
+    def _plant_steps(self) -> Plant:
         """The core's plant for the settings in force: the sensor noise of ``simulate``
         (the rig's standard deviations times the ``noise`` setting) and its process
-        noise (the spec's, white over the period, held over each physics step)."""
+        noise (the spec's, white over the period, held over each physics step); through the
+        rig's effects when the settings have some."""
         from equilibrist.sim.noise import Noise, square_root
+        from equilibrist.web.session_plant import PlainPlant, RigPlant
 
         system, loop = self.system, self.loop
         noise = Noise.from_spec(system, outputs=loop.outputs, rate=self.settings.rate)
@@ -454,17 +465,23 @@ class Session(_SessionPlan, _SessionRoa):
         lv = np.zeros((0, 0))
         if self.settings.noise > 0 and np.any(self.sigma_y > 0):
             lv = square_root(noise.measurement_covariance, "the sensor noise") * self.settings.noise
-        steps: PlantSteps = self.kernel.plant(x=self.x, p=self.p, rate=self.settings.rate,
-                                              n_sub=self.n_sub, lw=lw, outputs=loop.out_idx,
-                                              lv=lv, rng=self.core_rng,
-                                              integrator=integrators.DEFAULT)
-        return steps
+        rig = self.settings.rig_effects()
+        if rig is not None:
+            return RigPlant(self.kernel, system=system, x=self.x, p=self.p,
+                            rate=self.settings.rate, n_sub=self.n_sub, lw=lw,
+                            outputs=loop.out_idx, lv=lv, rng=self.core_rng, rig=rig,
+                            op=np.concatenate([loop.x_op, loop.u_op]))
+        return PlainPlant(self.kernel.plant(x=self.x, p=self.p, rate=self.settings.rate,
+                                            n_sub=self.n_sub, lw=lw, outputs=loop.out_idx,
+                                            lv=lv, rng=self.core_rng,
+                                            integrator=integrators.DEFAULT))
 
     def _sample(self) -> None:
         loop, x = self.loop, self.x
-        if self.plant is None or self.plant.x is not x:
+        if self.plant is None or self.plant_x is not x:
             self.plant = self._plant_steps()
-        y = self.plant.measure()
+            self.plant_x = x
+        y = self.plant.measure(self.k)
         # The filter runs whichever controller is in charge, so that switching is bumpless.
         u_filter = loop.filter.output(y)
         linear = loop.linear(self.settings.controller)
@@ -510,6 +527,7 @@ class Session(_SessionPlan, _SessionRoa):
             self.push_left -= 1
             if self.push_left == 0:
                 self.push_value = 0.0
+        u_app = self.plant.actuate(self.k, u_sat, u_app)  # what acts (through a rig's effects)
         self.record.add(self.t, x, xhat, y, u_cmd, u_sat, u_app)
         if self.k % self.chart_every == 0:
             self.chart_t.append(self.t)
@@ -517,7 +535,7 @@ class Session(_SessionPlan, _SessionRoa):
             self.chart_xhat.append(np.asarray(xhat).tolist())
             self.chart_u.append(u_app.tolist())
         self.y, self.xhat, self.u_cmd, self.u_sat, self.u_app = y, xhat, u_cmd, u_sat, u_app
-        self.plant.advance(self.k, u_app)
+        self.plant.advance(self.k)
         self.k += 1
         self.t += self.period
         if not np.all(np.isfinite(x)):

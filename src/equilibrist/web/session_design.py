@@ -20,6 +20,7 @@ if TYPE_CHECKING:
     from equilibrist.control.design_record import Design
     from equilibrist.control.trajopt import Trajectory
     from equilibrist.numeric.system import System
+    from equilibrist.sim.rig import Rig
 
 
 #: Floor of the measurement noise the Kalman filter assumes, as a fraction of the rig's.
@@ -116,7 +117,9 @@ class Catalogue:
 
 @dataclass(frozen=True)
 class Settings:
-    """What the page tuned (a value: each change makes a new one)."""
+    """What the page tuned (a value: each change makes a new one). *rig*: the rig's effects
+    between the plant and the controller, by :class:`~equilibrist.sim.rig.Rig`'s option names
+    (empty: none)."""
 
     controller: str
     rate: float
@@ -124,6 +127,7 @@ class Settings:
     limit: float
     scales: Mapping[str, float]
     params: Mapping[str, float]
+    rig: Mapping[str, float] = field(default_factory=lambda: types.MappingProxyType({}))
 
     def changed(self, fields: MessageFields) -> Settings:
         scales = dict(self.scales)
@@ -137,11 +141,20 @@ class Settings:
             limit=float(fields.get("limit", self.limit)),
             scales=types.MappingProxyType(scales),
             params=types.MappingProxyType(params),
+            rig=types.MappingProxyType(dict(fields["rig"])) if "rig" in fields else self.rig,
         )
 
     def to_dict(self) -> dict[str, object]:
         return {"controller": self.controller, "rate": self.rate, "noise": self.noise,
-                "limit": self.limit, "scales": dict(self.scales), "params": dict(self.params)}
+                "limit": self.limit, "scales": dict(self.scales), "params": dict(self.params),
+                "rig": dict(self.rig)}
+
+    def rig_effects(self) -> Rig | None:
+        """The rig of these settings, or None (no effect)."""
+        from equilibrist.sim.rig import Rig
+
+        rig = Rig(**self.rig)  # type: ignore[arg-type]
+        return None if rig.off else rig
 
 
 def tuned_system(base: System, settings: Settings) -> System:

@@ -32,7 +32,7 @@ if TYPE_CHECKING:
     from equilibrist.control.design_record import Design
     from equilibrist.control.trajopt import Trajectory
     from equilibrist.numeric.system import System
-    from equilibrist.sim.steps import PlantSteps
+    from equilibrist.web.session_plant import Plant
 
 #: Collocation intervals of the plan.
 KNOTS = 60
@@ -109,7 +109,7 @@ class _SessionPlan(_SessionOutput):
     rng: np.random.Generator
     design_message: dict[str, object]
     hang_start: np.ndarray | None
-    plant: PlantSteps | None
+    plant: Plant | None
 
     plan_epoch = 0  # bumped by every change that makes a plan under way another loop's
     plan_ids = 0
@@ -195,7 +195,7 @@ class _SessionPlan(_SessionOutput):
         self.plan_running = None
         if result is None:
             s = self.settings
-            self.settings = Settings("off", s.rate, s.noise, s.limit, s.scales, s.params)
+            self.settings = Settings("off", s.rate, s.noise, s.limit, s.scales, s.params, s.rig)
             self.mode = None
             self._apply_region()
             text = f"no plan to track: {error}; the controller is off"
