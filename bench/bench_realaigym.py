@@ -8,6 +8,7 @@ equilibrist with its ``trajopt`` extra), never in the project's: see docs/realai
     $BENCH/.venv/bin/python bench/bench_realaigym.py --benchmark $BENCH --board robustness \
         --robot acrobot                      # 15-25 minutes a robot
     $BENCH/.venv/bin/python bench/bench_realaigym.py --benchmark $BENCH --plant
+    $BENCH/.venv/bin/python bench/bench_realaigym.py --benchmark $BENCH --rigs   # other rigs
     .venv/bin/python bench/bench_realaigym.py --policy       # the policy's step, no benchmark
 
 ``--board simulation`` copies ``examples/realaigym/con_<robot>.py`` into the board's folder
@@ -124,6 +125,81 @@ def plant(benchmark: Path) -> None:
                       f"{worst:.1e}")
 
 
+#: The rigs of ``double_pendulum``'s ``model_parameters.load_model`` (design, model) besides
+#: the boards' C.1 model 1.0: other builds of the rig (link lengths, masses) and other
+#: identifications of them.
+RIGS = (("design_A.0", "model_1"), ("design_A.0", "model_2"), ("design_B.0", "model_1"),
+        ("design_B.0", "model_h2"), ("design_C.0", "model_3"), ("design_C.0", "model_h1"),
+        ("design_hD.0", "model_h1"))
+#: A model id's suffix: ``.0`` as identified (rotor, damping, Coulomb friction), ``.1``
+#: without them (the boards' setting), ``.2`` with damping alone.
+VARIANTS = (".1", ".2", ".0")
+
+
+def rigs(benchmark: Path, robots: list[str], variants: list[str]) -> None:
+    """The controller files, unchanged, on rigs they were not tuned on: each rig's
+    parameters as the benchmark's own ``model_parameters`` loads them, the actuated joint
+    limited to the boards' 6 N m, run by the simulation board's own simulator (its plant,
+    RK4, 500 Hz, 10 s from hanging at rest). A rig swings up when the board's criterion
+    finds a swing-up time (every state within 0.01 of upright, staying there), and ends up
+    when the final state is within the robustness board's tolerance."""
+    import importlib.util
+
+    from double_pendulum.analysis.leaderboard import get_swingup_time
+    from double_pendulum.model.model_parameters import model_parameters
+    from double_pendulum.model.symbolic_plant import SymbolicDoublePendulum
+    from double_pendulum.simulation.simulation import Simulator
+
+    os.environ.setdefault("MPLBACKEND", "Agg")
+    rows = []
+    for robot in robots:
+        folder = benchmark / "leaderboard" / robot / "simulation_v2"
+        sys.path.insert(0, str(folder))
+        sys.modules.pop("sim_parameters", None)  # each board folder has its own
+        cwd = os.getcwd()
+        os.chdir(folder)  # the board's sim_parameters.py reads its rig relative to it
+        try:
+            spec = importlib.util.spec_from_file_location(f"con_{robot}",
+                                                          EXAMPLES / f"con_{robot}.py")
+            assert spec is not None and spec.loader is not None
+            con = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(con)
+        finally:
+            os.chdir(cwd)
+            sys.path.remove(str(folder))
+        for (design, model) in RIGS:
+            for variant in variants:
+                mpar = model_parameters(model_design=design, model_id=model + variant,
+                                        robot=robot)
+                mpar.set_torque_limit([6.0, 0.0] if robot == "pendubot" else [0.0, 6.0])
+                t0 = time.perf_counter()
+                try:
+                    controller = con.build(mpar, robot)
+                except Exception as exc:  # a plan that does not converge, a refused rig
+                    rows.append((robot, design, model + variant, "not built", str(exc)[:60]))
+                    print(*rows[-1], flush=True)
+                    continue
+                controller.init()
+                sim = Simulator(plant=SymbolicDoublePendulum(model_pars=mpar))
+                T, X, U = sim.simulate(t0=0.0, x0=[0.0, 0.0, 0.0, 0.0], tf=10.0, dt=0.002,
+                                       controller=controller, integrator="runge_kutta")
+                X = np.asarray(X)
+                # The board's own criterion: the tip above 0.9 of the full height, staying.
+                swing = get_swingup_time(T=np.asarray(T), X=X, has_to_stay=True, mpar=mpar,
+                                         method="height", height=0.9, t_final=10.0)
+                d = X[-1] - np.array([np.pi, 0.0, 0.0, 0.0])
+                d[:2] = (d[:2] + np.pi) % (2 * np.pi) - np.pi
+                up = bool(np.all(np.abs(d) < [0.35, 0.35, 1.0, 1.0]))
+                rows.append((robot, design, model + variant,
+                             f"swing-up {swing:.2f} s" if swing < 10.0 else "no swing-up",
+                             f"final upright: {'yes' if up else 'no'}, peak torque "
+                             f"{np.max(np.abs(U)):.1f} N m, {time.perf_counter() - t0:.0f} s"))
+                print(*rows[-1], flush=True)
+    print("\n| robot | design | model | board's criterion | |\n|---|---|---|---|---|")
+    for row in rows:
+        print("| " + " | ".join(row) + " |")
+
+
 def policy_step() -> None:
     """The median and 90th percentile of a policy's step from Python."""
     import equilibrist
@@ -149,12 +225,17 @@ def main() -> None:
     parser.add_argument("--robot", choices=ROBOTS, action="append")
     parser.add_argument("--plant", action="store_true")
     parser.add_argument("--policy", action="store_true")
+    parser.add_argument("--rigs", action="store_true",
+                        help="the controller files on the other rigs of model_parameters")
+    parser.add_argument("--variant", choices=VARIANTS, action="append")
     args = parser.parse_args()
     if args.policy:
         policy_step()
-    if args.plant or args.board:
+    if args.plant or args.board or args.rigs:
         if args.benchmark is None:
-            parser.error("--board and --plant need --benchmark DIR")
+            parser.error("--board, --plant and --rigs need --benchmark DIR")
+        if args.rigs:
+            rigs(args.benchmark, args.robot or list(ROBOTS), args.variant or list(VARIANTS))
         if args.plant:
             plant(args.benchmark)
         if args.board:
