@@ -323,6 +323,15 @@ def plot_merged(paths: list[str], name: str) -> None:
     results = [json.loads(Path(p).read_text()) for p in paths]
     merged = {**results[0], "curves": {k: v for r in results for k, v in r["curves"].items()}}
     plot(merged, ROOT / "docs" / "images" / f"rl_{name}.png")
+    expert = float(np.mean(merged["expert"]))
+    for seed, curve in merged["curves"].items():
+        ok = [min(p["lengths"]) == merged["max_return"]
+              and float(np.mean(p["returns"])) >= 0.9 * expert for p in curve]
+        since = next((curve[i]["steps"] for i in range(len(curve)) if all(ok[i:])), None)
+        last = curve[-1]
+        print(f"seed {seed}: goal met from {since} steps on, at {last['steps']} steps "
+              f"{float(np.mean(last['returns'])):.1f} ({float(np.mean(last['returns'])) / expert:.3f}"
+              f" of the {merged['expert_kind']}'s), {last['seconds']:.0f} s of training")
 
 
 def main() -> None:
