@@ -17,7 +17,14 @@ script, same machine).
 ``--balance lqg`` measures the swing-up that hands over to the design's
 LQG instead of the LQR on its own tracker (docs/swingup.md).
 
+The two-link rigs (the catalogue's acrobot and pendubot, DFKI's acrobot and
+pendubot, named by their keys: ``dfki_double_pendulum[robot=pendubot]``) are
+also run from hanging exactly at rest without noise, RealAIGym's start
+(``from_rest``: whether that one run ends balancing, and when it was caught);
+``--duration 10`` gives every run RealAIGym's 10 s instead of the task's.
+
     python bench/bench_swingup.py [--runs 1000] [--json] [--balance lqr|lqg]
+        [--systems acrobot,dfki_double_pendulum[robot=acrobot]] [--duration S]
 """
 
 from __future__ import annotations
@@ -80,9 +87,31 @@ def swing_times(ctrl: object, batch: object, n_out: int, m: int) -> np.ndarray:
     return np.where(mode == 1.0, (last + 1) / ctrl.rate, np.nan)  # type: ignore[attr-defined]
 
 
-def bench_system(name: str, runs: int, seed: int, balance: str = "lqr") -> dict[str, object]:
-    system = get_system(name)
+def _system(key: str) -> object:
+    """A catalogue system by its key (``name`` or ``name[option=value]``)."""
+    name, _, rest = key.partition("[")
+    options = dict(kv.split("=", 1) for kv in rest.rstrip("]").split(",")) if rest else {}
+    return get_system(name, **options)
+
+
+def from_rest(system: object, ctrl: object, duration: float) -> tuple[bool, float | None]:
+    """One noise-free run from hanging exactly at rest: whether it ends balancing (both links
+    within 0.1 rad of upright, rates under 0.5 rad/s, the supervisor balancing) and the time of
+    its last hand-over to the balance."""
+    b = simulate_batch(system, ctrl, runs=1, duration=duration,  # type: ignore[arg-type]
+                       x0=np.zeros((1, 4)), seed=0, region={}, record=True)
+    t = float(swing_times(ctrl, b, len(ctrl.output_names), 1)[0])  # type: ignore[attr-defined]
+    end = np.asarray(b.final_state)[0] - system.operating_point().x  # type: ignore[attr-defined]
+    angles = np.abs(np.remainder(end[:2] + np.pi, 2 * np.pi) - np.pi)
+    up = bool(angles.max() < 0.1 and np.abs(end[2:]).max() < 0.5 and np.isfinite(t))
+    return up, (t if np.isfinite(t) else None)
+
+
+def bench_system(name: str, runs: int, seed: int, balance: str = "lqr",
+                 duration: float | None = None) -> dict[str, object]:
+    system = _system(name)
     task = get_task(system, "swingup")
+    horizon = float(duration if duration is not None else task.duration)
     d = design(system, rate=task.rate)
     ctrl = swingup(system, design=d, balance=balance)
     noise = Noise.from_design(d)
@@ -94,7 +123,7 @@ def bench_system(name: str, runs: int, seed: int, balance: str = "lqr") -> dict[
     steps = 0
     for start in range(0, runs, CHUNK):
         stop = min(runs, start + CHUNK)
-        b = simulate_batch(system, ctrl, runs=stop - start, duration=task.duration,
+        b = simulate_batch(system, ctrl, runs=stop - start, duration=horizon,
                            x0=x0[start:stop], seed=seed * 100_000 + start, noise=noise,
                            region=task.region, record=True)
         elapsed += b.elapsed
@@ -110,18 +139,23 @@ def bench_system(name: str, runs: int, seed: int, balance: str = "lqr") -> dict[
         simulate_batch(system, warm, runs=2, duration=0.1, x0=x0[:2] if warm is ctrl else None,
                        seed=seed, noise=noise, region={})
     t0 = time.perf_counter()
-    sb = simulate_batch(system, ctrl, runs=speed_runs, duration=task.duration,
+    sb = simulate_batch(system, ctrl, runs=speed_runs, duration=horizon,
                         x0=x0[:speed_runs], seed=seed, noise=noise, region=task.region)
     t_su = time.perf_counter() - t0
     t0 = time.perf_counter()
-    lb = simulate_batch(system, lqr, runs=speed_runs, duration=task.duration,
+    lb = simulate_batch(system, lqr, runs=speed_runs, duration=horizon,
                         x0=bal.draw_initials(rng, speed_runs), seed=seed, noise=noise, region={})
     t_lqr = time.perf_counter() - t0
     su_rate = sb.steps / t_su
     lqr_rate = lb.steps / t_lqr
     good = times[ok]
+    rest: dict[str, object] = {}
+    if system.spec.swingup.law in ("acrobot", "pendubot"):  # type: ignore[attr-defined]
+        up, caught = from_rest(system, ctrl, horizon)
+        rest = {"from_rest": up, "from_rest_time": caught}
     return {
-        "system": name, "balance": balance, "runs": runs, "success": float(ok.mean()),
+        "system": name, "balance": balance, "runs": runs, "duration": horizon,
+        "success": float(ok.mean()), **rest,
         "swingup_time_median": float(np.median(good)) if good.size else None,
         "swingup_time_p90": float(np.percentile(good, 90)) if good.size else None,
         "swingup_time_max": float(good.max()) if good.size else None,
@@ -138,10 +172,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--balance", choices=("lqr", "lqg"), default="lqr",
                     help="what balances after the catch (default lqr)")
+    ap.add_argument("--duration", type=float, default=None,
+                    help="seconds per run (default the task's)")
     args = ap.parse_args(argv)
     rows = []
     for name in args.systems.split(","):
-        row = bench_system(name, args.runs, args.seed, args.balance)
+        row = bench_system(name, args.runs, args.seed, args.balance, args.duration)
         rows.append(row)
         if not args.json:
             med = row["swingup_time_median"]
@@ -149,7 +185,9 @@ def main(argv: list[str] | None = None) -> int:
                   f"{'-' if med is None else f'{med:.2f} s'}  p90 "
                   f"{row['swingup_time_p90'] if row['swingup_time_p90'] is None else round(row['swingup_time_p90'], 2)}"
                   f"  steps/s {row['steps_per_second_swingup']:.3g} vs LQR "
-                  f"{row['steps_per_second_lqr']:.3g} (ratio {row['speed_ratio']:.2f})", flush=True)
+                  f"{row['steps_per_second_lqr']:.3g} (ratio {row['speed_ratio']:.2f})"
+                  + (f"  from rest: {'caught' if row['from_rest'] else 'not caught'}"
+                     f" ({row['from_rest_time']} s)" if "from_rest" in row else ""), flush=True)
     if args.json:
         json.dump(rows, sys.stdout, indent=2)
         print()
