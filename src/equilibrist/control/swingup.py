@@ -420,14 +420,9 @@ def swingup(
         "tuning": {k: getattr(tune, k) for k in tune.__dataclass_fields__},
     }
     source = controller_source(law, physics_source(system), n, nq)
-    # The energy measured from upright: the law's own at the operating point, at rest.
-    su_energy = python_namespace(source)["su_energy"]
-    cp[CP_SLOTS.index("e_up")] = su_energy(*x_op, cp)
-    if law in ACTUATED:
-        scaled = _collocated_gains(system, source, cp, law, tune)
-        for slot, value in scaled.items():
-            cp[CP_SLOTS.index(slot)] = value
-        settings["gains"] = scaled
+    gains = _energy_slots(system, source, cp, law, tune, x_op)
+    if gains:
+        settings["gains"] = gains
     return SwingUpController(
         name="swingup", source=source, params=cp, z0=np.zeros(z_layout(n)["end"]),
         rate=hz, x_op=x_op, u_op=u_op, state_names=names, input_names=system.input_names,
@@ -546,6 +541,20 @@ def _harmonic(fn: Callable[[float], float]) -> tuple[float, float, float]:
     p0, p1, p2 = fn(0.0), fn(0.5 * math.pi), fn(math.pi)
     c = 0.5 * (p0 + p2)
     return c, math.hypot(0.5 * (p2 - p0), c - p1), math.atan2(c - p1, 0.5 * (p2 - p0))
+
+
+def _energy_slots(system: System, source: str, cp: np.ndarray, law: str, tune: SwingUpTuning,
+                  x_op: np.ndarray) -> dict[str, float]:
+    """Write the slots that need the law's own energy into *cp*: the energy at upright (the
+    law's at the operating point, at rest: energies are measured from it), and the two-link
+    laws' gains and pump (:func:`_collocated_gains`, returned; empty for the others)."""
+    cp[CP_SLOTS.index("e_up")] = python_namespace(source)["su_energy"](*x_op, cp)
+    if law not in ACTUATED:
+        return {}
+    gains = _collocated_gains(system, source, cp, law, tune)
+    for slot, value in gains.items():
+        cp[CP_SLOTS.index(slot)] = value
+    return gains
 
 
 def _collocated_gains(system: System, source: str, cp: np.ndarray, law: str,
