@@ -511,6 +511,7 @@ class RigEpisode:
         from equilibrist.sim import setup as sim_setup
         from equilibrist.sim.kernel import Kernel
         from equilibrist.sim.noise import generator_state, seed_sequence
+        from equilibrist.sim.steps import SetupSteps
         from equilibrist.tasks import python_reward, task_kind
 
         system = core.system
@@ -524,43 +525,22 @@ class RigEpisode:
             atol=integrators.ATOL, plant="nonlinear", x0=x0, delay=False, noise=core.noise,
             reference=None, events=(), outputs=outputs, region=core.task.region, rig=core.rig)
         seq = seed_sequence(noise_seed)
-        self._rng = generator_state(seq)
-        kernel = Kernel(system, setup.nonlinear)
-        n, m = system.n_states, system.n_inputs
+        self.plant = SetupSteps(setup, Kernel(system, setup.nonlinear), generator_state(seq), seq)
         self.core, self.system, self.setup = core, system, setup
-        self.x = setup.x0.copy()
-        self.y = np.empty(len(outputs))
+        self.x, self.y = self.plant.x, self.plant.y
         self.k = 0
-        p_sets = setup.p_sets(np.array(system.p))
+        n, m = system.n_states, system.n_inputs
         base = len(system.spec.parameter_names) - 2 * m
-        self._lim = np.zeros(2 * m)
-        self._lim[0::2], self._lim[1::2] = p_sets[0, base::2][:m], p_sets[0, base + 1::2][:m]
-        self._u_buf, self._u_rig, self.acted = np.zeros(m), np.zeros(m), np.zeros(m)
-        iopts, fopts = setup.iopts(), setup.fopts
-        generic = kernel.generic
-        scr = kernel.scratch(p_len=p_sets.shape[1], ny=len(outputs), nw=setup.lw.shape[1])
-        self._status = np.zeros(len(layout.STATUS), dtype=np.int64)
-        rig_i, rig_f = setup.rig_arrays()
-        gforce, _pulses = setup.rig_forces(seq)
-        self._advance = generic.advancer(
-            x=self.x, u_app=self._u_buf, op=setup.op, p_sets=p_sets, p_switch=setup.p_switch,
-            lin_s=setup.linear_blocks(p_sets), region=setup.region, kicks=setup.kicks,
-            kick_value=setup.kick_value, pulses=setup.pulses, pulse_value=setup.pulse_value,
-            lw=setup.lw, rng=self._rng, iopts=iopts, fopts=fopts, status=self._status, scr=scr,
-            rig_i=rig_i, gforce=gforce)
-        rig_state = setup.rig_state()
-        assert rig_i is not None and rig_f is not None and rig_state is not None
-        self._measure, self._actuate = generic.rig_steps(
-            x=self.x, c_idx=setup.c_idx, lv=setup.lv, op=setup.op, fopts=fopts, rig_i=rig_i,
-            rig_f=rig_f, rig_s=rig_state, rng=self._rng, y=self.y, u_app=self._u_rig,
-            u_act=self.acted, lim=self._lim)
+        limits = self.plant.p_sets[0, base:]
+        self._low, self._high = limits[0::2][:m], limits[1::2][:m]
+        self.acted = np.zeros(m)
         self._reward = python_reward(task_kind(core.task.name), system)
         self._p = np.array(system.p, dtype=float)
         energy = system.functions.energy
         self._eref = np.array([energy(core.op[:n], self._p),
                                energy(np.asarray(core.task.start, dtype=float), self._p)])
         self._iscale = 1.0 / core.sc
-        self._measure(0)
+        self.plant.measure(0)
 
     def observation(self) -> np.ndarray:
         """What the agent observes now: the measurement through the rig, or the state."""
@@ -570,12 +550,10 @@ class RigEpisode:
         """One period with the input *u* (within its limits) commanded: the reward and the
         status (0 running, 1 fell, 2 out of time)."""
         k = self.k
-        self._u_rig[:] = u
-        self._actuate(k)
-        self._u_buf[:] = self.acted
-        fell = self._advance(k)
+        self.acted = self.plant.actuate(k, u, self._low, self._high)
+        fell = self.plant.advance(k)
         self.k = k + 1
-        self._measure(self.k)
+        self.plant.measure(self.k)
         core = self.core
         reward = float(self._reward(self.x, self.acted, self._p, core.op, self._iscale,
                                     core.hang, self._eref, 1.0 / core.rate, core.alive_bonus))

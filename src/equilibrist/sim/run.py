@@ -44,6 +44,7 @@ from equilibrist.sim.kernel import Kernel
 from equilibrist.sim.noise import Noise, SeedLike, describe_seed, generator_state, seed_sequence
 from equilibrist.sim.result import SimResult
 from equilibrist.sim.rig import Rig
+from equilibrist.sim.steps import SetupSteps
 
 # A run of at most this many physics steps (RK4 or the linear plant) is one
 # call of the compiled core in the calling thread: a few milliseconds, too
@@ -310,50 +311,20 @@ def _run_python(setup: setup_data.Setup, kernel: Kernel, rng: np.ndarray,
     assert not isinstance(ctrl, LinearController | NonlinearController)  # those run compiled
     sysm = setup.system
     n, m = sysm.n_states, sysm.n_inputs
-    ny = len(setup.outputs)
     ctrl.reset()
-    x = setup.x0.copy()
-    p_sets = setup.p_sets(np.array(sysm.p))
-    lin = setup.linear_blocks(p_sets)
-    iopts, fopts = setup.iopts(), setup.fopts
-    scr = kernel.scratch(p_len=p_sets.shape[1], ny=ny, nw=setup.lw.shape[1])
+    plant = SetupSteps(setup, kernel, rng, seq)
+    x, y, p_sets, status, scr = plant.x, plant.y, plant.p_sets, plant.status, plant.scr
     fell_row = layout.SCRATCH["fell_x"]
-    status = np.zeros(len(layout.STATUS), dtype=np.int64)
     rec = np.empty((setup.n_rows, setup.record_width))
     cols = layout.RECORD.slices(**setup.sizes)
-    names = sysm.spec.parameter_names
-    base = len(names) - 2 * m
-    y = np.empty(ny)
-    u_buf = np.zeros(m)  # the input held over a period, as the core reads it
-    core = kernel.generic
-    measure = core.measurer(x=x, c_idx=setup.c_idx, lv=setup.lv, rng=rng, y=y)
-    rig_i, rig_f = setup.rig_arrays()
-    gforce, pulses = setup.rig_forces(seq)
-    advance = core.advancer(
-        x=x, u_app=u_buf, op=setup.op, p_sets=p_sets, p_switch=setup.p_switch, lin_s=lin,
-        region=setup.region, kicks=setup.kicks, kick_value=setup.kick_value, pulses=setup.pulses,
-        pulse_value=setup.pulse_value, lw=setup.lw, rng=rng, iopts=iopts, fopts=fopts,
-        status=status, scr=scr, rig_i=rig_i, gforce=gforce)
-    # A rig's effects around the controller: the same C as the compiled loop's.
-    rig_on = rig_i is not None and bool(rig_i[layout.RIG_I["on"]])
-    u_rig, u_act, lim = np.zeros(m), np.zeros(m), np.zeros(2 * m)
-    if rig_on:
-        assert rig_i is not None and rig_f is not None
-        rig_state = setup.rig_state()
-        assert rig_state is not None
-        rig_measure, rig_actuate = core.rig_steps(
-            x=x, c_idx=setup.c_idx, lv=setup.lv, op=setup.op, fopts=fopts, rig_i=rig_i,
-            rig_f=rig_f, rig_s=rig_state, rng=rng, y=y, u_app=u_rig, u_act=u_act, lim=lim)
+    base = len(sysm.spec.parameter_names) - 2 * m
     u_prev = None
     has_estimate = False
     bar = _progress_bar(setup.n_rows, progress, "samples")
     rows = 0
     try:
         for k in range(setup.n_rows):
-            if rig_on:
-                rig_measure(k)
-            else:
-                measure()
+            plant.measure(k)
             t = float(setup.times[k])
             r = setup.ref[k].copy()
             try:
@@ -374,12 +345,7 @@ def _run_python(setup: setup_data.Setup, kernel: Kernel, rng: np.ndarray,
                 u_prev = np.minimum(np.maximum(setup.u_op, lo), hi)
             u_app = u_prev if setup.delay else u_sat
             u_prev = u_sat
-            acted = u_app
-            if rig_on:
-                u_rig[:] = u_app
-                lim[0::2], lim[1::2] = lo, hi
-                rig_actuate(k)
-                acted = u_act.copy()
+            acted = plant.actuate(k, u_app, lo, hi)
             try:
                 ctrl.update(t, y.copy(), r, u_app.copy())
             except StopRun:
@@ -407,15 +373,14 @@ def _run_python(setup: setup_data.Setup, kernel: Kernel, rng: np.ndarray,
                     break
             if k >= setup.n_samples:
                 break
-            u_buf[:] = acted
-            if advance(k):
+            if plant.advance(k):
                 break
     finally:
         if bar is not None:
             bar.close()
     status[layout.STATUS["rows"]] = rows
     return _result(setup, rec, rows, status, scr[fell_row, :n].copy(), x, seq,
-                   estimates=has_estimate, pulses=pulses)
+                   estimates=has_estimate, pulses=plant.pulses)
 
 
 def _outside(x: np.ndarray, region: np.ndarray) -> int:

@@ -10,6 +10,8 @@ import numpy as np
 from equilibrist.sim import integrators, layout
 
 if TYPE_CHECKING:
+    from equilibrist.sim.kernel import Kernel
+    from equilibrist.sim.setup_data import Setup
     from equilibrist.sim.simcore import NativeCore
 
 
@@ -68,6 +70,76 @@ class PlantSteps:
         """The period after sample *k* with *u_app* held (x updated in place)."""
         self.u[:] = u_app
         self._advance(k)
+
+
+class SetupSteps:
+    """The plant of a run's settings *setup* (:func:`equilibrist.sim.setup.build`), one
+    sample at a time, for a loop whose decisions are made in Python: ``simulate`` around a
+    :class:`~equilibrist.control.controller.PythonController`, and an environment's episode
+    through a rig. A sample is :meth:`measure` (the sensors of :attr:`x` into :attr:`y`,
+    through the rig's encoders, delay and filter when the settings have a rig),
+    :meth:`actuate` (the torque that acts for a saturated command: through the rig's delay,
+    response, noise and limits, or the command itself) and :meth:`advance` (the period's
+    physics with that torque held, the rig's pushes acting). Noise is drawn from the
+    generator state *rng* in ``simulate``'s order, the pushes from the seed sequence *seq*:
+    the same settings, seed and commands give the same bits wherever the loop runs.
+    """
+
+    def __init__(self, setup: Setup, kernel: Kernel, rng: np.ndarray,
+                 seq: np.random.SeedSequence | None) -> None:
+        system = setup.system
+        m = system.n_inputs
+        core = kernel.generic
+        self.x = setup.x0.copy()
+        self.y = np.empty(len(setup.outputs))
+        self.p_sets = setup.p_sets(np.array(system.p))
+        self.status = np.zeros(len(layout.STATUS), dtype=np.int64)
+        self.scr = kernel.scratch(p_len=self.p_sets.shape[1], ny=len(setup.outputs),
+                                  nw=setup.lw.shape[1])
+        self.held = np.zeros(m)  # the input held over a period, as the core reads it
+        plain = core.measurer(x=self.x, c_idx=setup.c_idx, lv=setup.lv, rng=rng, y=self.y)
+        rig_i, rig_f = setup.rig_arrays()
+        gforce, self.pulses = setup.rig_forces(seq)
+        self._advance = core.advancer(
+            x=self.x, u_app=self.held, op=setup.op, p_sets=self.p_sets,
+            p_switch=setup.p_switch, lin_s=setup.linear_blocks(self.p_sets),
+            region=setup.region, kicks=setup.kicks, kick_value=setup.kick_value,
+            pulses=setup.pulses, pulse_value=setup.pulse_value, lw=setup.lw, rng=rng,
+            iopts=setup.iopts(), fopts=setup.fopts, status=self.status, scr=self.scr,
+            rig_i=rig_i, gforce=gforce)
+        self._command, self._acted, self._lim = np.zeros(m), np.zeros(m), np.zeros(2 * m)
+        self.rig_on = rig_i is not None and bool(rig_i[layout.RIG_I["on"]])
+        if self.rig_on:
+            rig_state = setup.rig_state()
+            assert rig_i is not None and rig_f is not None and rig_state is not None
+            self._measure, self._actuate = core.rig_steps(
+                x=self.x, c_idx=setup.c_idx, lv=setup.lv, op=setup.op, fopts=setup.fopts,
+                rig_i=rig_i, rig_f=rig_f, rig_s=rig_state, rng=rng, y=self.y,
+                u_app=self._command, u_act=self._acted, lim=self._lim)
+        else:
+            self._measure = lambda k: plain()
+
+    def measure(self, k: int) -> None:
+        """The sensors at sample *k* into :attr:`y`."""
+        self._measure(k)
+
+    def actuate(self, k: int, u_app: np.ndarray, low: np.ndarray, high: np.ndarray
+                ) -> np.ndarray:
+        """The torque that acts over sample *k*'s period for the command *u_app* (within
+        the limits *low*, *high*), held for :meth:`advance` (a new array)."""
+        if self.rig_on:
+            self._command[:] = u_app
+            self._lim[0::2], self._lim[1::2] = low, high
+            self._actuate(k)
+            self.held[:] = self._acted
+        else:
+            self.held[:] = u_app
+        return self.held.copy()
+
+    def advance(self, k: int) -> bool:
+        """The period after sample *k* with the held torque: True if the state left its
+        region."""
+        return bool(self._advance(k))
 
 
 class EnvSteps:
@@ -139,4 +211,4 @@ class EnvSteps:
         return self.obs.copy()
 
 
-__all__ = ["EnvSteps", "PlantSteps"]
+__all__ = ["EnvSteps", "PlantSteps", "SetupSteps"]
