@@ -24,6 +24,7 @@ from equilibrist.sim.core_unit import FIELDS, RunArgs, unit_inputs, unit_source
 _C_FOLDER = Path(build.__file__).parent
 
 if TYPE_CHECKING:
+    from equilibrist.sim.rig import Rig
     from equilibrist.sim.steps import PlantSteps
 
 def _ptr(a: np.ndarray | None) -> int | None:
@@ -325,13 +326,14 @@ class NativeCore:
 
     def plant(self, *, x: np.ndarray, p: np.ndarray, rate: float, n_sub: int,
               lw: np.ndarray, outputs: np.ndarray, lv: np.ndarray,
-              rng: np.ndarray, integrator: str = integrators.DEFAULT) -> PlantSteps:
+              rng: np.ndarray, integrator: str = integrators.DEFAULT, rig: Rig | None = None,
+              op: np.ndarray | None = None) -> PlantSteps:
         """The plant alone, sample by sample, as ``simulate`` advances it around a controller
-        written in Python: see :class:`PlantSteps`."""
+        written in Python, through *rig*'s effects if given: see :class:`PlantSteps`."""
         from equilibrist.sim.steps import PlantSteps
 
         return PlantSteps(self, x=x, p=p, rate=rate, n_sub=n_sub, lw=lw, outputs=outputs, lv=lv,
-                          rng=rng, integrator=integrator)
+                          rng=rng, integrator=integrator, rig=rig, op=op)
 
     def rk4_steps(self, x: np.ndarray, u: np.ndarray, p: np.ndarray, h: float,
                   n_steps: int) -> None:

@@ -11,6 +11,7 @@ from equilibrist.sim import integrators, layout
 
 if TYPE_CHECKING:
     from equilibrist.sim.kernel import Kernel
+    from equilibrist.sim.rig import Rig
     from equilibrist.sim.setup_data import Setup
     from equilibrist.sim.simcore import NativeCore
 
@@ -18,22 +19,27 @@ if TYPE_CHECKING:
 class PlantSteps:
     """The plant of a closed loop whose controller runs in Python, one sample at a time.
 
-    The same two halves of a sample as ``simulate`` with a Python controller
+    The same three parts of a sample as ``simulate`` with a Python controller
     (:func:`equilibrist.sim.run.simulate`): :meth:`measure` reads the
-    sensors with their noise (``y = x[outputs] + lv z``), :meth:`advance`
-    holds the applied input over the period's *n_sub* steps of *integrator*
-    (a name of :mod:`equilibrist.sim.integrators`' table), each with
+    sensors with their noise (``y = x[outputs] + lv z``), :meth:`actuate` gives the
+    torque that acts for a command and :meth:`advance` holds it over the period's *n_sub*
+    steps of *integrator* (a name of :mod:`equilibrist.sim.integrators`' table), each with
     its process noise ``lw z`` (``lw``: ``n x nw``, the noise gain over the
     root of the step), drawn from the generator state *rng* in the same
-    order. Same seed, same inputs: the same bits as ``simulate``. *x*, *p*
-    and *rng* are the caller's arrays (updated in place, kept by reference);
-    the arrays' addresses are taken once, a call costs one ctypes call.
+    order. With a *rig* (:class:`~equilibrist.sim.rig.Rig`) the sensors and the
+    actuator go through its effects about the operating point *op* (state, then input),
+    by the core's rig functions that ``simulate``'s loops call. Same seed, same inputs: the
+    same bits as ``simulate``. *x*, *p* and *rng* are the caller's arrays (updated in
+    place, kept by reference); the arrays' addresses are taken once, a call costs one
+    ctypes call.
     """
 
     def __init__(self, core: NativeCore, *, x: np.ndarray, p: np.ndarray, rate: float,
                  n_sub: int, lw: np.ndarray, outputs: np.ndarray, lv: np.ndarray,
-                 rng: np.ndarray, integrator: str = integrators.DEFAULT) -> None:
-        n, m = core.system.n_states, core.system.n_inputs
+                 rng: np.ndarray, integrator: str = integrators.DEFAULT,
+                 rig: Rig | None = None, op: np.ndarray | None = None) -> None:
+        system = core.system
+        n, m = system.n_states, system.n_inputs
         core._out(x, np.float64, "x")
         core._out(rng, np.uint64, "rng")
         h = 1.0 / (rate * n_sub)
@@ -45,30 +51,63 @@ class PlantSteps:
         self.c_idx = np.ascontiguousarray(outputs, dtype=np.int64)
         self.lv = np.ascontiguousarray(lv, dtype=float)
         self.y = np.zeros(len(self.c_idx))
-        self.u = np.zeros(m)
-        region = np.array([[-np.inf] * n, [np.inf] * n])
+        self.u = np.zeros(m)  # the input held over a period
+        op = np.zeros(n + m) if op is None else np.asarray(op, dtype=float)
+        fopts = layout.FOPTS.pack(h=h, rtol=integrators.RTOL, atol=integrators.ATOL,
+                                  rate=float(rate))
+        rig_i = rig_f = None
+        if rig is not None:
+            rig_i, rig_f = rig.pack(system, rate, len(self.c_idx))
         self._advance = core.advancer(
-            x=x, u_app=self.u, op=np.zeros(n + m), p_sets=p_sets,
-            p_switch=np.zeros(1, dtype=np.int64), lin_s=None, region=region,
+            x=x, u_app=self.u, op=op, p_sets=p_sets,
+            p_switch=np.zeros(1, dtype=np.int64), lin_s=None,
+            region=np.array([[-np.inf] * n, [np.inf] * n]),
             kicks=np.zeros((0, 2), dtype=np.int64), kick_value=np.zeros(0),
             pulses=np.zeros((0, 3), dtype=np.int64), pulse_value=np.zeros(0), lw=self.lw,
             rng=rng,
             iopts=layout.IOPTS.pack(int, n_samples=0, record=0, delay=0, n_sub=int(n_sub),
                                     integrator=integrators.number(integrator), estimates=0,
                                     accumulate=0),
-            fopts=layout.FOPTS.pack(h=h, rtol=integrators.RTOL, atol=integrators.ATOL,
-                                    rate=float(rate)),
-            status=self.status, scr=core.scratch(p_sets.shape[1], 0, self.lw.shape[1]))
+            fopts=fopts, status=self.status,
+            scr=core.scratch(p_sets.shape[1], 0, self.lw.shape[1]), rig_i=rig_i)
+        self._command, self._acted = np.zeros(m), np.zeros(m)
+        self._lim = np.zeros(2 * m)
+        self._lim[0::2], self._lim[1::2] = system.input_limits
+        self.rig = rig
+        if rig is not None:
+            assert rig_i is not None and rig_f is not None
+            self._rig_measure, self._rig_actuate = core.rig_steps(
+                x=x, c_idx=self.c_idx, lv=self.lv, op=op, fopts=fopts, rig_i=rig_i,
+                rig_f=rig_f, rig_s=np.zeros(rig.state_len(system, rate, len(self.c_idx))),
+                rng=rng, y=self.y, u_app=self._command, u_act=self._acted, lim=self._lim)
         self._measure = core.measurer(x=x, c_idx=self.c_idx, lv=self.lv, rng=rng, y=self.y)
 
-    def measure(self) -> np.ndarray:
-        """The sensors now, with their noise (a new array)."""
-        self._measure()
+    def measure(self, k: int = 0) -> np.ndarray:
+        """The sensors at sample *k*, with their noise and the rig's effects (a new array)."""
+        if self.rig is not None:
+            self._rig_measure(k)
+        else:
+            self._measure()
         return self.y.copy()
 
-    def advance(self, k: int, u_app: np.ndarray) -> None:
-        """The period after sample *k* with *u_app* held (x updated in place)."""
-        self.u[:] = u_app
+    def actuate(self, k: int, u_sat: np.ndarray, u_app: np.ndarray) -> np.ndarray:
+        """What acts over sample *k*'s period, held for :meth:`advance` (a new array):
+        *u_app*, the saturated command *u_sat* with whatever acts beside the actuator;
+        through a rig, the torque that acts for *u_sat* (its delay, response, noise and the
+        system's limits) with that beside it added."""
+        if self.rig is not None:
+            self._command[:] = u_sat
+            self._rig_actuate(k)
+            self.u[:] = self._acted + (np.asarray(u_app, dtype=float) - u_sat)
+        else:
+            self.u[:] = u_app
+        return self.u.copy()
+
+    def advance(self, k: int, u_app: np.ndarray | None = None) -> None:
+        """The period after sample *k* with the input :meth:`actuate` held, or *u_app*
+        (x updated in place)."""
+        if u_app is not None:
+            self.u[:] = u_app
         self._advance(k)
 
 

@@ -12,8 +12,8 @@ saturation, a push beyond the limits, one control period of the plant on the com
 (:class:`~equilibrist.sim.steps.PlantSteps`, whose noise is drawn as ``simulate`` draws it:
 with the controller off and the same seed, a session's run is ``simulate``'s bit for bit),
 and the region's check. With a rig's effects (the ``rig`` setting), the sensors and the
-actuator go through them as ``simulate``'s do (:mod:`equilibrist.web.session_plant`). Every change of a setting redesigns outside the simulation's
-thread; a design that fails leaves the controller in force running, while a changed
+actuator go through them as ``simulate``'s do, in the same plant steps. Every change of a
+setting redesigns outside the simulation's thread; a design that fails leaves the controller in force running, while a changed
 physical parameter acts on the plant at once.
 """
 
@@ -49,8 +49,8 @@ if TYPE_CHECKING:
     from equilibrist.control.design_record import Design
     from equilibrist.mechanics.spec import Parameter
     from equilibrist.numeric.system import System
+    from equilibrist.sim.steps import PlantSteps
     from equilibrist.viz.drawing import Scene
-    from equilibrist.web.session_plant import Plant
 
 #: Longest catch-up after a stall [s]: beyond it the simulation skips ahead.
 MAX_CATCH_UP = 0.25
@@ -88,7 +88,7 @@ class Session(_SessionPlan, _SessionRoa):
         from equilibrist.sim.noise import generator_state, seed_sequence
 
         self.core_rng = generator_state(seed_sequence(seed))
-        self.plant: Plant | None = None  # the core's plant steps, rebuilt after any change
+        self.plant: PlantSteps | None = None  # the core's plant steps, rebuilt after any change
         self.plant_x: np.ndarray | None = None  # the state array the plant's steps are bound to
         self.paused = False
         self.busy = False  # True while another thread rebuilds the session
@@ -450,13 +450,12 @@ class Session(_SessionPlan, _SessionRoa):
                         + ": lower the control rate"),
         })
 
-    def _plant_steps(self) -> Plant:
+    def _plant_steps(self) -> PlantSteps:
         """The core's plant for the settings in force: the sensor noise of ``simulate``
         (the rig's standard deviations times the ``noise`` setting) and its process
         noise (the spec's, white over the period, held over each physics step); through the
         rig's effects when the settings have some."""
         from equilibrist.sim.noise import Noise, square_root
-        from equilibrist.web.session_plant import PlainPlant, RigPlant
 
         system, loop = self.system, self.loop
         noise = Noise.from_spec(system, outputs=loop.outputs, rate=self.settings.rate)
@@ -466,15 +465,10 @@ class Session(_SessionPlan, _SessionRoa):
         if self.settings.noise > 0 and np.any(self.sigma_y > 0):
             lv = square_root(noise.measurement_covariance, "the sensor noise") * self.settings.noise
         rig = self.settings.rig_effects()
-        if rig is not None:
-            return RigPlant(self.kernel, system=system, x=self.x, p=self.p,
-                            rate=self.settings.rate, n_sub=self.n_sub, lw=lw,
-                            outputs=loop.out_idx, lv=lv, rng=self.core_rng, rig=rig,
-                            op=np.concatenate([loop.x_op, loop.u_op]))
-        return PlainPlant(self.kernel.plant(x=self.x, p=self.p, rate=self.settings.rate,
-                                            n_sub=self.n_sub, lw=lw, outputs=loop.out_idx,
-                                            lv=lv, rng=self.core_rng,
-                                            integrator=integrators.DEFAULT))
+        return self.kernel.plant(x=self.x, p=self.p, rate=self.settings.rate, n_sub=self.n_sub,
+                                 lw=lw, outputs=loop.out_idx, lv=lv, rng=self.core_rng,
+                                 integrator=integrators.DEFAULT, rig=rig,
+                                 op=None if rig is None else np.concatenate([loop.x_op, loop.u_op]))
 
     def _sample(self) -> None:
         loop, x = self.loop, self.x

@@ -32,7 +32,7 @@ if TYPE_CHECKING:
     from equilibrist.control.design_record import Design
     from equilibrist.control.trajopt import Trajectory
     from equilibrist.numeric.system import System
-    from equilibrist.web.session_plant import Plant
+    from equilibrist.sim.steps import PlantSteps
 
 #: Collocation intervals of the plan.
 KNOTS = 60
@@ -109,7 +109,7 @@ class _SessionPlan(_SessionOutput):
     rng: np.random.Generator
     design_message: dict[str, object]
     hang_start: np.ndarray | None
-    plant: Plant | None
+    plant: PlantSteps | None
 
     plan_epoch = 0  # bumped by every change that makes a plan under way another loop's
     plan_ids = 0
