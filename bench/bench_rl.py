@@ -15,8 +15,8 @@ Usage: ``python bench/bench_rl.py ppo [--env ID] [--seeds 0 1 2] [--steps N] [--
 for the swing-up, ``--env equilibrist/acrobot-swingup-v1`` for the acrobot's entry of the
 recipe); ``python bench/bench_rl.py plot a.json b.json --name ppo_furuta``: one figure of
 seeds run apart; ``python bench/bench_rl.py race``: PPO's defaults on Gymnasium's
-CartPole-v1 and on ``cartpole-balance-v1`` side by side (two processes, seed after seed),
-the training wall time until each is solved; ``python bench/bench_rl.py policy-c``: an
+CartPole-v1 and on ``cartpole-balance-v1`` interleaved in one process (rollout by rollout,
+seed after seed), the training wall time until each is solved; ``python bench/bench_rl.py policy-c``: an
 exported 2x64 policy's C step time, ``make check`` and ``make size``; ``python
 bench/bench_rl.py throughput``: PPO's training steps per second over 16 copies, the adapter
 against ``DummyVecEnv``. Goals: PPO balances the cart-pole within 100,000 steps and the
@@ -217,76 +217,72 @@ def throughput(copies: int = 16, rollouts: int = 6) -> dict[str, float]:
 RACE_IDS = ("CartPole-v1", "equilibrist/cartpole-balance-v1")
 
 
-def _race_one(env_id: str, seed: int, max_steps: int, target: dict[str, float]
-              ) -> dict[str, Any]:
-    """Train PPO (defaults, one thread) on *env_id*, scoring its deterministic policy on
-    seeds 100-102 after every rollout (2,048 steps), until it is solved: CartPole-v1's mean
-    return 500; ours: no episode ends early and the return at least 0.9 of the LQG's."""
-    import gymnasium as gym
-    import torch
-    from stable_baselines3 import PPO
-
-    import equilibrist.envs  # noqa: F401  (registers the environments)
-
-    torch.set_num_threads(1)
-    env = gym.make(env_id)
-    limit = int(env.spec.max_episode_steps or env.unwrapped.core.n_samples)
-    model = PPO("MlpPolicy", env, seed=seed, device="cpu")
-    scoring = gym.make(env_id)
-    points = []
-    trained = 0.0
-    start_all = time.perf_counter()
-    while model.num_timesteps < max_steps:
-        start = time.perf_counter()
-        model.learn(model.n_steps, reset_num_timesteps=False)
-        trained += time.perf_counter() - start
-        returns, lengths = [], []
-        for start_seed in (100, 101, 102):
-            obs, _ = scoring.reset(seed=start_seed)
-            total, n, done = 0.0, 0, False
-            while not done:
-                obs, reward, terminated, truncated, _ = scoring.step(
-                    model.predict(obs, deterministic=True)[0])
-                total += float(reward)
-                n += 1
-                done = terminated or truncated
-            returns.append(total)
-            lengths.append(n)
-        solved = (min(lengths) == limit
-                  and float(np.mean(returns)) >= target["fraction"] * target["reference"])
-        points.append({"steps": model.num_timesteps, "seconds": trained,
-                       "wall": time.perf_counter() - start_all, "returns": returns,
-                       "lengths": lengths, "solved": solved})
-        if solved:
-            break
-    return {"env_id": env_id, "seed": seed, "points": points,
-            "solved_at": points[-1]["steps"] if points[-1]["solved"] else None,
-            "seconds": points[-1]["seconds"], "wall": points[-1]["wall"]}
+def _score(model: Any, env: Any) -> tuple[list[float], list[int]]:
+    """The deterministic policy's return and length from each of seeds 100-102."""
+    returns, lengths = [], []
+    for start_seed in (100, 101, 102):
+        obs, _ = env.reset(seed=start_seed)
+        total, n, done = 0.0, 0, False
+        while not done:
+            obs, reward, terminated, truncated, _ = env.step(
+                model.predict(obs, deterministic=True)[0])
+            total += float(reward)
+            n += 1
+            done = terminated or truncated
+        returns.append(total)
+        lengths.append(n)
+    return returns, lengths
 
 
 def race(seeds: list[int], max_steps: int, out: Path) -> dict[str, Any]:
-    """PPO's defaults on CartPole-v1 and on ``cartpole-balance-v1`` side by side (two
-    processes at once, one a task, seed after seed): the training wall time until each is
-    solved."""
-    from concurrent.futures import ProcessPoolExecutor
+    """PPO's defaults (one thread) on Gymnasium's CartPole-v1 and on ``cartpole-balance-v1``,
+    interleaved in one process (a rollout of 2,048 steps and its update on one, then on the
+    other, so that both train under the same load), each scored on seeds 100-102 after every
+    rollout until solved: CartPole-v1's mean return 500; ours: no episode ends early and the
+    return at least 0.9 of the LQG's. The training wall time until each is solved."""
+    import gymnasium as gym
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.logger import Logger
 
+    torch.set_num_threads(1)
     recipe = runpy.run_path(str(RECIPES["ppo"]))
     config = recipe["CONFIG"]
     lqg = float(np.mean(recipe["expert_scores"](config, config["eval_seeds"])))
-    targets = {"CartPole-v1": {"reference": 500.0, "fraction": 1.0},
-               "equilibrist/cartpole-balance-v1": {"reference": lqg, "fraction": 0.9}}
+    targets = {"CartPole-v1": {"reference": 500.0, "fraction": 1.0, "length": 500},
+               "equilibrist/cartpole-balance-v1": {"reference": lqg, "fraction": 0.9,
+                                                   "length": 2000}}
     result: dict[str, Any] = {"targets": targets, "runs": []}
-    with ProcessPoolExecutor(2) as pool:
-        for seed in seeds:
-            jobs = [pool.submit(_race_one, env_id, seed, max_steps, targets[env_id])
-                    for env_id in RACE_IDS]
-            for job in jobs:
-                run_ = job.result()
-                result["runs"].append(run_)
-                print(f"  {run_['env_id']:<34} seed {seed}: solved at {run_['solved_at']} steps, "
-                      f"{run_['seconds']:.0f} s of training ({run_['wall']:.0f} s with scoring)",
-                      flush=True)
-            out.write_text(json.dumps(result, indent=1))
+    for seed in seeds:
+        runs = {}
+        for env_id in RACE_IDS:
+            model = PPO("MlpPolicy", gym.make(env_id), seed=seed, device="cpu")
+            model.set_logger(Logger(folder=None, output_formats=[]))
+            runs[env_id] = {"env_id": env_id, "seed": seed, "points": [], "solved_at": None,
+                            "seconds": 0.0, "model": model, "scoring": gym.make(env_id)}
+        while any(r["solved_at"] is None and r["model"].num_timesteps < max_steps
+                  for r in runs.values()):
+            for env_id, r in runs.items():
+                model = r["model"]
+                if r["solved_at"] is not None or model.num_timesteps >= max_steps:
+                    continue
+                start = time.perf_counter()
+                model.learn(model.n_steps, reset_num_timesteps=False)
+                r["seconds"] += time.perf_counter() - start
+                returns, lengths = _score(model, r["scoring"])
+                target = targets[env_id]
+                solved = (min(lengths) == target["length"] and float(np.mean(returns))
+                          >= target["fraction"] * target["reference"])
+                r["points"].append({"steps": model.num_timesteps, "seconds": r["seconds"],
+                                    "returns": returns, "lengths": lengths})
+                if solved:
+                    r["solved_at"] = model.num_timesteps
+        for r in runs.values():
+            del r["model"], r["scoring"]
+            result["runs"].append(r)
+            print(f"  {r['env_id']:<34} seed {seed}: solved at {r['solved_at']} steps, "
+                  f"{r['seconds']:.0f} s of training", flush=True)
+        out.write_text(json.dumps(result, indent=1))
     return result
 
 
@@ -310,7 +306,7 @@ def plot_race(result: dict[str, Any], path: Path) -> None:
         ax.axhline(1.0, color="0.6", ls=":")
         ax.grid(alpha=0.3)
     axes[0].set_xlabel("environment steps")
-    axes[1].set_xlabel("training wall time [s] (one thread, side by side)")
+    axes[1].set_xlabel("training wall time [s] (one thread, interleaved)")
     axes[0].set_ylabel("return / reference (500; the LQG's)")
     axes[0].legend(fontsize=8, loc="lower right")
     fig.suptitle("PPO (Stable-Baselines3 defaults) until solved, 3 seeds", fontsize=10)
@@ -352,7 +348,7 @@ def main() -> None:
         return
     if args.recipe == "race":
         out = Path(args.out or "rl_race.json")
-        plot_race(race(args.seeds, args.steps or 200_000, out), ROOT / "docs" / "images"
+        plot_race(race(args.seeds, args.steps or 150_000, out), ROOT / "docs" / "images"
                   / "rl_race.png")
         return
     if args.recipe == "plot":
