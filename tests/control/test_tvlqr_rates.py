@@ -62,3 +62,10 @@ def test_differenced_rates_take_the_full_state() -> None:
                            rates="differenced", balance="lqg")
     with pytest.raises(ControllerError, match="expected one of measured, differenced"):
         equilibrist.policy(system, controller="tvlqr", trajectory=_swing(system), rates="both")
+
+
+def test_the_kind_offers_what_the_controller_takes() -> None:
+    from equilibrist.control.tvlqr import RATES
+    from equilibrist.controllers.tvlqr import RATES as OFFERED
+
+    assert OFFERED == RATES
