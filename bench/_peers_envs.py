@@ -8,7 +8,8 @@ EnvPool's CartPole. It answers one JSON line per JSON line read on stdin:
   resets it: ``ready`` (seconds to make and reset) and ``first`` (the first
   step, which for gymnax compiles);
 * ``{"cmd": "time", "peer": P, "n": N, "seconds": S}``: ``per_step``, seconds
-  per step of all *N* copies, over about *S* seconds of steps.
+  per step of all *N* copies, over about *S* seconds of steps, and ``cpu_per_step``,
+  the CPU seconds of every thread of this process per step.
 
 Every peer steps with a fixed action (push right) through its own autoresets,
 at its 0.02 s step.
@@ -119,10 +120,11 @@ def main() -> int:
                 t0 = time.perf_counter()
                 step()
                 count = max(3, int(float(ask["seconds"]) / max(time.perf_counter() - t0, 1e-9)))
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 for _ in range(count):
                     step()
-                answer = {"per_step": (time.perf_counter() - t0) / (count * per)}
+                answer = {"per_step": (time.perf_counter() - t0) / (count * per),
+                          "cpu_per_step": (time.process_time() - c0) / (count * per)}
         except Exception as exc:
             answer = {"error": f"{type(exc).__name__}: {exc}".splitlines()[0][:300]}
         print(json.dumps(answer), flush=True)

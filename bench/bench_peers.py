@@ -25,7 +25,11 @@ gymnax and EnvPool.
    bench/_peers_envs.py), each contender timed in turn, repeated; the median
    of the repeats. And the first step's latency of each (its make and reset
    apart). Goals: the thread choice loses at most 10 % to one thread; at 4096
-   copies the step on all threads wins where the machine has the cores.
+   copies the step on all threads wins where the machine has the cores. Beside
+   the speeds, each contender's env-steps per CPU second (every thread of its
+   process) and its CPU seconds per wall second while it stepped: on a machine
+   shared with other programs, how much of the cores each got, apart from
+   what its step costs.
 
 The machine's load average is printed before and after.
 """
@@ -170,14 +174,19 @@ def ours(way: str, n: int) -> tuple[Any, dict[str, float]]:
     return (env, actions), {"ready": t1 - t0, "first": t2 - t1, "steps_per_call": 1}
 
 
+#: The CPU seconds (every thread of the process) each timing of ``_time_ours`` took, per step.
+_CPU: list[float] = []
+
+
 def _time_ours(made: tuple[Any, Any], seconds: float) -> float:
     env, actions = made
     t0 = time.perf_counter()
     env.step(actions)
     count = max(3, int(seconds / max(time.perf_counter() - t0, 1e-9)))
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for _ in range(count):
         env.step(actions)
+    _CPU.append((time.process_time() - c0) / count)
     return (time.perf_counter() - t0) / count
 
 
@@ -224,6 +233,8 @@ def env_table(python: str | None, seconds: float, repeats: int) -> dict[str, Any
             assert peer is not None
             first[(k, n)] = peer.ask(cmd="make", peer=k, n=n)
     times: dict[tuple[str, int], list[float]] = {key: [] for key in first}
+    # CPU seconds per step (all the process's threads): how much of the machine each got.
+    cpu: dict[tuple[str, int], list[float]] = {key: [] for key in first}
     for rep in range(repeats):
         for n in SIZES:
             order = [*OURS, *usable]
@@ -232,6 +243,7 @@ def env_table(python: str | None, seconds: float, repeats: int) -> dict[str, Any
                     continue
                 if k in OURS:
                     times[(k, n)].append(_time_ours(made[(k, n)], seconds))
+                    cpu[(k, n)].append(_CPU[-1])
                 else:
                     assert peer is not None
                     a = peer.ask(cmd="time", peer=k, n=n, seconds=seconds)
@@ -239,6 +251,7 @@ def env_table(python: str | None, seconds: float, repeats: int) -> dict[str, Any
                         first[(k, n)] = a
                     else:
                         times[(k, n)].append(float(a["per_step"]))
+                        cpu[(k, n)].append(float(a["cpu_per_step"]))
     # The choice against one thread, stepped in turn: the medians above take each way's
     # timings apart in time, which under load differ by tens of per cent between two
     # identical copies.
@@ -249,7 +262,12 @@ def env_table(python: str | None, seconds: float, repeats: int) -> dict[str, Any
     if peer:
         peer.close()
     rate = {f"{k}@{n}": n / statistics.median(v) for (k, n), v in times.items() if v}
+    # Env-steps per CPU second (what a step costs, whatever share of the cores it got) and the
+    # share itself (CPU seconds per wall second: 2 is both cores), over all the repeats.
+    per_cpu = {f"{k}@{n}": n * len(v) / sum(v) for (k, n), v in cpu.items() if v and sum(v) > 0}
+    share = {f"{k}@{n}": sum(cpu[(k, n)]) / sum(v) for (k, n), v in times.items() if v}
     return {"threads": thread_count(), "versions": versions, "usable": usable, "rate": rate,
+            "per_cpu": per_cpu, "share": share,
             "best_step": best, "paired": paired,
             "first": {f"{k}@{n}": v for (k, n), v in first.items()}, "chosen": chosen}
 
@@ -300,6 +318,12 @@ def print_envs(r: dict[str, Any]) -> None:
             ahead.append(f"N = {n}: {rate[f'auto@{n}'] / peers[best]:.2f}x the fastest peer "
                          f"({NAMES[best]})")
     print("ahead: " + "; ".join(ahead))
+    print("million env-steps per CPU second (all the process's threads), and in brackets its "
+          "CPU seconds per wall second while stepping (2: both cores)")
+    for k in (*OURS, *PEERS):
+        cells = [f"{r['per_cpu'][f'{k}@{n}'] / 1e6:.3f} ({r['share'][f'{k}@{n}']:.2f})"
+                 if f"{k}@{n}" in r.get("per_cpu", {}) else "-" for n in SIZES]
+        print(f"{NAMES[k]:28s}" + "".join(f"{c:>16s}" for c in cells))
     print("peers: " + ", ".join(f"{k} {v}" for k, v in r["versions"].items()))
 
 
