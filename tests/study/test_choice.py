@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from equilibrist.cli.main import main
-from equilibrist.study import make_study, read_study
+from equilibrist.study import load_study_file, make_study, read_study
 from support.networks import cartpole_lqr_network
 
 RATE = 200.0  # the cart-pole's control rate, the study's
@@ -65,14 +65,19 @@ def test_a_policy_is_a_value_of_the_controller_axis_named_by_its_file(tmp_path, 
     assert study.point(2)["controller"] == f"policy:{tmp_path / 'double.pt'}"
 
 
-def test_the_command_line_takes_kind_value(tmp_path, monkeypatch, capsys):
-    """``--vary controller=lqr,policy:FILE`` on the command line, a file relative to the
-    working folder; the study equals the one ``make_study`` describes."""
+def test_files_are_recorded_as_absolute_paths(tmp_path, monkeypatch, capsys):
+    """A file relative to the working folder is recorded as an absolute path."""
     _lqr_as_network(tmp_path / "net.pt")
     monkeypatch.chdir(tmp_path)
     study = make_study("cartpole", vary={"controller": "lqr,policy:net.pt"}, runs=2)
     assert study.axes[0].values == ("lqr", f"policy:{tmp_path / 'net.pt'}")
     assert study.controller == "lqg"
+    # A study file's controller, not varied, reads its file from beside the study file.
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "net.pt").write_bytes((tmp_path / "net.pt").read_bytes())
+    toml = tmp_path / "sub" / "one.toml"
+    toml.write_text('system = "cartpole"\ncontroller = "policy:net.pt"\n[vary]\nm_p = [0.1]\n')
+    assert load_study_file(toml).controller == f"policy:{tmp_path / 'sub' / 'net.pt'}"
 
 
 @pytest.mark.parametrize(("value", "expected"), [
