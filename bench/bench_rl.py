@@ -99,6 +99,7 @@ def plot(result: dict[str, Any], path: Path) -> None:
                    label=f"{result['expert_kind']} (same starts)")
         ax.axhline(result["max_return"], color="0.6", ls=":", label="maximum")
         ax.grid(alpha=0.3)
+    axes[0].xaxis.set_major_formatter(lambda v, _pos: f"{v / 1000:g}k")
     axes[0].set_xlabel("environment steps")
     axes[1].set_xlabel("training wall time [s] (one thread)")
     axes[0].set_ylabel("return (mean of 3 fixed starts)")
@@ -305,6 +306,7 @@ def plot_race(result: dict[str, Any], path: Path) -> None:
     for ax in axes:
         ax.axhline(1.0, color="0.6", ls=":")
         ax.grid(alpha=0.3)
+    axes[0].xaxis.set_major_formatter(lambda v, _pos: f"{v / 1000:g}k")
     axes[0].set_xlabel("environment steps")
     axes[1].set_xlabel("training wall time [s] (one thread, interleaved)")
     axes[0].set_ylabel("return / reference (500; the LQG's)")
