@@ -9,7 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-from tests.support.signals import signal_while_working
+from tests.support.signals import STOPS_WITHIN, signal_while_working
 
 
 def _children(pid: int) -> list[int]:
@@ -52,7 +52,7 @@ def test_ctrl_c_while_the_workers_compile_ends_the_demo_and_its_workers(tmp_path
     code, _, err, took = signal_while_working(proc, signal.SIGINT, compiling)
     assert code == 130, err.decode()
     assert err.decode().strip().splitlines()[-1] == "equilibrist: interrupted"
-    assert took < 10.0, f"took {took:.1f} s to stop"
+    assert took < STOPS_WITHIN, f"took {took:.1f} s to stop"
     assert workers, "the demo started no worker processes"
     time.sleep(0.5)
     assert not [w for w in workers if _alive(w)], "worker processes outlived the demo"

@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 import pytest
-from tests.support.signals import after_cpu, signal_while_working, start
+from tests.support.signals import STOPS_WITHIN, after_cpu, signal_while_working, start
 
 from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import simulate, simulate_batch
@@ -28,8 +28,6 @@ SIMULATE = ["simulate", "cartpole", "--duration", "2000", "--physics-step", "1e-
             "--no-progress", "--noise", "off", "--out", "run.npz"]
 BATCH = ["batch", "cartpole", "--runs", "4", "--duration", "20000", "--physics-step", "1e-5",
          "--no-progress", "--noise", "off", "--max-steps", "1e11", "--out", "batch.npz"]
-#: Seconds from the signal to the end: a loaded machine takes a few, the runs minutes.
-STOPS_WITHIN = 15.0
 
 
 @pytest.fixture(scope="module")

@@ -9,6 +9,12 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+#: Seconds from the signal to the command's end that count as "at once". Every signalled
+#: command here has minutes of work left (or is held for good), so a bound far below that
+#: tells a command that stops from one that runs on without guessing the machine's speed;
+#: a loaded machine takes a few seconds to deliver the signal and unwind.
+STOPS_WITHIN = 15.0
+
 
 def cpu_seconds(pid: int) -> float:
     """User and system CPU time a process has used so far (from /proc)."""
