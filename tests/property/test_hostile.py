@@ -282,10 +282,10 @@ def _interrupt_after_start(argv: list[str], folder: Path) -> tuple[int, bytes, b
 
 
 @pytest.mark.parametrize("argv", [
-    # One long run: 3000 s at 500 physics steps a sample (3e8 steps).
-    ["simulate", "cartpole", "--duration", "3000", "--physics-step", "1e-5", "--json",
+    # One long run: 3000 s at 5000 physics steps a sample (3e9 steps: minutes on any core).
+    ["simulate", "cartpole", "--duration", "3000", "--physics-step", "1e-6", "--json",
      "--out", "run.npz"],
-    ["simulate", "cartpole", "--duration", "3000", "--physics-step", "1e-5", "--no-progress",
+    ["simulate", "cartpole", "--duration", "3000", "--physics-step", "1e-6", "--no-progress",
      "--out", "run.npz"],
     # Many short runs: 1e9 steps in all.
     ["batch", "cartpole", "--runs", "100000", "--duration", "10", "--json", "--out", "b.csv"],
