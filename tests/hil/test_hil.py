@@ -23,7 +23,7 @@ from equilibrist.hil import protocol as proto
 from equilibrist.native.firmware import RT_PRIORITY
 from equilibrist.sim import SimResult
 from support import cc_cache, require
-from support.hil import FakeDevice, pty_link
+from support.hil import FakeDevice, host_on_link, pty_link
 
 CLI = [sys.executable, "-m", "equilibrist.cli.main"]
 
@@ -97,15 +97,9 @@ def exports(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return out
 
 
-def _hil(folder: Path, *argv: str) -> tuple[subprocess.CompletedProcess[str], list[str]]:
-    with pty_link() as link:
-        device = subprocess.Popen([str(folder / "hil_host"), link.paths[0]])
-        try:
-            done = _cli("hil", "cartpole", "--port", link.paths[1], *argv)
-        finally:
-            device.terminate()
-            device.wait(timeout=5)
-    return done, link.paths
+def _hil(folder: Path, *argv: str) -> subprocess.CompletedProcess[str]:
+    with host_on_link(folder / "hil_host") as port:
+        return _cli("hil", "cartpole", "--port", port, *argv)
 
 
 @pytest.mark.slow
@@ -118,15 +112,10 @@ def test_lockstep_equals_simulate(kind: str, exports: dict[str, Path], tmp_path:
     b = SimResult.load(tmp_path / "sim.npz")
     for payload, tolerance in (("float32", 1e-4), ("float64", 1e-9)):
         capsys.readouterr()
-        with pty_link() as link:
-            device = subprocess.Popen([str(exports[kind] / "hil_host"), link.paths[0]])
-            try:
-                status = main(["hil", "cartpole", "--port", link.paths[1], "--controller", kind,
-                               "--payload", payload, "--out", str(tmp_path / "hil.npz"), "--json",
-                               *args])
-            finally:
-                device.terminate()
-                device.wait(timeout=5)
+        with host_on_link(exports[kind] / "hil_host") as port:
+            status = main(["hil", "cartpole", "--port", port, "--controller", kind,
+                           "--payload", payload, "--out", str(tmp_path / "hil.npz"), "--json",
+                           *args])
         out = capsys.readouterr()
         assert status == 0, out.err
         figures = json.loads(out.out)
@@ -147,7 +136,7 @@ def test_lockstep_equals_simulate(kind: str, exports: dict[str, Path], tmp_path:
 
 @pytest.mark.slow
 def test_realtime_at_200_hz_reports_its_figures(exports: dict[str, Path], tmp_path: Path) -> None:
-    done, _ = _hil(exports["lqg"], "--mode", "realtime", "--duration", "2", "--x0", "theta=0.05",
+    done = _hil(exports["lqg"], "--mode", "realtime", "--duration", "2", "--x0", "theta=0.05",
                    "--json", "--out", str(tmp_path / "rt.csv"))
     assert done.returncode == 0, done.stderr
     fig = json.loads(done.stdout)
@@ -193,7 +182,7 @@ def test_the_device_on_a_pseudo_terminal_of_its_own(exports: dict[str, Path], tm
             device.wait()
         assert device.stdout is not None
         device.stdout.close()
-    joined, _ = _hil(exports["lqg"], "--duration", "0.5", "--x0", "theta=0.05", "--json",
+    joined = _hil(exports["lqg"], "--duration", "0.5", "--x0", "theta=0.05", "--json",
                      "--out", str(tmp_path / "joined.npz"))
     assert joined.returncode == 0, joined.stderr
     a, b = SimResult.load(tmp_path / "direct.npz"), SimResult.load(tmp_path / "joined.npz")

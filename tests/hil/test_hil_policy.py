@@ -21,7 +21,7 @@ from equilibrist.control.design import design
 from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import SimResult
 from support import require
-from support.hil import pty_link
+from support.hil import host_on_link
 from support.networks import CARTPOLE_F_MAX, CARTPOLE_SCALES
 
 
@@ -60,16 +60,11 @@ def test_a_policy_on_the_device_answers_its_torch_forward_pass(
                           text=True, check=False)
     assert made.returncode == 0, made.stderr
     capsys.readouterr()
-    with pty_link() as link:
-        device = subprocess.Popen([str(folder / "hil_host"), link.paths[0]])
-        try:
-            status = main(["hil", "cartpole", "--port", link.paths[1], "--policy", str(path),
-                           "--payload", "float64", "--noise", "off", "--duration", "1",
-                           "--x0", "theta=0.25", "--x0", "x=-0.3", "--json",
-                           "--out", str(tmp_path / "hil.npz")])
-        finally:
-            device.terminate()
-            device.wait(timeout=5)
+    with host_on_link(folder / "hil_host") as port:
+        status = main(["hil", "cartpole", "--port", port, "--policy", str(path),
+                       "--payload", "float64", "--noise", "off", "--duration", "1",
+                       "--x0", "theta=0.25", "--x0", "x=-0.3", "--json",
+                       "--out", str(tmp_path / "hil.npz")])
     out = capsys.readouterr()
     assert status == 0, out.err
     figures = json.loads(out.out)

@@ -19,7 +19,7 @@ from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import SimResult
 from equilibrist.tasks import get_task
 from support import require
-from support.hil import pty_link
+from support.hil import host_on_link
 
 
 @pytest.mark.slow
@@ -42,14 +42,9 @@ def test_a_planned_swing_up_on_the_device_equals_simulate(tmp_path: Path,
     assert main(["simulate", "cartpole", *args, "--out", str(tmp_path / "sim.npz")]) == 0
     want = SimResult.load(tmp_path / "sim.npz")
     capsys.readouterr()
-    with pty_link() as link:
-        device = subprocess.Popen([str(folder / "hil_host"), link.paths[0]])
-        try:
-            status = main(["hil", "cartpole", "--port", link.paths[1], "--payload", "float64",
-                           "--out", str(tmp_path / "hil.npz"), "--json", *args])
-        finally:
-            device.terminate()
-            device.wait(timeout=5)
+    with host_on_link(folder / "hil_host") as port:
+        status = main(["hil", "cartpole", "--port", port, "--payload", "float64",
+                       "--out", str(tmp_path / "hil.npz"), "--json", *args])
     out = capsys.readouterr()
     assert status == 0, out.err
     figures = json.loads(out.out)

@@ -15,11 +15,13 @@ from __future__ import annotations
 import os
 import select
 import struct
+import subprocess
 import threading
 import time
 import tty
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
+from pathlib import Path
 
 from equilibrist.hil import protocol as proto
 from equilibrist.native.firmware import VERSION
@@ -77,6 +79,20 @@ def pty_link() -> Iterator[PtyLink]:
         yield link
     finally:
         link.cut()
+
+
+@contextmanager
+def host_on_link(host: Path) -> Iterator[str]:
+    """The exported host program *host* (``hil_host``) as the device on one end of a
+    pseudo-terminal link: yields the other end's path (the command's ``--port``), and stops
+    the device when done."""
+    with pty_link() as link:
+        device = subprocess.Popen([str(host), link.paths[0]])
+        try:
+            yield link.paths[1]
+        finally:
+            device.terminate()
+            device.wait(timeout=5)
 
 
 class FakeDevice(threading.Thread):
