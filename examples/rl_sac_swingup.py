@@ -8,7 +8,8 @@ cart-pole reward in [0, 1] per step; on the acrobot both links must be up), obse
 in Bryson units with each hanging angle as its cosine and sine, 750 steps in an episode of
 15 s. It is scored with its deterministic policy on fixed starts, beside the same policy
 untrained and the project's energy swing-up (``envs.expert(env, "swingup")``) on the same
-starts. Each task's whole configuration is its entry in ``CONFIGS``.
+starts. Each task's whole configuration is its entry in ``CONFIGS`` (``swingup_config``: the
+same settings for each rig).
 
 ``python examples/rl_sac_swingup.py [cartpole|acrobot]`` runs the full training (300,000
 steps: hours on one core), ``--steps 3000`` a short one. Needs
@@ -30,9 +31,11 @@ from stable_baselines3.common.logger import Logger
 import equilibrist.envs  # noqa: F401  (registers the environments)
 from equilibrist.envs.expert import expert
 
-CONFIGS: dict[str, dict[str, Any]] = {
-    "cartpole": {
-        "env_id": "equilibrist/cartpole-swingup-v1",
+
+def swingup_config(system: str) -> dict[str, Any]:
+    """The configuration of SAC on *system*'s swing-up (``<system>-swingup-v1``)."""
+    return {
+        "env_id": f"equilibrist/{system}-swingup-v1",
         "env_options": {"rate": 50.0},
         "algorithm": "SAC",
         "policy": "MlpPolicy",
@@ -41,19 +44,11 @@ CONFIGS: dict[str, dict[str, Any]] = {
         "seed": 0,
         "eval_seeds": [100, 101, 102],
         "expert": "swingup",
-    },
-    "acrobot": {
-        "env_id": "equilibrist/acrobot-swingup-v1",
-        "env_options": {"rate": 50.0},
-        "algorithm": "SAC",
-        "policy": "MlpPolicy",
-        "hyperparameters": {},  # Stable-Baselines3's defaults
-        "steps": 300_000,
-        "seed": 0,
-        "eval_seeds": [100, 101, 102],
-        "expert": "swingup",
-    },
-}
+    }
+
+
+CONFIGS: dict[str, dict[str, Any]] = {system: swingup_config(system)
+                                      for system in ("cartpole", "acrobot")}
 
 
 def make_env(config: dict[str, Any], **overrides: Any) -> gym.Env:

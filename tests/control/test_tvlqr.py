@@ -15,6 +15,7 @@ from equilibrist.control.trajectory_file import load_trajectory
 from equilibrist.control.tvlqr import LAYOUT
 from equilibrist.controllers.kinds import ControllerRequest, build_controller
 from equilibrist.sim.run import simulate
+from support.export import make_check
 
 
 def _controller(system, path: Path, catch: str = "on"):
@@ -114,8 +115,6 @@ def test_the_export_replays_a_tracked_swing_up_to_the_bit(
         cart_plan: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The TVLQR exports as any NonlinearController: its source translated to C, vectors
     recorded from where the plan starts (hanging), make check exact."""
-    import shutil
-    import subprocess
 
     out = tmp_path / "tv"
     assert main(["export", "cartpole", "--controller", "tvlqr", "--trajectory", str(cart_plan),
@@ -123,12 +122,7 @@ def test_the_export_replays_a_tracked_swing_up_to_the_bit(
     report = json.loads(capsys.readouterr().out)
     assert report["controller"] == "tvlqr"
     assert report["vector_start"]["theta"] == pytest.approx(math.pi, abs=1e-9)
-    if shutil.which("make") is None:
-        pytest.fail("make is needed (CI has it)")
-    check = subprocess.run(["make", "check"], cwd=out, capture_output=True, text=True,
-                           timeout=600, check=False)
-    assert check.returncode == 0, check.stdout + check.stderr
-    assert " 0 mismatches" in check.stdout
+    assert " 0 mismatches" in make_check(out)
     # The export needs its plan as simulate does.
     assert main(["export", "cartpole", "--controller", "tvlqr", "--out", str(tmp_path / "x")]) == 2
     assert "--trajectory" in capsys.readouterr().err

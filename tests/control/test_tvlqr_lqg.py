@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import math
 import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +18,7 @@ from equilibrist.control.tvlqr import LAYOUT_LQG, SOURCE, kalman_along
 from equilibrist.controllers.kinds import ControllerRequest, build
 from equilibrist.sim.noise import Noise
 from equilibrist.sim.run import simulate
+from support.export import make_check
 
 RATE = 200.0
 
@@ -158,12 +158,7 @@ def test_the_command_line_and_the_export_replay_the_estimating_controller_to_the
     assert report["controller"] == "tvlqr"
     header = (folder / "tvlqr.h").read_text()
     assert "tvlqr_estimate" in header
-    if shutil.which("make") is None:
-        pytest.fail("make is needed (CI has it)")
-    check = subprocess.run(["make", "check"], cwd=folder, capture_output=True, text=True,
-                           timeout=600, check=False)
-    assert check.returncode == 0, check.stdout + check.stderr
-    assert "1001 samples, 0 mismatches" in check.stdout, check.stdout
+    assert "1001 samples, 0 mismatches" in make_check(folder)
 
 
 def test_a_bad_balance_is_one_line_exit_2(cart_plan: Path, capsys: pytest.CaptureFixture[str]

@@ -5,7 +5,6 @@ changed after as the value it is, and a type of one's own with the exporter it r
 
 from __future__ import annotations
 
-import subprocess
 from dataclasses import fields
 from pathlib import Path
 
@@ -21,7 +20,7 @@ from equilibrist.errors import ExportError
 from equilibrist.export import writer
 from equilibrist.numeric.system import System
 from equilibrist.sim.run import simulate
-from support import require
+from support.export import make_check
 
 
 @pytest.fixture(scope="module")
@@ -38,15 +37,6 @@ def _hand_built(d: Design) -> LinearController:
         outputs=plant.output_names, x_op=plant.x0, u_op=plant.u0, rate=200.0,
         form=d.kalman_form, state_names=plant.state_names,
         input_names=plant.input_names, u_min=[-30.0], u_max=[30.0])
-
-
-def _make_check(folder: Path) -> str:
-    require("cc")
-    require("make")
-    done = subprocess.run(["make", "-s", "-C", str(folder), "check"], capture_output=True,
-                          text=True, check=False)
-    assert done.returncode == 0, done.stdout + done.stderr
-    return done.stdout
 
 
 def test_as_nonlinear_runs_to_the_bit_as_the_linear_controller(cart: tuple[System, Design]) -> None:
@@ -71,7 +61,7 @@ def test_a_hand_built_linear_controller_exports_and_checks_bit_for_bit(
     assert writer.exporter_of(lin) is writer._export_linear
     report = writer.export_controller(lin, tmp_path / "hand", system=system)
     assert (tmp_path / "hand" / "lqg.c").exists() and "hil_host.c" in report.files
-    assert " 0 mismatches" in _make_check(tmp_path / "hand")
+    assert " 0 mismatches" in make_check(tmp_path / "hand")
 
 
 def test_a_design_controller_is_the_design_library_until_it_is_changed(
@@ -84,7 +74,7 @@ def test_a_design_controller_is_the_design_library_until_it_is_changed(
     assert not writer.made_by_design(moved) and writer.made_by_design(as_made)
     writer.export_controller(moved, tmp_path / "moved", system=system)
     assert not (tmp_path / "moved" / "cartpole_lqg.h").exists()
-    assert " 0 mismatches" in _make_check(tmp_path / "moved")
+    assert " 0 mismatches" in make_check(tmp_path / "moved")
 
 
 def test_the_exporter_follows_the_type(cart: tuple[System, Design]) -> None:

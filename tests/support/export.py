@@ -1,8 +1,27 @@
-"""Helpers of the C export's tests: the controller's documented equations in numpy."""
+"""Helpers of the C export's tests: ``make check`` in an exported folder, and the
+controller's documented equations in numpy."""
 
 from __future__ import annotations
 
+import subprocess
+from collections.abc import Mapping
+from pathlib import Path
+
 import numpy as np
+
+from support import require
+
+
+def make_check(folder: Path, env: Mapping[str, str] | None = None) -> str:
+    """``make check`` in the exported *folder*: the recorded vectors replayed by the
+    compiled controller, its exit status 0 (what it printed, for the caller's checks of
+    its count of mismatches)."""
+    require("make")
+    require("cc")
+    done = subprocess.run(["make", "check"], cwd=folder, capture_output=True, text=True,
+                          timeout=600, check=False, env=None if env is None else dict(env))
+    assert done.returncode == 0, done.stdout + done.stderr
+    return done.stdout
 
 
 def reference_run(data, ys, rs):
