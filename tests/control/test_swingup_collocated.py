@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from equilibrist import get_system
-from equilibrist.control.swingup import ACTUATED, plant_scales, swingup
+from equilibrist.control.swingup import swingup
 from equilibrist.control.swingup_law import CP, energy, python_namespace
+from equilibrist.control.swingup_scales import ACTUATED, plant_scales
 from equilibrist.sim.run import simulate
 
 #: The rigs and their laws: the catalogue's and DFKI's (RealAIGym's design C.1), each robot.

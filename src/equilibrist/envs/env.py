@@ -21,10 +21,10 @@ from equilibrist.envs.core import (
     OPTION_DEFAULTS,
     Core,
     EnvError,
-    RigEpisode,
     as_actions,
     build_core,
 )
+from equilibrist.envs.rig_episode import RigEpisode
 from equilibrist.errors import DimensionError, nearest
 from equilibrist.sim.noise import generator_state
 from equilibrist.sim.steps import EnvSteps
@@ -212,7 +212,7 @@ class EquilibristEnv(gym.Env[np.ndarray, np.ndarray]):
         (:class:`~equilibrist.sim.rig.Rig`, or its options as a mapping:
         ``{"torque_response": 0.5, "measurement_delay": 2}``): each episode
         steps the loop ``simulate`` runs with that rig
-        (:class:`~equilibrist.envs.core.RigEpisode`), and ``simulate(...,
+        (:class:`~equilibrist.envs.rig_episode.RigEpisode`), and ``simulate(...,
         rig=rig, seed=info["noise_seed"])`` of the same actions is the same
         numbers.
 

@@ -21,7 +21,7 @@ parameters, then the noise of its episode. ``reset()`` without a seed
 continues every copy's stream.
 
 With a rig (the option ``rig``), each copy steps the loop ``simulate`` runs
-with that rig (:class:`~equilibrist.envs.core.RigEpisode`), one copy after
+with that rig (:class:`~equilibrist.envs.rig_episode.RigEpisode`), one copy after
 the other in Python: copy ``i`` is the single environment reset with
 ``seed + i`` (or ``seeds[i]``), the same numbers, and its ``noise_seed``
 (in the reset's info) is the integer ``simulate(..., seed=...)`` takes.
@@ -39,8 +39,9 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from equilibrist.envs.core import Core, EnvError, RigEpisode, as_actions
+from equilibrist.envs.core import Core, EnvError, as_actions
 from equilibrist.envs.env import Renderer, _spaces, open_core
+from equilibrist.envs.rig_episode import RigEpisode
 from equilibrist.sim.steps import EnvSteps
 
 # Fewer copies than this step on one thread: starting a parallel region
@@ -430,7 +431,7 @@ class EquilibristVectorEnv(VectorEnv[np.ndarray, np.ndarray, np.ndarray]):
 
 class _RigCopies:
     """The copies of a vector environment with a rig: each its own generator and
-    :class:`~equilibrist.envs.core.RigEpisode`, the single environment's, stepped in turn;
+    :class:`~equilibrist.envs.rig_episode.RigEpisode`, the single environment's, stepped in turn;
     their states, parameters and periods taken written into the copies' rows."""
 
     def __init__(self, core: Core, fs: np.ndarray, us: np.ndarray) -> None:

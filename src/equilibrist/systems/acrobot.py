@@ -76,7 +76,7 @@ if TYPE_CHECKING:  # sympy is imported only when the model is derived
 _ENCODER = 2.0 * math.pi / 4096 / math.sqrt(12.0)
 
 
-#: The acrobot's swing-up gains, in the rig's own scales (``control/swingup.py``'s
+#: The acrobot's swing-up gains, in the rig's own scales (``control/swingup_scales.py``'s
 #: ``plant_scales``, docs/swingup.md): k_D and k_P as shares of the bounds of Xin and Kaneda's
 #: conditions (``k_d_bound``, ``k_p_bound``: the catalogue acrobot's former k_D = 30, k_P = 60),
 #: the damping ratio ``zeta`` of the elbow's loop, and the pump from rest: a quarter of the
