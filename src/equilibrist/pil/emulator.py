@@ -1,7 +1,7 @@
 """The firmware running in its chip's emulator, its UART on a pseudo-terminal.
 
 - ``uno``: simavr, through a small harness linked with ``libsimavr``
-  (:data:`~equilibrist.pil.boards.SIMAVR_HARNESS`, built once and cached):
+  (:data:`~equilibrist.pil.simavr_harness.SIMAVR_HARNESS`, built once and cached):
   the ATmega328P at 16 MHz, its USART0 bridged to a pseudo-terminal, its
   cycle counter read at the firmware's marks.
 - ``cortex-m4f``, ``cortex-m0``: QEMU (``netduinoplus2``, ``microbit``) with
@@ -33,8 +33,8 @@ from pathlib import Path
 from typing import IO
 
 from equilibrist.errors import quote_outside
-from equilibrist.pil import boards
 from equilibrist.pil.firmware import Firmware, cache_folder
+from equilibrist.pil.simavr_harness import SIMAVR_HARNESS
 from equilibrist.pil.targets import PILError, Target
 
 #: How long the emulator may take to open its pseudo-terminal [s].
@@ -70,13 +70,13 @@ def harness() -> str:
     if shutil.which("cc") is None:
         raise PILError("--target uno needs a C compiler for its simavr harness: install gcc "
                        "(Debian: apt-get install gcc)")
-    digest = hashlib.sha256(boards.SIMAVR_HARNESS.encode()).hexdigest()[:16]
+    digest = hashlib.sha256(SIMAVR_HARNESS.encode()).hexdigest()[:16]
     program = cache_folder() / f"pil_simavr-{digest}"
     if program.exists():
         return str(program)
     work = Path(tempfile.mkdtemp(prefix=".build-simavr-", dir=cache_folder()))
     try:
-        (work / "pil_simavr.c").write_text(boards.SIMAVR_HARNESS)
+        (work / "pil_simavr.c").write_text(SIMAVR_HARNESS)
         done = subprocess.run(["cc", "-O2", "-o", "pil_simavr", "pil_simavr.c", "-lsimavr"],
                               cwd=work, capture_output=True, text=True, check=False, timeout=300)
         if done.returncode != 0:
