@@ -182,35 +182,49 @@ def policy_step(folder: Path) -> dict[str, float]:
     return {"us_per_step": us, "max_abs_error": float(np.abs(got - want).max())}
 
 
-def throughput(copies: int = 16, rollouts: int = 6) -> dict[str, float]:
-    """PPO's training steps per second on *copies* copies of ``cartpole-balance-v1``: the
-    adapter over the native vector environment against Stable-Baselines3's ``DummyVecEnv``
-    of as many single environments (``make_vec_env``), the same PPO (rollouts of 128 steps a
-    copy, one epoch), one thread, the best of interleaved repetitions."""
+def throughput(algorithm: str = "ppo", copies: int = 16, rollouts: int = 6) -> dict[str, float]:
+    """Training steps per second on *copies* copies of a task: the adapter over the native
+    vector environment against Stable-Baselines3's ``DummyVecEnv`` of as many single
+    environments (``make_vec_env``), the same learner, one thread, the best of three
+    interleaved repetitions. PPO on ``cartpole-balance-v1`` (rollouts of 128 steps a copy,
+    one epoch, so that stepping weighs as much as it does in a collection-bound training);
+    SAC on ``cartpole-swingup-v1`` at 50 Hz with its defaults (one gradient step of a batch
+    of 256 after each step of the copies)."""
     import torch
-    from stable_baselines3 import PPO
+    from stable_baselines3 import PPO, SAC
+    from stable_baselines3.common.base_class import BaseAlgorithm
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.logger import Logger
 
     from equilibrist.envs.sb3 import sb3_vec_env
 
     torch.set_num_threads(1)
-    env_id = "equilibrist/cartpole-balance-v1"
-    makers = {"adapter": lambda: sb3_vec_env(env_id, num_envs=copies, seed=0),
-              "DummyVecEnv": lambda: make_vec_env(env_id, n_envs=copies, seed=0)}
+    if algorithm == "ppo":
+        env_id, options, steps = "equilibrist/cartpole-balance-v1", {}, copies * 128 * rollouts
+
+        def learner(env: Any) -> BaseAlgorithm:
+            return PPO("MlpPolicy", env, n_steps=128, batch_size=copies * 128, n_epochs=1,
+                       seed=0, device="cpu")
+    else:
+        env_id, options, steps = "equilibrist/cartpole-swingup-v1", {"rate": 50}, copies * 200
+
+        def learner(env: Any) -> BaseAlgorithm:
+            return SAC("MlpPolicy", env, seed=0, device="cpu")
+    makers = {"adapter": lambda: sb3_vec_env(env_id, num_envs=copies, seed=0, **options),
+              "DummyVecEnv": lambda: make_vec_env(env_id, n_envs=copies, seed=0,
+                                                  env_kwargs=options)}
     best = dict.fromkeys(makers, 0.0)
-    steps = copies * 128 * rollouts
     for _ in range(3):
         for name, make in makers.items():
-            model = PPO("MlpPolicy", make(), n_steps=128, batch_size=copies * 128, n_epochs=1,
-                        seed=0, device="cpu")
+            model = learner(make())
             model.set_logger(Logger(folder=None, output_formats=[]))  # no folder in /tmp
-            model.learn(copies * 128)  # warm
+            model.learn(copies * 128)  # warm (and past SAC's first 100 steps without learning)
             start = time.perf_counter()
             model.learn(steps, reset_num_timesteps=False)
             best[name] = max(best[name], steps / (time.perf_counter() - start))
-    print(f"PPO on {copies} copies: adapter {best['adapter']:,.0f} steps/s, DummyVecEnv "
-          f"{best['DummyVecEnv']:,.0f} steps/s, ratio {best['adapter'] / best['DummyVecEnv']:.2f}")
+    print(f"{algorithm.upper()} on {copies} copies of {env_id} {options}: adapter "
+          f"{best['adapter']:,.0f} steps/s, DummyVecEnv {best['DummyVecEnv']:,.0f} steps/s, "
+          f"ratio {best['adapter'] / best['DummyVecEnv']:.2f}")
     return best
 
 
@@ -343,10 +357,12 @@ def main() -> None:
     parser.add_argument("--out", default=None)
     parser.add_argument("--env", default=None,
                         help="another task for the recipe (equilibrist/furuta-balance-v1)")
+    parser.add_argument("--algorithm", choices=["ppo", "sac"], default="ppo",
+                        help="throughput: the learner (PPO on the balance, SAC on the swing-up)")
     parser.add_argument("--name", default="ppo", help="plot: the figure's name (rl_NAME.png)")
     args = parser.parse_args()
     if args.recipe == "throughput":
-        throughput()
+        throughput(args.algorithm)
         return
     if args.recipe == "race":
         out = Path(args.out or "rl_race.json")
