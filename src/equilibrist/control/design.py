@@ -47,12 +47,17 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.control import checks
+from equilibrist.control import checks, fixed
 from equilibrist.control.design_cache import (
     _kept_on_disk,
 )
 from equilibrist.control.design_record import Design, _sorted
-from equilibrist.control.discretize import METHODS, discrete_noise, discretize
+from equilibrist.control.discretize import (
+    METHODS,
+    discrete_noise,
+    discretize,
+    with_input_delay,
+)
 from equilibrist.control.kalman import FORMS
 from equilibrist.control.reference import discrete_reference_gain, reference_gain
 from equilibrist.control.riccati import (
@@ -89,12 +94,14 @@ def design(
     kalman_form: str = "current",
     G: object | None = None,
     at: Mapping[str, float] | None = None,
+    delay: int = 0,
 ) -> Design:
     """Design LQR, Kalman filter and reference gain for *system* at its canonical point.
 
     With *at*, the design is made at another operating point: the
     equilibrium with the given states (``{"theta": math.pi}``), its other
-    components solved as for the canonical one.
+    components solved as for the canonical one. With *delay*, the design compensates
+    a loop that many control periods late (:func:`delayed`).
 
     Parameters
     ----------
@@ -124,6 +131,12 @@ def design(
     at:
         States of the operating point to design at (the others solved);
         None: the canonical operating point.
+    delay:
+        The loop's delay in whole control periods that the design compensates (a command
+        acting that many periods after it is sent, or a measurement that many periods
+        late): the gains are designed on the sampled plant extended by the commands in
+        flight (:func:`delayed`). Needs a *rate*. Default 0: the design of the plant as
+        it is.
 
     Returns
     -------
@@ -147,15 +160,16 @@ def design(
                           f"not {type(system).__name__}")
     discretization, kalman_form, rate_hz = _checked_options(
         system, outputs=outputs, at=at, discretization=discretization, kalman_form=kalman_form,
-        rate=rate,
+        rate=rate, delay=delay,
     )
     if system.n_inputs == 0:
         raise DesignError(f"{system.key} has no input: there is no controller to design")
     names = tuple(system.output_names if outputs is None else outputs)
     plant = _operating_plant(system, names, at=at, rate_hz=rate_hz)
     weights = _design_weights(system, plant, names, q=q, r=r, qn=qn, rn=rn, G=G, rate_hz=rate_hz)
-    return _solved(system, plant, names, weights, rate_hz=rate_hz,
+    made = _solved(system, plant, names, weights, rate_hz=rate_hz,
                    discretization=discretization, kalman_form=kalman_form)
+    return delayed(made, int(delay)) if delay else made
 
 
 def _checked_options(
@@ -166,6 +180,7 @@ def _checked_options(
     discretization: str,
     kalman_form: str,
     rate: float | None,
+    delay: object = 0,
 ) -> tuple[str, str, float | None]:
     """The options of :func:`design` checked, every problem at once: the discretization and
     Kalman form (the defaults in place of one that is not a string) and the rate in Hz.
@@ -212,6 +227,11 @@ def _checked_options(
                 problems.append(
                     f"rate must be a positive number of samples per second (Hz), got {rate_hz:g}"
                 )
+    if isinstance(delay, bool) or not isinstance(delay, int | np.integer) or delay < 0:
+        problems.append(f"delay = {delay!r}: expected a whole number of control periods >= 0")
+    elif delay and rate is None:
+        problems.append(f"delay = {delay}: a delay in control periods needs a discrete design "
+                        "(give a rate)")
     checks.raise_if(problems)
     return discretization, kalman_form, rate_hz
 
@@ -426,6 +446,116 @@ def _solved(
     )
 
 
+def delayed(made: Design, periods: int) -> Design:
+    """*made*, a discrete design, designed again for a loop *periods* control periods late.
+
+    The model is the sampled plant extended by the commands sent but not yet acted
+    (:func:`~equilibrist.control.discretize.with_input_delay`:
+    ``x_{k+1} = Ad x_k + Bd u_{k-N}``, the state ``[x; u_{k-N}; ...; u_{k-1}]``), and every
+    gain is that model's:
+
+    * the LQR minimizes the same ``sum x'Q x + u'R u`` on it (the commands in flight
+      weighed by zero), so ``K = [Kx, K_{N}, ..., K_{1}]`` acts on the plant's state and
+      on each command in flight (the undelayed gain on the state predicted over the
+      delay);
+    * the Kalman filter is the stationary filter of that model with the process noise on
+      the plant's states only: the commands in flight are known exactly, so its a-priori
+      covariance is the undelayed one's ``P`` beside zeros, the stabilizing solution of
+      the extended model's Riccati equation, and its gain is the undelayed gain beside
+      zeros. It estimates the plant's state the measurements describe and predicts with
+      the command sent ``N`` periods before;
+    * the reference gain is the extended loop's (the same steady state).
+
+    The weights ``Q, R, QN, RN, G`` stay the plant's (what was asked); ``discrete``,
+    ``K, S, poles, Kf, P, Qd, Kc, estimator_poles`` are the extended model's, and
+    :attr:`Design.delay` is *periods*. ``periods = 0`` returns *made*.
+
+    Raises
+    ------
+    DesignError
+        A continuous design, a design already delayed, or *periods* not a whole number >= 0.
+    """
+    if isinstance(periods, bool) or not isinstance(periods, int | np.integer) or periods < 0:
+        raise DesignError(f"delay = {periods!r}: expected a whole number of control periods >= 0")
+    if periods == 0:
+        return made
+    if made.discrete is None or made.rate is None or made.Qd is None or made.Rd is None:
+        raise DesignError("a delay in control periods needs a discrete design (give a rate)")
+    if made.delay:
+        raise DesignError(f"the design already compensates a delay of {made.delay} period(s): "
+                          "delay the design made without one")
+    N = int(periods)
+    model = with_input_delay(made.discrete, N)
+    n, size = made.discrete.n_states, model.n_states
+    Q = np.zeros((size, size))
+    Q[:n, :n] = made.Q
+    K, S, E = dlqr(model.A, model.B, Q, made.R, state_names=model.state_names)
+    P = np.zeros((size, size))
+    P[:n, :n] = made.P
+    Qd = np.zeros((size, size))
+    Qd[:n, :n] = made.Qd
+    M = current_gain(P, model.C, made.Rd)
+    L = fixed.matmul(model.A, M)
+    Kf = M if made.kalman_form == "current" else L
+    Kc, kc_note = made.Kc, made.kc_note
+    if made.tracked:
+        m = model.n_inputs
+        try:
+            Kc = discrete_reference_gain(model.A, model.B, model.C[:m], K,
+                                         tracked_names=made.tracked,
+                                         input_names=model.input_names)
+            kc_note = ""
+        except DesignError as exc:
+            Kc, kc_note = None, str(exc)
+    return replace(
+        made, discrete=model, K=K, S=S, poles=_sorted(E, True), Kf=Kf, P=P, Qd=Qd, Kc=Kc,
+        kc_note=kc_note, estimator_poles=_sorted(np.linalg.eigvals(model.A - L @ model.C), True),
+        delay=N,
+    )
+
+
+def delay_periods(value: object, rate: float) -> int:
+    """A loop delay as whole control periods at *rate* [Hz]: *value* is a whole number of
+    periods (``2``, ``"2"``) or seconds as text (``"4ms"``, ``"0.004s"``), which must be a
+    whole number of periods at *rate* (``0.004s`` at 500 Hz is 2; at 200 Hz, 0.8 periods,
+    it is refused). The command line's ``--design-delay``.
+
+    Raises
+    ------
+    DesignError
+        A value of neither form, a negative one, or seconds that are no whole number of
+        periods (naming how many periods they are).
+    """
+    expected = "a whole number of control periods >= 0, or seconds (4ms, 0.004s)"
+    if isinstance(value, bool):
+        raise DesignError(f"design delay {value!r}: expected {expected}")
+    if isinstance(value, int | np.integer):
+        if value < 0:
+            raise DesignError(f"design delay {value}: expected {expected}")
+        return int(value)
+    word = str(value).strip()
+    scale = 1e-3 if word.endswith("ms") else 1.0 if word.endswith("s") else None
+    try:
+        if scale is None:
+            periods = int(word)
+            if periods < 0:
+                raise ValueError(word)
+            return periods
+        seconds = float(word[: -2 if scale == 1e-3 else -1]) * scale
+    except ValueError:
+        raise DesignError(f"design delay {word!r}: expected {expected}") from None
+    exact = seconds * float(rate)
+    if not (math.isfinite(exact) and exact >= 0):
+        raise DesignError(f"design delay {word!r}: expected {expected}")
+    whole = round(exact)
+    if abs(exact - whole) > 1e-9 * max(1.0, exact):
+        raise DesignError(f"design delay {word} is {exact:g} control periods at {rate:g} Hz: "
+                          "expected a whole number of periods")
+    return int(whole)
+
+
 __all__ = [
+    "delay_periods",
+    "delayed",
     "design",
 ]

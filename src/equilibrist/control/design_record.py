@@ -82,6 +82,13 @@ class Design:
         the same for both forms).
     notes:
         Choices made on the user's behalf (a process-noise floor).
+    delay:
+        The loop's delay in control periods the design compensates (0: none). With a
+        delay, ``discrete`` is the sampled plant extended by the commands in flight
+        (:func:`~equilibrist.control.discretize.with_input_delay`, states
+        :attr:`model_state_names`) and ``K, S, poles, Kf, P, Qd, Kc, estimator_poles`` are
+        that model's (:func:`~equilibrist.control.design.delayed`); ``plant`` and the
+        weights ``Q, R, QN, RN, G`` stay the plant's.
     """
 
     system_key: str
@@ -108,6 +115,7 @@ class Design:
     tracked: tuple[str, ...]
     estimator_poles: np.ndarray
     notes: tuple[str, ...] = field(default=())
+    delay: int = 0
 
     def __repr__(self) -> str:  # one line; a notebook shows the tables (equilibrist.notebook)
         timebase = "continuous" if self.rate is None else f"{self.rate:g} Hz"
@@ -141,6 +149,12 @@ class Design:
     @property
     def output_names(self) -> tuple[str, ...]:
         return self.plant.output_names
+
+    @property
+    def model_state_names(self) -> tuple[str, ...]:
+        """The states of :attr:`model`, whose are the gains' columns: the plant's, then
+        (with a :attr:`delay`) the commands in flight, oldest first."""
+        return self.model.state_names
 
     @property
     def r0(self) -> np.ndarray:
@@ -206,7 +220,8 @@ class Design:
     def _margins(self, controller: str) -> Margins | None:
         if self.plant.n_inputs != 1:
             return None
-        loop = _loop_model(self, controller=controller)
+        loop = (_delayed_lqr_loop(self) if controller == "lqr" and self.delay
+                else _loop_model(self, controller=controller))
         return loop_margins(loop.A, loop.B, loop.C, dt=self.dt, D=float(loop.D[0, 0]))
 
     @cached_property
@@ -250,7 +265,9 @@ class Design:
             "dt": self.dt,
             "discretization": self.discretization,
             "kalman_form": self.kalman_form,
+            "delay": self.delay,
             "states": list(self.state_names),
+            "model_states": list(self.model_state_names),
             "inputs": list(self.input_names),
             "outputs": list(self.output_names),
             "tracked": list(self.tracked),
@@ -311,6 +328,9 @@ class Design:
             + "; "
             + ", ".join(f"{n} = {v:.4g}" for n, v in zip(inputs, self.plant.u0, strict=True)),
             f"measured outputs: {', '.join(outputs)}; tracked: {', '.join(self.tracked) or 'none'}",
+            *([f"delay: {self.delay} control period(s), designed on the plant extended by the "
+               f"commands in flight ({', '.join(self.model_state_names[len(states):])})"]
+              if self.delay else []),
             "",
             "weights: Q = diag("
             + _numbers(np.diag(self.Q))
@@ -324,7 +344,7 @@ class Design:
             + ")",
             "",
             "LQR gain K (u = -K x):",
-            _matrix(self.K, inputs, states),
+            _matrix(self.K, inputs, self.model_state_names),
             "",
             f"closed-loop poles ({var}):",
             _pole_lines(self.pole_table, self.is_discrete),
@@ -357,7 +377,7 @@ class Design:
         lines += [
             "",
             f"{gain_name}:",
-            _matrix(self.Kf, states, outputs),
+            _matrix(self.Kf, self.model_state_names, outputs),
             "",
             f"estimator poles ({var}):",
             _pole_lines(self.estimator_pole_table, self.is_discrete),
@@ -373,6 +393,32 @@ class Design:
         for note in self.notes:
             lines.append(f"note: {note}")
         return "\n".join(lines)
+
+
+def _delayed_lqr_loop(design: Design) -> LinearModel:
+    """The loop of a delayed design's LQR as implemented, broken at the plant's input: the
+    plant with its delay line (the extended model, fed the signal injected there) in series
+    with the controller, whose own record of the commands in flight is fed its own command
+    (``u = -Kx x - Ku b``, ``b`` shifted and given ``u``); it returns ``-u``. The state
+    feedback on the extended model, ``K (zI - A)^-1 B``, would count the controller's
+    record as part of the plant: an error in the actuator's gain would then reach it."""
+    model = design.model
+    n, size, m = design.plant.n_states, model.n_states, model.n_inputs
+    nb = size - n
+    K = np.asarray(design.K, dtype=float)
+    Kx, Ku = K[:, :n], K[:, n:]
+    shift, enter = model.A[n:, n:], model.B[n:, :]
+    A = np.zeros((size + nb, size + nb))
+    A[:size, :size] = model.A
+    A[size:, :n] = -enter @ Kx
+    A[size:, size:] = shift - enter @ Ku
+    B = np.vstack([model.B, np.zeros((nb, m))])
+    C = np.hstack([Kx, np.zeros((m, nb)), Ku])
+    states = model.state_names + tuple(f"record_{s}" for s in model.state_names[n:])
+    return LinearModel(
+        A=A, B=B, C=C, D=np.zeros((m, m)), state_names=states, input_names=model.input_names,
+        output_names=tuple(f"{name}_return" for name in model.input_names),
+        x0=np.zeros(size + nb), u0=np.zeros(m), system=design.system_key, dt=model.dt)
 
 
 # -- formatting helpers ------------------------------------------------------------------

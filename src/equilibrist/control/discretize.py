@@ -161,3 +161,76 @@ def discrete_noise(
     W = checks.symmetric(fixed.mm(Gm, QNm, Gm.T))
     Qd = W * T if method == "euler" else van_loan(Am, W, T)
     return Qd, RNm / T
+
+
+def delay_state_names(input_names: tuple[str, ...], periods: int) -> tuple[str, ...]:
+    """The names of the commands in flight of a model delayed by *periods* samples, oldest
+    first: ``F_sent2, F_sent1`` is the command sent two periods ago, then the one sent one
+    period ago (:func:`with_input_delay`'s states after the plant's)."""
+    return tuple(f"{name}_sent{age}" for age in range(periods, 0, -1) for name in input_names)
+
+
+def with_input_delay(model: LinearModel, periods: int) -> LinearModel:
+    """The discrete *model* whose input acts *periods* samples after it is sent, as a model
+    without delay: the state extended by the commands sent but not yet acted.
+
+    ``x_{k+1} = Ad x_k + Bd u_{k-N}`` becomes, with ``xi_k = [x_k; u_{k-N}; ...; u_{k-1}]``::
+
+        xi_{k+1} = [[Ad, Bd, 0, ..., 0],      xi_k + [0; ...; 0; I] u_k
+                    [0,  0,  I, ..., 0],
+                    ...
+                    [0,  0,  0, ..., I],
+                    [0,  0,  0, ..., 0]]
+        y_k      = [C, 0, ..., 0] xi_k
+
+    The measurements are the plant's (``D = 0``: a delayed input reaches no output at
+    once). A measurement *N* samples late (``y_k = C x_{k-N}`` with ``x_{k+1} = Ad x_k +
+    Bd u_k``) is the same model for ``x_{k-N}``: the two delays are one shift of the loop.
+    The operating point of each command in flight is the plant's input ``u0``; the states
+    after the plant's are named by :func:`delay_state_names`. ``periods = 0`` returns
+    *model* itself.
+
+    Raises
+    ------
+    DesignError
+        A continuous model, a model whose measurements depend on its input, or *periods*
+        not a whole number >= 0.
+    """
+    if isinstance(periods, bool) or not isinstance(periods, int | np.integer) or periods < 0:
+        raise DesignError(f"delay = {periods!r}: expected a whole number of periods >= 0")
+    if model.dt is None:
+        raise DesignError("a delay in samples needs a discrete model (a sample period)")
+    if periods == 0:
+        return model
+    if np.any(np.asarray(model.D) != 0):
+        raise DesignError(
+            "a delayed input cannot reach a measurement at once: the model's D must be zero"
+        )
+    n, m, p = model.n_states, model.n_inputs, model.n_outputs
+    size = n + int(periods) * m
+    A = np.zeros((size, size))
+    A[:n, :n] = model.A
+    A[:n, n : n + m] = model.B
+    A[n : size - m, n + m :] = np.eye(size - n - m)
+    B = np.zeros((size, m))
+    B[size - m :, :] = np.eye(m)
+    C = np.zeros((p, size))
+    C[:, :n] = model.C
+    units = model.input_units * int(periods) if model.input_units else ()
+    return LinearModel(
+        A=A,
+        B=B,
+        C=C,
+        D=np.zeros((p, m)),
+        state_names=model.state_names + delay_state_names(model.input_names, int(periods)),
+        input_names=model.input_names,
+        output_names=model.output_names,
+        x0=np.concatenate([model.x0, np.tile(model.u0, int(periods))]),
+        u0=model.u0,
+        residual=model.residual,
+        system=model.system,
+        params=model.params,
+        dt=model.dt,
+        state_units=model.state_units + units if model.state_units and units else (),
+        input_units=model.input_units,
+    )

@@ -457,6 +457,13 @@ class LinearController:
         reference gain (an error naming why when the design has none).
         The input limits default to the design's parameters
         (``<input>_min``, ``<input>_max``).
+
+        A design with a delay (:attr:`Design.delay`, ``N`` periods) gives a controller whose
+        state holds the commands it sent and that have not acted yet, ``b = [u_{k-N}; ...;
+        u_{k-1}]`` (deviations), each sample shifted and given the command :meth:`update`
+        is told (the saturated command): ``lqr`` is ``u = u_op - Kx dx - Ku b + Kc dr``
+        (``nz = N m``); ``lqg`` is the Kalman filter of the extended model, its state the
+        prediction of ``[x; b]`` (``nz = n + N m``), its estimate the plant's part.
         """
         if kind not in ("lqr", "lqg"):
             raise ControllerError(f"controller kind {kind!r}: expected 'lqr' or 'lqg'")
@@ -474,6 +481,9 @@ class LinearController:
                     f"reference tracking needs K_c: {design.kc_note or 'the design has no reference gain'}"
                 )
             kc, tracked = np.asarray(design.Kc, dtype=float), tuple(design.tracked)
+        if design.delay:
+            return _delayed(cls, design, kind=kind, Kc=kc, tracked=tracked, u_min=u_min,
+                            u_max=u_max)
         if kind == "lqr":
             return cls.state_feedback(
                 design.K, x_op=plant.x0, u_op=plant.u0, state_names=plant.state_names,
@@ -492,6 +502,47 @@ class LinearController:
             input_names=plant.input_names, Kc=kc, tracked=tracked, u_min=u_min, u_max=u_max,
             design=design,
         )
+
+
+def _delayed(cls: type[LinearController], design: Design, *, kind: str, Kc: np.ndarray | None,
+             tracked: tuple[str, ...], u_min: object, u_max: object) -> LinearController:
+    """:meth:`LinearController.from_design` of a design with a delay (see there)."""
+    from equilibrist.control import fixed
+    from equilibrist.control.lqg import lqg_compensator
+
+    plant, model = design.plant, design.model
+    if model.dt is None or design.rate is None:
+        raise ControllerError("a delayed design is discrete: it has a rate")
+    n, m = plant.n_states, plant.n_inputs
+    nb = model.n_states - n
+    K = np.asarray(design.K, dtype=float)
+    states, inputs = plant.state_names, plant.input_names
+    r_op = plant.x0[[states.index(t) for t in tracked]]
+    Kcm = np.zeros((m, 0)) if Kc is None else Kc
+    if kind == "lqr":
+        return cls(
+            Ac=model.A[n:, n:], By=np.zeros((nb, n)), Br=np.zeros((nb, len(tracked))),
+            Bu=model.B[n:, :], Cc=-K[:, n:], Dy=-K[:, :n], Dr=Kcm, Ez=np.zeros((n, nb)),
+            Ey=np.eye(n), x_op=plant.x0, u_op=plant.u0, y_op=plant.x0, r_op=r_op,
+            z0=np.zeros(nb), state_map=np.zeros((nb, n)), rate=float(design.rate),
+            state_names=states, input_names=inputs, output_names=states, tracked_names=tracked,
+            u_min=_optional(u_min), u_max=_optional(u_max), kind="lqr", design=design)
+    comp = lqg_compensator(model, K, design.Kf, Kc, tracked=tracked, form=design.kalman_form)
+    if comp.Ez is None or comp.Ey is None:
+        raise DesignError("the LQG's estimate needs a discrete compensator")
+    p, nr = plant.n_outputs, len(comp.tracked_names)
+    C = plant.C
+    state_map = np.zeros((n + nb, n))
+    state_map[:n, :n] = np.eye(n)
+    return cls(
+        Ac=comp.A, Bu=comp.B[:, :m], By=comp.B[:, m : m + p], Br=comp.B[:, m + p : m + p + nr],
+        Cc=comp.C, Dy=comp.D[:, m : m + p], Dr=comp.D[:, m + p : m + p + nr],
+        Ez=comp.Ez[:n], Ey=comp.Ey[:n], x_op=plant.x0, u_op=plant.u0,
+        y_op=fixed.matvec(C, plant.x0), r_op=comp.r0, z0=np.zeros(n + nb), state_map=state_map,
+        rate=float(design.rate), state_names=states, input_names=inputs,
+        output_names=plant.output_names, tracked_names=comp.tracked_names,
+        u_min=_optional(u_min), u_max=_optional(u_max), kind="lqg", form=design.kalman_form,
+        design=design)
 
 
 #: :meth:`LinearController.as_nonlinear`'s source, by role: the contract's functions, each

@@ -299,12 +299,17 @@ class ControllerKind:
 
 
 def linear_builder(kind: str) -> Callable[[ControllerRequest], LinearController]:
-    """``build`` of an LQR/LQG kind: the request's design as a ``LinearController``."""
+    """``build`` of an LQR/LQG kind: the request's design as a ``LinearController``, designed
+    for the loop delay its ``design_delay`` option names (none by default)."""
 
     def build(request: ControllerRequest) -> LinearController:
+        from equilibrist.control.design import delay_periods, delayed
         from equilibrist.control.linear import LinearController
 
-        return LinearController.from_design(request.design(), kind=kind, tracking=request.tracking)
+        made = request.design()
+        periods = delay_periods(request.options.get("design_delay", 0), request.sample_rate)
+        return LinearController.from_design(delayed(made, periods), kind=kind,
+                                            tracking=request.tracking)
 
     return build
 

@@ -283,7 +283,10 @@ def made_by_design(ctrl: LinearController) -> bool:
     from equilibrist.errors import EquilibristError
 
     design = ctrl.design
-    if not isinstance(design, Design) or design.discrete is None or not design.rate:
+    # The design's library holds an undelayed design's matrices; a design for a delayed loop
+    # (its state extended by the commands in flight) is exported as the value it is.
+    if not isinstance(design, Design) or design.discrete is None or not design.rate \
+            or design.delay:
         return False
     try:
         made = LinearController.from_design(design, kind=ctrl.kind,
