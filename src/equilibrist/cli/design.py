@@ -88,6 +88,13 @@ def run(args: argparse.Namespace) -> int:
                 print(f"  {key}: {value}")
         return 0
     result = design(system, rate=rate, **common.design_options(args))
+    if options.get("design_delay") is not None:  # the kind's option: the design it builds on
+        from equilibrist.control.design import delay_periods, delayed
+
+        if rate is None:
+            raise UsageError("--design-delay needs --rate: a delay in control periods is a "
+                             "discrete design's")
+        result = delayed(result, delay_periods(options["design_delay"], rate))
     if args.json:
         out = result.to_dict(controller=kind)
         if result.rate is not None:
