@@ -55,7 +55,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.control import fixed, swingup
+from equilibrist.control import compensation, fixed, swingup
 from equilibrist.control.discretize import discrete_matrices
 from equilibrist.control.kalman import KALMAN, Estimator, estimator, joseph, predict_covariance
 from equilibrist.control.nonlinear import BALANCES, CATCH_SOURCE, NonlinearController
@@ -349,7 +349,8 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
           S_end: np.ndarray, K_end: np.ndarray, x_op: np.ndarray, u_op: np.ndarray,
           balance: str = "lqr", design: Design | None = None, P0: np.ndarray | None = None,
           catch: bool = True, wrap: bool = False,
-          rates: str = "measured", plants: Sequence[System] = ()) -> NonlinearController:
+          rates: str = "measured", plants: Sequence[System] = (),
+          friction_compensation: bool = False) -> NonlinearController:
     """The time-varying LQR along *traj* at *rate*, handing over to ``K_end`` at the end.
 
     ``balance="lqr"`` acts on the full measured state; ``"lqg"`` on the estimate of
@@ -361,8 +362,16 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     (:data:`SOURCE_WRAP`). With ``rates="differenced"`` (``balance="lqr"`` only) the law's
     rates are differenced from the measured angles (:data:`SOURCE_DIFF`). With *plants*
     (the same system with other parameters: a spread the rig may be anywhere in), the gains
-    are shared by *system* and them (:func:`shared_gains`).
+    are shared by *system* and them (:func:`shared_gains`). With *friction_compensation*
+    (``balance="lqr"`` only) the command adds the model's friction torque on the actuated
+    joints at the state the law uses (:mod:`equilibrist.control.compensation`), and the gains
+    and the plan's feedforward are those of the plant with that friction cancelled
+    (:func:`_compensated`); *S_end*, *K_end* must then be the balancing design of
+    :func:`~equilibrist.control.compensation.compensated_system`.
     """
+    if friction_compensation and balance != "lqr":
+        raise ControllerError("--friction-compensation on adds the friction at the full "
+                              "state's rates: it takes --balance lqr")
     if rates not in RATES:
         raise ControllerError(f"--rates {rates!r}: expected one of {', '.join(RATES)}")
     if rates == "differenced" and balance != "lqr":
@@ -387,13 +396,19 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     t = traj.times[0] + np.arange(steps + 1) * dt
     xs = _hermite_states(system, traj, t)
     us = traj.input_at(t).reshape(steps + 1, m)
+    # With nothing to cancel (no friction on an actuated joint) the controller is the one
+    # without compensation, to the bit.
+    comp = compensation.compensation(system) if friction_compensation else None
+    plant_system = system
+    if comp is not None and comp.parameters:
+        plant_system, us = _compensated(system, comp, traj, xs, us)
     S = np.array(S_end, dtype=float)
     gains = np.zeros((steps, m, n))
     plant: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     if plants:
-        gains = shared_gains([system, *plants], xs, us, dt=dt, Q=Q, R=R, S_end=S)
+        gains = shared_gains([plant_system, *plants], xs, us, dt=dt, Q=Q, R=R, S_end=S)
     for k in range(steps - 1, -1, -1):
-        A, B = system.jacobians(xs[k], us[k])
+        A, B = plant_system.jacobians(xs[k], us[k])
         Ad, Bd = discrete_matrices(A, B, dt)
         if balance == "lqg":
             plant.append((A, Ad, Bd))
@@ -430,6 +445,12 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     else:
         params = LAYOUT.pack(sizes, blocks)
     source = SOURCE_DIFF if differenced else SOURCE_WRAP if wrap else SOURCE
+    settings: dict[str, object] = {}
+    if comp is not None:
+        settings["friction_compensation"] = list(comp.parameters)
+    if comp is not None and comp.parameters:
+        params = np.concatenate([params, compensation.block(system, comp)])
+        source = compensated_source(source, system, differenced=differenced)
     return NonlinearController(
         name="tvlqr", source=source, params=params,
         z0=np.zeros(2 + 2 * nq) if differenced else np.zeros(1),
@@ -439,8 +460,36 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
         settings={"kind": "tvlqr", "trajectory_duration": traj.duration, "samples": steps,
                   "start": dict(zip(system.state_names, traj.states[0].tolist(), strict=True)),
                   "balance": "lqr", "catch_level": level, **({"wrap": True} if wrap else {}),
-                  **({"rates": "differenced"} if differenced else {})},
+                  **({"rates": "differenced"} if differenced else {}), **settings},
     )
+
+
+def compensated_source(source: str, system: System, *, differenced: bool) -> str:
+    """A ``balance="lqr"`` tracker's *source* whose command adds the friction compensation
+    (:func:`equilibrist.control.compensation.source`) at the state its law uses: the
+    measured one, or with its rates differenced (*differenced*)."""
+    state = "tv_y(j, z, y, params)" if differenced else "y[j]"
+    tracked = source.replace("        u_out[i] = acc\n",
+                             "        u_out[i] = acc + fc_torque(i, t, z, y, params)\n")
+    if tracked == source:
+        raise AssertionError("the tracker's source has no command to compensate")
+    return (tracked + f"""
+
+def fc_x(j, t, z, y, params):
+    return {state}
+""" + compensation.source(system))
+
+
+def _compensated(system: System, comp: compensation.Compensation, traj: Trajectory,
+                 xs: np.ndarray, us: np.ndarray) -> tuple[System, np.ndarray]:
+    """The plant a compensated tracker is designed for (*system* with the compensated
+    frictions at zero) and the plan's feedforward on it: the plan's inputs less the friction
+    torque the plan's own model needed along it (its parameters, *traj*'s where it records
+    them: a plan made without friction needed none), which the compensation now supplies."""
+    planned = system.with_params(**{k: float(v) for k, v in traj.params.items()
+                                    if k in system.params and k in comp.parameters})
+    need = np.array([compensation.torque(planned, comp, x) for x in xs])
+    return compensation.compensated_system(system, comp), us - need
 
 
 
@@ -562,7 +611,19 @@ def build_request(request: ControllerRequest) -> NonlinearController:
     if traj.state_names != system.state_names or traj.input_names != system.input_names:
         raise ControllerError(f"{path} is a trajectory of {traj.system}, not of {system.key} "
                               "(its states or inputs differ)")
-    design = request.design()
+    compensate = str(request.options.get("friction_compensation", "off"))
+    if compensate not in ("on", "off"):
+        raise ControllerError(f"--friction-compensation {compensate!r}: expected on or off")
+    comp = compensation.compensation(system) if compensate == "on" else None
+    if comp is not None and comp.parameters:
+        # The balance is designed for the plant the compensation leaves: the actuated
+        # joints' friction cancelled.
+        from equilibrist.control.design import design as make_design
+
+        bare = compensation.compensated_system(system, comp)
+        design = make_design(bare, rate=request.sample_rate, **dict(request.design_options))
+    else:
+        design = request.design()
     if design.discrete is None:
         raise ControllerError("the time-varying LQR needs a discrete design (a rate)")
     rate = float(design.rate or system.spec.control_rate)
@@ -576,4 +637,5 @@ def build_request(request: ControllerRequest) -> NonlinearController:
     rates = str(request.options.get("rates", "measured"))
     return tvlqr(system, traj, rate=rate, Q=design.Q, R=design.R, S_end=design.S, K_end=design.K,
                  x_op=design.plant.x0, u_op=design.plant.u0, balance=balance, design=design,
-                 catch=catch == "on", wrap=wrap == "on", rates=rates)
+                 catch=catch == "on", wrap=wrap == "on", rates=rates,
+                 friction_compensation=compensate == "on")

@@ -23,6 +23,9 @@ WRAPS = ("on", "off")
 #: The same tuple as :data:`equilibrist.control.tvlqr.RATES` (listing the kinds imports no
 #: numerics).
 RATES = ("measured", "differenced")
+#: What ``--friction-compensation`` takes: add the model's friction torque on the actuated
+#: joints to the command (on), or not (off, the default).
+COMPENSATIONS = ("on", "off")
 
 
 def build(request: ControllerRequest) -> NonlinearController:
@@ -48,7 +51,12 @@ KIND = ControllerKind(
              Option("--rates", "with --controller tvlqr --balance lqr: the measured rates "
                     "(measured, default) or rates differenced from the measured angles, "
                     "(3 q_k - 4 q_k-1 + q_k-2) / (2 T), as a rig computes them from its encoders "
-                    "(differenced)", choices=RATES)),
+                    "(differenced)", choices=RATES),
+             Option("--friction-compensation", "with --controller tvlqr --balance lqr: add the "
+                    "model's own friction torque on the actuated joints (their damping and "
+                    "Coulomb friction, at the rates the law uses) to the command, the gains "
+                    "designed for the plant it leaves (on), or not (off, default)",
+                    choices=COMPENSATIONS)),
     surfaces=frozenset({"simulate", "export", "study", "playground"}), task="swingup", planned=True,
     order=50,
 )
