@@ -178,7 +178,7 @@ def test_bad_delays_are_named() -> None:
         delayed(d2, 1)
     assert delay_periods("4ms", 500.0) == 2 and delay_periods("0.02s", 100.0) == 2
     assert delay_periods("3", 100.0) == 3 and delay_periods(0, 100.0) == 0
-    with pytest.raises(DesignError, match="0.5 control periods at 100 Hz"):
+    with pytest.raises(DesignError, match=r"0\.5 control periods at 100 Hz"):
         delay_periods("5ms", 100.0)
     for bad_text in ("-1", "x", "2 periods"):
         with pytest.raises(DesignError, match="expected a whole number"):
