@@ -37,3 +37,13 @@ def test_bad_design_delays_are_one_line(capsys) -> None:
     assert main([*RUN, "--controller", "none", "--design-delay", "2"]) == 2
     assert "--design-delay is an option of --controller lqr or --controller lqg" in \
         capsys.readouterr().err
+
+
+def test_roa_of_a_delayed_lqr_says_why_it_has_no_certificate(capsys) -> None:
+    """Its Riccati function is on the commands in flight too, not on the plant's starts."""
+    assert main(["roa", "double_cartpole", "--controller", "lqr", "--rate", "100",
+                 "--design-delay", "2", "--samples", "100", "--duration", "0.2",
+                 "--boxes", "1000", "--falsify", "0", "--json"]) == 0
+    figures = json.loads(capsys.readouterr().out)
+    assert figures["rho"] is None and figures["certified"] is False
+    assert "designed for a delay" in figures["certificate_note"]

@@ -76,7 +76,10 @@ def analyse(system: System, controller: object, *, states: tuple[str, str],
     caught = np.concatenate([est.caught, np.array(tilt_ok, dtype=bool),
                              np.array(push_ok, dtype=bool)])
     design = getattr(controller, "design", None)
-    S = getattr(design, "S", None)
+    # A design for a delayed loop has its Riccati function on the plant's state and the
+    # commands in flight, not on the plant's state alone that the starts are.
+    delayed = bool(getattr(design, "delay", 0))
+    S = None if delayed else getattr(design, "S", None)
     cert, note = None, None
     if design is not None and S is not None and boxes is not None:
         cert, note, extra = _certify(system, design, x_op, u_op, boxes, falsify, controller,
@@ -84,6 +87,9 @@ def analyse(system: System, controller: object, *, states: tuple[str, str],
         if extra is not None:
             x0s = np.vstack([x0s, extra[0]])
             caught = np.concatenate([caught, extra[1]])
+    elif boxes is not None and delayed:
+        note = (f"--controller {name} designed for a delay has its Riccati function on the "
+                "commands in flight too, not on the plant's state alone: nothing to certify")
     elif boxes is not None:
         note = f"--controller {name} has no Riccati function to certify (lqr and lqg have)"
     rho_est = None
