@@ -204,7 +204,9 @@ class Design:
     def lqr_margins(self) -> Margins | None:
         """Margins of the state feedback alone, ``L = K (sI - A)^-1 B`` (``z`` when sampled),
         broken at the plant input (single-input plants; else None): the loop of an LQR on the
-        measured full state, not the LQG loop, which runs on the estimate."""
+        measured full state, not the LQG loop, which runs on the estimate. With a
+        :attr:`delay`, the LQR's loop as it runs: the plant and its delay line in series with
+        the controller whose record of the commands in flight is fed its own command."""
         return self._margins("lqr")
 
     def margins_of(self, controller: str = "lqg") -> Margins | None:
