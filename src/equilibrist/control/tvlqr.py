@@ -50,12 +50,12 @@ bits on every CPU).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from equilibrist.control import compensation, fixed, swingup
+from equilibrist.control import compensation, fixed, swingup, torque_lag
 from equilibrist.control.discretize import discrete_matrices
 from equilibrist.control.kalman import KALMAN, Estimator, estimator, joseph, predict_covariance
 from equilibrist.control.nonlinear import BALANCES, CATCH_SOURCE, NonlinearController
@@ -350,7 +350,8 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
           balance: str = "lqr", design: Design | None = None, P0: np.ndarray | None = None,
           catch: bool = True, wrap: bool = False,
           rates: str = "measured", plants: Sequence[System] = (),
-          friction_compensation: bool = False) -> NonlinearController:
+          friction_compensation: bool = False,
+          torque_response: float | None = None) -> NonlinearController:
     """The time-varying LQR along *traj* at *rate*, handing over to ``K_end`` at the end.
 
     ``balance="lqr"`` acts on the full measured state; ``"lqg"`` on the estimate of
@@ -367,11 +368,18 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     joints at the state the law uses (:mod:`equilibrist.control.compensation`), and the gains
     and the plan's feedforward are those of the plant with that friction cancelled
     (:func:`_compensated`); *S_end*, *K_end* must then be the balancing design of
-    :func:`~equilibrist.control.compensation.compensated_system`.
+    :func:`~equilibrist.control.compensation.compensated_system`. With *torque_response*
+    (``k`` per period, ``balance="lqr"`` only) the motor's lag is in the design: the plan's
+    torque led by its inverse, the gains of the model augmented with the torque state, which
+    the controller runs from its own commands (:mod:`equilibrist.control.torque_lag`; the
+    balance's gains and the catch region are the augmented model's, not *K_end*, *S_end*).
     """
     if friction_compensation and balance != "lqr":
         raise ControllerError("--friction-compensation on adds the friction at the full "
                               "state's rates: it takes --balance lqr")
+    if torque_response is not None and (balance != "lqr" or plants):
+        raise ControllerError("--design-torque-response designs the full state's gains with the "
+                              "torque state: it takes --balance lqr and one plant")
     if rates not in RATES:
         raise ControllerError(f"--rates {rates!r}: expected one of {', '.join(RATES)}")
     if rates == "differenced" and balance != "lqr":
@@ -407,7 +415,12 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     plant: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     if plants:
         gains = shared_gains([plant_system, *plants], xs, us, dt=dt, Q=Q, R=R, S_end=S)
-    for k in range(steps - 1, -1, -1):
+    lag = None
+    if torque_response is not None:
+        lag = _lagged(plant_system, xs, us, rate=rate, Q=Q, R=R, kappa=torque_response,
+                      x_op=x_op, u_op=u_op)
+        gains, K_end, S_end = lag[0][:, :, :n], lag[1][:, :n], lag[2][:n, :n]
+    for k in range(steps - 1, -1, -1) if lag is None else ():
         A, B = plant_system.jacobians(xs[k], us[k])
         Ad, Bd = discrete_matrices(A, B, dt)
         if balance == "lqg":
@@ -432,28 +445,13 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     blocks = {"xs": xs, "us": us, "gains": gains, "x_op": x_op, "u_op": u_op, "K_end": K_end,
               "S_end": S_end}
     sizes = {"steps": steps, "knots": steps + 1, "rate": rate, "n": n, "m": m, "level": level}
-    nq = int(system.functions.N_Q)
     differenced = rates == "differenced"
-    if differenced and (nq == 0 or n != 2 * nq):
-        raise ControllerError(f"--rates differenced needs a state [q, q_dot]: {system.key}'s is "
-                              f"{', '.join(system.state_names)}")
-    if differenced:
-        period = periods(system) if wrap else np.zeros(n)
-        params = LAYOUT_DIFF.pack({**sizes, "nq": nq}, {**blocks, "period": period})
-    elif wrap:
-        params = LAYOUT_WRAP.pack(sizes, {**blocks, "period": periods(system)})
-    else:
-        params = LAYOUT.pack(sizes, blocks)
-    source = SOURCE_DIFF if differenced else SOURCE_WRAP if wrap else SOURCE
-    settings: dict[str, object] = {}
-    if comp is not None:
-        settings["friction_compensation"] = list(comp.parameters)
-    if comp is not None and comp.parameters:
-        params = np.concatenate([params, compensation.block(system, comp)])
-        source = compensated_source(source, system, differenced=differenced)
+    params, source, z0 = _packed(system, sizes, blocks, wrap=wrap, differenced=differenced)
+    params, source, z0, settings = _extended(system, params, source, z0, comp=comp, lag=lag,
+                                             kappa=torque_response, u_op=u_op,
+                                             differenced=differenced)
     return NonlinearController(
-        name="tvlqr", source=source, params=params,
-        z0=np.zeros(2 + 2 * nq) if differenced else np.zeros(1),
+        name="tvlqr", source=source, params=params, z0=z0,
         rate=float(rate),
         x_op=x_op, u_op=u_op, state_names=system.state_names, input_names=system.input_names,
         output_names=system.state_names,
@@ -462,6 +460,73 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
                   "balance": "lqr", "catch_level": level, **({"wrap": True} if wrap else {}),
                   **({"rates": "differenced"} if differenced else {}), **settings},
     )
+
+
+def _packed(system: System, sizes: Mapping[str, float], blocks: Mapping[str, object], *,
+            wrap: bool, differenced: bool) -> tuple[np.ndarray, str, np.ndarray]:
+    """The ``balance="lqr"`` tracker's parameters, source and start state in the layout of
+    its form (measured, wrapped, or with its rates differenced)."""
+    n = system.n_states
+    nq = int(system.functions.N_Q)
+    if differenced and (nq == 0 or n != 2 * nq):
+        raise ControllerError(f"--rates differenced needs a state [q, q_dot]: {system.key}'s is "
+                              f"{', '.join(system.state_names)}")
+    if differenced:
+        period = periods(system) if wrap else np.zeros(n)
+        params = LAYOUT_DIFF.pack({**sizes, "nq": nq}, {**blocks, "period": period})
+        return params, SOURCE_DIFF, np.zeros(2 + 2 * nq)
+    if wrap:
+        return LAYOUT_WRAP.pack(sizes, {**blocks, "period": periods(system)}), SOURCE_WRAP, \
+            np.zeros(1)
+    return LAYOUT.pack(sizes, blocks), SOURCE, np.zeros(1)
+
+
+def _extended(system: System, params: np.ndarray, source: str, z0: np.ndarray, *,
+              comp: compensation.Compensation | None,
+              lag: tuple[np.ndarray, np.ndarray, np.ndarray] | None, kappa: float | None,
+              u_op: np.ndarray, differenced: bool
+              ) -> tuple[np.ndarray, str, np.ndarray, dict[str, object]]:
+    """The tracker with what it knows of the rig: the motor's lag (its block after the
+    tracker's parameters, the torque state after its state) and the friction compensation
+    (its block last), and the settings that say so."""
+    n, m = system.n_states, system.n_inputs
+    settings: dict[str, object] = {}
+    fc_block = np.zeros(0)
+    if comp is not None:
+        settings["friction_compensation"] = list(comp.parameters)
+    if comp is not None and comp.parameters:
+        fc_block = compensation.block(system, comp)
+        source = compensated_source(source, system, differenced=differenced)
+    if lag is not None and kappa is not None:
+        params = np.concatenate([params, torque_lag.block(
+            system, kappa=kappa, end=lag[1][:, n:], tau_gains=lag[0][:, :, n:])])
+        source = lagged_source(source, n=n, m=m, tail=fc_block.size)
+        z0 = np.concatenate([z0, torque_lag.start(system, u_op)])
+        settings["torque_response"] = kappa
+    return np.concatenate([params, fc_block]), source, z0, settings
+
+
+def _lagged(system: System, xs: np.ndarray, us: np.ndarray, *, rate: float, Q: np.ndarray,
+            R: np.ndarray, kappa: float, x_op: np.ndarray,
+            u_op: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The augmented model's gains along the plan ``(steps, m, n + m)``, its balancing gain
+    ``(m, n + m)`` and Riccati solution (:mod:`equilibrist.control.torque_lag`)."""
+    K_aug, S_aug = torque_lag.balance(system, x_op, u_op, rate=rate, Q=Q, R=R, kappa=kappa)
+    along = torque_lag.gains(system, xs, us, rate=rate, Q=Q, R=R, kappa=kappa, S_end=S_aug)
+    return along, K_aug, S_aug
+
+
+def lagged_source(source: str, *, n: int, m: int, tail: int) -> str:
+    """A ``balance="lqr"`` tracker's *source* that knows the motor's lag: its command adds
+    the lag's lead and the torque state's feedback, its update steps the torque state (the
+    last *m* entries of its state) (:func:`equilibrist.control.torque_lag.source`; *tail*:
+    the values after the lag's block in the parameters)."""
+    head = "    z_out[0] = tvlqr_caught(t, z, y, params)\n"
+    lagged = source.replace("        u_out[i] = acc", "        u_out[i] = acc + lg_torque(i, t, z, y, params)").replace(
+        head, head + "    lg_update(t, z, u_applied, params, z_out)\n")
+    if lagged.count("lg_torque") != 1 or lagged.count("lg_update") != 1:
+        raise AssertionError("the tracker's source has no command or update to extend")
+    return lagged + "\n\n" + torque_lag.source(n=n, m=m, tail=tail)
 
 
 def compensated_source(source: str, system: System, *, differenced: bool) -> str:
@@ -635,7 +700,9 @@ def build_request(request: ControllerRequest) -> NonlinearController:
     if wrap not in ("on", "off"):
         raise ControllerError(f"--wrap {wrap!r}: expected on or off")
     rates = str(request.options.get("rates", "measured"))
+    response = request.options.get("design_torque_response")
+    kappa = None if response is None else torque_lag.response_k(response, rate)
     return tvlqr(system, traj, rate=rate, Q=design.Q, R=design.R, S_end=design.S, K_end=design.K,
                  x_op=design.plant.x0, u_op=design.plant.u0, balance=balance, design=design,
                  catch=catch == "on", wrap=wrap == "on", rates=rates,
-                 friction_compensation=compensate == "on")
+                 friction_compensation=compensate == "on", torque_response=kappa)

@@ -56,7 +56,12 @@ KIND = ControllerKind(
                     "model's own friction torque on the actuated joints (their damping and "
                     "Coulomb friction, at the rates the law uses) to the command, the gains "
                     "designed for the plant it leaves (on), or not (off, default)",
-                    choices=COMPENSATIONS)),
+                    choices=COMPENSATIONS),
+             Option("--design-torque-response", "with --controller tvlqr --balance lqr: the "
+                    "motor's first-order lag the tracker compensates, as the rig's "
+                    "--torque-response k per period (0 < k < 2) or a time constant (20ms, "
+                    "0.02s): the plan's torque led by the lag's inverse, the gains of the model "
+                    "with the torque state (none by default)", metavar="K|TC")),
     surfaces=frozenset({"simulate", "export", "study", "playground"}), task="swingup", planned=True,
     order=50,
 )
