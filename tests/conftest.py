@@ -9,6 +9,14 @@ from pathlib import Path
 import pytest
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# One BLAS thread a process (set before numpy loads OpenBLAS here, and inherited by the
+# workers and every command a test starts): the suite already keeps both cores busy with
+# its two workers, and OpenBLAS's own threads on top of them wait on each other. A fit's
+# Cholesky of 700 unknowns took 4 times as long with 2 threads as with 1 on a loaded
+# 2-core machine; identification's tests 90 s against 58 s on 2 workers. The recorded
+# digests stay those recorded under OpenBLAS's default threads (tests/control/test_bits_designs.py,
+# tests/sim/test_sim_bits.py, tests/sim/test_bits_cpu.py pass either way).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 #: The modules that take longest (seconds of CPU, a few to a hundred each), longest first.
 #: They run first, each whole on one worker, so that neither worker is left with a long
