@@ -9,6 +9,8 @@ equilibrist with its ``trajopt`` extra), never in the project's: see docs/realai
         --robot acrobot                      # 15-25 minutes a robot
     $BENCH/.venv/bin/python bench/bench_realaigym.py --benchmark $BENCH --plant
     $BENCH/.venv/bin/python bench/bench_realaigym.py --benchmark $BENCH --rigs   # other rigs
+    $BENCH/.venv/bin/python bench/bench_realaigym.py --benchmark $BENCH --rigs --variant .0 \
+        --friction off       # the files without their friction compensation
     .venv/bin/python bench/bench_realaigym.py --policy       # the policy's step, no benchmark
 
 ``--board simulation`` copies ``examples/realaigym/con_<robot>.py`` into the board's folder
@@ -136,13 +138,16 @@ RIGS = (("design_A.0", "model_1"), ("design_A.0", "model_2"), ("design_B.0", "mo
 VARIANTS = (".1", ".2", ".0")
 
 
-def rigs(benchmark: Path, robots: list[str], variants: list[str]) -> None:
+def rigs(benchmark: Path, robots: list[str], variants: list[str], friction: str | None = None
+         ) -> None:
     """The controller files, unchanged, on rigs they were not tuned on: each rig's
     parameters as the benchmark's own ``model_parameters`` loads them, the actuated joint
     limited to the boards' 6 N m, run by the simulation board's own simulator (its plant,
     RK4, 500 Hz, 10 s from hanging at rest). A rig swings up when the board's criterion
     finds a swing-up time (every state within 0.01 of upright, staying there), and ends up
-    when the final state is within the robustness board's tolerance."""
+    when the final state is within the robustness board's tolerance. *friction*: the files'
+    ``FRICTION`` setting (``on``: the motor's joint's friction cancelled, ``off``: not; None:
+    the file's own)."""
     import importlib.util
 
     from double_pendulum.analysis.leaderboard import get_swingup_time
@@ -174,7 +179,8 @@ def rigs(benchmark: Path, robots: list[str], variants: list[str]) -> None:
                 mpar.set_torque_limit([6.0, 0.0] if robot == "pendubot" else [0.0, 6.0])
                 t0 = time.perf_counter()
                 try:
-                    controller = con.build(mpar, robot)
+                    controller = con.build(mpar, robot, **({} if friction is None
+                                                           else {"friction": friction}))
                 except Exception as exc:  # a plan that does not converge, a refused rig
                     rows.append((robot, design, model + variant, "not built", str(exc)[:60]))
                     print(*rows[-1], flush=True)
@@ -228,6 +234,8 @@ def main() -> None:
     parser.add_argument("--rigs", action="store_true",
                         help="the controller files on the other rigs of model_parameters")
     parser.add_argument("--variant", choices=VARIANTS, action="append")
+    parser.add_argument("--friction", choices=("on", "off"),
+                        help="with --rigs: the files' friction compensation (default: theirs)")
     args = parser.parse_args()
     if args.policy:
         policy_step()
@@ -235,7 +243,8 @@ def main() -> None:
         if args.benchmark is None:
             parser.error("--board, --plant and --rigs need --benchmark DIR")
         if args.rigs:
-            rigs(args.benchmark, args.robot or list(ROBOTS), args.variant or list(VARIANTS))
+            rigs(args.benchmark, args.robot or list(ROBOTS), args.variant or list(VARIANTS),
+                 args.friction)
         if args.plant:
             plant(args.benchmark)
         if args.board:

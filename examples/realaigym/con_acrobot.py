@@ -13,7 +13,9 @@ The controller is built with equilibrist's public API from the folder's own ``mp
 identified rig: the rig as a catalogue system (``dfki_double_pendulum``), a swing-up planned on
 it by direct collocation (``equilibrist.control.trajopt.plan``), and the time-varying LQR that
 tracks the plan and hands over to the balancing LQR (``--controller tvlqr``), stepped as the
-compiled controller through ``equilibrist.policy``.
+compiled controller through ``equilibrist.policy``. A rig whose parameters have friction gets
+its motor's joint's friction cancelled (``--friction-compensation on``: the plan and the
+tracker are made for the rig that leaves).
 """
 
 import os
@@ -23,6 +25,7 @@ from double_pendulum.controller.abstract_controller import AbstractController
 from sim_parameters import mpar
 
 import equilibrist
+from equilibrist.control.compensation import compensated_system, compensation
 from equilibrist.control.trajopt import plan
 from equilibrist.systems.dfki_parameters import settings_of
 
@@ -41,6 +44,11 @@ CATCH = "on"
 #: its encoders, inside the compiled controller: no noise of the measured rates gets in),
 #: or "measured" as the loop hands them.
 VELOCITY = "differenced"
+#: Cancel the friction of the motor's joint as the rig's model has it (its damping and
+#: Coulomb friction, at the rates the controller uses) and plan and design the tracker for
+#: the rig it leaves ("on"), or not ("off"). On the boards' frictionless rig the controller
+#: is the same either way.
+FRICTION = "on"
 #: The trackers' LQR cost: the torque's weight (higher, gentler gains) and the states'
 #: (``theta1, theta2, theta1_dot, theta2_dot``; None: Bryson's rule on the rig's design
 #: scales, 100, 100, 1, 1).
@@ -82,10 +90,12 @@ class EquilibristController(AbstractController):
 
 def build(mpar, robot, duration=DURATION, knots=KNOTS, rate_cost=RATE_COST,
           smoothing=SMOOTHING, wrap=WRAP, catch=CATCH, velocity=VELOCITY,
-          torque_weight=TORQUE_WEIGHT, state_weights=STATE_WEIGHTS):
+          torque_weight=TORQUE_WEIGHT, state_weights=STATE_WEIGHTS, friction=FRICTION):
     """The benchmark controller of equilibrist's planned swing-up for the rig *mpar*."""
     system = equilibrist.get_system("dfki_double_pendulum", **settings_of(mpar, robot=robot))
-    trajectory = plan(system, start=np.zeros(4), goal=np.array([np.pi, 0.0, 0.0, 0.0]),
+    # With the motor's friction cancelled, the plan need not push through it.
+    planned = compensated_system(system, compensation(system)) if friction == "on" else system
+    trajectory = plan(planned, start=np.zeros(4), goal=np.array([np.pi, 0.0, 0.0, 0.0]),
                       knots=knots, duration=duration,
                       state_cost={"theta1_dot": rate_cost, "theta2_dot": rate_cost},
                       input_rate_cost={"tau": smoothing})
@@ -93,7 +103,7 @@ def build(mpar, robot, duration=DURATION, knots=KNOTS, rate_cost=RATE_COST,
     weights = {} if state_weights is None else {"q": list(state_weights)}
     policy = equilibrist.policy(system, controller="tvlqr", rate=rate, trajectory=trajectory,
                                 wrap=wrap, catch=catch, rates=velocity, r=[torque_weight],
-                                **weights)
+                                friction_compensation=friction, **weights)
     return EquilibristController(policy, actuated=1 if robot == "acrobot" else 0)
 
 

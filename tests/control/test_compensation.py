@@ -71,8 +71,8 @@ def test_the_compensation_is_the_rigs_friction_law_on_the_motors_joint(robot: st
         assert compensation.torque(rig, comp, y)[0] == pytest.approx(want, rel=1e-10, abs=1e-13)
 
 
-def test_without_friction_on_the_motors_joint_the_controller_is_the_one_without() -> None:
-    rig = _rig("pendubot", cf2=0.12)  # the passive elbow's friction only
+def test_without_friction_the_controller_is_the_one_without() -> None:
+    rig = _rig("pendubot")
     plan = _held_upright(rig)
     on = equilibrist.policy(rig, controller="tvlqr", trajectory=plan,
                             friction_compensation="on").controller
@@ -81,6 +81,22 @@ def test_without_friction_on_the_motors_joint_the_controller_is_the_one_without(
     assert np.array_equal(on.params, off.params)
     assert on.settings["friction_compensation"] == []
     assert "friction_compensation" not in off.settings
+
+
+def test_a_passive_joints_coulomb_friction_is_designed_as_its_secant() -> None:
+    """The passive elbow's friction is not the motor's to cancel: nothing is added to the
+    command, and the gains see it as the damping ``cf atan(100 V) / V`` at the rate's
+    design scale ``V`` (1 rad/s), added to the joint's own, not as its slope at rest."""
+    rig = _rig("pendubot", b2=0.001, cf2=0.12)
+    plan = _held_upright(rig)
+    on = equilibrist.policy(rig, controller="tvlqr", trajectory=plan,
+                            friction_compensation="on").controller
+    off = equilibrist.policy(rig, controller="tvlqr", trajectory=plan).controller
+    assert on.source == off.source
+    assert on.settings["friction_compensation"] == []
+    secant = _benchmark_friction(1.0, 0.001, 0.12)
+    assert on.settings["friction_design"] == {"b2": pytest.approx(secant, rel=1e-9), "cf2": 0.0}
+    assert not np.array_equal(on.params, off.params)
 
 
 def test_compensation_takes_the_full_state() -> None:

@@ -138,9 +138,69 @@ def compensation(system: System) -> Compensation:
 
 
 def compensated_system(system: System, comp: Compensation) -> System:
-    """*system* with the compensated frictions at zero: the plant a compensated controller's
-    design sees."""
+    """*system* with the compensated frictions at zero: the plant the motor leaves (what a
+    plan through it is made on)."""
     return system.with_params(**{name: 0.0 for name in comp.parameters})
+
+
+def _single_coordinate(force: np.ndarray) -> int | None:
+    """The one coordinate a force (probes x coordinates) acts on, or None."""
+    reach = np.max(np.abs(force), axis=0)
+    scale = float(np.max(reach))
+    acting = np.flatnonzero(reach > 1e-9 * scale) if scale > 0.0 else np.zeros(0, dtype=int)
+    return int(acting[0]) if acting.size == 1 else None
+
+
+def design_system(system: System, comp: Compensation) -> System:
+    """The plant a compensated controller's gains are designed for: the compensated frictions
+    at zero, and each Coulomb friction left (a passive joint's) as the viscous damping it acts
+    as over the rates the design expects.
+
+    A smooth Coulomb law's slope at rest (``100 cf`` for ``cf atan(100 v)``) holds only below
+    some 0.01 rad/s; linearized there, a passive joint looks locked to the design, and a
+    balance designed so loses the rig. The friction enters instead as its secant at the
+    joint's rate scale ``V`` (the system's Bryson scale of that rate, 1 where it has none),
+    ``F(V) / V``, added to the joint's viscous damping parameter (a dissipative parameter
+    whose force is linear in that joint's rate alone); a Coulomb friction without one is left
+    as it is."""
+    bare = compensated_system(system, comp)
+    nq = int(system.functions.N_Q)
+    m = system.n_inputs
+    probes = _probes(system)
+    coulomb = [p for p in system.spec.parameters
+               if p.coulomb and p.name not in comp.parameters and system.params[p.name] != 0.0]
+    viscous = [p for p in system.spec.parameters if p.dissipative and not p.coulomb]
+    changes: dict[str, float] = {}
+    for parameter in coulomb:
+        p = np.array(bare.p, dtype=float)
+        without = _zeroed(bare, (parameter.name,))
+        force = np.array([_forces(bare, p, x, np.zeros(m)) - _forces(bare, without, x, np.zeros(m))
+                          for x in probes])
+        joint = _single_coordinate(force)
+        if joint is None:
+            continue
+        for damping in viscous:
+            unit = np.array(without, dtype=float)
+            index = system.spec.parameter_names.index(damping.name)
+            unit[index] += 1.0
+            per = np.array([_forces(bare, unit, x, np.zeros(m)) - _forces(bare, without, x, np.zeros(m))
+                            for x in probes])
+            if _single_coordinate(per) != joint:
+                continue
+            ratio = per[:, joint] / probes[:, nq + joint]
+            if np.ptp(ratio) > 1e-9 * np.max(np.abs(ratio)) or ratio[0] >= 0.0:
+                continue  # not a damping linear in the joint's rate
+            rate_name = system.state_names[nq + joint]
+            scale = float(system.spec.design_scales.get(rate_name, 1.0))
+            at = np.array(system.operating_point().x, dtype=float)
+            at[nq + joint] = scale
+            secant = abs(float((_forces(bare, p, at, np.zeros(m))
+                                - _forces(bare, without, at, np.zeros(m)))[joint])) / scale
+            changes[parameter.name] = 0.0
+            changes[damping.name] = changes.get(damping.name, float(system.params[damping.name])) \
+                + secant / float(-ratio[0])
+            break
+    return bare.with_params(**changes)
 
 
 def torque(system: System, comp: Compensation, x: np.ndarray) -> np.ndarray:

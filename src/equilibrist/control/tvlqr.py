@@ -404,11 +404,10 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     t = traj.times[0] + np.arange(steps + 1) * dt
     xs = _hermite_states(system, traj, t)
     us = traj.input_at(t).reshape(steps + 1, m)
-    # With nothing to cancel (no friction on an actuated joint) the controller is the one
-    # without compensation, to the bit.
+    # Without friction the controller is the one without compensation, to the bit.
     comp = compensation.compensation(system) if friction_compensation else None
     plant_system = system
-    if comp is not None and comp.parameters:
+    if comp is not None:
         plant_system, us = _compensated(system, comp, traj, xs, us)
     S = np.array(S_end, dtype=float)
     gains = np.zeros((steps, m, n))
@@ -494,6 +493,9 @@ def _extended(system: System, params: np.ndarray, source: str, z0: np.ndarray, *
     fc_block = np.zeros(0)
     if comp is not None:
         settings["friction_compensation"] = list(comp.parameters)
+        designed = compensation.design_system(system, comp)
+        settings["friction_design"] = {k: v for k, v in designed.params.items()
+                                       if v != system.params[k]}
     if comp is not None and comp.parameters:
         fc_block = compensation.block(system, comp)
         source = compensated_source(source, system, differenced=differenced)
@@ -551,10 +553,13 @@ def _compensated(system: System, comp: compensation.Compensation, traj: Trajecto
     frictions at zero) and the plan's feedforward on it: the plan's inputs less the friction
     torque the plan's own model needed along it (its parameters, *traj*'s where it records
     them: a plan made without friction needed none), which the compensation now supplies."""
+    designed = compensation.design_system(system, comp)
+    if not comp.parameters:
+        return designed, us
     planned = system.with_params(**{k: float(v) for k, v in traj.params.items()
                                     if k in system.params and k in comp.parameters})
     need = np.array([compensation.torque(planned, comp, x) for x in xs])
-    return compensation.compensated_system(system, comp), us - need
+    return designed, us - need
 
 
 
@@ -679,13 +684,14 @@ def build_request(request: ControllerRequest) -> NonlinearController:
     compensate = str(request.options.get("friction_compensation", "off"))
     if compensate not in ("on", "off"):
         raise ControllerError(f"--friction-compensation {compensate!r}: expected on or off")
-    comp = compensation.compensation(system) if compensate == "on" else None
-    if comp is not None and comp.parameters:
+    bare = None
+    if compensate == "on":
+        bare = compensation.design_system(system, compensation.compensation(system))
+    if bare is not None and dict(bare.params) != dict(system.params):
         # The balance is designed for the plant the compensation leaves: the actuated
-        # joints' friction cancelled.
+        # joints' friction cancelled, a passive joint's Coulomb friction as its secant.
         from equilibrist.control.design import design as make_design
 
-        bare = compensation.compensated_system(system, comp)
         design = make_design(bare, rate=request.sample_rate, **dict(request.design_options))
     else:
         design = request.design()
