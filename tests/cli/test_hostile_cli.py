@@ -15,9 +15,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from tests.support.signals import (
     STOPS_WITHIN,
-    after_cpu,
     signal_while_working,
-    start,
+    start_at_work,
     start_held,
     when_held,
 )
@@ -37,18 +36,19 @@ def _one_line(code: int, err: str, *words: str) -> None:
 
 SIGNALLED = {
     # Each is signalled past the start (the handlers are set before 0.3 s of CPU) and
-    # before its end: held at a known point of its work (tests.support.signals.start_held:
-    # whatever the machine's speed, the signal comes while it works), or after some seconds
-    # of CPU of minutes of work.
+    # before its end, whatever the machine's speed: held at a known point of its work
+    # (tests.support.signals.start_held), or once its work has begun and gone on for half
+    # a second of CPU (start_at_work: the work itself runs unchanged, for minutes).
     # show: held where it writes the equations as LaTeX, its header printed.
-    "show": (["show", "double_cartpole", "--latex"],
+    "show": (["show", "double_cartpole", "--latex"], "held",
              "equilibrist.mechanics.printing:equations_latex"),
-    # sweep: 400 points of 2000 runs each, minutes of work.
+    # sweep: 400 points of 2000 runs each, minutes of work, signalled in its first chunk.
     "sweep": (["sweep", "cartpole", "--vary", "m_p=0.2:2:400", "--runs", "2000",
-               "--no-progress", "--out", "s.parquet"], 4.0),
+               "--no-progress", "--out", "s.parquet"], "at work",
+              "equilibrist.study.runner:evaluate_chunk"),
     # export: the MPC's recorded run, then the compiles that measure it, where it is held:
     # its files made in memory, none written yet.
-    "export": (["export", "cartpole", "--controller", "mpc", "--out", "lib"],
+    "export": (["export", "cartpole", "--controller", "mpc", "--out", "lib"], "held",
                "equilibrist.native.size:measure"),
 }
 
@@ -56,11 +56,11 @@ SIGNALLED = {
 @pytest.mark.parametrize("command", sorted(SIGNALLED))
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_signalled_command_exits_130_or_143(tmp_path, command, signum) -> None:
-    argv, when = SIGNALLED[command]
-    if isinstance(when, str):
-        proc, ready = start_held(argv, tmp_path, when), when_held
+    argv, how, at = SIGNALLED[command]
+    if how == "held":
+        proc, ready = start_held(argv, tmp_path, at), when_held
     else:
-        proc, ready = start(argv, tmp_path), after_cpu(when)
+        proc, ready = start_at_work(argv, tmp_path, at)
     code, _, err, took = signal_while_working(proc, signum, ready)
     assert code == (143 if signum == signal.SIGTERM else 130), err.decode()
     assert "Traceback" not in err.decode()
@@ -337,18 +337,18 @@ def test_a_log_whose_output_never_moves_is_one_line(tmp_path, capsys, cart_log, 
 
 @pytest.mark.parametrize("extra", [[], ["--max-step", "6e-6"]], ids=["default", "finest-step"])
 def test_ctrl_c_stops_identify_at_once(tmp_path, extra) -> None:
-    # A 30 s log: its fit takes minutes of CPU, signalled after 4 s (the command enters
-    # least_squares after about 2.5 s of CPU: imports, the log, the first shooting fit's
-    # set-up); at the finest step accepted (1000 RK4 steps a sample) too.
+    # A 30 s log: its fit takes minutes of CPU, signalled once the fit has gone on for half a
+    # second of CPU from its first call of least_squares (after the imports, the log and the
+    # first shooting fit's set-up: about 2.5 s of CPU here, whatever the machine's speed);
+    # at the finest step accepted (1000 RK4 steps a sample) too.
     folder = tmp_path / "work"
     folder.mkdir()
     assert main(["simulate", "cartpole", "--duration", "30", "--excite", "prbs:20:0.2",
                  "--seed", "4", "--out", str(folder / "run.csv"), "--json"]) == 0
     for signum, status in ((signal.SIGINT, 130), (signal.SIGTERM, 143)):
-        code, _, err, took = signal_while_working(
-            start(["identify", "cartpole", "run.csv", "--free", "m_p,l", "--out", "p.json", *extra],
-                  folder),
-            signum, after_cpu(4.0))
+        proc, ready = start_at_work(["identify", "cartpole", "run.csv", "--free", "m_p,l", "--out",
+                                     "p.json", *extra], folder, "scipy.optimize:least_squares")
+        code, _, err, took = signal_while_working(proc, signum, ready)
         assert code == status, err.decode()
         assert err.decode().strip() == "equilibrist: interrupted"
         assert took < STOPS_WITHIN, f"took {took:.1f} s to stop"

@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 import pytest
-from tests.support.signals import STOPS_WITHIN, after_cpu, signal_while_working, start
+from tests.support.signals import STOPS_WITHIN, signal_while_working, start_at_work
 
 from equilibrist.numeric.lookup import get_system
 from equilibrist.sim import simulate, simulate_batch
@@ -45,12 +45,19 @@ def warm(tmp_path_factory: pytest.TempPathFactory) -> None:
             assert main(short) == 0
 
 
+#: Where each command's runs enter the core (run.py calls it by its module's name, batch.py
+#: by the name it imported).
+CORE = {"simulate": "equilibrist.sim.run", "batch": "equilibrist.sim.batch"}
+
+
 @pytest.mark.parametrize("argv", [SIMULATE, BATCH], ids=["simulate", "batch"])
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_stops_a_long_run_at_once(warm, tmp_path, argv, signum) -> None:
-    # Started and working in the core: 1.5 s of its own CPU time (imports and the
-    # cached core's load take less), so the signal lands inside the compiled loop.
-    code, out, err, took = signal_while_working(start(argv, tmp_path), signum, after_cpu(1.5))
+    # Started and working in the core: its runs begun there (its first call of
+    # call_interruptibly, past the imports and the cached core's load) and half a second of
+    # its CPU since, so the signal lands inside the compiled loop.
+    proc, ready = start_at_work(argv, tmp_path, f"{CORE[argv[0]]}:call_interruptibly")
+    code, out, err, took = signal_while_working(proc, signum, ready)
     assert code == (143 if signum == signal.SIGTERM else 130), err.decode()
     assert err.decode().strip() == "equilibrist: interrupted"
     assert out == b""
@@ -134,6 +141,7 @@ def test_a_keyboard_interrupt_while_waiting_stops_the_core(monkeypatch) -> None:
 
 
 PYTHON_BATCH = '''
+import multiprocessing
 import sys
 
 import numpy as np
@@ -146,8 +154,12 @@ from equilibrist.sim import simulate_batch
 class Still(PythonControllerBase):
     rate = 100.0
     outputs = ("x", "theta", "x_dot", "theta_dot")
+    running = False
 
     def output(self, t, y, r):
+        if not Still.running:  # once a process: its run has begun
+            Still.running = True
+            print("running in", multiprocessing.current_process().name, flush=True)
         return np.zeros(1)
 
 
@@ -171,9 +183,11 @@ def test_a_signal_stops_a_batch_of_python_controllers_in_worker_processes(tmp_pa
                             stderr=subprocess.PIPE, cwd=tmp_path)
 
     def ready(proc: subprocess.Popen[bytes]) -> None:
+        # Both workers spawned and running their runs (each says so at its first sample).
         assert proc.stdout is not None
         assert proc.stdout.readline() == b"started\n"
-        time.sleep(4.0)  # the workers are spawned and running their runs
+        running = {proc.stdout.readline() for _ in range(2)}
+        assert running == {b"running in SpawnPoolWorker-1\n", b"running in SpawnPoolWorker-2\n"}, running
 
     code, out, err, took = signal_while_working(proc, signal.SIGINT, ready)
     assert code == 130, err.decode()

@@ -78,6 +78,66 @@ def when_held(proc: subprocess.Popen[bytes]) -> None:
                          + (proc.stderr.read() if proc.stderr else b"").decode())
 
 
+#: What a command of :func:`start_at_work` writes on its marks' pipe when its work begins.
+AT_WORK = b"at work in "
+
+# ``equilibrist ARGV`` (after the four words MODULE FUNCTION CALLS FD) with MODULE.FUNCTION
+# replaced by one that, at its call CALLS + 1, writes a line on the pipe FD (neither stdout
+# nor stderr, which the tests read whole), then lets that call and every other one through:
+# the command runs unchanged, and the test knows when its work has begun, whatever the
+# machine's speed.
+_MARK = """\
+import importlib, os, sys
+module, name, calls, fd = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
+del sys.argv[1:5]
+owner = importlib.import_module(module)
+original = getattr(owner, name)
+
+def marked(*args, **kwargs):
+    global calls
+    if calls == 0:
+        os.write(fd, f"at work in {module}.{name}\\n".encode())
+        os.close(fd)
+    calls -= 1
+    return original(*args, **kwargs)
+
+setattr(owner, name, marked)
+from equilibrist.cli.main import main
+sys.exit(main())
+"""
+
+
+def start_at_work(argv: list[str], folder: Path, at: str, *, after: int = 0,
+                  cpu: float = 0.5) -> tuple[subprocess.Popen[bytes],
+                                             Callable[[subprocess.Popen[bytes]], None]]:
+    """``equilibrist ARGV`` in *folder* as :func:`start`, and the wait until it works: it has
+    called *at* (``"module:function"``, looked up in the module when called; its call
+    *after* + 1 counts) and used *cpu* seconds of CPU since. The command runs unchanged: the
+    signal of :func:`signal_while_working` after this wait reaches the work itself, not the
+    imports or the set-up before it, on any machine."""
+    module, _, name = at.partition(":")
+    marks, mark = os.pipe()
+    try:
+        proc = subprocess.Popen([sys.executable, "-c", _MARK, module, name, str(after), str(mark),
+                                 *argv], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                cwd=folder, pass_fds=(mark,))
+    except BaseException:
+        os.close(marks)
+        raise
+    finally:
+        os.close(mark)
+
+    def ready(proc: subprocess.Popen[bytes]) -> None:
+        with os.fdopen(marks, "rb") as pipe:
+            line = pipe.readline()
+        if not line.startswith(AT_WORK):
+            raise AssertionError(f"the command ended before it called {at}: "
+                                 + proc.communicate(timeout=60)[1].decode())
+        after_cpu(cpu_seconds(proc.pid) + cpu)(proc)
+
+    return proc, ready
+
+
 def after_cpu(seconds: float) -> Callable[[subprocess.Popen[bytes]], None]:
     """Wait until the process has used *seconds* of CPU (it is working, past its start)."""
 
