@@ -131,6 +131,26 @@ def test_the_rig_with_its_motors_friction_balances_with_compensation_and_not_wit
     assert distance["off"] > 0.02, distance
 
 
+def test_the_rig_as_identified_balances_compensated_and_falls_without() -> None:
+    """The pendubot with its identified rotor, damping and Coulomb friction on both joints
+    (the RealAIGym pendubot file's weights), link 1 started 0.03 rad off upright: the LQR
+    designed on the friction's slope at rest (the elbow looks locked to it) loses the rig;
+    compensated (the shoulder's friction cancelled, the elbow's designed as its secant) it
+    settles upright."""
+    rig = _rig("pendubot", **MODEL_1_0)
+    plan = _held_upright(rig)
+    start = np.array([np.pi + 0.03, 0.0, 0.0, 0.0])
+    distance = {}
+    for setting in ("on", "off"):
+        ctrl = equilibrist.policy(rig, controller="tvlqr", trajectory=plan, rates="differenced",
+                                  r=[8.0], q=[25.0, 25.0, 1.0, 1.0], catch="off",
+                                  friction_compensation=setting).controller
+        distance[setting] = _final_distance(simulate(rig, ctrl, duration=4.0, x0=start,
+                                                     region={}))
+    assert distance["on"] < 0.01, distance
+    assert distance["off"] > 1.0, distance
+
+
 def test_the_compensated_controller_exports_with_make_check_exact(tmp_path: Path) -> None:
     rig = _rig("acrobot", **MODEL_1_0)
     ctrl = equilibrist.policy(rig, controller="tvlqr", trajectory=_held_upright(rig),

@@ -152,9 +152,9 @@ def _single_coordinate(force: np.ndarray) -> int | None:
 
 
 def design_system(system: System, comp: Compensation) -> System:
-    """The plant a compensated controller's gains are designed for: the compensated frictions
-    at zero, and each Coulomb friction left (a passive joint's) as the viscous damping it acts
-    as over the rates the design expects.
+    """The plant a compensated controller's balance is designed for (at rest, the operating
+    point): the compensated frictions at zero, and each Coulomb friction left (a passive
+    joint's) as the viscous damping it acts as over the rates the design expects.
 
     A smooth Coulomb law's slope at rest (``100 cf`` for ``cf atan(100 v)``) holds only below
     some 0.01 rad/s; linearized there, a passive joint looks locked to the design, and a

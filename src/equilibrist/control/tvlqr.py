@@ -367,8 +367,9 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
     (``balance="lqr"`` only) the command adds the model's friction torque on the actuated
     joints at the state the law uses (:mod:`equilibrist.control.compensation`), and the gains
     and the plan's feedforward are those of the plant with that friction cancelled
-    (:func:`_compensated`); *S_end*, *K_end* must then be the balancing design of
-    :func:`~equilibrist.control.compensation.compensated_system`. With *torque_response*
+    (:func:`_compensated`); *S_end*, *K_end* should then be the balancing design of
+    :func:`~equilibrist.control.compensation.design_system` (a passive joint's Coulomb
+    friction as its secant), as :func:`build_request` makes it. With *torque_response*
     (``k`` per period, ``balance="lqr"`` only) the motor's lag is in the design: the plan's
     torque led by its inverse, the gains of the model augmented with the torque state, which
     the controller runs from its own commands (:mod:`equilibrist.control.torque_lag`; the
@@ -549,11 +550,13 @@ def fc_x(j, t, z, y, params):
 
 def _compensated(system: System, comp: compensation.Compensation, traj: Trajectory,
                  xs: np.ndarray, us: np.ndarray) -> tuple[System, np.ndarray]:
-    """The plant a compensated tracker is designed for (*system* with the compensated
-    frictions at zero) and the plan's feedforward on it: the plan's inputs less the friction
+    """The plant a compensated tracker's gains along the plan are designed for (*system*
+    with the compensated frictions at zero) and the plan's feedforward on it: the plan's inputs less the friction
     torque the plan's own model needed along it (its parameters, *traj*'s where it records
     them: a plan made without friction needed none), which the compensation now supplies."""
-    designed = compensation.design_system(system, comp)
+    # Along the plan the friction left is linearized where the plan moves (the design's
+    # secant is for the balance, at rest: build_request, design_system).
+    designed = compensation.compensated_system(system, comp)
     if not comp.parameters:
         return designed, us
     planned = system.with_params(**{k: float(v) for k, v in traj.params.items()
