@@ -210,11 +210,12 @@ def _pole_rows(design_poles: Sequence[object]) -> list[list[str]]:
 def design_bundle(design: Design) -> Bundle:
     """A design: gains, poles with damping, margins, the choices made."""
     kind = "continuous" if design.rate is None else (
-        f"discrete at {design.rate:g} Hz ({design.discretization}, {design.kalman_form} filter)")
+        f"discrete at {design.rate:g} Hz ({design.discretization}, {design.kalman_form} filter)"
+        + (f", for a loop {design.delay} period(s) late" if design.delay else ""))
     parts = [f"<h3 style='margin:0.2em 0'>LQG design of <code>{html.escape(design.system_key)}"
              f"</code>, {html.escape(kind)}</h3>",
              _section("State feedback u = -K x", matrix_table(
-                 design.K, design.input_names, design.state_names))]
+                 design.K, design.input_names, design.model_state_names))]
     if design.Kc is not None:
         parts.append(_section("Reference gain Kc", matrix_table(
             design.Kc, design.input_names, design.tracked)))
