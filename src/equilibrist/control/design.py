@@ -464,7 +464,9 @@ def delayed(made: Design, periods: int) -> Design:
       the extended model's Riccati equation, and its gain is the undelayed gain beside
       zeros. It estimates the plant's state the measurements describe and predicts with
       the command sent ``N`` periods before;
-    * the reference gain is the extended loop's (the same steady state).
+    * the reference gain is the extended loop's (the same steady state);
+    * the closed-loop poles are the undelayed design's and ``N m`` at ``z = 0``: with the
+      prediction the loop is the undelayed one, ``N`` periods later.
 
     The weights ``Q, R, QN, RN, G`` stay the plant's (what was asked); ``discrete``,
     ``K, S, poles, Kf, P, Qd, Kc, estimator_poles`` are the extended model's, and
@@ -489,7 +491,11 @@ def delayed(made: Design, periods: int) -> Design:
     n, size = made.discrete.n_states, model.n_states
     Q = np.zeros((size, size))
     Q[:n, :n] = made.Q
-    K, S, E = dlqr(model.A, model.B, Q, made.R, state_names=model.state_names)
+    K, S, _E = dlqr(model.A, model.B, Q, made.R, state_names=model.state_names)
+    # The loop with the predictor is the undelayed loop N periods later: its poles are the
+    # undelayed design's and N m at z = 0 (a nilpotent block, whose computed eigenvalues
+    # scatter about 0 by ~1e-8 and would read as poles of 1700 rad/s).
+    E = np.concatenate([made.poles, np.zeros(size - n, dtype=complex)])
     P = np.zeros((size, size))
     P[:n, :n] = made.P
     Qd = np.zeros((size, size))

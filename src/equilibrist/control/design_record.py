@@ -119,6 +119,7 @@ class Design:
 
     def __repr__(self) -> str:  # one line; a notebook shows the tables (equilibrist.notebook)
         timebase = "continuous" if self.rate is None else f"{self.rate:g} Hz"
+        timebase += f", delay {self.delay}" if self.delay else ""
         slowest = max(info.time_constant for info in self.pole_table)
         return (f"Design({self.system_key}, LQG {timebase}, K={np.round(self.K, 4).tolist()}, "
                 f"slowest pole tau={slowest:.3g} s)")
@@ -149,6 +150,12 @@ class Design:
     @property
     def output_names(self) -> tuple[str, ...]:
         return self.plant.output_names
+
+    @property
+    def extended(self) -> bool:
+        """Whether :attr:`model` extends the plant (a :attr:`delay`): its gains' columns are
+        then more than the plant's states, and its controllers hold states of their own."""
+        return self.model.n_states != self.plant.n_states
 
     @property
     def model_state_names(self) -> tuple[str, ...]:
@@ -206,7 +213,8 @@ class Design:
         broken at the plant input (single-input plants; else None): the loop of an LQR on the
         measured full state, not the LQG loop, which runs on the estimate. With a
         :attr:`delay`, the LQR's loop as it runs: the plant and its delay line in series with
-        the controller whose record of the commands in flight is fed its own command."""
+        the controller whose record of the commands in flight is fed its own command
+        (:func:`~equilibrist.control.interop.loop_at_input`)."""
         return self._margins("lqr")
 
     def margins_of(self, controller: str = "lqg") -> Margins | None:
@@ -222,8 +230,7 @@ class Design:
     def _margins(self, controller: str) -> Margins | None:
         if self.plant.n_inputs != 1:
             return None
-        loop = (_delayed_lqr_loop(self) if controller == "lqr" and self.delay
-                else _loop_model(self, controller=controller))
+        loop = _loop_model(self, controller=controller)
         return loop_margins(loop.A, loop.B, loop.C, dt=self.dt, D=float(loop.D[0, 0]))
 
     @cached_property
@@ -355,17 +362,24 @@ class Design:
             timebase = (
                 f"discrete at {self.rate:g} Hz" if self.rate is not None else "continuous"
             )
+            late = (f" and its line of {self.delay} command(s) in flight" if self.delay
+                    else "")
+            lqr_loop = (f"LQR: u = -Kx x - Ku b, its record b of the {self.delay} command(s) in "
+                        f"flight fed its own command, in series with the plant{late}"
+                        if self.delay else "LQR: u = -K x on the measured state")
             loop = (
                 "LQG: the compensator, its Kalman filter fed its own command, in series with "
-                "the plant"
+                f"the plant{late}"
                 if controller == "lqg"
-                else "LQR: u = -K x on the measured state"
+                else lqr_loop
             )
             lines += ["", f"loop broken at the input, as implemented ({loop}; {timebase}):"]
             lines += _margin_lines(margins)
             if controller == "lqg":
+                alone = (f"the LQR with its record on the measured state, in series with the "
+                         f"plant{late}" if self.delay else "LQR loop K (sI - A)^-1 B")
                 lines += [
-                    "state feedback alone (LQR loop K (sI - A)^-1 B, not the loop that runs: "
+                    f"state feedback alone ({alone}, not the loop that runs: "
                     "LQG has no guaranteed margins):",
                     *_margin_lines(self.lqr_margins),
                 ]
@@ -395,32 +409,6 @@ class Design:
         for note in self.notes:
             lines.append(f"note: {note}")
         return "\n".join(lines)
-
-
-def _delayed_lqr_loop(design: Design) -> LinearModel:
-    """The loop of a delayed design's LQR as implemented, broken at the plant's input: the
-    plant with its delay line (the extended model, fed the signal injected there) in series
-    with the controller, whose own record of the commands in flight is fed its own command
-    (``u = -Kx x - Ku b``, ``b`` shifted and given ``u``); it returns ``-u``. The state
-    feedback on the extended model, ``K (zI - A)^-1 B``, would count the controller's
-    record as part of the plant: an error in the actuator's gain would then reach it."""
-    model = design.model
-    n, size, m = design.plant.n_states, model.n_states, model.n_inputs
-    nb = size - n
-    K = np.asarray(design.K, dtype=float)
-    Kx, Ku = K[:, :n], K[:, n:]
-    shift, enter = model.A[n:, n:], model.B[n:, :]
-    A = np.zeros((size + nb, size + nb))
-    A[:size, :size] = model.A
-    A[size:, :n] = -enter @ Kx
-    A[size:, size:] = shift - enter @ Ku
-    B = np.vstack([model.B, np.zeros((nb, m))])
-    C = np.hstack([Kx, np.zeros((m, nb)), Ku])
-    states = model.state_names + tuple(f"record_{s}" for s in model.state_names[n:])
-    return LinearModel(
-        A=A, B=B, C=C, D=np.zeros((m, m)), state_names=states, input_names=model.input_names,
-        output_names=tuple(f"{name}_return" for name in model.input_names),
-        x0=np.zeros(size + nb), u0=np.zeros(m), system=design.system_key, dt=model.dt)
 
 
 # -- formatting helpers ------------------------------------------------------------------

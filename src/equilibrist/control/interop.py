@@ -201,6 +201,16 @@ def loop_at_input(design: Design, *, controller: str = "lqg") -> control.StateSp
         state feedback on the measured full state, ``L = K (sI - A)^-1 B``
         (``d.lqr_margins``).
 
+        A design for a delayed loop (``d.delay = N``) gives the loop as it runs: the
+        plant with its line of ``N`` commands in flight (``d.discrete``, fed the injected
+        signal) in series with the controller that holds its own record of the commands it
+        sent, fed its own command (``"lqr"``: ``u = -Kx x - Ku b``, states ``plant states,
+        F_sent<k>, record_F_sent<k>``; ``"lqg"``: the Kalman filter of the extended model,
+        ``d.compensator``), the controller
+        :meth:`~equilibrist.control.linear.LinearController.from_design` makes. Not
+        ``K (zI - A)^-1 B`` of the extended model, which would count the controller's record
+        as part of the plant.
+
     Notes
     -----
     Continuous loops: ``control.stability_margins(loop_at_input(d))``
@@ -237,6 +247,8 @@ def _loop_model(design: Design, *, controller: str = "lqg") -> LinearModel:
     m = plant.n_inputs
     inputs = plant.input_names
     outputs = tuple(f"{name}_return" for name in inputs)
+    if controller == "lqr" and design.delay:
+        return _delayed_lqr_loop(design)
     if controller == "lqr":
         A, B = plant.A, plant.B
         C, D = np.asarray(design.K, dtype=float), np.zeros((m, m))
@@ -270,3 +282,30 @@ def _loop_model(design: Design, *, controller: str = "lqg") -> LinearModel:
         system=design.system_key,
         dt=plant.dt,
     )
+
+
+def _delayed_lqr_loop(design: Design) -> LinearModel:
+    """The loop of a delayed design's LQR as it runs, broken at the plant's input: the plant
+    with its delay line (the extended model, fed the signal injected there) in series with
+    the controller, whose own record of the commands in flight is fed its own command
+    (``u = -Kx x - Ku b``, ``b`` shifted and given ``u``); it returns ``-u``. The state
+    feedback on the extended model, ``K (zI - A)^-1 B``, would count the controller's record
+    as part of the plant: an error in the actuator's gain would then reach the record too,
+    and the margins would be those of a loop that does not run."""
+    model = design.model
+    n, size, m = design.plant.n_states, model.n_states, model.n_inputs
+    nb = size - n
+    K = np.asarray(design.K, dtype=float)
+    Kx, Ku = K[:, :n], K[:, n:]
+    shift, enter = model.A[n:, n:], model.B[n:, :]
+    A = np.zeros((size + nb, size + nb))
+    A[:size, :size] = model.A
+    A[size:, :n] = -enter @ Kx
+    A[size:, size:] = shift - enter @ Ku
+    B = np.vstack([model.B, np.zeros((nb, m))])
+    C = np.hstack([Kx, np.zeros((m, nb)), Ku])
+    states = model.state_names + tuple(f"record_{s}" for s in model.state_names[n:])
+    return LinearModel(
+        A=A, B=B, C=C, D=np.zeros((m, m)), state_names=states, input_names=model.input_names,
+        output_names=tuple(f"{name}_return" for name in model.input_names),
+        x0=np.zeros(size + nb), u0=np.zeros(m), system=design.system_key, dt=model.dt)

@@ -25,7 +25,7 @@ function ``(t, y, r) -> u`` still runs, through
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import FrozenInstanceError, dataclass
+from dataclasses import FrozenInstanceError, dataclass, replace
 from typing import Any, Protocol, cast, runtime_checkable
 
 import numpy as np
@@ -131,15 +131,50 @@ class _Description:
 
     def linear(self, state_names: Sequence[str], input_names: Sequence[str] | None = None
                ) -> LinearController:
-        """This controller in the one linear form, for a plant with these states and inputs."""
+        """This controller in the one linear form, for a plant with these states and inputs.
+
+        Made from a design whose model extends the plant (:attr:`Design.extended`: a design
+        for a delayed loop, whose controller holds the commands in flight), it is the
+        design's own controller, :meth:`LinearController.from_design` (the one the ``lqr``
+        and ``lqg`` kinds build), named for the plant it runs on."""
         key = (tuple(state_names), None if input_names is None else tuple(input_names))
         if key not in self._forms:
-            self._forms[key] = self._build(state_names, input_names)
+            self._forms[key] = (self._of_extended(state_names, input_names) if self._extended
+                                else self._build(state_names, input_names))
         return self._forms[key]
+
+    @property
+    def _extended(self) -> bool:
+        """Whether the description reads a design whose model extends the plant."""
+        return self._given is None and self._source().extended
+
+    def _of_extended(self, state_names: Sequence[str], input_names: Sequence[str] | None
+                     ) -> LinearController:
+        """:meth:`LinearController.from_design` of the design, named for the plant."""
+        design = self._source()
+        try:
+            made = LinearController.from_design(design, kind=self.kind, tracking=self._tracking)
+        except EquilibristError as exc:
+            raise SimulationError(str(exc)) from exc
+        states = tuple(state_names)
+        inputs = made.input_names if input_names is None else tuple(input_names)
+        if (states, inputs) == (made.state_names, made.input_names):
+            return made
+        try:
+            return replace(made, state_names=states, input_names=inputs)
+        except EquilibristError as exc:
+            raise SimulationError(str(exc)) from exc
 
     def _build(self, state_names: Sequence[str], input_names: Sequence[str] | None
                ) -> LinearController:
         raise NotImplementedError
+
+    def _described(self) -> dict[str, object]:
+        """What a result records of a design whose model extends the plant: the linear form
+        that runs, :meth:`LinearController.describe` (as the kinds record it; ``K``, ``Ad``,
+        ``Kf`` of the extended model are the design's, not the controller's form)."""
+        design = self._source()
+        return self.linear(design.plant.state_names, design.plant.input_names).describe()
 
     def runtime(self, state_names: Sequence[str]) -> LinearRuntime:
         """A Python controller doing the same as the compiled core (for checks)."""
@@ -223,6 +258,8 @@ class StateFeedback(_Description):
         )
 
     def describe(self) -> dict[str, object]:
+        if self._extended:
+            return self._described()
         kc = self.Kc
         return {"kind": self.kind, "K": self.K.tolist(),
                 "Kc": None if kc is None else kc.tolist(),
@@ -338,6 +375,8 @@ class LQG(_Description):
             raise SimulationError(str(exc)) from exc
 
     def describe(self) -> dict[str, object]:
+        if self._extended:
+            return self._described()
         kc = self.Kc
         return {"kind": self.kind, "form": self.form, "outputs": list(self.outputs),
                 "rate": self.rate, "K": self.K.tolist(), "Kf": self.Kf.tolist(),
