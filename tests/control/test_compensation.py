@@ -85,8 +85,9 @@ def test_without_friction_the_controller_is_the_one_without() -> None:
 
 def test_a_passive_joints_coulomb_friction_is_designed_as_its_secant() -> None:
     """The passive elbow's friction is not the motor's to cancel: nothing is added to the
-    command, and the gains see it as the damping ``cf atan(100 V) / V`` at the rate's
-    design scale ``V`` (1 rad/s), added to the joint's own, not as its slope at rest."""
+    command, and the balance's gains see it as the damping ``cf atan(100 V) / V`` at half the
+    rate's design scale, ``V`` = 0.5 rad/s, added to the joint's own, not as its slope at
+    rest."""
     rig = _rig("pendubot", b2=0.001, cf2=0.12)
     plan = _held_upright(rig)
     on = equilibrist.policy(rig, controller="tvlqr", trajectory=plan,
@@ -94,7 +95,7 @@ def test_a_passive_joints_coulomb_friction_is_designed_as_its_secant() -> None:
     off = equilibrist.policy(rig, controller="tvlqr", trajectory=plan).controller
     assert on.source == off.source
     assert on.settings["friction_compensation"] == []
-    secant = _benchmark_friction(1.0, 0.001, 0.12)
+    secant = 0.001 + _benchmark_friction(0.5, 0.0, 0.12) / 0.5
     assert on.settings["friction_design"] == {"b2": pytest.approx(secant, rel=1e-9), "cf2": 0.0}
     assert not np.array_equal(on.params, off.params)
 

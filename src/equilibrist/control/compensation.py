@@ -49,6 +49,12 @@ if TYPE_CHECKING:
 LAYOUT = Layout("FC", ("np", "m"), (("phys", ("np",)), ("bare", ("np",)), ("joint", ("m",)),
                                     ("gain", ("m",))))
 
+#: Where a passive joint's Coulomb friction is linearized for the balance, as a share of the
+#: design's scale of its rate: the mean speed of rates spread evenly over the scale. (At the
+#: whole scale, 1 rad/s, the pendubot's balance held four of the seven RealAIGym rigs with
+#: their identified friction; at a half, or a quarter, all seven: bench/README.md.)
+SPEED = 0.5
+
 #: The states at which an input's direction and a friction's reach are checked: positions
 #: over a turn, rates from the smooth Coulomb law's knee (0.01) to a swing's (10).
 _PROBES = 12
@@ -158,11 +164,12 @@ def design_system(system: System, comp: Compensation) -> System:
 
     A smooth Coulomb law's slope at rest (``100 cf`` for ``cf atan(100 v)``) holds only below
     some 0.01 rad/s; linearized there, a passive joint looks locked to the design, and a
-    balance designed so loses the rig. The friction enters instead as its secant at the
-    joint's rate scale ``V`` (the system's Bryson scale of that rate, 1 where it has none),
-    ``F(V) / V``, added to the joint's viscous damping parameter (a dissipative parameter
-    whose force is linear in that joint's rate alone); a Coulomb friction without one is left
-    as it is."""
+    balance designed so loses the rig. The friction enters instead as its secant ``F(V) / V``
+    at the mean speed of rates spread evenly over the design's scale of that rate,
+    ``V = SPEED * scale`` (:data:`SPEED`; the scale is the system's Bryson scale of the
+    rate, 1 where it has none), added to the joint's viscous damping parameter (a
+    dissipative parameter whose force is linear in that joint's rate alone); a Coulomb
+    friction without one is left as it is."""
     bare = compensated_system(system, comp)
     nq = int(system.functions.N_Q)
     m = system.n_inputs
@@ -191,7 +198,7 @@ def design_system(system: System, comp: Compensation) -> System:
             if np.ptp(ratio) > 1e-9 * np.max(np.abs(ratio)) or ratio[0] >= 0.0:
                 continue  # not a damping linear in the joint's rate
             rate_name = system.state_names[nq + joint]
-            scale = float(system.spec.design_scales.get(rate_name, 1.0))
+            scale = SPEED * float(system.spec.design_scales.get(rate_name, 1.0))
             at = np.array(system.operating_point().x, dtype=float)
             at[nq + joint] = scale
             secant = abs(float((_forces(bare, p, at, np.zeros(m))
