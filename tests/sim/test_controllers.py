@@ -12,6 +12,7 @@ import pytest
 
 from equilibrist.control.design import design
 from equilibrist.control.linear import LinearController
+from equilibrist.errors import SimulationError
 from equilibrist.numeric.lookup import get_system
 from equilibrist.sim.controllers import LQG, StateFeedback
 from equilibrist.sim.noise import Noise
@@ -59,3 +60,17 @@ def test_an_undelayed_design_described_is_as_before() -> None:
     described = StateFeedback.from_design(d).describe()
     assert set(described) == {"kind", "K", "Kc", "tracked", "rate"}
     assert np.array_equal(described["K"], d.K)
+
+
+def test_a_design_for_the_rigs_velocity_filter_described_runs_the_kinds_controller() -> None:
+    system = get_system("dfki_double_pendulum")
+    d = design(system, rate=500.0, outputs=("theta1", "theta2", "theta1_dot", "theta2_dot"),
+               rn=(1e-12, 1e-12, 1e-7, 1e-7), velocity_filter=20.0)
+    run = functools.partial(simulate, system, duration=1.0, rate=500.0, x0={"theta1": 3.1},
+                            rig=Rig(velocity_filter=20.0, velocity_noise=0.05), seed=5)
+    ours, theirs = run(LQG.from_design(d)), run(LinearController.from_design(d, kind="lqg"))
+    np.testing.assert_array_equal(ours.states, theirs.states)
+    np.testing.assert_array_equal(ours.estimates, theirs.estimates)
+    assert LQG.from_design(d).describe() == LinearController.from_design(d).describe()
+    with pytest.raises(SimulationError, match="an LQR reads the rates as measured"):
+        run(StateFeedback.from_design(d))

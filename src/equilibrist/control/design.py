@@ -43,7 +43,7 @@ import math
 import types
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -56,7 +56,9 @@ from equilibrist.control.discretize import (
     METHODS,
     discrete_noise,
     discretize,
+    velocity_filter_gain,
     with_input_delay,
+    with_velocity_filter,
 )
 from equilibrist.control.kalman import FORMS
 from equilibrist.control.reference import discrete_reference_gain, reference_gain
@@ -95,6 +97,7 @@ def design(
     G: object | None = None,
     at: Mapping[str, float] | None = None,
     delay: int = 0,
+    velocity_filter: float = 0.0,
 ) -> Design:
     """Design LQR, Kalman filter and reference gain for *system* at its canonical point.
 
@@ -137,6 +140,13 @@ def design(
         late): the gains are designed on the sampled plant extended by the commands in
         flight (:func:`delayed`). Needs a *rate*. Default 0: the design of the plant as
         it is.
+    velocity_filter:
+        The cutoff [Hz] of the rig's low-pass of the measured joint rates
+        (:class:`~equilibrist.sim.rig.Rig`'s ``velocity_filter``) the Kalman filter's model
+        includes, so that it estimates the plant's state from the filtered rates without
+        their lag (:func:`velocity_filtered`); the measured outputs that are joints' rates
+        are the filtered ones, as the rig filters them. Needs a *rate* and a measured rate;
+        not with a *delay* (yet). Default 0: the rates as measured.
 
     Returns
     -------
@@ -160,7 +170,7 @@ def design(
                           f"not {type(system).__name__}")
     discretization, kalman_form, rate_hz = _checked_options(
         system, outputs=outputs, at=at, discretization=discretization, kalman_form=kalman_form,
-        rate=rate, delay=delay,
+        rate=rate, delay=delay, velocity_filter=velocity_filter,
     )
     if system.n_inputs == 0:
         raise DesignError(f"{system.key} has no input: there is no controller to design")
@@ -169,7 +179,19 @@ def design(
     weights = _design_weights(system, plant, names, q=q, r=r, qn=qn, rn=rn, G=G, rate_hz=rate_hz)
     made = _solved(system, plant, names, weights, rate_hz=rate_hz,
                    discretization=discretization, kalman_form=kalman_form)
+    if velocity_filter:
+        return velocity_filtered(made, float(velocity_filter), rate_outputs(system, names))
     return delayed(made, int(delay)) if delay else made
+
+
+def rate_outputs(system: System, outputs: Sequence[str]) -> tuple[str, ...]:
+    """The *outputs* the rig's velocity filter acts on: those that are a joint's rate (a
+    state ``q_dot`` of a state ``[q, q_dot]``), as :mod:`equilibrist.sim.rig` picks them."""
+    nq = int(system.functions.N_Q)
+    if nq == 0 or system.n_states != 2 * nq:
+        return ()
+    rates = system.state_names[nq:]
+    return tuple(o for o in outputs if o in rates)
 
 
 def _checked_options(
@@ -181,6 +203,7 @@ def _checked_options(
     kalman_form: str,
     rate: float | None,
     delay: object = 0,
+    velocity_filter: object = 0.0,
 ) -> tuple[str, str, float | None]:
     """The options of :func:`design` checked, every problem at once: the discretization and
     Kalman form (the defaults in place of one that is not a string) and the rate in Hz.
@@ -232,6 +255,26 @@ def _checked_options(
     elif delay and rate is None:
         problems.append(f"delay = {delay}: a delay in control periods needs a discrete design "
                         "(give a rate)")
+    if isinstance(velocity_filter, bool) or not isinstance(
+            velocity_filter, int | float | np.integer | np.floating) \
+            or not math.isfinite(float(velocity_filter)) or velocity_filter < 0:
+        problems.append(f"velocity_filter = {velocity_filter!r}: expected a cutoff in Hz > 0 "
+                        "(0: none)")
+    elif velocity_filter:
+        if rate is None:
+            problems.append(f"velocity_filter = {velocity_filter:g} Hz: the rig's filter of "
+                            "samples needs a discrete design (give a rate)")
+        if delay:
+            problems.append("velocity_filter and delay together are not designed yet: give one")
+        if outputs is not None and isinstance(outputs, Sequence) and not rate_outputs(
+                system, [o for o in outputs if isinstance(o, str)]):
+            problems.append(f"velocity_filter = {velocity_filter:g} Hz: no measured output is a "
+                            "joint's rate (the rig filters measured rates): measure them "
+                            "(outputs=...)")
+        elif outputs is None and not rate_outputs(system, system.output_names):
+            problems.append(f"velocity_filter = {velocity_filter:g} Hz: no measured output of "
+                            f"{system.key} ({', '.join(system.output_names)}) is a joint's "
+                            "rate (the rig filters measured rates): measure them (outputs=...)")
     checks.raise_if(problems)
     return discretization, kalman_form, rate_hz
 
@@ -486,6 +529,8 @@ def delayed(made: Design, periods: int) -> Design:
     if made.delay:
         raise DesignError(f"the design already compensates a delay of {made.delay} period(s): "
                           "delay the design made without one")
+    if made.velocity_filter:
+        raise DesignError("velocity_filter and delay together are not designed yet: give one")
     N = int(periods)
     model = with_input_delay(made.discrete, N)
     n, size = made.discrete.n_states, model.n_states
@@ -518,6 +563,102 @@ def delayed(made: Design, periods: int) -> Design:
         kc_note=kc_note, estimator_poles=_sorted(np.linalg.eigvals(model.A - L @ model.C), True),
         delay=N,
     )
+
+
+def velocity_filtered(made: Design, cutoff: float, outputs: Sequence[str]) -> Design:
+    """*made*, a discrete design, with its Kalman filter designed again for measured *outputs*
+    read through the rig's velocity filter of cutoff *cutoff* [Hz]
+    (:class:`~equilibrist.sim.rig.Rig`'s ``velocity_filter``: ``v_f += a (v - v_f)``,
+    ``a = 1 - exp(-2 pi f_c T)``, per measured rate).
+
+    The model is the sampled plant extended by the filter's last outputs
+    (:func:`~equilibrist.control.discretize.with_velocity_filter`), and
+
+    * the Kalman filter is the stationary filter of that model with the process noise on the
+      plant's states and the design's measurement noise on the filtered outputs: it
+      estimates the plant's state (and the filter's) from the filtered rates, their lag
+      accounted for;
+    * the LQR is the plant's, beside zeros: the filter's states change nothing the plant
+      does (``K = [K, 0]``, ``S = [[S, 0], [0, 0]]``), so the closed-loop poles are the
+      plant's and the filter's own, ``1 - a``, once per filtered output;
+    * the reference gain is the extended loop's (the same steady state).
+
+    ``discrete``, ``K, S, poles, Kf, P, Qd, Kc, estimator_poles`` are the extended model's;
+    :attr:`Design.velocity_filter` is *cutoff* and :attr:`Design.filtered` the *outputs*.
+    Only the LQG runs on such a design (the LQR reads the state as it is measured).
+
+    Raises
+    ------
+    DesignError
+        A continuous or delayed design, one already filtered, a cutoff that is not a
+        positive number, *outputs* the design does not measure.
+    """
+    if isinstance(cutoff, bool) or not isinstance(cutoff, int | float | np.integer | np.floating) \
+            or not math.isfinite(float(cutoff)) or cutoff <= 0:
+        raise DesignError(f"velocity_filter = {cutoff!r}: expected a cutoff in Hz > 0")
+    if made.discrete is None or made.rate is None or made.Qd is None or made.Rd is None:
+        raise DesignError("a velocity filter of samples needs a discrete design (give a rate)")
+    if made.extended:
+        raise DesignError("the design's model is already extended (a delay or a filter): "
+                          "filter the design made without one")
+    names = tuple(outputs)
+    gain = velocity_filter_gain(cutoff, made.rate)
+    model = with_velocity_filter(made.discrete, names, gain)
+    n, size = made.discrete.n_states, model.n_states
+    K = np.hstack([made.K, np.zeros((made.K.shape[0], size - n))])
+    S = np.zeros((size, size))
+    S[:n, :n] = made.S
+    Qd = np.zeros((size, size))
+    Qd[:n, :n] = made.Qd
+    L, P, Ef = dlqe(model.A, np.eye(size), model.C, Qd, made.Rd,
+                    state_names=model.state_names, output_names=model.output_names)
+    Kf = current_gain(P, model.C, made.Rd) if made.kalman_form == "current" else L
+    E = np.concatenate([made.poles, np.full(size - n, 1.0 - gain, dtype=complex)])
+    Kc, kc_note = made.Kc, made.kc_note
+    if made.tracked:
+        m = model.n_inputs
+        try:
+            Kc = discrete_reference_gain(model.A, model.B, model.C[:m], K,
+                                         tracked_names=made.tracked,
+                                         input_names=model.input_names)
+            kc_note = ""
+        except DesignError as exc:
+            Kc, kc_note = None, str(exc)
+    return replace(
+        made, discrete=model, K=K, S=S, poles=_sorted(E, True), Kf=Kf, P=P, Qd=Qd, Kc=Kc,
+        kc_note=kc_note, estimator_poles=_sorted(Ef, True), velocity_filter=float(cutoff),
+        filtered=names,
+    )
+
+
+def kind_design(made: Design, system: System, options: Mapping[str, object]) -> Design:
+    """The design the ``lqr`` and ``lqg`` kinds' options ask for, from *made* (the request's
+    design of *system*): ``design_delay`` (``--design-delay N|Ts``, :func:`delayed`) and
+    ``design_velocity_filter`` (``--design-velocity-filter HZ``, :func:`velocity_filtered` of
+    the measured outputs that are joints' rates). Neither given: *made* itself.
+
+    Raises
+    ------
+    DesignError
+        A continuous design, both options at once, a filter with no measured rate, a value
+        :func:`delay_periods` or :func:`velocity_filtered` refuses.
+    """
+    delay, cutoff = options.get("design_delay"), options.get("design_velocity_filter")
+    if (delay is not None or cutoff is not None) and made.rate is None:
+        raise DesignError("--design-delay and --design-velocity-filter need a rate: they "
+                          "design a sampled loop")
+    periods = 0 if delay is None or made.rate is None else delay_periods(delay, made.rate)
+    if cutoff is None:
+        return delayed(made, periods)
+    if periods:
+        raise DesignError("--design-velocity-filter and --design-delay together are not "
+                          "designed yet: give one")
+    rates = rate_outputs(system, made.output_names)
+    if not rates:
+        raise DesignError(f"--design-velocity-filter: no measured output of {system.key} "
+                          f"({', '.join(made.output_names)}) is a joint's rate (the rig "
+                          "filters measured rates): measure them (--outputs)")
+    return velocity_filtered(made, cast(float, cutoff), rates)
 
 
 def delay_periods(value: object, rate: float) -> int:
@@ -564,4 +705,7 @@ __all__ = [
     "delay_periods",
     "delayed",
     "design",
+    "kind_design",
+    "rate_outputs",
+    "velocity_filtered",
 ]

@@ -89,6 +89,12 @@ class Design:
         :attr:`model_state_names`) and ``K, S, poles, Kf, P, Qd, Kc, estimator_poles`` are
         that model's (:func:`~equilibrist.control.design.delayed`); ``plant`` and the
         weights ``Q, R, QN, RN, G`` stay the plant's.
+    velocity_filter, filtered:
+        The cutoff [Hz] of the rig's low-pass of the measured rates *filtered* that the
+        Kalman filter's model includes (0 and ``()``: none). With it, ``discrete`` is the
+        sampled plant extended by the filter's last outputs
+        (:func:`~equilibrist.control.discretize.with_velocity_filter`) and the gains are that
+        model's (:func:`~equilibrist.control.design.velocity_filtered`).
     """
 
     system_key: str
@@ -116,10 +122,13 @@ class Design:
     estimator_poles: np.ndarray
     notes: tuple[str, ...] = field(default=())
     delay: int = 0
+    velocity_filter: float = 0.0
+    filtered: tuple[str, ...] = ()
 
     def __repr__(self) -> str:  # one line; a notebook shows the tables (equilibrist.notebook)
         timebase = "continuous" if self.rate is None else f"{self.rate:g} Hz"
         timebase += f", delay {self.delay}" if self.delay else ""
+        timebase += f", velocity filter {self.velocity_filter:g} Hz" if self.velocity_filter else ""
         slowest = max(info.time_constant for info in self.pole_table)
         return (f"Design({self.system_key}, LQG {timebase}, K={np.round(self.K, 4).tolist()}, "
                 f"slowest pole tau={slowest:.3g} s)")
@@ -153,8 +162,9 @@ class Design:
 
     @property
     def extended(self) -> bool:
-        """Whether :attr:`model` extends the plant (a :attr:`delay`): its gains' columns are
-        then more than the plant's states, and its controllers hold states of their own."""
+        """Whether :attr:`model` extends the plant (a :attr:`delay`, a :attr:`velocity_filter`):
+        its gains' columns are then more than the plant's states, and its controllers hold
+        states of their own."""
         return self.model.n_states != self.plant.n_states
 
     @property
@@ -275,6 +285,8 @@ class Design:
             "discretization": self.discretization,
             "kalman_form": self.kalman_form,
             "delay": self.delay,
+            "velocity_filter": self.velocity_filter,
+            "filtered": list(self.filtered),
             "states": list(self.state_names),
             "model_states": list(self.model_state_names),
             "inputs": list(self.input_names),
@@ -340,6 +352,11 @@ class Design:
             *([f"delay: {self.delay} control period(s), designed on the plant extended by the "
                f"commands in flight ({', '.join(self.model_state_names[len(states):])})"]
               if self.delay else []),
+            *([f"velocity filter: the measured {', '.join(self.filtered)} read through the "
+               f"rig's low-pass at {self.velocity_filter:g} Hz, the Kalman filter designed on "
+               f"the plant extended by its states "
+               f"({', '.join(self.model_state_names[len(states):])})"]
+              if self.velocity_filter else []),
             "",
             "weights: Q = diag("
             + _numbers(np.diag(self.Q))

@@ -19,6 +19,8 @@ over a period becomes ``Rd = RN / T``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from equilibrist.control import checks, fixed
@@ -232,5 +234,84 @@ def with_input_delay(model: LinearModel, periods: int) -> LinearModel:
         params=model.params,
         dt=model.dt,
         state_units=model.state_units + units if model.state_units and units else (),
+        input_units=model.input_units,
+    )
+
+
+def velocity_filter_gain(cutoff: float, rate: float) -> float:
+    """The rig's velocity filter's gain per period, ``a = 1 - exp(-2 pi f_c T)`` for the
+    cutoff *cutoff* [Hz] at *rate* [Hz], computed as :meth:`equilibrist.sim.rig.Rig.pack`
+    computes it (the same bits): its filter is ``v_f += a (v - v_f)``."""
+    return -math.expm1(-2.0 * math.pi * float(cutoff) / float(rate))
+
+
+def filter_state_names(outputs: tuple[str, ...]) -> tuple[str, ...]:
+    """The states :func:`with_velocity_filter` adds: each filtered output's reading,
+    ``theta1_dot_filtered``."""
+    return tuple(f"{name}_filtered" for name in outputs)
+
+
+def with_velocity_filter(model: LinearModel, outputs: tuple[str, ...], gain: float) -> LinearModel:
+    """The discrete *model* whose measured *outputs* are read through the rig's first-order
+    low-pass ``f_k = f_{k-1} + a (v_k - f_{k-1})`` (``a`` = *gain*,
+    :func:`velocity_filter_gain`; ``v_k = Cv x_k`` the output as the model measures it), as
+    a model without the filter: the state extended by the filtered readings ``f_k``, which
+    the filtered outputs then measure::
+
+        [x; f]_{k+1} = [[Ad, 0], [a Cv Ad, (1 - a) I]] [x; f]_k + [Bd; a Cv Bd] u_k
+        y_k = f_k (a filtered output),  C x_k (any other)
+
+    (``f_{k+1} = (1 - a) f_k + a Cv x_{k+1}``, ``x_{k+1} = Ad x_k + Bd u_k``). Each output
+    still reads one state, as the Kalman filter's source needs. The operating point of each
+    reading is its output's there. The model's measurements must not depend on its input
+    (``D = 0``).
+
+    Raises
+    ------
+    DesignError
+        A continuous model, a ``D`` that is not zero, an output the model does not measure
+        or one named twice, a gain outside ``(0, 1]``.
+    """
+    if model.dt is None:
+        raise DesignError("a velocity filter of samples needs a discrete model (a sample period)")
+    if np.any(np.asarray(model.D) != 0):
+        raise DesignError("a filtered measurement cannot depend on the input at once: the "
+                          "model's D must be zero")
+    unknown = [o for o in outputs if o not in model.output_names]
+    if unknown or len(set(outputs)) != len(outputs) or not outputs:
+        raise DesignError(f"filtered outputs {', '.join(outputs) or '(none)'}: expected measured "
+                          f"outputs, each once ({', '.join(model.output_names)})")
+    if not (0.0 < gain <= 1.0):
+        raise DesignError(f"velocity filter gain {gain!r}: expected a number in (0, 1]")
+    n, m, p, nf = model.n_states, model.n_inputs, model.n_outputs, len(outputs)
+    rows = [model.output_names.index(o) for o in outputs]
+    Cv = np.asarray(model.C, dtype=float)[rows]
+    A = np.zeros((n + nf, n + nf))
+    A[:n, :n] = model.A
+    A[n:, :n] = gain * fixed.matmul(Cv, model.A)
+    A[n:, n:] = (1.0 - gain) * np.eye(nf)
+    B = np.vstack([model.B, gain * fixed.matmul(Cv, model.B)])
+    C = np.zeros((p, n + nf))
+    C[:, :n] = model.C
+    for i, row in enumerate(rows):
+        C[row] = 0.0
+        C[row, n + i] = 1.0
+    units = tuple(model.state_units[list(model.state_names).index(o)] if o in model.state_names
+                  else "" for o in outputs) if model.state_units else ()
+    return LinearModel(
+        A=A,
+        B=B,
+        C=C,
+        D=np.zeros((p, m)),
+        state_names=model.state_names + filter_state_names(outputs),
+        input_names=model.input_names,
+        output_names=model.output_names,
+        x0=np.concatenate([model.x0, np.asarray(model.y0, dtype=float)[rows]]),
+        u0=model.u0,
+        residual=model.residual,
+        system=model.system,
+        params=model.params,
+        dt=model.dt,
+        state_units=model.state_units + units if units else (),
         input_units=model.input_units,
     )

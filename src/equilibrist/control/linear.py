@@ -464,6 +464,11 @@ class LinearController:
         is told (the saturated command): ``lqr`` is ``u = u_op - Kx dx - Ku b + Kc dr``
         (``nz = N m``); ``lqg`` is the Kalman filter of the extended model, its state the
         prediction of ``[x; b]`` (``nz = n + N m``), its estimate the plant's part.
+
+        A design with a velocity filter (:attr:`Design.velocity_filter`) gives the ``lqg``
+        whose Kalman filter runs on the plant extended by the rig's filter of the measured
+        rates (``nz = n + `` the filtered outputs), its estimate the plant's part; its
+        ``lqr`` is refused (the state feedback reads the rates as measured).
         """
         if kind not in ("lqr", "lqg"):
             raise ControllerError(f"controller kind {kind!r}: expected 'lqr' or 'lqg'")
@@ -481,9 +486,9 @@ class LinearController:
                     f"reference tracking needs K_c: {design.kc_note or 'the design has no reference gain'}"
                 )
             kc, tracked = np.asarray(design.Kc, dtype=float), tuple(design.tracked)
-        if design.delay:
-            return _delayed(cls, design, kind=kind, Kc=kc, tracked=tracked, u_min=u_min,
-                            u_max=u_max)
+        if design.extended:
+            return _extended(cls, design, kind=kind, Kc=kc, tracked=tracked, u_min=u_min,
+                             u_max=u_max)
         if kind == "lqr":
             return cls.state_feedback(
                 design.K, x_op=plant.x0, u_op=plant.u0, state_names=plant.state_names,
@@ -504,9 +509,10 @@ class LinearController:
         )
 
 
-def _delayed(cls: type[LinearController], design: Design, *, kind: str, Kc: np.ndarray | None,
-             tracked: tuple[str, ...], u_min: object, u_max: object) -> LinearController:
-    """:meth:`LinearController.from_design` of a design with a delay (see there)."""
+def _extended(cls: type[LinearController], design: Design, *, kind: str, Kc: np.ndarray | None,
+              tracked: tuple[str, ...], u_min: object, u_max: object) -> LinearController:
+    """:meth:`LinearController.from_design` of a design whose model extends the plant (a
+    delay, a velocity filter; see there)."""
     from equilibrist.control import fixed
     from equilibrist.control.lqg import lqg_compensator
 
@@ -519,6 +525,11 @@ def _delayed(cls: type[LinearController], design: Design, *, kind: str, Kc: np.n
     states, inputs = plant.state_names, plant.input_names
     r_op = plant.x0[[states.index(t) for t in tracked]]
     Kcm = np.zeros((m, 0)) if Kc is None else Kc
+    if kind == "lqr" and design.velocity_filter:
+        raise ControllerError(
+            f"the design's velocity filter ({design.velocity_filter:g} Hz) is its Kalman "
+            "filter's model: an LQR reads the rates as measured (controller lqg, or a design "
+            "without velocity_filter)")
     if kind == "lqr":
         return cls(
             Ac=model.A[n:, n:], By=np.zeros((nb, n)), Br=np.zeros((nb, len(tracked))),
