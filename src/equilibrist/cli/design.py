@@ -88,13 +88,14 @@ def run(args: argparse.Namespace) -> int:
                 print(f"  {key}: {value}")
         return 0
     result = design(system, rate=rate, **common.design_options(args))
-    if options.get("design_delay") is not None:  # the kind's option: the design it builds on
-        from equilibrist.control.design import delay_periods, delayed
+    if options.get("design_delay") is not None or options.get("design_velocity_filter") is not None:
+        from equilibrist.control.design import kind_design
 
-        if rate is None:
-            raise UsageError("--design-delay needs --rate: a delay in control periods is a "
-                             "discrete design's")
-        result = delayed(result, delay_periods(options["design_delay"], rate))
+        if rate is None:  # the kind's options: the design it builds on
+            flag = "--design-delay" if options.get("design_delay") is not None \
+                else "--design-velocity-filter"
+            raise UsageError(f"{flag} needs --rate: it designs a sampled loop")
+        result = kind_design(result, system, options)
     if args.json:
         out = result.to_dict(controller=kind)
         if result.rate is not None:

@@ -283,10 +283,11 @@ def made_by_design(ctrl: LinearController) -> bool:
     from equilibrist.errors import EquilibristError
 
     design = ctrl.design
-    # The design's library holds an undelayed design's matrices; a design for a delayed loop
-    # (its state extended by the commands in flight) is exported as the value it is.
+    # The design's library holds the matrices of a design on the plant as it is; a design on
+    # an extended model (the commands in flight of a delayed loop, the rig's velocity filter)
+    # is exported as the value it is.
     if not isinstance(design, Design) or design.discrete is None or not design.rate \
-            or design.delay:
+            or design.extended:
         return False
     try:
         made = LinearController.from_design(design, kind=ctrl.kind,
