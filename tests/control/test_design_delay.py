@@ -183,3 +183,14 @@ def test_bad_delays_are_named() -> None:
     for bad_text in ("-1", "x", "2 periods"):
         with pytest.raises(DesignError, match="expected a whole number"):
             delay_periods(bad_text, 100.0)
+
+
+def test_the_designs_own_library_refuses_a_delayed_design_naming_the_export_that_takes_it(
+        tmp_path) -> None:
+    from equilibrist.errors import ExportError
+    from equilibrist.export.writer import export_c
+
+    _, d2 = _designs()
+    with pytest.raises(ExportError, match=r"a loop 2 period\(s\) late.*export_controller\("):
+        export_c(d2, tmp_path / "late")
+    assert not (tmp_path / "late").exists()  # nothing half-written

@@ -28,8 +28,11 @@ margins are those of the loop as implemented, broken at the plant input
 its own command, in series with the plant, in the design's timebase
 (discrete at --rate); for lqr the state feedback. lqr_margins are the state
 feedback's alone, K (sI - A)^-1 B: an LQG has no guaranteed margins and its
-loop's are usually well below them. equilibrist.control.loop_at_input(d)
-is that loop as a python-control system.
+loop's are usually well below them. With --design-delay each is the loop as
+it runs: the controller holding its record of the commands in flight, fed
+its own command, with the plant and its delay line; with
+--design-velocity-filter the LQG's loop runs through the rig's filter.
+equilibrist.control.loop_at_input(d) is that loop as a python-control system.
 
 --at STATE=VALUE designs at the equilibrium with those states (the others
 solved), e.g. --at theta=3.14159 for a pendulum hanging down.

@@ -376,6 +376,16 @@ def export_c(
     """
     check_controller(controller)
     check_precision(precision)
+    from equilibrist.control.design_record import Design
+
+    if isinstance(design, Design) and design.extended:
+        what = (f"a loop {design.delay} period(s) late" if design.delay
+                else f"the rig's {design.velocity_filter:g} Hz velocity filter")
+        raise ExportError(
+            f"the design is for {what}: its library holds a design of the plant as it is; "
+            "export its controller, the linear controller it is: export_controller("
+            f"LinearController.from_design(design, kind={controller!r}), out, system=...) "
+            "from equilibrist.export.writer (the command line's export does)")
     folder = check_folder(out, force=force)
     data = controller_data(design, controller=controller)
     if system is None:
