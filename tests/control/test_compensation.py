@@ -153,10 +153,15 @@ def test_the_rig_as_identified_balances_compensated_and_falls_without() -> None:
 
 
 def test_the_compensated_controller_exports_with_make_check_exact(tmp_path: Path) -> None:
+    """The acrobot as identified, compensated, its rates differenced and its motor's lag in
+    the design too (the two options' sources together): the C library replays the recorded
+    vectors exactly."""
     rig = _rig("acrobot", **MODEL_1_0)
     ctrl = equilibrist.policy(rig, controller="tvlqr", trajectory=_held_upright(rig),
-                              rates="differenced", wrap="on",
+                              rates="differenced", wrap="on", design_torque_response="10ms",
                               friction_compensation="on").controller
+    assert ctrl.settings["friction_compensation"] == ["b2", "cf2"]
+    assert "torque_response" in ctrl.settings
     out = tmp_path / "fc"
     export_controller(ctrl, out, system=rig, duration=0.5)
     assert " 0 mismatches" in make_check(out)

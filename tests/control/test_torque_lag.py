@@ -4,13 +4,13 @@ Truths: the exactly sampled first-order lag ``k = 1 - exp(-T / tc)``; SciPy's di
 solver on the augmented model built here by hand; the rig's own torque response in the
 compiled core (the torque that acts at the first sample is the plan's when the tracker leads
 it by the lag's inverse); the scorecard's torque-response family (the benchmark's values of
-``k``), on which the lag-aware tracker succeeds where the plain one does not; ``make check``.
+``k``), on which the lag-aware tracker succeeds where the plain one does not. (Its C export,
+with the friction compensation, is replayed by ``make check`` in test_compensation.py.)
 """
 
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,12 +21,9 @@ from equilibrist.control import torque_lag
 from equilibrist.control.discretize import discrete_matrices
 from equilibrist.control.trajopt import Trajectory, plan
 from equilibrist.errors import ControllerError
-from equilibrist.export.writer import export_controller
 from equilibrist.sim.rig import Rig
 from equilibrist.sim.run import simulate
 from equilibrist.study.robustness import robustness
-from equilibrist.systems.dfki_double_pendulum import MODEL_1_0
-from support.export import make_check
 
 
 def test_the_design_response_is_k_or_the_sampled_time_constant() -> None:
@@ -70,9 +67,9 @@ def test_the_plans_torque_acts_through_the_lag_when_the_tracker_leads_it() -> No
     rig = equilibrist.get_system("dfki_double_pendulum", robot="pendubot")
     kappa = 0.25
     path = _pushing(rig, 1.0)
-    lagged = equilibrist.policy(rig, controller="tvlqr", trajectory=path,
+    lagged = equilibrist.policy(rig, controller="tvlqr", trajectory=path, wrap="on",
                                 design_torque_response=str(kappa)).controller
-    plain = equilibrist.policy(rig, controller="tvlqr", trajectory=path).controller
+    plain = equilibrist.policy(rig, controller="tvlqr", trajectory=path, wrap="on").controller
     motor = Rig(torque_response=kappa)
     first = {name: simulate(rig, c, duration=0.01, x0=np.zeros(4), rig=motor, region={})
              for name, c in (("lagged", lagged), ("plain", plain))}
@@ -103,14 +100,3 @@ def test_the_lag_aware_tracker_scores_above_the_plain_one_on_the_torque_response
         card = robustness(rig, ctrl, x0=np.zeros(4), rate=100.0, families=("torque_response",))
         scores[design] = card.scores["torque_response"]
     assert scores["0.5"] >= scores[None] + 0.4, scores
-
-
-def test_the_lag_aware_and_compensated_tracker_exports_with_make_check_exact(
-        tmp_path: Path) -> None:
-    rig = equilibrist.get_system("dfki_double_pendulum", robot="acrobot", **MODEL_1_0)
-    ctrl = equilibrist.policy(rig, controller="tvlqr", trajectory=_pushing(rig, 0.5),
-                              rates="differenced", design_torque_response="10ms",
-                              friction_compensation="on").controller
-    out = tmp_path / "lag"
-    export_controller(ctrl, out, system=rig, duration=0.5)
-    assert " 0 mismatches" in make_check(out)
