@@ -417,8 +417,11 @@ def tvlqr(system: System, traj: Trajectory, *, rate: float, Q: np.ndarray, R: np
         gains = shared_gains([plant_system, *plants], xs, us, dt=dt, Q=Q, R=R, S_end=S)
     lag = None
     if torque_response is not None:
-        lag = _lagged(plant_system, xs, us, rate=rate, Q=Q, R=R, kappa=torque_response,
-                      x_op=x_op, u_op=u_op)
+        # The balance of the plant the compensation leaves is designed as build_request's
+        # (a passive joint's Coulomb friction as its secant).
+        at_rest = plant_system if comp is None else compensation.design_system(system, comp)
+        lag = _lagged(plant_system, at_rest, xs, us, rate=rate, Q=Q, R=R,
+                      kappa=torque_response, x_op=x_op, u_op=u_op)
         gains, K_end, S_end = lag[0][:, :, :n], lag[1][:, :n], lag[2][:n, :n]
     for k in range(steps - 1, -1, -1) if lag is None else ():
         A, B = plant_system.jacobians(xs[k], us[k])
@@ -509,12 +512,13 @@ def _extended(system: System, params: np.ndarray, source: str, z0: np.ndarray, *
     return np.concatenate([params, fc_block]), source, z0, settings
 
 
-def _lagged(system: System, xs: np.ndarray, us: np.ndarray, *, rate: float, Q: np.ndarray,
-            R: np.ndarray, kappa: float, x_op: np.ndarray,
+def _lagged(system: System, at_rest: System, xs: np.ndarray, us: np.ndarray, *, rate: float,
+            Q: np.ndarray, R: np.ndarray, kappa: float, x_op: np.ndarray,
             u_op: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The augmented model's gains along the plan ``(steps, m, n + m)``, its balancing gain
-    ``(m, n + m)`` and Riccati solution (:mod:`equilibrist.control.torque_lag`)."""
-    K_aug, S_aug = torque_lag.balance(system, x_op, u_op, rate=rate, Q=Q, R=R, kappa=kappa)
+    """The augmented model's gains along the plan ``(steps, m, n + m)`` (*system*'s), its
+    balancing gain ``(m, n + m)`` and Riccati solution (*at_rest*'s, at the operating point)
+    (:mod:`equilibrist.control.torque_lag`)."""
+    K_aug, S_aug = torque_lag.balance(at_rest, x_op, u_op, rate=rate, Q=Q, R=R, kappa=kappa)
     along = torque_lag.gains(system, xs, us, rate=rate, Q=Q, R=R, kappa=kappa, S_end=S_aug)
     return along, K_aug, S_aug
 
@@ -525,8 +529,9 @@ def lagged_source(source: str, *, n: int, m: int, tail: int) -> str:
     last *m* entries of its state) (:func:`equilibrist.control.torque_lag.source`; *tail*:
     the values after the lag's block in the parameters)."""
     head = "    z_out[0] = tvlqr_caught(t, z, y, params)\n"
-    lagged = source.replace("        u_out[i] = acc", "        u_out[i] = acc + lg_torque(i, t, z, y, params)").replace(
-        head, head + "    lg_update(t, z, u_applied, params, z_out)\n")
+    lagged = source.replace("        u_out[i] = acc",
+                            "        u_out[i] = acc + lg_torque(i, t, z, y, params)")
+    lagged = lagged.replace(head, head + "    lg_update(t, z, u_applied, params, z_out)\n")
     if lagged.count("lg_torque") != 1 or lagged.count("lg_update") != 1:
         raise AssertionError("the tracker's source has no command or update to extend")
     return lagged + "\n\n" + torque_lag.source(n=n, m=m, tail=tail)
@@ -551,9 +556,10 @@ def fc_x(j, t, z, y, params):
 def _compensated(system: System, comp: compensation.Compensation, traj: Trajectory,
                  xs: np.ndarray, us: np.ndarray) -> tuple[System, np.ndarray]:
     """The plant a compensated tracker's gains along the plan are designed for (*system*
-    with the compensated frictions at zero) and the plan's feedforward on it: the plan's inputs less the friction
-    torque the plan's own model needed along it (its parameters, *traj*'s where it records
-    them: a plan made without friction needed none), which the compensation now supplies."""
+    with the compensated frictions at zero) and the plan's feedforward on it: the plan's
+    inputs less the friction torque the plan's own model needed along it (its parameters,
+    *traj*'s where it records them: a plan made without friction needed none), which the
+    compensation now supplies."""
     # Along the plan the friction left is linearized where the plan moves (the design's
     # secant is for the balance, at rest: build_request, design_system).
     designed = compensation.compensated_system(system, comp)
