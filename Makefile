@@ -24,6 +24,10 @@ $(STAMP): pyproject.toml setup.py $(wildcard src/equilibrist/native/daqp/src/*.c
 	@# its libraries link them, so they cannot be left out, and the CPU-only index is not
 	@# PyPI): from a warm uv cache they are linked in seconds, byte-compiled in about 30 s.
 	$(VENV)/bin/uv pip install --quiet --compile-bytecode --python $(PY) -e '.[dev]'
+	@# PufferLib's vector interface, for envs/puffer.py's tests: pufferlib-core pins the PyTorch
+	@# its CUDA extension was built for, which would replace the rl extra's; the modules used
+	@# (vector, emulation) are plain Python, so it goes in without its pins (docs/envs.md).
+	$(VENV)/bin/uv pip install --quiet --compile-bytecode --no-deps --python $(PY) 'pufferlib-core==3.0.23'
 	$(PY) -m compileall -q src/equilibrist
 	@touch $(STAMP)
 

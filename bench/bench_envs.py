@@ -125,12 +125,38 @@ def single_case(seconds: float, repeats: int) -> dict[str, float]:
     return {k: v * 1e6 for k, v in t.items()}  # microseconds per step
 
 
+def puffer_case(n: int, seconds: float, repeats: int) -> dict[str, float]:
+    """PufferLib's native environment over the vector one (``envs.puffer``, its buffers
+    filled every step) against the vector environment alone: env-steps per second."""
+    from equilibrist.envs.puffer import EquilibristPufferEnv
+
+    alone = gym.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", **OPTIONS)
+    alone.reset(seed=0)
+    puffer = EquilibristPufferEnv(ENV_ID, num_envs=n, **OPTIONS)
+    puffer.reset(seed=0)
+    a = np.zeros((n, 1))
+    t = best_of({"alone": _timer(lambda: alone.step(a), seconds),
+                 "puffer": _timer(lambda: puffer.step(a), seconds)}, repeats)
+    alone.close()
+    puffer.close()
+    return {k: n / v for k, v in t.items()}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--seconds", type=float, default=0.3, help="per timing")
     parser.add_argument("--json", action="store_true")
+    parser.add_argument("--puffer", action="store_true",
+                        help="PufferLib's native environment over the vector one, against it alone")
     args = parser.parse_args()
+    if args.puffer:
+        print(f"load average {os.getloadavg()[0]:.1f}; env-steps per second (M/s)")
+        for n in SIZES:
+            r = puffer_case(n, args.seconds, args.repeats)
+            print(f"{n:5d} vector env alone {r['alone'] / 1e6:8.3f}  as a PufferEnv "
+                  f"{r['puffer'] / 1e6:8.3f}  ({r['puffer'] / r['alone']:.2f} x)")
+        return
 
     from equilibrist.sim.kernel import thread_count
 
