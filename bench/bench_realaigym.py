@@ -147,7 +147,8 @@ def rigs(benchmark: Path, robots: list[str], variants: list[str], friction: str 
     finds a swing-up time (every state within 0.01 of upright, staying there), and ends up
     when the final state is within the robustness board's tolerance. *friction*: the files'
     ``FRICTION`` setting (``on``: the motor's joint's friction cancelled, ``off``: not; None:
-    the file's own)."""
+    the file's own). A file that checks its design on its own model of the rig says which of
+    its back-off settings it kept (``{}``: its own)."""
     import importlib.util
 
     from double_pendulum.analysis.leaderboard import get_swingup_time
@@ -198,8 +199,11 @@ def rigs(benchmark: Path, robots: list[str], variants: list[str], friction: str 
                 up = bool(np.all(np.abs(d) < [0.35, 0.35, 1.0, 1.0]))
                 rows.append((robot, design, model + variant,
                              f"swing-up {swing:.2f} s" if swing < 10.0 else "no swing-up",
-                             f"final upright: {'yes' if up else 'no'}, peak torque "
-                             f"{np.max(np.abs(U)):.1f} N m, {time.perf_counter() - t0:.0f} s"))
+                             f"final upright: {'yes' if up else 'no'} (angles within "
+                             f"{np.max(np.abs(d[:2])):.3f} rad), peak torque "
+                             f"{np.max(np.abs(U)):.1f} N m, {time.perf_counter() - t0:.0f} s"
+                             + (f", kept {controller.back_off}" if hasattr(controller, "back_off")
+                                else "")))
                 print(*rows[-1], flush=True)
     print("\n| robot | design | model | board's criterion | |\n|---|---|---|---|---|")
     for row in rows:

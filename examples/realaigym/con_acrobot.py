@@ -122,7 +122,7 @@ def build(mpar, robot, duration=DURATION, knots=KNOTS, rate_cost=RATE_COST,
                 "smoothing": smoothing, "wrap": wrap, "catch": catch, "velocity": velocity,
                 "torque_weight": torque_weight, "state_weights": state_weights}
     plans = {}
-    first = None
+    first, kept = None, None
     for change in back_off if check == "on" else ({},):
         tried = {**settings, **change}
         key = tuple(tried[k] for k in ("duration", "knots", "rate_cost", "smoothing"))
@@ -137,10 +137,14 @@ def build(mpar, robot, duration=DURATION, knots=KNOTS, rate_cost=RATE_COST,
         if first is None:
             first = policy
         if check != "on" or balances(system, policy):
+            kept = change
             break
     else:
         policy = first  # none balances its own rig: the file's own settings
-    return EquilibristController(policy, actuated=1 if robot == "acrobot" else 0)
+    controller = EquilibristController(policy, actuated=1 if robot == "acrobot" else 0)
+    # What the check kept ({}: the file's own settings; None: none balanced, the file's own).
+    controller.back_off = kept
+    return controller
 
 
 def _policy(system, trajectory, settings, friction):
