@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import select
 import subprocess
 import sys
 import time
@@ -128,9 +129,14 @@ def start_at_work(argv: list[str], folder: Path, at: str, *, after: int = 0,
         os.close(mark)
 
     def ready(proc: subprocess.Popen[bytes]) -> None:
+        # Its line, or the end of the pipe (the command ended), within the deadline of
+        # after_cpu: a command that never calls *at* fails here, not after its minutes.
         with os.fdopen(marks, "rb") as pipe:
-            line = pipe.readline()
-        if not line.startswith(AT_WORK):
+            called, _, _ = select.select([pipe], [], [], 120)
+            line = pipe.readline() if called else b""
+        if not called:
+            raise AssertionError(f"the command did not call {at} within 120 s")
+        if not line.startswith(AT_WORK):  # the pipe's end: the command ended
             raise AssertionError(f"the command ended before it called {at}: "
                                  + proc.communicate(timeout=60)[1].decode())
         after_cpu(cpu_seconds(proc.pid) + cpu)(proc)
