@@ -11,6 +11,8 @@ from pathlib import Path
 
 from tests.support.signals import STOPS_WITHIN, signal_while_working
 
+from equilibrist.native import build
+
 
 def _children(pid: int) -> list[int]:
     found = []
@@ -23,6 +25,13 @@ def _children(pid: int) -> list[int]:
             if int(fields[1]) == pid:
                 found.append(int(entry.name))
     return found
+
+
+def _name(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/comm").read_text().strip()
+    except OSError:
+        return ""
 
 
 def _alive(pid: int) -> bool:
@@ -39,15 +48,18 @@ def test_ctrl_c_while_the_workers_compile_ends_the_demo_and_its_workers(tmp_path
                              str(tmp_path / "report")], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, cwd=tmp_path, env=env)
     workers: list[int] = []
+    # The compiler the workers run, as /proc names its process (15 characters at most).
+    compiler = Path(build.compiler()[0]).name[:15]
 
     def compiling(p: subprocess.Popen[bytes]) -> None:
+        # Both workers started and one of them running the C compiler on a core.
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and p.poll() is None:
             workers[:] = [c for c in _children(p.pid) if _alive(c)]
-            if len(workers) >= 2:
-                time.sleep(3.0)  # inside the workers' first derivation and compile
+            if len(workers) >= 2 and any(_name(c) == compiler for w in workers
+                                         for c in _children(w)):
                 return
-            time.sleep(0.1)
+            time.sleep(0.05)
 
     code, _, err, took = signal_while_working(proc, signal.SIGINT, compiling)
     assert code == 130, err.decode()
