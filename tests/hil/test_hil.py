@@ -162,19 +162,21 @@ def test_realtime_at_200_hz_reports_its_figures(exports: dict[str, Path], tmp_pa
 
 
 @pytest.mark.slow
-def test_the_device_on_a_pseudo_terminal_of_its_own(exports: dict[str, Path], tmp_path: Path) -> None:
+def test_the_device_on_a_pseudo_terminal_of_its_own(exports: dict[str, Path], tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
     """``hil_host --pty`` opens a pseudo-terminal itself and prints its path: ``hil`` runs over it
     with no relay between, equal to a run over the joined pair, and the device ends by itself
-    once the host has gone."""
+    once the host has gone (``hil``'s command in this process: it closes the port itself)."""
     device = subprocess.Popen([str(exports["lqg"] / "hil_host"), "--pty"], stdout=subprocess.PIPE,
                               text=True)
     try:
         assert device.stdout is not None
         port = device.stdout.readline().strip()
         assert port.startswith("/dev/")
-        direct = _cli("hil", "cartpole", "--port", port, "--duration", "0.5", "--x0",
-                      "theta=0.05", "--json", "--out", str(tmp_path / "direct.npz"))
-        assert direct.returncode == 0, direct.stderr
+        status = main(["hil", "cartpole", "--port", port, "--duration", "0.5", "--x0",
+                       "theta=0.05", "--json", "--out", str(tmp_path / "direct.npz")])
+        direct = capsys.readouterr()
+        assert status == 0, direct.err
         assert device.wait(timeout=10) == 0  # the host closed the port: the device ends
     finally:
         if device.poll() is None:
@@ -182,12 +184,13 @@ def test_the_device_on_a_pseudo_terminal_of_its_own(exports: dict[str, Path], tm
             device.wait()
         assert device.stdout is not None
         device.stdout.close()
-    joined = _hil(exports["lqg"], "--duration", "0.5", "--x0", "theta=0.05", "--json",
-                     "--out", str(tmp_path / "joined.npz"))
-    assert joined.returncode == 0, joined.stderr
+    with host_on_link(exports["lqg"] / "hil_host") as joined_port:
+        status = main(["hil", "cartpole", "--port", joined_port, "--duration", "0.5", "--x0",
+                       "theta=0.05", "--json", "--out", str(tmp_path / "joined.npz")])
+    assert status == 0, capsys.readouterr().err
     a, b = SimResult.load(tmp_path / "direct.npz"), SimResult.load(tmp_path / "joined.npz")
     np.testing.assert_array_equal(a.states, b.states)
-    assert json.loads(direct.stdout)["send_delay_ms"]["p50"] is None  # lockstep: no clock
+    assert json.loads(direct.out)["send_delay_ms"]["p50"] is None  # lockstep: no clock
 
 
 # -- faults: one line, the right status, the run so far saved, the port released ---------------
