@@ -85,7 +85,7 @@ def test_files_are_recorded_as_absolute_paths(tmp_path, monkeypatch, capsys):
     ("lqr,policy:junk.pt", "not a PyTorch state dict"),
     ("lqr,policy:wrong.pt", "takes 3 observation(s)"),
     ("lqr,policy:", "expected policy:FILE"),
-    ("lqr:net.pt", "the lqr controller takes no option"),
+    ("lqr:net.pt", "--design-delay 'net.pt': expected a whole number of control periods"),
     ("mpc:soon", "--horizon 'soon': expected a whole number"),
     ("policy:net.pt,policy:sub/net.pt", "two files of one name"),
 ])
