@@ -548,21 +548,26 @@ def delayed(made: Design, periods: int) -> Design:
     M = current_gain(P, model.C, made.Rd)
     L = fixed.matmul(model.A, M)
     Kf = M if made.kalman_form == "current" else L
-    Kc, kc_note = made.Kc, made.kc_note
-    if made.tracked:
-        m = model.n_inputs
-        try:
-            Kc = discrete_reference_gain(model.A, model.B, model.C[:m], K,
-                                         tracked_names=made.tracked,
-                                         input_names=model.input_names)
-            kc_note = ""
-        except DesignError as exc:
-            Kc, kc_note = None, str(exc)
+    Kc, kc_note = _extended_reference_gain(made, model, K)
     return replace(
         made, discrete=model, K=K, S=S, poles=_sorted(E, True), Kf=Kf, P=P, Qd=Qd, Kc=Kc,
         kc_note=kc_note, estimator_poles=_sorted(np.linalg.eigvals(model.A - L @ model.C), True),
         delay=N,
     )
+
+
+def _extended_reference_gain(made: Design, model: LinearModel, K: np.ndarray
+                             ) -> tuple[np.ndarray | None, str]:
+    """The reference gain of *made*'s loop on its extended *model* with gain *K* (and the
+    note of why there is none), or *made*'s own when it tracks nothing."""
+    if not made.tracked:
+        return made.Kc, made.kc_note
+    try:
+        return discrete_reference_gain(model.A, model.B, model.C[:model.n_inputs], K,
+                                       tracked_names=made.tracked,
+                                       input_names=model.input_names), ""
+    except DesignError as exc:
+        return None, str(exc)
 
 
 def velocity_filtered(made: Design, cutoff: float, outputs: Sequence[str]) -> Design:
@@ -614,16 +619,7 @@ def velocity_filtered(made: Design, cutoff: float, outputs: Sequence[str]) -> De
                     state_names=model.state_names, output_names=model.output_names)
     Kf = current_gain(P, model.C, made.Rd) if made.kalman_form == "current" else L
     E = np.concatenate([made.poles, np.full(size - n, 1.0 - gain, dtype=complex)])
-    Kc, kc_note = made.Kc, made.kc_note
-    if made.tracked:
-        m = model.n_inputs
-        try:
-            Kc = discrete_reference_gain(model.A, model.B, model.C[:m], K,
-                                         tracked_names=made.tracked,
-                                         input_names=model.input_names)
-            kc_note = ""
-        except DesignError as exc:
-            Kc, kc_note = None, str(exc)
+    Kc, kc_note = _extended_reference_gain(made, model, K)
     return replace(
         made, discrete=model, K=K, S=S, poles=_sorted(E, True), Kf=Kf, P=P, Qd=Qd, Kc=Kc,
         kc_note=kc_note, estimator_poles=_sorted(Ef, True), velocity_filter=float(cutoff),
