@@ -34,9 +34,6 @@ the least effort (integral of (u / scale)^2, the inputs' Bryson scales).
 --to NAME=VALUE,... plans a transfer to the operating point with those
 components changed (from --from, by default the operating point).
 --duration-max S frees the final time (up to S); --minimize time needs it.
---method ilqr plans by iterative LQR instead (a fixed --duration, the least
-effort; slower, and from the straight guess often a plan of less effort: its
-file is a --guess that collocation polishes; docs/trajopt.md).
 --guess random (seeded by --seed) | straight | FILE.npz (an earlier plan; with
 --duration-max its duration must be within [0.05, 1] x that bound).
 --max-time S stops IPOPT after S seconds of wall-clock time (default 120,
@@ -70,9 +67,6 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
     time_group.add_argument("--duration", metavar="S", help="a fixed final time (default 5 s)")
     time_group.add_argument("--duration-max", metavar="S", help="a free final time, at most S")
     p.add_argument("--minimize", choices=("effort", "time"), default="effort")
-    p.add_argument("--method", choices=("collocation", "ilqr"), default="collocation",
-                   help="collocation (default: Hermite-Simpson, IPOPT) or ilqr (iterative LQR "
-                   "on RK4 steps: a fixed --duration, the least effort)")
     p.add_argument("--margin", metavar="FRACTION", default="0.3",
                    help="share of the task's state bounds kept free for the tracker to correct "
                    "in (default 0.3: the cart-pole plans within 70 %% of its track)")
@@ -142,9 +136,6 @@ def run(args: argparse.Namespace) -> int:
     _check_outputs(args)
     if args.minimize == "time" and args.duration_max is None:
         raise UsageError("--minimize time needs a free final time: give --duration-max S")
-    if args.method == "ilqr" and args.duration_max is not None:
-        raise UsageError("--method ilqr plans a fixed --duration: give --duration, not "
-                         "--duration-max")
     if args.start is not None and args.to is None:
         raise UsageError("--from is the start of a transfer: give --to as well")
     if args.task is not None and args.to is not None:
@@ -185,16 +176,9 @@ def run(args: argparse.Namespace) -> int:
         if not 0.0 <= margin < 1.0:
             raise UsageError(f"--margin {args.margin}: expected a fraction in [0, 1)")
         start, goal, bounds = task.start, task.x_op, planning_bounds(task, margin)
-    if args.method == "ilqr":
-        from equilibrist.control.ilqr import plan_ilqr
-
-        assert duration is not None  # --duration-max is refused above
-        traj = plan_ilqr(system, start=start, goal=goal, knots=knots, duration=duration,
-                         guess=guess, seed=seed, bounds=bounds, max_time=max_time)
-    else:
-        traj = plan(system, start=start, goal=goal, knots=knots, duration=duration,
-                    duration_max=duration_max, minimize=args.minimize, guess=guess, seed=seed,
-                    bounds=bounds, max_time=max_time)
+    traj = plan(system, start=start, goal=goal, knots=knots, duration=duration,
+                duration_max=duration_max, minimize=args.minimize, guess=guess, seed=seed,
+                bounds=bounds, max_time=max_time)
     summary = traj.summary()
     if args.json:
         common.print_json(summary)
