@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from equilibrist.control.design import delay_periods, delayed, design
+from equilibrist.control.design import design
+from equilibrist.control.design_extended import delay_periods, delayed
 from equilibrist.control.linear import LinearController
 from equilibrist.errors import DesignError
 from equilibrist.numeric.lookup import get_system

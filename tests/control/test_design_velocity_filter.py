@@ -14,7 +14,8 @@ import pytest
 import scipy.linalg
 import scipy.optimize
 
-from equilibrist.control.design import design, kind_design, velocity_filtered
+from equilibrist.control.design import design, kind_design
+from equilibrist.control.design_extended import velocity_filtered
 from equilibrist.control.linear import LinearController
 from equilibrist.errors import ControllerError, DesignError
 from equilibrist.numeric.lookup import get_system

@@ -87,14 +87,14 @@ class Design:
         delay, ``discrete`` is the sampled plant extended by the commands in flight
         (:func:`~equilibrist.control.discretize.with_input_delay`, states
         :attr:`model_state_names`) and ``K, S, poles, Kf, P, Qd, Kc, estimator_poles`` are
-        that model's (:func:`~equilibrist.control.design.delayed`); ``plant`` and the
+        that model's (:func:`~equilibrist.control.design_extended.delayed`); ``plant`` and the
         weights ``Q, R, QN, RN, G`` stay the plant's.
     velocity_filter, filtered:
         The cutoff [Hz] of the rig's low-pass of the measured rates *filtered* that the
         Kalman filter's model includes (0 and ``()``: none). With it, ``discrete`` is the
         sampled plant extended by the filter's last outputs
         (:func:`~equilibrist.control.discretize.with_velocity_filter`) and the gains are that
-        model's (:func:`~equilibrist.control.design.velocity_filtered`).
+        model's (:func:`~equilibrist.control.design_extended.velocity_filtered`).
     """
 
     system_key: str

@@ -303,7 +303,7 @@ def linear_builder(kind: str) -> Callable[[ControllerRequest], LinearController]
     for the loop delay its ``design_delay`` option names (none by default)."""
 
     def build(request: ControllerRequest) -> LinearController:
-        from equilibrist.control.design import delay_periods, delayed
+        from equilibrist.control.design_extended import delay_periods, delayed
         from equilibrist.control.linear import LinearController
 
         made = request.design()

@@ -21,7 +21,7 @@ def _cutoff(text: str) -> float:
 
 
 #: ``--design-velocity-filter``: the rig's low-pass of the measured rates that the Kalman
-#: filter's model includes (:func:`equilibrist.control.design.velocity_filtered`).
+#: filter's model includes (:func:`equilibrist.control.design_extended.velocity_filtered`).
 DESIGN_VELOCITY_FILTER = Option(
     "--design-velocity-filter",
     "the cutoff of the rig's low-pass of the measured rates (its --velocity-filter) that the "

@@ -16,7 +16,7 @@ def _delay_text(text: str) -> str:
 
 
 #: ``--design-delay``: the loop delay the LQR and the LQG designs compensate (one option,
-#: both kinds' records; :func:`equilibrist.control.design.delay_periods` reads it).
+#: both kinds' records; :func:`equilibrist.control.design_extended.delay_periods` reads it).
 DESIGN_DELAY = Option(
     "--design-delay",
     "the loop's delay the design compensates: N control periods, or seconds (4ms, 0.004s); "
