@@ -5,15 +5,12 @@ environments do, instead of the next), and without PufferLib the error names it.
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
-import sys
-
 import gymnasium as gym
 import numpy as np
 import pufferlib
 import pufferlib.vector
 import pytest
+from tests.support.imports import import_without
 
 from equilibrist.envs.puffer import EquilibristPufferEnv
 
@@ -81,10 +78,6 @@ def test_pufferlibs_workers_share_its_buffers() -> None:
 
 
 def test_without_pufferlib_the_error_names_it(monkeypatch: pytest.MonkeyPatch) -> None:
-    real = importlib.util.find_spec
-    monkeypatch.setattr(importlib.util, "find_spec",
-                        lambda name, *a: None if name == "pufferlib" else real(name, *a))
-    monkeypatch.delitem(sys.modules, "equilibrist.envs.puffer")
     with pytest.raises(ImportError, match=r"pip install --no-deps pufferlib-core"):
-        importlib.import_module("equilibrist.envs.puffer")
+        import_without(monkeypatch, "pufferlib", "equilibrist.envs.puffer")
     assert pufferlib.PufferEnv  # the real one stays importable

@@ -4,14 +4,11 @@ expects, instead of the next), PPO trains on it, and without the extra the error
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
-import sys
-
 import numpy as np
 import pytest
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import VecMonitor
+from tests.support.imports import import_without
 
 from equilibrist.envs.sb3 import EquilibristSB3VecEnv, sb3_vec_env
 
@@ -73,9 +70,5 @@ def test_ppo_trains_on_it() -> None:
 
 
 def test_without_the_extra_the_error_names_it(monkeypatch: pytest.MonkeyPatch) -> None:
-    real = importlib.util.find_spec
-    monkeypatch.setattr(importlib.util, "find_spec",
-                        lambda name, *a: None if name == "stable_baselines3" else real(name, *a))
-    monkeypatch.delitem(sys.modules, "equilibrist.envs.sb3")
     with pytest.raises(ImportError, match=r"pip install 'equilibrist\[rl\]'"):
-        importlib.import_module("equilibrist.envs.sb3")
+        import_without(monkeypatch, "stable_baselines3", "equilibrist.envs.sb3")
